@@ -1,0 +1,155 @@
+"""The one Drive interface the CLI uses for every family.
+
+A family = one codec module in drives/ (sans-IO: builds output octets from a command, decodes input
+octets into a DriveStatus) + one profile in profiles/ + one sim model in sim/. A Drive couples a codec
+with a CyclicChannel (one Data_Exchange per call, provided by dp/) and does the waiting: stepping the
+state machine, running the PKW/handshake request until its answer arrives, timeouts.
+
+Everything here speaks engineering units and native codes (F03, A004, E1-04); raw PNU/register access
+goes through the same calls with codes like "PNU23", "PNU947[9]" or "REG0x0180" (see the codec).
+"""
+
+from __future__ import annotations
+
+import time
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from profidrive_cli import BusError
+
+
+class CyclicChannel(Protocol):
+    """One station in Data_Exchange. Implemented by dp.poller.StationChannel (and by test doubles)."""
+
+    def exchange(self, outputs: bytes) -> bytes:
+        """Send outputs, return the station's inputs (one cycle, waits for the cycle period)."""
+
+    def now(self) -> float:
+        """Monotonic time in seconds (the clock the bus runs on)."""
+
+
+class DriveError(BusError):
+    """The drive refused or did not answer (parameter error, timeout, not allowed in this state)."""
+
+
+class ParamError(DriveError):
+    """A parameter request was answered with an error; .number is the card's error number."""
+
+    def __init__(self, message: str, number: int | None = None):
+        super().__init__(message)
+        self.number = number
+
+
+@dataclass
+class DriveStatus:
+    state: str                        # "S1 switching on inhibited", "operation", "fault", "stopped", ...
+    running: bool
+    fault: bool
+    flags: dict[str, bool]            # named status bits, in the family's words
+    speed_percent: float | None       # actual speed in % of max frequency (signed: negative = reverse)
+    speed_hz: float | None            # actual frequency in Hz, when max frequency is known
+    reference_percent: float | None = None
+    fault_code: str | None = None     # current fault as the family names it ("OC1", "E05", ...)
+    raw: dict[str, int] = field(default_factory=dict)   # raw words (status word, actual value, ...)
+
+    @property
+    def stopped(self) -> bool:
+        return not self.running and (self.speed_percent in (None, 0.0) or abs(self.speed_percent) < 0.05)
+
+
+@dataclass
+class ParamValue:
+    code: str            # native code as the profile names it ("F03")
+    name: str
+    raw: int             # value on the wire
+    value: float | int   # engineering value (raw * scale)
+    unit: str = ""
+
+    def __str__(self) -> str:
+        return f"{self.code} = {self.value}{(' ' + self.unit) if self.unit else ''}"
+
+
+@dataclass
+class FaultRecord:
+    position: str        # "current", "last", "2nd last", ... or an index
+    raw: int             # code on the wire
+    codes: list[str]     # alarm names; several when one number maps to several alarms
+    meanings: list[str]
+
+
+class Drive(ABC):
+    """Common operations. Every blocking call keeps exchanging cyclic data while it waits."""
+
+    family: str = ""
+
+    def __init__(self, channel: CyclicChannel, profile: Any, layout: str | None = None):
+        self.channel = channel
+        self.profile = profile
+        self.layout = layout or profile.default_layout
+
+    # -- one cycle ---------------------------------------------------------------------------
+    @abstractmethod
+    def cycle(self) -> DriveStatus:
+        """One Data_Exchange with the current command; returns the decoded status."""
+
+    def cycles_until(self, predicate, timeout: float, what: str) -> DriveStatus:
+        """Cycle until predicate(status) is true; DriveError naming `what` after `timeout` s."""
+        end = self.channel.now() + timeout
+        st = self.cycle()
+        while not predicate(st):
+            if self.channel.now() > end:
+                raise DriveError(f"timed out after {timeout:g} s waiting for {what} (state: {st.state})")
+            st = self.cycle()
+        return st
+
+    # -- motion ------------------------------------------------------------------------------
+    @abstractmethod
+    def start(self, timeout: float = 5.0) -> DriveStatus:
+        """Step the drive to operation (running) with the current reference."""
+
+    @abstractmethod
+    def stop(self, mode: str = "normal", wait: bool = True, timeout: float = 30.0) -> DriveStatus:
+        """mode: 'normal' (ramp, OFF1), 'quick' (OFF3), 'coast' (OFF2 / base block)."""
+
+    @abstractmethod
+    def set_speed(self, percent: float) -> None:
+        """Reference in % of max frequency; negative = reverse (families with a reverse bit use it)."""
+
+    def set_speed_hz(self, hz: float) -> None:
+        fmax = self.max_frequency()
+        self.set_speed(100.0 * hz / fmax)
+
+    def jog(self, on: bool = True) -> None:
+        raise DriveError(f"{self.family}: jog is not supported by this card")
+
+    @abstractmethod
+    def reset_fault(self, timeout: float = 5.0) -> DriveStatus:
+        """Acknowledge the current fault (after the cause is gone)."""
+
+    @abstractmethod
+    def status(self) -> DriveStatus:
+        """One cycle's status, decoded."""
+
+    # -- parameters --------------------------------------------------------------------------
+    @property
+    def has_param_channel(self) -> bool:
+        return True
+
+    @abstractmethod
+    def read_param(self, code: str) -> ParamValue: ...
+
+    @abstractmethod
+    def write_param(self, code: str, value: float | int) -> ParamValue:
+        """Range-checked write, then read back; returns the value read back."""
+
+    def save(self) -> None:
+        """Store parameters in non-volatile memory where the card supports it."""
+        raise DriveError(f"{self.family}: this card has no separate save command")
+
+    @abstractmethod
+    def fault_history(self) -> list[FaultRecord]: ...
+
+    def max_frequency(self) -> float:
+        """Max frequency in Hz: read from the drive when a parameter channel exists, else the profile."""
+        return float(self.profile.max_frequency_default)

@@ -1,0 +1,306 @@
+"""Drive profiles: profiles/*.yaml loaded and validated with file:line errors.
+
+Common schema (every family):
+
+    profile: fuji-opc-g1-pdp          # the profile's name (= file stem)
+    aliases: [fuji-g1]                # short names (sim URLs, --profile)
+    family: fuji                      # codec module drives/<family>.py
+    title: Fuji FRENIC-MEGA, OPC-G1-PDP
+    identity:
+      ident: 0xF0A1                   # PROFIBUS ident number
+      ident_placeholder: "why"        # present when the manual gives no ident
+      gsd: FUJI_G1.GSD                # library file in gsd/
+    word_order: big                   # 16-bit words on the bus: big | little
+    layouts:                          # PPO types / message formats
+      ppo1: {cfg: "F3 F1", pkw: true, description: "PPO1: 4 PKW + 2 PZD"}
+    default_layout: ppo1
+    max_frequency: {param: F03, default_hz: 60.0}
+    parameters:                       # code, name, unit, scale, min, max, access, default + addressing
+      - {code: F03, name: Maximum frequency 1, pnu: 0x103, index: 3, unit: Hz, scale: 0.01,
+         min: 25.0, max: 500.0, access: stop, default: 60.0}
+    alarms:                           # number on the wire -> names (several where a number is shared)
+      - {number: 1, code: OC1, meaning: Overcurrent during acceleration}
+    decisions: [...]                  # what we decided where the manual is ambiguous, and why
+
+Family codecs may read further keys (fault_history, handshake, ...) from Profile.raw; they validate them
+with the same ProfileError(file:line).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from profidrive_cli.data import profiles_dir
+from profidrive_cli.datafile import DataFileError, LineDict, load_yaml
+from profidrive_cli.dp.cfg import CfgError, decode_cfg, io_sizes, parse_hex
+
+ProfileError = DataFileError
+
+ACCESS = ("rw", "ro", "stop", "wo")  # stop = writable only while the motor is stopped
+
+
+@dataclass
+class Layout:
+    name: str
+    cfg: bytes
+    input_len: int
+    output_len: int
+    pkw: bool
+    description: str = ""
+    extra: dict = field(default_factory=dict)
+
+
+@dataclass
+class ParamDef:
+    code: str
+    name: str
+    unit: str = ""
+    scale: float = 1.0
+    min: float | None = None
+    max: float | None = None
+    access: str = "rw"
+    default: float | int | None = None
+    pnu: int | None = None
+    index: int | None = None
+    register: int | None = None
+    signed: bool = False
+    size: int = 16                    # bits on the wire: 16 or 32
+    line: int = 0
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def writable(self) -> bool:
+        return self.access in ("rw", "stop", "wo")
+
+    def to_raw(self, value: float) -> int:
+        raw = round(value / self.scale) if self.scale else int(value)
+        return int(raw)
+
+    def from_raw(self, raw: int) -> float | int:
+        if self.signed:
+            bits = self.size
+            if raw >= 1 << (bits - 1):
+                raw -= 1 << bits
+        v = raw * self.scale
+        if isinstance(self.scale, int) or float(self.scale).is_integer():
+            return int(round(v))
+        return round(v, 6)
+
+    def check_range(self, value: float) -> str | None:
+        """None if value is inside the range, else a message with range and unit."""
+        u = f" {self.unit}" if self.unit else ""
+        if (self.min is not None and value < self.min) or (self.max is not None and value > self.max):
+            return (f"{self.code} ({self.name}): {value:g}{u} is outside "
+                    f"{self.min:g}..{self.max:g}{u}")
+        return None
+
+
+@dataclass
+class Alarm:
+    number: int
+    code: str
+    meaning: str = ""
+
+
+@dataclass
+class Profile:
+    name: str
+    family: str
+    title: str
+    ident: int
+    gsd: str | None
+    word_order: str
+    layouts: dict[str, Layout]
+    default_layout: str
+    max_frequency_param: str | None
+    max_frequency_default: float
+    parameters: dict[str, ParamDef]
+    alarms: list[Alarm]
+    aliases: list[str] = field(default_factory=list)
+    ident_placeholder: str | None = None
+    path: Path | None = None
+    raw: LineDict = field(default_factory=LineDict)
+
+    def alarms_for(self, number: int) -> list[Alarm]:
+        return [a for a in self.alarms if a.number == number]
+
+    def alarm_by_code(self, code: str) -> Alarm | None:
+        code = code.upper()
+        return next((a for a in self.alarms if a.code.upper() == code), None)
+
+    def param(self, code: str) -> ParamDef | None:
+        return self.parameters.get(code) or self.parameters.get(code.upper())
+
+    def layout_for_ppo(self, n: int) -> Layout | None:
+        return self.layouts.get(f"ppo{n}")
+
+
+def _err(path, node, key, msg) -> DataFileError:
+    line = node.line_of(key) if isinstance(node, LineDict) else getattr(node, "line", None)
+    return DataFileError(path, line, msg)
+
+
+def _get(path, node: LineDict, key: str, types, required=True, default=None):
+    if key not in node:
+        if required:
+            raise DataFileError(path, node.line, f"missing field '{key}'")
+        return default
+    v = node[key]
+    if types is float and isinstance(v, int) and not isinstance(v, bool):
+        return float(v)
+    if not isinstance(v, types) or (isinstance(v, bool) and types in (int, float)):
+        tn = types.__name__ if isinstance(types, type) else "/".join(t.__name__ for t in types)
+        raise _err(path, node, key, f"'{key}' must be {tn}, got {type(v).__name__} {v!r}")
+    return v
+
+
+_PARAM_KEYS = {"code", "name", "unit", "scale", "min", "max", "access", "default", "pnu", "index",
+               "register", "signed", "size"}
+
+
+def _param(path, node) -> ParamDef:
+    if not isinstance(node, LineDict):
+        raise DataFileError(path, getattr(node, "line", None), "a parameter must be a mapping")
+    num = (int, float)
+    p = ParamDef(
+        code=str(_get(path, node, "code", (str, int))),
+        name=_get(path, node, "name", str),
+        unit=_get(path, node, "unit", str, False, ""),
+        scale=_get(path, node, "scale", num, False, 1),
+        min=_get(path, node, "min", num, False),
+        max=_get(path, node, "max", num, False),
+        access=_get(path, node, "access", str, False, "rw"),
+        default=_get(path, node, "default", num, False),
+        pnu=_get(path, node, "pnu", int, False),
+        index=_get(path, node, "index", int, False),
+        register=_get(path, node, "register", int, False),
+        signed=_get(path, node, "signed", bool, False, False),
+        size=_get(path, node, "size", int, False, 16),
+        line=node.line,
+        extra={k: v for k, v in node.items() if k not in _PARAM_KEYS},
+    )
+    if p.access not in ACCESS:
+        raise _err(path, node, "access", f"access must be one of {', '.join(ACCESS)}, got {p.access!r}")
+    if p.size not in (16, 32):
+        raise _err(path, node, "size", f"size must be 16 or 32, got {p.size}")
+    if p.min is not None and p.max is not None and p.min > p.max:
+        raise _err(path, node, "min", f"{p.code}: min {p.min} > max {p.max}")
+    if p.scale == 0:
+        raise _err(path, node, "scale", f"{p.code}: scale must not be 0")
+    return p
+
+
+def load_profile_file(path: str | Path) -> Profile:
+    path = Path(path)
+    doc = load_yaml(path)
+    if not isinstance(doc, LineDict):
+        raise DataFileError(path, 1, "a profile must be a YAML mapping")
+    ident_node = _get(path, doc, "identity", LineDict)
+    layouts_node = _get(path, doc, "layouts", LineDict)
+    layouts: dict[str, Layout] = {}
+    for lname, lnode in layouts_node.items():
+        if not isinstance(lnode, LineDict):
+            raise _err(path, layouts_node, lname, f"layout '{lname}' must be a mapping")
+        cfg_text = _get(path, lnode, "cfg", str)
+        try:
+            cfg = parse_hex(cfg_text)
+            decode_cfg(cfg)
+        except (ValueError, CfgError) as e:
+            raise _err(path, lnode, "cfg", f"layout '{lname}': bad cfg octets: {e}") from None
+        if not cfg:
+            raise _err(path, lnode, "cfg", f"layout '{lname}': cfg is empty")
+        inp, out = io_sizes(cfg)
+        layouts[str(lname)] = Layout(
+            name=str(lname), cfg=cfg, input_len=inp, output_len=out,
+            pkw=_get(path, lnode, "pkw", bool, False, False),
+            description=_get(path, lnode, "description", str, False, ""),
+            extra={k: v for k, v in lnode.items() if k not in ("cfg", "pkw", "description")})
+    if not layouts:
+        raise _err(path, doc, "layouts", "no layouts")
+    default_layout = _get(path, doc, "default_layout", str)
+    if default_layout not in layouts:
+        raise _err(path, doc, "default_layout",
+                   f"default_layout '{default_layout}' is not one of {', '.join(layouts)}")
+
+    params: dict[str, ParamDef] = {}
+    plist = _get(path, doc, "parameters", list, False, [])
+    for i, pnode in enumerate(plist):
+        p = _param(path, pnode)
+        if p.code in params:
+            raise DataFileError(path, p.line, f"parameter {p.code} defined twice "
+                                f"(first at line {params[p.code].line})")
+        params[p.code] = p
+
+    alarms: list[Alarm] = []
+    for anode in _get(path, doc, "alarms", list, False, []):
+        if not isinstance(anode, LineDict):
+            raise DataFileError(path, getattr(anode, "line", None), "an alarm must be a mapping")
+        alarms.append(Alarm(number=_get(path, anode, "number", int),
+                            code=str(_get(path, anode, "code", (str, int))),
+                            meaning=_get(path, anode, "meaning", str, False, "")))
+
+    mf = _get(path, doc, "max_frequency", LineDict, False, LineDict())
+    mf_param = _get(path, mf, "param", str, False) if mf else None
+    if mf_param is not None and mf_param not in params:
+        raise _err(path, mf, "param", f"max_frequency.param {mf_param} is not in parameters")
+    name = _get(path, doc, "profile", str)
+    return Profile(
+        name=name,
+        family=_get(path, doc, "family", str),
+        title=_get(path, doc, "title", str),
+        ident=_get(path, ident_node, "ident", int),
+        ident_placeholder=_get(path, ident_node, "ident_placeholder", str, False),
+        gsd=_get(path, ident_node, "gsd", str, False),
+        word_order=_word_order(path, doc),
+        layouts=layouts,
+        default_layout=default_layout,
+        max_frequency_param=mf_param,
+        max_frequency_default=_get(path, mf, "default_hz", float, False, 50.0) if mf else 50.0,
+        parameters=params,
+        alarms=alarms,
+        aliases=[str(a) for a in _get(path, doc, "aliases", list, False, [])],
+        path=path,
+        raw=doc,
+    )
+
+
+def _word_order(path, doc) -> str:
+    wo = _get(path, doc, "word_order", str, False, "big")
+    if wo not in ("big", "little"):
+        raise _err(path, doc, "word_order", f"word_order must be big or little, got {wo!r}")
+    return wo
+
+
+_cache: dict[Path, Profile] = {}
+
+
+def all_profiles() -> list[Profile]:
+    out = []
+    for p in sorted(profiles_dir().glob("*.yaml")):
+        if p not in _cache:
+            _cache[p] = load_profile_file(p)
+        out.append(_cache[p])
+    return out
+
+
+def load_profile(name: str) -> Profile:
+    """By profile name, alias, or a path to a .yaml file."""
+    if name.endswith((".yaml", ".yml")) or "/" in name:
+        return load_profile_file(name)
+    key = name.lower()
+    profs = all_profiles()
+    for p in profs:
+        if p.name == key or key in (a.lower() for a in p.aliases):
+            return p
+    known = ", ".join(sorted(p.name for p in profs))
+    from profidrive_cli import UsageError
+    raise UsageError(f"unknown profile '{name}' (known: {known or 'none'})")
+
+
+def profile_for_ident(ident: int) -> Profile | None:
+    for p in all_profiles():
+        if p.ident == ident:
+            return p
+    return None

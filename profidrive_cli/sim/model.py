@@ -1,0 +1,88 @@
+"""The application behind a simulated station's Data_Exchange.
+
+sim/slave.py owns the DP side of a station (states, Set_Prm/Chk_Cfg checks, watchdog, FCB, diag bits);
+a SlaveModel owns what the device does with its process data. One drive family = one model module in
+sim/ (sim/fuji.py, sim/moeller.py, ...), built from that family's profile.
+
+All methods are sans-IO and take `now` (seconds, monotonic, from whoever drives the bus), so a model can
+be run on a simulated clock.
+"""
+
+from __future__ import annotations
+
+
+class SlaveModel:
+    """A plain DP-V0 slave: fixed ident, a set of accepted configurations, zero inputs.
+
+    Drive models subclass it and override data_exchange()/tick()/on_leave_data_exchange().
+    """
+
+    #: short family name ("fuji-g1", "plain", ...) shown by the sim
+    family = "plain"
+
+    def __init__(self, ident: int, cfgs: dict[str, bytes] | None = None, name: str = "DP-V0 slave",
+                 user_prm_len: int | None = None, max_diag_len: int = 6):
+        self.ident = ident
+        self.name = name
+        #: accepted configurations: layout name -> exact Chk_Cfg octets
+        self.cfgs = dict(cfgs or {})
+        #: Set_Prm user-parameter length the device insists on (None = any)
+        self.user_prm_len = user_prm_len
+        self.max_diag_len = max_diag_len
+        #: the layout chosen by the last accepted Chk_Cfg (None until configured)
+        self.layout: str | None = None
+        self.input_len = 0
+        self.output_len = 0
+
+    # -- DP start-up -------------------------------------------------------------------------
+    def check_prm(self, user_prm: bytes) -> bool:
+        """Return True when the Set_Prm user-parameter octets are acceptable."""
+        return self.user_prm_len is None or len(user_prm) == self.user_prm_len
+
+    def check_cfg(self, cfg: bytes) -> bool:
+        """Return True and select the layout when `cfg` equals one accepted configuration exactly."""
+        from profidrive_cli.dp.cfg import io_sizes
+        for name, allowed in self.cfgs.items():
+            if bytes(cfg) == allowed:
+                self.layout = name
+                self.input_len, self.output_len = io_sizes(allowed)
+                return True
+        return False
+
+    def real_cfg(self) -> bytes:
+        """What Get_Cfg answers: the configured layout, else the first (default) one."""
+        if self.layout is not None:
+            return self.cfgs[self.layout]
+        return next(iter(self.cfgs.values()), b"")
+
+    # -- cyclic ------------------------------------------------------------------------------
+    def data_exchange(self, outputs: bytes, now: float) -> bytes:
+        """Outputs from the master in, inputs to the master out (exactly input_len octets)."""
+        return bytes(self.input_len)
+
+    def tick(self, now: float) -> None:
+        """Advance internal dynamics (ramps, timers) to `now`."""
+
+    def on_leave_data_exchange(self, now: float, reason: str) -> None:
+        """The station left Data_Exchange (watchdog expired, new Set_Prm, power cycle, Clear).
+
+        Outputs go to their safe state; a drive applies its communication-loss reaction here.
+        """
+
+    def clear_outputs(self, now: float) -> None:
+        """Global_Control Clear_Data: the master is in CLEAR; outputs to safe values."""
+        self.on_leave_data_exchange(now, "clear")
+
+    # -- diagnosis ---------------------------------------------------------------------------
+    def ext_diag(self) -> bytes:
+        """Extended diagnosis octets appended after the 6 standard octets (b'' for none)."""
+        return b""
+
+    # -- fault injection / demos -------------------------------------------------------------
+    def trip(self, alarm: str, now: float) -> None:
+        """Trip the device with a family alarm name (drive models); plain slaves ignore it."""
+        raise ValueError(f"{self.family} station cannot trip")
+
+    def seed_faults(self, alarms: list[str]) -> None:
+        """Pre-fill the fault history (drive models)."""
+        raise ValueError(f"{self.family} station has no fault history")
