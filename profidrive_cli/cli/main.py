@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import sys
 
 import click
@@ -18,15 +19,33 @@ def cli():
     """
 
 
+# (module, click object) for each command; a module that is not there yet is skipped
+_COMMANDS = [
+    ("profidrive_cli.cli.bus_cmds", "scan_cmd"),
+    ("profidrive_cli.cli.bus_cmds", "diag_cmd"),
+    ("profidrive_cli.cli.bus_cmds", "io_cmd"),
+    ("profidrive_cli.cli.sniff_cmd", "sniff_cmd"),
+    ("profidrive_cli.cli.sim_cmd", "sim_cmd"),
+    ("profidrive_cli.cli.gsd_cmd", "gsd_group"),
+    ("profidrive_cli.cli.decode_cmd", "decode_cmd"),
+]
+for _mod, _obj in _COMMANDS:
+    try:
+        cli.add_command(getattr(importlib.import_module(_mod), _obj))
+    except ModuleNotFoundError as _e:  # TODO(lead): make strict once every command module landed
+        if _e.name != _mod:
+            raise
+
+
 def main(argv=None):
     try:
-        cli.main(args=argv, prog_name="pdrive", standalone_mode=False)
+        rc = cli.main(args=argv, prog_name="pdrive", standalone_mode=False)
     except click.exceptions.Abort:
         click.echo("aborted", err=True)
         sys.exit(130)
     except click.ClickException as e:
         e.show()
-        sys.exit(2 if isinstance(e, click.UsageError) or e.exit_code == 2 else e.exit_code)
+        sys.exit(2)
     except UsageError as e:
         click.echo(f"pdrive: {e}", err=True)
         sys.exit(2)
@@ -36,4 +55,6 @@ def main(argv=None):
     except KeyboardInterrupt:
         click.echo("interrupted", err=True)
         sys.exit(130)
-    sys.exit(0)
+    except BrokenPipeError:
+        sys.exit(1)
+    sys.exit(rc if isinstance(rc, int) else 0)

@@ -1,0 +1,123 @@
+"""Options every bus command accepts after its name, and opening the master from them."""
+
+from __future__ import annotations
+
+import functools
+import json
+import os
+import sys
+from dataclasses import dataclass
+
+import click
+from rich.console import Console
+
+from profidrive_cli import UsageError
+from profidrive_cli.fdl.timing import BusParams, parse_baud
+
+NO_PORT_HELP = ("no port given: use --port DEVICE (e.g. /dev/ttyUSB0, COM3, socket://host:port) "
+                "or set PDRIVE_PORT; --port sim:// runs the built-in simulated bus")
+
+out = Console(soft_wrap=True, highlight=False)
+err = Console(stderr=True, soft_wrap=True, highlight=False)
+
+
+@dataclass
+class BusOptions:
+    port: str | None
+    baud: str
+    master_address: int
+    slot_time: int | None
+    retries: int | None
+    rs485: bool
+    echo: bool
+    verbose: int
+    json: bool
+
+    def require_port(self) -> str:
+        if not self.port:
+            raise UsageError(NO_PORT_HELP)
+        return self.port
+
+    def baud_rate(self, default: int = 19200) -> int:
+        if self.baud in (None, "", "auto"):
+            return default
+        try:
+            return parse_baud(self.baud)
+        except ValueError as e:
+            raise UsageError(str(e)) from None
+
+    def params(self, baud: int | None = None, link=None) -> BusParams:
+        b = baud or self.baud_rate()
+        # over real ports, widen the reply timeout for USB/OS latency (reference §4.3); the
+        # instant simulator needs none
+        latency = 0.0 if (link is not None and link.instant) else 0.02
+        try:
+            return BusParams.for_baud(b, slot_time=self.slot_time,
+                                      retries=self.retries if self.retries is not None else
+                                      (1 if link is not None and link.is_simulator else 2),
+                                      link_latency=latency)
+        except ValueError as e:
+            raise UsageError(str(e)) from None
+
+    def open_link(self, baud: int | None = None):
+        from profidrive_cli.link import open_link
+        return open_link(self.require_port(), baud or self.baud_rate(), rs485=self.rs485,
+                         echo=self.echo)
+
+    def open_master(self, baud: int | None = None):
+        from profidrive_cli.dp.poller import Master
+        link = self.open_link(baud)
+        try:
+            return Master(link, self.params(baud, link), self.master_address)
+        except ValueError as e:
+            link.close()
+            raise UsageError(str(e)) from None
+
+
+def bus_options(f):
+    """--port, --baud, --master-address, --slot-time, --retries, --rs485, --echo, -v, --json."""
+    @click.option("--port", envvar="PDRIVE_PORT", default=None, metavar="PORT",
+                  help="Serial device, pyserial URL or sim:// (env PDRIVE_PORT).")
+    @click.option("--baud", default="19200", show_default=True, metavar="RATE",
+                  help="Bus baud rate (9.6k … 12M).")
+    @click.option("--master-address", default=2, show_default=True, type=click.IntRange(0, 125))
+    @click.option("--slot-time", default=None, type=int, metavar="BITS",
+                  help="Reply timeout in bit times (default: the standard TSL for the baud rate).")
+    @click.option("--retries", default=None, type=click.IntRange(0, 15),
+                  help="Retries after no reply (default 2 on real ports, 1 on sim://).")
+    @click.option("--rs485", is_flag=True, help="Kernel RS-485 mode (RTS direction control).")
+    @click.option("--echo", is_flag=True, help="Adapter hears its own transmission: drop the echo.")
+    @click.option("-v", "--verbose", count=True)
+    @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
+    @functools.wraps(f)
+    def wrapper(port, baud, master_address, slot_time, retries, rs485, echo, verbose, as_json,
+                **kw):
+        opts = BusOptions(port, baud, master_address, slot_time, retries, rs485, echo, verbose,
+                          as_json)
+        return f(opts, **kw)
+    return wrapper
+
+
+def emit_json(obj) -> None:
+    sys.stdout.write(json.dumps(obj, indent=None, sort_keys=False) + "\n")
+    sys.stdout.flush()
+
+
+def station_address(value: int) -> int:
+    if not 0 <= value <= 125:
+        raise UsageError(f"station address {value} outside 0..125")
+    return value
+
+
+def hex_option(text: str | None, what: str) -> bytes | None:
+    if text is None:
+        return None
+    from profidrive_cli.dp.cfg import parse_hex
+    try:
+        return parse_hex(text)
+    except ValueError as e:
+        raise UsageError(f"{what}: {e}") from None
+
+
+def is_tty() -> bool:
+    return sys.stdout.isatty() and os.environ.get("CI") is None

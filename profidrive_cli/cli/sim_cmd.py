@@ -1,0 +1,68 @@
+"""pdrive sim: serve the simulated bus on a pty, a TCP port or a serial device, in the foreground."""
+
+from __future__ import annotations
+
+import signal
+import sys
+
+import click
+
+from profidrive_cli import UsageError
+from profidrive_cli.cli.common import emit_json, err, out
+
+
+@click.command("sim")
+@click.option("--pty", "use_pty", is_flag=True, help="Create a pty and print its path.")
+@click.option("--listen", default=None, metavar="HOST:PORT", help="Serve on a TCP port.")
+@click.option("--port", "serial_port", default=None, metavar="DEVICE",
+              help="Serve on an existing serial device (e.g. one end of a socat pty pair).")
+@click.option("--plant", default="sim://", show_default=True,
+              help="Which stations: a sim:// URL, e.g. sim://?stations=3:fuji-g1,9:yaskawa")
+@click.option("--baud", default="19200", show_default=True)
+@click.option("--json", "as_json", is_flag=True, help="Print the endpoint as JSON.")
+def sim_cmd(use_pty, listen, serial_port, plant, baud, as_json):
+    """Serve a simulated PROFIBUS segment for another master (Ctrl-C ends it)."""
+    from profidrive_cli.fdl.timing import parse_baud
+    from profidrive_cli.sim import server
+    from profidrive_cli.sim.plant import build_bus
+    if sum(bool(x) for x in (use_pty, listen, serial_port)) != 1:
+        raise UsageError("choose exactly one of --pty, --listen HOST:PORT, --port DEVICE")
+    if not plant.startswith("sim://"):
+        raise UsageError(f"--plant must be a sim:// URL, got {plant!r}")
+    try:
+        b = parse_baud(baud)
+    except ValueError as e:
+        raise UsageError(str(e)) from None
+    bus = build_bus(plant)
+    if use_pty:
+        ep = server.PtyEndpoint()
+        where = ep.path
+    elif listen:
+        host, _, p = listen.rpartition(":")
+        try:
+            ep = server.TcpEndpoint(host or "127.0.0.1", int(p))
+        except ValueError:
+            raise UsageError(f"--listen needs HOST:PORT, got {listen!r}") from None
+        except OSError as e:
+            raise UsageError(f"--listen {listen}: {e.strerror}") from None
+        where = f"socket://{ep.address[0]}:{ep.address[1]}"
+    else:
+        ep = server.SerialEndpoint(serial_port, b)
+        where = serial_port
+    stations = {a: s.model.family for a, s in sorted(bus.slaves.items())}
+    if as_json:
+        emit_json({"port": where, "stations": stations})
+    else:
+        out.print(where)
+        err.print("simulated stations: " + ", ".join(f"{a} {f}" for a, f in stations.items())
+                  + " — Ctrl-C ends")
+    sys.stdout.flush()
+    stopping = []
+    signal.signal(signal.SIGTERM, lambda *a: stopping.append(1))
+    try:
+        server.serve(bus, ep, stop=lambda: bool(stopping))
+    except KeyboardInterrupt:
+        pass
+    finally:
+        ep.close()
+    err.print("simulator stopped")

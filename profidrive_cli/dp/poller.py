@@ -1,0 +1,207 @@
+"""The DP master over a Link: one request/reply at a time, several stations in a cycle.
+
+This is the only place in the protocol stack that waits: for replies (until the FDL deadline) and
+for the cycle period. Everything it decides comes from the sans-IO pieces (fdl.master.FdlMaster,
+dp.station.StationMachine).
+"""
+
+from __future__ import annotations
+
+import time
+
+from profidrive_cli import BusError
+from profidrive_cli.dp import services as S
+from profidrive_cli.dp.station import (CFG_FAULT, DATA_EXCH, LOCKED, PRM_FAULT, RELEASED, STATE_WORDS, DpRequest, Event,
+                                       SlaveConfig, StationMachine)
+from profidrive_cli.fdl import frames as F
+from profidrive_cli.fdl.master import NO_ANSWER, REPLY, FdlMaster, Outcome
+from profidrive_cli.fdl.timing import BusParams
+from profidrive_cli.link.base import Link
+
+
+class Master:
+    def __init__(self, link: Link, params: BusParams, address: int = F.DEFAULT_MASTER):
+        self.link = link
+        self.params = params
+        self.fdl = FdlMaster(params, address)
+        self.address = address
+        self.stations: dict[int, StationMachine] = {}
+        self._idle_from = 0.0        # end of the last reply: next request not before + TID1
+        self.on_event = None         # callable(address, Event) for live views / logs
+        self._rr = 0
+
+    # -- one FDL cycle -------------------------------------------------------------------------
+    def _wait_idle(self) -> None:
+        if self.link.instant:
+            return
+        gap = self.params.tid1 / self.params.baud
+        now = self.link.now()
+        if now < self._idle_from + gap:
+            time.sleep(self._idle_from + gap - now)
+
+    def transact(self, da: int, function: int, data: bytes = b"", dsap: int | None = None,
+                 ssap: int | None = None, expect: int = 255) -> Outcome:
+        """Send one request and wait for its reply, with the configured retries."""
+        self._wait_idle()
+        out, deadline = self.fdl.request(da, function, data, dsap, ssap, self.link.now(), expect)
+        self.link.write(out)
+        while True:
+            chunk = self.link.read(deadline)
+            now = self.link.now()
+            if chunk:
+                res = self.fdl.feed(chunk, now)
+                if res is not None:
+                    self._idle_from = now
+                    return res
+                continue
+            if now < deadline:
+                continue
+            nxt = self.fdl.expire(now)
+            if isinstance(nxt, Outcome):
+                self._idle_from = now
+                return nxt
+            self.link.flush_input()
+            self._wait_idle()
+            out, deadline = nxt
+            self.link.write(out)
+
+    def send_sdn(self, da: int, dsap: int, data: bytes) -> None:
+        self._wait_idle()
+        self.link.write(self.fdl.send_no_reply(da, F.SDN_HIGH, data, dsap, S.SAP_MASTER))
+        # TID2 = max TSDR after an unacknowledged telegram
+        self._idle_from = self.link.now() + self.params.chars(len(data) + 11) + \
+            self.params.max_tsdr / self.params.baud
+
+    # -- single services (scan, diag, io) ------------------------------------------------------
+    def fdl_status(self, da: int) -> F.Frame | None:
+        """FDL status request (live-list probe): the reply frame, or None when nobody answered."""
+        res = self.transact(da, F.FDL_STATUS, expect=6)
+        return res.frame if res.kind == REPLY else None
+
+    def slave_diag(self, da: int) -> S.SlaveDiag | None:
+        res = self.transact(da, F.SRD_HIGH, b"", S.SAP_SLAVE_DIAG, S.SAP_MASTER, 250)
+        if res.kind != REPLY or res.frame.sd == F.SC:
+            return None
+        if (res.frame.fc & 0x0F) not in (F.DL, F.DH):
+            raise BusError(f"station {da}: Slave_Diag answered {F.describe_fc(res.frame.fc)}")
+        try:
+            return S.SlaveDiag.decode(res.frame.data)
+        except S.ServiceError as e:
+            raise BusError(f"station {da}: {e}") from None
+
+    def get_cfg(self, da: int) -> bytes | None:
+        res = self.transact(da, F.SRD_HIGH, b"", S.SAP_GET_CFG, S.SAP_MASTER, 250)
+        if res.kind != REPLY or res.frame.sd == F.SC:
+            return None
+        if (res.frame.fc & 0x0F) not in (F.DL, F.DH):
+            return None
+        return res.frame.data
+
+    def global_control(self, command: int = 0, group: int = 0, da: int = F.BROADCAST) -> None:
+        self.send_sdn(da, S.SAP_GLOBAL_CONTROL, S.GlobalControl(command, group).encode())
+
+    # -- cyclic operation -----------------------------------------------------------------------
+    def add_station(self, address: int, config: SlaveConfig) -> StationMachine:
+        if not 0 <= address <= 125:
+            raise BusError(f"station address {address} outside 0..125")
+        self.fdl.reset_station(address)
+        st = StationMachine(address, config, self.address, self.fdl.counters_for(address))
+        self.stations[address] = st
+        return st
+
+    def _emit(self, address: int, events: list[Event]) -> None:
+        if self.on_event:
+            for e in events:
+                self.on_event(address, e)
+
+    def step(self, st: StationMachine) -> bool:
+        """One request for one station (if it wants one now). True if something was sent."""
+        now = self.link.now()
+        req = st.next_request(now)
+        if req is None:
+            return False
+        if req.service in ("Set_Prm",):
+            self.fdl.reset_station(st.address) if st.state == "start" else None
+        res = self.transact(st.address, req.function, req.data, req.dsap, req.ssap, req.expect)
+        ev = st.on_outcome(req, res, self.link.now())
+        if any(e.kind == "state" and e.data == "start" for e in ev):
+            self.fdl.reset_station(st.address)
+        self._emit(st.address, ev)
+        return True
+
+    def poll(self) -> int:
+        """One pass: one request to every station that wants one. Returns how many were sent."""
+        n = 0
+        for st in list(self.stations.values()):
+            n += self.step(st)
+        return n
+
+    def bring_up(self, address: int, timeout: float = 5.0, fail_fast: bool = False) -> StationMachine:
+        """Run the start-up of one station until Data_Exchange; BusError in words otherwise.
+        fail_fast: give up at the first Cfg_Fault / Prm_Fault / lock instead of retrying."""
+        st = self.stations[address]
+        end = self.link.now() + timeout
+        while not st.in_data_exchange:
+            if self.link.now() > end or (fail_fast and st.state in (CFG_FAULT, PRM_FAULT, LOCKED)):
+                why = st.last_error or STATE_WORDS.get(st.state, st.state)
+                if st.last_diag is not None and st.state != "absent":
+                    why += f" (diagnosis: {st.last_diag.state_words(self.address)})"
+                raise BusError(f"station {address} did not reach data exchange: {why}")
+            if not self.step(st):
+                time.sleep(min(0.01, max(0.0, st.wait_until - self.link.now())))
+        return st
+
+    def exchange(self, address: int, outputs: bytes | None = None) -> bytes:
+        """One Data_Exchange with a station in data exchange; restarts it if it dropped out."""
+        st = self.stations[address]
+        if outputs is not None:
+            st.set_outputs(outputs)
+        if not st.in_data_exchange:
+            self.bring_up(address)
+        st.fresh_inputs = False
+        self.step(st)
+        if st.state == "absent" or not (st.in_data_exchange or st.fresh_inputs):
+            # dropped out during this cycle: try to come back once, then report
+            self.bring_up(address)
+            self.step(st)
+        return st.inputs
+
+    def release(self, address: int) -> None:
+        """Leave data exchange cleanly: Set_Prm with Unlock_Req (station back to Wait_Prm, outputs
+        to their safe state). Best effort: no exception if the station does not answer."""
+        st = self.stations.get(address)
+        if st is None:
+            return
+        prm = st.config.set_prm()
+        prm.lock, prm.unlock = False, True
+        try:
+            self.transact(address, F.SRD_HIGH, prm.encode(), S.SAP_SET_PRM, S.SAP_MASTER, 1)
+        except BusError:
+            pass
+        st.state = RELEASED
+
+    def channel(self, address: int, period: float = 0.0) -> "StationChannel":
+        return StationChannel(self, address, period)
+
+
+class StationChannel:
+    """drives.base.CyclicChannel for one station: exchange() = one Data_Exchange per period."""
+
+    def __init__(self, master: Master, address: int, period: float = 0.0):
+        self.master = master
+        self.address = address
+        self.period = period
+        self._next = 0.0
+        self.cycles = 0
+
+    def now(self) -> float:
+        return self.master.link.now()
+
+    def exchange(self, outputs: bytes) -> bytes:
+        if self.period:
+            now = self.now()
+            if now < self._next:
+                time.sleep(self._next - now)
+            self._next = max(self._next + self.period, self.now())
+        self.cycles += 1
+        return self.master.exchange(self.address, outputs)

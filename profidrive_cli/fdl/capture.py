@@ -1,0 +1,110 @@
+"""Passive capture: frames with timestamps from a byte stream; pcap files (LINKTYPE_PROFIBUS_DL = 257)."""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+
+from profidrive_cli.dp.services import SERVICE_NAMES, service_name
+from profidrive_cli.fdl import frames as F
+
+LINKTYPE_PROFIBUS_DL = 257
+
+
+@dataclass
+class Captured:
+    t: float
+    raw: bytes
+    frame: F.Frame | None = None
+    error: str = ""
+
+    def describe(self) -> dict:
+        f = self.frame
+        if f is None:
+            return {"t": round(self.t, 6), "error": self.error, "raw": self.raw.hex(" ")}
+        d = {"t": round(self.t, 6), "sd": {F.SD1: "SD1", F.SD2: "SD2", F.SD3: "SD3", F.SD4: "SD4",
+                                            F.SC: "SC"}[f.sd], "raw": self.raw.hex(" ")}
+        if f.sd == F.SC:
+            d["service"] = "short acknowledge"
+            return d
+        d.update(da=f.da, sa=f.sa)
+        if f.sd == F.SD4:
+            d["service"] = "token"
+            return d
+        d.update(dsap=f.dsap, ssap=f.ssap, fc=f"0x{f.fc:02X}", fc_text=F.describe_fc(f.fc),
+                 du=f.data.hex(" "))
+        if f.is_request and f.function == F.FDL_STATUS:
+            d["service"] = "FDL status"
+        elif not f.is_request and f.dsap is None and f.ssap is None and f.fc & 0x0F == F.OK and not f.data:
+            d["service"] = "FDL status reply"
+        else:
+            d["service"] = service_name(f.dsap, f.ssap, f.is_request) + ("" if f.is_request else " reply")
+        return d
+
+
+class Capture:
+    """Feed octets with the time they arrived; collect Captured frames and framing errors."""
+
+    def __init__(self):
+        self.rx = F.Receiver()
+        self._t = 0.0
+
+    def feed(self, data: bytes, t: float) -> list[Captured]:
+        if not len(self.rx):
+            self._t = t
+        self.rx.feed(data)
+        out = []
+        while True:
+            before = bytes(self.rx.buf)
+            r = self.rx.next()
+            if r is None:
+                break
+            used = len(before) - len(self.rx.buf)
+            if isinstance(r, F.FrameError):
+                out.append(Captured(self._t, before[:used], None, f"{r.kind}: {r.detail}"))
+            else:
+                out.append(Captured(self._t, before[:used], r))
+            self._t = t
+        return out
+
+
+def merge_errors(items: list[Captured]) -> list[Captured]:
+    """Collapse runs of one-octet garbage errors into one entry (readable sniff output)."""
+    out: list[Captured] = []
+    for c in items:
+        if c.frame is None and out and out[-1].frame is None and out[-1].error.startswith("garbage") \
+                and c.error.startswith("garbage"):
+            out[-1] = Captured(out[-1].t, out[-1].raw + c.raw, None, "garbage")
+        else:
+            out.append(c)
+    return out
+
+
+class PcapWriter:
+    def __init__(self, fh):
+        self.fh = fh
+        fh.write(struct.pack("<IHHiIII", 0xA1B2C3D4, 2, 4, 0, 0, 65535, LINKTYPE_PROFIBUS_DL))
+
+    def write(self, t: float, raw: bytes) -> None:
+        sec = int(t)
+        usec = int(round((t - sec) * 1e6))
+        if usec >= 1000000:
+            sec, usec = sec + 1, usec - 1000000
+        self.fh.write(struct.pack("<IIII", sec, usec, len(raw), len(raw)) + raw)
+
+
+def read_pcap(data: bytes) -> tuple[int, list[tuple[float, bytes]]]:
+    """(linktype, [(time, packet), ...]) from a classic little-endian pcap file."""
+    magic, _, _, _, _, _, linktype = struct.unpack_from("<IHHiIII", data, 0)
+    if magic != 0xA1B2C3D4:
+        raise ValueError("not a little-endian pcap file")
+    pos, pkts = 24, []
+    while pos + 16 <= len(data):
+        sec, usec, incl, _ = struct.unpack_from("<IIII", data, pos)
+        pos += 16
+        pkts.append((sec + usec / 1e6, data[pos:pos + incl]))
+        pos += incl
+    return linktype, pkts
+
+
+__all__ = ["Capture", "Captured", "PcapWriter", "read_pcap", "merge_errors", "SERVICE_NAMES"]

@@ -1,0 +1,156 @@
+"""Master side of FDL request/reply cycles, sans-IO.
+
+    fm = FdlMaster(params, address=2)
+    out, deadline = fm.request(da, function, data, dsap, ssap, now)   # octets to send
+    ... fm.feed(octets, now) -> Outcome | None     (None: keep waiting until deadline)
+    ... fm.expire(now)       -> (retry octets, new deadline) or Outcome(no answer)
+
+The engine keeps the FCB per station (reference §2.3), repeats the same FCB on a retry, checks that a
+reply comes from the addressed station and is addressed to us, and counts what it saw.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from profidrive_cli.fdl import frames as F
+from profidrive_cli.fdl.fcb import MasterFcb
+from profidrive_cli.fdl.timing import BusParams
+
+REPLY, NO_ANSWER = "reply", "no answer"
+
+
+@dataclass
+class Outcome:
+    kind: str                      # REPLY or NO_ANSWER
+    frame: F.Frame | None = None   # the reply (SC frames included)
+    retries: int = 0
+    illegal: int = 0               # corrupt frames / foreign replies seen during this request
+
+
+@dataclass
+class StationCounters:
+    requests: int = 0
+    retries: int = 0
+    no_answer: int = 0
+    illegal: int = 0
+    rs: int = 0
+    rr: int = 0
+    ue: int = 0
+    reparams: int = 0
+    diag_reads: int = 0
+    data_exchanges: int = 0
+    extra: dict = field(default_factory=dict)
+
+    def as_dict(self) -> dict:
+        d = {k: v for k, v in self.__dict__.items() if k != "extra"}
+        d.update(self.extra)
+        return d
+
+
+class FdlMaster:
+    def __init__(self, params: BusParams, address: int = F.DEFAULT_MASTER):
+        if not 0 <= address <= 125:
+            raise ValueError(f"master address {address} outside 0..125")
+        self.params = params
+        self.address = address
+        self._fcb: dict[int, MasterFcb] = {}
+        self.counters: dict[int, StationCounters] = {}
+        self._pending: bytes | None = None
+        self._da = 0
+        self._uses_fcb = False
+        self._retries_left = 0
+        self._retries = 0
+        self._illegal = 0
+        self._rx = F.Receiver()
+        self.deadline = 0.0
+        self._timeout = 0.0
+
+    def counters_for(self, da: int) -> StationCounters:
+        c = self.counters.get(da)
+        if c is None:
+            c = self.counters[da] = StationCounters()
+        return c
+
+    def reset_station(self, da: int) -> None:
+        """Station (re)initialised: its next request starts a new FCB sequence."""
+        self._fcb.pop(da, None)
+
+    def request(self, da: int, function: int, data: bytes = b"", dsap: int | None = None,
+                ssap: int | None = None, now: float = 0.0, expect_octets: int = 255) -> tuple[bytes, float]:
+        uses_fcb = function in (F.SRD_LOW, F.SRD_HIGH, F.SDA_LOW, F.SDA_HIGH)
+        if uses_fcb:
+            fcb = self._fcb.get(da)
+            if fcb is None:
+                fcb = self._fcb[da] = MasterFcb()
+            fc = fcb.fc(function)
+        else:
+            fc = F.request_fc(function)
+        frame = F.Frame(F.SD2, da, self.address, fc, bytes(data), dsap, ssap)
+        self._pending = F.encode(frame)
+        self._da = da
+        self._uses_fcb = uses_fcb
+        self._retries_left = self.params.retries
+        self._retries = 0
+        self._illegal = 0
+        self._rx.reset()
+        self._timeout = self.params.chars(len(self._pending)) + self.params.reply_timeout(expect_octets)
+        self.deadline = now + self._timeout
+        self.counters_for(da).requests += 1
+        return self._pending, self.deadline
+
+    def send_no_reply(self, da: int, function: int, data: bytes = b"", dsap=None, ssap=None) -> bytes:
+        """SDN (e.g. Global_Control broadcast): FCB/FCV 0, nothing to wait for."""
+        return F.encode(F.Frame(F.SD2, da, self.address, F.request_fc(function), bytes(data), dsap, ssap))
+
+    def feed(self, data: bytes, now: float) -> Outcome | None:
+        if self._pending is None:
+            return None
+        self._rx.feed(data)
+        while True:
+            r = self._rx.next()
+            if r is None:
+                return None
+            if isinstance(r, F.FrameError):
+                self._illegal += 1
+                continue
+            if r.sd == F.SC:
+                return self._done(r)
+            if r.sd == F.SD4 or r.is_request or r.da != self.address or r.sa != self._da:
+                self._illegal += 1          # token, another master's request, a foreign reply
+                continue
+            return self._done(r)
+
+    def _done(self, frame: F.Frame) -> Outcome:
+        if self._uses_fcb:
+            self._fcb[self._da].confirm()
+        c = self.counters_for(self._da)
+        c.retries += self._retries
+        c.illegal += self._illegal
+        if frame.sd != F.SC:
+            st = frame.fc & 0x0F
+            if st == F.RS:
+                c.rs += 1
+            elif st == F.RR:
+                c.rr += 1
+            elif st == F.UE:
+                c.ue += 1
+        self._pending = None
+        return Outcome(REPLY, frame, self._retries, self._illegal)
+
+    def expire(self, now: float):
+        """Deadline passed without a valid reply: (octets, deadline) to retry, or the NO_ANSWER outcome."""
+        if self._pending is None:
+            return None
+        if self._retries_left > 0:
+            self._retries_left -= 1
+            self._retries += 1
+            self._rx.reset()
+            self.deadline = now + self._timeout
+            return self._pending, self.deadline
+        c = self.counters_for(self._da)
+        c.retries += self._retries
+        c.illegal += self._illegal
+        c.no_answer += 1
+        self._pending = None
+        return Outcome(NO_ANSWER, None, self._retries, self._illegal)

@@ -1,0 +1,129 @@
+"""SerialLink: the Link over any pyserial port — device paths, pyserial URLs and sim://.
+
+8 data bits, even parity, 1 stop bit. Optional kernel RS-485 mode (pyserial RS485Settings) and
+suppression of the adapter's own echo on 2-wire adapters that hear themselves.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import time
+
+import serial
+import serial.rs485
+
+from profidrive_cli import BusError, UsageError
+from profidrive_cli.fdl.timing import BAUD_NAMES
+from profidrive_cli.link.base import Link, LinkLost
+
+if "profidrive_cli.link" not in serial.protocol_handler_packages:
+    serial.protocol_handler_packages.append("profidrive_cli.link")
+
+
+def open_serial(port: str, baud: int, rs485: bool = False, timeout: float = 0.0) -> serial.SerialBase:
+    """Open a pyserial port for PROFIBUS; one-line errors for missing / busy / forbidden ports."""
+    try:
+        ser = serial.serial_for_url(port, do_not_open=True)
+        ser.baudrate = baud
+        ser.bytesize = serial.EIGHTBITS
+        ser.parity = serial.PARITY_EVEN
+        ser.stopbits = serial.STOPBITS_ONE
+        ser.timeout = timeout
+        ser.write_timeout = 2.0
+        ser.xonxoff = ser.rtscts = ser.dsrdtr = False
+        if "://" not in port and not port.upper().startswith("COM"):
+            ser.exclusive = True
+        if rs485:
+            ser.rs485_mode = serial.rs485.RS485Settings()
+        ser.open()
+        return ser
+    except ValueError as e:
+        if "baud" in str(e).lower():
+            raise BusError(f"{port}: the port refuses {BAUD_NAMES.get(baud, baud)} baud ({e})") from None
+        raise UsageError(f"{port}: {e}") from None
+    except serial.SerialException as e:
+        raise BusError(_explain_open_error(port, e)) from None
+    except OSError as e:
+        raise BusError(_explain_open_error(port, e)) from None
+
+
+def _explain_open_error(port: str, e: Exception) -> str:
+    err = getattr(e, "errno", None)
+    text = str(e)
+    if err == errno.ENOENT or "No such file" in text or "could not open port" in text and "2]" in text:
+        return f"{port}: no such port (list ports with `python -m serial.tools.list_ports`, or use --port sim://)"
+    if err in (errno.EACCES, errno.EPERM) or "Permission denied" in text:
+        return (f"{port}: permission denied — add yourself to the port's group "
+                f"(e.g. `sudo usermod -aG dialout $USER`, then log in again)")
+    if err == errno.EBUSY or "busy" in text.lower() or "exclusively lock" in text:
+        return f"{port}: port is busy (another program has it open)"
+    if "Connection refused" in text:
+        return f"{port}: connection refused"
+    return f"{port}: cannot open: {text}"
+
+
+class SerialLink(Link):
+    def __init__(self, port: str, baud: int = 19200, rs485: bool = False, echo: bool = False):
+        self.name = port
+        self.baud = baud
+        self.echo = echo
+        self.ser = open_serial(port, baud, rs485)
+        self.is_simulator = port.startswith("sim://")
+        #: the simulated bus behind sim:// (for tests and fault injection), else None
+        self.bus = getattr(self.ser, "bus", None)
+        self.instant = self.bus is not None and not self.bus.wire
+        self.echo_errors = 0
+
+    def write(self, data: bytes) -> None:
+        try:
+            self.ser.write(data)
+            if self.echo:
+                self._swallow_echo(data)
+        except serial.SerialTimeoutException:
+            raise LinkLost(f"{self.name}: write timed out (adapter gone?)") from None
+        except (serial.SerialException, OSError) as e:
+            raise LinkLost(f"{self.name}: port lost while writing: {e}") from None
+
+    def _swallow_echo(self, data: bytes) -> None:
+        deadline = time.monotonic() + 0.05 + len(data) * 11 / self.baud
+        got = bytearray()
+        while len(got) < len(data):
+            chunk = self.read(deadline)
+            if not chunk:
+                break
+            got += chunk
+        if bytes(got[:len(data)]) != data:
+            self.echo_errors += 1
+
+    def read(self, deadline: float) -> bytes:
+        try:
+            n = self.ser.in_waiting
+            if n:
+                return self.ser.read(n)
+            wait = deadline - time.monotonic()
+            if wait <= 0:
+                return b""
+            self.ser.timeout = wait
+            first = self.ser.read(1)
+            if not first:
+                return b""
+            n = self.ser.in_waiting
+            return first + (self.ser.read(n) if n else b"")
+        except (serial.SerialException, OSError) as e:
+            raise LinkLost(f"{self.name}: port lost while reading: {e}") from None
+        except TypeError:
+            # pyserial raises TypeError from os.read on a closed fd in some versions
+            raise LinkLost(f"{self.name}: port closed") from None
+
+    def flush_input(self) -> None:
+        try:
+            self.ser.reset_input_buffer()
+        except (serial.SerialException, OSError) as e:
+            raise LinkLost(f"{self.name}: port lost: {e}") from None
+
+    def close(self) -> None:
+        try:
+            self.ser.close()
+        except Exception:
+            pass

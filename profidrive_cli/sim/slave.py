@@ -1,0 +1,251 @@
+"""A simulated DP-V0 slave at telegram level (reference §3.6), sans-IO.
+
+handle(frame, now) takes one request Frame addressed to this station and returns the reply octets
+(or None when no reply is due, e.g. SDN). It answers in each state what a real slave answers,
+refusals included: RS for services not enabled in the current state, Prm_Fault / Cfg_Fault in the
+next diagnosis for rejected Set_Prm / Chk_Cfg, the cached reply for an FCB repetition.
+"""
+
+from __future__ import annotations
+
+from profidrive_cli.dp import services as S
+from profidrive_cli.fdl import frames as F
+from profidrive_cli.fdl.fcb import SlaveFcb
+from profidrive_cli.sim.model import SlaveModel
+
+WAIT_PRM, WAIT_CFG, DATA_EXCH = "Wait_Prm", "Wait_Cfg", "Data_Exch"
+
+
+class SimSlave:
+    def __init__(self, address: int, model: SlaveModel, set_slave_add_supported: bool = False):
+        self.address = address
+        self.model = model
+        self.set_slave_add_supported = set_slave_add_supported
+        self.fcb = SlaveFcb()
+        self.powered = True
+        #: counters a test can look at
+        self.stats = {"requests": 0, "repeats": 0, "prm_rejected": 0, "cfg_rejected": 0,
+                      "watchdog_expired": 0, "data_exchange": 0}
+        self.power_on(0.0)
+
+    # -- state ------------------------------------------------------------------------------
+    def power_on(self, now: float) -> None:
+        self.state = WAIT_PRM
+        self.master: int | None = None       # the master that parameterised us (lock holder)
+        self.wd_s: float | None = None
+        self.last_seen = now
+        self.prm_fault = False
+        self.cfg_fault = False
+        self.not_supported = False
+        self.diag_pending = False
+        self.sync = self.freeze = False
+        self.group = 0
+        self.outputs = b""
+        self.inputs = b""
+        self.fcb.reset()
+
+    def power_cycle(self, now: float) -> None:
+        """Power off and on: back to Wait_Prm, needs a new Set_Prm (fault injection)."""
+        if self.state == DATA_EXCH:
+            self.model.on_leave_data_exchange(now, "power cycle")
+        self.power_on(now)
+
+    def _leave(self, now: float, reason: str, to: str = WAIT_PRM) -> None:
+        if self.state == DATA_EXCH:
+            self.model.on_leave_data_exchange(now, reason)
+        self.state = to
+
+    def tick(self, now: float) -> None:
+        """Watchdog: no telegram from our master within the watchdog time -> Wait_Prm."""
+        if (self.wd_s is not None and self.state in (WAIT_CFG, DATA_EXCH)
+                and now - self.last_seen > self.wd_s):
+            self.stats["watchdog_expired"] += 1
+            self._leave(now, "watchdog")
+            self.master = None
+            self.wd_s = None
+        self.model.tick(now)
+
+    # -- diagnosis ---------------------------------------------------------------------------
+    def diag(self) -> S.SlaveDiag:
+        ext = self.model.ext_diag()
+        st1 = 0
+        if self.state != DATA_EXCH:
+            st1 |= S.ST1["Station_Not_Ready"]
+        if self.cfg_fault:
+            st1 |= S.ST1["Cfg_Fault"]
+        if self.prm_fault:
+            st1 |= S.ST1["Prm_Fault"]
+        if self.not_supported:
+            st1 |= S.ST1["Not_Supported"]
+        if ext:
+            st1 |= S.ST1["Ext_Diag"]
+        st2 = S.ST2_FIXED
+        if self.state == WAIT_PRM:
+            st2 |= S.ST2["Prm_Req"]
+        if self.wd_s is not None:
+            st2 |= S.ST2["WD_On"]
+        if self.sync:
+            st2 |= S.ST2["Sync_Mode"]
+        if self.freeze:
+            st2 |= S.ST2["Freeze_Mode"]
+        room = max(0, self.model.max_diag_len - 6)
+        st3 = S.ST3_OVERFLOW if len(ext) > room else 0
+        master = self.master if self.master is not None and self.state != WAIT_PRM else 0xFF
+        return S.SlaveDiag(st1, st2, st3, master, self.model.ident, ext[:room])
+
+    # -- telegrams ---------------------------------------------------------------------------
+    def _reply(self, req: F.Frame, status: int, data: bytes = b"", saps: bool = True) -> bytes:
+        if saps and req.dsap is not None:
+            f = F.Frame(F.SD2, req.sa, self.address, F.response_fc(status), data, req.ssap, req.dsap)
+        else:
+            f = F.Frame(F.SD2, req.sa, self.address, F.response_fc(status), data)
+        return F.encode(f)
+
+    def handle(self, req: F.Frame, now: float) -> bytes | None:
+        if not self.powered:
+            return None
+        self.tick(now)
+        fn = req.function
+        if fn == F.FDL_STATUS:
+            return F.encode(F.Frame(F.SD1, req.sa, self.address, F.response_fc(F.OK)))
+        if fn not in (F.SRD_LOW, F.SRD_HIGH, F.SDN_LOW, F.SDN_HIGH, F.SDA_LOW, F.SDA_HIGH):
+            # ident / LSAP status / reserved functions: not offered by this station
+            return F.encode(F.Frame(F.SD1, req.sa, self.address, F.response_fc(F.RS))) \
+                if fn in F.NEEDS_REPLY else None
+        if fn in (F.SDN_LOW, F.SDN_HIGH):
+            self._sdn(req, now)
+            return None
+        self.stats["requests"] += 1
+        if self.fcb.is_repeat(req.sa, req.fc):
+            self.stats["repeats"] += 1
+            return self.fcb.last_reply
+        reply = self._service(req, now)
+        self.fcb.remember(reply)
+        return reply
+
+    def _from_own_master(self, req: F.Frame) -> bool:
+        return self.master is not None and req.sa == self.master
+
+    def _sdn(self, req: F.Frame, now: float) -> None:
+        if req.dsap == S.SAP_GLOBAL_CONTROL and self._from_own_master(req):
+            try:
+                gc = S.GlobalControl.decode(req.data)
+            except S.ServiceError:
+                return
+            if gc.group and not gc.group & self.group:
+                return
+            self.last_seen = now
+            if gc.command & S.GC_CLEAR and self.state == DATA_EXCH:
+                self.model.clear_outputs(now)
+
+    def _service(self, req: F.Frame, now: float) -> bytes:
+        if self._from_own_master(req):
+            self.last_seen = now
+        if req.dsap is None:
+            return self._data_exchange(req, now)
+        if req.ssap is None:
+            return self._reply(req, F.RS, saps=False)
+        sap = req.dsap
+        if sap == S.SAP_SLAVE_DIAG:
+            d = self.diag()
+            self.diag_pending = False
+            return self._reply(req, F.DL, d.encode())
+        if sap == S.SAP_GET_CFG:
+            return self._reply(req, F.DL, self.model.real_cfg())
+        if sap == S.SAP_SET_PRM:
+            return self._set_prm(req, now)
+        if sap == S.SAP_CHK_CFG:
+            return self._chk_cfg(req, now)
+        if sap == S.SAP_RD_INP and self.state == DATA_EXCH:
+            return self._reply(req, F.DL, self.inputs)
+        if sap == S.SAP_RD_OUTP and self.state == DATA_EXCH:
+            return self._reply(req, F.DL, self.outputs)
+        if sap == S.SAP_SET_SLAVE_ADD and self.set_slave_add_supported and self.state == WAIT_PRM:
+            try:
+                ssa = S.SetSlaveAdd.decode(req.data)
+            except S.ServiceError:
+                return self._reply(req, F.RS)
+            if ssa.ident != self.model.ident or not 0 <= ssa.new_address <= 125:
+                return self._reply(req, F.RS)
+            reply = F.encode(F.Frame(F.SC))
+            self.address = ssa.new_address
+            return reply
+        return self._reply(req, F.RS)
+
+    def _set_prm(self, req: F.Frame, now: float) -> bytes:
+        sc = F.encode(F.Frame(F.SC))
+        try:
+            prm = S.SetPrm.decode(req.data)
+        except S.ServiceError:
+            self._reject_prm(now)
+            return sc
+        locked_by_other = (self.master is not None and req.sa != self.master
+                           and self.state != WAIT_PRM)
+        if locked_by_other:
+            # another master holds the lock: not executed (it sees Master_Lock in our diag)
+            return sc
+        if prm.unlock:
+            # released for other masters: drop the lock and wait for new parameters
+            self._leave(now, "released by master")
+            self.master, self.wd_s = None, None
+            return sc
+        ok = prm.ident == self.model.ident
+        if prm.wd_ms is not None and 0 in (prm.wd_factors or (1, 1)):
+            ok = False
+        if (prm.sync and not getattr(self.model, "sync_supported", False)) or \
+                (prm.freeze and not getattr(self.model, "freeze_supported", False)):
+            self.not_supported = True
+            ok = False
+        else:
+            self.not_supported = False
+        if ok and not self.model.check_prm(prm.user_prm):
+            ok = False
+        if not ok:
+            self._reject_prm(now)
+            return sc
+        self._leave(now, "new parameters", to=WAIT_CFG)
+        self.state = WAIT_CFG
+        self.prm_fault = False
+        self.cfg_fault = False
+        self.master = req.sa
+        self.wd_s = prm.wd_ms / 1000.0 if prm.wd_ms is not None else None
+        self.sync, self.freeze, self.group = prm.sync, prm.freeze, prm.group
+        self.last_seen = now
+        return sc
+
+    def _reject_prm(self, now: float) -> None:
+        self.stats["prm_rejected"] += 1
+        self._leave(now, "parameters rejected")
+        self.prm_fault = True
+        self.master = None
+        self.wd_s = None
+
+    def _chk_cfg(self, req: F.Frame, now: float) -> bytes:
+        if self.state == WAIT_PRM or not self._from_own_master(req):
+            return self._reply(req, F.RS)
+        if self.model.check_cfg(req.data):
+            if self.state != DATA_EXCH:
+                self.outputs = bytes(self.model.output_len)
+                self.inputs = bytes(self.model.input_len)
+            self.state = DATA_EXCH
+            self.cfg_fault = False
+        else:
+            self.stats["cfg_rejected"] += 1
+            self._leave(now, "configuration rejected")
+            self.cfg_fault = True
+        return F.encode(F.Frame(F.SC))
+
+    def _data_exchange(self, req: F.Frame, now: float) -> bytes:
+        if self.state != DATA_EXCH or not self._from_own_master(req):
+            return self._reply(req, F.RS, saps=False)
+        if len(req.data) != self.model.output_len:
+            # receive length mismatch: the station leaves data exchange and wants new parameters
+            self._leave(now, "output length mismatch")
+            return self._reply(req, F.RS, saps=False)
+        self.stats["data_exchange"] += 1
+        self.outputs = req.data
+        self.inputs = self.model.data_exchange(req.data, now)
+        status = F.DH if self.diag_pending else F.DL
+        if not self.inputs and status == F.DL:
+            return F.encode(F.Frame(F.SC))
+        return self._reply(req, status, self.inputs, saps=False)
