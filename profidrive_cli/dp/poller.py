@@ -46,7 +46,7 @@ class Master:
         out, deadline = self.fdl.request(da, function, data, dsap, ssap, self.link.now(), expect)
         self.link.write(out)
         while True:
-            chunk = self.link.read(deadline)
+            chunk = self.link.read(self.fdl.deadline)
             now = self.link.now()
             if chunk:
                 res = self.fdl.feed(chunk, now)
@@ -54,8 +54,9 @@ class Master:
                     self._idle_from = now
                     return res
                 continue
-            if now < deadline:
+            if now < self.fdl.deadline and not self.link.instant:
                 continue
+            # (the instant simulator answers at once: an empty read means no answer is coming)
             nxt = self.fdl.expire(now)
             if isinstance(nxt, Outcome):
                 self._idle_from = now

@@ -62,6 +62,7 @@ class FdlMaster:
         self._retries_left = 0
         self._retries = 0
         self._illegal = 0
+        self._in_garbage = False
         self._rx = F.Receiver()
         self.deadline = 0.0
         self._timeout = 0.0
@@ -93,8 +94,13 @@ class FdlMaster:
         self._retries_left = self.params.retries
         self._retries = 0
         self._illegal = 0
+        self._in_garbage = False
         self._rx.reset()
-        self._timeout = self.params.chars(len(self._pending)) + self.params.reply_timeout(expect_octets)
+        # the first reply octet must start within the slot time after our last octet; once octets
+        # arrive, the deadline moves out by the wire time of the rest of the longest reply
+        self._timeout = (self.params.chars(len(self._pending)) + self.params.slot_seconds
+                         + self.params.link_latency)
+        self._expect = expect_octets
         self.deadline = now + self._timeout
         self.counters_for(da).requests += 1
         return self._pending, self.deadline
@@ -110,10 +116,18 @@ class FdlMaster:
         while True:
             r = self._rx.next()
             if r is None:
+                if len(self._rx):
+                    self.deadline = max(self.deadline, now + self.params.chars(self._expect + 9)
+                                        + self.params.link_latency)
                 return None
             if isinstance(r, F.FrameError):
-                self._illegal += 1
+                # one corrupt telegram shows up as a run of octet-by-octet resync errors:
+                # count the run once
+                if not self._in_garbage:
+                    self._illegal += 1
+                    self._in_garbage = True
                 continue
+            self._in_garbage = False
             if r.sd == F.SC:
                 return self._done(r)
             if r.sd == F.SD4 or r.is_request or r.da != self.address or r.sa != self._da:
@@ -146,6 +160,7 @@ class FdlMaster:
             self._retries_left -= 1
             self._retries += 1
             self._rx.reset()
+            self._in_garbage = False
             self.deadline = now + self._timeout
             return self._pending, self.deadline
         c = self.counters_for(self._da)
