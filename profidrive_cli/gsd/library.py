@@ -1,0 +1,219 @@
+"""The GSD library: pdrive's own files (`gsd/` at the repo root, `profidrive_cli/gsd_files` when installed)
+plus the user's folders (`--gsd-dir DIR`, then `$PDRIVE_GSD_DIR`). User files win over the library: a
+lookup by ident searches the user folders first.
+
+Parsed files are cached per path, keyed by (mtime, size), so naming every station of a bus scan parses each
+file once per process. A lookup by ident first reads only the `Ident_Number` line of each candidate file
+(also cached), then parses the one that matches.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+from profidrive_cli import UsageError
+from profidrive_cli.data import gsd_dir, user_gsd_dirs
+from profidrive_cli.datafile import DataFileError
+from profidrive_cli.gsd.model import Gsd
+from profidrive_cli.gsd.parser import _decode, parse_gsd
+
+# .gsd is the default language; .gse English, .gsg German, .gsf French, .gsi Italian, .gsp Portuguese,
+# .gss Spanish. In one folder, for one file stem, the first in this order is used.
+GSD_SUFFIXES = (".gsd", ".gse", ".gsg", ".gsf", ".gsi", ".gsp", ".gss")
+
+_IDENT = re.compile(r"^[ \t]*Ident_Number[ \t]*=[ \t]*(0[xX][0-9a-fA-F]+|[0-9]+)", re.I | re.M)
+
+_parsed: dict[str, tuple[tuple[int, int], Gsd]] = {}
+_idents: dict[str, tuple[tuple[int, int], int | None]] = {}
+
+
+def _stamp(p: Path) -> tuple[int, int]:
+    st = p.stat()
+    return st.st_mtime_ns, st.st_size
+
+
+def clear_cache() -> None:
+    _parsed.clear()
+    _idents.clear()
+
+
+def parse_cached(path: str | Path) -> Gsd:
+    """parse_gsd with a per-process cache keyed by (path, mtime, size)."""
+    p = Path(path)
+    try:
+        stamp = _stamp(p)
+    except FileNotFoundError:
+        raise DataFileError(p, None, "file not found") from None
+    except OSError as e:
+        raise DataFileError(p, None, f"cannot read: {e.strerror or e}") from None
+    key = str(p.resolve())
+    hit = _parsed.get(key)
+    if hit and hit[0] == stamp:
+        return hit[1]
+    g = parse_gsd(p)
+    _parsed[key] = (stamp, g)
+    return g
+
+
+def quick_ident(path: str | Path) -> int | None:
+    """The Ident_Number of a GSD file from its first `Ident_Number =` line (no full parse); None if absent."""
+    p = Path(path)
+    try:
+        stamp = _stamp(p)
+    except OSError:
+        return None
+    key = str(p.resolve())
+    hit = _idents.get(key)
+    if hit and hit[0] == stamp:
+        return hit[1]
+    try:
+        text, _ = _decode(p.read_bytes())
+    except OSError:
+        return None
+    m = _IDENT.search(text)
+    ident = None
+    if m:
+        t = m.group(1)
+        ident = int(t[2:], 16) if t[:2].lower() == "0x" else int(t)
+    _idents[key] = (stamp, ident)
+    return ident
+
+
+def _user_dirs(extra_dir: str | Path | None) -> list[Path]:
+    if extra_dir is not None and not Path(extra_dir).is_dir():
+        raise UsageError(f"--gsd-dir {extra_dir}: no such folder")
+    return [d for d in user_gsd_dirs(str(extra_dir) if extra_dir is not None else None) if d.is_dir()]
+
+
+def search_dirs(extra_dir: str | Path | None = None) -> list[tuple[Path, str]]:
+    """(folder, "user" | "library") in lookup order: user folders first."""
+    out = [(d, "user") for d in _user_dirs(extra_dir)]
+    lib = gsd_dir()
+    if lib.is_dir():
+        out.append((lib, "library"))
+    return out
+
+
+def gsd_files(folder: Path) -> list[Path]:
+    """GSD files in one folder (not recursive), one per stem, sorted by name."""
+    by_stem: dict[str, Path] = {}
+    try:
+        entries = sorted(folder.iterdir(), key=lambda p: p.name.lower())
+    except OSError:
+        return []
+    for p in entries:
+        suf = p.suffix.lower()
+        if suf not in GSD_SUFFIXES or not p.is_file():
+            continue
+        stem = p.stem.lower()
+        old = by_stem.get(stem)
+        if old is None or GSD_SUFFIXES.index(suf) < GSD_SUFFIXES.index(old.suffix.lower()):
+            by_stem[stem] = p
+    return sorted(by_stem.values(), key=lambda p: p.name.lower())
+
+
+@dataclass
+class LibraryEntry:
+    path: Path
+    source: str                  # "user" | "library"
+    ident: int | None
+    vendor: str | None = None
+    model: str | None = None
+    modules: int = 0
+    error: str | None = None     # the parse error, if the file does not parse
+    shadowed_by: Path | None = None   # a user file with the same ident that wins over this one
+
+    def to_dict(self) -> dict:
+        return {"path": str(self.path), "source": self.source,
+                "ident": self.ident, "ident_hex": None if self.ident is None else f"0x{self.ident:04X}",
+                "vendor": self.vendor, "model": self.model, "modules": self.modules, "error": self.error,
+                "shadowed_by": None if self.shadowed_by is None else str(self.shadowed_by)}
+
+
+def list_library(extra_dir: str | Path | None = None) -> list[LibraryEntry]:
+    """Every GSD file of the user folders and the library, user files first. Broken files are listed
+    with their error instead of raising."""
+    out: list[LibraryEntry] = []
+    first_by_ident: dict[int, Path] = {}
+    for folder, source in search_dirs(extra_dir):
+        for p in gsd_files(folder):
+            try:
+                g = parse_cached(p)
+                e = LibraryEntry(path=p, source=source, ident=g.ident_number, vendor=g.vendor_name,
+                                 model=g.model_name, modules=len(g.modules))
+            except DataFileError as err:
+                e = LibraryEntry(path=p, source=source, ident=quick_ident(p), error=str(err))
+            if e.ident is not None and e.error is None:
+                if e.ident in first_by_ident:
+                    e.shadowed_by = first_by_ident[e.ident]
+                else:
+                    first_by_ident[e.ident] = p
+            out.append(e)
+    return out
+
+
+def find_path_by_ident(ident: int, extra_dir: str | Path | None = None) -> Path | None:
+    for folder, _ in search_dirs(extra_dir):
+        for p in gsd_files(folder):
+            if quick_ident(p) == ident:
+                return p
+    return None
+
+
+def find_by_ident(ident: int, extra_dir: str | Path | None = None) -> Gsd | None:
+    """The GSD for a PROFIBUS ident number: user folders first, then the library; None if no file has it.
+    A matching file that does not parse raises its DataFileError."""
+    for folder, _ in search_dirs(extra_dir):
+        for p in gsd_files(folder):
+            if quick_ident(p) == ident:
+                g = parse_cached(p)
+                if g.ident_number == ident:
+                    return g
+    return None
+
+
+def station_name(ident: int, extra_dir: str | Path | None = None) -> str | None:
+    """"Vendor Model" for an ident, for naming stations in a bus scan; None when unknown or unreadable."""
+    try:
+        g = find_by_ident(ident, extra_dir)
+    except (DataFileError, UsageError):
+        return None
+    return None if g is None else g.title
+
+
+def _as_ident(text: str) -> int | None:
+    t = text.strip()
+    if re.fullmatch(r"0[xX][0-9a-fA-F]{1,4}", t):
+        return int(t, 16)
+    if t.isascii() and t.isdigit() and int(t) <= 0xFFFF:
+        return int(t)
+    return None
+
+
+def load_gsd(path_or_ident: str | Path | int, extra_dir: str | Path | None = None) -> Gsd:
+    """A GSD by file path, by ident (int, "0x00CA", "202") or by library file name ("YASK00CA.GSD" or
+    "YASK00CA"). Raises UsageError / DataFileError (one line) when nothing fits or the file is broken."""
+    if isinstance(path_or_ident, int) and not isinstance(path_or_ident, bool):
+        g = find_by_ident(path_or_ident, extra_dir)
+        if g is None:
+            raise UsageError(f"no GSD file with ident 0x{path_or_ident:04X} in the library"
+                             + ("" if extra_dir else " (add your vendor's file with --gsd-dir DIR)"))
+        return g
+    p = Path(path_or_ident)
+    if p.is_file():
+        return parse_cached(p)
+    text = str(path_or_ident)
+    ident = _as_ident(text)
+    if ident is not None:
+        return load_gsd(ident, extra_dir)
+    if p.parent == Path(".") or str(p.parent) == "":
+        want = text.strip().lower()
+        for folder, _ in search_dirs(extra_dir):
+            for q in gsd_files(folder):
+                if q.name.lower() == want or q.stem.lower() == want:
+                    return parse_cached(q)
+    if p.exists():
+        raise DataFileError(p, None, "is not a file")
+    raise UsageError(f"{text}: no such GSD file, ident or library name (try `pdrive gsd list`)")

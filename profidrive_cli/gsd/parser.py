@@ -1,0 +1,713 @@
+"""GSD parser for files as found in the wild (reference §5).
+
+Two small stages, plain Python:
+
+1. lines: decode (UTF-8 if the bytes are valid UTF-8, else Latin-1), split on CRLF / CR / LF (mixed is
+   fine), skip everything before the `#Profibus_DP` line, cut `;` comments (not inside strings) and join
+   `\\` continuations (also inside number lists and strings) into logical lines that remember the
+   physical line they started on.
+2. statements: each logical line is `Keyword[(args)] [=] value`, keywords compared case-insensitively.
+   A small stack of open blocks (PrmText, ExtUserPrmData, Module, Data_Area, Unit_Diag_Area,
+   UnitDiagType, SlotDefinition, ...) decides what a keyword means.
+
+Errors raise `DataFileError(path, line, message)` (a UsageError: one line, no traceback): missing
+`#Profibus_DP`, unterminated string or block, bad number, malformed Bit/BitArea, undecodable cfg bytes.
+Unknown keywords are kept (`Gsd.values`, `Gsd.unknown`) and reported in `Gsd.warnings` as
+"file:line: ..."; so are soft problems (undefined Prm_Text_Ref, default outside its range, ...).
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any
+
+from profidrive_cli.datafile import DataFileError
+from profidrive_cli.dp.cfg import CfgError, decode_cfg
+from profidrive_cli.gsd.model import (
+    BAUDS, INT_TYPES, DiagArea, ExtUserPrmData, Gsd, Module, PrmBlock, PrmConst, PrmRef, PrmText, Slot,
+    UnitDiagType,
+)
+
+_SPLIT = re.compile(r"\r\n|\r|\n")
+_HEAD = re.compile(r"\s*([^\s=(]+)\s*(?:\(([^)]*)\))?\s*(=)?\s*(.*)\Z", re.S)
+_TOK = re.compile(r'"([^"]*)"|([-,@])|([^\s,"@-]+)')
+_NUM = re.compile(r"0[xX][0-9a-fA-F]+\Z|[0-9]+\Z")
+
+# Set_Prm DU is at most 244 octets, 7 of them the standard part: User_Prm_Data <= 237 octets.
+MAX_USER_PRM_LEN = 237
+
+_BAUD_SUFFIXES = tuple(s.lower() for s, _, _ in BAUDS)
+_BAUD_KEY = re.compile(r"(maxtsdr|maxtsd|tsdi|trdy|tqui|tset|transmission_delay|reaction_delay)_("
+                       + "|".join(re.escape(s) for s in _BAUD_SUFFIXES) + r")\Z")
+
+_STR_KEYS = frozenset("""
+vendor_name model_name revision hardware_release software_release implementation_type bitmap_device
+bitmap_diag bitmap_sf info_text ordernumber family_name version_name webpage
+""".split())
+
+_INT_KEYS = frozenset("""
+gsd_revision revision_number ident_number protocol_ident station_type fms_supp redundancy
+repeater_ctrl_sig 24v_pins freeze_mode_supp sync_mode_supp auto_baud_supp set_slave_add_supp
+user_prm_data_len min_slave_intervall modular_station max_module max_input_len max_output_len max_data_len
+modul_offset fail_safe max_diag_data_len max_user_prm_data_len diag_update_delay fail_safe_required
+physical_interface
+dpv1_slave c1_read_write_supp c2_read_write_supp c1_max_data_len c2_max_data_len c1_response_timeout
+c2_response_timeout c1_read_write_required c2_read_write_required c2_max_count_channels
+max_initiate_pdu_length diagnostic_alarm_supp process_alarm_supp pull_plug_alarm_supp status_alarm_supp
+update_alarm_supp manufacturer_specific_alarm_supp extra_alarm_sap_supp alarm_sequence_mode_count
+alarm_type_mode_supp diagnostic_alarm_required process_alarm_required pull_plug_alarm_required
+status_alarm_required update_alarm_required manufacturer_specific_alarm_required dpv1_data_types
+wd_base_1ms_supp wb_base_1ms_supp check_cfg_mode
+publisher_supp subscriber_supp dxb_max_link_count dxb_max_data_length dxb_subscribertable_block_location
+x_prm_sap_supp x_max_user_prm_data_len x_prm_block_structure_supp prm_block_structure_supp
+prm_block_structure_req prm_structure_supp prm_structure_req
+isochron_mode_supp isochron_mode_required tbase_dp tdp_max tdp_min tbase_io ti_min to_min t_pll_w_max
+time_sync_supp ident_maintenance_supp firmware_download_supp ds248_fct fixpresetmodules
+slave_redundancy_supp slave_max_switch_over_time max_iso_channels
+max_slaves_supp max_master_input_len max_master_output_len max_master_data_len max_mps_length max_lsdu_ms
+min_poll_timeout las_len master_freeze_mode_supp master_sync_mode_supp master_fail_safe_supp download_supp
+upload_supp act_para_brct_supp act_param_supp dpv1_master dpv1_conformance_class c1_master_read_write_supp
+master_dpv1_alarm_supp isochron_mode_synchronised dxb_master_supp x_master_prm_sap_supp
+""".split())
+
+# keywords that open a block, with the keyword that closes it
+_BLOCKS = {
+    "prmtext": "endprmtext",
+    "extuserprmdata": "endextuserprmdata",
+    "module": "endmodule",
+    "unit_diag_area": "unit_diag_area_end",
+    "x_unit_diag_area": "x_unit_diag_area_end",
+    "unitdiagtype": "endunitdiagtype",
+    "unit_diag_type": "endunitdiagtype",
+    "slotdefinition": "endslotdefinition",
+    "data_area_beg": "data_area_end",
+    "version_firmware_download": "end_version_firmware_download",
+}
+_BLOCK_NAMES = {
+    "prmtext": "PrmText", "extuserprmdata": "ExtUserPrmData", "module": "Module",
+    "unit_diag_area": "Unit_Diag_Area", "x_unit_diag_area": "X_Unit_Diag_Area",
+    "unitdiagtype": "UnitDiagType", "unit_diag_type": "UnitDiagType", "slotdefinition": "SlotDefinition",
+    "data_area_beg": "Data_Area_Beg", "version_firmware_download": "Version_Firmware_Download",
+}
+_END_NAMES = {
+    "endprmtext": "EndPrmText", "endextuserprmdata": "EndExtUserPrmData", "endmodule": "EndModule",
+    "unit_diag_area_end": "Unit_Diag_Area_End", "x_unit_diag_area_end": "X_Unit_Diag_Area_End",
+    "endunitdiagtype": "EndUnitDiagType", "endslotdefinition": "EndSlotDefinition",
+    "data_area_end": "Data_Area_End", "end_version_firmware_download": "End_Version_Firmware_Download",
+}
+_ENDS = frozenset(_END_NAMES)
+
+_TYPE_NAMES = {t.lower(): t for t in list(INT_TYPES) + ["Bit", "BitArea"]}
+
+# module-level keywords that are kept without a warning
+_MODULE_KNOWN = frozenset("""
+preset f_paramdesccrc f_io_structuredesccrc f_io_structuredescversion f_ext_module_prm_data_len
+x_ext_module_prm_data_len ext_module_prm_data_len module_reference info_text channel_diag channel_diag_help
+slot_number alarm_supp
+""".split())
+
+
+def _decode(data: bytes) -> tuple[str, str]:
+    try:
+        text = data.decode("utf-8")
+        enc = "ascii" if text.isascii() else "utf-8"
+    except UnicodeDecodeError:
+        text = data.decode("latin-1")
+        enc = "latin-1"
+    if text.startswith("\ufeff"):
+        text = text[1:]
+    return text, enc
+
+
+def _strip_comment(raw: str, in_str: bool) -> tuple[str, bool]:
+    """Cut a `;` comment that is outside strings; return (kept text, inside-a-string at the end)."""
+    if '"' not in raw:
+        if in_str:
+            return raw, True
+        j = raw.find(";")
+        return (raw if j < 0 else raw[:j]), False
+    parts = raw.split('"')
+    out: list[str] = []
+    state = in_str
+    for k, p in enumerate(parts):
+        if k:
+            out.append('"')
+            state = not state
+        if not state:
+            j = p.find(";")
+            if j >= 0:
+                out.append(p[:j])
+                return "".join(out), False
+        out.append(p)
+    return "".join(out), state
+
+
+class _Toks:
+    """Tokens of one value: ('s', text) strings, ('n', int) numbers, ('-'|','|'@', None), ('w', text)."""
+
+    __slots__ = ("t", "i", "p", "line", "what")
+
+    def __init__(self, text: str, parser: "_Parser", line: int, what: str):
+        t: list[tuple[str, Any]] = []
+        for m in _TOK.finditer(text):
+            s, punct, word = m.groups()
+            if s is not None:
+                t.append(("s", s))
+            elif punct is not None:
+                t.append((punct, None))
+            else:
+                if _NUM.match(word):
+                    t.append(("n", int(word[2:], 16) if word[1:2] in ("x", "X") else int(word)))
+                else:
+                    t.append(("w", word))
+        self.t = t
+        self.i = 0
+        self.p = parser
+        self.line = line
+        self.what = what
+
+    def error(self, msg: str) -> DataFileError:
+        return DataFileError(self.p.path, self.line, f"{self.what}: {msg}")
+
+    def at_end(self) -> bool:
+        return self.i >= len(self.t)
+
+    def peek(self) -> str | None:
+        return self.t[self.i][0] if self.i < len(self.t) else None
+
+    def _show(self) -> str:
+        kind, v = self.t[self.i]
+        return {"s": f'"{v}"', "n": str(v), "w": str(v)}.get(kind, kind)
+
+    def int(self, what: str = "number", signed: bool = False) -> int:
+        neg = False
+        if signed and self.peek() == "-":
+            neg = True
+            self.i += 1
+        if self.at_end():
+            raise self.error(f"{what} missing")
+        kind, v = self.t[self.i]
+        if kind != "n":
+            raise self.error(f"bad number {self._show()!s} (expected {what})" if kind == "w"
+                             else f"expected {what}, found {self._show()}")
+        self.i += 1
+        return -v if neg else v
+
+    def string(self, what: str = "string") -> str:
+        if self.at_end():
+            raise self.error(f"{what} missing")
+        kind, v = self.t[self.i]
+        if kind != "s":
+            raise self.error(f'expected a "quoted" {what}, found {self._show()}')
+        self.i += 1
+        return v
+
+    def skip(self, punct: str) -> bool:
+        if self.peek() == punct:
+            self.i += 1
+            return True
+        return False
+
+    def int_list(self, what: str, lo: int | None = None, hi: int | None = None,
+                 signed: bool = False) -> list[int]:
+        out: list[int] = []
+        while not self.at_end():
+            v = self.int(what, signed=signed)
+            if (lo is not None and v < lo) or (hi is not None and v > hi):
+                raise self.error(f"{what} {v} out of range {lo}..{hi}")
+            out.append(v)
+            if not self.skip(","):
+                if not self.at_end() and self.peek() not in ("n", "-"):
+                    raise self.error(f"unexpected {self._show()}")
+        return out
+
+    def end(self) -> None:
+        if not self.at_end():
+            raise self.error(f"unexpected {self._show()} after the value")
+
+
+class _Parser:
+    def __init__(self, path: str):
+        self.path = path
+        self.gsd = Gsd(path=path)
+        self.stack: list[tuple[str, Any, int]] = []   # (block keyword, object, line)
+        self.module_index = 0
+
+    # ------------------------------------------------------------------ helpers
+    def warn(self, line: int, msg: str) -> None:
+        self.gsd.warnings.append(f"{self.path}:{line}: {msg}")
+
+    def err(self, line: int, msg: str) -> DataFileError:
+        return DataFileError(self.path, line, msg)
+
+    def toks(self, text: str, line: int, what: str) -> _Toks:
+        return _Toks(text, self, line, what)
+
+    def args_int(self, args: str | None, line: int, kw: str, signed: bool = False) -> int:
+        if args is None:
+            raise self.err(line, f"{kw}: (number) missing")
+        t = self.toks(args, line, kw)
+        v = t.int("number in ( )", signed=signed)
+        t.end()
+        return v
+
+    # ------------------------------------------------------------------ lines
+    def logical_lines(self, lines: list[str], start: int):
+        buf: list[str] = []
+        first = 0
+        in_str = False
+        str_line = 0
+        for i in range(start, len(lines)):
+            lineno = i + 1
+            was_in_str = in_str
+            part, in_str = _strip_comment(lines[i], in_str)
+            if in_str and not was_in_str:
+                str_line = lineno          # the string still open at the end started on this line
+            stripped = part.rstrip()
+            if stripped.endswith("\\"):
+                if not buf:
+                    first = lineno
+                    buf.append(stripped[:-1])
+                else:
+                    buf.append(stripped[:-1] if in_str else " " + stripped[:-1].lstrip())
+                continue
+            if in_str:
+                raise self.err(str_line, "unterminated string (closing \" missing)")
+            if buf:
+                buf.append(part if was_in_str else " " + part.lstrip())
+                text = "".join(buf)
+                buf = []
+                yield first, text
+            else:
+                yield lineno, part
+        if in_str:
+            raise self.err(str_line, "unterminated string (closing \" missing)")
+        if buf:
+            yield first, "".join(buf)
+
+    # ------------------------------------------------------------------ entry
+    def parse(self, text: str) -> Gsd:
+        lines = _SPLIT.split(text)
+        start = None
+        for i, raw in enumerate(lines):
+            if raw.lstrip()[:12].lower() == "#profibus_dp":
+                start = i
+                break
+        if start is None:
+            raise self.err(1, "not a GSD file: no '#Profibus_DP' line")
+        self.gsd.start_line = start + 1
+        for line, text_ in self.logical_lines(lines, start + 1):
+            if not text_ or text_.isspace():
+                continue
+            m = _HEAD.match(text_)
+            if m is None:
+                self.gsd.unknown.append((text_.strip(), line))
+                self.warn(line, f"line not understood: {text_.strip()[:40]!r} (ignored)")
+                continue
+            kw_raw, args, eq, rest = m.groups()
+            self.statement(line, kw_raw, kw_raw.lower(), args, eq, rest)
+        if self.stack:
+            kind, obj, line = self.stack[-1]
+            name = f" {obj.name.strip()!r}" if isinstance(obj, Module) else ""
+            raise self.err(line, f"{_BLOCK_NAMES[kind]}{name} not terminated: "
+                                 f"{_END_NAMES[_BLOCKS[kind]]} missing before the end of the file")
+        self.finish()
+        return self.gsd
+
+    # ------------------------------------------------------------------ dispatch
+    def statement(self, line: int, kw_raw: str, kw: str, args: str | None, eq: str | None, rest: str) -> None:
+        if kw.startswith("maxtsd_"):
+            kw = "maxtsdr_" + kw[7:]
+        if kw == "#profibus_dp":
+            return
+        if self.stack:
+            kind = self.stack[-1][0]
+            if kw in _ENDS:
+                if _BLOCKS[kind] == kw or (kind in ("unit_diag_area", "x_unit_diag_area")
+                                           and kw in ("unit_diag_area_end", "x_unit_diag_area_end")):
+                    _, obj, _ = self.stack.pop()
+                    if kind == "module":
+                        obj.end_line = line
+                    return
+                raise self.unterminated(line, kw_raw)
+            if kw in _BLOCKS and not (kind == "unitdiagtype" or kind == "unit_diag_type") \
+                    and not (kind == "module" and kw == "data_area_beg"):
+                raise self.unterminated(line, kw_raw)
+            handler = getattr(self, "in_" + ("unitdiagtype" if kind == "unit_diag_type" else
+                                            "unit_diag_area" if kind == "x_unit_diag_area" else kind))
+            handler(line, kw_raw, kw, args, eq, rest)
+            return
+        if kw in _ENDS:
+            raise self.err(line, f"{kw_raw} without a matching "
+                                 f"{_BLOCK_NAMES[next(k for k, v in _BLOCKS.items() if v == kw)]}")
+        self.top(line, kw_raw, kw, args, eq, rest)
+
+    def unterminated(self, line: int, kw_raw: str) -> DataFileError:
+        kind, obj, start = self.stack[-1]
+        name = f" {obj.name.strip()!r}" if isinstance(obj, Module) else ""
+        return self.err(start, f"{_BLOCK_NAMES[kind]}{name} not terminated: "
+                               f"{_END_NAMES[_BLOCKS[kind]]} missing before {kw_raw} at line {line}")
+
+    def store(self, line: int, kw: str, value: Any) -> None:
+        g = self.gsd
+        if kw in g.values and kw not in ("info_text",):
+            self.warn(line, f"{kw} given again (first at line {g.value_lines[kw]}); the last one counts")
+        g.values[kw] = value
+        g.value_lines[kw] = line
+
+    def unknown(self, line: int, kw_raw: str, args: str | None, rest: str, where: str = "") -> str:
+        self.gsd.unknown.append((kw_raw, line))
+        self.warn(line, f"unknown keyword {kw_raw!r}{where} (kept, not interpreted)")
+        return rest.strip() if args is None else f"({args}) {rest.strip()}".strip()
+
+    # ------------------------------------------------------------------ top level
+    def top(self, line, kw_raw, kw, args, eq, rest) -> None:
+        g = self.gsd
+        if kw in _INT_KEYS or _BAUD_KEY.match(kw) or (kw.endswith("_supp") and kw[:-5] in _BAUD_SUFFIXES):
+            t = self.toks(rest, line, kw_raw)
+            v = t.int()
+            t.end()
+            self.store(line, kw, v)
+        elif kw in _STR_KEYS:
+            t = self.toks(rest, line, kw_raw)
+            if t.peek() == "s":
+                v = t.string()
+                t.end()
+            else:
+                v = rest.strip()
+                self.warn(line, f"{kw_raw}: value is not in quotes")
+            self.store(line, kw, v)
+        elif kw == "slave_family":
+            self.store(line, kw, rest.strip())
+        elif kw == "user_prm_data":
+            t = self.toks(rest, line, kw_raw)
+            data = bytes(t.int_list("octet", 0, 255))
+            self.store(line, kw, data)
+            g.prm.base, g.prm.base_line = data, line
+        elif kw in ("ext_user_prm_data_const", "ext_user_prm_data_ref"):
+            self.prm_statement(g.prm, line, kw_raw, kw, args, rest)
+        elif kw == "prmtext":
+            t = self.toks(rest, line, kw_raw)
+            ref = t.int("reference number")
+            t.end()
+            if ref in g.prm_texts:
+                self.warn(line, f"PrmText {ref} defined again (first at line {g.prm_texts[ref].line})")
+            pt = PrmText(ref=ref, line=line)
+            g.prm_texts[ref] = pt
+            self.stack.append((kw, pt, line))
+        elif kw == "extuserprmdata":
+            t = self.toks(rest, line, kw_raw)
+            ref = t.int("reference number")
+            name = t.string("name") if not t.at_end() else ""
+            t.end()
+            if ref in g.ext_user_prm_data:
+                self.warn(line, f"ExtUserPrmData {ref} defined again "
+                                f"(first at line {g.ext_user_prm_data[ref].line})")
+            d = ExtUserPrmData(ref=ref, name=name, line=line)
+            g.ext_user_prm_data[ref] = d
+            self.stack.append((kw, d, line))
+        elif kw == "module":
+            t = self.toks(rest, line, kw_raw)
+            name = t.string("module name")
+            cfg = bytes(t.int_list("configuration octet", 0, 255))
+            if not cfg:
+                raise self.err(line, f"Module {name.strip()!r}: no configuration (identifier) octets")
+            try:
+                decode_cfg(cfg)
+            except CfgError as e:
+                raise self.err(line, f"Module {name.strip()!r}: bad configuration octets: {e}") from None
+            self.module_index += 1
+            mod = Module(name=name, cfg=cfg, line=line, index=self.module_index)
+            g.modules.append(mod)
+            self.stack.append((kw, mod, line))
+        elif kw in ("unit_diag_bit", "unit_diag_not_bit", "channel_diag"):
+            n = self.args_int(args, line, kw_raw)
+            t = self.toks(rest, line, kw_raw)
+            text = t.string("text")
+            t.end()
+            target = {"unit_diag_bit": g.unit_diag_bits, "unit_diag_not_bit": g.unit_diag_not_bits,
+                      "channel_diag": g.channel_diag}[kw]
+            target[n] = text
+        elif kw in ("unit_diag_bit_help", "unit_diag_not_bit_help", "channel_diag_help"):
+            self.args_int(args, line, kw_raw)
+            g.values.setdefault(kw, {})
+        elif kw in ("unit_diag_area", "x_unit_diag_area"):
+            area = self.diag_area(line, kw_raw, rest)
+            g.unit_diag_areas.append(area)
+            self.stack.append((kw, area, line))
+        elif kw in ("unitdiagtype", "unit_diag_type"):
+            t = self.toks(rest, line, kw_raw)
+            v = t.int("type value")
+            t.end()
+            dt = UnitDiagType(type_value=v, line=line)
+            g.unit_diag_types[v] = dt
+            self.stack.append((kw, dt, line))
+        elif kw == "slotdefinition":
+            self.stack.append((kw, None, line))
+        elif kw == "version_firmware_download":
+            block: dict[str, Any] = {}
+            g.values.setdefault(kw, []).append(block)
+            self.stack.append((kw, block, line))
+        else:
+            if _NUM.match(kw):
+                self.gsd.unknown.append((kw_raw, line))
+                self.warn(line, f"stray number {kw_raw!r} outside a Module (ignored)")
+                return
+            g.values[kw] = self.unknown(line, kw_raw, args, rest)
+            g.value_lines[kw] = line
+
+    def diag_area(self, line: int, kw_raw: str, rest: str) -> DiagArea:
+        t = self.toks(rest, line, kw_raw)
+        a = t.int("first bit")
+        if not t.skip("-"):
+            raise t.error("expected first-last bit range")
+        b = t.int("last bit")
+        t.end()
+        if b < a:
+            raise self.err(line, f"{kw_raw}: last bit {b} before first bit {a}")
+        if b - a >= 32:
+            raise self.err(line, f"{kw_raw}: {a}-{b} is wider than 32 bits")
+        return DiagArea(first_bit=a, last_bit=b, line=line)
+
+    def prm_statement(self, block: PrmBlock, line, kw_raw, kw, args, rest) -> None:
+        off = self.args_int(args, line, kw_raw)
+        if off >= MAX_USER_PRM_LEN:
+            raise self.err(line, f"{kw_raw}({off}): offset beyond the {MAX_USER_PRM_LEN} octets "
+                                 "Set_Prm can carry")
+        t = self.toks(rest, line, kw_raw)
+        if kw.endswith("const"):
+            data = bytes(t.int_list("octet", 0, 255))
+            if not data:
+                raise self.err(line, f"{kw_raw}({off}): no octets")
+            if off + len(data) > MAX_USER_PRM_LEN:
+                raise self.err(line, f"{kw_raw}({off}): {len(data)} octets run beyond the "
+                                     f"{MAX_USER_PRM_LEN} octets Set_Prm can carry")
+            block.consts.append(PrmConst(offset=off, data=data, line=line))
+        else:
+            ref = t.int("ExtUserPrmData reference")
+            t.end()
+            block.refs.append(PrmRef(offset=off, ref=ref, line=line))
+
+    # ------------------------------------------------------------------ blocks
+    def in_prmtext(self, line, kw_raw, kw, args, eq, rest) -> None:
+        pt: PrmText = self.stack[-1][1]
+        if kw == "text":
+            v = self.args_int(args, line, kw_raw, signed=True)
+            t = self.toks(rest, line, kw_raw)
+            pt.texts[v] = t.string("text")
+            t.end()
+        else:
+            self.unknown(line, kw_raw, args, rest, " inside PrmText")
+
+    def in_extuserprmdata(self, line, kw_raw, kw, args, eq, rest) -> None:
+        d: ExtUserPrmData = self.stack[-1][1]
+        if kw in _TYPE_NAMES:
+            if d.data_type:
+                self.warn(line, f"ExtUserPrmData {d.ref}: second type line (first at line {d.type_line})")
+            d.data_type = _TYPE_NAMES[kw]
+            d.type_line = line
+            if d.is_bits:
+                if args is None:
+                    raise self.err(line, f"{kw_raw}: bit number(s) in ( ) missing")
+                ta = self.toks(args, line, kw_raw)
+                lo = ta.int("bit number")
+                hi = lo
+                if d.data_type == "BitArea":
+                    if not ta.skip("-"):
+                        raise ta.error("expected BitArea(first-last)")
+                    hi = ta.int("last bit number")
+                ta.end()
+                if not (0 <= lo <= 7 and 0 <= hi <= 7) or hi < lo:
+                    raise self.err(line, f"{kw_raw}({args.strip()}): bits must be 0..7, first <= last")
+                d.bit_lo, d.bit_hi = lo, hi
+            elif args is not None:
+                raise self.err(line, f"{kw_raw}: unexpected ( ) after the type")
+            t = self.toks(rest, line, kw_raw)
+            d.default = t.int("default value", signed=True)
+            if not t.at_end():
+                first = t.int("allowed value", signed=True)
+                if t.skip("-"):
+                    d.min_value, d.max_value = first, t.int("maximum", signed=True)
+                    t.end()
+                    if d.max_value < d.min_value:
+                        raise self.err(line, f"{kw_raw}: range {d.min_value}-{d.max_value} is empty")
+                else:
+                    vals = [first]
+                    if t.skip(","):
+                        vals += t.int_list("allowed value", signed=True)
+                    t.end()
+                    d.allowed = tuple(vals)
+        elif kw == "prm_text_ref":
+            t = self.toks(rest, line, kw_raw)
+            d.text_ref = t.int("PrmText reference")
+            t.end()
+        elif kw in ("changeable", "visible"):
+            t = self.toks(rest, line, kw_raw)
+            v = t.int("0 or 1")
+            t.end()
+            setattr(d, kw, bool(v))
+        elif kw in ("octetstring", "visiblestring", "float32", "float64", "date", "time_of_day",
+                    "time_difference", "prm_data_value"):
+            self.warn(line, f"ExtUserPrmData {d.ref}: {kw_raw} is not supported (kept, not interpreted)")
+            d.data_type = d.data_type or kw_raw
+        else:
+            self.unknown(line, kw_raw, args, rest, " inside ExtUserPrmData")
+
+    def in_module(self, line, kw_raw, kw, args, eq, rest) -> None:
+        mod: Module = self.stack[-1][1]
+        if kw.isascii() and kw.isdigit() and args is None and not rest.strip():
+            if mod.reference is not None:
+                self.warn(line, f"Module {mod.display_name!r}: second reference number {kw}")
+            mod.reference = int(kw)
+            return
+        if kw == "module_reference":
+            t = self.toks(rest, line, kw_raw)
+            mod.reference = t.int()
+            t.end()
+        elif kw in ("ext_module_prm_data_len", "f_ext_module_prm_data_len", "x_ext_module_prm_data_len"):
+            t = self.toks(rest, line, kw_raw)
+            block = {"e": mod.prm, "f": mod.f_prm, "x": mod.x_prm}[kw[0]]
+            block.length = t.int("length")
+            block.length_line = line
+            t.end()
+        elif kw in ("ext_user_prm_data_const", "ext_user_prm_data_ref"):
+            self.prm_statement(mod.prm, line, kw_raw, kw, args, rest)
+        elif kw in ("f_ext_user_prm_data_const", "f_ext_user_prm_data_ref"):
+            self.prm_statement(mod.f_prm, line, kw_raw, kw[2:], args, rest)
+        elif kw in ("x_ext_user_prm_data_const", "x_ext_user_prm_data_ref"):
+            self.prm_statement(mod.x_prm, line, kw_raw, kw[2:], args, rest)
+        elif kw == "info_text":
+            t = self.toks(rest, line, kw_raw)
+            mod.info_text = t.string() if t.peek() == "s" else rest.strip()
+        elif kw == "channel_diag":
+            n = self.args_int(args, line, kw_raw)
+            t = self.toks(rest, line, kw_raw)
+            mod.channel_diag[n] = t.string("text")
+            t.end()
+        elif kw == "data_area_beg":
+            area: dict[str, Any] = {"line": line}
+            mod.data_areas.append(area)
+            self.stack.append((kw, area, line))
+        else:
+            key = kw if args is None else f"{kw}({args.strip()})"
+            if kw in _MODULE_KNOWN or kw.startswith(("f_", "x_")):
+                mod.extra[key] = rest.strip()
+            else:
+                mod.extra[key] = self.unknown(line, kw_raw, args, rest, f" in Module {mod.display_name!r}")
+
+    def in_data_area_beg(self, line, kw_raw, kw, args, eq, rest) -> None:
+        area: dict[str, Any] = self.stack[-1][1]
+        area[kw] = rest.strip()
+
+    def in_version_firmware_download(self, line, kw_raw, kw, args, eq, rest) -> None:
+        block: dict[str, Any] = self.stack[-1][1]
+        block[kw if args is None else f"{kw}({args.strip()})"] = rest.strip()
+
+    def in_unit_diag_area(self, line, kw_raw, kw, args, eq, rest) -> None:
+        area: DiagArea = self.stack[-1][1]
+        if kw in ("value", "x_value"):
+            v = self.args_int(args, line, kw_raw)
+            t = self.toks(rest, line, kw_raw)
+            area.values[v] = t.string("text")
+            t.end()
+        elif kw.endswith("_help"):
+            return
+        else:
+            self.unknown(line, kw_raw, args, rest, " inside Unit_Diag_Area")
+
+    def in_unitdiagtype(self, line, kw_raw, kw, args, eq, rest) -> None:
+        dt: UnitDiagType = self.stack[-1][1]
+        base = kw[2:] if kw.startswith("x_") else kw
+        if base in ("unit_diag_bit", "unit_diag_not_bit"):
+            n = self.args_int(args, line, kw_raw)
+            t = self.toks(rest, line, kw_raw)
+            (dt.bits if base == "unit_diag_bit" else dt.not_bits)[n] = t.string("text")
+            t.end()
+        elif base.endswith("_help"):
+            return
+        elif base == "unit_diag_area":
+            area = self.diag_area(line, kw_raw, rest)
+            dt.areas.append(area)
+            self.stack.append((kw, area, line))
+        elif kw in _BLOCKS:
+            raise self.unterminated(line, kw_raw)
+        else:
+            self.unknown(line, kw_raw, args, rest, " inside UnitDiagType")
+
+    def in_slotdefinition(self, line, kw_raw, kw, args, eq, rest) -> None:
+        if kw != "slot":
+            self.unknown(line, kw_raw, args, rest, " inside SlotDefinition")
+            return
+        n = self.args_int(args, line, kw_raw)
+        t = self.toks(rest, line, kw_raw)
+        name = t.string("slot name")
+        default = t.int("default module reference") if not t.at_end() else None
+        allowed: list[int] = []
+        if not t.at_end():
+            first = t.int("allowed module reference")
+            if t.skip("-"):
+                last = t.int("last module reference")
+                if last < first or last - first > 1000:
+                    raise t.error(f"bad range {first}-{last}")
+                allowed = list(range(first, last + 1))
+            else:
+                allowed = [first]
+                if t.skip(","):
+                    allowed += t.int_list("allowed module reference")
+        t.end()
+        self.gsd.slots.append(Slot(number=n, name=name, default=default, allowed=tuple(allowed), line=line))
+
+    # ------------------------------------------------------------------ checks after the last line
+    def finish(self) -> None:
+        g = self.gsd
+        if isinstance(g.values.get("user_prm_data_len"), int):
+            g.prm.length = g.values["user_prm_data_len"]
+            g.prm.length_line = g.value_lines["user_prm_data_len"]
+        for d in g.ext_user_prm_data.values():
+            if not d.data_type:
+                self.warn(d.line, f"ExtUserPrmData {d.ref} {d.name!r}: no type line (Bit/BitArea/UnsignedN)")
+                continue
+            if d.text_ref is not None:
+                pt = g.prm_texts.get(d.text_ref)
+                if pt is None:
+                    self.warn(d.line, f"ExtUserPrmData {d.ref} {d.name!r}: Prm_Text_Ref {d.text_ref} "
+                                      "is not defined")
+                else:
+                    d.texts = pt.texts
+            if (d.is_bits or d.data_type in INT_TYPES) and not d.is_allowed(d.default):
+                self.warn(d.type_line, f"ExtUserPrmData {d.ref} {d.name!r}: default {d.default} is outside "
+                                       f"{d.describe_allowed()}")
+        blocks = [("device", g.prm)] + [(f"Module {m.display_name!r}", b) for m in g.modules
+                                        for b in (m.prm, m.f_prm)]
+        for label, block in blocks:
+            for r in block.refs:
+                if r.ref not in g.ext_user_prm_data:
+                    self.warn(r.line, f"{label}: Ext_User_Prm_Data_Ref({r.offset}) = {r.ref}: "
+                                      "no ExtUserPrmData with that number")
+
+
+def parse_gsd_text(text: str, path: str | Path = "<string>", encoding: str = "ascii") -> Gsd:
+    """Parse GSD text (already decoded). Raises DataFileError(path, line, ...)."""
+    p = _Parser(str(path))
+    p.gsd.encoding = encoding
+    return p.parse(text)
+
+
+def parse_gsd_bytes(data: bytes, path: str | Path = "<bytes>") -> Gsd:
+    text, enc = _decode(data)
+    return parse_gsd_text(text, path, enc)
+
+
+def parse_gsd(path: str | Path) -> Gsd:
+    """Read and parse one GSD file (Latin-1 or UTF-8). Raises DataFileError(path, line, ...)."""
+    p = Path(path)
+    try:
+        data = p.read_bytes()
+    except FileNotFoundError:
+        raise DataFileError(p, None, "file not found") from None
+    except IsADirectoryError:
+        raise DataFileError(p, None, "is a folder, not a GSD file") from None
+    except OSError as e:
+        raise DataFileError(p, None, f"cannot read: {e.strerror or e}") from None
+    return parse_gsd_bytes(data, p)
