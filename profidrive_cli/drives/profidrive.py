@@ -55,9 +55,10 @@ PNU 9xx helpers
 
 Per-card configuration (the profile's `profidrive:` section, validated with file:line errors)
     ProfidriveConfig.from_profile(profile);  config(profile) -> ProfidriveConfig (cached)
+    a family module may define profidrive_config(profile) -> ProfidriveConfig instead (own keys)
     keys (all optional):
       labels: {control: STW, status: ZSW, reference: HSW, actual: HIW}   the card's own word names
-      ctw_bits / stw_bits: {bit: name}          vendor names for bits (usually 8..15)
+      ctw_bits / stw_bits: {bit: name}          vendor names for bits (usually 8..15); null = unused
       held_ctw_bits: [4, 5, 6]                  held at 1 in every control word (extra_bits)
       array_pnus: [915, 916, 947]               PNUs addressed with the array AKs 6/7/8
       pzd_map: {setpoint: 915, actual: 916}
@@ -855,6 +856,8 @@ class ProfidriveConfig:
         ctw.update(_bit_names(path, sec, "ctw_bits"))
         stw = dict(STW_NAMES)
         stw.update(_bit_names(path, sec, "stw_bits"))
+        ctw = {b: n for b, n in ctw.items() if n is not None}      # null = bit not used
+        stw = {b: n for b, n in stw.items() if n is not None}
         held = 0
         for b in _int_list(path, sec, "held_ctw_bits", 0, 15):
             held |= 1 << b
@@ -977,8 +980,8 @@ def _bit_names(path, node, key) -> dict[int, str]:
     m = _map(path, node, key)
     out = {}
     for k, v in m.items():
-        if not isinstance(k, int) or not 0 <= k <= 15 or not isinstance(v, str):
-            raise _e(path, m, k, f"{key}: keys are bit numbers 0..15, values names")
+        if not isinstance(k, int) or not 0 <= k <= 15 or not (v is None or isinstance(v, str)):
+            raise _e(path, m, k, f"{key}: keys are bit numbers 0..15, values names (null = unused)")
         out[k] = v
     return out
 
@@ -987,11 +990,20 @@ _config_cache: dict[int, tuple[object, ProfidriveConfig]] = {}
 
 
 def config(profile) -> ProfidriveConfig:
-    """The profile's ProfidriveConfig (validated once, cached per profile object)."""
+    """The profile's ProfidriveConfig (validated once, cached per profile object).
+
+    A family module drives/<family>.py may define `profidrive_config(profile) -> ProfidriveConfig`
+    to build it from its own profile keys; otherwise the `profidrive:` section is read.
+    """
     hit = _config_cache.get(id(profile))
     if hit is not None and hit[0] is profile:
         return hit[1]
-    cfg = ProfidriveConfig.from_profile(profile)
+    from profidrive_cli.drives import codec_module
+    try:
+        hook = getattr(codec_module(profile), "profidrive_config", None)
+    except UsageError:
+        hook = None
+    cfg = hook(profile) if hook is not None else ProfidriveConfig.from_profile(profile)
     _config_cache[id(profile)] = (profile, cfg)
     return cfg
 
@@ -1126,9 +1138,10 @@ class ProfidriveDrive(Drive):
 
     family = "profidrive"
 
-    def __init__(self, channel, profile, layout: str | None = None):
+    def __init__(self, channel, profile, layout: str | None = None,
+                 cfg: ProfidriveConfig | None = None):
         super().__init__(channel, profile, layout)
-        self.cfg = config(profile)
+        self.cfg = cfg or config(profile)
         self.ppo = ppo_layout(profile, self.layout)
         self.target: Target | None = None          # None = passive (control word 0, bit 10 = 0)
         self.reference = 0                          # N2 word
@@ -1458,17 +1471,20 @@ def describe_pkw(profile, frame: PkwFrame, direction: str, cfg: ProfidriveConfig
                "spm": frame.spm, "pnu": frame.pnu, "ind": frame.ind, "subindex": frame.subindex,
                "pwe": frame.value}
     if frame.ak == 0:
-        d["text"] = f"PKW: AK 0 ({d['ak_text']})"
+        d["text"] = (f"PKE 0x{frame.pke:04X}: AK 0 ({d['ak_text']}); IND 0x{frame.ind:04X}; "
+                     f"PWE 0x{frame.value:08X}")
         d["summary"] = d["ak_text"]
         return d
     p = param_for(profile, frame.pnu, frame.subindex)
     where = f"PNU {frame.pnu}" + (f"[{frame.subindex}]" if frame.subindex else "")
     if p is not None:
         d["code"], d["name"] = p.code, p.name
-        label = f"{where} = {p.code} {p.name}" if p.code != f"PNU{frame.pnu}" \
-            else f"{where} {p.name}"
+        named = p.code.upper() != f"PNU{frame.pnu}"
+        label = f"{where} = {p.code} {p.name}" if named else f"{where} {p.name}"
+        pnu_label = f"PNU {frame.pnu} = {p.code} {p.name}" if named else \
+            f"PNU {frame.pnu} {p.name}"
     else:
-        label = where
+        label = pnu_label = where if not frame.subindex else f"PNU {frame.pnu}"
     value_text = None
     is_error = direction == "response" and frame.ak in ERROR_RESPONSES
     carries_value = (direction == "request" and frame.ak in WRITE_REQUESTS) or (
@@ -1483,18 +1499,15 @@ def describe_pkw(profile, frame: PkwFrame, direction: str, cfg: ProfidriveConfig
             value_text = f"{frame.value} elements"
     elif carries_value:
         value_text = _value_text(profile, cfg, p, frame, d)
-    parts = [d["ak_text"], label]
     line = f"{d['ak_text']}, {label}"
     if value_text is not None:
         line += f" = {value_text}" if not is_error else f": {value_text}"
     d["value_text"] = value_text
     d["summary"] = line
     d["text"] = (f"PKE 0x{frame.pke:04X}: AK {frame.ak} {d['ak_text']}, SPM {frame.spm}, "
-                 f"PNU {frame.pnu}" + (f" = {p.code} {p.name}" if p is not None else "")
-                 + f"; IND 0x{frame.ind:04X} (subindex {frame.subindex}); "
+                 + pnu_label + f"; IND 0x{frame.ind:04X} (subindex {frame.subindex}); "
                  f"PWE 0x{frame.value:08X} = {frame.value}"
                  + (f" -> {value_text}" if value_text is not None else ""))
-    del parts
     return d
 
 
