@@ -1,0 +1,382 @@
+"""Moeller DE6-NET-DP (DF6/DV6 inverters): the PROFIdrive core plus the card's dialect.
+
+Dialect (profile profiles/moeller-de6-net-dp.yaml, sections `profidrive:` and `moeller:`):
+  * parameters by PROFIBUS PNU 1..418 from the cross-reference list (native codes F002, A004, ...),
+    1, 2 or 4 octets on the wire (`bytes`), right-aligned in PWE; AK 3 for 4-octet writes, AK 2 else
+  * control source: A001 = 2 (operator) lets the bus give the reference, A002 = 1 (terminal) the run
+    commands; with those set, STW bit 12 = 1 takes the commands away, bit 13 = 1 the reference,
+    bit 10 = 0 both; bit 11 = reverse (direction = sign of HSW XOR bit 11)
+  * P002 (slot 2; P001 for slot 1): communication-loss reaction, 0 = trip E7x, 1 = keep running
+  * PNU 947 subindexes 1, 9, 17, ..., 49; PNU 964 = 0x812C (DF6) or 0x012C (DV6); PNU 971 0 -> 1 saves
+  * DF6 limits: rows marked df6: false are not on a DF6; df6_max lowers the maximum
+
+Module API: make_drive(channel, profile, layout=None), decode_area(profile, layout, direction, data),
+param_value(profile, param, raw), moeller_config(profile), source_selection(ctw),
+device_name(word), baud_text(code, profile), fault_text(profile, number),
+address_from_switches(right, left), value_from_wire(param, raw), wire_from_value(param, value).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from profidrive_cli import UsageError
+from profidrive_cli.datafile import DataFileError, LineDict
+from profidrive_cli.drives import profidrive as pd
+from profidrive_cli.drives.base import DriveError, DriveStatus, ParamError, ParamValue
+
+FAMILY_PARAM_KEYS = {"bytes", "format", "ranges", "df6", "df6_max", "note", "array"}
+FORMATS = ("code", "hex", "bits")
+
+
+# =============================================================================================
+# profile section `moeller:`
+# =============================================================================================
+
+
+@dataclass
+class MoellerConfig:
+    frequency_param: str = "A001"
+    frequency_bus_value: int = 2
+    commands_param: str = "A002"
+    commands_bus_value: int = 1
+    commands_invalid_bit: int = 12
+    reference_invalid_bit: int = 13
+    reverse_bit: int = 11
+    comm_loss_param: str = "P002"
+    comm_loss_other_param: str | None = "P001"
+    comm_loss_alarm: str = "E70"
+    df6_device_id: int = 0x812C
+    sim_defaults: dict | None = None
+
+
+def _err(profile, node, key, msg) -> DataFileError:
+    line = node.line_of(key) if isinstance(node, LineDict) else getattr(node, "line", None)
+    return DataFileError(profile.path or "<profile>", line, msg)
+
+
+def _validate_params(profile) -> None:
+    path = profile.path or "<profile>"
+    for p in profile.parameters.values():
+        b = p.extra.get("bytes")
+        if b is None:
+            if not p.code.startswith("PNU"):
+                raise DataFileError(path, p.line, f"{p.code}: missing 'bytes' (1, 2 or 4)")
+        elif b not in (1, 2, 4):
+            raise DataFileError(path, p.line, f"{p.code}: bytes must be 1, 2 or 4, got {b!r}")
+        elif (b == 4) != (p.size == 32):
+            raise DataFileError(path, p.line, f"{p.code}: bytes {b} needs size "
+                                f"{32 if b == 4 else 16}, got {p.size}")
+        fmt = p.extra.get("format")
+        if fmt is not None and fmt not in FORMATS:
+            raise DataFileError(path, p.line, f"{p.code}: format must be one of "
+                                f"{', '.join(FORMATS)}, got {fmt!r}")
+        rg = p.extra.get("ranges")
+        if rg is not None and not (isinstance(rg, list) and rg and all(
+                isinstance(r, list) and len(r) == 2 and all(isinstance(x, (int, float)) for x in r)
+                and r[0] <= r[1] for r in rg)):
+            raise DataFileError(path, p.line, f"{p.code}: ranges must be a list of [min, max]")
+        if "df6" in p.extra and not isinstance(p.extra["df6"], bool):
+            raise DataFileError(path, p.line, f"{p.code}: df6 must be true or false")
+        if "df6_max" in p.extra and not isinstance(p.extra["df6_max"], (int, float)):
+            raise DataFileError(path, p.line, f"{p.code}: df6_max must be a number")
+        unknown = set(p.extra) - FAMILY_PARAM_KEYS
+        if unknown:
+            raise DataFileError(path, p.line, f"{p.code}: unknown key(s) {', '.join(sorted(unknown))}"
+                                f" (Moeller keys: {', '.join(sorted(FAMILY_PARAM_KEYS))})")
+
+
+def _code(profile, node, key, default):
+    v = node.get(key, default) if isinstance(node, dict) else default
+    if not isinstance(v, str) or profile.param(v) is None:
+        raise _err(profile, node, key, f"'{key}': {v!r} is not a parameter of this profile")
+    return v
+
+
+def _intv(profile, node, key, default, lo=0, hi=0xFFFF):
+    v = node.get(key, default) if isinstance(node, dict) else default
+    if not isinstance(v, int) or isinstance(v, bool) or not lo <= v <= hi:
+        raise _err(profile, node, key, f"'{key}' must be an integer {lo}..{hi}, got {v!r}")
+    return v
+
+
+def _build_config(profile) -> MoellerConfig:
+    _validate_params(profile)
+    doc = profile.raw if isinstance(profile.raw, LineDict) else LineDict()
+    sec = doc.get("moeller")
+    if sec is None:
+        raise DataFileError(profile.path or "<profile>", doc.line if isinstance(doc, LineDict) else None,
+                            "missing section 'moeller'")
+    if not isinstance(sec, dict):
+        raise _err(profile, doc, "moeller", "'moeller' must be a mapping")
+    known = {"control_source", "ctw_commands_invalid_bit", "ctw_reference_invalid_bit",
+             "ctw_reverse_bit", "comm_loss", "df6_device_id", "sim_defaults"}
+    for k in sec:
+        if k not in known:
+            raise _err(profile, sec, k, f"moeller: unknown key '{k}' (known: {', '.join(sorted(known))})")
+    c = MoellerConfig()
+    cs = sec.get("control_source", {})
+    if not isinstance(cs, dict):
+        raise _err(profile, sec, "control_source", "control_source must be a mapping")
+    for role, pattr, vattr in (("frequency", "frequency_param", "frequency_bus_value"),
+                               ("commands", "commands_param", "commands_bus_value")):
+        node = cs.get(role)
+        if node is None:
+            continue
+        if not isinstance(node, dict):
+            raise _err(profile, cs, role, f"control_source.{role} must be {{param, bus_value}}")
+        setattr(c, pattr, _code(profile, node, "param", getattr(c, pattr)))
+        setattr(c, vattr, _intv(profile, node, "bus_value", getattr(c, vattr), 0, 255))
+    c.commands_invalid_bit = _intv(profile, sec, "ctw_commands_invalid_bit", 12, 11, 15)
+    c.reference_invalid_bit = _intv(profile, sec, "ctw_reference_invalid_bit", 13, 11, 15)
+    c.reverse_bit = _intv(profile, sec, "ctw_reverse_bit", 11, 11, 15)
+    cl = sec.get("comm_loss", {})
+    if not isinstance(cl, dict):
+        raise _err(profile, sec, "comm_loss", "comm_loss must be a mapping")
+    if cl:
+        c.comm_loss_param = _code(profile, cl, "param", c.comm_loss_param)
+        c.comm_loss_other_param = _code(profile, cl, "other_param", c.comm_loss_other_param) \
+            if "other_param" in cl else None
+        alarm = cl.get("alarm", c.comm_loss_alarm)
+        if not isinstance(alarm, str) or profile.alarm_by_code(alarm) is None:
+            raise _err(profile, cl, "alarm", f"comm_loss.alarm {alarm!r} is not in alarms")
+        c.comm_loss_alarm = alarm
+    c.df6_device_id = _intv(profile, sec, "df6_device_id", c.df6_device_id)
+    sd = sec.get("sim_defaults", {})
+    if not isinstance(sd, dict):
+        raise _err(profile, sec, "sim_defaults", "sim_defaults must be a mapping code: value")
+    for k, v in sd.items():
+        if profile.param(str(k)) is None:
+            raise _err(profile, sd, k, f"sim_defaults: {k} is not a parameter of this profile")
+        if not isinstance(v, (int, float)) or isinstance(v, bool):
+            raise _err(profile, sd, k, f"sim_defaults: {k} must be a number")
+    c.sim_defaults = dict(sd)
+    return c
+
+
+_cache: dict[int, tuple[object, MoellerConfig]] = {}
+
+
+def moeller_config(profile) -> MoellerConfig:
+    hit = _cache.get(id(profile))
+    if hit is not None and hit[0] is profile:
+        return hit[1]
+    c = _build_config(profile)
+    _cache[id(profile)] = (profile, c)
+    return c
+
+
+# =============================================================================================
+# values on the wire
+# =============================================================================================
+
+
+def value_from_wire(param, raw: int):
+    """PWE (right-aligned) -> engineering value: the low `bytes` octets, sign-extended if signed."""
+    nbytes = param.extra.get("bytes", param.size // 8)
+    bits = 8 * nbytes
+    raw &= (1 << bits) - 1
+    if param.signed and raw >= 1 << (bits - 1):
+        raw -= 1 << bits
+    v = raw * param.scale
+    if float(param.scale).is_integer():
+        return int(round(v))
+    return round(v, 6)
+
+
+def wire_from_value(param, value) -> int:
+    """Engineering value -> PWE integer in the parameter's own width (two's complement if < 0)."""
+    nbytes = param.extra.get("bytes", param.size // 8)
+    raw = int(round(value / param.scale)) if param.scale else int(value)
+    return raw & ((1 << (8 * nbytes)) - 1)
+
+
+def param_value(profile, param, raw: int):
+    """Hook used by the core decoder."""
+    return value_from_wire(param, raw)
+
+
+def in_ranges(param, value) -> bool:
+    rg = param.extra.get("ranges")
+    if rg:
+        return any(lo - 1e-9 <= value <= hi + 1e-9 for lo, hi in rg)
+    return (param.min is None or value >= param.min - 1e-9) and \
+        (param.max is None or value <= param.max + 1e-9)
+
+
+# =============================================================================================
+# small decoders (test vectors TV-9 .. TV-14)
+# =============================================================================================
+
+
+def device_name(word: int) -> str:
+    """PNU 964: bit 15 = family (1 DF, 0 DV), bits 14..0 = model number (300 = '6' series)."""
+    fam = "DF" if word & 0x8000 else "DV"
+    model = word & 0x7FFF
+    return f"{fam}6" if model == 0x12C else f"{fam} model {model}"
+
+
+def baud_text(code: int, profile) -> str:
+    return pd.config(profile).baud_codes.get(code, f"invalid baud-rate code {code}")
+
+
+def fault_text(profile, number: int) -> str:
+    if number == 0:
+        return "no fault"
+    alarms = profile.alarms_for(number)
+    if not alarms:
+        return f"unknown ({number})"
+    return " / ".join(f"{a.code} {a.meaning}" for a in alarms)
+
+
+def address_from_switches(right: int, left: int) -> int:
+    """Node address from the two rotary switches: the right one is the tens digit."""
+    if not (0 <= right <= 9 and 0 <= left <= 9):
+        raise ValueError("switch positions are 0..9")
+    return right * 10 + left
+
+
+def source_selection(ctw: int, mc: MoellerConfig | None = None) -> str:
+    """What the bus controls (with A001 = 2, A002 = 1), from STW bits 10, 12, 13."""
+    mc = mc or MoellerConfig()
+    if not ctw & pd.Ctw.CONTROL_BY_PLC:
+        return "nothing (data invalid)"
+    cmd = not ctw >> mc.commands_invalid_bit & 1
+    ref = not ctw >> mc.reference_invalid_bit & 1
+    return {(True, True): "frequency and commands", (False, True): "frequency only",
+            (True, False): "commands only", (False, False): "nothing"}[(cmd, ref)]
+
+
+def direction_text(ctw: int, hsw: int, mc: MoellerConfig | None = None) -> str:
+    mc = mc or MoellerConfig()
+    neg = pd.to_signed16(hsw) < 0
+    rev = bool(ctw >> mc.reverse_bit & 1)
+    if pd.to_signed16(hsw) == 0:
+        return "reverse" if rev else "forward"
+    return "reverse" if neg != rev else "forward"
+
+
+# =============================================================================================
+# the Drive
+# =============================================================================================
+
+
+class MoellerDrive(pd.ProfidriveDrive):
+    family = "moeller"
+
+    def __init__(self, channel, profile, layout: str | None = None):
+        super().__init__(channel, profile, layout)
+        self.mc = moeller_config(profile)
+        self._device: str | None = None
+
+    def raw_to_value(self, ref: pd.ParamRef, raw: int):
+        if ref.param is None:
+            return raw
+        return value_from_wire(ref.param, raw)
+
+    def value_to_raw(self, ref: pd.ParamRef, value) -> int:
+        if ref.param is None:
+            return int(value) & ((1 << ref.size) - 1)
+        return wire_from_value(ref.param, value)
+
+    def device(self) -> str:
+        """'DF6' or 'DV6' from PNU 964 (read once)."""
+        if self._device is None:
+            self._device = device_name(self.read_raw(pd.PNU_DEVICE_ID) & 0xFFFF)
+        return self._device
+
+    def check_value(self, ref: pd.ParamRef, value) -> str | None:
+        p = ref.param
+        if p is None:
+            return None
+        u = f" {p.unit}" if p.unit else ""
+        if not in_ranges(p, value):
+            rg = p.extra.get("ranges")
+            allowed = ", ".join(f"{lo:g}..{hi:g}" if lo != hi else f"{lo:g}" for lo, hi in rg) \
+                if rg else f"{p.min:g}..{p.max:g}"
+            return f"{p.code} ({p.name}): {value:g}{u} is outside {allowed}{u}"
+        if ("df6" in p.extra or "df6_max" in p.extra) and self.pkw is not None:
+            dev = self.device()
+            if dev.startswith("DF"):
+                if p.extra.get("df6") is False:
+                    return f"{p.code} ({p.name}) does not exist on a DF6"
+                mx = p.extra.get("df6_max")
+                if mx is not None and value > mx:
+                    return f"{p.code} ({p.name}): {value:g}{u} is above the DF6 maximum {mx:g}{u}"
+        return None
+
+    def start_hint(self, status: DriveStatus) -> str:
+        mc = self.mc
+        return (f"the card gives run commands only with {mc.commands_param} = {mc.commands_bus_value} "
+                f"and the reference only with {mc.frequency_param} = {mc.frequency_bus_value} "
+                f"(both writable only while stopped), PNU 928 = 1, and STW bits 10 = 1, "
+                f"{mc.commands_invalid_bit} = 0, {mc.reference_invalid_bit} = 0")
+
+    def status_extras(self, area: pd.PpoArea, status: DriveStatus) -> None:
+        ctw = self.last_ctw or 0
+        status.flags["bus gives commands"] = bool(area.word1 & pd.Stw.CONTROL_REQUESTED) and \
+            not ctw >> self.mc.commands_invalid_bit & 1
+        status.raw["control_word"] = ctw
+
+    def comm_loss_setting(self) -> dict[str, ParamValue]:
+        """P002 (and P001): 0 = trip on communication loss, 1 = keep running."""
+        out = {self.mc.comm_loss_param: self.read_param(self.mc.comm_loss_param)}
+        if self.mc.comm_loss_other_param:
+            out[self.mc.comm_loss_other_param] = self.read_param(self.mc.comm_loss_other_param)
+        return out
+
+    def bus_control_check(self) -> list[str]:
+        """Problems that keep the bus from controlling the inverter (empty = fine)."""
+        mc = self.mc
+        probs = []
+        f = self.read_param(mc.frequency_param)
+        if f.raw != mc.frequency_bus_value:
+            probs.append(f"{mc.frequency_param} = {f.raw}: the bus reference is not used "
+                         f"(needs {mc.frequency_bus_value})")
+        c = self.read_param(mc.commands_param)
+        if c.raw != mc.commands_bus_value:
+            probs.append(f"{mc.commands_param} = {c.raw}: the bus run commands are not used "
+                         f"(needs {mc.commands_bus_value})")
+        for pnu, what in ((pd.PNU_EDIT_RIGHTS, "parameter edit rights"),
+                          (pd.PNU_CONTROL_RIGHTS, "process-data control rights")):
+            try:
+                if self.read_raw(pnu) & 0xFFFF != 1:
+                    probs.append(f"PNU {pnu} = 0: no {what}")
+            except ParamError as e:
+                probs.append(str(e))
+        return probs
+
+
+def make_drive(channel, profile, layout: str | None = None) -> MoellerDrive:
+    moeller_config(profile)
+    return MoellerDrive(channel, profile, layout)
+
+
+# =============================================================================================
+# decoder
+# =============================================================================================
+
+
+def decode_area(profile, layout: str, direction: str, data: bytes, *,
+                max_hz: float | None = None) -> dict:
+    mc = moeller_config(profile)
+    out = pd.decode_area(profile, layout, direction, data, max_hz=max_hz)
+    text = out["text"]
+    if direction == "request":
+        cw = out["control_word"]["word"]
+        hsw = out["reference"]["raw"]
+        src = source_selection(cw, mc)
+        dirn = direction_text(cw, hsw, mc)
+        out["control_word"]["bus_controls"] = src
+        out["control_word"]["direction"] = dirn
+        text.insert(-1, f"bus controls (with {mc.frequency_param} = {mc.frequency_bus_value}, "
+                        f"{mc.commands_param} = {mc.commands_bus_value}): {src}; direction {dirn} "
+                        f"(sign of {pd.config(profile).labels['reference']} XOR STW bit "
+                        f"{mc.reverse_bit})")
+    return out
+
+
+__all__ = ["MoellerConfig", "MoellerDrive", "make_drive", "decode_area", "param_value",
+           "moeller_config", "source_selection", "device_name", "baud_text", "fault_text",
+           "address_from_switches", "value_from_wire", "wire_from_value", "in_ranges",
+           "direction_text", "DriveError"]
