@@ -1,0 +1,143 @@
+"""Simulated Moeller DF6/DV6 inverter with a DE6-NET-DP card (sim/profidrive_model.py + dialect).
+
+    make_model(profile, device="DF6", address=0, baud_code=0, bus_control=True, pkw_latency=0,
+               defaults=None) -> MoellerModel
+
+Dialect on top of the generic PROFIdrive model:
+  * run commands come from the bus only with STW bit 10 = 1, bit 12 = 0, A002 = 1 and PNU 928 = 1;
+    the reference only with bit 10 = 1, bit 13 = 0, A001 = 2 and PNU 928 = 1. Without bus commands a
+    running motor ramps to standstill (the terminals are not simulated) and the state machine waits.
+  * direction = sign of HSW XOR STW bit 11; ZSW bits 12/13 mirror STW bits 12/13
+  * ZSW bit 8 (at set-point) also when stopped (manual example 0x0331); bit 10 when |f| >= C042 > 0
+  * parameters as 1/2/4-octet wire values (profile `bytes`), R/WOS refused with error 17 while running
+  * communication loss: P002 = 0 trips E70 (only a running drive), 1 keeps running
+  * trips count d080 (PNU 352) and fill the trip records d081..d086 (PNU 354 points at the latest)
+  * PNU 964 = 0x812C (DF6) or 0x012C (DV6)
+"""
+
+from __future__ import annotations
+
+from profidrive_cli.drives import moeller as mo
+from profidrive_cli.drives import profidrive as pd
+from profidrive_cli.drives.profidrive import Ctw, State
+from profidrive_cli.sim.profidrive_model import ProfidriveModel
+
+DEVICE_IDS = {"DF6": 0x812C, "DV6": 0x012C}
+
+
+class MoellerModel(ProfidriveModel):
+    family = "moeller"
+
+    def __init__(self, profile, *, device: str = "DF6", bus_control: bool = True, **kw):
+        self.mc = mo.moeller_config(profile)
+        dev = device.upper()
+        if dev not in DEVICE_IDS:
+            raise ValueError(f"device must be DF6 or DV6, got {device!r}")
+        defaults = dict(self.mc.sim_defaults or {})
+        if not bus_control:
+            defaults[self.mc.frequency_param] = 1
+            defaults[self.mc.commands_param] = 2
+        defaults.update(kw.pop("defaults", None) or {})
+        super().__init__(profile, defaults=defaults, device_id=DEVICE_IDS[dev], **kw)
+        self.edit_rights = int(defaults.get("PNU927", 1))
+        self.control_rights = int(defaults.get("PNU928", 1))
+        self.device = dev
+        self.dc_bus_voltage = 560.0 if dev == "DF6" else 540.0
+        self.run_seconds = 0.0
+
+    # -- control source ----------------------------------------------------------------------
+    def _raw(self, code: str) -> int:
+        return self.values[self.profile.param(code).code]
+
+    def commands_from_bus(self, ctw: int) -> bool:
+        mc = self.mc
+        return bool(ctw & Ctw.CONTROL_BY_PLC) and not ctw >> mc.commands_invalid_bit & 1 \
+            and self._raw(mc.commands_param) == mc.commands_bus_value and bool(self.control_rights)
+
+    def reference_from_bus(self, ctw: int) -> bool:
+        mc = self.mc
+        return bool(ctw & Ctw.CONTROL_BY_PLC) and not ctw >> mc.reference_invalid_bit & 1 \
+            and self._raw(mc.frequency_param) == mc.frequency_bus_value and bool(self.control_rights)
+
+    def effective_control_word(self, ctw: int) -> int | None:
+        if self.commands_from_bus(ctw):
+            return ctw
+        if self.state in (State.S3, State.S4, State.S5):
+            return self.ctw_eff & ~int(Ctw.ON | Ctw.FAULT_ACK)     # run command gone: ramp stop
+        return None
+
+    def reference_sign(self, ctw: int) -> int:
+        if self.commands_from_bus(ctw) and ctw >> self.mc.reverse_bit & 1:
+            return -1
+        return 1
+
+    def status_extra_bits(self, ctw: int) -> int:
+        mask = (1 << self.mc.commands_invalid_bit) | (1 << self.mc.reference_invalid_bit)
+        return ctw & mask
+
+    def at_setpoint(self) -> bool:
+        if self.state in (State.S4, State.S5):
+            return self.state is State.S4 and abs(self.freq - self._target_hz()) < 1e-6
+        return self.freq == 0.0
+
+    def arrival_reached(self) -> bool:
+        level = float(self.param_value("C042")) if self.profile.param("C042") else 0.0
+        return level > 0 and abs(self.freq) >= level
+
+    # -- values ------------------------------------------------------------------------------
+    def value_from_wire(self, p, raw: int):
+        return mo.value_from_wire(p, raw)
+
+    def wire_from_value(self, p, value) -> int:
+        return mo.wire_from_value(p, value)
+
+    def value_allowed(self, p, value) -> bool:
+        if not mo.in_ranges(p, value):
+            return False
+        if self.device == "DF6":
+            if p.extra.get("df6") is False:
+                return False
+            mx = p.extra.get("df6_max")
+            if mx is not None and value > mx:
+                return False
+        return True
+
+    def pkw_answer(self, req: pd.PkwFrame) -> pd.PkwFrame:
+        p = pd.param_for(self.profile, req.pnu, req.subindex)
+        if p is not None and p.extra.get("df6") is False and self.device == "DF6" and req.ak:
+            return pd.PkwFrame(7, req.pnu, req.subindex, self.cfg.error_numbers["unknown_pnu"])
+        return super().pkw_answer(req)
+
+    # -- dynamics ----------------------------------------------------------------------------
+    def tick(self, now: float) -> None:
+        last = self._last_tick
+        super().tick(now)
+        if last is not None and now > last and self.state in (State.S4, State.S5):
+            self.run_seconds += now - last
+
+    def comm_loss_action(self) -> tuple[str, str | None]:
+        if self._raw(self.mc.comm_loss_param) == 0:
+            return ("trip", self.mc.comm_loss_alarm)
+        return ("continue", None)
+
+    def on_trip(self, number: int, now: float) -> None:
+        par = self.profile.param
+        if par("d080"):
+            self.values["d080"] = min(0xFFFF, self.values["d080"] + 1)
+        if not par("PNU354"):
+            return
+        k = self.values["PNU354"] % 6 + 1            # trip record 1..6, round robin
+        self.values["PNU354"] = k
+        base = 355 + 6 * (k - 1)
+        freq = abs(self.last_trip[1]) if self.last_trip else 0.0
+        fields = [number, freq, 0.0, self.dc_bus_voltage, int(self.run_seconds), int(now)]
+        for off, v in enumerate(fields):
+            p = pd.param_for(self.profile, base + off)
+            if p is not None:
+                self.values[p.code] = self.wire_from_value(p, min(v, p.max or v))
+
+
+def make_model(profile, **options) -> MoellerModel:
+    if "address" in options:
+        options["node_address"] = int(options.pop("address"))
+    return MoellerModel(profile, **options)
