@@ -1,0 +1,67 @@
+"""`pdrive decode`: decode a captured output (request) or input (response) area offline."""
+
+from __future__ import annotations
+
+import json
+
+import click
+
+from profidrive_cli import UsageError
+from profidrive_cli.dp.cfg import parse_hex
+
+
+@click.command("decode")
+@click.argument("profile")
+@click.argument("hex_octets", nargs=-1, required=True, metavar="HEX...")
+@click.option("--ppo", type=int, default=None, metavar="N", help="PPO type 1..5 (layout ppoN)")
+@click.option("--format", "layout_name", default=None, metavar="NAME",
+              help="a non-PPO layout of the profile, e.g. extended1 (see the profile's layouts)")
+@click.option("--request", "direction", flag_value="request",
+              help="master -> drive (DP output area)")
+@click.option("--response", "direction", flag_value="response",
+              help="drive -> master (DP input area)")
+@click.option("--json", "as_json", is_flag=True, help="print the decoded fields as JSON")
+def decode_cmd(profile, hex_octets, ppo, layout_name, direction, as_json):
+    """Decode a captured area of PROFILE's layout into named fields.
+
+    HEX is the area as hex octets or words, with or without spaces:
+    pdrive decode moeller --ppo 1 --request 3017 0000 0000 0190 047F 2000
+    """
+    from profidrive_cli.drives import decode_area
+    from profidrive_cli.drives.profile import load_profile
+
+    if direction is None:
+        raise UsageError("say which area this is: --request (master -> drive) or --response")
+    if ppo is not None and layout_name is not None:
+        raise UsageError("give either --ppo N or --format NAME, not both")
+    prof = load_profile(profile)
+    if ppo is not None:
+        layout = f"ppo{ppo}"
+        if layout not in prof.layouts:
+            ppos = sorted(n for n in prof.layouts if n.startswith("ppo"))
+            raise UsageError(f"{prof.name} has no PPO{ppo} "
+                             f"(it has: {', '.join(p.upper() for p in ppos) or 'no PPO layouts'})")
+    elif layout_name is not None:
+        layout = layout_name
+        if layout not in prof.layouts:
+            raise UsageError(f"{prof.name} has no layout '{layout}' "
+                             f"(known: {', '.join(prof.layouts)})")
+    else:
+        layout = prof.default_layout
+    try:
+        data = parse_hex(" ".join(hex_octets))
+    except ValueError as e:
+        raise UsageError(f"bad hex: {e}") from None
+    want = prof.layouts[layout].output_len if direction == "request" \
+        else prof.layouts[layout].input_len
+    if len(data) != want:
+        raise UsageError(f"{prof.name} {layout} {direction} is {want} octets, got {len(data)}")
+    try:
+        result = decode_area(prof, layout, direction, data)
+    except ValueError as e:
+        raise UsageError(str(e)) from None
+    if as_json:
+        click.echo(json.dumps(result, indent=2, ensure_ascii=False, default=str))
+    else:
+        for line in result.get("text", []):
+            click.echo(line)
