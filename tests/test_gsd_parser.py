@@ -244,6 +244,9 @@ def test_comments_continuations_and_line_ends():
     assert g.modules[0].cfg == b"\xf3\xf1"
     assert g.modules[0].line == 10 and g.value_lines["ident_number"] == 5
     assert device_user_prm(g) == b"\x01\x02\x03\x04"
+    # a string continued over three lines keeps its text exactly; no blank is added inside it
+    g = parse_gsd_text('#Profibus_DP\nInfo_Text = "a \\\n  b\\\nc" ; x\nIdent_Number = 1\n')
+    assert g.get("info_text") == "a   bc" and g.ident_number == 1
 
 
 def test_yaskawa_maxtsd_alias_and_defaults():

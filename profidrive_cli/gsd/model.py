@@ -292,6 +292,11 @@ class Gsd:
         return self._int("ident_number")
 
     @property
+    def ident(self) -> int | None:
+        """Alias of ident_number."""
+        return self.ident_number
+
+    @property
     def gsd_revision(self) -> int | None:
         return self._int("gsd_revision")
 

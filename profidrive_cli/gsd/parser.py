@@ -270,7 +270,7 @@ class _Parser:
                     first = lineno
                     buf.append(stripped[:-1])
                 else:
-                    buf.append(stripped[:-1] if in_str else " " + stripped[:-1].lstrip())
+                    buf.append(stripped[:-1] if was_in_str else " " + stripped[:-1].lstrip())
                 continue
             if in_str:
                 raise self.err(str_line, "unterminated string (closing \" missing)")
