@@ -88,7 +88,7 @@ def test_prm_table_and_json():
               "--set", "PZD1 Failsafe value=0x0400")
     assert res.exit_code == 0, res.output
     assert "00 00 08 1A 81 00 00 02 00 1E 04 00" in res.output.replace("\n", " ")
-    assert "Chk_Cfg (1 octets): F1" in res.output
+    assert "Chk_Cfg (1 octet): F1" in res.output
     res = run("prm", str(abb880()), "-m", "PPO3", "--set", "Fail Safe mode=2", "--json")
     d = json.loads(res.output)
     assert d["user_prm"].startswith("00 00 08 1A 81 00 00 02 00 1E 04 7E")
@@ -128,3 +128,18 @@ def test_broken_file_error_names_file_and_line():
     res = run("show", str(path))
     assert isinstance(res.exception, DataFileError)
     assert str(res.exception).startswith(f"{path}:7: ")
+
+
+def test_prm_explains_constant_and_dpv1_octets():
+    hits = sorted(TESTDATA.rglob("si0380a7.gsd")) if TESTDATA.is_dir() else []
+    if not hits:
+        pytest.skip("si0380a7.gsd not present")
+    res = run("prm", str(hits[0]), "-m", "DR-CfgData", "--set", "Diagnose frame for=Segment DP2,DP3", columns=200)
+    assert res.exit_code == 0, res.output
+    lines = res.output.splitlines()
+    assert "80 00 08 08 81 00 00 2E 00 00 03" in res.output
+    row0 = next(ln for ln in lines if "DPV1_Status_1 (constant)" in ln)
+    assert "0x80" in row0
+    row7 = next(ln for ln in lines if "Diagnose frame for" in ln)
+    assert "bits 0-7" in row7 and "46 (Segment DP2,DP3) [set]" in row7
+    assert "1 byte out" in next(ln for ln in lines if "DR-CfgData" in ln and "20" in ln)

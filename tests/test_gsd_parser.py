@@ -332,6 +332,9 @@ EndModule
     lines = r.explain()
     assert any("Mode = 2" in ln and "[set]" in ln and "User_Prm[5]" in ln for ln in lines)
     assert any(ln.startswith("User_Prm[0]") and "0xAA" in ln for ln in lines)
+    rows = r.rows()
+    assert [(x["offset"], x["constant"]) for x in rows] == [(0, True), (1, True), (2, True), (3, False),
+                                                             (4, True), (5, False)]
     with pytest.raises(UsageError, match="at most 3"):
         build_prm(g, ["A"] * 4)
 

@@ -55,6 +55,10 @@ def _squeeze(items: list[str]) -> str:
     return "; ".join(it if n == 1 else f"{n} x {it}" for n, it in out)
 
 
+def _octets(n: int) -> str:
+    return f"{n} octet" if n == 1 else f"{n} octets"
+
+
 def _yn(v: bool) -> str:
     return "yes" if v else "no"
 
@@ -231,8 +235,8 @@ def prm_cmd(source: str, modules: tuple[str, ...], sets: tuple[str, ...], gsd_di
     con = _console()
     con.print(f"[bold]{g.title}[/]  ident {_ident(g.ident_number)}  ({g.path})")
     con.print("modules: " + ", ".join(f"{m.index}: {m.display_name}" for m in res.modules))
-    con.print(f"[bold]User_Prm_Data[/] ({len(res.user_prm)} octets): {_hex(res.user_prm)}")
-    con.print(f"[bold]Chk_Cfg[/] ({len(res.cfg)} octets): {_hex(res.cfg)}   "
+    con.print(f"[bold]User_Prm_Data[/] ({_octets(len(res.user_prm))}): {_hex(res.user_prm)}")
+    con.print(f"[bold]Chk_Cfg[/] ({_octets(len(res.cfg))}): {_hex(res.cfg)}   "
               f"-> {sum(m.inputs for m in res.modules)} octets in, {sum(m.outputs for m in res.modules)} out")
     rows = res.rows()
     if rows:
@@ -240,7 +244,7 @@ def prm_cmd(source: str, modules: tuple[str, ...], sets: tuple[str, ...], gsd_di
         for c in ("offset", "Set_Prm", "octets", "bits", "parameter", "value", "block"):
             t.add_column(c, justify="right" if c in ("offset", "Set_Prm") else "left")
         for r in rows:
-            if r["name"].endswith("constant"):
+            if r["constant"]:
                 value = f"0x{r['value']:02X}"
             else:
                 value = str(r["value"]) + (f" ({r['text']})" if r["text"] else "")

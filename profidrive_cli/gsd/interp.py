@@ -166,14 +166,14 @@ class PrmResult:
                             "octets": data[off:off + f.size].hex(" ").upper(),
                             "bits": f.bits_label if f.bits or f.size > 1 else "",
                             "name": f.name, "value": f.value, "text": f.text, "block": f.block,
-                            "overridden": f.overridden})
+                            "overridden": f.overridden, "constant": False})
                 elif off not in covered:
                     name = "constant"
                     if blk.index == 0 and self.gsd.dpv1_slave and off < 3:
                         name = f"DPV1_Status_{off + 1} (constant)"
                     rows.append({"offset": off, "set_prm_octet": 7 + off, "octets": f"{data[off]:02X}",
                                  "bits": "", "name": name, "value": data[off], "text": None,
-                                 "block": blk.label, "overridden": False})
+                                 "block": blk.label, "overridden": False, "constant": True})
         return rows
 
     def explain(self) -> list[str]:
@@ -181,7 +181,7 @@ class PrmResult:
         out = []
         for r in self.rows():
             val = f"{r['value']}" + (f" ({r['text']})" if r["text"] else "")
-            if r["name"].endswith("(constant)") or r["name"] == "constant":
+            if r["constant"]:
                 val = f"0x{r['value']:02X}"
             bits = f" {r['bits']}" if r["bits"] else ""
             mark = " [set]" if r["overridden"] else ""
