@@ -143,3 +143,13 @@ def test_prm_explains_constant_and_dpv1_octets():
     row7 = next(ln for ln in lines if "Diagnose frame for" in ln)
     assert "bits 0-7" in row7 and "46 (Segment DP2,DP3) [set]" in row7
     assert "1 byte out" in next(ln for ln in lines if "DR-CfgData" in ln and "20" in ln)
+
+
+def test_bracketed_gsd_names_are_printed_literally():
+    hits = sorted(TESTDATA.rglob("siemens_et200m_im153.gsd")) if TESTDATA.is_dir() else []
+    if not hits:
+        pytest.skip("siemens_et200m_im153.gsd not present")
+    res = run("prm", str(hits[0]), "-m", "1", "-m", "2", "-m", "3", "-m", "4", columns=200)
+    assert res.exit_code == 0, res.output
+    row = next(ln for ln in res.output.splitlines() if "[SlotNumber]" in ln)
+    assert "4 (slot number)" in row

@@ -8,6 +8,7 @@ import json
 import click
 from rich.console import Console
 from rich.table import Table
+from rich.text import Text
 
 from profidrive_cli import UsageError
 from profidrive_cli.gsd import build_prm, user_params
@@ -22,7 +23,8 @@ _json_option = click.option("--json", "as_json", is_flag=True, help="Print JSON 
 
 
 def _console() -> Console:
-    return Console(highlight=False, soft_wrap=False)
+    # markup off: GSD texts contain brackets ("[SlotNumber]") that rich would otherwise eat as tags
+    return Console(highlight=False, soft_wrap=False, markup=False)
 
 
 def _echo_json(obj) -> None:
@@ -186,7 +188,7 @@ def show_cmd(source: str, gsd_dir: str | None, module_params: bool, as_json: boo
     if g.unit_diag_bits or g.unit_diag_areas:
         con.print(f"Unit diagnosis texts: {len(g.unit_diag_bits)} bits, {len(g.unit_diag_areas)} areas")
     for w in g.warnings:
-        con.print(f"[yellow]warning:[/] {w}", markup=True)
+        con.print(Text.assemble(("warning: ", "yellow"), w))
 
 
 @gsd_group.command("list")
@@ -203,13 +205,13 @@ def list_cmd(gsd_dir: str | None, as_json: bool):
     for c in ("ident", "vendor", "model", "mods", "source", "file"):
         t.add_column(c, justify="right" if c == "mods" else "left", no_wrap=c in ("ident", "file", "mods"))
     for e in entries:
-        note = ""
+        cell = Text(e.path.name)
         if e.error:
-            note = f"\n[red]error: {e.error}[/]"
+            cell.append(f"\nerror: {e.error}", style="red")
         elif e.shadowed_by:
-            note = f"\n(overridden by {e.shadowed_by.name})"
+            cell.append(f"\n(overridden by {e.shadowed_by.name})")
         t.add_row(_ident(e.ident), e.vendor or "-", e.model or "-", str(e.modules) if not e.error else "-",
-                  e.source, f"{e.path.name}{note}")
+                  e.source, cell)
     con.print(t)
     if not entries:
         con.print("no GSD files found")
@@ -233,11 +235,13 @@ def prm_cmd(source: str, modules: tuple[str, ...], sets: tuple[str, ...], gsd_di
         _echo_json(res.to_dict())
         return
     con = _console()
-    con.print(f"[bold]{g.title}[/]  ident {_ident(g.ident_number)}  ({g.path})")
+    con.print(Text.assemble((g.title, "bold"), f"  ident {_ident(g.ident_number)}  ({g.path})"))
     con.print("modules: " + ", ".join(f"{m.index}: {m.display_name}" for m in res.modules))
-    con.print(f"[bold]User_Prm_Data[/] ({_octets(len(res.user_prm))}): {_hex(res.user_prm)}")
-    con.print(f"[bold]Chk_Cfg[/] ({_octets(len(res.cfg))}): {_hex(res.cfg)}   "
-              f"-> {sum(m.inputs for m in res.modules)} octets in, {sum(m.outputs for m in res.modules)} out")
+    con.print(Text.assemble(("User_Prm_Data", "bold"),
+                            f" ({_octets(len(res.user_prm))}): {_hex(res.user_prm)}"))
+    con.print(Text.assemble(("Chk_Cfg", "bold"), f" ({_octets(len(res.cfg))}): {_hex(res.cfg)}   "
+                            f"-> {sum(m.inputs for m in res.modules)} octets in, "
+                            f"{sum(m.outputs for m in res.modules)} out"))
     rows = res.rows()
     if rows:
         t = Table(title="User_Prm_Data", title_justify="left")
@@ -260,4 +264,4 @@ def prm_cmd(source: str, modules: tuple[str, ...], sets: tuple[str, ...], gsd_di
         ct.add_row(str(r["offset"]), r["octets"], str(r["slot"]), r["module"], r["description"])
     con.print(ct)
     for w in res.warnings:
-        con.print(f"[yellow]warning:[/] {w}")
+        con.print(Text.assemble(("warning: ", "yellow"), w))
