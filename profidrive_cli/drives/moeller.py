@@ -86,10 +86,10 @@ def _validate_params(profile) -> None:
                                 f" (Moeller keys: {', '.join(sorted(FAMILY_PARAM_KEYS))})")
 
 
-def _code(profile, node, key, default):
+def _code(profile, node, key, default, where: str = "moeller"):
     v = node.get(key, default) if isinstance(node, dict) else default
     if not isinstance(v, str) or profile.param(v) is None:
-        raise _err(profile, node, key, f"'{key}': {v!r} is not a parameter of this profile")
+        raise _err(profile, node, key, f"{where}.{key}: {v} is not a parameter of this profile")
     return v
 
 
@@ -125,7 +125,8 @@ def _build_config(profile) -> MoellerConfig:
             continue
         if not isinstance(node, dict):
             raise _err(profile, cs, role, f"control_source.{role} must be {{param, bus_value}}")
-        setattr(c, pattr, _code(profile, node, "param", getattr(c, pattr)))
+        setattr(c, pattr, _code(profile, node, "param", getattr(c, pattr),
+                                f"moeller.control_source.{role}"))
         setattr(c, vattr, _intv(profile, node, "bus_value", getattr(c, vattr), 0, 255))
     c.commands_invalid_bit = _intv(profile, sec, "ctw_commands_invalid_bit", 12, 11, 15)
     c.reference_invalid_bit = _intv(profile, sec, "ctw_reference_invalid_bit", 13, 11, 15)
@@ -134,9 +135,9 @@ def _build_config(profile) -> MoellerConfig:
     if not isinstance(cl, dict):
         raise _err(profile, sec, "comm_loss", "comm_loss must be a mapping")
     if cl:
-        c.comm_loss_param = _code(profile, cl, "param", c.comm_loss_param)
-        c.comm_loss_other_param = _code(profile, cl, "other_param", c.comm_loss_other_param) \
-            if "other_param" in cl else None
+        c.comm_loss_param = _code(profile, cl, "param", c.comm_loss_param, "moeller.comm_loss")
+        c.comm_loss_other_param = _code(profile, cl, "other_param", c.comm_loss_other_param,
+                                        "moeller.comm_loss") if "other_param" in cl else None
         alarm = cl.get("alarm", c.comm_loss_alarm)
         if not isinstance(alarm, str) or profile.alarm_by_code(alarm) is None:
             raise _err(profile, cl, "alarm", f"comm_loss.alarm {alarm!r} is not in alarms")

@@ -76,6 +76,7 @@ Drive
     subclass hooks: resolve_param, raw_to_value, value_to_raw, check_value, start_hint,
     write_refused_message, status_extras; see the class docstring.
     decode_area(profile, layout, direction, data, *, max_hz=None) -> dict   (generic PPO decoder)
+    make_drive(channel, profile, layout=None) -> ProfidriveDrive  (so `family: profidrive` works)
 """
 
 from __future__ import annotations
@@ -1448,6 +1449,11 @@ class ProfidriveDrive(Drive):
                                  "the fault to clear (is its cause still present?)")
 
 
+def make_drive(channel, profile, layout: str | None = None) -> ProfidriveDrive:
+    """Family `profidrive`: a plain PROFIdrive V2 drive configured only by its profile."""
+    return ProfidriveDrive(channel, profile, layout)
+
+
 # =============================================================================================
 # generic decoder (pdrive decode)
 # =============================================================================================
@@ -1574,15 +1580,20 @@ def describe_status_word(profile, stw: int, actual: int | None = None,
                          cfg: ProfidriveConfig | None = None) -> dict:
     cfg = cfg or config(profile)
     names = cfg.stw_names
-    moving = None if actual is None else to_signed16(actual) != 0
-    state = state_from_status(stw, moving)
+    # a captured area is one snapshot: the state comes from the status word alone; an actual value
+    # != 0 with the S2/S3 pattern may also mean S5 (manual examples show 0x0331 with HIW 0x2000)
+    state = state_from_status(stw)
+    moving = actual is not None and to_signed16(actual) != 0
+    maybe_s5 = moving and state in (State.S2, State.S3)
     bits = [{"bit": b, "set": bool(stw >> b & 1), "name": names.get(b, f"bit {b}")}
             for b in range(16) if b in names or stw >> b & 1]
     lab = cfg.labels["status"]
     text = (f"{lab} (status word) 0x{stw:04X}: " + (", ".join(bit_list(stw, names)) or "no bits set")
-            + f" -> {state.value}")
+            + f" -> {state.value}" + (" (or S5 switching off, if the motor is still turning)"
+                                       if maybe_s5 else ""))
     return {"word": stw, "hex": f"0x{stw:04X}", "label": lab, "bits": bits,
-            "set": bit_list(stw, names), "state": state.value, "text": text}
+            "set": bit_list(stw, names), "state": state.value, "maybe_s5": maybe_s5,
+            "text": text}
 
 
 def describe_n2(word: int, max_hz: float | None, label: str, what: str, max_note: str = "") -> dict:

@@ -76,9 +76,11 @@ class MoellerModel(ProfidriveModel):
         return ctw & mask
 
     def at_setpoint(self) -> bool:
-        if self.state in (State.S4, State.S5):
-            return self.state is State.S4 and abs(self.freq - self._target_hz()) < 1e-6
-        return self.freq == 0.0
+        # the manual's "ready to switch on" example 0x0331 has bit 8 set: at standstill with no run
+        # command the output equals its (zero) set-point; not in S1 (switch-on inhibited)
+        if self.state in (State.S2, State.S3):
+            return self.freq == 0.0
+        return self.state is State.S4 and abs(self.freq - self._target_hz()) < 1e-6
 
     def arrival_reached(self) -> bool:
         level = float(self.param_value("C042")) if self.profile.param("C042") else 0.0

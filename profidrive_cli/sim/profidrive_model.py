@@ -366,6 +366,8 @@ class ProfidriveModel(SlaveModel):
             elif not enop:
                 self.freq = 0.0                   # operation disabled: coast
                 self.state = State.S3
+            elif not ctw & Ctw.ENABLE_RFG and not ctw & Ctw.JOG1:
+                self.freq = 0.0                   # ramp-generator output forced to 0 at once
             elif not ctw & Ctw.UNFREEZE_RFG and prev & Ctw.UNFREEZE_RFG:
                 self._frozen_target = self.freq
             elif ctw & Ctw.UNFREEZE_RFG:
