@@ -7,7 +7,6 @@ marked `derived` in the test names).
 from __future__ import annotations
 
 import csv
-import shutil
 import subprocess
 import sys
 from pathlib import Path

@@ -395,3 +395,11 @@ def test_bus_control_check(prof):
     probs = drive.bus_control_check()
     assert len(probs) == 2 and "A001 = 1" in probs[0] and "A002 = 2" in probs[1]
     assert set(drive.comm_loss_setting()) == {"P002", "P001"}
+
+
+def test_card_info(prof):
+    _, _, drive = rig(prof, address=27, baud_code=8, device="DV6")
+    info = drive.card_info()
+    assert info == {"node_address": 27, "baud": "19.2 kbit/s", "device": "0x012C (DV6)",
+                    "profile_version": 2, "edit_rights": 1, "control_rights": 1,
+                    "control_word": "0x0000", "status_word": "0x0040"}

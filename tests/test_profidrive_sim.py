@@ -10,7 +10,7 @@ import pytest
 from profidrive_cli.drives import decode_area, make_drive
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.base import DriveError, ParamError
-from profidrive_cli.drives.profidrive import Ctw, PkwFrame, State
+from profidrive_cli.drives.profidrive import PkwFrame, State
 from profidrive_cli.drives.profile import load_profile_file
 from profidrive_cli.sim.direct import DirectChannel
 from profidrive_cli.sim.profidrive_model import ProfidriveModel

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from profidrive_cli import UsageError
 from profidrive_cli.datafile import DataFileError, LineDict
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.base import DriveError, DriveStatus, ParamError, ParamValue

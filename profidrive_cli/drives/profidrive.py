@@ -75,6 +75,8 @@ Drive
     ProfidriveDrive(channel, profile, layout=None)  -- the Drive interface (drives/base.py);
     subclass hooks: resolve_param, raw_to_value, value_to_raw, check_value, start_hint,
     write_refused_message, status_extras; see the class docstring.
+    Beyond the Drive interface: request(frame), read_raw / write_raw(pnu, ...), card_info(),
+    set_pzd(n, raw), pzd_mapping(direction), map_pzd(direction, slot, pnu), jog(on), extra_bits
     decode_area(profile, layout, direction, data, *, max_hz=None) -> dict   (generic PPO decoder)
     make_drive(channel, profile, layout=None) -> ProfidriveDrive  (so `family: profidrive` works)
 """
@@ -1360,6 +1362,29 @@ class ProfidriveDrive(Drive):
             else:
                 self._fmax = float(self.profile.max_frequency_default)
         return self._fmax
+
+    def card_info(self) -> dict[str, object]:
+        """PNU 918 address, 963 baud, 964 device, 965 profile, 927/928 rights, 967/968 last words.
+        Entries the card does not support are None."""
+        out: dict[str, object] = {}
+        for key, pnu in (("node_address", PNU_NODE_ADDRESS), ("baud", PNU_BAUD),
+                         ("device", PNU_DEVICE_ID), ("profile_version", PNU_PROFILE),
+                         ("edit_rights", PNU_EDIT_RIGHTS), ("control_rights", PNU_CONTROL_RIGHTS),
+                         ("control_word", PNU_CONTROL_WORD), ("status_word", PNU_STATUS_WORD)):
+            try:
+                v = self.read_raw(pnu) & 0xFFFF
+            except ParamError:
+                out[key] = None
+                continue
+            if key == "baud" and self.cfg.baud_codes:
+                out[key] = decode_baud(v, self.cfg)
+            elif key == "device" and self.cfg.device_ids:
+                out[key] = f"0x{v:04X} ({decode_device_id(v, self.cfg)})"
+            elif key in ("control_word", "status_word", "device"):
+                out[key] = f"0x{v:04X}"
+            else:
+                out[key] = v
+        return out
 
     # -- PZD3.. ------------------------------------------------------------------------------
     def set_pzd(self, n: int, raw: int) -> None:

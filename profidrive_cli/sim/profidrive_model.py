@@ -38,6 +38,12 @@ Hooks for dialects (override in sim/<family>.py; all have generic defaults):
   fault_memory_value(subindex) -> int     PNU 947 element
   alarm_number(alarm) -> int              "E05" / "5" / 5 -> fault number (ValueError if unknown)
   on_trip(number, now) / on_acknowledge(number, now)   side effects (trip records, counters)
+  _transition(ctw, prev, now)             one state-machine step on an effective control word;
+                                          override to add card rules and call super()
+  pkw_answer(req) -> PkwFrame             one PKW task (override to pre-empt, call super())
+  status_word() / actual_word()           the two input words (override to mask or add bits)
+Useful state: state, freq (Hz), ref_pct, ctw_in, ctw_eff, fault, history, values (raw store),
+fault_cause_active (True keeps the fault through an acknowledgement), pkw_log, status_text().
 """
 
 from __future__ import annotations
