@@ -1,0 +1,302 @@
+"""Simulated Fuji FRENIC inverter with an OPC-G1-PDP or OPC-PDP3 card (generic PROFIdrive model + dialect).
+
+    make_model(profile, bus_control=True, o30=None, address=0, baud_code=0, pkw_latency=0,
+               defaults=None, card_version=100) -> FujiModel
+
+Dialect on top of sim/profidrive_model.py:
+  * run commands from the bus only with CTW bit 10 = 1 and y98 = 2 or 3; the reference only with bit 10
+    and y98 = 1 or 3 (bus_control=True seeds y98 = 3, the manual's quick-start setting; the factory
+    value 0 leaves the bus without control). STW bit 9 (R/L) shows y98 != 0, whatever bit 10 says
+    (manual step 1: CTW 0 answers STW 0x0240).
+  * S4 is reached only with CTW bits 4, 5 and 6 = 1 as well (the manual: otherwise no running state)
+  * direction = sign of MRV XOR CTW bit 11; STW bit 8 FAR, bit 10 FDT (|f| >= E31)
+  * ramps F07 (accel), F08 (decel, also the o27 forced stop), H56 (OFF3); each 0 -> F03
+  * PKW errors: 0 unknown code, 1 read-only or PNU927 = 0 (writes only; reads stay allowed), 2 range,
+    3 subindex (also PNU947 read without the array request), 4 not an array, 11 stop-only while
+    running, 104 busy (while a y97 save runs, or `busy_next` writes for tests), 17 unsupported ID
+  * PNU947[1, 9, 17, 25] = the four latest alarms (PROFIdrive codes), M16-M19 = the same as alarm codes
+  * o30: by default the model accepts any PPO and sets o30 to match; o30=N (or strict_o30) accepts
+    only the PPO that o30 selects (a mismatch is the ERR LED: Chk_Cfg refused)
+  * communication loss (DP watchdog, after at least one data exchange) per o27/o28 for a drive in
+    operation: coast or F08 ramp, at once or after o28, forgotten when the link returns within o28
+    where o27 says so, then Er5
+  * OPC-PDP3: y97 (0 EEPROM, 1 RAM, 2 save -> reads 1 when done, 1 s here), o32 all-zero output data
+"""
+
+from __future__ import annotations
+
+from profidrive_cli.drives import fuji as fj
+from profidrive_cli.drives import profidrive as pd
+from profidrive_cli.drives.profidrive import Ctw, State
+from profidrive_cli.sim.profidrive_model import ProfidriveModel
+
+SAVE_SECONDS = 1.0
+
+
+class FujiModel(ProfidriveModel):
+    family = "fuji"
+
+    def __init__(self, profile, *, bus_control: bool = True, o30: int | None = None,
+                 strict_o30: bool | None = None, card_version: int = 100, **kw):
+        self.fc = fj.fuji_config(profile)
+        defaults = {}
+        if bus_control:
+            defaults["y98"] = 3
+        if o30 is not None:
+            defaults[self.fc.ppo_param] = int(o30)
+        if profile.param("W90") is not None:
+            defaults["W90"] = card_version
+        defaults.update(kw.pop("defaults", None) or {})
+        super().__init__(profile, defaults=defaults, **kw)
+        self.edit_rights = int(defaults.get("PNU927", 1))
+        self.strict_o30 = (o30 is not None) if strict_o30 is None else bool(strict_o30)
+        #: most recent first: (PNU947 code, alarm code) of the last four alarms (current one included)
+        self.alarm_log: list[tuple[int, str]] = []
+        self._trip_code: str | None = None
+        self._now = 0.0
+        self.busy_next = 0              # tests: answer the next N writes with error 104
+        self._save_until: float | None = None
+        self.had_exchange = False
+        self.link_up = False
+        self.comm_lost_at: float | None = None
+        self._loss_action: fj.CommLossAction | None = None
+        self._forced_stop = False       # o27 ramp stop in progress: ignore the bus, trip when stopped
+        self.last_ctw_in = 0
+        m = self.profile.param("M16")
+        self._m_pnu = m.pnu if m is not None else None
+
+    # -- configuration (o30) ---------------------------------------------------------------------
+    def check_cfg(self, cfg: bytes) -> bool:
+        want = fj.ppo_for_o30(self.profile, self.values.get(self.fc.ppo_param, 0))
+        for name, allowed in self.cfgs.items():
+            if bytes(cfg) != allowed:
+                continue
+            if self.strict_o30 and name != want:
+                return False              # ERR LED blinking: the PPO set by o30 differs
+            ok = super().check_cfg(cfg)
+            if ok and not self.strict_o30:
+                v = fj.o30_for_layout(self.profile, name)
+                if v is not None and fj.ppo_for_o30(self.profile, self.values[self.fc.ppo_param]) != name:
+                    self.values[self.fc.ppo_param] = v
+            return ok
+        return False
+
+    # -- command source --------------------------------------------------------------------------
+    def _y98(self) -> int:
+        return self.values.get("y98", 0)
+
+    def commands_from_bus(self, ctw: int) -> bool:
+        return bool(ctw & Ctw.CONTROL_BY_PLC) and self._y98() in (2, 3) and not self._forced_stop
+
+    def reference_from_bus(self, ctw: int) -> bool:
+        return bool(ctw & Ctw.CONTROL_BY_PLC) and self._y98() in (1, 3) and not self._forced_stop
+
+    def effective_control_word(self, ctw: int) -> int | None:
+        if self._forced_stop:
+            return None
+        if self.commands_from_bus(ctw):
+            return ctw
+        if ctw & Ctw.CONTROL_BY_PLC and self.state in (State.S3, State.S4, State.S5):
+            return self.ctw_eff & ~int(Ctw.ON | Ctw.FAULT_ACK)   # run from elsewhere: ramp stop
+        return None                                               # bit 10 = 0: CTW ignored
+
+    def reference_sign(self, ctw: int) -> int:
+        return -1 if ctw >> 11 & 1 else 1
+
+    def _transition(self, ctw: int, prev: int, now: float) -> None:
+        run = int(pd.RUN_BITS & ~Ctw.ENABLE_OPERATION)      # bits 4, 5, 6
+        if self.state in (State.S2, State.S3) and (ctw & run) != run:
+            ctw &= ~int(Ctw.ENABLE_OPERATION)                # no S4 without bits 4-6
+        super()._transition(ctw, prev, now)
+
+    def status_word(self) -> int:
+        w = super().status_word() & ~int(pd.Stw.CONTROL_REQUESTED | pd.Stw.WARNING)
+        if self._y98() != 0:
+            w |= pd.Stw.CONTROL_REQUESTED            # R/L: the bus is a command source
+        return w
+
+    def at_setpoint(self) -> bool:
+        return self.state is State.S4 and abs(self.freq - self._target_hz()) < 1e-6 \
+            and self.freq != 0.0
+
+    def arrival_reached(self) -> bool:
+        p = self.profile.param("E31")
+        level = float(self.param_value("E31")) if p is not None else 0.0
+        return level > 0 and abs(self.freq) >= level - 1e-9
+
+    # -- alarms ----------------------------------------------------------------------------------
+    def _alarm(self, alarm):
+        """'OC1', 'oc1', '1' / 'M1' (alarm code), '0x2301' (PNU947 code, first candidate)."""
+        text = str(alarm).strip()
+        a = self.profile.alarm_by_code(text)
+        if a is not None:
+            return a
+        t = text.upper()
+        if t.startswith("0X"):
+            cands = self.profile.alarms_for(int(t, 16))
+            if cands:
+                return cands[0]
+        elif t.lstrip("M").isdigit():
+            a = fj.alarm_by_mcode(self.profile, int(t.lstrip("M")))
+            if a is not None:
+                return a
+        known = ", ".join(x.code for x in self.profile.alarms[:12])
+        raise ValueError(f"unknown alarm '{alarm}' for {self.profile.name} (e.g. {known}, ...)")
+
+    def alarm_number(self, alarm) -> int:
+        if isinstance(alarm, int):
+            return alarm
+        return self._alarm(alarm).number
+
+    def trip(self, alarm, now: float = 0.0) -> None:
+        a = self._alarm(alarm) if not isinstance(alarm, int) else None
+        self._trip_code = a.code if a is not None else None
+        super().trip(a.number if a is not None else alarm, now)
+
+    def on_trip(self, number: int, now: float) -> None:
+        code = self._trip_code
+        if code is None:
+            cands = self.profile.alarms_for(number)
+            code = cands[0].code if cands else f"0x{number:04X}"
+        self.alarm_log.insert(0, (number, code))
+        del self.alarm_log[len(self.fc.history):]
+        self._trip_code = None
+        self._forced_stop = False
+        self._loss_action = None
+        self.comm_lost_at = None
+
+    def seed_faults(self, alarms) -> None:
+        items = [self._alarm(a) for a in alarms]
+        self.alarm_log = [(a.number, a.code) for a in items] + self.alarm_log
+        del self.alarm_log[len(self.fc.history):]
+
+    def fault_memory_value(self, subindex: int) -> int:
+        for i, (_, ind, _) in enumerate(self.fc.history):
+            if ind == subindex:
+                return self.alarm_log[i][0] if i < len(self.alarm_log) else 0
+        return 0
+
+    def _mcode_value(self, position: int) -> int:
+        if position >= len(self.alarm_log):
+            return 0
+        return fj.mcode_of(self.profile, self.alarm_log[position][1]) or 0
+
+    def read_special(self, pnu: int, sub: int) -> int | None:
+        if pnu == self._m_pnu:
+            for i, (_, _, mparam) in enumerate(self.fc.history):
+                p = self.profile.param(mparam) if mparam else None
+                if p is not None and p.index == sub:
+                    return self._mcode_value(i)
+            return None
+        return super().read_special(pnu, sub)
+
+    # -- PKW dialect -----------------------------------------------------------------------------
+    def pkw_answer(self, req: pd.PkwFrame) -> pd.PkwFrame:
+        write = req.ak in (2, 7)
+        err = self.cfg.error_numbers
+        if write and not self.edit_rights and req.pnu != pd.PNU_EDIT_RIGHTS:
+            return pd.PkwFrame(7, req.pnu, req.subindex, err["no_rights"])
+        if write and (self.busy_next > 0 or self._saving()):
+            if self.busy_next > 0:
+                self.busy_next -= 1
+            return pd.PkwFrame(7, req.pnu, req.subindex, self.fc.busy_error)
+        saved, self.edit_rights = self.edit_rights, 1        # reads are never blocked by PNU927
+        resp = super().pkw_answer(req)
+        if not (write and req.pnu == pd.PNU_EDIT_RIGHTS and resp.ak not in pd.ERROR_RESPONSES):
+            self.edit_rights = saved
+        if write and resp.ak in (1, 4) and self.fc.storage is not None:
+            sp = self.profile.param(self.fc.storage["param"])
+            if sp is not None and (req.pnu, req.subindex) == (sp.pnu, sp.index):
+                if req.value == self.fc.storage["save"]:
+                    self._save_until = self._now + SAVE_SECONDS
+                    self.saves += 1
+                else:
+                    self._save_until = None
+        return resp
+
+    def _saving(self) -> bool:
+        return self._save_until is not None and self._now < self._save_until
+
+    def tick(self, now: float) -> None:
+        self._now = now
+        if self._save_until is not None and now >= self._save_until and self.fc.storage is not None:
+            self.values[self.fc.storage["param"]] = self.fc.storage["saved_reads"]
+            self._save_until = None
+        super().tick(now)
+        self._comm_loss_tick(now)
+
+    # -- cyclic ----------------------------------------------------------------------------------
+    def data_exchange(self, outputs: bytes, now: float) -> bytes:
+        self._now = now
+        self.had_exchange = True
+        self.link_up = True
+        if self._loss_action is not None and self._loss_action.recover and self.comm_lost_at is not None \
+                and not self._forced_stop:
+            self._loss_action, self.comm_lost_at = None, None          # link back within o28
+        if self.fc.zero_data is not None and not any(outputs):
+            self._all_zero(now)
+        out = super().data_exchange(outputs, now)
+        self.last_ctw_in = self.ctw_in
+        return out
+
+    def _all_zero(self, now: float) -> None:
+        """OPC-PDP3 o32: all-zero output data (values >= 3 act like 0)."""
+        mode = self.values.get(self.fc.zero_data.get("param", "o32"), 0)
+        if mode == 1 or (mode == 2 and self.last_ctw_in & Ctw.CONTROL_BY_PLC):
+            if self.state not in (State.FAULT, State.S1):
+                self.freq = 0.0
+                self.state, self.stop_mode = State.S1, None
+
+    # -- communication loss ----------------------------------------------------------------------
+    def on_leave_data_exchange(self, now: float, reason: str) -> None:
+        self._pkw_req, self._pkw_resp, self._pkw_wait = None, pd.IDLE, 0
+        self.link_up = False
+        if reason != "watchdog" or not self.had_exchange:
+            return          # Er5 needs a break after at least one good exchange
+        if self.state not in (State.S4, State.S5):
+            return          # see decisions: the sim applies o27 to a drive in operation only
+        o27 = self.values.get(self.fc.comm_loss_param, 0)
+        act = fj.comm_loss_action(self.profile, o27)
+        if act.stop == "none":
+            return
+        self.comm_lost_at = now
+        self._loss_action = act
+        if not act.delayed:
+            self._react(now)
+
+    def _react(self, now: float) -> None:
+        act = self._loss_action
+        if act is None:
+            return
+        if act.stop == "coast":
+            self.trip(self.fc.comm_loss_alarm, now)
+        else:
+            self._forced_stop = True
+            if self.state is State.S4:
+                self.state, self.stop_mode = State.S5, "off1"
+
+    def _comm_loss_tick(self, now: float) -> None:
+        act = self._loss_action
+        if act is None:
+            return
+        if self._forced_stop:
+            if self.freq == 0.0:
+                self.trip(self.fc.comm_loss_alarm, now)
+            return
+        if act.delayed and self.comm_lost_at is not None:
+            delay = float(self.param_value(self.fc.comm_loss_timer))
+            if now - self.comm_lost_at >= delay - 1e-9:
+                if act.recover and self.link_up:
+                    self._loss_action, self.comm_lost_at = None, None
+                else:
+                    self.comm_lost_at = None
+                    self._react(now)
+
+
+def make_model(profile, **options) -> FujiModel:
+    if "address" in options:
+        options["node_address"] = int(options.pop("address"))
+    for k in ("o30", "card_version", "baud_code", "node_address", "pkw_latency"):
+        if k in options and options[k] is not None:
+            options[k] = int(options[k])
+    return FujiModel(profile, **options)
