@@ -479,6 +479,10 @@ class FujiDrive(pd.ProfidriveDrive):
             self._notes: list[str] = []
         return self._notes
 
+    def jog(self, on: bool = True) -> None:
+        raise DriveError(f"{self.profile.name}: CTW bits 8 and 9 are not used by this card; there is no jog "
+                         f"over PROFIBUS (use a reference instead)")
+
     def start_hint(self, status: DriveStatus) -> str:
         hint = ("the card takes CTW/MRV only with y98 = 3 (run and frequency from PROFIBUS), CTW bits "
                 "4, 5, 6 and 10 = 1, and no higher-priority source (H30, y99, LE/LOC terminals)")
@@ -696,8 +700,20 @@ def decode_area(profile, layout: str, direction: str, data: bytes, *,
     else:
         sw = out["status_word"]
         stw = sw["word"]
-        if stw & 0x7 == 0b011:
+        if stw & 0x7 == 0b011 and not stw & 0x48:
             sw["note"] = "S3 and S5 share this status pattern; MAV != 0 means S5 (stopping)"
+            if pd.to_signed16(out["actual"]["raw"]) != 0:
+                # the manual's ramp-stop example: 0x0233 while decelerating is S5 (decision in the profile)
+                old_state = sw["state"]
+                sw["state"] = pd.State.S5.value
+                sw["maybe_s5"] = False
+                for i, line in enumerate(text):
+                    if line == sw["text"]:
+                        text[i] = sw["text"] = line.split(" -> ")[0] + f" -> {pd.State.S5.value} (MAV != 0: " \
+                            f"decelerating; the same pattern at standstill is S3)"
+                out["summary"] = out["summary"].replace(old_state, pd.State.S5.value, 1)
+                if text[-1].startswith("summary: "):
+                    text[-1] = "summary: " + out["summary"]
     # PCD1-4 (PPO2 / PPO4): function-code words assigned by o40-o43 / o48-o51
     if "pzd" in out:
         which = "o40-o43 / PNU915" if direction == "request" else "o48-o51 / PNU916"

@@ -48,7 +48,8 @@ class FujiModel(ProfidriveModel):
             defaults["W90"] = card_version
         defaults.update(kw.pop("defaults", None) or {})
         super().__init__(profile, defaults=defaults, **kw)
-        self.edit_rights = int(defaults.get("PNU927", 1))
+        #: PNU927: 0 = PKW writes refused (error 1) except to PNU927 itself; reads stay allowed
+        self.write_permission = int(defaults.get("PNU927", 1))
         self.strict_o30 = (o30 is not None) if strict_o30 is None else bool(strict_o30)
         #: most recent first: (PNU947 code, alarm code) of the last four alarms (current one included)
         self.alarm_log: list[tuple[int, str]] = []
@@ -181,7 +182,7 @@ class FujiModel(ProfidriveModel):
             return 0
         return fj.mcode_of(self.profile, self.alarm_log[position][1]) or 0
 
-    def read_special(self, pnu: int, sub: int) -> int | None:
+    def _read_special_mcode(self, pnu: int, sub: int) -> int | None:
         if pnu == self._m_pnu:
             for i, (_, _, mparam) in enumerate(self.fc.history):
                 p = self.profile.param(mparam) if mparam else None
@@ -190,20 +191,71 @@ class FujiModel(ProfidriveModel):
             return None
         return super().read_special(pnu, sub)
 
+    # -- PCD1-4 (PPO2 / PPO4): function codes assigned by o40-o43 / o48-o51 = PNU915/916 ----------
+    def _assign_code(self, direction: str, slot: int) -> str:
+        first = 40 if direction == "setpoint" else 48
+        return f"o{first + slot - 1}"
+
+    def _assigned_param(self, word: int):
+        code = fj.pcd_assignment_code(self.profile, word)
+        return self.profile.param(code) if code else None
+
+    def read_special(self, pnu: int, sub: int) -> int | None:
+        if pnu == pd.PNU_EDIT_RIGHTS:
+            return self.write_permission
+        if pnu in self.cfg.pzd_map:
+            if not 1 <= sub <= 4:
+                return None
+            direction = "setpoint" if pnu == self.cfg.pzd_map[0] else "actual"
+            return self.values.get(self._assign_code(direction, sub), 0)
+        return self._read_special_mcode(pnu, sub)
+
+    def write_special(self, pnu: int, sub: int, raw: int) -> str | None:
+        if pnu == pd.PNU_EDIT_RIGHTS:
+            if raw not in (0, 1):
+                return "out_of_range"
+            self.write_permission = raw
+            return ""
+        if pnu in self.cfg.pzd_map:
+            direction = "setpoint" if pnu == self.cfg.pzd_map[0] else "actual"
+            self.values[self._assign_code(direction, sub)] = raw & 0xFFFF
+            return ""
+        return super().write_special(pnu, sub, raw)
+
+    def _pzd_write(self, words: list[int]) -> None:
+        seen = set()
+        for slot, w in enumerate(words[:4], start=1):
+            p = self._assigned_param(self.values.get(self._assign_code("setpoint", slot), 0))
+            if p is None or p.code in seen or not p.writable or (p.access == "stop" and self.running):
+                continue          # the lowest-numbered o-code wins a code assigned twice
+            seen.add(p.code)
+            if self.value_allowed(p, self.value_from_wire(p, w)):
+                self.values[p.code] = w & 0xFFFF
+
+    def _pzd_read(self, n: int) -> list[int]:
+        out = []
+        for slot in range(1, n + 1):
+            word = self.values.get(self._assign_code("actual", slot), 0)
+            p = self._assigned_param(word)
+            v = 0
+            if p is not None:
+                v = self._read_special_mcode(p.pnu, p.index)
+                if v is None:
+                    v = self.values.get(p.code, 0)
+            out.append(v & 0xFFFF)
+        return out
+
     # -- PKW dialect -----------------------------------------------------------------------------
     def pkw_answer(self, req: pd.PkwFrame) -> pd.PkwFrame:
         write = req.ak in (2, 7)
         err = self.cfg.error_numbers
-        if write and not self.edit_rights and req.pnu != pd.PNU_EDIT_RIGHTS:
+        if write and not self.write_permission and req.pnu != pd.PNU_EDIT_RIGHTS:
             return pd.PkwFrame(7, req.pnu, req.subindex, err["no_rights"])
         if write and (self.busy_next > 0 or self._saving()):
             if self.busy_next > 0:
                 self.busy_next -= 1
             return pd.PkwFrame(7, req.pnu, req.subindex, self.fc.busy_error)
-        saved, self.edit_rights = self.edit_rights, 1        # reads are never blocked by PNU927
-        resp = super().pkw_answer(req)
-        if not (write and req.pnu == pd.PNU_EDIT_RIGHTS and resp.ak not in pd.ERROR_RESPONSES):
-            self.edit_rights = saved
+        resp = super().pkw_answer(req)       # generic edit_rights stays 1: PNU927 blocks writes only
         if write and resp.ak in (1, 4) and self.fc.storage is not None:
             sp = self.profile.param(self.fc.storage["param"])
             if sp is not None and (req.pnu, req.subindex) == (sp.pnu, sp.index):
