@@ -387,6 +387,8 @@ def describe_word(profile, fname: str, raw: int, direction: str, *, max_hz: floa
         return d
     kind = f["kind"]
     d["name"] = f["name"]
+    if kind in ("ctw", "zsw", "run_cmd", "bits"):
+        d["word"] = raw
     head = f"{f['name']} 0x{raw:04X}"
     if kind == "ctw":
         names = bit_names(profile, "ctw", raw)
@@ -824,6 +826,9 @@ class ToyoDrive(pd.ProfidriveDrive):
             raw["status_word"] = zsw
             moving = pct is not None and abs(pct) > 0
             state = pd.state_from_status(zsw, moving)
+            if self.jogging and state is pd.State.S5:
+                state = pd.State.S3             # jog runs in the switched-on state (bits 4-6 = 0)
+            flags["jogging"] = self.jogging
             for b, t in self.tc.bits["zsw"].items():
                 flags[t] = bool(zsw >> b & 1)
             running = state in (pd.State.S4, pd.State.S5) or bool(moving)
@@ -916,8 +921,7 @@ class ToyoDrive(pd.ProfidriveDrive):
         if on:
             self.jogging = True
             self.extra_bits = (self.extra_bits & ~int(pd.Ctw.JOG1 | pd.Ctw.JOG2)) | bit
-            if self.target is None:
-                self.target = pd.Target.OPERATE
+            self.target = pd.Target.OPERATE     # sent as SWITCHED_ON + jog bit while jogging
         else:
             self.jogging = False
             self.extra_bits &= ~int(pd.Ctw.JOG1 | pd.Ctw.JOG2)

@@ -415,7 +415,9 @@ class ToyoModel(ProfidriveModel):
         self.trip_log.insert(0, ty.history_word(number, self.inverter_mode, self.block))
         del self.trip_log[len(self.tc.history_indexes):]
         self._sample()
-        self.recordings.insert(0, list(self.samples))
+        rec = list(self.samples)
+        rec = [(0,) * 16] * (self.tc.traceback_points - len(rec)) + rec     # always 100 points
+        self.recordings.insert(0, rec)
         del self.recordings[self.tc.traceback_recordings:]
 
     def on_acknowledge(self, number: int, now: float) -> None:
