@@ -398,3 +398,40 @@ def test_comm_loss_setting_and_ppo_setting_texts():
     assert d.comm_loss_setting() == ("o27 = 12: decelerate with F08 after o28 = 4 s unless the link returns "
                                      "within 4 s, then trip Er5")
     assert d.ppo_setting() == "o30 = 0: PPO1"
+
+
+# ---------------------------------------------------------------------------------------------
+# the same over the simulated bus (sim://, master, Data_Exchange)
+# ---------------------------------------------------------------------------------------------
+
+def test_over_sim_bus_both_cards():
+    from profidrive_cli.dp.poller import Master, StationChannel
+    from profidrive_cli.dp.station import SlaveConfig
+    from profidrive_cli.fdl.timing import BusParams
+    from profidrive_cli.link import open_link
+
+    link = open_link("sim://?stations=3:fuji-g1,4:fuji-pdp3&baud=1500000&trip=3:OC1&trip=4:OL4"
+                     "&faults=4:Er5")
+    try:
+        m = Master(link, BusParams.for_baud(1500000, retries=1))
+        for addr, name, layout, code in ((3, "fuji-g1", "ppo1", "OC1"), (4, "fuji-pdp3", "ppo2", "OL4")):
+            prof = load_profile(name)
+            m.add_station(addr, SlaveConfig(ident=prof.ident, cfg=prof.layouts[layout].cfg, wd_ms=500))
+            m.bring_up(addr)
+            d = make_drive(StationChannel(m, addr), prof, layout)
+            st = d.status()
+            assert st.fault and st.fault_code == code
+            assert not d.reset_fault().fault
+            hist = d.fault_history()
+            assert hist[0].codes == [code]
+            if addr == 4:
+                assert hist[1].codes == ["Er5"]
+            d.write_param("F07", 0.3)
+            d.write_param("F08", 0.3)
+            d.set_speed(50.0)
+            assert d.start().state.startswith("S4")
+            st = d.cycles_until(lambda s: s.flags["FAR (frequency arrival)"], 10, "FAR")
+            assert st.speed_hz == pytest.approx(30.0, abs=0.01)
+            assert d.stop().state.startswith("S2")
+    finally:
+        link.close()

@@ -351,3 +351,33 @@ def test_big_endian_override_end_to_end(tmp_path):
     out = ch.log[-1][0]
     assert out[8:12] == bytes.fromhex("047F2710")
     assert d.read_param("dc-voltage").value == 283.0
+
+
+def test_over_sim_bus_mode0_and_mode1():
+    from profidrive_cli.dp.poller import Master, StationChannel
+    from profidrive_cli.dp.station import SlaveConfig
+    from profidrive_cli.fdl.timing import BusParams
+    from profidrive_cli.link import open_link
+
+    link = open_link("sim://?stations=5:toyo,8:toyo&baud=1500000&trip=5:OV&trip=8:UV&faults=8:COMM")
+    try:
+        m = Master(link, BusParams.for_baud(1500000, retries=1))
+        prof = load_profile("toyo")
+        for addr, layout, code in ((5, "ppo2", "OV"), (8, "toyo", "UV")):
+            m.add_station(addr, SlaveConfig(ident=prof.ident, cfg=prof.layouts[layout].cfg, wd_ms=500))
+            m.bring_up(addr)
+            d = make_drive(StationChannel(m, addr), prof, layout)
+            st = d.status()
+            assert st.fault and st.fault_code == code
+            assert not d.reset_fault().fault
+            hist = d.fault_history()
+            assert hist[0].codes == [code]
+            if addr == 8:
+                assert hist[1].codes == ["COMM"]
+            d.set_speed(10.0)
+            d.start()
+            st = d.cycles_until(lambda s: abs((s.speed_percent or 0) - 10.0) < 0.01, 10, "10 %")
+            assert st.speed_hz == pytest.approx(6.0, abs=0.01)
+            assert d.stop().stopped
+    finally:
+        link.close()
