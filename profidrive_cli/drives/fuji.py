@@ -275,9 +275,6 @@ def profidrive_config(profile) -> pd.ProfidriveConfig:
 # function codes
 # =============================================================================================
 
-_FC_RE = re.compile(r"^([A-Za-z][A-Za-z0-9]?)?$")
-
-
 def parse_function_code(profile, text: str) -> tuple[str, int, int, int] | None:
     """'F26' -> ('F26', group code 4, pnu 0x104, subindex 26); None when it is not a function code.
 
@@ -424,6 +421,8 @@ class FujiDrive(pd.ProfidriveDrive):
     def __init__(self, channel, profile, layout: str | None = None):
         self.fc = fuji_config(profile)
         super().__init__(channel, profile, layout)
+        #: remarks for the user from the last calls (e.g. "o30 takes effect after a power cycle")
+        self.notes: list[str] = []
 
     # -- addressing ----------------------------------------------------------------------------
     def resolve_param(self, code: str) -> pd.ParamRef:
@@ -472,12 +471,6 @@ class FujiDrive(pd.ProfidriveDrive):
         if ref.param is not None and ref.param.extra.get("power_cycle"):
             self.notes.append(f"{ref.code} takes effect after the inverter is switched off and on")
         return pv
-
-    @property
-    def notes(self) -> list[str]:
-        if not hasattr(self, "_notes"):
-            self._notes: list[str] = []
-        return self._notes
 
     def jog(self, on: bool = True) -> None:
         raise DriveError(f"{self.profile.name}: CTW bits 8 and 9 are not used by this card; there is no jog "
