@@ -59,6 +59,7 @@ def sim_cmd(use_pty, listen, serial_port, plant, baud, as_json):
     sys.stdout.flush()
     stopping = []
     signal.signal(signal.SIGTERM, lambda *a: stopping.append(1))
+    signal.signal(signal.SIGINT, lambda *a: stopping.append(1))
     try:
         server.serve(bus, ep, stop=lambda: bool(stopping))
     except KeyboardInterrupt:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import errno
 import os
+import select
 import time
 
 import serial
@@ -21,13 +22,18 @@ if "profidrive_cli.link" not in serial.protocol_handler_packages:
     serial.protocol_handler_packages.append("profidrive_cli.link")
 
 
-def open_serial(port: str, baud: int, rs485: bool = False, timeout: float = 0.0) -> serial.SerialBase:
+def _is_pty(port: str) -> bool:
+    return "://" not in port and os.path.realpath(port).startswith(("/dev/pts/", "/dev/pty"))
+
+
+def open_serial(port: str, baud: int, rs485: bool = False, timeout: float = 0.0,
+                _retry: bool = False) -> serial.SerialBase:
     """Open a pyserial port for PROFIBUS; one-line errors for missing / busy / forbidden ports."""
     try:
         ser = serial.serial_for_url(port, do_not_open=True)
         ser.baudrate = baud
         ser.bytesize = serial.EIGHTBITS
-        ser.parity = serial.PARITY_EVEN
+        ser.parity = serial.PARITY_NONE if _retry else serial.PARITY_EVEN
         ser.stopbits = serial.STOPBITS_ONE
         ser.timeout = timeout
         ser.write_timeout = 2.0
@@ -46,6 +52,15 @@ def open_serial(port: str, baud: int, rs485: bool = False, timeout: float = 0.0)
         raise BusError(_explain_open_error(port, e)) from None
     except OSError as e:
         raise BusError(_explain_open_error(port, e)) from None
+    except Exception as e:  # termios.error (not an OSError) from tcsetattr on odd devices
+        if type(e).__name__ == "error" and type(e).__module__ == "termios":
+            if _is_pty(port) and not _retry:
+                # Linux ptys carry no parity bits, and a reopened pty may refuse PARENB with
+                # EINVAL: parity means nothing there, so open it without
+                return open_serial(port, baud, rs485, timeout, _retry=True)
+            raise BusError(f"{port}: the device refuses the serial settings "
+                           f"(8E1 at {BAUD_NAMES.get(baud, baud)}): {e.args[-1]}") from None
+        raise
 
 
 def _explain_open_error(port: str, e: Exception) -> str:
@@ -61,6 +76,38 @@ def _explain_open_error(port: str, e: Exception) -> str:
     if "Connection refused" in text:
         return f"{port}: connection refused"
     return f"{port}: cannot open: {text}"
+
+
+def read_available(ser: serial.SerialBase, timeout: float) -> bytes:
+    """Whatever has arrived, waiting up to `timeout` s for the first octet.
+
+    On a POSIX device the wait is a select() on its fd: changing pyserial's timeout would call
+    tcsetattr on every read (slow, and refused by some ptys). URL ports (socket://, sim://) take
+    the timeout directly (no termios there).
+    """
+    n = ser.in_waiting
+    if n:
+        return ser.read(n)
+    if timeout <= 0:
+        return b""
+    fd = None
+    if isinstance(ser, serial.Serial) and hasattr(ser, "fd"):
+        fd = ser.fd
+    if fd is not None:
+        r, _, _ = select.select([fd], [], [], timeout)
+        if not r:
+            return b""
+        n = ser.in_waiting
+        if not n:
+            # readable but nothing to read: the other end went away (EOF on a pty/USB unplug)
+            raise serial.SerialException("device reports readiness to read but returned no data")
+        return ser.read(n)
+    ser.timeout = timeout
+    first = ser.read(1)
+    if not first:
+        return b""
+    n = ser.in_waiting
+    return first + (ser.read(n) if n else b"")
 
 
 class SerialLink(Link):
@@ -98,18 +145,7 @@ class SerialLink(Link):
 
     def read(self, deadline: float) -> bytes:
         try:
-            n = self.ser.in_waiting
-            if n:
-                return self.ser.read(n)
-            wait = deadline - time.monotonic()
-            if wait <= 0:
-                return b""
-            self.ser.timeout = wait
-            first = self.ser.read(1)
-            if not first:
-                return b""
-            n = self.ser.in_waiting
-            return first + (self.ser.read(n) if n else b"")
+            return read_available(self.ser, deadline - time.monotonic())
         except (serial.SerialException, OSError) as e:
             raise LinkLost(f"{self.name}: port lost while reading: {e}") from None
         except TypeError:

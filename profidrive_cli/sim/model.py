@@ -31,6 +31,8 @@ class SlaveModel:
         self.max_diag_len = max_diag_len
         #: the layout chosen by the last accepted Chk_Cfg (None until configured)
         self.layout: str | None = None
+        #: what Get_Cfg reports before any configuration (the device's own default)
+        self.default_layout: str | None = None
         self.input_len = 0
         self.output_len = 0
 
@@ -53,6 +55,8 @@ class SlaveModel:
         """What Get_Cfg answers: the configured layout, else the first (default) one."""
         if self.layout is not None:
             return self.cfgs[self.layout]
+        if self.default_layout in self.cfgs:
+            return self.cfgs[self.default_layout]
         return next(iter(self.cfgs.values()), b"")
 
     # -- cyclic ------------------------------------------------------------------------------

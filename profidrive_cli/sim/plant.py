@@ -35,9 +35,13 @@ def make_model(profile: Profile, **options) -> SlaveModel:
             raise
         mod = None
     if mod is not None and hasattr(mod, "make_model"):
-        return mod.make_model(profile, **options)
-    m = SlaveModel(profile.ident, {n: l.cfg for n, l in profile.layouts.items()}, name=profile.title)
-    m.family = profile.name
+        m = mod.make_model(profile, **options)
+    else:
+        m = SlaveModel(profile.ident, {n: l.cfg for n, l in profile.layouts.items()},
+                       name=profile.title)
+        m.family = profile.name
+    if getattr(m, "default_layout", None) is None:
+        m.default_layout = profile.default_layout
     return m
 
 

@@ -95,15 +95,12 @@ class SerialEndpoint:
         self.path = port
 
     def read(self, timeout: float) -> bytes:
-        n = self.ser.in_waiting
-        if n:
-            return self.ser.read(n)
-        self.ser.timeout = timeout
-        first = self.ser.read(1)
-        if not first:
+        from profidrive_cli.link.serial_link import read_available
+        try:
+            return read_available(self.ser, timeout)
+        except Exception:
+            time.sleep(timeout)     # the master side closed: keep serving for the next one
             return b""
-        n = self.ser.in_waiting
-        return first + (self.ser.read(n) if n else b"")
 
     def write(self, data: bytes) -> None:
         self.ser.write(data)

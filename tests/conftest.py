@@ -1,0 +1,36 @@
+import os
+import shutil
+import subprocess
+import sys
+import time
+
+import pytest
+
+SHARED = os.path.join(os.path.dirname(__file__), "..", "..", "shared")
+
+
+def pdrive_cmd() -> list[str]:
+    """How to start pdrive as a separate process (the installed console script if there is one)."""
+    exe = shutil.which("pdrive")
+    return [exe] if exe else [sys.executable, "-m", "profidrive_cli"]
+
+
+@pytest.fixture
+def socat_pair(tmp_path):
+    """Two linked ptys from socat: (a, b). Skips when socat is absent (CI installs it)."""
+    if not shutil.which("socat"):
+        pytest.skip("socat not installed")
+    a, b = str(tmp_path / "ttyA"), str(tmp_path / "ttyB")
+    p = subprocess.Popen(["socat", f"pty,raw,echo=0,ignoreeof,link={a}",
+                          f"pty,raw,echo=0,ignoreeof,link={b}"],
+                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    for _ in range(200):
+        if os.path.exists(a) and os.path.exists(b):
+            break
+        time.sleep(0.01)
+    else:
+        p.kill()
+        pytest.fail("socat did not create its ptys")
+    yield a, b
+    p.terminate()
+    p.wait(timeout=5)
