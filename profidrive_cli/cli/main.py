@@ -19,7 +19,7 @@ def cli():
     """
 
 
-# (module, click object) for each command; a module that is not there yet is skipped
+# (module, click object) for each command
 _COMMANDS = [
     ("profidrive_cli.cli.bus_cmds", "scan_cmd"),
     ("profidrive_cli.cli.bus_cmds", "diag_cmd"),
@@ -30,11 +30,7 @@ _COMMANDS = [
     ("profidrive_cli.cli.decode_cmd", "decode_cmd"),
 ]
 for _mod, _obj in _COMMANDS:
-    try:
-        cli.add_command(getattr(importlib.import_module(_mod), _obj))
-    except ModuleNotFoundError as _e:  # TODO(lead): make strict once every command module landed
-        if _e.name != _mod:
-            raise
+    cli.add_command(getattr(importlib.import_module(_mod), _obj))
 
 
 def main(argv=None):
