@@ -29,6 +29,7 @@ from profidrive_cli import UsageError
 from profidrive_cli.datafile import DataFileError, LineDict
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.base import DriveError, DriveStatus, FaultRecord, ParamError, ParamValue
+from profidrive_cli.drives.profile import per_profile
 
 # =============================================================================================
 # profile keys
@@ -213,16 +214,7 @@ def _build_config(profile) -> FujiConfig:
     return c
 
 
-_cache: dict[int, tuple[object, FujiConfig]] = {}
-
-
-def fuji_config(profile) -> FujiConfig:
-    hit = _cache.get(id(profile))
-    if hit is not None and hit[0] is profile:
-        return hit[1]
-    c = _build_config(profile)
-    _cache[id(profile)] = (profile, c)
-    return c
+fuji_config = per_profile(_build_config)   # -> FujiConfig, built once per profile
 
 
 FUJI_CTW_BITS = {0: "ON (run command)", 1: "ON2 (no OFF2 coast stop)", 2: "ON3 (no OFF3 quick stop)",

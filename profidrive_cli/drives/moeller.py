@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from profidrive_cli.datafile import DataFileError, LineDict
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.base import DriveError, DriveStatus, ParamError, ParamValue
+from profidrive_cli.drives.profile import per_profile
 
 FAMILY_PARAM_KEYS = {"bytes", "format", "ranges", "df6", "df6_max", "note", "array"}
 FORMATS = ("code", "hex", "bits")
@@ -154,16 +155,7 @@ def _build_config(profile) -> MoellerConfig:
     return c
 
 
-_cache: dict[int, tuple[object, MoellerConfig]] = {}
-
-
-def moeller_config(profile) -> MoellerConfig:
-    hit = _cache.get(id(profile))
-    if hit is not None and hit[0] is profile:
-        return hit[1]
-    c = _build_config(profile)
-    _cache[id(profile)] = (profile, c)
-    return c
+moeller_config = per_profile(_build_config)   # -> MoellerConfig, built once per profile
 
 
 # =============================================================================================

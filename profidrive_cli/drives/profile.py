@@ -28,6 +28,7 @@ with the same ProfileError(file:line).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -271,6 +272,21 @@ def _word_order(path, doc) -> str:
     if wo not in ("big", "little"):
         raise _err(path, doc, "word_order", f"word_order must be big or little, got {wo!r}")
     return wo
+
+
+def per_profile(build):
+    """Memoise a family codec's config builder per Profile object (profiles are immutable once loaded)."""
+    cache: dict[int, tuple[Profile, object]] = {}
+
+    @functools.wraps(build)
+    def get(profile):
+        hit = cache.get(id(profile))
+        if hit is not None and hit[0] is profile:
+            return hit[1]
+        c = build(profile)
+        cache[id(profile)] = (profile, c)
+        return c
+    return get
 
 
 _cache: dict[Path, Profile] = {}

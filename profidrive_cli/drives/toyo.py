@@ -30,6 +30,7 @@ from profidrive_cli import UsageError
 from profidrive_cli.datafile import DataFileError, LineDict
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.base import DriveError, DriveStatus, FaultRecord, ParamError, ParamValue
+from profidrive_cli.drives.profile import per_profile
 
 FAMILY_PARAM_KEYS = {"power_cycle", "format", "bits", "plc", "scale_400v", "traceback", "note"}
 FIELD_KINDS = ("ctw", "zsw", "run_cmd", "bits", "speed", "scaled", "date", "raw", "param")
@@ -185,16 +186,7 @@ def _build_config(profile) -> ToyoConfig:
     return c
 
 
-_cache: dict[int, tuple[object, ToyoConfig]] = {}
-
-
-def toyo_config(profile) -> ToyoConfig:
-    hit = _cache.get(id(profile))
-    if hit is not None and hit[0] is profile:
-        return hit[1]
-    c = _build_config(profile)
-    _cache[id(profile)] = (profile, c)
-    return c
+toyo_config = per_profile(_build_config)   # -> ToyoConfig, built once per profile
 
 
 def profidrive_config(profile) -> pd.ProfidriveConfig:
