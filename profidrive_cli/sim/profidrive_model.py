@@ -69,6 +69,9 @@ SPECIAL_READ_ONLY = (pd.PNU_NODE_ADDRESS, pd.PNU_BAUD, pd.PNU_DEVICE_ID, pd.PNU_
 
 class ProfidriveModel(SlaveModel):
     family = "profidrive"
+    #: how the family calls its faults in messages ("alarm", "protection") and extra hint text
+    alarm_noun = "alarm"
+    alarm_hint = ""
 
     def __init__(self, profile, *, cfg: pd.ProfidriveConfig | None = None,
                  defaults: dict | None = None, pkw_latency: int = 0, name: str | None = None,
@@ -259,7 +262,8 @@ class ProfidriveModel(SlaveModel):
         a = self.profile.alarm_by_code(text)
         if a is None:
             known = ", ".join(x.code for x in self.profile.alarms[:12])
-            raise ValueError(f"unknown alarm '{alarm}' for {self.profile.name} (e.g. {known})")
+            raise ValueError(f"unknown {self.alarm_noun} '{alarm}' for {self.profile.name} "
+                             f"(e.g. {known}{self.alarm_hint})")
         return a.number
 
     def on_trip(self, number: int, now: float) -> None:

@@ -47,6 +47,8 @@ BUS_CONTROL_DEFAULTS = {"J-00": 4, "b-10": 3, "b-11": 3, "b-12": 3, "C-00": 1}
 
 
 class ToyoModel(ProfidriveModel):
+    alarm_noun = "protection"
+    alarm_hint = ", or 1..32"
     family = "toyo"
 
     def __init__(self, profile, *, mode: int | None = None, bus_control: bool = True,
@@ -390,18 +392,6 @@ class ToyoModel(ProfidriveModel):
         return reply(1, raw)            # the value actually written
 
     # -- faults ------------------------------------------------------------------------------------
-    def alarm_number(self, alarm) -> int:
-        if isinstance(alarm, int):
-            return alarm
-        text = str(alarm).strip()
-        if text.isdigit():
-            return int(text)
-        a = self.profile.alarm_by_code(text)
-        if a is None:
-            known = ", ".join(x.code for x in self.profile.alarms[:12])
-            raise ValueError(f"unknown protection '{alarm}' for {self.profile.name} (e.g. {known}, or 1..32)")
-        return a.number
-
     def trip(self, alarm, now: float = 0.0) -> None:
         code = self.alarm_number(alarm)
         if code == FAN_FAILURE:
