@@ -284,7 +284,7 @@ class SlaveDiag:
             if self.st1 >> i & 1:
                 lines.append(f"st1 bit {i} {n}: {ST1_WORDS[n]}")
         for i, n in enumerate(ST2_BITS):
-            if self.st2 >> i & 1:
+            if self.st2 >> i & 1 and n != "always 1":
                 lines.append(f"st2 bit {i} {n}" + (f": {ST2_WORDS[n]}" if n in ST2_WORDS else ""))
         if not self.st2 & ST2_FIXED:
             lines.append("st2 bit 2 is 0 (a slave always sets it): suspicious reply")
