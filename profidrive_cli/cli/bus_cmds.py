@@ -126,14 +126,10 @@ def diag_cmd(opts, address, gsd_dir):
 
 
 def _unit_diag_texts(d, gsd_dir) -> list[str]:
-    blocks = [b for b in d.ext_blocks() if b.kind == "device"]
-    if not blocks:
+    if not any(b.kind == "device" for b in d.ext_blocks()):
         return []
-    try:
-        from profidrive_cli.gsd.library import find_by_ident
-        from profidrive_cli.gsd import decode_unit_diag
-    except ImportError:
-        return []
+    from profidrive_cli.gsd import decode_unit_diag
+    from profidrive_cli.gsd.library import find_by_ident
     g = find_by_ident(d.ident, gsd_dir)
     if g is None:
         return []
@@ -202,11 +198,8 @@ def io_cmd(opts, address, cfg_hex, ident_hex, prm_hex, out_hex, count, wd_ms, gs
 
 
 def _from_gsd(gsd_file, modules):
-    try:
-        from profidrive_cli.gsd import library
-    except ImportError:
-        raise UsageError("GSD support is not available") from None
-    g = library.load_gsd(gsd_file)
     from profidrive_cli.gsd import build_prm
+    from profidrive_cli.gsd.library import load_gsd
+    g = load_gsd(gsd_file)
     res = build_prm(g, list(modules))
     return res.cfg, res.user_prm, g.ident
