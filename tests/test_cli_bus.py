@@ -108,3 +108,13 @@ def test_sniff_from_file_and_pcap(tmp_path):
     r = run("sniff", "--from-file", str(f), "--json")
     services = [json.loads(x).get("service") for x in r.output.splitlines()]
     assert services[:2] == ["FDL status", "FDL status reply"]
+
+
+def test_diag_names_unit_diagnosis_from_the_gsd():
+    # Toyo protection 18 (communication timeout) shows in its device-related diagnosis block,
+    # and TOYO0BE7.GSD's Unit_Diag_Bit texts name it
+    r = run("diag", "5", "--port", "sim://?trip=5:18", "--json")
+    assert r.exit_code == 0, r.output
+    d = json.loads(r.output)
+    assert "Ext_Diag" in d["diag"]["flags"]
+    assert any("timeout" in t.lower() for t in d["unit_diag"])
