@@ -1,0 +1,502 @@
+"""pdrive run / status / param (get, set, dump, restore, diff) / faults — drive operations from the shell.
+
+All protocol and safety logic lives in drives/session.py (DriveSession); this module parses the
+command line, asks for confirmation before writing to a real port, and renders (render_drive.py).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import sys
+import time
+
+import click
+from rich.markup import escape
+from rich.progress import Progress
+
+from profidrive_cli import BusError, UsageError
+from profidrive_cli.cli.common import bus_options, emit_json, err, out, station_address
+from profidrive_cli.cli import render_drive as R
+from profidrive_cli.drives.base import DriveError
+from profidrive_cli.drives.session import DriveSession, SessionTerminated
+
+
+# =============================================================================================
+# shared options and helpers
+# =============================================================================================
+
+
+def drive_options(f):
+    """--profile, --ppo, --format, --watchdog."""
+    f = click.option("--watchdog", "watchdog_ms", default=500, show_default=True,
+                     type=click.IntRange(10, 650000), help="Slave watchdog in ms (always armed).")(f)
+    f = click.option("--format", "fmt", default=None, metavar="NAME",
+                     help="Layout by name (e.g. extended1, toyo); default: the profile's.")(f)
+    f = click.option("--ppo", type=click.IntRange(1, 5), default=None, help="PPO type N (layout pppN).")(f)
+    f = click.option("--profile", "profile_name", default=None, metavar="NAME",
+                     help="Drive profile (default: from the station's ident).")(f)
+    return f
+
+
+def _message(text: str) -> None:
+    err.print(escape(text))
+
+
+def _is_sim(opts) -> bool:
+    return (opts.port or "").startswith("sim://")
+
+
+def _confirmer(opts, yes: bool, what: str):
+    """before_connect callback: writing to a real port needs --yes or a 'y' on the terminal."""
+    def before(session):
+        if yes or _is_sim(opts):
+            return
+        text = (f"{what} — station {session.address} ({session.profile.name}) on {opts.port}")
+        if not sys.stdin.isatty():
+            raise UsageError(f"{text}: this writes to a real port; add --yes to confirm "
+                             f"(no terminal to ask)")
+        if not click.confirm(f"{text}. Continue?", default=False, err=True):
+            err.print("cancelled: nothing was written")
+            raise SystemExit(1)
+    return before
+
+
+def _session(opts, address, profile_name, ppo, fmt, watchdog_ms, *, cycle_hz=0.0, before=None,
+             log=None) -> DriveSession:
+    if address is not None:
+        station_address(address)
+    master = opts.open_master()
+    try:
+        return DriveSession(master, address, profile=profile_name, ppo=ppo, fmt=fmt,
+                            watchdog_ms=watchdog_ms, cycle_hz=cycle_hz, before_connect=before,
+                            on_message=_message, log_csv=log)
+    except BaseException:
+        master.link.close()
+        raise
+
+
+def _terminations(f):
+    """SIGTERM (SessionTerminated) -> one line and exit 143; the session has already stopped the drive."""
+    @functools.wraps(f)
+    def wrapper(*a, **kw):
+        try:
+            return f(*a, **kw)
+        except SessionTerminated as e:
+            err.print(f"terminated (signal {e.signum})")
+            sys.exit(128 + int(e.signum))
+    return wrapper
+
+
+def _split_address(args: tuple[str, ...], min_rest: int) -> tuple[int | None, list[str]]:
+    """A leading number 0..125 is the station address when at least `min_rest` arguments follow."""
+    args = list(args)
+    if len(args) > min_rest and args[0].isdigit():
+        return station_address(int(args[0])), args[1:]
+    return None, args
+
+
+# =============================================================================================
+# pdrive run
+# =============================================================================================
+
+
+@click.command("run")
+@click.argument("address", required=False, type=int)
+@drive_options
+@click.option("--hz", type=float, default=None, help="Speed reference in Hz (negative = reverse).")
+@click.option("--percent", type=float, default=None, help="Speed reference in % of the max frequency.")
+@click.option("--reverse", is_flag=True, help="Run in reverse.")
+@click.option("--duration", type=float, default=None, metavar="S",
+              help="Seconds from the start command to the stop (default: until q / Ctrl-C).")
+@click.option("--fmax", type=float, default=None, metavar="HZ",
+              help="Max frequency for Hz <-> % when the layout has no parameter channel.")
+@click.option("--cycle-hz", type=float, default=None, metavar="RATE",
+              help="Data_Exchange rate (default: the fastest the bus allows, at most 100/s; 50/s on sim://).")
+@click.option("--yes", is_flag=True, help="Do not ask before running a drive on a real port.")
+@click.option("--log", "log_path", default=None, metavar="FILE.csv", help="CSV of every cycle.")
+@bus_options
+@_terminations
+def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, reverse, duration, fmax,
+            cycle_hz, yes, log_path):
+    """Run a drive at a speed and show it live; stops it safely on every exit.
+
+    Keys (on a terminal): up/down change the speed, r reverses, space stops/starts, q quits.
+    """
+    if (hz is None) == (percent is None):
+        raise UsageError("give the speed with --hz F or --percent P (one of them)")
+    for name, v in (("--hz", hz), ("--percent", percent), ("--fmax", fmax), ("--duration", duration),
+                    ("--cycle-hz", cycle_hz)):
+        if v is not None and not math.isfinite(v):
+            raise UsageError(f"{name}: not a number")
+    if percent is not None and not -100.0 <= percent <= 100.0:
+        raise UsageError(f"--percent {percent:g} is outside -100..100")
+    if duration is not None and duration <= 0:
+        raise UsageError(f"--duration {duration:g} must be above 0 s")
+    if cycle_hz is not None and not 0 < cycle_hz <= 10000:
+        raise UsageError(f"--cycle-hz {cycle_hz:g} must be in 0..10000 (exclusive of 0)")
+    if fmax is not None and fmax <= 0:
+        raise UsageError(f"--fmax {fmax:g} must be above 0 Hz")
+    interactive = not opts.json and sys.stdin.isatty() and sys.stdout.isatty()
+    mode = "json" if opts.json else ("live" if sys.stdout.isatty() else "text")
+    speed_words = f"{hz:g} Hz" if hz is not None else f"{percent:g} %"
+    what = f"run the drive at {speed_words}{' reverse' if reverse else ''}"
+    session = _session(opts, address, profile_name, ppo, fmt, watchdog_ms, cycle_hz=cycle_hz,
+                       before=_confirmer(opts, yes, what), log=log_path)
+    view = R.RunView(mode)
+    end = {"reason": "", "stop": None}
+    started = False
+    exit_code = 0
+    try:
+        with session as s:
+            fmax_hz, src = s.fmax(fmax)
+            pct = percent if percent is not None else s.percent_for_hz(hz, fmax)
+            if reverse:
+                pct = -abs(pct)
+            step = 100.0 / fmax_hz if hz is not None else 1.0     # keys: 1 Hz or 1 %
+            view.start({"address": s.address, "ident": f"0x{s.ident:04X}", "profile": s.profile.name,
+                        "family": s.profile.family, "title": s.profile.title, "layout": s.layout,
+                        "fmax_hz": fmax_hz, "fmax_source": src, "reference_percent": round(pct, 4),
+                        "reference_hz": round(pct * fmax_hz / 100.0, 3),
+                        "cycle_hz_target": round(s.cycle_hz, 3), "wire_hz": round(s.wire_hz, 3),
+                        "watchdog_ms": s.watchdog_ms, "duration_s": duration, "warnings": s.warnings})
+            if interactive:
+                view.hint = "up/down speed · r reverse · space stop/start · q quit"
+            view.set_phase("starting")
+            sample = s.start(pct)
+            started = True
+            t_start = sample.t
+            view.set_phase("running", sample)
+            running = True
+            keys = R.KeyReader() if interactive else None
+            if keys is not None:
+                keys.__enter__()
+            try:
+                while True:
+                    sample = s.poll()
+                    view.update(sample)
+                    if running and view.reached_after is None and _at_reference(sample):
+                        view.reached_after = round(sample.t - t_start, 3)
+                    if sample.status.fault:
+                        end["reason"] = "the drive tripped" + (f" ({sample.status.fault_code})"
+                                                               if sample.status.fault_code else "")
+                        exit_code = 1
+                        break
+                    if duration is not None and sample.t - t_start >= duration:
+                        end["reason"] = f"duration {duration:g} s reached"
+                        break
+                    if keys is None:
+                        continue
+                    quit_now = False
+                    for k in keys.keys():
+                        if k == "q":
+                            quit_now = True
+                        elif k in ("up", "down") and running:
+                            pct = max(-100.0, min(100.0, pct + (step if k == "up" else -step) *
+                                                  (1 if pct >= 0 else -1)))
+                            s.set_reference(pct)
+                            view.reached_after = None
+                        elif k == "r" and running:
+                            pct = -pct
+                            s.set_reference(pct)
+                            view.reached_after = None
+                        elif k == "space":
+                            if running:
+                                view.set_phase("stopping (space)")
+                                rep = s.stop(on_sample=view.update)
+                                running = False
+                                view.set_phase(f"stopped ({rep.how}) — space starts, q quits")
+                            else:
+                                view.set_phase("starting")
+                                s.start(pct)
+                                running = True
+                                view.set_phase("running")
+                    if quit_now:
+                        end["reason"] = "q pressed"
+                        break
+            finally:
+                if keys is not None:
+                    keys.__exit__(None, None, None)
+            if s.may_run:
+                view.set_phase("stopping", sample)
+                s.stop_report = s.stop(on_sample=view.update)
+                if s.stop_report.how in ("normal", "coast"):
+                    view.set_phase("stopped", None)
+    except SessionTerminated:
+        end["reason"] = "SIGTERM"
+        raise
+    except KeyboardInterrupt:
+        end["reason"] = "Ctrl-C"
+        raise
+    except BusError as e:
+        end["reason"] = f"error: {e}"
+        raise
+    finally:
+        rep = session.stop_report
+        end["stop"] = rep.to_dict() if rep is not None else None
+        end["stopped"] = bool(rep.stopped) if rep is not None else not started
+        fs = session.final_status
+        if fs is not None:
+            end["state"] = fs.state
+            end["fault"] = fs.fault
+        end["reached_after_s"] = view.reached_after
+        end["cycles"] = session.cycles
+        end["counters"] = session.counters
+        end["warnings"] = session.warnings
+        if session.drive is not None or view.header:
+            view.finish(end)
+    if exit_code:
+        raise DriveError(f"station {session.address}: {end['reason']}; the drive is stopped")
+
+
+def _at_reference(sample) -> bool:
+    ref, act = sample.reference_percent, sample.actual_percent
+    if ref is None or act is None:
+        return False
+    return abs(act - ref) <= max(0.01 * abs(ref), 0.05)
+
+
+# =============================================================================================
+# pdrive status
+# =============================================================================================
+
+
+@click.command("status")
+@click.argument("address", required=False, type=int)
+@drive_options
+@bus_options
+@_terminations
+def status_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms):
+    """One read of a drive's status: state, flags, speed, current fault."""
+    with _session(opts, address, profile_name, ppo, fmt, watchdog_ms) as s:
+        sample = s.status()
+        d = R.status_dict(s, sample)
+    if opts.json:
+        emit_json(d)
+    else:
+        R.print_status(d)
+
+
+# =============================================================================================
+# pdrive param get / set / dump / restore / diff
+# =============================================================================================
+
+
+@click.group("param")
+def param_group():
+    """Read and write drive parameters by their native codes (F03, A004, C1-01, dc-voltage, PNU23[1],
+    REG0x0180); dump, restore and compare whole parameter sets."""
+
+
+@param_group.command("get")
+@click.argument("args", nargs=-1, required=True, metavar="[ADDRESS] CODE...")
+@drive_options
+@bus_options
+@_terminations
+def param_get(opts, args, profile_name, ppo, fmt, watchdog_ms):
+    """Read parameters (engineering value with unit, and the raw wire value)."""
+    address, codes = _split_address(args, 1)
+    if not codes:
+        raise UsageError("param get: give at least one parameter code")
+    with _session(opts, address, profile_name, ppo, fmt, watchdog_ms) as s:
+        for c in codes:
+            s.param_info(c)             # every code checked before the first read
+        values = [s.read_param(c) for c in codes]
+    if opts.json:
+        emit_json({"address": s.address, "profile": s.profile.name,
+                   "parameters": [R.param_json(v) for v in values]})
+    else:
+        out.print(R.param_table(values))
+
+
+@param_group.command("set", context_settings={"ignore_unknown_options": True})
+@click.argument("args", nargs=-1, required=True, metavar="[ADDRESS] CODE VALUE")
+@click.option("--save", is_flag=True, help="Store to non-volatile memory afterwards (where the card can).")
+@click.option("--yes", is_flag=True, help="Do not ask before writing on a real port.")
+@drive_options
+@bus_options
+@_terminations
+def param_set(opts, args, save, yes, profile_name, ppo, fmt, watchdog_ms):
+    """Write one parameter: range-checked first, read back after."""
+    address, rest = _split_address(args, 2)
+    bad = [a for a in rest if a.startswith("--")]
+    if bad:
+        raise UsageError(f"param set: unknown option {bad[0]}")
+    if len(rest) != 2:
+        raise UsageError("param set: expected [ADDRESS] CODE VALUE")
+    code, text = rest
+    before = _confirmer(opts, yes, f"write {code} = {text}")
+    with _session(opts, address, profile_name, ppo, fmt, watchdog_ms, before=before) as s:
+        info = s.param_info(code)
+        value = s.parse_value(code, text, info)
+        s._check_write(info, value)
+        try:
+            old = s.read_param(code) if info.access != "wo" else None
+        except DriveError:
+            old = None
+        new = s.write_param(code, value)
+        saved = s.save() if save else None
+        notes = s.notes()
+    if opts.json:
+        emit_json({"address": s.address, "profile": s.profile.name, "code": new.code,
+                   "old": R.param_json(old) if old else None, "new": R.param_json(new),
+                   "saved": saved, "notes": notes})
+        return
+    was = f" (was {R.value_text(old.value, old.unit)})" if old is not None else ""
+    out.print(f"{escape(new.code)} ({escape(new.name)}) = {escape(R.value_text(new.value, new.unit))}{escape(was)}")
+    if saved:
+        out.print(escape(saved))
+    for n in notes:
+        err.print(escape(f"note: {n}"))
+
+
+@param_group.command("dump")
+@click.argument("address", required=False, type=int)
+@click.option("-o", "--output", required=True, metavar="FILE.yaml", help="Where to write the YAML.")
+@drive_options
+@bus_options
+@_terminations
+def param_dump(opts, address, output, profile_name, ppo, fmt, watchdog_ms):
+    """Read every readable parameter into a YAML file (with the station's identity and profile)."""
+    import yaml
+    try:
+        f = open(output, "w", encoding="utf-8")
+    except OSError as e:
+        raise UsageError(f"-o {output}: {e.strerror or e}") from None
+    with f, _session(opts, address, profile_name, ppo, fmt, watchdog_ms) as s:
+        doc = _with_progress(opts, "reading parameters", lambda prog: s.dump(prog))
+        f.write(f"# pdrive parameter dump of station {s.address} ({s.profile.title})\n"
+                f"# restore with: pdrive param restore {s.address} {output}\n")
+        yaml.safe_dump(doc, f, sort_keys=False, allow_unicode=True, width=120)
+    n_set, n_ro, n_bad = len(doc["parameters"]), len(doc["readonly"]), len(doc.get("unreadable", {}))
+    if opts.json:
+        emit_json({"file": output, "address": s.address, "profile": s.profile.name, "settings": n_set,
+                   "readonly": n_ro, "unreadable": n_bad})
+    else:
+        out.print(f"station {s.address} ({escape(s.profile.name)}): {n_set} settings and {n_ro} read-only "
+                  f"values written to {escape(output)}" + (f"; {n_bad} could not be read (listed under "
+                                                            f"'unreadable')" if n_bad else ""))
+
+
+def _file_args(args, what: str):
+    address, rest = _split_address(args, 1)
+    if len(rest) != 1:
+        raise UsageError(f"param {what}: expected [ADDRESS] FILE.yaml")
+    return address, rest[0]
+
+
+@param_group.command("restore")
+@click.argument("args", nargs=-1, required=True, metavar="[ADDRESS] FILE.yaml")
+@click.option("--dry-run", is_flag=True, help="Show what would be written; write nothing.")
+@click.option("--yes", is_flag=True, help="Do not ask before writing on a real port.")
+@drive_options
+@bus_options
+@_terminations
+def param_restore(opts, args, dry_run, yes, profile_name, ppo, fmt, watchdog_ms):
+    """Write back what differs from a dump; each write is read back. Ends with a table."""
+    address, path = _file_args(args, "restore")
+    doc = DriveSession.load_dump(path)
+    before = None if dry_run else _confirmer(opts, yes, f"restore parameters from {path}")
+    with _session(opts, address, profile_name, ppo, fmt, watchdog_ms, before=before) as s:
+        rows = _with_progress(opts, "comparing", lambda prog: s.restore(doc, dry_run=dry_run, progress=prog))
+        notes = s.notes()
+    _print_rows(opts, s, rows, "restore", dry_run)
+    for n in notes:
+        err.print(escape(f"note: {n}"))
+    if any(r.result == "refused" for r in rows):
+        raise DriveError(f"station {s.address}: {sum(r.result == 'refused' for r in rows)} "
+                         f"parameter(s) refused (see the table)")
+
+
+@param_group.command("diff")
+@click.argument("args", nargs=-1, required=True, metavar="[ADDRESS] FILE.yaml")
+@drive_options
+@bus_options
+@_terminations
+def param_diff(opts, args, profile_name, ppo, fmt, watchdog_ms):
+    """Compare the drive with a dump (nothing is written)."""
+    address, path = _file_args(args, "diff")
+    doc = DriveSession.load_dump(path)
+    with _session(opts, address, profile_name, ppo, fmt, watchdog_ms) as s:
+        rows = _with_progress(opts, "comparing", lambda prog: s.compare(doc, prog))
+    _print_rows(opts, s, rows, "diff", False)
+
+
+def _print_rows(opts, s, rows, what: str, dry_run: bool) -> None:
+    counts: dict[str, int] = {}
+    for r in rows:
+        counts[r.result] = counts.get(r.result, 0) + 1
+    if opts.json:
+        emit_json({"address": s.address, "profile": s.profile.name, "dry_run": dry_run,
+                   "counts": counts, "rows": [r.to_dict() for r in rows]})
+        return
+    shown = [r for r in rows if r.result not in ("unchanged", "skipped") or opts.verbose]
+    if what == "diff":
+        cols = ("code", "name", "file", "drive", "result", "reason")
+        title = f"station {s.address}: {counts.get('differs', 0)} parameter(s) differ from the file"
+    else:
+        cols = ("code", "name", "file", "drive", "now", "result", "reason")
+        title = f"station {s.address}: restore" + (" (dry run: nothing written)" if dry_run else "")
+    if shown:
+        out.print(R.rows_table(shown, title, cols))
+    else:
+        out.print(escape(title))
+    order = ("applied", "would apply", "refused", "differs", "unchanged", "missing", "skipped")
+    out.print(", ".join(f"{counts[k]} {k}" for k in order if counts.get(k)) or "nothing in the file")
+
+
+def _with_progress(opts, label: str, fn):
+    if opts.json or not err.is_terminal:
+        return fn(None)
+    with Progress(console=err, transient=True) as prog:
+        task = prog.add_task(label, total=None)
+
+        def cb(i, n, code):
+            prog.update(task, total=n, completed=i, description=f"{label} {code}")
+        return fn(cb)
+
+
+# =============================================================================================
+# pdrive faults
+# =============================================================================================
+
+
+@click.command("faults")
+@click.argument("address", required=False, type=int)
+@click.option("--clear", is_flag=True, help="Acknowledge the current fault (the history stays).")
+@click.option("--yes", is_flag=True, help="Do not ask before acknowledging on a real port.")
+@drive_options
+@bus_options
+@_terminations
+def faults_cmd(opts, address, clear, yes, profile_name, ppo, fmt, watchdog_ms):
+    """Fault history (all candidate alarms where one number means several) and the current fault."""
+    before = _confirmer(opts, yes, "acknowledge the current fault") if clear else None
+    cleared = None
+    with _session(opts, address, profile_name, ppo, fmt, watchdog_ms, before=before) as s:
+        cur = s.status()
+        history = s.fault_history()
+        if clear:
+            if cur.status.fault:
+                after = s.clear_fault()
+                cleared = {"was": cur.status.fault_code, "state": after.status.state,
+                           "fault": after.status.fault}
+            else:
+                cleared = {"was": None, "state": cur.status.state, "fault": False}
+    st = cur.status
+    if opts.json:
+        emit_json({"address": s.address, "profile": s.profile.name,
+                   "current": {"fault": st.fault, "code": st.fault_code, "state": st.state},
+                   "history": [R.fault_json(r) for r in history], "cleared": cleared})
+        return
+    out.print(f"[bold]station {s.address}[/bold]: {escape(s.profile.name)} — current: "
+              + (f"[red]fault {escape(st.fault_code or '(code not readable)')}[/red]" if st.fault
+                 else f"no fault ({escape(st.state)})"))
+    if history:
+        out.print(R.faults_table(history, "fault history"))
+    else:
+        out.print("fault history: empty")
+    if cleared is not None:
+        if cleared["was"] is None and not st.fault:
+            out.print("--clear: there was no fault to acknowledge")
+        else:
+            out.print(f"--clear: acknowledged; the drive is now {escape(cleared['state'])}")

@@ -1,0 +1,318 @@
+"""Rendering for the drive commands (run / status / param / faults): rich live view, tables, JSON
+objects, and the key reader for `run`. No protocol logic here."""
+
+from __future__ import annotations
+
+import os
+import select
+import sys
+import time
+from collections import deque
+
+from rich.console import Group
+from rich.live import Live
+from rich.markup import escape
+from rich.panel import Panel
+from rich.table import Table
+from rich.text import Text
+
+from profidrive_cli.cli.common import emit_json, err, out
+
+SPARK = "▁▂▃▄▅▆▇█"
+
+
+def sparkline(values, hi: float = 100.0) -> str:
+    """Block characters for |value| in 0..hi (a blank for no value)."""
+    chars = []
+    for v in values:
+        if v is None:
+            chars.append(" ")
+            continue
+        x = min(1.0, abs(v) / hi) if hi else 0.0
+        chars.append(SPARK[min(len(SPARK) - 1, int(round(x * (len(SPARK) - 1))))])
+    return "".join(chars)
+
+
+def fmt_num(v, digits: int = 2, unit: str = "") -> str:
+    if v is None:
+        return "-"
+    text = f"{v:.{digits}f}"
+    return f"{text} {unit}" if unit else text
+
+
+def flag_words(flags: dict[str, bool]) -> str:
+    on = [k for k, v in flags.items() if v]
+    return ", ".join(on) if on else "(none set)"
+
+
+def counter_words(c: dict) -> str:
+    keys = ("retries", "no_answer", "illegal", "reparams", "rs", "rr")
+    return ", ".join(f"{k.replace('_', ' ')} {c.get(k, 0)}" for k in keys)
+
+
+# =============================================================================================
+# run: the live view
+# =============================================================================================
+
+
+class RunView:
+    """mode 'live' (rich Live on a terminal), 'text' (a line a second) or 'json' (one object per
+    update, at most `json_hz` per second, plus start/phase/end events)."""
+
+    def __init__(self, mode: str, json_hz: float = 10.0, trend_len: int = 60, trend_hz: float = 5.0):
+        self.mode = mode
+        self.json_period = 1.0 / json_hz
+        self.trend: deque = deque(maxlen=trend_len)
+        self.trend_period = 1.0 / trend_hz
+        self.header: dict = {}
+        self.phase = "starting"
+        self.last = None
+        self.hint = ""
+        self._last_emit = -1e9
+        self._last_trend = -1e9
+        self._last_text = -1e9
+        self._live: Live | None = None
+        self.reached_after: float | None = None
+        self.peak_hz = None
+
+    # -- lifecycle ---------------------------------------------------------------------------
+    def start(self, header: dict) -> None:
+        self.header = header
+        if self.mode == "json":
+            emit_json({"event": "start", **header})
+        elif self.mode == "text":
+            out.print(escape(self._header_line()))
+        else:
+            self._live = Live(console=out, refresh_per_second=8, transient=False,
+                              get_renderable=self._renderable)
+            self._live.start()
+
+    def _header_line(self) -> str:
+        h = self.header
+        return (f"station {h['address']}: {h['profile']} ({h['title']}), layout {h['layout']}; "
+                f"max frequency {h['fmax_hz']:g} Hz {h['fmax_source']}; cycle {h['cycle_hz_target']:g} Hz "
+                f"(bus limit {h['wire_hz']:.1f} Hz), watchdog {h['watchdog_ms']:g} ms")
+
+    def set_phase(self, phase: str, sample=None) -> None:
+        self.phase = phase
+        if self.mode == "json":
+            d = {"event": "phase", "phase": phase}
+            if sample is not None:
+                d["t"] = round(sample.t, 3)
+            emit_json(d)
+        elif self.mode == "text":
+            out.print(f"-- {phase}")
+        if sample is not None:
+            self.update(sample, force=True)
+
+    def update(self, sample, force: bool = False) -> None:
+        self.last = sample
+        now = time.monotonic()
+        if now - self._last_trend >= self.trend_period:
+            self._last_trend = now
+            self.trend.append(sample.actual_percent)
+        if self.mode == "json":
+            if force or now - self._last_emit >= self.json_period:
+                self._last_emit = now
+                emit_json({"event": "update", "phase": self.phase, **sample.to_dict()})
+        elif self.mode == "text":
+            if force or now - self._last_text >= 1.0:
+                self._last_text = now
+                out.print(escape(self._text_line(sample)))
+
+    def _text_line(self, s) -> str:
+        st = s.status
+        fault = f"  FAULT {st.fault_code or ''}" if st.fault else ""
+        return (f"{s.t:7.2f} s  {st.state:<28} ref {fmt_num(s.reference_hz, 2, 'Hz')} "
+                f"({fmt_num(s.reference_percent, 1, '%')})  actual {fmt_num(s.actual_hz, 2, 'Hz')} "
+                f"({fmt_num(s.actual_percent, 1, '%')})  {s.cycle_hz:5.1f} cycles/s  "
+                f"retries {s.counters.get('retries', 0)} errors "
+                f"{s.counters.get('no_answer', 0) + s.counters.get('illegal', 0)}{fault}")
+
+    def finish(self, end: dict) -> None:
+        if self._live is not None:
+            self._live.stop()
+            self._live = None
+        if self.mode == "json":
+            emit_json({"event": "end", **end})
+        else:
+            msg = end.get("message") or ""
+            stop = end.get("stop") or {}
+            words = f"end: {end.get('reason', '')}"
+            if stop:
+                words += f"; stop: {stop.get('how')}" + (f" ({stop.get('message')})" if stop.get("message") else "")
+            if end.get("reached_after_s") is not None:
+                words += f"; reached the reference after {end['reached_after_s']:.2f} s"
+            if msg:
+                words += f"; {msg}"
+            err.print(escape(words))
+
+    # -- rich rendering ----------------------------------------------------------------------
+    def _renderable(self):
+        h = self.header
+        s = self.last
+        title = f"station {h.get('address')} · {h.get('profile')} · {h.get('layout')}"
+        if s is None:
+            return Panel(Text("connecting…"), title=title)
+        st = s.status
+        t = Table.grid(padding=(0, 2))
+        t.add_column(style="bold")
+        t.add_column()
+        state = Text(st.state, style="bold red" if st.fault else ("bold green" if st.running else "bold"))
+        if st.fault and st.fault_code:
+            state.append(f"  fault {st.fault_code}", style="red")
+        t.add_row("phase", Text(self.phase))
+        t.add_row("state", state)
+        t.add_row("status bits", Text(flag_words(st.flags)))
+        t.add_row("reference", Text(f"{fmt_num(s.reference_hz, 2, 'Hz')}   {fmt_num(s.reference_percent, 2, '%')}"))
+        t.add_row("actual", Text(f"{fmt_num(s.actual_hz, 2, 'Hz')}   {fmt_num(s.actual_percent, 2, '%')}"))
+        t.add_row("max frequency", Text(f"{s.fmax_hz:g} Hz {h.get('fmax_source', '')}"))
+        t.add_row("cycle", Text(f"{s.cycle_hz:.1f} /s (target {h.get('cycle_hz_target', 0):g}, "
+                                f"bus limit {h.get('wire_hz', 0):.1f})   {s.cycles} exchanges"))
+        t.add_row("bus", Text(counter_words(s.counters)))
+        t.add_row("trend", Text(sparkline(self.trend) or " ", style="cyan"))
+        parts = [t]
+        if self.hint:
+            parts.append(Text(self.hint, style="dim"))
+        return Panel(Group(*parts), title=title)
+
+
+# =============================================================================================
+# keys while running (terminal only)
+# =============================================================================================
+
+
+class KeyReader:
+    """Single keys from stdin in cbreak mode (Ctrl-C still sends SIGINT). Yields 'up', 'down', 'r',
+    'space', 'q'."""
+
+    def __init__(self):
+        self.fd = sys.stdin.fileno()
+        self._old = None
+        self._buf = b""
+
+    def __enter__(self):
+        import termios
+        import tty
+        self._old = termios.tcgetattr(self.fd)
+        tty.setcbreak(self.fd)
+        return self
+
+    def __exit__(self, *exc):
+        import termios
+        if self._old is not None:
+            termios.tcsetattr(self.fd, termios.TCSADRAIN, self._old)
+
+    def keys(self) -> list[str]:
+        r, _, _ = select.select([self.fd], [], [], 0)
+        if r:
+            try:
+                self._buf += os.read(self.fd, 64)
+            except OSError:
+                return []
+        out_keys = []
+        b = self._buf
+        while b:
+            if b.startswith(b"\x1b[A") or b.startswith(b"\x1bOA"):
+                out_keys.append("up")
+                b = b[3:]
+            elif b.startswith(b"\x1b[B") or b.startswith(b"\x1bOB"):
+                out_keys.append("down")
+                b = b[3:]
+            elif b[:1] == b"\x1b" and len(b) < 3:
+                break                     # an escape sequence still arriving
+            else:
+                c = b[:1]
+                b = b[1:]
+                key = {b" ": "space", b"q": "q", b"Q": "q", b"r": "r", b"R": "r", b"+": "up",
+                       b"-": "down"}.get(c)
+                if key:
+                    out_keys.append(key)
+        self._buf = b
+        return out_keys
+
+
+# =============================================================================================
+# status / params / faults
+# =============================================================================================
+
+
+def status_dict(session, sample) -> dict:
+    st = sample.status
+    fmax, src = session.fmax() if session.drive is not None else (sample.fmax_hz, "")
+    return {"address": session.address, "ident": f"0x{session.ident:04X}", "profile": session.profile.name,
+            "family": session.profile.family, "title": session.profile.title, "layout": session.layout,
+            "state": st.state, "running": st.running, "stopped": st.stopped, "fault": st.fault,
+            "fault_code": st.fault_code, "flags": dict(st.flags),
+            "speed_hz": sample.actual_hz, "speed_percent": sample.actual_percent,
+            "reference_percent": sample.reference_percent, "fmax_hz": fmax, "fmax_source": src,
+            "raw": dict(st.raw), "counters": sample.counters}
+
+
+def print_status(d: dict) -> None:
+    out.print(f"[bold]station {d['address']}[/bold]: {escape(d['profile'])} ({escape(d['title'])}), "
+              f"layout {escape(d['layout'])}")
+    state = d["state"] + ("  (stopped)" if d["stopped"] else ("  (running)" if d["running"] else ""))
+    out.print(f"  state:  {escape(state)}")
+    out.print(f"  speed:  {fmt_num(d['speed_hz'], 2, 'Hz')} ({fmt_num(d['speed_percent'], 2, '%')} of "
+              f"{d['fmax_hz']:g} Hz, {escape(d['fmax_source'])})")
+    if d.get("reference_percent") is not None:
+        out.print(f"  reference: {fmt_num(d['reference_percent'], 2, '%')}")
+    out.print(f"  fault:  {escape(d['fault_code'] or ('yes (code not readable)' if d['fault'] else 'none'))}")
+    on = [k for k, v in d["flags"].items() if v]
+    off = [k for k, v in d["flags"].items() if not v]
+    out.print(f"  status bits set:     {escape(', '.join(on) or '(none)')}")
+    out.print(f"  status bits not set: {escape(', '.join(off) or '(none)')}")
+    raw = ", ".join(f"{k} 0x{v & 0xFFFF:04X}" for k, v in d["raw"].items() if isinstance(v, int))
+    out.print(f"  words:  {escape(raw)}")
+
+
+def value_text(v, unit: str = "") -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        t = f"{v:.6g}"
+    else:
+        t = str(v)
+    return f"{t} {unit}" if unit else t
+
+
+def param_table(values) -> Table:
+    t = Table(show_header=True)
+    for c in ("code", "name", "value", "raw"):
+        t.add_column(c)
+    for pv in values:
+        t.add_row(escape(pv.code), escape(pv.name or ""), escape(value_text(pv.value, pv.unit)),
+                  f"{pv.raw} (0x{pv.raw:X})" if isinstance(pv.raw, int) and pv.raw >= 0 else str(pv.raw))
+    return t
+
+
+def param_json(pv) -> dict:
+    return {"code": pv.code, "name": pv.name, "value": pv.value, "unit": pv.unit, "raw": pv.raw}
+
+
+def rows_table(rows, title: str, columns=("code", "name", "file", "drive", "result", "reason")) -> Table:
+    t = Table(title=title, show_header=True)
+    for c in columns:
+        t.add_column(c)
+    for r in rows:
+        vals = {"code": r.code, "name": r.name, "file": value_text(r.file_value, r.unit),
+                "drive": value_text(r.drive_value, r.unit), "result": r.result, "reason": r.reason,
+                "now": value_text(r.new_value, r.unit)}
+        style = {"applied": "green", "refused": "red", "would apply": "yellow", "differs": "yellow"}.get(r.result)
+        t.add_row(*(escape(str(vals[c])) for c in columns), style=style)
+    return t
+
+
+def faults_table(records, title: str) -> Table:
+    t = Table(title=title, show_header=True)
+    for c in ("position", "number", "alarm", "meaning"):
+        t.add_column(c)
+    for r in records:
+        t.add_row(escape(str(r.position)), f"{r.raw} (0x{r.raw:04X})" if r.raw else "0",
+                  escape(" / ".join(r.codes) or "-"), escape("\n".join(r.meanings)))
+    return t
+
+
+def fault_json(r) -> dict:
+    return {"position": r.position, "number": r.raw, "codes": list(r.codes), "meanings": list(r.meanings)}
