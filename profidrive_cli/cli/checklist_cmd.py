@@ -1,0 +1,283 @@
+"""`pdrive checklist run|validate FILE.yaml`: rendering only; the work is in profidrive_cli.checklist."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+from rich.console import Console
+from rich.markup import escape
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+from profidrive_cli import UsageError
+from profidrive_cli.checklist.spec import ChecklistError, load_checklist, parse_var_assignments
+from profidrive_cli.cli.common import BusOptions, bus_options, emit_json, is_tty
+
+_MARK = {"passed": "[green]✔[/]", "failed": "[red]✘[/]", "error": "[red]✘[/]", "not run": "[dim]–[/]",
+         "skipped": "[dim]–[/]", "interrupted": "[yellow]![/]"}
+_PLAIN = {"passed": "PASS", "failed": "FAIL", "error": "ERROR", "not run": "not run", "skipped": "skip",
+          "interrupted": "INTERRUPTED"}
+
+
+def _load(ctx, path: str, variables: tuple[str, ...]):
+    """The validated checklist, or every problem on stderr (file:line each) and exit code 2."""
+    try:
+        return load_checklist(path, parse_var_assignments(variables))
+    except ChecklistError as e:
+        for line in e.lines():
+            click.echo(f"pdrive: {line}", err=True)
+        n = len(e.errors)
+        click.echo(f"pdrive: {path}: {n} problem{'s' if n != 1 else ''}; nothing was sent to any drive",
+                   err=True)
+        ctx.exit(2)
+    except UsageError as e:
+        click.echo(f"pdrive: {e}", err=True)
+        ctx.exit(2)
+
+
+@click.group("checklist")
+def checklist_group():
+    """Scripted commissioning checklists: validate, rehearse on the simulator, run, report.
+
+    The format is in docs/checklists.md; examples in examples/checklists/.
+    """
+
+
+@checklist_group.command("validate")
+@click.argument("file", type=click.Path(dir_okay=False))
+@click.option("--var", "variables", multiple=True, metavar="NAME=VALUE",
+              help="Set a checklist variable (repeatable); overrides the file's value.")
+@click.option("--json", "as_json", is_flag=True, help="Print the plan per station as JSON.")
+@click.pass_context
+def validate_cmd(ctx, file, variables, as_json):
+    """Check FILE.yaml without touching a bus: every problem with file:line (exit code 2)."""
+    cl = _load(ctx, file, variables)
+    if as_json:
+        emit_json({"checklist": cl.name, "file": str(cl.path), "valid": True, "variables": cl.variables,
+                   "stations": [{**s.identity(), "steps": [st.to_dict() for st in s.steps],
+                                 "snapshot": [t.label for t in s.snapshot]} for s in cl.stations]})
+        return
+    con = Console(highlight=False, soft_wrap=True)
+    con.print(f"{escape(str(cl.path))}: [bold]{escape(cl.name)}[/] is valid "
+              f"({cl.step_count} steps, {len(cl.stations)} station{'s' if len(cl.stations) != 1 else ''})")
+    for s in cl.stations:
+        idt = s.identity()
+        con.print(f"  station {escape(s.name)}: address {s.address}, {s.profile.name} ({escape(s.profile.title)}), "
+                  f"ident {idt['ident']}, layout {s.layout}: {len(s.steps)} steps")
+        for st in s.steps:
+            extra = f"  [dim](on_fail: continue)[/]" if st.on_fail == "continue" else ""
+            con.print(f"    {st.index:>2}. {escape(st.label)}  [dim]line {st.line}[/]{extra}")
+
+
+@checklist_group.command("run")
+@click.argument("file", type=click.Path(dir_okay=False))
+@bus_options
+@click.option("--report", "reports", multiple=True, metavar="FILE",
+              help="Write a report: .json, .md (Markdown) or .xml (JUnit); repeatable.")
+@click.option("--dry-run", is_flag=True,
+              help="Validate, then rehearse on a simulated station of each station's profile "
+                   "(sim://?stations=ADDR:PROFILE); the plant is not touched.")
+@click.option("--yes", "-y", is_flag=True, help="Take every prompt step as confirmed (needed when not on a terminal).")
+@click.option("--var", "variables", multiple=True, metavar="NAME=VALUE",
+              help="Set a checklist variable (repeatable); overrides the file's value.")
+@click.option("--cycle-hz", type=click.FloatRange(min=0), default=None, metavar="RATE",
+              help="Data_Exchange rate (default: the fastest the bus allows, capped; 0 = unpaced).")
+@click.option("--watchdog-ms", type=click.FloatRange(10, 650000), default=None, metavar="MS",
+              help="DP watchdog armed in Set_Prm (default 500 ms).")
+@click.pass_context
+def run_cmd(ctx, opts: BusOptions, file, reports, dry_run, yes, variables, cycle_hz, watchdog_ms):
+    """Run FILE.yaml on the drives it names, station by station; exit code 0 only when every step passed.
+
+    A failed step (on_fail: stop, the default), Ctrl-C or SIGTERM stop the drive safely before pdrive
+    lets go of the station. Reports are written in every case once the run has started.
+    """
+    from profidrive_cli.checklist.report import report_format, write_report
+    from profidrive_cli.checklist.runner import Runner, dry_run_port, session_opener, signals_as_interrupts
+
+    for r in reports:
+        report_format(r)                          # a bad extension is a usage error before anything runs
+    cl = _load(ctx, file, variables)
+    interactive = sys.stdin.isatty() and sys.stdout.isatty()
+    if cl.has_prompts and not (yes or dry_run or interactive):
+        line = cl.first_prompt_line()
+        click.echo(f"pdrive: {cl.path}:{line}: the checklist has prompt steps and there is no terminal to "
+                   f"answer them: give --yes to take them as confirmed (nothing was sent to any drive)",
+                   err=True)
+        ctx.exit(2)
+    # port: --port / PDRIVE_PORT, else the checklist's; --dry-run: a simulated bus of the same stations
+    if dry_run:
+        port = dry_run_port(cl)
+    else:
+        port = opts.port or cl.port
+        if not port:
+            raise UsageError(f"no port: give --port (or PDRIVE_PORT), or put `port:` in {cl.path}")
+    baud = opts.baud
+    if cl.baud and _defaulted(ctx, "baud"):
+        baud = cl.baud
+    master_address = opts.master_address
+    if cl.master_address is not None and _defaulted(ctx, "master_address"):
+        master_address = cl.master_address
+    bus = BusOptions(port, baud, master_address, opts.slot_time, opts.retries, opts.rs485, opts.echo,
+                     opts.verbose, opts.json)
+
+    live = is_tty() and not opts.json
+    con = Console(highlight=False, soft_wrap=True, stderr=opts.json)
+    view = _LiveView(con, live) if not opts.json else _Quiet()
+    ask = view.ask if interactive and not opts.json else None
+    options = {"yes": yes, "cycle_hz": cycle_hz, "watchdog_ms": watchdog_ms, "baud": str(baud),
+               "master_address": master_address}
+    with signals_as_interrupts():
+        master = bus.open_master()
+        try:
+            runner = Runner(cl, session_opener(master, cycle_hz=cycle_hz, watchdog_ms=watchdog_ms,
+                                               on_message=view.message),
+                            port=port, yes=yes, ask=ask, dry_run=dry_run, observer=view, options=options)
+            try:
+                view.begin(cl, port, dry_run)
+                result = runner.run()
+            finally:
+                view.end()
+        finally:
+            try:
+                master.link.close()
+            except Exception:
+                pass
+        written = []
+        for r in reports:
+            try:
+                written.append(str(write_report(result, r)))
+            except OSError as e:
+                click.echo(f"pdrive: --report {r}: {e.strerror or e}", err=True)
+    if opts.json:
+        from profidrive_cli.checklist.report import to_json
+        sys.stdout.write(to_json(result))
+    else:
+        _summary(con, result, written)
+    if result.interrupted:
+        ctx.exit(143 if result.interrupted == "SIGTERM" else 130)
+    ctx.exit(0 if result.passed else 1)
+
+
+def _defaulted(ctx, name: str) -> bool:
+    """True when the option was not given (so the checklist's header value applies)."""
+    src = ctx.get_parameter_source(name)
+    return src is None or src.name in ("DEFAULT", "DEFAULT_MAP")
+
+
+def _summary(con: Console, result, written: list[str]) -> None:
+    c = result.counts()
+    verdict = {"passed": "[bold green]PASSED[/]", "failed": "[bold red]FAILED[/]",
+               "interrupted": "[bold yellow]INTERRUPTED[/]"}[result.status]
+    con.print(f"{verdict} {escape(result.checklist.name)}: {c['passed']} passed, {c['failed']} failed, "
+              f"{c['error']} errors, {c['not run']} not run" + (" [dim](dry run on the simulator)[/]"
+                                                               if result.dry_run else ""))
+    ff = result.first_failure()
+    if ff is not None:
+        sr, r = ff
+        if r is not None:
+            con.print(f"  first failure: station {escape(sr.spec.name)}, step {r.step.index} "
+                      f"({escape(str(result.checklist.path))}:{r.step.line}): {escape(r.message)}")
+        elif sr.error:
+            con.print(f"  station {escape(sr.spec.name)}: {escape(sr.error)}")
+    for sr in result.stations:
+        fs = sr.final_status or {}
+        if "stopped" in fs:
+            con.print(f"  station {escape(sr.spec.name)}: drive left "
+                      + ("stopped" if fs.get("stopped") else "[bold red]NOT confirmed stopped[/]")
+                      + (f" ({escape(str(fs.get('state')))})" if fs.get("state") else ""))
+    for w in written:
+        con.print(f"  report: {escape(w)}")
+
+
+class _Quiet:
+    """--json: no live output (the result goes to stdout as one JSON document)."""
+
+    def __getattr__(self, name):
+        return lambda *a, **k: None
+
+
+class _LiveView:
+    """Progress on the terminal: a live bar per station with the running step and its measurement; one
+    line per finished step. Without a terminal: the lines only."""
+
+    def __init__(self, con: Console, live: bool):
+        self.con = con
+        self.live = live
+        self.progress: Progress | None = None
+        self.task = None
+
+    # -- setup -----------------------------------------------------------------------------------
+    def begin(self, cl, port, dry_run):
+        head = f"[bold]{escape(cl.name)}[/] on {escape(port)}" + (" [yellow](dry run: simulator)[/]" if dry_run else "")
+        self.con.print(head)
+        if self.live:
+            self.progress = Progress(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(),
+                                     MofNCompleteColumn(), TimeElapsedColumn(), console=self.con,
+                                     transient=True)
+            self.progress.start()
+
+    def end(self):
+        if self.progress is not None:
+            self.progress.stop()
+            self.progress = None
+
+    def _print(self, text: str):
+        (self.progress.console if self.progress is not None else self.con).print(text)
+
+    def message(self, text: str):
+        self._print(f"    [dim]{escape(text)}[/]")
+
+    # -- observer ----------------------------------------------------------------------------------
+    def run_started(self, run):
+        pass
+
+    def station_started(self, sr):
+        s = sr.spec
+        self._print(f"station [bold]{escape(s.name)}[/] (address {s.address}, {s.profile.name}, layout {s.layout})")
+        if self.progress is not None:
+            self.task = self.progress.add_task(escape(s.name), total=len(sr.steps))
+
+    def station_opened(self, sr):
+        idt = sr.identity
+        self._print(f"    [dim]found ident {idt.get('ident')}, profile {idt.get('profile')}, "
+                    f"GSD {escape(str(idt.get('gsd')))}[/]")
+
+    def step_started(self, sr, r):
+        if self.progress is not None and self.task is not None:
+            self.progress.update(self.task, description=f"{r.step.index}. {escape(r.step.label)}")
+
+    def step_progress(self, sr, r, text):
+        if self.progress is not None and self.task is not None:
+            self.progress.update(self.task, description=f"{r.step.index}. {escape(r.step.label)}: {escape(text)}")
+
+    def step_finished(self, sr, r):
+        mark = _MARK.get(r.status, r.status) if self.live else _PLAIN.get(r.status, r.status)
+        msg = f" — {escape(r.message)}" if r.message else ""
+        self._print(f"  {mark} {r.step.index:>2}. {escape(r.step.label)}{msg}")
+        if self.progress is not None and self.task is not None:
+            self.progress.advance(self.task)
+
+    def station_finished(self, sr):
+        if self.progress is not None and self.task is not None:
+            self.progress.remove_task(self.task)
+            self.task = None
+        if sr.error:
+            self._print(f"  [red]{escape(sr.error)}[/]" if self.live else f"  {escape(sr.error)}")
+        skipped = [r for r in sr.steps if r.status == "not run"]
+        if skipped:
+            self._print(f"  [dim]{len(skipped)} step{'s' if len(skipped) != 1 else ''} not run "
+                        f"({escape(skipped[0].message)})[/]")
+
+    def run_finished(self, run):
+        pass
+
+    # -- operator prompts (called from the runner's prompt thread while it keeps the bus cycling) ----
+    def ask(self, text: str) -> bool:
+        prog = self.progress
+        if prog is not None:
+            prog.stop()
+        try:
+            return click.confirm(f"  ? {text}", default=False)
+        finally:
+            if prog is not None:
+                prog.start()
