@@ -482,7 +482,7 @@ class Runner:
         r.expected = {"ident": _hex(a["ident"]), "profile": a["profile"], "gsd": a["gsd"]}
         r.measured = {"ident": _hex(got_ident), "profile": idt.get("profile"), "gsd": idt.get("gsd"),
                       "address": idt.get("address"), "layout": idt.get("layout")}
-        for k in ("device", "name", "vendor", "card"):
+        for k in ("dp_state", "warnings", "device", "name", "vendor", "card"):
             if idt.get(k):
                 r.measured[k] = idt[k]
         problems = []

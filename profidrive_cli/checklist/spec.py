@@ -191,7 +191,12 @@ def load_checklist(path: str | Path, overrides: dict | None = None) -> Checklist
 
 
 def load_checklist_text(text: str, path: str | Path = "<string>", overrides: dict | None = None) -> Checklist:
-    doc = load_yaml_text(text, path)
+    try:
+        doc = load_yaml_text(text, path)
+    except ChecklistError:
+        raise
+    except DataFileError as e:
+        raise ChecklistError([e]) from None
     v = _Validator(Path(path), overrides or {})
     cl = v.checklist(doc, hashlib.sha256(text.encode("utf-8")).hexdigest())
     if v.errors:
@@ -446,6 +451,14 @@ class _Validator:
                     ident, ident_source = gident, "gsd"
         if ident is None:
             ident = profile.ident
+        else:
+            from profidrive_cli.drives.profile import profile_for_ident
+            other = profile_for_ident(ident)
+            if other is not None and other.name != profile.name:
+                key = "ident" if ident_source == "checklist" else "gsd"
+                self.fail(node.line_of(key), f"{w}: ident 0x{ident:04X}"
+                          + (f" (from {gsd})" if key == "gsd" else "")
+                          + f" is {other.name} ({other.title}), not {profile.name}")
         layout = self.opt(node, "layout", str, default=profile.default_layout)
         if layout not in profile.layouts:
             self.err(node.line_of("layout"), f"{w}: profile {profile.name} has no layout {layout!r} "

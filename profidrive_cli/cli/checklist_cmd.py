@@ -19,6 +19,12 @@ _PLAIN = {"passed": "PASS", "failed": "FAIL", "error": "ERROR", "not run": "not 
           "interrupted": "INTERRUPTED"}
 
 
+def _usage(ctx, message: str):
+    """A usage error as one line and exit code 2 (also under click's test runner)."""
+    click.echo(f"pdrive: {message}", err=True)
+    ctx.exit(2)
+
+
 def _load(ctx, path: str, variables: tuple[str, ...]):
     """The validated checklist, or every problem on stderr (file:line each) and exit code 2."""
     try:
@@ -31,8 +37,7 @@ def _load(ctx, path: str, variables: tuple[str, ...]):
                    err=True)
         ctx.exit(2)
     except UsageError as e:
-        click.echo(f"pdrive: {e}", err=True)
-        ctx.exit(2)
+        _usage(ctx, str(e))
 
 
 @click.group("checklist")
@@ -95,7 +100,10 @@ def run_cmd(ctx, opts: BusOptions, file, reports, dry_run, yes, variables, cycle
     from profidrive_cli.checklist.runner import Runner, dry_run_port, session_opener, signals_as_interrupts
 
     for r in reports:
-        report_format(r)                          # a bad extension is a usage error before anything runs
+        try:
+            report_format(r)                      # a bad extension is a usage error before anything runs
+        except UsageError as e:
+            _usage(ctx, str(e))
     cl = _load(ctx, file, variables)
     interactive = sys.stdin.isatty() and sys.stdout.isatty()
     if cl.has_prompts and not (yes or dry_run or interactive):
@@ -110,7 +118,7 @@ def run_cmd(ctx, opts: BusOptions, file, reports, dry_run, yes, variables, cycle
     else:
         port = opts.port or cl.port
         if not port:
-            raise UsageError(f"no port: give --port (or PDRIVE_PORT), or put `port:` in {cl.path}")
+            _usage(ctx, f"no port: give --port (or PDRIVE_PORT), or put `port:` in {cl.path}")
     baud = opts.baud
     if cl.baud and _defaulted(ctx, "baud"):
         baud = cl.baud
@@ -127,7 +135,10 @@ def run_cmd(ctx, opts: BusOptions, file, reports, dry_run, yes, variables, cycle
     options = {"yes": yes, "cycle_hz": cycle_hz, "watchdog_ms": watchdog_ms, "baud": str(baud),
                "master_address": master_address}
     with signals_as_interrupts():
-        master = bus.open_master()
+        try:
+            master = bus.open_master()
+        except UsageError as e:
+            _usage(ctx, str(e))
         try:
             runner = Runner(cl, session_opener(master, cycle_hz=cycle_hz, watchdog_ms=watchdog_ms,
                                                on_message=view.message),
