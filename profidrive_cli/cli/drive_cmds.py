@@ -88,6 +88,14 @@ def _terminations(f):
     return wrapper
 
 
+def _is_number(text: str) -> bool:
+    try:
+        float(text) if not text.lower().lstrip("-").startswith("0x") else int(text, 16)
+        return True
+    except ValueError:
+        return False
+
+
 def _split_address(args: tuple[str, ...], min_rest: int) -> tuple[int | None, list[str]]:
     """A leading number 0..125 is the station address when at least `min_rest` arguments follow."""
     args = list(args)
@@ -147,6 +155,12 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
     end = {"reason": "", "stop": None}
     started = False
     exit_code = 0
+
+    def stopping(sample):                    # every stop, also the one on any exit, stays visible
+        if not view.phase.startswith("stopping"):
+            view.set_phase("stopping")
+        view.update(sample)
+    session.on_sample = stopping
     try:
         with session as s:
             fmax_hz, src = s.fmax(fmax)
@@ -203,7 +217,7 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
                         elif k == "space":
                             if running:
                                 view.set_phase("stopping (space)")
-                                rep = s.stop(on_sample=view.update)
+                                rep = s.stop()
                                 running = False
                                 view.set_phase(f"stopped ({rep.how}) — space starts, q quits")
                             else:
@@ -219,9 +233,9 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
                     keys.__exit__(None, None, None)
             if s.may_run:
                 view.set_phase("stopping", sample)
-                s.stop_report = s.stop(on_sample=view.update)
+                s.stop()
                 if s.stop_report.how in ("normal", "coast"):
-                    view.set_phase("stopped", None)
+                    view.set_phase("stopped", s._sample(s.final_status) if s.final_status else None)
     except SessionTerminated:
         end["reason"] = "SIGTERM"
         raise
@@ -243,7 +257,7 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
         end["cycles"] = session.cycles
         end["counters"] = session.counters
         end["warnings"] = session.warnings
-        if session.drive is not None or view.header:
+        if view.header:
             view.finish(end)
     if exit_code:
         raise DriveError(f"station {session.address}: {end['reason']}; the drive is stopped")
@@ -322,7 +336,7 @@ def param_set(opts, args, save, yes, profile_name, ppo, fmt, watchdog_ms):
     bad = [a for a in rest if a.startswith("--")]
     if bad:
         raise UsageError(f"param set: unknown option {bad[0]}")
-    if len(rest) != 2:
+    if len(rest) != 2 or (address is None and rest[0].isdigit() and not _is_number(rest[1])):
         raise UsageError("param set: expected [ADDRESS] CODE VALUE")
     code, text = rest
     before = _confirmer(opts, yes, f"write {code} = {text}")

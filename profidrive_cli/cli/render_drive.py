@@ -90,7 +90,7 @@ class RunView:
     def _header_line(self) -> str:
         h = self.header
         return (f"station {h['address']}: {h['profile']} ({h['title']}), layout {h['layout']}; "
-                f"max frequency {h['fmax_hz']:g} Hz {h['fmax_source']}; cycle {h['cycle_hz_target']:g} Hz "
+                f"max frequency {h['fmax_hz']:g} Hz {h['fmax_source']}; cycle {h['cycle_hz_target']:.1f} Hz "
                 f"(bus limit {h['wire_hz']:.1f} Hz), watchdog {h['watchdog_ms']:g} ms")
 
     def set_phase(self, phase: str, sample=None) -> None:
@@ -167,7 +167,7 @@ class RunView:
         t.add_row("reference", Text(f"{fmt_num(s.reference_hz, 2, 'Hz')}   {fmt_num(s.reference_percent, 2, '%')}"))
         t.add_row("actual", Text(f"{fmt_num(s.actual_hz, 2, 'Hz')}   {fmt_num(s.actual_percent, 2, '%')}"))
         t.add_row("max frequency", Text(f"{s.fmax_hz:g} Hz {h.get('fmax_source', '')}"))
-        t.add_row("cycle", Text(f"{s.cycle_hz:.1f} /s (target {h.get('cycle_hz_target', 0):g}, "
+        t.add_row("cycle", Text(f"{s.cycle_hz:.1f} /s (target {h.get('cycle_hz_target', 0):.1f}, "
                                 f"bus limit {h.get('wire_hz', 0):.1f})   {s.cycles} exchanges"))
         t.add_row("bus", Text(counter_words(s.counters)))
         t.add_row("trend", Text(sparkline(self.trend) or " ", style="cyan"))
@@ -190,12 +190,13 @@ class KeyReader:
         self.fd = sys.stdin.fileno()
         self._old = None
         self._buf = b""
+        self._since = 0.0
 
     def __enter__(self):
         import termios
         import tty
         self._old = termios.tcgetattr(self.fd)
-        tty.setcbreak(self.fd)
+        tty.setcbreak(self.fd, termios.TCSANOW)   # keep keys typed while starting
         return self
 
     def __exit__(self, *exc):
@@ -210,17 +211,21 @@ class KeyReader:
                 self._buf += os.read(self.fd, 64)
             except OSError:
                 return []
+            self._since = time.monotonic()
         out_keys = []
         b = self._buf
         while b:
-            if b.startswith(b"\x1b[A") or b.startswith(b"\x1bOA"):
-                out_keys.append("up")
-                b = b[3:]
-            elif b.startswith(b"\x1b[B") or b.startswith(b"\x1bOB"):
-                out_keys.append("down")
-                b = b[3:]
-            elif b[:1] == b"\x1b" and len(b) < 3:
-                break                     # an escape sequence still arriving
+            if b[:1] == b"\x1b":
+                if len(b) >= 3 and b[1:2] in (b"[", b"O"):
+                    key = {b"A": "up", b"B": "down"}.get(b[2:3])
+                    if key:
+                        out_keys.append(key)
+                    b = b[3:]              # other sequences (arrows left/right, ...) are ignored
+                elif len(b) < 3 and b in (b"\x1b", b"\x1b[", b"\x1bO") and \
+                        time.monotonic() - self._since < 0.2:
+                    break                  # an escape sequence still arriving
+                else:
+                    b = b[1:]              # a lone Escape
             else:
                 c = b[:1]
                 b = b[1:]

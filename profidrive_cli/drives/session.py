@@ -41,7 +41,9 @@ Public API (stable; everything else is internal)
 
     Attributes after open: station (DriveStation), address, ident, profile, layout (name), drive
     (drives.base.Drive), channel (MeteredChannel), cycle_hz (target, 0 = unpaced), wire_hz (the bus
-    limit for this station), warnings, messages, link_lost, stop_report (after close).
+    limit for this station), warnings, messages, link_lost, stop_report (after stop() / close),
+    final_status (the last DriveStatus seen); settable: on_sample(Sample), called on every cycle
+    while a stop is awaited (also the stop on exit) — live views keep updating through it.
 
     Motion:   start(percent) / set_reference(percent) / poll() -> Sample / status() -> Sample /
               stop(on_sample=None) -> StopReport (normal, then coast; bounded) / may_run
@@ -424,6 +426,8 @@ class DriveSession:
         self.handle_signals = handle_signals
         self.before_connect = before_connect
         self.on_message = on_message
+        #: called with each Sample while the session waits for a stop (also the stop on exit)
+        self.on_sample: Callable[[Sample], None] | None = None
         self.log_csv = log_csv
         self.env = os.environ if env is None else env
 
@@ -531,7 +535,8 @@ class DriveSession:
                 self._warn(f"--cycle-hz {self.cycle_hz:g} is more than {BAUD_NAMES.get(baud, baud)} "
                            f"allows for this station ({self.wire_hz:.1f} Hz: "
                            f"{1000.0 / self.wire_hz:.1f} ms per Data_Exchange of "
-                           f"{lay.output_len}/{lay.input_len} octets); the bus sets the pace")
+                           f"{lay.output_len}/{lay.input_len} octets); on a real bus the wire sets "
+                           f"the pace")
         return self.station
 
     # -- step 2: parameterise, configure, Data_Exchange, Drive ----------------------------------
@@ -743,7 +748,7 @@ class DriveSession:
         """The family's normal stop; wait (bounded) until the drive reports stopped; coast if it does
         not. A second SIGINT/SIGTERM during the wait (when signals are handled) coasts at once.
         The report is also kept in .stop_report."""
-        self.stop_report = self._stop(on_sample, timeout)
+        self.stop_report = self._stop(on_sample or self.on_sample, timeout)
         return self.stop_report
 
     def _stop(self, on_sample, timeout) -> StopReport:
@@ -761,8 +766,8 @@ class DriveSession:
             if st is not None:
                 self._may_run = False
                 how = "normal"
-                msg = ("the drive tripped while stopping" + (f" ({st.fault_code})" if st.fault_code else "")
-                       if st.fault else "stopped")
+                msg = (f"the drive is in fault{f' ({st.fault_code})' if st.fault_code else ''}: "
+                       f"its output is off" if st.fault else "stopped")
                 return StopReport(how, True, self.channel.now() - t_start, msg, st)
             why = ("stop hurried by a second signal" if self._hurry else
                    f"not stopped after {limit:g} s")
@@ -1089,6 +1094,8 @@ class DriveSession:
                 continue
             if p.extra.get("traceback"):
                 continue                          # Toyo traceback channels: 4 x 100 samples each
+            if not self._exists_on_device(p):
+                continue
             kind = "setting" if p.writable else "readonly"
             why = _not_restored(self.profile, p)
             if why and p.writable:
@@ -1101,6 +1108,20 @@ class DriveSession:
                 continue                           # read-only arrays (fault memory): `pdrive faults`
             out.append((p.code, p, kind))
         return out
+
+    def _exists_on_device(self, p) -> bool:
+        """False for parameters the connected device variant does not have (Moeller: `df6: false`
+        on a DF6) and for fault memories (`pdrive faults` reads those)."""
+        fam = self.profile.family
+        d = self.drive
+        if fam == "toyo" and p.pnu == getattr(getattr(d, "tc", None), "history_pnu", None):
+            return False
+        if fam == "moeller" and p.extra.get("df6") is False and hasattr(d, "device"):
+            try:
+                return not d.device().startswith("DF")
+            except (DriveError, UsageError):
+                return True
+        return True
 
     def dump(self, progress: Callable[[int, int, str], None] | None = None) -> dict:
         """Read every readable parameter; a YAML-ready document with the station's identity."""
