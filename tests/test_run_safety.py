@@ -1,0 +1,175 @@
+"""The safe stop of `pdrive run` through a real serial path: `pdrive sim --pty` in one process (the plant
+keeps its state between commands), `pdrive run` in another, signalled mid-run; then `pdrive status`
+must find the drive stopped. Also: keys on a terminal, link loss, confirmation on a real port."""
+
+import json
+import os
+import select
+import signal
+import subprocess
+import time
+
+import pytest
+
+from conftest import pdrive_cmd
+
+RAMPS = {3: ("F07", "F08"), 4: ("F07", "F08"), 6: ("F002", "F003"), 7: ("C1-01", "C1-02")}
+
+
+def _start_sim():
+    p = subprocess.Popen(pdrive_cmd() + ["sim", "--pty", "--json"], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)
+    line = p.stdout.readline()
+    if not line:
+        p.kill()
+        pytest.fail("pdrive sim printed nothing: " + p.stderr.read())
+    return p, json.loads(line)["port"]
+
+
+def _stop_sim(p):
+    p.send_signal(signal.SIGINT)
+    try:
+        p.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        p.kill()
+        p.wait()
+
+
+def pdrive(*args, timeout=60):
+    return subprocess.run(pdrive_cmd() + list(args), capture_output=True, text=True, timeout=timeout,
+                          stdin=subprocess.DEVNULL)
+
+
+@pytest.fixture(scope="module")
+def pty_sim(tmp_path_factory):
+    p, port = _start_sim()
+    try:
+        # short ramps keep the tests quick (Toyo's are fixed: 5 s to 60 Hz); one restore per station
+        for addr, codes in RAMPS.items():
+            f = tmp_path_factory.mktemp("ramps") / f"{addr}.yaml"
+            f.write_text("parameters:\n" + "".join(f"  {c}: 0.3\n" for c in codes))
+            r = pdrive("param", "restore", str(addr), str(f), "--port", port, "--yes")
+            assert r.returncode == 0 and "2 applied" in r.stdout, r.stdout + r.stderr
+        yield port
+    finally:
+        _stop_sim(p)
+
+
+def _status(port, address):
+    r = pdrive("status", str(address), "--port", port, "--json")
+    assert r.returncode == 0, r.stderr
+    return json.loads(r.stdout)
+
+
+def _read_until_turning(p, deadline_s=20.0, min_hz=1.0):
+    """Read run's JSON stream until the motor turns (actual above min_hz); return the events."""
+    events = []
+    end = time.monotonic() + deadline_s
+    while time.monotonic() < end:
+        r, _, _ = select.select([p.stdout], [], [], 0.5)
+        if not r:
+            continue
+        line = p.stdout.readline()
+        if not line:
+            break
+        ev = json.loads(line)
+        events.append(ev)
+        if ev["event"] == "update" and ev["phase"] == "running" and abs(ev["actual_hz"] or 0) > min_hz:
+            return events
+    p.kill()
+    pytest.fail(f"run never turned the motor: {events[-3:]} {p.stderr.read()}")
+
+
+@pytest.mark.parametrize("address", [3, 4, 5, 6, 7])
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+def test_signal_during_run_leaves_the_drive_stopped(pty_sim, address, sig):
+    p = subprocess.Popen(pdrive_cmd() + ["run", str(address), "--hz", "20", "--port", pty_sim, "--yes",
+                                         "--json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         stdin=subprocess.DEVNULL, text=True)
+    try:
+        _read_until_turning(p)
+        p.send_signal(sig)
+        out, err = p.communicate(timeout=30)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == (143 if sig == signal.SIGTERM else 130), err
+    end = json.loads(out.strip().splitlines()[-1])
+    assert end["event"] == "end" and end["reason"] == ("SIGTERM" if sig == signal.SIGTERM else "Ctrl-C")
+    assert end["stop"]["how"] == "normal" and end["stopped"]
+    assert "Traceback" not in err
+    st = _status(pty_sim, address)
+    assert st["stopped"] and not st["running"] and not st["fault"], st
+
+
+def test_writing_to_a_real_port_needs_yes(pty_sim):
+    r = pdrive("param", "set", "3", "F07", "1", "--port", pty_sim)
+    assert r.returncode == 2 and "add --yes" in r.stderr
+    r = pdrive("run", "3", "--hz", "5", "--duration", "0.2", "--port", pty_sim)
+    assert r.returncode == 2 and "add --yes" in r.stderr
+    r = pdrive("param", "get", "3", "F07", "--port", pty_sim, "--json")       # reading needs none
+    assert r.returncode == 0 and json.loads(r.stdout)["parameters"][0]["value"] == 0.3
+
+
+def test_keys_on_a_terminal(tmp_path):
+    """up raises the reference by 1 Hz, q stops the drive and ends the run (own in-process sim)."""
+    mfd, sfd = os.openpty()
+    p = subprocess.Popen(pdrive_cmd() + ["run", "3", "--hz", "10", "--port", "sim://", "--log",
+                                         str(tmp_path / "k.csv")],
+                         stdin=sfd, stdout=sfd, stderr=sfd, env={**os.environ, "COLUMNS": "120"})
+    os.close(sfd)
+    buf = b""
+
+    def read_for(seconds):
+        nonlocal buf
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            r, _, _ = select.select([mfd], [], [], 0.1)
+            if r:
+                try:
+                    buf += os.read(mfd, 65536)
+                except OSError:
+                    return
+    try:
+        end = time.monotonic() + 20
+        while b"running" not in buf and time.monotonic() < end:
+            read_for(0.2)
+        os.write(mfd, b"\x1b[A")
+        read_for(1.0)
+        os.write(mfd, b"q")
+        end = time.monotonic() + 30
+        while p.poll() is None and time.monotonic() < end:
+            read_for(0.2)                        # keep reading: a full pty would block the writer
+        read_for(0.2)
+    finally:
+        if p.poll() is None:
+            p.kill()
+        os.close(mfd)
+    text = buf.decode(errors="replace")
+    assert p.returncode == 0, text[-2000:]
+    assert "11.00 Hz" in text                    # the reference after one step up
+    assert "q pressed" in text and "stop: normal" in text
+    rows = (tmp_path / "k.csv").read_text().splitlines()
+    refs = {int(r.split(",")[3]) for r in rows[1:]}
+    assert {round(0x4000 * 10 / 60), round(0x4000 * 11 / 60)} <= refs     # N2 words of 10 and 11 Hz
+
+
+def test_link_loss_during_run_names_the_watchdog():
+    sim, port = _start_sim()
+    p = subprocess.Popen(pdrive_cmd() + ["run", "7", "--hz", "20", "--port", port, "--yes", "--json",
+                                         "--watchdog", "400"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True)
+    try:
+        _read_until_turning(p, min_hz=0.5)
+        sim.kill()                                   # the port goes away mid-run
+        sim.wait()
+        out, err = p.communicate(timeout=30)
+    finally:
+        for x in (p, sim):
+            if x.poll() is None:
+                x.kill()
+    assert p.returncode == 1, err
+    assert "pdrive cannot send a stop" in err and "watchdog (400 ms)" in err
+    assert "Traceback" not in err
+    end = json.loads(out.strip().splitlines()[-1])
+    assert end["stop"]["how"] == "not sent (link lost)" and not end["stopped"]
