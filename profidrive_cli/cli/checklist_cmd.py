@@ -115,6 +115,8 @@ def run_cmd(ctx, opts: BusOptions, file, reports, dry_run, yes, variables, cycle
     # port: --port / PDRIVE_PORT, else the checklist's; --dry-run: a simulated bus of the same stations
     if dry_run:
         port = dry_run_port(cl)
+        if opts.port:
+            click.echo(f"pdrive: --dry-run rehearses on {port}; --port {opts.port} is not used", err=True)
     else:
         port = opts.port or cl.port
         if not port:
@@ -236,7 +238,7 @@ class _LiveView:
         (self.progress.console if self.progress is not None else self.con).print(text)
 
     def message(self, text: str):
-        self._print(f"    [dim]{escape(text)}[/]")
+        self._print(f"    [dim]session: {escape(text)}[/]")
 
     # -- observer ----------------------------------------------------------------------------------
     def run_started(self, run):
