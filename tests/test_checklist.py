@@ -276,3 +276,6 @@ steps:
     a, b = res.stations
     assert a.status == "error" and "does not answer" in a.error
     assert b.status == NOT_RUN and not res.passed
+    # on_fail: continue in the header: the next station is tried all the same
+    res = Runner(load_checklist_text("on_fail: continue\n" + text, "t.yaml"), absent).run()
+    assert [s.status for s in res.stations] == ["error", "error"] and not res.passed

@@ -318,7 +318,7 @@ class Runner:
         self.obs.station_finished(sr)
 
     def _stops_on_error(self, sr: StationResult) -> bool:
-        return not sr.steps or sr.steps[0].step.on_fail == "stop"
+        return self.cl.on_fail == "stop"
 
     def _steps(self, sr: StationResult, handle: StationHandle) -> None:
         stop_here = False

@@ -140,6 +140,8 @@ class Checklist:
     variables: dict                # global values after --var
     stations: list[StationSpec]
     step_count: int                # steps in the file
+    on_fail: str = "stop"          # the header's default: also decides whether a station that cannot be
+                                   # opened ends the run
 
     @property
     def has_prompts(self) -> bool:
@@ -325,7 +327,8 @@ class _Validator:
             return None
         return Checklist(name=name, description=description, path=self.path, sha256=sha, port=port,
                          baud=str(baud) if baud is not None else None, master_address=master_address,
-                         variables=variables, stations=stations, step_count=len(raw_steps))
+                         variables=variables, stations=stations, step_count=len(raw_steps),
+                         on_fail=default_on_fail)
 
     def _station_declares(self, doc, key) -> bool:
         for s in doc.get("stations") or []:
