@@ -58,5 +58,10 @@ class SlaveFcb:
             self.master, self.last_fcb = sa, fcb
         return repeat
 
+    def would_repeat(self, sa: int, fc: int) -> bool:
+        """is_repeat() without changing anything (for whoever looks at a request before the slave)."""
+        return (bool(fc & FC_FCV) and self.master == sa and self.last_fcb == bool(fc & FC_FCB)
+                and self.last_reply is not None)
+
     def remember(self, reply: bytes) -> None:
         self.last_reply = reply

@@ -243,6 +243,26 @@ def parse(buf: bytes | bytearray, pos: int = 0):
     return Frame(sd, da & ADDR_MASK, sa & ADDR_MASK, fc, bytes(buf[i:body_end]), dsap, ssap), total
 
 
+def missing(buf: bytes | bytearray, pos: int = 0) -> int:
+    """Octets still missing for the telegram that starts at buf[pos] (as far as its start delimiter
+    and length octet tell; at least 1 while parse() says NEED_MORE, 0 for an empty buffer)."""
+    n = len(buf) - pos
+    if n <= 0:
+        return 0
+    sd = buf[pos]
+    if sd == SD1:
+        total = 6
+    elif sd == SD3:
+        total = 14
+    elif sd == SD4:
+        total = 3
+    elif sd == SD2:
+        total = buf[pos + 1] + 6 if n >= 2 else 7
+    else:
+        return 1
+    return max(1, total - n)
+
+
 class Receiver:
     """Streaming receiver: feed octets, take frames or typed errors. Never loops without consuming."""
 

@@ -7,6 +7,13 @@
 
 The engine keeps the FCB per station (reference §2.3), repeats the same FCB on a retry, checks that a
 reply comes from the addressed station and is addressed to us, and counts what it saw.
+
+Receiving: octets that cannot start a telegram (line noise before a reply) are skipped and counted
+once per run as one illegal frame; the reply that follows is taken. A telegram that starts and then
+breaks (FCS, length, end delimiter) spoils the rest of the attempt: everything up to the deadline is
+dropped (reference §2: resynchronise on an idle line) and the request is repeated. So each corrupt
+reply costs exactly one illegal frame plus one retry, a reply from the wrong station the same, a
+missing or late reply one retry, and noise before a good reply one illegal frame only.
 """
 
 from __future__ import annotations
@@ -30,6 +37,17 @@ class Outcome:
 
 @dataclass
 class StationCounters:
+    """What the master saw of one station.
+
+    requests      requests sent (a retry is not a new request)
+    retries       repeats after a missing, late, corrupt or foreign reply
+    no_answer     requests that got no valid reply after all retries
+    illegal       corrupt telegrams, noise runs, replies from another station
+    rs/rr/ue      negative replies: service not activated / no resources / user error
+    dh            Data_Exchange replies announcing new diagnosis (DH/RDH): one per event
+    reparams      start-ups re-run after the station had reached Data_Exchange (RS, silence,
+                  Prm_Req, link restored)
+    """
     requests: int = 0
     retries: int = 0
     no_answer: int = 0
@@ -40,12 +58,26 @@ class StationCounters:
     reparams: int = 0
     diag_reads: int = 0
     data_exchanges: int = 0
+    dh: int = 0
     extra: dict = field(default_factory=dict)
 
     def as_dict(self) -> dict:
         d = {k: v for k, v in self.__dict__.items() if k != "extra"}
         d.update(self.extra)
         return d
+
+
+#: short names for the compact one-line form, in display order
+_BRIEF = (("retries", "retry"), ("no_answer", "no answer"), ("illegal", "illegal"), ("rs", "RS"),
+          ("rr", "RR"), ("ue", "UE"), ("dh", "DH"), ("reparams", "reparam"))
+
+
+def format_counters(c: "StationCounters | dict") -> str:
+    """'12 req, 1 retry, 1 illegal' — requests always, the error counters when not zero."""
+    d = c.as_dict() if isinstance(c, StationCounters) else dict(c or {})
+    parts = [f"{d.get('requests', 0)} req"]
+    parts += [f"{d[k]} {name}" for k, name in _BRIEF if d.get(k)]
+    return ", ".join(parts)
 
 
 class FdlMaster:
@@ -63,9 +95,11 @@ class FdlMaster:
         self._retries = 0
         self._illegal = 0
         self._in_garbage = False
+        self._spoilt = False
         self._rx = F.Receiver()
         self.deadline = 0.0
         self._timeout = 0.0
+        self._expect = 255
 
     def counters_for(self, da: int) -> StationCounters:
         c = self.counters.get(da)
@@ -76,6 +110,23 @@ class FdlMaster:
     def reset_station(self, da: int) -> None:
         """Station (re)initialised: its next request starts a new FCB sequence."""
         self._fcb.pop(da, None)
+
+    @property
+    def busy(self) -> bool:
+        """A request is waiting for its reply."""
+        return self._pending is not None
+
+    def missing(self) -> int:
+        """Octets still to come for the reply being received (0: none started)."""
+        if self._pending is None or self._spoilt or not len(self._rx):
+            return 0
+        return F.missing(self._rx.buf)
+
+    def abort(self) -> None:
+        """Forget the request in progress (the link went away under it)."""
+        self._pending = None
+        self._rx.reset()
+        self._in_garbage = self._spoilt = False
 
     def request(self, da: int, function: int, data: bytes = b"", dsap: int | None = None,
                 ssap: int | None = None, now: float = 0.0, expect_octets: int = 255) -> tuple[bytes, float]:
@@ -95,6 +146,7 @@ class FdlMaster:
         self._retries = 0
         self._illegal = 0
         self._in_garbage = False
+        self._spoilt = False
         self._rx.reset()
         # the first reply octet must start within the slot time after our last octet; once octets
         # arrive, the deadline moves out by the wire time of the rest of the longest reply
@@ -105,12 +157,23 @@ class FdlMaster:
         self.counters_for(da).requests += 1
         return self._pending, self.deadline
 
+    def sent(self, now: float) -> float:
+        """The request (or its retry) was handed to the link at `now`: the reply timeout counts
+        from here (a write that took long must not eat the slot time). Returns the deadline."""
+        if self._pending is not None:
+            self.deadline = now + self._timeout
+        return self.deadline
+
     def send_no_reply(self, da: int, function: int, data: bytes = b"", dsap=None, ssap=None) -> bytes:
         """SDN (e.g. Global_Control broadcast): FCB/FCV 0, nothing to wait for."""
         return F.encode(F.Frame(F.SD2, da, self.address, F.request_fc(function), bytes(data), dsap, ssap))
 
     def feed(self, data: bytes, now: float) -> Outcome | None:
         if self._pending is None:
+            return None
+        if self._spoilt:
+            # a telegram broke in this attempt: drop everything until the line is idle again
+            self.deadline = max(self.deadline, now + self._idle_wait())
             return None
         self._rx.feed(data)
         while True:
@@ -121,12 +184,20 @@ class FdlMaster:
                                         + self.params.link_latency)
                 return None
             if isinstance(r, F.FrameError):
-                # one corrupt telegram shows up as a run of octet-by-octet resync errors:
-                # count the run once
+                if r.kind == F.FrameError.GARBAGE:
+                    # octets that cannot start a telegram (noise): skip them, one count per run
+                    if not self._in_garbage:
+                        self._illegal += 1
+                        self._in_garbage = True
+                    continue
+                # a telegram started and broke: its remaining octets could fake a start
+                # delimiter, so nothing more is taken in this attempt (the retry repeats it)
                 if not self._in_garbage:
                     self._illegal += 1
-                    self._in_garbage = True
-                continue
+                self._spoilt = True
+                self._rx.reset()
+                self.deadline = max(self.deadline, now + self._idle_wait())
+                return None
             self._in_garbage = False
             if r.sd == F.SC:
                 return self._done(r)
@@ -134,6 +205,11 @@ class FdlMaster:
                 self._illegal += 1          # token, another master's request, a foreign reply
                 continue
             return self._done(r)
+
+    def _idle_wait(self) -> float:
+        """How long the line must stay quiet after garbage before a retry: TSYN and one character,
+        plus what the link adds."""
+        return self.params.tsyn + self.params.chars(1) + self.params.link_latency
 
     def _done(self, frame: F.Frame) -> Outcome:
         if self._uses_fcb:
@@ -149,6 +225,8 @@ class FdlMaster:
                 c.rr += 1
             elif st == F.UE:
                 c.ue += 1
+            elif st in (F.DH, F.RDH):
+                c.dh += 1
         self._pending = None
         return Outcome(REPLY, frame, self._retries, self._illegal)
 
@@ -161,6 +239,7 @@ class FdlMaster:
             self._retries += 1
             self._rx.reset()
             self._in_garbage = False
+            self._spoilt = False
             self.deadline = now + self._timeout
             return self._pending, self.deadline
         c = self.counters_for(self._da)

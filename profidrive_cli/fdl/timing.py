@@ -89,6 +89,16 @@ class BusParams:
         return 35 + 2 * self.tset + self.tqui
 
     @property
+    def tid1_seconds(self) -> float:
+        """Idle time the initiator keeps after a reply before its next request (>= TSYN)."""
+        return self.tid1 / self.baud
+
+    @property
+    def tid2(self) -> int:
+        """Idle after an unacknowledged (SDN) telegram, bit times: max TSDR."""
+        return self.max_tsdr
+
+    @property
     def slot_seconds(self) -> float:
         return self.tsl / self.baud
 
@@ -103,6 +113,25 @@ class BusParams:
         tsdr = self.max_tsdr if tsdr_bits is None else tsdr_bits
         return (self.chars(req_octets) + (tsdr + self.tid1) / self.baud
                 + self.chars(reply_octets))
+
+
+def transaction_wire_time(params: BusParams, req_octets: int, reply_octets: int | None,
+                          tsdr_bits: int = 11, attempts: int = 1) -> float:
+    """The least time one request costs on the wire, idle time included.
+
+    Answered: request + TSDR + reply + TID1 (the idle before the next request).
+    Unanswered: each attempt is request + slot time (TSL >= TSYN, so the next request may follow
+    at once); `attempts` = 1 + retries for a station that is not there.
+    """
+    if reply_octets is None:
+        return attempts * (params.chars(req_octets) + params.slot_seconds)
+    return params.cycle_time(req_octets, reply_octets, tsdr_bits)
+
+
+def frame_octets(du_octets: int, saps: bool = False) -> int:
+    """Octets of a data telegram with `du_octets` of user data (SD1 / SD3 / SD2 as encode() picks)."""
+    n = du_octets + (2 if saps else 0)
+    return 6 if n == 0 else (14 if n == 8 else n + 9)
 
 
 def wire_time_data_exchange(baud: int, out_octets: int, in_octets: int, tsdr_bits: int = 11) -> float:
