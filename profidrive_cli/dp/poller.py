@@ -1,12 +1,18 @@
 """The DP master over a Link: one request/reply at a time, several stations in a cycle.
 
-This is the only place in the protocol stack that waits: for replies (until the FDL deadline) and
-for the cycle period. Everything it decides comes from the sans-IO pieces (fdl.master.FdlMaster,
-dp.station.StationMachine).
+This is the only place in the protocol stack that waits: for replies (until the FDL deadline), for
+the idle time the line needs before each request (TID1 after a reply, TID2 after a broadcast; the
+slot time already covers TSYN after a request without reply) and for the cycle period. It waits on
+the link's clock (Link.now/Link.sleep), so the virtual-time simulator runs it without real sleeping.
+Everything it decides comes from the sans-IO pieces (fdl.master.FdlMaster, dp.station.StationMachine).
+
+When the port goes away, every call raises LinkLost with the port and the counters; reconnect()
+reopens the same port and brings every station back to data exchange.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 from profidrive_cli import BusError
@@ -14,64 +20,118 @@ from profidrive_cli.dp import services as S
 from profidrive_cli.dp.station import (CFG_FAULT, DATA_EXCH, LOCKED, PRM_FAULT, RELEASED, STATE_WORDS, DpRequest, Event,
                                        SlaveConfig, StationMachine)
 from profidrive_cli.fdl import frames as F
-from profidrive_cli.fdl.master import NO_ANSWER, REPLY, FdlMaster, Outcome
+from profidrive_cli.fdl.master import NO_ANSWER, REPLY, FdlMaster, Outcome, format_counters
 from profidrive_cli.fdl.timing import BusParams
-from profidrive_cli.link.base import Link
+from profidrive_cli.link.base import Link, LinkLost
 
 
 class Master:
     def __init__(self, link: Link, params: BusParams, address: int = F.DEFAULT_MASTER):
         self.link = link
-        self.params = params
+        if getattr(link, "latency", None) is not None and link.latency != params.link_latency:
+            # the link knows its own latency (the simulator: none): no margin for a USB adapter
+            params = dataclasses.replace(params, link_latency=link.latency)
         self.fdl = FdlMaster(params, address)
         self.address = address
         self.stations: dict[int, StationMachine] = {}
-        self._idle_from = 0.0        # end of the last reply: next request not before + TID1
+        self._line_free_at = 0.0     # earliest start of the next request (TSYN / TID1 / TID2 kept)
         self.on_event = None         # callable(address, Event) for live views / logs
         self._rr = 0
+        #: how often the port went away, and how often reconnect() brought it back
+        self.link_losses = 0
+        self.reconnects = 0
+
+    @property
+    def params(self) -> BusParams:
+        return self.fdl.params
+
+    @params.setter
+    def params(self, value: BusParams) -> None:
+        self.fdl.params = value
+
+    def counters(self) -> dict[int, dict]:
+        """{station address: counters dict} for every station the master has talked to."""
+        return {a: c.as_dict() for a, c in sorted(self.fdl.counters.items())}
 
     # -- one FDL cycle -------------------------------------------------------------------------
     def _wait_idle(self) -> None:
         if self.link.instant:
             return
-        gap = self.params.tid1 / self.params.baud
         now = self.link.now()
-        if now < self._idle_from + gap:
-            time.sleep(self._idle_from + gap - now)
+        while now < self._line_free_at:
+            self.link.sleep(self._line_free_at - now)
+            now = self.link.now()
+
+    def _link_lost(self, e: LinkLost) -> LinkLost:
+        """The port went away: forget the request in progress, say so with the counters."""
+        self.fdl.abort()
+        self.link_losses += 1
+        counters = self.counters()
+        shown = [a for a in counters if a in self.stations] or list(counters)
+        detail = "; ".join(f"station {a}: {format_counters(counters[a])}" for a in shown[:8])
+        if len(shown) > 8:
+            detail += f"; {len(shown) - 8} more"
+        msg = f"link lost: {e}" + (f" (counters: {detail})" if detail else "")
+        return LinkLost(msg, getattr(e, "port", "") or self.link.name, counters)
 
     def transact(self, da: int, function: int, data: bytes = b"", dsap: int | None = None,
                  ssap: int | None = None, expect: int = 255) -> Outcome:
         """Send one request and wait for its reply, with the configured retries."""
+        try:
+            return self._transact(da, function, data, dsap, ssap, expect)
+        except LinkLost as e:
+            raise self._link_lost(e) from None
+
+    def _sent(self, out: bytes) -> None:
+        # timeouts and idle times count from when the write returned (a slow write must not eat
+        # the slot time); after a request without reply the slot time keeps the line idle >= TSYN
+        at = self.link.now()
+        self.fdl.sent(at)
+        self._line_free_at = at + self.fdl.params.chars(len(out)) + self.fdl.params.tsyn
+
+    def _transact(self, da, function, data, dsap, ssap, expect) -> Outcome:
         self._wait_idle()
-        out, deadline = self.fdl.request(da, function, data, dsap, ssap, self.link.now(), expect)
+        now = self.link.now()
+        out, deadline = self.fdl.request(da, function, data, dsap, ssap, now, expect)
         self.link.write(out)
+        self._sent(out)
         while True:
             chunk = self.link.read(self.fdl.deadline)
             now = self.link.now()
             if chunk:
                 res = self.fdl.feed(chunk, now)
                 if res is not None:
-                    self._idle_from = now
+                    self._line_free_at = now + self.fdl.params.tid1_seconds
                     return res
+                rest = self.fdl.missing()
+                if rest > 1 and not self.link.instant:
+                    # the rest of a telegram of known length cannot be there sooner: one wait
+                    # instead of a wake-up per octet
+                    self.link.sleep(min(self.fdl.params.chars(rest - 1), self.fdl.deadline - now))
                 continue
             if now < self.fdl.deadline and not self.link.instant:
                 continue
             # (the instant simulator answers at once: an empty read means no answer is coming)
             nxt = self.fdl.expire(now)
             if isinstance(nxt, Outcome):
-                self._idle_from = now
                 return nxt
             self.link.flush_input()
             self._wait_idle()
             out, deadline = nxt
             self.link.write(out)
+            self._sent(out)
 
     def send_sdn(self, da: int, dsap: int, data: bytes) -> None:
-        self._wait_idle()
-        self.link.write(self.fdl.send_no_reply(da, F.SDN_HIGH, data, dsap, S.SAP_MASTER))
+        try:
+            self._wait_idle()
+            frame = self.fdl.send_no_reply(da, F.SDN_HIGH, data, dsap, S.SAP_MASTER)
+            self.link.write(frame)
+            now = self.link.now()
+        except LinkLost as e:
+            raise self._link_lost(e) from None
         # TID2 = max TSDR after an unacknowledged telegram
-        self._idle_from = self.link.now() + self.params.chars(len(data) + 11) + \
-            self.params.max_tsdr / self.params.baud
+        p = self.fdl.params
+        self._line_free_at = now + p.chars(len(frame)) + p.tid2 / p.baud
 
     # -- single services (scan, diag, io) ------------------------------------------------------
     def fdl_status(self, da: int) -> F.Frame | None:
@@ -149,7 +209,7 @@ class Master:
                     why += f" (diagnosis: {st.last_diag.state_words(self.address)})"
                 raise BusError(f"station {address} did not reach data exchange: {why}")
             if not self.step(st):
-                time.sleep(min(0.01, max(0.0, st.wait_until - self.link.now())))
+                self.link.sleep(min(0.01, max(0.0, st.wait_until - self.link.now())))
         return st
 
     def exchange(self, address: int, outputs: bytes | None = None) -> bytes:
@@ -181,6 +241,52 @@ class Master:
             pass
         st.state = RELEASED
 
+    def reconnect(self, timeout: float = 10.0, interval: float = 0.25) -> None:
+        """After LinkLost: reopen the same port (retrying every `interval` s until `timeout`), then
+        run the start-up of every station again until it is back in data exchange.
+
+        Raises LinkLost when the port does not come back in time, BusError naming the stations that
+        did not reach data exchange. Each station that had been in data exchange counts one
+        re-parameterisation; Master.reconnects counts the successful reopenings.
+        """
+        t_end = time.monotonic() + timeout
+        last = None
+        while True:
+            try:
+                self.link.reopen()
+                break
+            except BusError as e:          # LinkLost included: the port is not back yet
+                last = e
+            left = t_end - time.monotonic()
+            if left <= 0:
+                raise LinkLost(f"{self.link.name}: the port did not come back within {timeout:g} s"
+                               + (f" ({last})" if last else ""), self.link.name,
+                               self.counters()) from None
+            time.sleep(min(interval, left))
+        self.reconnects += 1
+        self.fdl.abort()
+        self._line_free_at = 0.0
+        now = self.link.now()
+        for a, st in self.stations.items():
+            self.fdl.reset_station(a)
+            if st.state == RELEASED:
+                continue
+            ev: list[Event] = []
+            st.restart(ev, "link restored", now)
+            self._emit(a, ev)
+        failed = []
+        for a, st in self.stations.items():
+            if st.state == RELEASED:
+                continue
+            try:
+                self.bring_up(a, timeout=max(0.5, t_end - time.monotonic()))
+            except LinkLost:
+                raise
+            except BusError as e:
+                failed.append(str(e))
+        if failed:
+            raise BusError("after reconnecting: " + "; ".join(failed))
+
     def channel(self, address: int, period: float = 0.0) -> "StationChannel":
         return StationChannel(self, address, period)
 
@@ -202,7 +308,7 @@ class StationChannel:
         if self.period:
             now = self.now()
             if now < self._next:
-                time.sleep(self._next - now)
+                self.master.link.sleep(self._next - now)
             self._next = max(self._next + self.period, self.now())
         self.cycles += 1
         return self.master.exchange(self.address, outputs)

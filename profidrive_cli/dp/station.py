@@ -3,7 +3,8 @@
     Slave_Diag -> Set_Prm -> Chk_Cfg -> Slave_Diag (until ready) -> Data_Exchange
 
 Prm_Req, Cfg_Fault, Prm_Fault and Stat_Diag are honoured; DH/RDH in Data_Exchange -> read the
-diagnosis; RS or repeated silence -> start over (counted as a re-parameterisation).
+diagnosis; RS or repeated silence -> start over (counted as a re-parameterisation when the station
+had reached Data_Exchange; retried start-up steps are not).
 next_request(now) says what to send; on_outcome(request, outcome, now) takes what came back.
 """
 
@@ -82,13 +83,15 @@ class StationMachine:
         self._diag_due = False
         self._silent = 0
         self._checks = 0
-        self._started_once = False
+        self._was_in_dx = False        # reached Data_Exchange since the last start-up began
         self.fresh_inputs = False      # set when a Data_Exchange delivered inputs
 
     # -- helpers ------------------------------------------------------------------------------
     def _goto(self, state: str, events: list, text: str = "") -> None:
         if state != self.state:
             self.state = state
+            if state == DATA_EXCH:
+                self._was_in_dx = True
             events.append(Event("state", text or STATE_WORDS[state], state))
 
     def restart(self, events: list, why: str, now: float = 0.0, delay: float = 0.0) -> None:
@@ -202,9 +205,9 @@ class StationMachine:
             if d.ident != self.config.ident:
                 self.last_error = (f"station reports ident 0x{d.ident:04X}, "
                                    f"configured 0x{self.config.ident:04X}")
-            if self._started_once:
+            if self._was_in_dx:
                 self.counters.reparams += 1
-            self._started_once = True
+                self._was_in_dx = False
             self._goto(PRM, ev)
             return ev
         if self.state == CHECK:

@@ -5,6 +5,9 @@
                             for the first one; b"" when nothing came in time
     flush_input()           drop whatever is buffered (after a timeout, before a retry)
     now()                   the clock deadlines are expressed in (time.monotonic for real ports)
+    sleep(seconds)          wait on that clock (the poller's only way to pass time)
+    reopen()                close and open the same port again (after LinkLost); raises BusError
+                            (LinkLost included) while the port is not back
     close()
 
 A Link raises LinkLost when the port disappears (USB pulled, pty closed, socket dropped).
@@ -18,8 +21,33 @@ from abc import ABC, abstractmethod
 from profidrive_cli import BusError
 
 
+#: the last part of a wait is spent polling the clock: the OS wakes a sleeping thread ~0.1 ms late,
+#: which at 187.5 kbit/s and above is more than the idle times the master has to keep
+SPIN_S = 0.0002
+
+
+def precise_sleep(seconds: float, clock=time.monotonic) -> None:
+    """Sleep, then poll the clock for the last SPIN_S: returns close after `seconds`, never early."""
+    if seconds <= 0:
+        return
+    end = clock() + seconds
+    if seconds > SPIN_S:
+        time.sleep(seconds - SPIN_S)
+    while clock() < end:
+        pass
+
+
 class LinkLost(BusError):
-    """The port went away under us."""
+    """The port went away under us.
+
+    port      the port name (as given to --port)
+    counters  {station address: counters dict} at the moment of the loss, when a master raised it
+    """
+
+    def __init__(self, message: str, port: str = "", counters: dict | None = None):
+        super().__init__(message)
+        self.port = port
+        self.counters = dict(counters or {})
 
 
 class Link(ABC):
@@ -28,6 +56,9 @@ class Link(ABC):
     #: True when the transport takes no wire time (the instant simulator): the master then skips
     #: the idle gaps (TSYN/TID1) that a real line needs
     instant: bool = False
+    #: seconds the transport itself adds to every reply, when it knows (the simulator: 0);
+    #: None = unknown, the master keeps the latency margin of its BusParams
+    latency: float | None = None
 
     @abstractmethod
     def write(self, data: bytes) -> None: ...
@@ -40,6 +71,12 @@ class Link(ABC):
 
     def now(self) -> float:
         return time.monotonic()
+
+    def sleep(self, seconds: float) -> None:
+        precise_sleep(seconds)
+
+    def reopen(self) -> None:
+        raise LinkLost(f"{self.name or 'the link'}: cannot be reopened", self.name)
 
     def close(self) -> None:
         pass

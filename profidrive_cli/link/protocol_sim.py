@@ -1,15 +1,34 @@
 """pyserial URL handler for sim:// — the built-in simulated bus opens like any port.
 
 pyserial finds it because profidrive_cli.link adds itself to serial.protocol_handler_packages.
-Writes go to a SimBus (sim/bus.py); replies become readable at the time the bus says they are
-complete (immediately for timing=instant; after real wire time for timing=wire).
+Writes go to a SimBus (sim/bus.py); reply octets become readable at the time the bus says each one is
+complete on the wire: at once for timing=instant, after real wire time for timing=wire (the reader
+sleeps like a real port), and on a simulated clock for timing=virtual (reads advance the clock
+instead of sleeping; the port's `clock` is then the time base of everything that uses it).
+
+unplug() makes every later call fail like a pulled USB adapter (tests of LinkLost).
 """
 
 from __future__ import annotations
 
 import time
+from urllib.parse import parse_qs, urlsplit
 
-from serial.serialutil import PortNotOpenError, SerialBase, SerialTimeoutException  # noqa: F401
+from serial.serialutil import PortNotOpenError, SerialBase, SerialException, SerialTimeoutException  # noqa: F401
+
+
+class VirtualClock:
+    """Seconds on a simulated clock; sleep() advances it."""
+
+    def __init__(self, start: float = 0.0):
+        self.t = start
+
+    def now(self) -> float:
+        return self.t
+
+    def sleep(self, seconds: float) -> None:
+        if seconds > 0:
+            self.t += seconds
 
 
 class Serial(SerialBase):
@@ -19,21 +38,48 @@ class Serial(SerialBase):
 
     def __init__(self, *args, **kwargs):
         self.bus = None
-        self._pending: list[tuple[float, bytes]] = []
         self._rxbuf = bytearray()
         self.clock = time.monotonic
+        self.virtual: VirtualClock | None = None
+        self._unplugged = False
+        self._ticked = float("-inf")
         super().__init__(*args, **kwargs)
 
     def open(self):
         if self._port is None:
             raise ValueError("port must be configured before it can be used")
         from profidrive_cli.sim.plant import build_bus
+        timing = parse_qs(urlsplit(self._port).query).get("timing", ["instant"])[-1]
+        if timing == "virtual":
+            self.virtual = VirtualClock()
+            self.clock = self.virtual.now
         self.bus = build_bus(self._port, now=self.clock())
+        self._unplugged = False
         self.is_open = True
 
     def close(self):
         self.is_open = False
         self.bus = None
+
+    def unplug(self) -> None:
+        """From now on the port behaves like a USB adapter that was pulled out."""
+        self._unplugged = True
+
+    def _check(self) -> None:
+        if not self.is_open:
+            raise PortNotOpenError()
+        if self._unplugged:
+            raise SerialException("device disconnected (simulated unplug)")
+
+    def sim_sleep(self, seconds: float) -> None:
+        """Wait on this port's clock (real sleep, or advance the virtual clock)."""
+        if seconds <= 0:
+            return
+        if self.virtual is not None:
+            self.virtual.sleep(seconds)
+        else:
+            from profidrive_cli.link.base import precise_sleep
+            precise_sleep(seconds)
 
     def _reconfigure_port(self):
         pass
@@ -42,54 +88,53 @@ class Serial(SerialBase):
         return url
 
     def _collect(self, now: float) -> None:
-        keep = []
-        for t, data in self._pending:
-            if t <= now:
-                self._rxbuf += data
-            else:
-                keep.append((t, data))
-        self._pending = keep
+        if self.bus is not None:
+            self._rxbuf += self.bus.take(now)
 
     @property
     def in_waiting(self):
-        if not self.is_open:
-            raise PortNotOpenError()
+        self._check()
         self._collect(self.clock())
         return len(self._rxbuf)
 
     def read(self, size=1):
-        if not self.is_open:
-            raise PortNotOpenError()
+        self._check()
         deadline = None if self._timeout is None else self.clock() + self._timeout
         while True:
             now = self.clock()
             self._collect(now)
             if len(self._rxbuf) >= size:
                 break
-            nxt = min((t for t, _ in self._pending), default=None)
+            nxt = self.bus.next_time()
             if nxt is None or (deadline is not None and nxt > deadline):
-                if deadline is not None and deadline > now and nxt is None:
-                    # nothing will ever come (the sim answers synchronously): don't sleep it out
-                    # unless the bus runs on wire time, where the caller expects real waiting
-                    if self.bus is not None and self.bus.wire:
-                        time.sleep(deadline - now)
+                # nothing (more) arrives in time. The instant simulator answers synchronously, so
+                # the caller need not sleep it out; a wire-timed bus waits like a real port.
+                if self.bus.wire and deadline is not None and deadline > now:
+                    self.sim_sleep(deadline - now)
+                    self._collect(self.clock())
                 break
-            time.sleep(max(0.0, nxt - now))
+            self.sim_sleep(max(0.0, nxt - now))
         data = bytes(self._rxbuf[:size])
         del self._rxbuf[:size]
         return data
 
+    #: the stations that are not addressed run their clocks (watchdog, drive ramps) at least this
+    #: often; the addressed one always runs up to the request first
+    TICK_S = 0.01
+
     def write(self, data):
-        if not self.is_open:
-            raise PortNotOpenError()
+        self._check()
         now = self.clock()
-        self.bus.tick(now)
-        self._pending.extend(self.bus.receive(bytes(data), now))
+        if now - self._ticked >= self.TICK_S:
+            self.bus.tick(now)
+            self._ticked = now
+        self.bus.receive(bytes(data), now)
         return len(data)
 
     def reset_input_buffer(self):
+        self._check()
         self._rxbuf.clear()
-        self._pending.clear()
+        self.bus.flush()
 
     def reset_output_buffer(self):
         pass

@@ -16,7 +16,7 @@ import serial.rs485
 
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.fdl.timing import BAUD_NAMES
-from profidrive_cli.link.base import Link, LinkLost
+from profidrive_cli.link.base import Link, LinkLost, precise_sleep
 
 if "profidrive_cli.link" not in serial.protocol_handler_packages:
     serial.protocol_handler_packages.append("profidrive_cli.link")
@@ -114,13 +114,40 @@ class SerialLink(Link):
     def __init__(self, port: str, baud: int = 19200, rs485: bool = False, echo: bool = False):
         self.name = port
         self.baud = baud
+        self.rs485 = rs485
         self.echo = echo
-        self.ser = open_serial(port, baud, rs485)
-        self.is_simulator = port.startswith("sim://")
+        self.echo_errors = 0
+        self.ser = None
+        self._open()
+
+    def _open(self) -> None:
+        self.ser = open_serial(self.name, self.baud, self.rs485)
+        self.is_simulator = self.name.startswith("sim://")
         #: the simulated bus behind sim:// (for tests and fault injection), else None
         self.bus = getattr(self.ser, "bus", None)
         self.instant = self.bus is not None and not self.bus.wire
-        self.echo_errors = 0
+        # the simulator adds no latency of its own; a real port's is unknown
+        self.latency = 0.0 if self.bus is not None else None
+        self._sim_sleep = getattr(self.ser, "sim_sleep", None) if self.bus is not None else None
+        self._clock = getattr(self.ser, "clock", time.monotonic) if self.bus is not None \
+            else time.monotonic
+
+    def now(self) -> float:
+        return self._clock()
+
+    def sleep(self, seconds: float) -> None:
+        if seconds <= 0:
+            return
+        if self._sim_sleep is not None:
+            self._sim_sleep(seconds)
+        else:
+            precise_sleep(seconds)
+
+    def reopen(self) -> None:
+        """Close and open the same port again (after LinkLost). BusError while it is not back.
+        sim:// comes back as a new simulated plant (its stations start in Wait_Prm)."""
+        self.close()
+        self._open()
 
     def write(self, data: bytes) -> None:
         try:
@@ -128,12 +155,12 @@ class SerialLink(Link):
             if self.echo:
                 self._swallow_echo(data)
         except serial.SerialTimeoutException:
-            raise LinkLost(f"{self.name}: write timed out (adapter gone?)") from None
+            raise LinkLost(f"{self.name}: write timed out (adapter gone?)", self.name) from None
         except (serial.SerialException, OSError) as e:
-            raise LinkLost(f"{self.name}: port lost while writing: {e}") from None
+            raise LinkLost(f"{self.name}: port lost while writing: {e}", self.name) from None
 
     def _swallow_echo(self, data: bytes) -> None:
-        deadline = time.monotonic() + 0.05 + len(data) * 11 / self.baud
+        deadline = self.now() + 0.05 + len(data) * 11 / self.baud
         got = bytearray()
         while len(got) < len(data):
             chunk = self.read(deadline)
@@ -145,18 +172,18 @@ class SerialLink(Link):
 
     def read(self, deadline: float) -> bytes:
         try:
-            return read_available(self.ser, deadline - time.monotonic())
+            return read_available(self.ser, deadline - self.now())
         except (serial.SerialException, OSError) as e:
-            raise LinkLost(f"{self.name}: port lost while reading: {e}") from None
+            raise LinkLost(f"{self.name}: port lost while reading: {e}", self.name) from None
         except TypeError:
             # pyserial raises TypeError from os.read on a closed fd in some versions
-            raise LinkLost(f"{self.name}: port closed") from None
+            raise LinkLost(f"{self.name}: port closed", self.name) from None
 
     def flush_input(self) -> None:
         try:
             self.ser.reset_input_buffer()
         except (serial.SerialException, OSError) as e:
-            raise LinkLost(f"{self.name}: port lost: {e}") from None
+            raise LinkLost(f"{self.name}: port lost: {e}", self.name) from None
 
     def close(self) -> None:
         try:

@@ -1,13 +1,28 @@
-"""Fault injection on the simulated bus (reference: issue "bus realism").
+"""Fault injection on the simulated bus.
 
-A FaultPlan decides, reply by reply, whether to corrupt, drop, delay or misaddress it, with a seeded
-random generator so runs repeat. URL keys (rates are probabilities per reply, 0..1):
+A FaultPlan decides, reply by reply, whether to corrupt, drop, delay or misaddress it, and, at each
+new Data_Exchange request to a station in data exchange, whether to power-cycle the station or trip
+its drive. A seeded random generator makes runs repeat. URL keys (rates are probabilities, 0..1):
 
-    noise=R      a garbage octet before the reply        flip=R     one bit flipped (FCS error)
-    drop=R       no reply                               late=R     reply after the slot time
-    wrongsa=R    reply with a wrong source address      only=3,5   limit injection to these stations
+    noise=R       a garbage octet before the reply      flip=R        one bit flipped (FCS error)
+    drop=R        no reply                              late=R        reply after the slot time
+    wrongsa=R     reply with a wrong source address     late_ms=MS    how late (default 200 ms)
+    powercycle=R  the station powers off and on: back to Wait_Prm, needs Set_Prm again
+    drivetrip=R   the drive trips (model.trip) and the station flags new diagnosis (DH)
+    tripcode=ADDR:CODE   the alarm drivetrip uses for a station (default: a family overcurrent)
+    only=3,5      limit injection to these stations     seed=N        random seed
 
-Every injection is counted in FaultPlan.counts so tests can check that the master accounted for each.
+Python API: FaultPlan(rates, seed, only, late_s, trip_codes); plan.inject_next(station, kind) queues
+a one-shot injection for the next reply (or Data_Exchange) of that station where it applies.
+
+Every injection is counted in FaultPlan.counts (and per station in FaultPlan.by_station), and
+expected_counters() says what pdrive's master must count for them (fdl/master.py):
+
+    drop, late       one failed attempt: one retry (or a no-answer when the retries are used up)
+    flip, wrongsa    one illegal frame + one failed attempt
+    noise            one illegal frame, the reply behind it is taken (no retry)
+    powercycle       the next Data_Exchange is answered RS: one RS + one re-parameterisation
+    drivetrip        one DH reply (the master then reads the diagnosis)
 """
 
 from __future__ import annotations
@@ -15,51 +30,105 @@ from __future__ import annotations
 import random
 
 from profidrive_cli import UsageError
+from profidrive_cli.fdl import frames as F
 
-URL_KEYS = ("noise", "flip", "drop", "late", "wrongsa", "only")
-KINDS = ("noise", "flip", "drop", "late", "wrongsa")
+REPLY_KINDS = ("noise", "flip", "drop", "late", "wrongsa")
+STATION_KINDS = ("powercycle", "drivetrip")
+KINDS = REPLY_KINDS + STATION_KINDS
+URL_KEYS = KINDS + ("only", "late_ms", "tripcode")
+
+#: alarm used by drivetrip when no tripcode is given: the first of these the profile knows
+DEFAULT_TRIP_CODES = ("OC1", "OC", "E01", "EF0")
+
+
+def default_trip_code(model) -> str:
+    prof = getattr(model, "profile", None)
+    codes = [a.code for a in getattr(prof, "alarms", [])] if prof is not None else []
+    for c in DEFAULT_TRIP_CODES:
+        if c in codes:
+            return c
+    if codes:
+        return codes[0]
+    raise ValueError(f"{getattr(model, 'family', 'this')} station has no alarms to trip")
 
 
 class FaultPlan:
     def __init__(self, rates: dict[str, float] | None = None, seed: int = 1,
-                 only: set[int] | None = None, late_s: float = 0.2):
+                 only: set[int] | None = None, late_s: float = 0.2,
+                 trip_codes: dict[int, str] | None = None):
         self.rates = {k: float(v) for k, v in (rates or {}).items()}
         for k, v in self.rates.items():
             if k not in KINDS:
-                raise ValueError(f"unknown fault kind {k}")
+                raise ValueError(f"unknown fault kind {k} (known: {', '.join(KINDS)})")
             if not 0.0 <= v <= 1.0:
                 raise ValueError(f"{k} rate {v} outside 0..1")
+        if late_s <= 0:
+            raise ValueError(f"late delay {late_s} s must be > 0")
         self.rng = random.Random(seed)
         self.only = only
         self.late_s = late_s
+        self.trip_codes = dict(trip_codes or {})
         self.counts = {k: 0 for k in KINDS}
+        self.by_station: dict[int, dict[str, int]] = {}
         #: one-shot injections queued by tests: list of (station, kind)
         self.queue: list[tuple[int, str]] = []
+        #: (time, station, kind) of every injection, for a test that wants to look closer
+        self.history: list[tuple[float, int, str]] = []
 
+    # -- API ------------------------------------------------------------------------------------
     def inject_next(self, station: int, kind: str) -> None:
         if kind not in KINDS:
-            raise ValueError(f"unknown fault kind {kind}")
+            raise ValueError(f"unknown fault kind {kind} (known: {', '.join(KINDS)})")
         self.queue.append((station, kind))
 
-    def _choose(self, station: int) -> str | None:
+    def expected_counters(self, station: int | None = None) -> dict[str, int]:
+        """What the master's counters must show for the injections so far (all stations, or one):
+        illegal, failed_attempts (= retries + no_answer), rs, reparams, dh."""
+        c = self.counts if station is None else self.by_station.get(station, {})
+        g = lambda k: c.get(k, 0)  # noqa: E731
+        return {"illegal": g("flip") + g("wrongsa") + g("noise"),
+                "failed_attempts": g("drop") + g("flip") + g("late") + g("wrongsa"),
+                "rs": g("powercycle"), "reparams": g("powercycle"), "dh": g("drivetrip")}
+
+    # -- decisions ------------------------------------------------------------------------------
+    def _count(self, station: int, kind: str, t: float) -> None:
+        self.counts[kind] += 1
+        per = self.by_station.setdefault(station, {k: 0 for k in KINDS})
+        per[kind] += 1
+        self.history.append((t, station, kind))
+
+    def _choose(self, station: int, kinds: tuple[str, ...], applicable) -> str | None:
         for i, (st, kind) in enumerate(self.queue):
-            if st == station:
+            if st == station and kind in kinds and applicable(kind):
                 del self.queue[i]
                 return kind
         if self.only is not None and station not in self.only:
             return None
-        for kind in KINDS:
+        for kind in kinds:
             r = self.rates.get(kind, 0.0)
-            if r and self.rng.random() < r:
+            if r and self.rng.random() < r and applicable(kind):
                 return kind
         return None
 
+    def on_request(self, bus, slave, req, t: float) -> None:
+        """A new Data_Exchange request to `slave` in data exchange, before the slave handles it."""
+        kind = self._choose(slave.address, STATION_KINDS, lambda k: True)
+        if kind is None:
+            return
+        self._count(slave.address, kind, t)
+        if kind == "powercycle":
+            slave.power_cycle(t)
+        else:
+            code = self.trip_codes.get(slave.address) or default_trip_code(slave.model)
+            slave.inject_trip(code, t)
+
     def on_reply(self, bus, req, reply: bytes, t: float):
         """-> None (dropped) or (octets, extra delay in seconds)."""
-        kind = self._choose(req.da)
+        sc = reply[:1] == b"\xE5"
+        kind = self._choose(req.da, REPLY_KINDS, lambda k: not (k == "wrongsa" and sc))
         if kind is None:
             return reply, 0.0
-        self.counts[kind] += 1
+        self._count(req.da, kind, t)
         if kind == "drop":
             return None
         if kind == "noise":
@@ -68,22 +137,13 @@ class FaultPlan:
             b = bytearray(reply)
             i = self.rng.randrange(1, len(b)) if len(b) > 1 else 0
             b[i] ^= 1 << self.rng.randrange(8)
-            if bytes(b) == reply:
-                b[0] ^= 0x01
             return bytes(b), 0.0
         if kind == "late":
             return reply, self.late_s
-        if kind == "wrongsa":
-            from profidrive_cli.fdl import frames as F
-            r = F.parse(reply)
-            if r is None or isinstance(r, F.FrameError):
-                return reply, 0.0
-            f, _ = r
-            if f.sd in (F.SC, F.SD4):
-                return reply, 0.0
-            wrong = F.Frame(f.sd, f.da, (f.sa + 1) % 126, f.fc, f.data, f.dsap, f.ssap)
-            return F.encode(wrong, force_sd2=f.sd == F.SD2), 0.0
-        return reply, 0.0
+        # wrongsa (never on an SC: it carries no address)
+        f, _ = F.parse(reply)
+        wrong = F.Frame(f.sd, f.da, (f.sa + 1) % 126, f.fc, f.data, f.dsap, f.ssap)
+        return F.encode(wrong, force_sd2=f.sd == F.SD2), 0.0
 
 
 def plan_from_query(q: dict[str, list[str]], seed: int = 1) -> FaultPlan:
@@ -100,7 +160,22 @@ def plan_from_query(q: dict[str, list[str]], seed: int = 1) -> FaultPlan:
             only = {int(x) for x in q["only"][-1].split(",") if x}
         except ValueError:
             raise UsageError(f"sim URL: only={q['only'][-1]} must be addresses") from None
+    late_s = 0.2
+    if "late_ms" in q:
+        try:
+            late_s = float(q["late_ms"][-1]) / 1000.0
+        except ValueError:
+            raise UsageError(f"sim URL: late_ms={q['late_ms'][-1]} is not a number") from None
+    codes: dict[int, str] = {}
+    for v in q.get("tripcode", []):
+        addr, _, code = v.partition(":")
+        try:
+            codes[int(addr)] = code.strip()
+        except ValueError:
+            raise UsageError(f"sim URL: tripcode={v} must be ADDRESS:CODE") from None
+        if not code.strip():
+            raise UsageError(f"sim URL: tripcode={v} must be ADDRESS:CODE")
     try:
-        return FaultPlan(rates, seed=seed, only=only)
+        return FaultPlan(rates, seed=seed, only=only, late_s=late_s, trip_codes=codes)
     except ValueError as e:
         raise UsageError(f"sim URL: {e}") from None

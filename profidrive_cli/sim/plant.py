@@ -2,7 +2,11 @@
 
     sim://                                   default plant: 3 fuji-g1, 4 fuji-pdp3, 5 toyo, 6 moeller, 7 yaskawa
     sim://?stations=3:fuji-g1,9:yaskawa      choose stations (profile names or aliases)
-    sim://?baud=187500&timing=wire           wire-timed bus (see sim/bus.py)
+    sim://?baud=187500&timing=wire           wire-timed bus (see sim/bus.py); timing=virtual: the same
+                                             on a simulated clock (tests, benchmarks)
+    sim://?tsdr=30                           stations answer 30 bit times after a request (at least
+                                             the min TSDR of Set_Prm; default 11)
+    sim://?drop=0.01&powercycle=0.001&...    fault injection (keys in sim/faults.py)
     sim://?trip=3:OC1                        station 3 starts tripped with alarm OC1
     sim://?faults=6:E01,E05                  station 6's fault history pre-filled (repeat the key per station)
     sim://?wd=0                              (debug) ignore the watchdog... not offered: the sim always enforces it
@@ -25,6 +29,7 @@ from profidrive_cli.sim.slave import SimSlave
 
 DEFAULT_PLANT = ((3, "fuji-g1"), (4, "fuji-pdp3"), (5, "toyo"), (6, "moeller"), (7, "yaskawa"))
 KNOWN_KEYS = {"stations", "baud", "timing", "trip", "faults", "tsdr", "seed"}
+TIMINGS = ("instant", "wire", "virtual")
 
 
 def make_model(profile: Profile, **options) -> SlaveModel:
@@ -91,8 +96,8 @@ def build_bus(url: str, now: float = 0.0) -> SimBus:
     except ValueError as e:
         raise UsageError(f"sim URL: {e}") from None
     timing = q.get("timing", ["instant"])[-1]
-    if timing not in ("instant", "wire"):
-        raise UsageError(f"sim URL: timing must be instant or wire, got {timing!r}")
+    if timing not in TIMINGS:
+        raise UsageError(f"sim URL: timing must be {', '.join(TIMINGS)}, got {timing!r}")
     trips = _per_station(q.get("trip", []), "trip")
     seeded = _per_station(q.get("faults", []), "faults")
     slaves = []
@@ -114,6 +119,38 @@ def build_bus(url: str, now: float = 0.0) -> SimBus:
             addrs[a].model.trip(codes[-1], now)
         except (ValueError, IndexError) as e:
             raise UsageError(f"sim URL: trip for station {a}: {e}") from None
-    tsdr = int(q.get("tsdr", ["11"])[-1])
-    plan = faults_mod.plan_from_query(q, seed=int(q.get("seed", ["1"])[-1])) if fault_keys else None
+    try:
+        tsdr = int(q.get("tsdr", ["11"])[-1])
+        seed = int(q.get("seed", ["1"])[-1])
+    except ValueError:
+        raise UsageError("sim URL: tsdr and seed must be whole numbers") from None
+    if not 11 <= tsdr <= 1023:
+        raise UsageError(f"sim URL: tsdr={tsdr} outside 11..1023 bit times")
+    plan = faults_mod.plan_from_query(q, seed=seed) if fault_keys else None
+    if plan is not None:
+        _check_trip_codes(plan, addrs, faults_mod)
     return SimBus(slaves, baud=baud, timing=timing, tsdr_bits=tsdr, faults=plan)
+
+
+def _check_trip_codes(plan, addrs: dict[int, SimSlave], faults_mod) -> None:
+    """drivetrip needs an alarm each station in scope knows: fill in the defaults, refuse unknown codes."""
+    for a in plan.trip_codes:
+        if a not in addrs:
+            raise UsageError(f"sim URL: tripcode for station {a}, which is not on the bus")
+    if not plan.rates.get("drivetrip") and not plan.trip_codes:
+        return
+    for a, s in addrs.items():
+        if plan.only is not None and a not in plan.only and a not in plan.trip_codes:
+            continue
+        code = plan.trip_codes.get(a)
+        if code is None:
+            try:
+                code = faults_mod.default_trip_code(s.model)
+            except ValueError as e:
+                raise UsageError(f"sim URL: drivetrip: {e} (limit it with only=)") from None
+        prof = getattr(s.model, "profile", None)
+        known = {x.code.upper() for x in getattr(prof, "alarms", [])}
+        if known and code.upper() not in known:
+            raise UsageError(f"sim URL: tripcode {code} unknown for station {a} "
+                             f"({', '.join(sorted(known)[:10])}, ...)")
+        plan.trip_codes[a] = code

@@ -1,9 +1,13 @@
 """Serve a simulated bus to another master through a real byte path: a pty, a TCP port or an
 existing serial device (e.g. one end of a socat pty pair).
 
-The loop reads what the master sends, lets the SimBus answer, and writes each reply when the bus
-says it is complete (at once with timing=instant; after wire time with timing=wire). Watchdogs run on
-the real clock, so a master that stops talking sees its stations fall back to Wait_Prm.
+The loop reads what the master sends, lets the SimBus answer, and writes reply octets when the bus
+says they are complete (at once with timing=instant; octet by octet after wire time with
+timing=wire). Watchdogs run on the real clock, so a master that stops talking (or whose link is
+lost) sees its stations fall back to Wait_Prm and its drives react as to a communication loss.
+
+The byte path can go away and come back: a TCP client may disconnect and another connect; a serial
+device that disappears (USB pulled, the socat of a pty pair ended) is reopened when it returns.
 """
 
 from __future__ import annotations
@@ -53,6 +57,8 @@ class TcpEndpoint:
         self.srv.listen(1)
         self.address = self.srv.getsockname()
         self.conn: socket.socket | None = None
+        #: clients accepted so far
+        self.accepted = 0
 
     def read(self, timeout: float) -> bytes:
         socks = [self.conn] if self.conn else [self.srv]
@@ -62,14 +68,14 @@ class TcpEndpoint:
         if self.conn is None:
             self.conn, _ = self.srv.accept()
             self.conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            self.accepted += 1
             return b""
         try:
             data = self.conn.recv(4096)
         except OSError:
             data = b""
         if not data:
-            self.conn.close()
-            self.conn = None
+            self.drop()
         return data
 
     def write(self, data: bytes) -> None:
@@ -77,51 +83,87 @@ class TcpEndpoint:
             try:
                 self.conn.sendall(data)
             except OSError:
+                self.drop()
+
+    def drop(self) -> None:
+        """Close the client connection (the converter lost it); the next client is accepted."""
+        if self.conn is not None:
+            try:
                 self.conn.close()
-                self.conn = None
+            except OSError:
+                pass
+            self.conn = None
 
     def close(self) -> None:
-        if self.conn:
-            self.conn.close()
+        self.drop()
         self.srv.close()
 
 
 class SerialEndpoint:
-    """An existing serial device through pyserial (8E1)."""
+    """An existing serial device through pyserial (8E1). When it goes away, it is reopened as soon
+    as the same path opens again."""
+
+    RETRY_S = 0.2
 
     def __init__(self, port: str, baud: int):
         from profidrive_cli.link.serial_link import open_serial
-        self.ser = open_serial(port, baud)
+        self._open = lambda: open_serial(port, baud)
+        self.ser = self._open()
         self.path = port
+        self.reopened = 0
+        self._retry_at = 0.0
+
+    def _lost(self) -> None:
+        try:
+            self.ser.close()
+        except Exception:
+            pass
+        self.ser = None
+        self._retry_at = time.monotonic() + self.RETRY_S
 
     def read(self, timeout: float) -> bytes:
         from profidrive_cli.link.serial_link import read_available
+        if self.ser is None:
+            if time.monotonic() >= self._retry_at:
+                try:
+                    self.ser = self._open()
+                    self.reopened += 1
+                except Exception:
+                    self._retry_at = time.monotonic() + self.RETRY_S
+            if self.ser is None:
+                time.sleep(timeout)
+                return b""
         try:
             return read_available(self.ser, timeout)
         except Exception:
-            time.sleep(timeout)     # the master side closed: keep serving for the next one
+            self._lost()        # the device went away: keep serving, reopen when it is back
             return b""
 
     def write(self, data: bytes) -> None:
-        self.ser.write(data)
+        if self.ser is None:
+            return
+        try:
+            self.ser.write(data)
+        except Exception:
+            self._lost()
 
     def close(self) -> None:
-        self.ser.close()
+        if self.ser is not None:
+            self.ser.close()
 
 
 def serve(bus: SimBus, endpoint, stop=lambda: False, poll: float = 0.005, clock=time.monotonic) -> None:
-    """Run until stop() is true. Replies go out in the order and at the times the bus gives."""
-    pending: list[tuple[float, bytes]] = []
+    """Run until stop() is true. Reply octets go out at the times the bus gives."""
     while not stop():
         timeout = poll
-        if pending:
-            timeout = max(0.0, min(poll, pending[0][0] - clock()))
+        nxt = bus.next_time()
+        if nxt is not None:
+            timeout = max(0.0, min(poll, nxt - clock()))
         data = endpoint.read(timeout)
         now = clock()
         bus.tick(now)
         if data:
-            pending.extend(bus.receive(data, now))
-            pending.sort(key=lambda p: p[0])
-        now = clock()
-        while pending and pending[0][0] <= now:
-            endpoint.write(pending.pop(0)[1])
+            bus.receive(data, now)
+        out = bus.take(clock())
+        if out:
+            endpoint.write(out)

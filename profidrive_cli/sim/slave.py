@@ -14,19 +14,29 @@ from profidrive_cli.fdl.fcb import SlaveFcb
 from profidrive_cli.sim.model import SlaveModel
 
 WAIT_PRM, WAIT_CFG, DATA_EXCH = "Wait_Prm", "Wait_Cfg", "Data_Exch"
+DEFAULT_MIN_TSDR = 11        # bit times, until a Set_Prm says otherwise
 
 
 class SimSlave:
-    def __init__(self, address: int, model: SlaveModel, set_slave_add_supported: bool = False):
+    def __init__(self, address: int, model: SlaveModel, set_slave_add_supported: bool = False,
+                 response_bits: int | None = None):
         self.address = address
         self.model = model
         self.set_slave_add_supported = set_slave_add_supported
         self.fcb = SlaveFcb()
         self.powered = True
+        #: the station's own response time in bit times (None: the bus default); it never answers
+        #: earlier than the min TSDR from Set_Prm
+        self.response_bits = response_bits
         #: counters a test can look at
         self.stats = {"requests": 0, "repeats": 0, "prm_rejected": 0, "cfg_rejected": 0,
-                      "watchdog_expired": 0, "data_exchange": 0}
+                      "watchdog_expired": 0, "data_exchange": 0, "power_cycles": 0, "trips": 0}
         self.power_on(0.0)
+
+    @property
+    def reply_delay_bits(self) -> int:
+        """TSDR this station keeps before its reply: its own time, at least min TSDR."""
+        return max(self.response_bits or 0, self.min_tsdr)
 
     # -- state ------------------------------------------------------------------------------
     def power_on(self, now: float) -> None:
@@ -42,13 +52,22 @@ class SimSlave:
         self.group = 0
         self.outputs = b""
         self.inputs = b""
+        self.min_tsdr = DEFAULT_MIN_TSDR
         self.fcb.reset()
 
     def power_cycle(self, now: float) -> None:
         """Power off and on: back to Wait_Prm, needs a new Set_Prm (fault injection)."""
+        self.stats["power_cycles"] += 1
         if self.state == DATA_EXCH:
             self.model.on_leave_data_exchange(now, "power cycle")
         self.power_on(now)
+
+    def inject_trip(self, alarm: str, now: float) -> None:
+        """The drive trips (model.trip) and the station flags new diagnosis: the next
+        Data_Exchange reply is DH, so the master reads Slave_Diag (fault injection)."""
+        self.stats["trips"] += 1
+        self.model.trip(alarm, now)
+        self.diag_pending = True
 
     def _leave(self, now: float, reason: str, to: str = WAIT_PRM) -> None:
         if self.state == DATA_EXCH:
@@ -210,6 +229,8 @@ class SimSlave:
         self.master = req.sa
         self.wd_s = prm.wd_ms / 1000.0 if prm.wd_ms is not None else None
         self.sync, self.freeze, self.group = prm.sync, prm.freeze, prm.group
+        if prm.min_tsdr:                    # 0 = keep the value in use
+            self.min_tsdr = prm.min_tsdr
         self.last_seen = now
         return sc
 
