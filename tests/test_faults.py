@@ -266,3 +266,28 @@ def test_soak_on_the_instant_bus():
     for _ in range(30):
         m.poll()
     _check_accounting(m, plan)
+
+
+# -- the counters in pdrive scan / diag -------------------------------------------------------------
+
+def test_scan_and_diag_show_the_injected_faults_in_their_counters():
+    import json
+
+    from click.testing import CliRunner
+
+    from profidrive_cli.cli.main import cli
+    url = "sim://?stations=3:fuji-g1,4:fuji-pdp3&noise=1&only=3"
+    r = CliRunner().invoke(cli, ["scan", "--port", url, "--json"])
+    assert r.exit_code == 0, r.output
+    st = {s["address"]: s["counters"] for s in json.loads(r.output)["stations"]}
+    # noise before each of station 3's two replies (FDL status, Slave_Diag)
+    assert (st[3]["requests"], st[3]["illegal"], st[3]["retries"]) == (2, 2, 0)
+    assert (st[4]["requests"], st[4]["illegal"], st[4]["retries"]) == (2, 0, 0)
+    r = CliRunner().invoke(cli, ["scan", "--port", "sim://?stations=3:fuji-g1&noise=1", "--to", "5"])
+    assert r.exit_code == 0, r.output
+    assert "counters" in r.output and "2 illegal" in r.output       # (the cell may wrap)
+    r = CliRunner().invoke(cli, ["diag", "3", "--port", "sim://?stations=3:fuji-g1&drop=0.5&seed=3",
+                                 "--retries", "5"])
+    assert r.exit_code == 0, r.output
+    line = [ln for ln in r.output.splitlines() if ln.startswith("counters:")][0]
+    assert "2 req" in line and "retry" in line

@@ -76,13 +76,15 @@ def scan_cmd(opts, first, last, gsd_dir):
                      f" at {BAUD_NAMES[opts.baud_rate()]} (try --baud auto)"))
         raise SystemExit(1)
     t = Table(title=f"{opts.port} at {BAUD_NAMES[used_baud]}: {len(result)} station(s)")
-    for col in ("addr", "type", "ident", "DP state", "device"):
+    from profidrive_cli.fdl.master import format_counters
+    for col in ("addr", "type", "ident", "DP state", "device", "counters"):
         t.add_column(col)
     for e in result:
         t.add_row(str(e.address), e.station_type,
                   f"0x{e.ident:04X}" if e.ident is not None else "",
                   e.diag.state_words(opts.master_address) if e.diag else e.error,
-                  device_name(e.ident, gsd_dir) if e.ident is not None else "")
+                  device_name(e.ident, gsd_dir) if e.ident is not None else "",
+                  format_counters(e.counters))
     out.print(t)
 
 
@@ -122,7 +124,8 @@ def diag_cmd(opts, address, gsd_dir):
         out.print(f"Get_Cfg: {cfg.hex(' ') or '(empty)'}")
         for m in _cfg_json(cfg):
             out.print(f"  {m.get('octets')}: {m.get('text', m.get('error'))}")
-    out.print("counters: " + ", ".join(f"{k} {v}" for k, v in counters.items() if v))
+    from profidrive_cli.fdl.master import format_counters
+    out.print(f"counters: {format_counters(counters)}")
 
 
 def _unit_diag_texts(d, gsd_dir) -> list[str]:
