@@ -4,6 +4,7 @@ survives between commands, like `pdrive sim`), for each of the five default stat
 import json
 
 import pytest
+
 from profidrive_cli.cli.main import main
 
 RAMPS = {3: ("F07", "F08"), 4: ("F07", "F08"), 6: ("F002", "F003"), 7: ("C1-01", "C1-02")}

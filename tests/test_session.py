@@ -34,8 +34,8 @@ def sim(monkeypatch):
     return buses
 
 
-def master(port="sim://"):
-    return BusOptions(port, "19200", 2, None, None, False, False, 0, False).open_master()
+def master(port="sim://", address=2):
+    return BusOptions(port, "19200", address, None, None, False, False, 0, False).open_master()
 
 
 def session(address=None, port="sim://", **kw):
@@ -95,6 +95,18 @@ def test_absent_station_is_one_line():
     with pytest.raises(BusError, match="station 42 does not answer"):
         with session(42):
             pass
+
+
+def test_a_station_locked_by_another_master_fails_fast(sim):
+    other = DriveSession(master(address=1), 3, handle_signals=False, cycle_hz=0).open()
+    try:
+        with pytest.raises(BusError, match="did not reach data exchange: locked by master 1"):
+            with session(3):
+                pass
+    finally:
+        other.close()
+    with session(3) as s:                           # released: free for us
+        assert s.status().status.state
 
 
 def test_profile_of_another_family_names_the_station_family():

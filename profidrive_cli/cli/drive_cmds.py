@@ -9,7 +9,6 @@ from __future__ import annotations
 import functools
 import math
 import sys
-import time
 
 import click
 from rich.markup import escape
@@ -33,7 +32,7 @@ def drive_options(f):
                      type=click.IntRange(10, 650000), help="Slave watchdog in ms (always armed).")(f)
     f = click.option("--format", "fmt", default=None, metavar="NAME",
                      help="Layout by name (e.g. extended1, toyo); default: the profile's.")(f)
-    f = click.option("--ppo", type=click.IntRange(1, 5), default=None, help="PPO type N (layout pppN).")(f)
+    f = click.option("--ppo", type=click.IntRange(1, 5), default=None, help="PPO type N (layout ppoN).")(f)
     f = click.option("--profile", "profile_name", default=None, metavar="NAME",
                      help="Drive profile (default: from the station's ident).")(f)
     return f

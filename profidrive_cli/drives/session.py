@@ -76,12 +76,12 @@ import signal
 import threading
 import time
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
 from profidrive_cli import BusError, PdriveError, UsageError
-from profidrive_cli.drives.base import DriveError, DriveStatus, FaultRecord, ParamError, ParamValue
+from profidrive_cli.drives.base import DriveError, DriveStatus, FaultRecord, ParamValue
 from profidrive_cli.drives.profile import Profile, all_profiles, load_profile, profile_for_ident
 
 DEFAULT_WATCHDOG_MS = 500
