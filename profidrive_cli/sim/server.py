@@ -59,8 +59,16 @@ class TcpEndpoint:
         self.conn: socket.socket | None = None
         #: clients accepted so far
         self.accepted = 0
+        self._drop_requested = False
+
+    def request_drop(self) -> None:
+        """Ask the serving loop (maybe another thread) to drop the client at its next read."""
+        self._drop_requested = True
 
     def read(self, timeout: float) -> bytes:
+        if self._drop_requested:
+            self._drop_requested = False
+            self.drop()
         socks = [self.conn] if self.conn else [self.srv]
         r, _, _ = select.select(socks, [], [], timeout)
         if not r:
