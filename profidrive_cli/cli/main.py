@@ -28,6 +28,7 @@ _COMMANDS = [
     ("profidrive_cli.cli.sim_cmd", "sim_cmd"),
     ("profidrive_cli.cli.gsd_cmd", "gsd_group"),
     ("profidrive_cli.cli.decode_cmd", "decode_cmd"),
+    ("profidrive_cli.cli.doctor_cmd", "doctor_cmd"),
     ("profidrive_cli.cli.checklist_cmd", "checklist_group"),
     ("profidrive_cli.cli.drive_cmds", "run_cmd"),
     ("profidrive_cli.cli.drive_cmds", "status_cmd"),

@@ -1,0 +1,64 @@
+"""pdrive doctor: check a serial setup (permission, baud rates, USB latency, echo, RS-485) and
+recommend slot time and retries. The checks live in link/doctor.py; this is rendering only."""
+
+from __future__ import annotations
+
+import click
+from rich.table import Table
+
+from profidrive_cli import UsageError
+from profidrive_cli.cli.common import bus_options, emit_json, out
+
+_MARK = {"ok": "[green]ok[/green]", "warn": "[yellow]warn[/yellow]", "fail": "[red]FAIL[/red]",
+         "info": "info", "skip": "[dim]skip[/dim]"}
+
+
+@click.command("doctor")
+@click.option("--probe-address", default=126, show_default=True, type=click.IntRange(0, 126),
+              help="Address for the one FDL status request of the echo test (sent only when the "
+                   "line is quiet; pick one no station uses).")
+@click.option("--listen", "listen_s", default=0.3, show_default=True, type=click.FloatRange(0.0, 10.0),
+              help="Seconds to listen for other traffic before transmitting.")
+@bus_options
+def doctor_cmd(opts, probe_address, listen_s):
+    """Check a serial setup for PROFIBUS: permission, DP baud rates, FTDI latency_timer, echo,
+    kernel RS-485; recommend --slot-time and --retries. Without --port: list the ports."""
+    from profidrive_cli.link.doctor import diagnose
+    if not opts.port:
+        _list_ports(opts)
+        return
+    if opts.baud == "auto":
+        raise UsageError("doctor needs one baud rate for its echo test (--baud RATE)")
+    rep = diagnose(opts.port, opts.baud_rate(), opts.master_address, probe_address, opts.rs485,
+                   listen_s)
+    if opts.json:
+        emit_json(rep.as_dict())
+    else:
+        t = Table(title=f"pdrive doctor: {rep.port} ({rep.kind})", show_lines=False)
+        t.add_column("check")
+        t.add_column("")
+        t.add_column("finding", overflow="fold")
+        for c in rep.checks:
+            t.add_row(c.name, _MARK.get(c.status, c.status), c.detail)
+        out.print(t)
+        if rep.recommend.get("options"):
+            out.print(f"recommended: [bold]{rep.recommend['options']}[/bold]")
+            out.print(f"  why: {rep.recommend['why']}", markup=False)
+    if rep.failed:
+        raise SystemExit(1)
+
+
+def _list_ports(opts) -> None:
+    import serial.tools.list_ports
+    ports = sorted(serial.tools.list_ports.comports(), key=lambda p: p.device)
+    rows = [{"port": p.device, "description": p.description, "hwid": p.hwid} for p in ports]
+    if opts.json:
+        emit_json({"port": None, "ports": rows,
+                   "hint": "pdrive doctor --port PORT checks one port; --port sim:// is the simulator"})
+        return
+    if not rows:
+        out.print("no serial ports found; pdrive doctor --port PORT checks one (sim:// is the simulator)")
+        return
+    for r in rows:
+        out.print(f"{r['port']}  {r['description']}  {r['hwid']}", markup=False)
+    out.print("pdrive doctor --port PORT checks one of them")
