@@ -189,3 +189,22 @@ def test_global_control_keeps_tid2_on_virtual_clock():
 def test_timing_url_errors(url, msg):
     with pytest.raises(UsageError, match=msg):
         build_bus(url)
+
+
+def test_station_channel_keeps_its_period_from_the_first_cycle():
+    m = _master("sim://?stations=3:fuji-g1&timing=virtual", 19200)
+    m.add_station(3, SlaveConfig(ident=0xFD01, cfg=bytes.fromhex("F3F1")))
+    m.bring_up(3)
+    ch = m.channel(3, 0.05)
+    starts = []
+    real = m.exchange
+
+    def timed(address, outputs=None):
+        starts.append(m.link.now())
+        return real(address, outputs)
+    m.exchange = timed
+    for _ in range(10):
+        ch.exchange(bytes(12))
+    gaps = [b - a for a, b in zip(starts, starts[1:])]
+    assert gaps == pytest.approx([0.05] * 9, abs=1e-9)
+    m.link.close()

@@ -298,7 +298,7 @@ class StationChannel:
         self.master = master
         self.address = address
         self.period = period
-        self._next = 0.0
+        self._next: float | None = None
         self.cycles = 0
 
     def now(self) -> float:
@@ -307,6 +307,8 @@ class StationChannel:
     def exchange(self, outputs: bytes) -> bytes:
         if self.period:
             now = self.now()
+            if self._next is None:
+                self._next = now             # the first exchange goes at once, the next a period later
             if now < self._next:
                 self.master.link.sleep(self._next - now)
             self._next = max(self._next + self.period, self.now())
