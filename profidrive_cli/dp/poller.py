@@ -94,7 +94,8 @@ class Master:
         now = self.link.now()
         out, deadline = self.fdl.request(da, function, data, dsap, ssap, now, expect)
         self.link.write(out)
-        self._sent(out)
+        if not self.link.instant:
+            self._sent(out)
         while True:
             chunk = self.link.read(self.fdl.deadline)
             now = self.link.now()

@@ -93,12 +93,14 @@ class Serial(SerialBase):
 
     @property
     def in_waiting(self):
-        self._check()
-        self._collect(self.clock())
+        if self._unplugged or not self.is_open:
+            self._check()
+        self._rxbuf += self.bus.take(self.clock())
         return len(self._rxbuf)
 
     def read(self, size=1):
-        self._check()
+        if self._unplugged or not self.is_open:
+            self._check()
         deadline = None if self._timeout is None else self.clock() + self._timeout
         while True:
             now = self.clock()
@@ -123,7 +125,8 @@ class Serial(SerialBase):
     TICK_S = 0.01
 
     def write(self, data):
-        self._check()
+        if self._unplugged or not self.is_open:
+            self._check()
         now = self.clock()
         if now - self._ticked >= self.TICK_S:
             self.bus.tick(now)
