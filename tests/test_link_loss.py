@@ -303,3 +303,39 @@ def test_reconnect_names_stations_that_do_not_come_back():
     link.name = "sim://?stations=4:fuji-pdp3"            # the port comes back with another plant
     with pytest.raises(BusError, match="after reconnecting: station 3 did not reach data exchange"):
         m.reconnect(timeout=0.3)
+
+
+def test_run_reconnect_resumes_and_leaves_the_drive_stopped():
+    """`pdrive run --reconnect`: the converter goes away mid-run; the run says so, waits, resumes
+    data exchange when it returns, does not restart the motor, and ends with it stopped."""
+    sim = _start(["sim", "--json", "--listen", "127.0.0.1:0", "--plant", "sim://?stations=3:fuji-g1"])
+    host, port = sim.info["port"].removeprefix("socket://").split(":")
+    proxy = Proxy((host, int(port)))
+    url = f"socket://127.0.0.1:{proxy.port}"
+    try:
+        run = subprocess.Popen(pdrive_cmd() + ["run", "3", "--port", url, "--hz", "20", "--duration", "30",
+                                               "--reconnect", "20", "--json", "--watchdog", "200", "--yes"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        events = []
+        for line in run.stdout:
+            ev = json.loads(line)
+            events.append(ev)
+            if ev.get("event") == "update" and ev.get("running") and ev.get("actual_hz", 0) > 1.0:
+                break
+        proxy.cut()
+        threading.Timer(1.0, proxy.resume).start()
+        rest, errtext = run.communicate(timeout=60)
+        events += [json.loads(x) for x in rest.splitlines() if x.strip()]
+        phases = [e.get("phase", "") for e in events if e.get("event") == "phase"]
+        assert any(p.startswith("link lost") for p in phases), phases
+        assert any(p.startswith("link restored") for p in phases), phases
+        end = events[-1]
+        assert end["event"] == "end" and end["stopped"] and "link lost and restored" in end["reason"]
+        assert run.returncode == 1
+        st = subprocess.run(pdrive_cmd() + ["status", "3", "--port", url, "--json"],
+                            capture_output=True, text=True, timeout=60)
+        assert st.returncode == 0, st.stderr
+        assert json.loads(st.stdout)["running"] is False
+    finally:
+        proxy.cut()
+        _stop(sim)

@@ -19,6 +19,7 @@ from profidrive_cli.cli.common import bus_options, emit_json, err, out, station_
 from profidrive_cli.cli import render_drive as R
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.drives.session import DriveSession, SessionTerminated
+from profidrive_cli.link.base import LinkLost
 
 
 # =============================================================================================
@@ -122,10 +123,14 @@ def _split_address(args: tuple[str, ...], min_rest: int) -> tuple[int | None, li
               help="Data_Exchange rate (default: the fastest the bus allows, at most 100/s; 50/s on sim://).")
 @click.option("--yes", is_flag=True, help="Do not ask before running a drive on a real port.")
 @click.option("--log", "log_path", default=None, metavar="FILE.csv", help="CSV of every cycle.")
+@click.option("--reconnect", "reconnect_s", type=float, default=None, metavar="S", is_flag=False,
+              flag_value=60.0, help="When the port goes away, wait up to S s (default 60) for it to "
+              "come back and resume data exchange; the drive, stopped meanwhile by its watchdog, is "
+              "not restarted.")
 @bus_options
 @_terminations
 def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, reverse, duration, fmax,
-            cycle_hz, yes, log_path):
+            cycle_hz, yes, log_path, reconnect_s):
     """Run a drive at a speed and show it live; stops it safely on every exit.
 
     Keys (on a terminal): up/down change the speed, r reverses, space stops/starts, q quits.
@@ -186,7 +191,25 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
                 keys.__enter__()
             try:
                 while True:
-                    sample = s.poll()
+                    try:
+                        sample = s.poll()
+                    except LinkLost as e:
+                        if reconnect_s is None:
+                            raise
+                        # the link is gone: nothing can be sent; the station's watchdog stops
+                        # the drive. Wait for the port, resume data exchange, never restart.
+                        view.set_phase(f"link lost ({e}); reconnecting for up to {reconnect_s:g} s")
+                        s.master.reconnect(timeout=reconnect_s)
+                        view.set_phase("link restored: the drive was stopped by its watchdog "
+                                       "and is not restarted")
+                        rep = s.stop()
+                        running = False
+                        if keys is None:
+                            end["reason"] = f"link lost and restored; stop: {rep.how}"
+                            exit_code = 1
+                            break
+                        view.set_phase(f"stopped ({rep.how}) — space starts, q quits")
+                        continue
                     view.update(sample)
                     if running and view.reached_after is None and _at_reference(sample):
                         view.reached_after = round(sample.t - t_start, 3)
