@@ -91,12 +91,16 @@ def load_yaml_text(text: str, path: str | Path = "<string>") -> Any:
         raise DataFileError(path, None, f"YAML error: {e}") from None
 
 
-def load_yaml(path: str | Path) -> Any:
+def read_text(path: str | Path) -> str:
+    """A UTF-8 data file's text; DataFileError (one line, with the path) when it cannot be read."""
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        return p.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise DataFileError(p, None, "file not found") from None
     except (OSError, UnicodeDecodeError) as e:
         raise DataFileError(p, None, f"cannot read: {e}") from None
-    return load_yaml_text(text, p)
+
+
+def load_yaml(path: str | Path) -> Any:
+    return load_yaml_text(read_text(path), Path(path))

@@ -34,3 +34,18 @@ def socat_pair(tmp_path):
     yield a, b
     p.terminate()
     p.wait(timeout=5)
+
+
+@pytest.fixture
+def sim(monkeypatch):
+    """sim:// whose plant survives closing the port (like `pdrive sim`), one bus per URL."""
+    from profidrive_cli.sim import plant
+    real = plant.build_bus
+    buses = {}
+
+    def cached(url, now=0.0):
+        if url not in buses:
+            buses[url] = real(url, now)
+        return buses[url]
+    monkeypatch.setattr(plant, "build_bus", cached)
+    return buses

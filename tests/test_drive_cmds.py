@@ -14,18 +14,6 @@ WRITABLE = {3: ("F07", "2.5", 6.0), 4: ("E31", "40", 60.0), 6: ("F002", "1.5", 5
 TRIPS = {3: "OC1", 4: "OU2", 5: "OC", 6: "E05", 7: "EF0"}
 
 
-@pytest.fixture
-def sim(monkeypatch):
-    from profidrive_cli.sim import plant
-    real = plant.build_bus
-    buses = {}
-
-    def cached(url, now=0.0):
-        if url not in buses:
-            buses[url] = real(url, now)
-        return buses[url]
-    monkeypatch.setattr(plant, "build_bus", cached)
-    return buses
 
 
 class Result:

@@ -19,19 +19,6 @@ DEFAULT = {3: "fuji-opc-g1-pdp", 4: "fuji-opc-pdp3", 5: "toyo-pbus66z", 6: "moel
 RAMPS = {3: ("F07", "F08"), 4: ("F07", "F08"), 6: ("F002", "F003"), 7: ("C1-01", "C1-02")}
 
 
-@pytest.fixture
-def sim(monkeypatch):
-    """sim:// whose plant survives closing the port (like `pdrive sim`), one bus per URL."""
-    from profidrive_cli.sim import plant
-    real = plant.build_bus
-    buses = {}
-
-    def cached(url, now=0.0):
-        if url not in buses:
-            buses[url] = real(url, now)
-        return buses[url]
-    monkeypatch.setattr(plant, "build_bus", cached)
-    return buses
 
 
 def master(port="sim://", address=2):

@@ -24,7 +24,7 @@ from typing import Any
 import yaml
 
 from profidrive_cli import PdriveError, UsageError
-from profidrive_cli.datafile import DataFileError, LineDict, LineList, load_yaml_text
+from profidrive_cli.datafile import DataFileError, LineDict, LineList, load_yaml_text, read_text
 
 STEP_TYPES = ("expect_identity", "read", "write", "save", "run", "stop", "expect_status", "wait", "faults",
               "reset_fault", "prompt", "note")
@@ -182,14 +182,7 @@ def parse_var_assignments(items: list[str] | tuple[str, ...]) -> dict:
 
 
 def load_checklist(path: str | Path, overrides: dict | None = None) -> Checklist:
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise DataFileError(p, None, "file not found") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise DataFileError(p, None, f"cannot read: {e}") from None
-    return load_checklist_text(text, p, overrides)
+    return load_checklist_text(read_text(path), Path(path), overrides)
 
 
 def load_checklist_text(text: str, path: str | Path = "<string>", overrides: dict | None = None) -> Checklist:

@@ -70,7 +70,7 @@ def validate_cmd(ctx, file, variables, as_json):
         con.print(f"  station {escape(s.name)}: address {s.address}, {s.profile.name} ({escape(s.profile.title)}), "
                   f"ident {idt['ident']}, layout {s.layout}: {len(s.steps)} steps")
         for st in s.steps:
-            extra = f"  [dim](on_fail: continue)[/]" if st.on_fail == "continue" else ""
+            extra = "  [dim](on_fail: continue)[/]" if st.on_fail == "continue" else ""
             con.print(f"    {st.index:>2}. {escape(st.label)}  [dim]line {st.line}[/]{extra}")
 
 

@@ -7,7 +7,7 @@ GSD's module bytes verbatim (including 0x00 empty-slot identifiers).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 
 class CfgError(ValueError):

@@ -17,10 +17,10 @@ import time
 
 from profidrive_cli import BusError
 from profidrive_cli.dp import services as S
-from profidrive_cli.dp.station import (CFG_FAULT, DATA_EXCH, LOCKED, PRM_FAULT, RELEASED, STATE_WORDS, DpRequest, Event,
+from profidrive_cli.dp.station import (CFG_FAULT, LOCKED, PRM_FAULT, RELEASED, STATE_WORDS, Event,
                                        SlaveConfig, StationMachine)
 from profidrive_cli.fdl import frames as F
-from profidrive_cli.fdl.master import NO_ANSWER, REPLY, FdlMaster, Outcome, format_counters
+from profidrive_cli.fdl.master import REPLY, FdlMaster, Outcome, format_counters
 from profidrive_cli.fdl.timing import BusParams
 from profidrive_cli.link.base import Link, LinkLost
 

@@ -10,7 +10,7 @@ next_request(now) says what to send; on_outcome(request, outcome, now) takes wha
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from profidrive_cli.dp import services as S
 from profidrive_cli.fdl import frames as F

@@ -11,7 +11,6 @@ goes through the same calls with codes like "PNU23", "PNU947[9]" or "REG0x0180" 
 
 from __future__ import annotations
 
-import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from typing import Any, Protocol

@@ -517,11 +517,7 @@ class FujiDrive(pd.ProfidriveDrive):
         return self.fault_record(pos, raw, self._mcode(mparam))
 
     def status(self) -> DriveStatus:
-        if self.pkw is not None and self._fmax is None:
-            try:
-                self.max_frequency()
-            except DriveError:
-                self._fmax = float(self.profile.max_frequency_default)
+        self._ensure_fmax()
         st = self.cycle()
         if st.fault:
             rec = self.current_alarm()

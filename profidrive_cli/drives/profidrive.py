@@ -1404,12 +1404,16 @@ class ProfidriveDrive(Drive):
             raise ParamError(f"PZD{slot + 2} mapping: {res.describe_error()}", res.error)
 
     # -- motion ------------------------------------------------------------------------------
-    def status(self) -> DriveStatus:
+    def _ensure_fmax(self) -> None:
+        """Learn the drive's max frequency once (PKW), else fall back to the profile default."""
         if self.pkw is not None and self._fmax is None:
             try:
                 self.max_frequency()
             except DriveError:
                 self._fmax = float(self.profile.max_frequency_default)
+
+    def status(self) -> DriveStatus:
+        self._ensure_fmax()
         st = self.cycle()
         if st.fault and self.pkw is not None:
             try:
@@ -1634,11 +1638,15 @@ def describe_n2(word: int, max_hz: float | None, label: str, what: str, max_note
     return d
 
 
+def check_direction(direction: str) -> None:
+    if direction not in ("request", "response"):
+        raise UsageError(f"direction must be request or response, got {direction!r}")
+
+
 def decode_area(profile, layout: str, direction: str, data: bytes, *,
                 max_hz: float | None = None) -> dict:
     """Decode a captured PPO output (direction "request") or input ("response") area."""
-    if direction not in ("request", "response"):
-        raise UsageError(f"direction must be request or response, got {direction!r}")
+    check_direction(direction)
     cfg = config(profile)
     ppo = ppo_layout(profile, layout)
     try:

@@ -31,7 +31,6 @@ from __future__ import annotations
 import functools
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 from profidrive_cli.data import profiles_dir
 from profidrive_cli.datafile import DataFileError, LineDict, load_yaml

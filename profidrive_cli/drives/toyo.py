@@ -520,8 +520,7 @@ def describe_pkw(profile, words, direction: str, *, max_hz: float | None = None)
 def decode_area(profile, layout: str, direction: str, data: bytes, *,
                 max_hz: float | None = None) -> dict:
     """Decode a captured output (request) or input (response) area of any PBUS66-Z layout."""
-    if direction not in ("request", "response"):
-        raise UsageError(f"direction must be request or response, got {direction!r}")
+    pd.check_direction(direction)
     tc = toyo_config(profile)
     if layout not in tc.layouts:
         raise UsageError(f"profile {profile.name} has no layout '{layout}' (known: {', '.join(tc.layouts)})")
