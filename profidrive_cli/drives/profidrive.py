@@ -1221,19 +1221,25 @@ class ProfidriveDrive(Drive):
         return next_control_word(stw, self.target, self.control_extra_bits(),
                                  previous=self.last_ctw, moving=moving)
 
-    def cycle(self) -> DriveStatus:
-        ctw = self._control_word()
+    def _exchange_area(self, pzd_words: list[int]) -> PpoArea:
+        """One Data_Exchange: this cycle's PKW words + `pzd_words` out, the decoded input area
+        back; a PKW answer that completes is kept for the waiting request."""
         pkw_words = self.pkw.outputs() if self.pkw else None
-        out = PpoArea(pkw_words, [ctw, self.reference] + list(self.pzd_out))
+        out = PpoArea(pkw_words, pzd_words)
         inputs = self.channel.exchange(encode_area(self.ppo, out, "request"))
-        self.last_ctw = ctw
         area = decode_area_bytes(self.ppo, inputs, "response")
         self.last_area = area
-        self.last_stw = area.word1
         if self.pkw is not None and area.pkw is not None:
             res = self.pkw.feed(area.pkw, self.channel.now())
             if res is not None:
                 self._pkw_result = res
+        return area
+
+    def cycle(self) -> DriveStatus:
+        ctw = self._control_word()
+        area = self._exchange_area([ctw, self.reference] + list(self.pzd_out))
+        self.last_ctw = ctw
+        self.last_stw = area.word1
         st = self._decode_status(area)
         self.last_status = st
         return st

@@ -760,20 +760,12 @@ class ToyoDrive(pd.ProfidriveDrive):
 
     def cycle(self) -> DriveStatus:
         ctw = self._control_word() if self.mode == 0 else 0
-        pkw_words = self.pkw.outputs() if self.pkw else None
-        out = pd.PpoArea(pkw_words, self._out_words(ctw))
-        inputs = self.channel.exchange(pd.encode_area(self.ppo, out, "request"))
+        area = self._exchange_area(self._out_words(ctw))
         if self._reset_pulse:
             self._reset_pulse -= 1
         self.last_ctw = ctw
-        area = pd.decode_area_bytes(self.ppo, inputs, "response")
-        self.last_area = area
         if self.mode == 0:
             self.last_stw = area.word1
-        if self.pkw is not None and area.pkw is not None:
-            res = self.pkw.feed(area.pkw, self.channel.now())
-            if res is not None:
-                self._pkw_result = res
         st = self._decode_status(area)
         self.last_status = st
         return st
