@@ -49,3 +49,14 @@ def sim(monkeypatch):
         return buses[url]
     monkeypatch.setattr(plant, "build_bus", cached)
     return buses
+
+
+def drive_on_bus(master, address, profile, layout, wd_ms=500):
+    """A Drive for `profile`/`layout` on a station of `master`, brought to Data_Exchange."""
+    from profidrive_cli.dp.poller import StationChannel
+    from profidrive_cli.dp.station import SlaveConfig
+    from profidrive_cli.drives import make_drive
+    master.add_station(address, SlaveConfig(ident=profile.ident, cfg=profile.layouts[layout].cfg,
+                                            wd_ms=wd_ms))
+    master.bring_up(address)
+    return make_drive(StationChannel(master, address), profile, layout)

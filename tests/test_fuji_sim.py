@@ -7,6 +7,7 @@ numbers, the control-source rules, o27/o28 communication loss, o30, y97 and o32.
 import pytest
 
 from profidrive_cli.drives import make_drive
+from conftest import drive_on_bus
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.base import DriveError, ParamError
 from profidrive_cli.drives.profile import load_profile
@@ -405,8 +406,7 @@ def test_comm_loss_setting_and_ppo_setting_texts():
 # ---------------------------------------------------------------------------------------------
 
 def test_over_sim_bus_both_cards():
-    from profidrive_cli.dp.poller import Master, StationChannel
-    from profidrive_cli.dp.station import SlaveConfig
+    from profidrive_cli.dp.poller import Master
     from profidrive_cli.fdl.timing import BusParams
     from profidrive_cli.link import open_link
 
@@ -416,9 +416,7 @@ def test_over_sim_bus_both_cards():
         m = Master(link, BusParams.for_baud(1500000, retries=1))
         for addr, name, layout, code in ((3, "fuji-g1", "ppo1", "OC1"), (4, "fuji-pdp3", "ppo2", "OL4")):
             prof = load_profile(name)
-            m.add_station(addr, SlaveConfig(ident=prof.ident, cfg=prof.layouts[layout].cfg, wd_ms=500))
-            m.bring_up(addr)
-            d = make_drive(StationChannel(m, addr), prof, layout)
+            d = drive_on_bus(m, addr, prof, layout)
             st = d.status()
             assert st.fault and st.fault_code == code
             assert not d.reset_fault().fault

@@ -5,13 +5,15 @@ from pathlib import Path
 import pytest
 
 from profidrive_cli.drives import make_drive
+from conftest import drive_on_bus
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives import toyo
 from profidrive_cli.drives.base import DriveError, ParamError
-from profidrive_cli.drives.profile import load_profile, load_profile_file
+from profidrive_cli.drives.profile import load_profile
 from profidrive_cli.sim import plant
 from profidrive_cli.sim.direct import DirectChannel
 from profidrive_cli.sim.toyo import ToyoModel, make_model
+from test_toyo_vectors import variant
 
 ROOT = Path(__file__).resolve().parent.parent
 PROFILE_PATH = ROOT / "profiles" / "toyo-pbus66z.yaml"
@@ -37,16 +39,6 @@ def setup(layout="ppo1", prof=None, **opts):
     model = make_model(prof, **opts)
     ch = Recorder(model, prof.layouts[layout].cfg)
     return prof, model, ch, make_drive(ch, prof, layout)
-
-
-def variant(tmp_path, **changes):
-    text = PROFILE_PATH.read_text(encoding="utf-8")
-    for old, new in changes.items():
-        assert old in text
-        text = text.replace(old, new)
-    f = tmp_path / "toyo-variant.yaml"
-    f.write_text(text, encoding="utf-8")
-    return load_profile_file(f)
 
 
 def pkw_of(prof, area: bytes) -> tuple:
@@ -354,8 +346,7 @@ def test_big_endian_override_end_to_end(tmp_path):
 
 
 def test_over_sim_bus_mode0_and_mode1():
-    from profidrive_cli.dp.poller import Master, StationChannel
-    from profidrive_cli.dp.station import SlaveConfig
+    from profidrive_cli.dp.poller import Master
     from profidrive_cli.fdl.timing import BusParams
     from profidrive_cli.link import open_link
 
@@ -364,9 +355,7 @@ def test_over_sim_bus_mode0_and_mode1():
         m = Master(link, BusParams.for_baud(1500000, retries=1))
         prof = load_profile("toyo")
         for addr, layout, code in ((5, "ppo2", "OV"), (8, "toyo", "UV")):
-            m.add_station(addr, SlaveConfig(ident=prof.ident, cfg=prof.layouts[layout].cfg, wd_ms=500))
-            m.bring_up(addr)
-            d = make_drive(StationChannel(m, addr), prof, layout)
+            d = drive_on_bus(m, addr, prof, layout)
             st = d.status()
             assert st.fault and st.fault_code == code
             assert not d.reset_fault().fault

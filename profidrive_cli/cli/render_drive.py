@@ -17,6 +17,7 @@ from rich.table import Table
 from rich.text import Text
 
 from profidrive_cli.cli.common import emit_json, err, out
+from profidrive_cli.drives.base import value_text  # noqa: F401  (also used as R.value_text)
 
 SPARK = "▁▂▃▄▅▆▇█"
 
@@ -270,16 +271,6 @@ def print_status(d: dict) -> None:
     out.print(f"  status bits not set: {escape(', '.join(off) or '(none)')}")
     raw = ", ".join(f"{k} 0x{v & 0xFFFF:04X}" for k, v in d["raw"].items() if isinstance(v, int))
     out.print(f"  words:  {escape(raw)}")
-
-
-def value_text(v, unit: str = "") -> str:
-    if v is None:
-        return "-"
-    if isinstance(v, float):
-        t = f"{v:.6g}"
-    else:
-        t = str(v)
-    return f"{t} {unit}" if unit else t
 
 
 def param_table(values) -> Table:

@@ -57,6 +57,14 @@ class DriveStatus:
         return not self.running and (self.speed_percent in (None, 0.0) or abs(self.speed_percent) < 0.05)
 
 
+def value_text(v, unit: str = "") -> str:
+    """An engineering value with its unit for messages and tables ("6 Hz", "2.5 s", "-")."""
+    if v is None:
+        return "-"
+    t = f"{v:.6g}" if isinstance(v, float) else str(v)
+    return f"{t} {unit}" if unit else t
+
+
 @dataclass
 class ParamValue:
     code: str            # native code as the profile names it ("F03")

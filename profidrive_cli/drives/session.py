@@ -81,7 +81,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from profidrive_cli import BusError, PdriveError, UsageError
-from profidrive_cli.drives.base import DriveError, DriveStatus, FaultRecord, ParamValue
+from profidrive_cli.drives.base import DriveError, DriveStatus, FaultRecord, ParamValue, value_text
 from profidrive_cli.drives.profile import Profile, all_profiles, load_profile, profile_for_ident
 
 DEFAULT_WATCHDOG_MS = 500
@@ -374,16 +374,6 @@ def suggest_codes(profile: Profile, code: str, n: int = 5) -> list[str]:
 def profiles_with_code(code: str) -> list[Profile]:
     c = code.strip().lower()
     return [p for p in all_profiles() if any(k.lower() == c for k in p.parameters)]
-
-
-def _fmt_value(v, unit: str = "") -> str:
-    if v is None:
-        return "-"
-    if isinstance(v, float):
-        text = f"{v:.6g}"
-    else:
-        text = str(v)
-    return f"{text} {unit}" if unit else text
 
 
 def _same_value(a, b, scale: float | None) -> bool:
@@ -1300,7 +1290,7 @@ class DriveSession:
             if _same_value(back.value, r.file_value, pdef.scale if pdef is not None else None):
                 r.result = "applied"
             else:
-                r.result, r.reason = "refused", f"the drive kept {_fmt_value(back.value, back.unit)}"
+                r.result, r.reason = "refused", f"the drive kept {value_text(back.value, back.unit)}"
         return rows
 
 
