@@ -2,16 +2,21 @@
 
 from __future__ import annotations
 
+import contextlib
+import signal
+import threading
 
 import click
 from rich.progress import Progress
 from rich.table import Table
 
 from profidrive_cli import BusError, UsageError
-from profidrive_cli.cli.common import bus_options, emit_json, err, hex_option, out, station_address
+from profidrive_cli.cli.common import (bus_options, confirm_real_port, emit_json, err, hex_option, out,
+                                       station_address)
 from profidrive_cli.cli.names import device_name
 from profidrive_cli.dp.cfg import CfgError, decode_cfg
 from profidrive_cli.fdl.timing import BAUD_NAMES, BAUD_RATES
+from profidrive_cli.link.base import LinkLost
 
 
 def _diag_json(d) -> dict | None:
@@ -149,9 +154,20 @@ def _unit_diag_texts(d, gsd_dir) -> list[str]:
               help="Slave watchdog in ms (always armed).")
 @click.option("--gsd", "gsd_file", default=None, help="GSD file or ident for --module.")
 @click.option("--module", "modules", multiple=True, help="GSD module name (with --gsd).")
+@click.option("--yes", is_flag=True, help="Do not ask before sending --out on a real port.")
+@click.option("--stop-timeout", "stop_timeout", default=30.0, show_default=True,
+              type=click.FloatRange(0.0, 3600.0), metavar="S",
+              help="At the end, hold the safe state at most S s waiting for the inputs to settle.")
 @bus_options
-def io_cmd(opts, address, cfg_hex, ident_hex, prm_hex, out_hex, count, wd_ms, gsd_file, modules):
-    """Bring any DP slave to Data_Exchange with a given configuration and show its inputs."""
+def io_cmd(opts, address, cfg_hex, ident_hex, prm_hex, out_hex, count, wd_ms, gsd_file, modules, yes,
+           stop_timeout):
+    """Bring any DP slave to Data_Exchange with a given configuration and show its inputs.
+
+    It ends like a PLC going to STOP: outputs all zero and Global_Control Clear_Data for at least
+    one watchdog period (and, after non-zero --out, until the inputs settle), then the station is
+    released. Also on Ctrl-C, SIGTERM and errors.
+    """
+    from profidrive_cli.dp.cfg import io_sizes
     from profidrive_cli.dp.station import SlaveConfig
     station_address(address)
     cfg = hex_option(cfg_hex, "--cfg")
@@ -165,38 +181,171 @@ def io_cmd(opts, address, cfg_hex, ident_hex, prm_hex, out_hex, count, wd_ms, gs
         raise UsageError("give the configuration with --cfg HEX (or --gsd FILE --module NAME)")
     try:
         decode_cfg(cfg)
-    except CfgError as e:
+        _, output_len = io_sizes(cfg)
+    except (CfgError, ValueError) as e:
         raise UsageError(f"--cfg: {e}") from None
+    ident = None
+    if ident_hex:
+        try:
+            ident = int(ident_hex, 16)
+        except ValueError:
+            raise UsageError(f"--ident: not hex: {ident_hex}") from None
+    outputs = hex_option(out_hex, "--out")
+    if outputs is not None and len(outputs) != output_len:
+        raise UsageError(f"--out has {len(outputs)} octets, the configuration has "
+                         f"{output_len} output octets")
+    port = opts.require_port()
+    if outputs is not None:
+        # any --out on a real port asks: whatever the station drives acts on these octets
+        confirm_real_port(port, yes, f"send outputs {outputs.hex(' ') or '(none)'} to station "
+                                     f"{address} on {port} (a drive there may start)",
+                          cancelled="cancelled: nothing was sent")
+    moved = outputs is not None and any(outputs)
     master = opts.open_master()
+    ender = _SafeEnd(master, address, wd_ms / 1000.0, stop_timeout, wait_settle=moved)
     try:
-        if ident_hex:
+        with _terminations_raise():
             try:
-                ident = int(ident_hex, 16)
-            except ValueError:
-                raise UsageError(f"--ident: not hex: {ident_hex}") from None
-        else:
-            d = master.slave_diag(address)
-            if d is None:
-                raise BusError(f"station {address} does not answer on {opts.port}")
-            ident = d.ident
-        sc = SlaveConfig(ident=ident, cfg=cfg, user_prm=prm, wd_ms=wd_ms)
-        st = master.add_station(address, sc)
-        outputs = hex_option(out_hex, "--out")
-        if outputs is not None and len(outputs) != st.output_len:
-            raise UsageError(f"--out has {len(outputs)} octets, the configuration has "
-                             f"{st.output_len} output octets")
-        master.bring_up(address, timeout=3.0, fail_fast=True)
-        rows = []
-        for i in range(count):
-            inputs = master.exchange(address, outputs if outputs is not None else None)
-            rows.append(inputs)
-            if opts.json:
-                emit_json({"address": address, "cycle": i, "inputs": inputs.hex(" ")})
-            else:
-                out.print(f"{i:>5}  in: {inputs.hex(' ') or '(none)'}")
-        master.release(address)
+                if ident is None:
+                    d = master.slave_diag(address)
+                    if d is None:
+                        raise BusError(f"station {address} does not answer on {opts.port}")
+                    ident = d.ident
+                sc = SlaveConfig(ident=ident, cfg=cfg, user_prm=prm, wd_ms=wd_ms)
+                master.add_station(address, sc)
+                master.bring_up(address, timeout=3.0, fail_fast=True)
+                for i in range(count):
+                    inputs = master.exchange(address, outputs)
+                    if opts.json:
+                        emit_json({"address": address, "cycle": i, "inputs": inputs.hex(" ")})
+                    else:
+                        out.print(f"{i:>5}  in: {inputs.hex(' ') or '(none)'}")
+            except LinkLost:
+                ender.link_lost = True
+                raise
+            finally:
+                ender.run()
+    except _Terminated as e:
+        err.print(f"terminated (signal {e.signum})")
+        raise SystemExit(128 + e.signum) from None
     finally:
         master.link.close()
+    if ender.problem:
+        raise BusError(f"station {address}: {ender.problem}")
+
+
+class _Terminated(BaseException):
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = int(signum)
+
+
+@contextlib.contextmanager
+def _terminations_raise():
+    """SIGTERM raises _Terminated in the main thread while the block runs (SIGINT: KeyboardInterrupt)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def on_term(signum, frame):
+        raise _Terminated(signum)
+    old = signal.signal(signal.SIGTERM, on_term)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
+class _SafeEnd:
+    """How io leaves a station, like a PLC going to STOP: outputs all zero and Global_Control
+    Clear_Data (reference §3.5), kept up by Data_Exchange (the watchdog stays fed) for at least one
+    watchdog period and — after non-zero outputs — until the inputs have not changed for one
+    watchdog period (a drive reports its speed falling), at most `stop_timeout` s; then Set_Prm with
+    Unlock_Req. A drive stopped this way is stopped, not tripped by communication loss.
+
+    While it runs, a further Ctrl-C / SIGTERM only shortens the wait for the inputs to settle."""
+
+    PACE_S = 0.01
+
+    def __init__(self, master, address: int, wd_s: float, stop_timeout: float, wait_settle: bool):
+        self.master = master
+        self.address = address
+        self.wd_s = wd_s
+        self.stop_timeout = max(stop_timeout, wd_s)
+        self.wait_settle = wait_settle
+        self.link_lost = False
+        self.problem: str | None = None
+        self.hurry = False
+        self.done = False
+
+    def run(self) -> None:
+        if self.done:
+            return
+        self.done = True
+        if self.link_lost:
+            err.print(f"station {self.address}: link lost: nothing can be sent; the station's "
+                      f"watchdog ({self.wd_s * 1000:g} ms) sets its outputs to the safe state")
+            return
+        st = self.master.stations.get(self.address)
+        if st is None:
+            return
+        old = self._guard()
+        try:
+            self._hold(st)
+        except BaseException as e:                 # never mask what ended the exchange
+            if not isinstance(e, Exception):
+                self.hurry = True
+            self.problem = f"the safe state could not be held ({e})"
+            err.print(f"station {self.address}: {self.problem}")
+        finally:
+            try:
+                self.master.release(self.address)
+            except Exception:
+                pass
+            self._unguard(old)
+
+    def _hold(self, st) -> None:
+        from profidrive_cli.dp import services as S
+        m, link = self.master, self.master.link
+        zeros = bytes(st.output_len)
+        st.set_outputs(zeros)
+        if not st.in_data_exchange:
+            return                                     # never reached data exchange: nothing to hold
+        m.global_control(S.GC_CLEAR, da=self.address)
+        t0 = link.now()
+        next_gc = t0 + self.wd_s / 2
+        prev, last_change = None, t0
+        while True:
+            inputs = m.exchange(self.address, zeros)
+            now = link.now()
+            if inputs != prev:
+                prev, last_change = inputs, now
+            if now >= next_gc:                         # a master in CLEAR repeats Global_Control
+                m.global_control(S.GC_CLEAR, da=self.address)
+                next_gc = now + self.wd_s / 2
+            held = now - t0
+            if held >= self.wd_s and (not self.wait_settle or self.hurry
+                                      or now - last_change >= self.wd_s):
+                break
+            if held >= self.stop_timeout:
+                self.problem = (f"inputs still changing after {held:.1f} s of safe outputs "
+                                f"(--stop-timeout {self.stop_timeout:g}); released anyway")
+                break
+            link.sleep(self.PACE_S)
+        err.print(f"station {self.address}: outputs zero and Global_Control Clear for "
+                  f"{held:.2f} s, then released")
+
+    def _guard(self):
+        if threading.current_thread() is not threading.main_thread():
+            return None
+
+        def hurry(signum, frame):
+            self.hurry = True
+        return {s: signal.signal(s, hurry) for s in (signal.SIGINT, signal.SIGTERM)}
+
+    def _unguard(self, old) -> None:
+        for s, h in (old or {}).items():
+            signal.signal(s, h if h is not None else signal.SIG_DFL)
 
 
 def _from_gsd(gsd_file, modules):

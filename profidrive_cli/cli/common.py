@@ -121,3 +121,35 @@ def hex_option(text: str | None, what: str) -> bytes | None:
 
 def is_tty() -> bool:
     return sys.stdout.isatty() and os.environ.get("CI") is None
+
+
+def is_sim_port(port: str | None) -> bool:
+    """The built-in simulated bus: nothing real can move, so nothing asks."""
+    return (port or "").startswith("sim://")
+
+
+def can_ask() -> bool:
+    """A person can answer: the answer is read from stdin and the question shown on stderr."""
+    return sys.stdin.isatty() and sys.stderr.isatty()
+
+
+def confirm_real_port(port: str | None, yes: bool, text: str,
+                      cancelled: str = "cancelled: nothing was written") -> None:
+    """Before anything moves a drive or changes a setting on a real port: --yes, or 'y' on a terminal.
+
+    sim:// never asks. Without a terminal to ask (stdin or stderr not a terminal) and without --yes:
+    UsageError (exit 2) before anything is sent. 'n' (or end of input) on the terminal: exit 1.
+    """
+    if yes or is_sim_port(port):
+        return
+    if not can_ask():
+        raise UsageError(f"{text}: this writes to a real port; add --yes to confirm "
+                         f"(no terminal to ask)")
+    try:
+        ok = click.confirm(f"{text}. Continue?", default=False, err=True)
+    except click.exceptions.Abort:
+        ok = False
+        err.print()
+    if not ok:
+        err.print(cancelled)
+        raise SystemExit(1)

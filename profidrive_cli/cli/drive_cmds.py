@@ -15,7 +15,8 @@ from rich.markup import escape
 from rich.progress import Progress
 
 from profidrive_cli import BusError, UsageError
-from profidrive_cli.cli.common import bus_options, emit_json, err, out, station_address
+from profidrive_cli.cli.common import (bus_options, confirm_real_port, emit_json, err, out,
+                                       station_address)
 from profidrive_cli.cli import render_drive as R
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.drives.session import DriveSession, SessionTerminated
@@ -43,22 +44,12 @@ def _message(text: str) -> None:
     err.print(escape(text))
 
 
-def _is_sim(opts) -> bool:
-    return (opts.port or "").startswith("sim://")
-
-
 def _confirmer(opts, yes: bool, what: str):
-    """before_connect callback: writing to a real port needs --yes or a 'y' on the terminal."""
+    """before_connect callback: writing to a real port needs --yes or a 'y' on the terminal
+    (common.confirm_real_port: the same question io and checklist run ask)."""
     def before(session):
-        if yes or _is_sim(opts):
-            return
-        text = (f"{what} — station {session.address} ({session.profile.name}) on {opts.port}")
-        if not sys.stdin.isatty():
-            raise UsageError(f"{text}: this writes to a real port; add --yes to confirm "
-                             f"(no terminal to ask)")
-        if not click.confirm(f"{text}. Continue?", default=False, err=True):
-            err.print("cancelled: nothing was written")
-            raise SystemExit(1)
+        confirm_real_port(opts.port, yes, f"{what} — station {session.address} "
+                                          f"({session.profile.name}) on {opts.port}")
     return before
 
 
