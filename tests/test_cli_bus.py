@@ -73,7 +73,7 @@ def test_io_wrong_cfg_reports_cfg_fault_in_words():
 def test_io_right_cfg_exchanges_data():
     r = run("io", "7", "--port", "sim://", "--cfg", "5F 6F", "--count", "3", "--json")
     assert r.exit_code == 0, r.output
-    lines = [json.loads(x) for x in r.output.splitlines()]
+    lines = [json.loads(x) for x in r.stdout.splitlines()]      # stdout: JSON only
     assert len(lines) == 3 and all(len(bytes.fromhex(x["inputs"].replace(" ", ""))) == 32 for x in lines)
 
 
@@ -118,3 +118,30 @@ def test_diag_names_unit_diagnosis_from_the_gsd():
     d = json.loads(r.output)
     assert "Ext_Diag" in d["diag"]["flags"]
     assert any("timeout" in t.lower() for t in d["unit_diag"])
+
+
+# =============================================================================================
+# io ends like a PLC going to STOP (issue 12 finding 1); sim:// never asks
+# =============================================================================================
+
+# Moeller PPO1 (Chk_Cfg F3 F1): PKW 8 octets, then STW 047F (operate, bus control) and HSW 0x2000 = 50 %
+MOELLER_RUN = "0000 0000 0000 0000 047F 2000"
+
+
+def _moeller_ready(sim_port):
+    """Station 6 in S2 (ready to switch on): a short run leaves it there, so 047F starts it."""
+    r = run("run", "6", "--hz", "5", "--duration", "0.2", "--port", sim_port)
+    assert r.exit_code == 0, r.output
+
+
+def test_io_on_sim_needs_no_yes_and_ends_with_the_drive_stopped_not_tripped(sim):
+    port = "sim://?stations=6:moeller"
+    _moeller_ready(port)
+    r = run("io", "6", "--cfg", "F3F1", "--out", MOELLER_RUN, "--count", "200", "--port", port, "--json")
+    assert r.exit_code == 0, r.output
+    last = bytes.fromhex(json.loads(r.stdout.splitlines()[-1])["inputs"].replace(" ", ""))
+    # ZSW 0x0237: operation enabled (bit 2) with bus control; HIW above 0: the motor was turning
+    assert last[8] & 0x02 and last[9] & 0x04 and int.from_bytes(last[10:12], "big") > 0
+    assert "Global_Control Clear" in r.stderr and "released" in r.stderr
+    st = json.loads(run("status", "6", "--port", port, "--json").output)
+    assert st["stopped"] and not st["running"] and not st["fault"] and st["speed_hz"] == 0.0, st

@@ -173,3 +173,94 @@ def test_link_loss_during_run_names_the_watchdog():
     assert "Traceback" not in err
     end = json.loads(out.strip().splitlines()[-1])
     assert end["stop"]["how"] == "not sent (link lost)" and not end["stopped"]
+
+
+# =============================================================================================
+# pdrive io with outputs that start a drive (issue 12 finding 1): asks on a real port; ends with the
+# outputs safe (zero + Global_Control Clear) until the drive has stopped, then releases it
+# =============================================================================================
+
+# Moeller PPO1 (Chk_Cfg F3 F1): PKW 8 octets, STW 047F (operate, bus control), HSW 0x2000 = 50 % (25 Hz)
+MOELLER_RUN = "0000 0000 0000 0000 047F 2000"
+
+
+def _moeller_ready(port):
+    """Station 6 without a fault and in S2 (ready to switch on), where 047F starts it."""
+    r = pdrive("faults", "6", "--clear", "--yes", "--port", port)
+    assert r.returncode == 0, r.stderr
+    r = pdrive("run", "6", "--hz", "5", "--duration", "0.2", "--yes", "--port", port)
+    assert r.returncode == 0, r.stderr
+    assert _status(port, 6)["state"].startswith("S2")
+
+
+def _actual_word(json_line: str) -> int:
+    inputs = bytes.fromhex(json.loads(json_line)["inputs"].replace(" ", ""))
+    return int.from_bytes(inputs[10:12], "big")
+
+
+def test_io_outputs_without_a_terminal_and_without_yes_move_nothing(pty_sim):
+    _moeller_ready(pty_sim)
+    r = pdrive("io", "6", "--cfg", "F3F1", "--out", MOELLER_RUN, "--count", "300", "--port", pty_sim)
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert "add --yes" in r.stderr and r.stdout == ""
+    st = _status(pty_sim, 6)
+    assert st["stopped"] and not st["running"] and not st["fault"] and st["speed_hz"] == 0.0, st
+    assert st["state"].startswith("S2")                  # not started, not tripped
+
+
+def test_io_with_yes_ends_with_the_drive_stopped_and_no_fault(pty_sim):
+    _moeller_ready(pty_sim)
+    r = pdrive("io", "6", "--cfg", "F3F1", "--out", MOELLER_RUN, "--count", "300", "--port", pty_sim,
+               "--yes", "--json")
+    assert r.returncode == 0, r.stderr
+    assert max(_actual_word(x) for x in r.stdout.splitlines()) > 0      # the motor did turn
+    st = _status(pty_sim, 6)
+    assert st["stopped"] and not st["running"] and not st["fault"] and st["speed_hz"] == 0.0, st
+    f = pdrive("faults", "6", "--port", pty_sim, "--json")
+    assert f.returncode == 0 and json.loads(f.stdout)["current"]["fault"] is False, f.stdout
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+def test_signal_during_io_leaves_the_drive_stopped_without_a_trip(pty_sim, sig):
+    _moeller_ready(pty_sim)
+    p = subprocess.Popen(pdrive_cmd() + ["io", "6", "--cfg", "F3F1", "--out", MOELLER_RUN, "--count",
+                                         "100000000", "--port", pty_sim, "--yes", "--json"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True)
+    try:
+        end = time.monotonic() + 20
+        while time.monotonic() < end:
+            line = p.stdout.readline()
+            if not line:
+                break
+            if _actual_word(line) > 0x0800:              # above 1/8 of the max frequency: turning
+                break
+        else:
+            pytest.fail("io never turned the motor")
+        p.send_signal(sig)
+        out, err = p.communicate(timeout=30)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == (143 if sig == signal.SIGTERM else 130), err
+    assert "Traceback" not in err and "Global_Control Clear" in err
+    st = _status(pty_sim, 6)
+    assert st["stopped"] and not st["running"] and not st["fault"] and st["speed_hz"] == 0.0, st
+
+
+def test_the_question_needs_a_terminal_on_stderr_too(pty_sim):
+    """stdin a terminal but stderr a pipe: the question would be invisible; refuse instead of waiting."""
+    mfd, sfd = os.openpty()
+    try:
+        p = subprocess.Popen(pdrive_cmd() + ["run", "3", "--hz", "5", "--duration", "0.2", "--port", pty_sim],
+                             stdin=sfd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            out, err = p.communicate(timeout=20)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.communicate()
+            pytest.fail("pdrive waited for an answer to a question nobody can see")
+    finally:
+        os.close(sfd)
+        os.close(mfd)
+    assert p.returncode == 2 and "add --yes" in err, err
+    assert _status(pty_sim, 3)["speed_hz"] == 0.0
