@@ -166,7 +166,7 @@ def test_wrong_expectation_fails_at_that_step_and_the_drive_is_left_stopped(pty_
     f = tmp_path / "wrong.yaml"
     f.write_text(FAILING)
     js, md, xml = tmp_path / "r.json", tmp_path / "r.md", tmp_path / "r.xml"
-    r = run("checklist", "run", f, "--port", pty_sim, "--report", js, "--report", md, "--report", xml)
+    r = run("checklist", "run", f, "--port", pty_sim, "--yes", "--report", js, "--report", md, "--report", xml)
     assert r.exit_code == 1, r.output + r.stderr
     assert f"step 4 ({f}:8): F07 = 0.5 s, expected 5 s" in r.output
     doc = json.loads(js.read_text())
@@ -187,14 +187,14 @@ def test_broken_checklist_gives_file_line_exit_2_and_writes_nothing(pty_sim, tmp
     broken = good.replace("  - stop\n", "  - stop\n  - write: {param: F07, valeu: 2}\n")
     f = tmp_path / "broken.yaml"
     f.write_text(broken)
-    r = run("checklist", "run", f, "--port", pty_sim, "--report", tmp_path / "r.json")
+    r = run("checklist", "run", f, "--port", pty_sim, "--yes", "--report", tmp_path / "r.json")
     assert r.exit_code == 2
     assert f"{f}:11: step 6 (write): unknown field 'valeu' (did you mean value?)" in r.stderr
     assert not (tmp_path / "r.json").exists()
     assert param_of(pty_sim, "F07") == 6.0 and param_of(pty_sim, "F08") == 6.0      # factory values
     # the same checklist without the broken step does write (so the check above can fail)
     f.write_text(good)
-    r = run("checklist", "run", f, "--port", pty_sim)
+    r = run("checklist", "run", f, "--port", pty_sim, "--yes")
     assert r.exit_code == 0, r.output + r.stderr
     assert param_of(pty_sim, "F07") == 0.5
 
@@ -206,7 +206,7 @@ def test_signal_during_a_run_stops_the_drive_and_still_reports(pty_sim, tmp_path
         "  - run: {hz: 10, duration: 0.3}\n", "  - note: long run\n  - run: {hz: 10, duration: 60}\n"))
     js = tmp_path / "r.json"
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    p = subprocess.Popen(pdrive_cmd() + ["checklist", "run", str(f), "--port", pty_sim, "--report", str(js)],
+    p = subprocess.Popen(pdrive_cmd() + ["checklist", "run", str(f), "--port", pty_sim, "--yes", "--report", str(js)],
                          stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
     seen = []
     try:

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from profidrive_cli import UsageError
 from profidrive_cli.checklist.runner import ERROR, FAILED, NOT_RUN, PASSED, SKIPPED, RunResult, StationResult
+from profidrive_cli.outfile import write_text_atomic
 
 FORMATS = {".json": "json", ".md": "markdown", ".markdown": "markdown", ".xml": "junit"}
 
@@ -36,14 +37,12 @@ def render(result: RunResult, fmt: str) -> str:
 
 
 def write_report(result: RunResult, path: str | Path) -> Path:
+    """Render and write one report: a temporary file beside `path`, renamed over it only when
+    complete (outfile.write_text_atomic). Creates no directory. OutputPathError / OutputWriteError
+    (the old file untouched) on failure."""
     p = Path(path)
     text = render(result, report_format(p))
-    if p.parent and not p.parent.exists():
-        p.parent.mkdir(parents=True, exist_ok=True)
-    tmp = p.with_name(p.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(p)
-    return p
+    return write_text_atomic(p, text, what="--report")
 
 
 # =============================================================================================

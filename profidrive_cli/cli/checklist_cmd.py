@@ -9,9 +9,11 @@ from rich.console import Console
 from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
-from profidrive_cli import UsageError
+from profidrive_cli import PdriveError, UsageError
 from profidrive_cli.checklist.spec import ChecklistError, load_checklist, parse_var_assignments
-from profidrive_cli.cli.common import BusOptions, bus_options, emit_json, is_tty
+from profidrive_cli.cli.common import (BusOptions, bus_options, can_ask, confirm_real_port, emit_json,
+                                       is_sim_port, is_tty)
+from profidrive_cli.outfile import check_output_path
 
 _MARK = {"passed": "[green]✔[/]", "failed": "[red]✘[/]", "error": "[red]✘[/]", "not run": "[dim]–[/]",
          "skipped": "[dim]–[/]", "interrupted": "[yellow]![/]"}
@@ -102,6 +104,7 @@ def run_cmd(ctx, opts: BusOptions, file, reports, dry_run, yes, variables, cycle
     for r in reports:
         try:
             report_format(r)                      # a bad extension is a usage error before anything runs
+            check_output_path(r, "--report")      # so is a report that cannot be written (no mkdir)
         except UsageError as e:
             _usage(ctx, str(e))
     cl = _load(ctx, file, variables)
@@ -121,6 +124,18 @@ def run_cmd(ctx, opts: BusOptions, file, reports, dry_run, yes, variables, cycle
         port = opts.port or cl.port
         if not port:
             _usage(ctx, f"no port: give --port (or PDRIVE_PORT), or put `port:` in {cl.path}")
+    if not dry_run and not is_sim_port(port):
+        # a real port: one question before the first station is opened (--yes answers it)
+        if not yes and can_ask():
+            for line in _plan_lines(cl):
+                click.echo(line, err=True)
+        try:
+            confirm_real_port(port, yes, f"run checklist {cl.name!r} on {port} "
+                                         f"({len(cl.stations)} station{'s' if len(cl.stations) != 1 else ''}"
+                                         f"{': it writes settings and runs motors' if _moves(cl) else ''})",
+                              cancelled="cancelled: nothing was sent to any drive")
+        except UsageError as e:
+            _usage(ctx, f"{cl.path}: {e}; nothing was sent to any drive")
     baud = opts.baud
     if cl.baud and _defaulted(ctx, "baud"):
         baud = cl.baud
@@ -155,20 +170,46 @@ def run_cmd(ctx, opts: BusOptions, file, reports, dry_run, yes, variables, cycle
                 master.link.close()
             except Exception:
                 pass
-        written = []
+        written, failed = [], []
         for r in reports:
             try:
                 written.append(str(write_report(result, r)))
+            except PdriveError as e:              # OutputPathError / OutputWriteError: one line each
+                failed.append(str(e))
             except OSError as e:
-                click.echo(f"pdrive: --report {r}: {e.strerror or e}", err=True)
+                failed.append(f"--report {r}: {e.strerror or e}")
     if opts.json:
         from profidrive_cli.checklist.report import to_json
         sys.stdout.write(to_json(result))
     else:
         _summary(con, result, written)
+    if failed:
+        # the last word is that the report is missing, never PASSED
+        sys.stdout.flush()
+        for line in failed:
+            click.echo(f"pdrive: {line}", err=True)
+        click.echo(f"pdrive: {len(failed)} report{'s' if len(failed) != 1 else ''} could not be written: "
+                   f"the run ({result.status}) is not fully recorded", err=True)
     if result.interrupted:
         ctx.exit(143 if result.interrupted == "SIGTERM" else 130)
-    ctx.exit(0 if result.passed else 1)
+    ctx.exit(0 if result.passed and not failed else 1)
+
+
+def _moves(cl) -> bool:
+    return any(st.type in _MOVES for s in cl.stations for st in s.steps)
+
+
+_MOVES = ("write", "save", "run", "reset_fault")
+
+
+def _plan_lines(cl) -> list[str]:
+    """What the checklist will do that changes something, per station (for the question)."""
+    lines = []
+    for s in cl.stations:
+        acts = [st.label for st in s.steps if st.type in _MOVES]
+        lines.append(f"  station {s.name} (address {s.address}, {s.profile.name}): "
+                     + ("; ".join(acts) if acts else "reads only"))
+    return lines
 
 
 def _defaulted(ctx, name: str) -> bool:

@@ -21,6 +21,7 @@ from profidrive_cli.cli import render_drive as R
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.drives.session import DriveSession, SessionTerminated
 from profidrive_cli.link.base import LinkLost
+from profidrive_cli.outfile import check_output_path
 
 
 # =============================================================================================
@@ -144,6 +145,8 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
     mode = "json" if opts.json else ("live" if sys.stdout.isatty() else "text")
     speed_words = f"{hz:g} Hz" if hz is not None else f"{percent:g} %"
     what = f"run the drive at {speed_words}{' reverse' if reverse else ''}"
+    if log_path is not None:                 # checked before the bus is opened: nothing moves first
+        check_output_path(log_path, "--log")
     session = _session(opts, address, profile_name, ppo, fmt, watchdog_ms, cycle_hz=cycle_hz,
                        before=_confirmer(opts, yes, what), log=log_path)
     view = R.RunView(mode)

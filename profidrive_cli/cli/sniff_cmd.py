@@ -9,6 +9,7 @@ import click
 from profidrive_cli import UsageError
 from profidrive_cli.cli.common import bus_options, emit_json, out
 from profidrive_cli.fdl.capture import Capture, PcapWriter, merge_errors
+from profidrive_cli.outfile import OutputFile, check_output_path
 
 
 def _line(c) -> str:
@@ -26,58 +27,81 @@ def _line(c) -> str:
 
 @click.command("sniff")
 @click.option("--duration", default=10.0, show_default=True, type=float, help="Seconds to listen.")
-@click.option("--pcap", "pcap_file", default=None, type=click.Path(dir_okay=False, writable=True),
+@click.option("--pcap", "pcap_file", default=None, metavar="FILE",
               help="Also write a pcap file (link type 257, PROFIBUS_DL).")
+@click.option("--raw", "raw_out", default=None, metavar="FILE",
+              help="Also write the received octets as they came (decode later with --from-file).")
 @click.option("--from-file", "raw_file", default=None, type=click.Path(exists=True, dir_okay=False),
               help="Decode a raw byte capture offline instead of listening.")
 @bus_options
-def sniff_cmd(opts, duration, pcap_file, raw_file):
-    """Passive capture: one line per frame (time, SD, SA->DA, SAPs, FC in words, service, DU)."""
+def sniff_cmd(opts, duration, pcap_file, raw_out, raw_file):
+    """Passive capture: one line per frame (time, SD, SA->DA, SAPs, FC in words, service, DU).
+
+    --pcap and --raw files are written beside the target and replace it only when the capture
+    ended well (also by Ctrl-C); on an error an existing file stays as it was.
+    """
+    if raw_out is not None and raw_file:
+        raise UsageError("--raw writes what is received from a port; with --from-file there is nothing "
+                         "to receive")
+    if not raw_file and duration <= 0:
+        raise UsageError("--duration must be positive")
+    # every output path checked before the port is opened; each written only on success
+    files = [OutputFile(path, "wb", what=what) for path, what in ((pcap_file, "--pcap"),
+                                                                  (raw_out, "--raw")) if path]
+    for f in files:
+        check_output_path(f.path, f.what)
     cap = Capture()
-    pcap_fh = open(pcap_file, "wb") if pcap_file else None
-    writer = PcapWriter(pcap_fh) if pcap_fh else None
     count = 0
-
-    def show(items):
-        nonlocal count
-        for c in merge_errors(items):
-            count += 1
-            if writer and c.frame is not None:
-                writer.write(c.t, c.raw)
-            if opts.json:
-                emit_json(c.describe())
-            else:
-                out.print(_line(c), markup=False)
-
     try:
+        for f in files:
+            f.open()
+        writer = PcapWriter(files[0]) if pcap_file else None
+        raw_fh = files[-1] if raw_out else None
+
+        def show(items):
+            nonlocal count
+            for c in merge_errors(items):
+                count += 1
+                if writer and c.frame is not None:
+                    writer.write(c.t, c.raw)
+                if opts.json:
+                    emit_json(c.describe())
+                else:
+                    out.print(_line(c), markup=False)
+
         if raw_file:
             with open(raw_file, "rb") as fh:
                 data = fh.read()
             show(cap.feed(data, 0.0))
             if len(cap.rx):
                 show([_truncated(cap)])
-            return
-        if duration <= 0:
-            raise UsageError("--duration must be positive")
-        link = opts.open_link()
-        try:
-            if link.is_simulator:
-                from profidrive_cli.cli.common import err
-                err.print("sim:// is silent unless a master talks: nothing to sniff "
-                          "(use `pdrive sim --pty` and a master on the other end)")
-            start = time.monotonic()
-            end = start + duration
-            while time.monotonic() < end:
-                data = link.read(min(end, time.monotonic() + 0.2))
-                if data:
-                    show(cap.feed(data, time.monotonic() - start))
-        except KeyboardInterrupt:
-            pass
-        finally:
-            link.close()
+        else:
+            link = opts.open_link()
+            try:
+                if link.is_simulator:
+                    from profidrive_cli.cli.common import err
+                    err.print("sim:// is silent unless a master talks: nothing to sniff "
+                              "(use `pdrive sim --pty` and a master on the other end)")
+                start = time.monotonic()
+                end = start + duration
+                while time.monotonic() < end:
+                    data = link.read(min(end, time.monotonic() + 0.2))
+                    if data:
+                        if raw_fh is not None:
+                            raw_fh.write(data)
+                        show(cap.feed(data, time.monotonic() - start))
+            except KeyboardInterrupt:
+                pass                                 # Ctrl-C ends a capture: keep what was captured
+            finally:
+                link.close()
+        for f in files:
+            f.commit()
     finally:
-        if pcap_fh:
-            pcap_fh.close()
+        for f in files:
+            if not f.committed:
+                f.discard()
+    if raw_file:
+        return
     if not opts.json:
         out.print(f"{count} frame(s)")
 

@@ -446,6 +446,8 @@ class DriveSession:
         self._closed = False
         self._log_file = None
         self._log_writer = None
+        #: OutputWriteError when the --log file could not be written (raised by close())
+        self.log_error = None
 
     # -- messages ------------------------------------------------------------------------------
     def _warn(self, text: str) -> None:
@@ -815,6 +817,10 @@ class DriveSession:
                 except Exception:
                     pass
             self._restore_signals()
+        if self.log_error is not None:
+            if exc is None:
+                raise self.log_error          # the run went well, its log did not: exit 1
+            self._say(str(self.log_error))
 
     def _link_lost_words(self, e: BaseException) -> str:
         fam_text = self.comm_loss_text or _COMM_LOSS_WORDS.get(
@@ -906,29 +912,51 @@ class DriveSession:
         self._old_handlers.clear()
 
     # -- cycle log ------------------------------------------------------------------------------
+    # Written to a temporary file beside the target (outfile.OutputFile) and renamed over it when the
+    # session closes, also after Ctrl-C or a trip (the log of such a run is the one wanted). A write
+    # that fails mid-run never disturbs the cycle (nor the stop): logging ends, the temporary file is
+    # dropped, the old file stays, and close() raises OutputWriteError (exit 1).
     def _open_log(self) -> None:
-        try:
-            self._log_file = open(self.log_csv, "w", newline="", encoding="utf-8")
-        except OSError as e:
-            raise UsageError(f"--log {self.log_csv}: {e.strerror or e}") from None
-        self._log_writer = csv.writer(self._log_file)
-        self._log_writer.writerow(["time_s", "cycle", "control_word", "reference", "status_word",
-                                   "actual", "outputs", "inputs"])
+        from profidrive_cli.outfile import OutputFile
+        out = OutputFile(self.log_csv, "w", newline="", what="--log")
+        out.open()
+        self._log_file = out
+        self._log_writer = csv.writer(out.file)
         self.channel.hooks.append(self._log_cycle)
+        self._log_row(["time_s", "cycle", "control_word", "reference", "status_word",
+                       "actual", "outputs", "inputs"])
 
     def _log_cycle(self, t: float, outputs: bytes, inputs: bytes) -> None:
+        if self._log_file is None:
+            return
         ctw, ref, stw, act = cycle_words(self.drive, outputs, inputs)
-        self._log_writer.writerow([f"{t - self._t0:.4f}", self.channel.cycles,
-                                   _hex4(ctw), _s16(ref), _hex4(stw), _s16(act),
-                                   outputs.hex(), inputs.hex()])
+        self._log_row([f"{t - self._t0:.4f}", self.channel.cycles, _hex4(ctw), _s16(ref), _hex4(stw),
+                       _s16(act), outputs.hex(), inputs.hex()])
+
+    def _log_row(self, row: list) -> None:
+        try:
+            self._log_writer.writerow(row)
+        except OSError as e:
+            self._log_failed(e)
+
+    def _log_failed(self, e: OSError) -> None:
+        from profidrive_cli.outfile import OutputWriteError
+        out, self._log_file = self._log_file, None
+        kept = out.path.is_file()           # a regular file there: it stays as it was
+        out.discard()
+        self.log_error = OutputWriteError(f"--log {self.log_csv}: write failed: {e.strerror or e}"
+                                          + ("; the previous file is untouched" if kept else ""))
+        self._warn(f"{self.log_error}; logging stopped")
 
     def _close_log(self) -> None:
-        if self._log_file is not None:
-            try:
-                self._log_file.close()
-            except OSError:
-                pass
-            self._log_file = None
+        from profidrive_cli.outfile import OutputWriteError
+        out, self._log_file = self._log_file, None
+        if out is None:
+            return
+        try:
+            out.commit()
+        except OutputWriteError as e:
+            self.log_error = e
 
     # -- parameters -----------------------------------------------------------------------------
     def param_info(self, code: str) -> ParamInfo:
