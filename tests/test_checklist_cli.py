@@ -4,6 +4,7 @@ SIGTERM during a run, --dry-run, prompts without a terminal."""
 
 import json
 import os
+import select
 import signal
 import subprocess
 import time
@@ -229,3 +230,52 @@ def test_signal_during_a_run_stops_the_drive_and_still_reports(pty_sim, tmp_path
     st = status_of(pty_sim)
     assert st["running"] is False and st["speed_hz"] == 0.0
 
+
+
+GOOD = FAILING.replace("expect: 5.0", "expect: 0.5")
+
+
+def test_a_real_port_without_a_terminal_needs_yes_and_nothing_is_sent(pty_sim, tmp_path):
+    f = tmp_path / "good.yaml"
+    f.write_text(GOOD)
+    js = tmp_path / "r.json"
+    r = run("checklist", "run", f, "--port", pty_sim, "--report", js)
+    assert r.exit_code == 2, r.output + r.stderr
+    assert "--yes" in r.stderr and "nothing was sent to any drive" in r.stderr
+    assert not js.exists()
+    assert param_of(pty_sim, "F07") == 6.0 and param_of(pty_sim, "F08") == 6.0      # factory values
+
+
+def test_a_real_port_asks_once_listing_what_the_checklist_writes_and_runs(pty_sim, tmp_path):
+    f = tmp_path / "good.yaml"
+    f.write_text(GOOD)
+    mfd, sfd = os.openpty()
+    p = subprocess.Popen(pdrive_cmd() + ["checklist", "run", str(f), "--port", pty_sim],
+                         stdin=sfd, stderr=sfd, stdout=subprocess.PIPE, text=True)
+    os.close(sfd)
+    buf = b""
+    try:
+        end = time.monotonic() + 20
+        while b"Continue?" not in buf and time.monotonic() < end:
+            r, _, _ = select.select([mfd], [], [], 0.2)
+            if r:
+                buf += os.read(mfd, 4096)
+        os.write(mfd, b"n\n")
+        out, _ = p.communicate(timeout=20)
+        while True:
+            r, _, _ = select.select([mfd], [], [], 0.2)
+            if not r:
+                break
+            try:
+                buf += os.read(mfd, 4096)
+            except OSError:
+                break
+    finally:
+        if p.poll() is None:
+            p.kill()
+        os.close(mfd)
+    text = buf.decode(errors="replace")
+    assert p.returncode == 1, text
+    assert "station c1 (address 3, fuji-opc-g1-pdp)" in text and "F07" in text and "run forward at 10" in text
+    assert text.count("Continue?") == 1 and "cancelled: nothing was sent to any drive" in text
+    assert param_of(pty_sim, "F07") == 6.0                # 'n': nothing written
