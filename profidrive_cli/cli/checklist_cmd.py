@@ -204,9 +204,9 @@ _MOVES = ("write", "save", "run", "reset_fault")
 
 def _plan_lines(cl) -> list[str]:
     """What the checklist will do that changes something, per station (for the question)."""
-    lines = []
+    lines = [f"{cl.path}: what it changes, station by station:"]
     for s in cl.stations:
-        acts = [st.label for st in s.steps if st.type in _MOVES]
+        acts = [st.title for st in s.steps if st.type in _MOVES]
         lines.append(f"  station {s.name} (address {s.address}, {s.profile.name}): "
                      + ("; ".join(acts) if acts else "reads only"))
     return lines
