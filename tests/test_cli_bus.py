@@ -145,3 +145,22 @@ def test_io_on_sim_needs_no_yes_and_ends_with_the_drive_stopped_not_tripped(sim)
     assert "Global_Control Clear" in r.stderr and "released" in r.stderr
     st = json.loads(run("status", "6", "--port", port, "--json").output)
     assert st["stopped"] and not st["running"] and not st["fault"] and st["speed_hz"] == 0.0, st
+
+
+def test_io_stopped_by_an_exception_mid_run_still_ends_with_the_drive_stopped(sim, monkeypatch):
+    from profidrive_cli.cli import bus_cmds
+    port = "sim://?stations=6:moeller"
+    _moeller_ready(port)
+    seen = []
+
+    def broken_stdout(obj):                      # e.g. `pdrive io ... --json | head`: the pipe closes
+        seen.append(obj)
+        if len(seen) == 150:
+            raise BrokenPipeError("stdout closed")
+    monkeypatch.setattr(bus_cmds, "emit_json", broken_stdout)
+    r = run("io", "6", "--cfg", "F3F1", "--out", MOELLER_RUN, "--count", "100000", "--port", port, "--json")
+    assert isinstance(r.exception, BrokenPipeError) and len(seen) == 150
+    last = bytes.fromhex(seen[-1]["inputs"].replace(" ", ""))
+    assert int.from_bytes(last[10:12], "big") > 0            # it was turning when the exception came
+    st = json.loads(run("status", "6", "--port", port, "--json").output)
+    assert st["stopped"] and not st["running"] and not st["fault"] and st["speed_hz"] == 0.0, st
