@@ -32,13 +32,21 @@ class BusOptions:
     echo: bool
     verbose: int
     json: bool
+    #: the rate --baud auto found (set by the first open_master/open_link)
+    found_baud: int | None = None
 
     def require_port(self) -> str:
         if not self.port:
             raise UsageError(NO_PORT_HELP)
         return self.port
 
+    @property
+    def auto_baud(self) -> bool:
+        return self.baud == "auto" and self.found_baud is None
+
     def baud_rate(self, default: int = 19200) -> int:
+        if self.found_baud is not None:
+            return self.found_baud
         if self.baud in (None, "", "auto"):
             return default
         try:
@@ -60,18 +68,47 @@ class BusOptions:
             raise UsageError(str(e)) from None
 
     def open_link(self, baud: int | None = None):
+        """The link at `baud`, the given rate, or (--baud auto) the rate heard on the line."""
         from profidrive_cli.link import open_link
+        if baud is None and self.auto_baud:
+            found, link = self._detect(addresses=None, probe=False)
+            return link
         return open_link(self.require_port(), baud or self.baud_rate(), rs485=self.rs485,
                          echo=self.echo)
 
-    def open_master(self, baud: int | None = None):
+    def _make_master(self, link, baud: int | None):
         from profidrive_cli.dp.poller import Master
-        link = self.open_link(baud)
         try:
             return Master(link, self.params(baud, link), self.master_address)
         except ValueError as e:
             link.close()
             raise UsageError(str(e)) from None
+
+    def open_master(self, baud: int | None = None, address: int | None = None):
+        """A Master at `baud`, the given rate, or (--baud auto) the rate found by listening and
+        then probing `address` (every address when None)."""
+        if baud is None and self.auto_baud:
+            found, master = self._detect(addresses=None if address is None else [address],
+                                         probe=True)
+            return master
+        return self._make_master(self.open_link(baud), baud)
+
+    def _detect(self, addresses, probe: bool):
+        from profidrive_cli import BusError
+        from profidrive_cli.dp.baud import detect_baud
+        from profidrive_cli.link import open_link
+        port = self.require_port()
+        found, obj = detect_baud(
+            lambda b: open_link(port, b, rs485=self.rs485, echo=self.echo),
+            self._make_master, addresses, probe=probe)
+        if found is None:
+            where = "" if addresses is None else f" from station {addresses[0]}"
+            how = "heard no running master" + ("" if not probe else
+                                                 f" and got no answer{where}")
+            raise BusError(f"--baud auto: {how} at any DP baud rate on {port}")
+        self.found_baud = found.baud
+        err.print(f"{found.describe()}")
+        return found, obj
 
 
 def bus_options(f):
