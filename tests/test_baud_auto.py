@@ -216,3 +216,34 @@ def test_second_tcp_client_is_told_busy():
         stop.append(1)
         th.join(timeout=5)
         ep.close()
+
+
+# -- sniff decoding: garbage runs are one entry; chunked feeding equals one feed ----------------------
+
+def test_capture_garbage_run_is_one_entry_and_frames_after_it_are_found():
+    from profidrive_cli.fdl.capture import Capture
+    req = F.encode(F.make(3, 2, F.request_fc(F.FDL_STATUS)))    # SD1 10 03 02 49 4E 16
+    assert req == bytes.fromhex("10 03 02 49 4E 16")
+    noise = bytes([0x00, 0x55, 0xAA, 0x99, 0x01])               # none of them can start a telegram
+    items = Capture().feed(noise + req + noise, 0.0)
+    assert [(c.frame is None, c.raw) for c in items] == [(True, noise), (False, req), (True, noise)]
+
+
+def test_capture_chunked_feed_equals_one_feed():
+    import random
+    from profidrive_cli.fdl.capture import Capture, merge_errors
+    rnd = random.Random(7)
+    frames = [F.encode(F.make(a, 2, F.request_fc(F.SRD_HIGH, True, True), bytes([a] * 4), 58, 62))
+              for a in range(3, 10)]
+    alphabet = [b for b in range(256) if b not in (F.SD1, F.SD2, F.SD3, F.SD4, F.SC)]
+    data = b"".join(bytes(rnd.choice(alphabet) for _ in range(rnd.randrange(0, 20))) + f
+                    for f in frames)
+    whole = merge_errors(Capture().feed(data, 0.0))
+    cap = Capture()
+    parts = []
+    for i in range(0, len(data), 5):
+        parts += cap.feed(data[i:i + 5], 0.0)
+    chunked = merge_errors(parts)
+    assert [c.raw for c in whole if c.frame] == frames
+    assert [c.raw for c in chunked if c.frame] == frames
+    assert b"".join(c.raw for c in whole) == b"".join(c.raw for c in chunked) == data[:len(b"".join(c.raw for c in whole))]
