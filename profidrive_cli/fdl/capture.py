@@ -45,6 +45,22 @@ class Captured:
         return d
 
 
+def format_line(c: Captured, arrow: str = "") -> str:
+    """One line per frame, as `pdrive sniff` and the -vv trace print it: time, SD, SA -> DA, SAPs,
+    FC in words, service, DU."""
+    d = c.describe()
+    a = f"{arrow} " if arrow else ""
+    if "error" in d:
+        return f"{d['t']:>12.6f}  {a}!! {d['error']}: {d['raw']}"
+    if d["sd"] == "SC":
+        return f"{d['t']:>12.6f}  {a}SC   short acknowledge"
+    if d["sd"] == "SD4":
+        return f"{d['t']:>12.6f}  {a}SD4  token {d['sa']} -> {d['da']}"
+    saps = "" if d["dsap"] is None else f" [{d['ssap']}->{d['dsap']}]"
+    return (f"{d['t']:>12.6f}  {a}{d['sd']}  {d['sa']:>3} -> {d['da']:<3}{saps}  {d['fc_text']}  "
+            f"{d['service']}  {d['du']}")
+
+
 class Capture:
     """Feed octets with the time they arrived; collect Captured frames and framing errors."""
 
