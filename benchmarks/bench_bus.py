@@ -4,7 +4,7 @@ over a pty.
 
     python benchmarks/bench_bus.py [--only scan|cycle|jitter] [--cycles N] [--jitter-cycles N] [--no-spin]
 
-scan    pdrive's live list 0..126 (FDL status to every address, retries 1, then Slave_Diag to the
+scan    pdrive's live list 0..126 (one FDL status to every address, then Slave_Diag to the
         five stations found) at 19.2k and 187.5k. Wire limit: every request's octets (11 bit each),
         then either TSDR + reply + TID1, or the slot time for an empty address, per attempt.
 cycle   Master.poll() over 1 and 5 stations in data exchange (default plant, default layouts) at

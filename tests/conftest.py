@@ -43,9 +43,9 @@ def sim(monkeypatch):
     real = plant.build_bus
     buses = {}
 
-    def cached(url, now=0.0):
+    def cached(url, now=0.0, **kw):
         if url not in buses:
-            buses[url] = real(url, now)
+            buses[url] = real(url, now, **kw)
         return buses[url]
     monkeypatch.setattr(plant, "build_bus", cached)
     return buses

@@ -15,7 +15,7 @@ from profidrive_cli.cli.common import (bus_options, confirm_real_port, emit_json
                                        station_address)
 from profidrive_cli.cli.names import device_name
 from profidrive_cli.dp.cfg import CfgError, decode_cfg
-from profidrive_cli.fdl.timing import BAUD_NAMES, BAUD_RATES
+from profidrive_cli.fdl.timing import BAUD_NAMES
 from profidrive_cli.link.base import LinkLost
 
 
@@ -48,24 +48,17 @@ def scan_cmd(opts, first, last, gsd_dir):
     if first > last:
         raise UsageError(f"--from {first} is above --to {last}")
     opts.require_port()
-    rates = BAUD_RATES if opts.baud == "auto" else (opts.baud_rate(),)
-    result, used_baud = [], None
-    for baud in rates:
-        master = opts.open_master(baud)
-        try:
-            if opts.json or not err.is_terminal:
-                result = scan(master, first, last)
-            else:
-                with Progress(console=err, transient=True) as prog:
-                    task = prog.add_task(f"scanning at {BAUD_NAMES[baud]}", total=last - first + 1)
-                    result = scan(master, first, last, progress=lambda a: prog.advance(task))
-        finally:
-            master.link.close()
-        if opts.baud == "auto" and not opts.json:
-            err.print(f"{BAUD_NAMES[baud]}: {len(result)} station(s)")
-        if result:
-            used_baud = baud
-            break
+    master = opts.open_master()
+    used_baud = opts.baud_rate()
+    try:
+        if opts.json or not err.is_terminal:
+            result = scan(master, first, last)
+        else:
+            with Progress(console=err, transient=True) as prog:
+                task = prog.add_task(f"scanning at {BAUD_NAMES[used_baud]}", total=last - first + 1)
+                result = scan(master, first, last, progress=lambda a: prog.advance(task))
+    finally:
+        master.link.close()
     if opts.json:
         emit_json({"port": opts.port, "baud": used_baud, "stations": [
             {"address": e.address, "type": e.station_type,
@@ -75,9 +68,8 @@ def scan_cmd(opts, first, last, gsd_dir):
              "diag": _diag_json(e.diag), "counters": e.counters} for e in result]})
         return
     if not result:
-        out.print(f"no station answered on {opts.port}"
-                  + (" at any DP baud rate" if opts.baud == "auto" else
-                     f" at {BAUD_NAMES[opts.baud_rate()]} (try --baud auto)"))
+        out.print(f"no station answered on {opts.port} at {BAUD_NAMES[used_baud]}"
+                  + ("" if opts.baud == "auto" else " (try --baud auto)"))
         raise SystemExit(1)
     t = Table(title=f"{opts.port} at {BAUD_NAMES[used_baud]}: {len(result)} station(s)")
     from profidrive_cli.fdl.master import format_counters
@@ -99,7 +91,7 @@ def scan_cmd(opts, first, last, gsd_dir):
 def diag_cmd(opts, address, gsd_dir):
     """The whole Slave_Diag of one station decoded, and its Get_Cfg."""
     station_address(address)
-    master = opts.open_master()
+    master = opts.open_master(address=address)
     try:
         d = master.slave_diag(address)
         if d is None:
@@ -201,7 +193,7 @@ def io_cmd(opts, address, cfg_hex, ident_hex, prm_hex, out_hex, count, wd_ms, gs
                                      f"{address} on {port} (a drive there may start)",
                           cancelled="cancelled: nothing was sent")
     moved = outputs is not None and any(outputs)
-    master = opts.open_master()
+    master = opts.open_master(address=address)
     ender = _SafeEnd(master, address, wd_ms / 1000.0, stop_timeout, wait_settle=moved)
     try:
         with _terminations_raise():

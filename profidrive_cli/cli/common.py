@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import json
+import logging
 import os
 import sys
 from dataclasses import dataclass
@@ -32,13 +33,24 @@ class BusOptions:
     echo: bool
     verbose: int
     json: bool
+    #: --trace FILE.pcap: every telegram the command sends and receives
+    trace: str | None = None
+    #: the rate --baud auto found (set by the first open_master/open_link)
+    found_baud: int | None = None
+    _recorder: object = None
 
     def require_port(self) -> str:
         if not self.port:
             raise UsageError(NO_PORT_HELP)
         return self.port
 
+    @property
+    def auto_baud(self) -> bool:
+        return self.baud == "auto" and self.found_baud is None
+
     def baud_rate(self, default: int = 19200) -> int:
+        if self.found_baud is not None:
+            return self.found_baud
         if self.baud in (None, "", "auto"):
             return default
         try:
@@ -60,22 +72,104 @@ class BusOptions:
             raise UsageError(str(e)) from None
 
     def open_link(self, baud: int | None = None):
-        from profidrive_cli.link import open_link
-        return open_link(self.require_port(), baud or self.baud_rate(), rs485=self.rs485,
-                         echo=self.echo)
+        """The link at `baud`, the given rate, or (--baud auto) the rate heard on the line; with
+        -vv or --trace wrapped so that every telegram is logged / recorded."""
+        if baud is None and self.auto_baud:
+            found, link = self._detect(addresses=None, probe=False)
+            return self._traced(link)
+        return self._traced(self._raw_link(baud or self.baud_rate()))
 
-    def open_master(self, baud: int | None = None):
+    def _raw_link(self, baud: int):
+        from profidrive_cli.link import open_link
+        return open_link(self.require_port(), baud, rs485=self.rs485, echo=self.echo)
+
+    def _traced(self, link):
+        if self.verbose < 2 and not self.trace:
+            return link
+        from profidrive_cli.dp.trace import TraceLink
+        if self.trace and self._recorder is None:
+            self._recorder = _open_trace(self.trace)
+        return TraceLink(link, self._recorder)
+
+    def _make_master(self, link, baud: int | None):
         from profidrive_cli.dp.poller import Master
-        link = self.open_link(baud)
         try:
             return Master(link, self.params(baud, link), self.master_address)
         except ValueError as e:
             link.close()
             raise UsageError(str(e)) from None
 
+    def open_master(self, baud: int | None = None, address: int | None = None):
+        """A Master at `baud`, the given rate, or (--baud auto) the rate found by listening and
+        then probing `address` (every address when None)."""
+        if baud is None and self.auto_baud:
+            found, master = self._detect(addresses=None if address is None else [address],
+                                         probe=True)
+            return master
+        return self._make_master(self.open_link(baud), baud)
+
+    def _make_master_traced(self, link, baud: int | None):
+        return self._make_master(self._traced(link), baud)
+
+    def _detect(self, addresses, probe: bool):
+        from profidrive_cli import BusError
+        from profidrive_cli.dp.baud import detect_baud
+        from profidrive_cli.link import open_link
+        port = self.require_port()
+        found, obj = detect_baud(
+            lambda b: open_link(port, b, rs485=self.rs485, echo=self.echo),
+            self._make_master_traced, addresses, probe=probe)
+        if found is None:
+            where = "" if addresses is None else f" from station {addresses[0]}"
+            how = "heard no running master" + ("" if not probe else
+                                                 f" and got no answer{where}")
+            raise BusError(f"--baud auto: {how} at any DP baud rate on {port}")
+        self.found_baud = found.baud
+        err.print(f"{found.describe()}")
+        return found, obj
+
+
+class _StderrHandler(logging.Handler):
+    """Log lines on whatever sys.stderr is when they are emitted (click's test runner swaps it)."""
+
+    def emit(self, record):
+        try:
+            sys.stderr.write(self.format(record) + "\n")
+            sys.stderr.flush()
+        except Exception:
+            self.handleError(record)
+
+
+def configure_logging(verbose: int) -> None:
+    """-v: DP service steps (profidrive_cli.dp at INFO); -vv: also every telegram
+    (profidrive_cli.trace at DEBUG). On stderr, so that stdout stays the command's output."""
+    logger = logging.getLogger("profidrive_cli")
+    for h in [h for h in logger.handlers if isinstance(h, _StderrHandler)]:
+        logger.removeHandler(h)
+    if verbose <= 0:
+        return
+    h = _StderrHandler()
+    h.setFormatter(logging.Formatter("%(message)s"))
+    logger.addHandler(h)
+    logger.setLevel(logging.DEBUG if verbose >= 2 else logging.INFO)
+
+
+def _open_trace(path: str):
+    """The --trace recorder: a pcap written beside the target and renamed over it when the command
+    ends (whatever way it ends: the trace of a failure is the useful one)."""
+    from profidrive_cli.fdl.capture import PcapWriter
+    from profidrive_cli.outfile import OutputFile
+    f = OutputFile(path, "wb", what="trace file")
+    f.open()
+    writer = PcapWriter(f)
+    ctx = click.get_current_context(silent=True)
+    if ctx is not None:
+        ctx.call_on_close(f.commit)
+    return writer
+
 
 def bus_options(f):
-    """--port, --baud, --master-address, --slot-time, --retries, --rs485, --echo, -v, --json."""
+    """--port, --baud, --master-address, --slot-time, --retries, --rs485, --echo, -v, --trace, --json."""
     @click.option("--port", envvar="PDRIVE_PORT", default=None, metavar="PORT",
                   help="Serial device, pyserial URL or sim:// (env PDRIVE_PORT).")
     @click.option("--baud", default="19200", show_default=True, metavar="RATE",
@@ -87,13 +181,21 @@ def bus_options(f):
                   help="Retries after no reply (default 2 on real ports, 1 on sim://).")
     @click.option("--rs485", is_flag=True, help="Kernel RS-485 mode (RTS direction control).")
     @click.option("--echo", is_flag=True, help="Adapter hears its own transmission: drop the echo.")
-    @click.option("-v", "--verbose", count=True)
+    @click.option("-v", "--verbose", count=True,
+                  help="-v: DP service steps (start-up, diagnosis, retries); -vv: every telegram. "
+                       "On stderr.")
+    @click.option("--trace", "trace", default=None, metavar="FILE.pcap",
+                  help="Record every telegram this command sends and receives (pcap).")
     @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
     @functools.wraps(f)
-    def wrapper(port, baud, master_address, slot_time, retries, rs485, echo, verbose, as_json,
-                **kw):
+    def wrapper(port, baud, master_address, slot_time, retries, rs485, echo, verbose, trace,
+                as_json, **kw):
+        configure_logging(verbose)
+        if trace:
+            from profidrive_cli.outfile import check_output_path
+            check_output_path(trace, "trace file")
         opts = BusOptions(port, baud, master_address, slot_time, retries, rs485, echo, verbose,
-                          as_json)
+                          as_json, trace)
         return f(opts, **kw)
     return wrapper
 

@@ -58,7 +58,7 @@ def _session(opts, address, profile_name, ppo, fmt, watchdog_ms, *, cycle_hz=0.0
              log=None) -> DriveSession:
     if address is not None:
         station_address(address)
-    master = opts.open_master()
+    master = opts.open_master(address=address)
     try:
         return DriveSession(master, address, profile=profile_name, ppo=ppo, fmt=fmt,
                             watchdog_ms=watchdog_ms, cycle_hz=cycle_hz, before_connect=before,

@@ -10,33 +10,66 @@ import click
 from profidrive_cli import BusError, PdriveError, UsageError, __version__
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
-@click.version_option(__version__, prog_name="pdrive")
+#: name -> (module, click object, one-line help). A command's module is imported only when that
+#: command runs (or `--help` of that command is asked for): `pdrive --version` and `pdrive --help`
+#: load neither rich nor yaml nor any protocol code. tests/test_cli_lazy.py checks that each help
+#: line here is the command's own.
+COMMANDS = {
+    "checklist": ("profidrive_cli.cli.checklist_cmd", "checklist_group",
+                  "Scripted commissioning checklists: validate, rehearse, run, report."),
+    "decode": ("profidrive_cli.cli.decode_cmd", "decode_cmd",
+               "Decode a captured area of PROFILE's layout into named fields."),
+    "diag": ("profidrive_cli.cli.bus_cmds", "diag_cmd",
+             "The whole Slave_Diag of one station decoded, and its Get_Cfg."),
+    "doctor": ("profidrive_cli.cli.doctor_cmd", "doctor_cmd",
+               "Check a serial setup for PROFIBUS: permission, baud rates, echo."),
+    "faults": ("profidrive_cli.cli.drive_cmds", "faults_cmd",
+               "Fault history with alarm names, and the current fault."),
+    "gsd": ("profidrive_cli.cli.gsd_cmd", "gsd_group",
+            "GSD device description files: show, list, build Set_Prm."),
+    "io": ("profidrive_cli.cli.bus_cmds", "io_cmd",
+           "Bring any DP slave to Data_Exchange and show its inputs."),
+    "param": ("profidrive_cli.cli.drive_cmds", "param_group",
+              "Read and write drive parameters by their native codes."),
+    "run": ("profidrive_cli.cli.drive_cmds", "run_cmd",
+            "Run a drive at a speed, live; a safe stop on every exit."),
+    "scan": ("profidrive_cli.cli.bus_cmds", "scan_cmd",
+             "Live list: every station, its type, ident and DP state."),
+    "sim": ("profidrive_cli.cli.sim_cmd", "sim_cmd",
+            "Serve a simulated PROFIBUS segment for another master."),
+    "sniff": ("profidrive_cli.cli.sniff_cmd", "sniff_cmd",
+              "Passive capture: one line per frame, pcap output."),
+    "status": ("profidrive_cli.cli.drive_cmds", "status_cmd",
+               "One read of a drive's status: state, flags, speed, current fault."),
+}
+
+
+class LazyGroup(click.Group):
+    """A group that imports a command's module when the command is looked up."""
+
+    def list_commands(self, ctx):
+        return sorted(COMMANDS)
+
+    def get_command(self, ctx, name):
+        entry = COMMANDS.get(name)
+        if entry is None:
+            return None
+        module, attr, _ = entry
+        return getattr(importlib.import_module(module), attr)
+
+    def format_commands(self, ctx, formatter):
+        rows = [(name, COMMANDS[name][2]) for name in self.list_commands(ctx)]
+        with formatter.section("Commands"):
+            formatter.write_dl(rows)
+
+
+@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="pdrive", package_name="profidrive-cli")
 def cli():
     """pdrive: PROFIBUS-DP master and drive commissioning.
 
     Every command works on the built-in simulated bus: add --port sim://
     """
-
-
-# (module, click object) for each command
-_COMMANDS = [
-    ("profidrive_cli.cli.bus_cmds", "scan_cmd"),
-    ("profidrive_cli.cli.bus_cmds", "diag_cmd"),
-    ("profidrive_cli.cli.bus_cmds", "io_cmd"),
-    ("profidrive_cli.cli.sniff_cmd", "sniff_cmd"),
-    ("profidrive_cli.cli.sim_cmd", "sim_cmd"),
-    ("profidrive_cli.cli.gsd_cmd", "gsd_group"),
-    ("profidrive_cli.cli.decode_cmd", "decode_cmd"),
-    ("profidrive_cli.cli.doctor_cmd", "doctor_cmd"),
-    ("profidrive_cli.cli.checklist_cmd", "checklist_group"),
-    ("profidrive_cli.cli.drive_cmds", "run_cmd"),
-    ("profidrive_cli.cli.drive_cmds", "status_cmd"),
-    ("profidrive_cli.cli.drive_cmds", "param_group"),
-    ("profidrive_cli.cli.drive_cmds", "faults_cmd"),
-]
-for _mod, _obj in _COMMANDS:
-    cli.add_command(getattr(importlib.import_module(_mod), _obj))
 
 
 def main(argv=None):

@@ -8,21 +8,12 @@ import click
 
 from profidrive_cli import UsageError
 from profidrive_cli.cli.common import bus_options, emit_json, out
-from profidrive_cli.fdl.capture import Capture, PcapWriter, merge_errors
+from profidrive_cli.fdl.capture import Capture, PcapWriter, format_line, merge_errors
 from profidrive_cli.outfile import OutputFile, check_output_path
 
 
 def _line(c) -> str:
-    d = c.describe()
-    if "error" in d:
-        return f"{d['t']:>12.6f}  !! {d['error']}: {d['raw']}"
-    if d["sd"] == "SC":
-        return f"{d['t']:>12.6f}  SC   short acknowledge"
-    if d["sd"] == "SD4":
-        return f"{d['t']:>12.6f}  SD4  token {d['sa']} -> {d['da']}"
-    saps = "" if d["dsap"] is None else f" [{d['ssap']}->{d['dsap']}]"
-    return (f"{d['t']:>12.6f}  {d['sd']}  {d['sa']:>3} -> {d['da']:<3}{saps}  {d['fc_text']}  "
-            f"{d['service']}  {d['du']}")
+    return format_line(c)
 
 
 @click.command("sniff")

@@ -13,6 +13,7 @@ reopens the same port and brings every station back to data exchange.
 from __future__ import annotations
 
 import dataclasses
+import logging
 import time
 
 from profidrive_cli import BusError
@@ -23,6 +24,8 @@ from profidrive_cli.fdl import frames as F
 from profidrive_cli.fdl.master import REPLY, FdlMaster, Outcome, format_counters
 from profidrive_cli.fdl.timing import BusParams
 from profidrive_cli.link.base import Link, LinkLost
+
+log = logging.getLogger("profidrive_cli.dp")
 
 
 class Master:
@@ -172,6 +175,11 @@ class Master:
         return st
 
     def _emit(self, address: int, events: list[Event]) -> None:
+        if log.isEnabledFor(logging.INFO):
+            for e in events:
+                if e.kind != "inputs":
+                    log.info("station %d: %s%s", address, e.text or e.kind,
+                             "" if e.kind == "state" else f" ({e.kind})")
         if self.on_event:
             for e in events:
                 self.on_event(address, e)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 from profidrive_cli import BusError
@@ -23,6 +24,22 @@ class ScanEntry:
         return self.diag.ident if self.diag else None
 
 
+def probe(master, addr: int):
+    """One FDL status request, as a live list sends it: a single attempt, and a second (with the
+    configured retries) only where something answered garbled. An empty address costs one request
+    and one slot time, not 1 + retries of them. The reply frame, or None."""
+    params = master.params
+    before = master.fdl.counters_for(addr).illegal
+    master.params = dataclasses.replace(params, retries=0)
+    try:
+        reply = master.fdl_status(addr)
+    finally:
+        master.params = params
+    if reply is None and master.fdl.counters_for(addr).illegal > before:
+        reply = master.fdl_status(addr)
+    return reply
+
+
 def scan(master, first: int = 0, last: int = 126, progress=None, read_cfg: bool = False) -> list[ScanEntry]:
     """progress(address) is called before each probe (for a progress bar)."""
     found: list[ScanEntry] = []
@@ -31,7 +48,7 @@ def scan(master, first: int = 0, last: int = 126, progress=None, read_cfg: bool 
             progress(addr)
         if addr == master.address:
             continue
-        reply = master.fdl_status(addr)
+        reply = probe(master, addr)
         if reply is None:
             continue
         st = F.STATION_TYPES[reply.station_type] if reply.sd != F.SC else "slave"

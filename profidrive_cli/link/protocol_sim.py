@@ -43,6 +43,7 @@ class Serial(SerialBase):
         self.virtual: VirtualClock | None = None
         self._unplugged = False
         self._ticked = float("-inf")
+        self.locked_baud: int | None = None
         super().__init__(*args, **kwargs)
 
     def open(self):
@@ -53,7 +54,13 @@ class Serial(SerialBase):
         if timing == "virtual":
             self.virtual = VirtualClock()
             self.clock = self.virtual.now
-        self.bus = build_bus(self._port, now=self.clock())
+        q = parse_qs(urlsplit(self._port).query)
+        # sim://?baud=R: the stations are locked to R like slaves on a running bus and hear a
+        # master at any other rate as garbage; without baud= they answer at any rate (a slave
+        # still searching the rate), and a wire-timed bus takes the port's rate
+        self.bus = build_bus(self._port, now=self.clock(), default_baud=int(self._baudrate or 19200))
+        if "baud" in q:
+            self.locked_baud = self.bus.params.baud
         self._unplugged = False
         self.is_open = True
 
@@ -131,6 +138,8 @@ class Serial(SerialBase):
         if now - self._ticked >= self.TICK_S:
             self.bus.tick(now)
             self._ticked = now
+        if self.locked_baud is not None and int(self._baudrate) != self.locked_baud:
+            return len(data)    # wrong rate: the stations see framing errors and stay silent
         self.bus.receive(bytes(data), now)
         return len(data)
 

@@ -3,7 +3,10 @@
     sim://                                   default plant: 3 fuji-g1, 4 fuji-pdp3, 5 toyo, 6 moeller, 7 yaskawa
     sim://?stations=3:fuji-g1,9:yaskawa      choose stations (profile names or aliases)
     sim://?baud=187500&timing=wire           wire-timed bus (see sim/bus.py); timing=virtual: the same
-                                             on a simulated clock (tests, benchmarks)
+                                             on a simulated clock (tests, benchmarks). With baud= the
+                                             stations are locked to that rate (a running bus) and stay
+                                             silent to a master at another rate; without it they
+                                             answer at the port's rate, whatever it is
     sim://?tsdr=30                           stations answer 30 bit times after a request (at least
                                              the min TSDR of Set_Prm; default 11)
     sim://?drop=0.01&powercycle=0.001&...    fault injection (keys in sim/faults.py)
@@ -78,7 +81,7 @@ def _per_station(values: list[str], key: str) -> dict[int, list[str]]:
     return out
 
 
-def build_bus(url: str, now: float = 0.0) -> SimBus:
+def build_bus(url: str, now: float = 0.0, default_baud: int = 19200) -> SimBus:
     parts = urlsplit(url)
     if parts.scheme != "sim":
         raise UsageError(f"not a sim URL: {url}")
@@ -92,7 +95,7 @@ def build_bus(url: str, now: float = 0.0) -> SimBus:
                          f"(known: {', '.join(sorted(KNOWN_KEYS | set(faults_mod.URL_KEYS)))})")
     stations = _station_list(q["stations"][-1]) if "stations" in q else list(DEFAULT_PLANT)
     try:
-        baud = parse_baud(q["baud"][-1]) if "baud" in q else 19200
+        baud = parse_baud(q["baud"][-1]) if "baud" in q else parse_baud(default_baud)
     except ValueError as e:
         raise UsageError(f"sim URL: {e}") from None
     timing = q.get("timing", ["instant"])[-1]

@@ -47,8 +47,14 @@ class PtyEndpoint:
                 pass
 
 
+#: what a second client hears before its connection is closed (one client at a time, like a
+#: converter; a silent bus would send its user looking for a wiring fault)
+BUSY_LINE = b"pdrive sim: busy - another client is connected; try again when it has gone\r\n"
+
+
 class TcpEndpoint:
-    """One client at a time (like an RS-485-over-TCP converter)."""
+    """One client at a time (like an RS-485-over-TCP converter). A second client that connects
+    while one is served is told so (BUSY_LINE) and closed at once."""
 
     def __init__(self, host: str, port: int):
         self.srv = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
@@ -59,6 +65,8 @@ class TcpEndpoint:
         self.conn: socket.socket | None = None
         #: clients accepted so far
         self.accepted = 0
+        #: clients turned away because another was connected
+        self.refused = 0
         self._drop_requested = False
 
     def request_drop(self) -> None:
@@ -69,10 +77,14 @@ class TcpEndpoint:
         if self._drop_requested:
             self._drop_requested = False
             self.drop()
-        socks = [self.conn] if self.conn else [self.srv]
+        socks = [self.conn, self.srv] if self.conn else [self.srv]
         r, _, _ = select.select(socks, [], [], timeout)
         if not r:
             return b""
+        if self.conn is not None and self.srv in r:
+            self._refuse()
+            if self.conn not in r:
+                return b""
         if self.conn is None:
             self.conn, _ = self.srv.accept()
             self.conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
@@ -85,6 +97,20 @@ class TcpEndpoint:
         if not data:
             self.drop()
         return data
+
+    def _refuse(self) -> None:
+        try:
+            extra, _ = self.srv.accept()
+        except OSError:
+            return
+        self.refused += 1
+        try:
+            extra.settimeout(0.5)
+            extra.sendall(BUSY_LINE)
+        except OSError:
+            pass
+        finally:
+            extra.close()
 
     def write(self, data: bytes) -> None:
         if self.conn is not None:

@@ -1,0 +1,54 @@
+"""Start-up time of pdrive commands against `python -c "import click"`, measured in the same run.
+
+    python benchmarks/bench_startup.py [--rounds N]
+
+Each round runs every command once, in turn (interleaved, so machine load hits all alike); the
+figure per command is the median wall time over the rounds, and its ratio to the median of
+`python -c "import click"` in the same rounds. Run from the repository root (or with pdrive
+installed): the commands are started as `python -m profidrive_cli …`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+import time
+
+HERE = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+CASES = [
+    ("import click", [sys.executable, "-c", "import click"]),
+    ("pdrive --version", [sys.executable, "-m", "profidrive_cli", "--version"]),
+    ("pdrive --help", [sys.executable, "-m", "profidrive_cli", "--help"]),
+    ("pdrive decode moeller --ppo 1 --request …",
+     [sys.executable, "-m", "profidrive_cli", "decode", "moeller", "--ppo", "1", "--request",
+      "3017 0000 0000 0190 047F 2000"]),
+    ("pdrive scan --port sim://", [sys.executable, "-m", "profidrive_cli", "scan", "--port", "sim://"]),
+]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--rounds", type=int, default=15)
+    a = ap.parse_args()
+    env = dict(os.environ)
+    env["PYTHONPATH"] = HERE + os.pathsep + env.get("PYTHONPATH", "")
+    times: dict[str, list[float]] = {name: [] for name, _ in CASES}
+    for _ in range(a.rounds):
+        for name, cmd in CASES:
+            t = time.perf_counter()
+            subprocess.run(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                           stdin=subprocess.DEVNULL, check=True, cwd=HERE)
+            times[name].append(time.perf_counter() - t)
+    ref = statistics.median(times["import click"])
+    print(f"python {sys.version.split()[0]}, {os.cpu_count()} CPUs, {a.rounds} interleaved rounds")
+    for name, _ in CASES:
+        med = statistics.median(times[name])
+        print(f"{name:<45} {med * 1000:7.1f} ms  {med / ref:5.2f}x import click")
+
+
+if __name__ == "__main__":
+    main()

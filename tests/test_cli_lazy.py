@@ -1,0 +1,42 @@
+"""The command group loads a command's module only when it runs; its help lines stay the commands' own."""
+
+import importlib
+import subprocess
+import sys
+
+from click.testing import CliRunner
+
+from profidrive_cli.cli.main import COMMANDS, cli
+
+
+def test_version_and_help_load_no_command_module():
+    code = ("import sys; from profidrive_cli.cli.main import main\n"
+            "try:\n    main(['--version'])\nexcept SystemExit:\n    pass\n"
+            "try:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
+            "heavy = [m for m in ('rich', 'yaml', 'construct', 'serial', 'profidrive_cli.cli.common',"
+            " 'profidrive_cli.fdl.frames', 'profidrive_cli.gsd.parser') if m in sys.modules]\n"
+            "print('HEAVY', heavy)\n")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert "HEAVY []" in p.stdout, p.stdout + p.stderr
+    assert "pdrive, version" in p.stdout
+
+
+def test_every_command_is_listed_and_loads():
+    r = CliRunner().invoke(cli, ["--help"])
+    assert r.exit_code == 0
+    for name in ("scan", "diag", "io", "sniff", "sim", "gsd", "decode", "doctor", "checklist",
+                 "run", "status", "param", "faults"):
+        assert name in COMMANDS
+        assert f"  {name} " in r.output
+        module, attr, short = COMMANDS[name]
+        cmd = getattr(importlib.import_module(module), attr)
+        assert cmd.name == name
+        # the table's line starts like the command's own first help line (no drift between them)
+        own = (cmd.help or "").split("\n")[0]
+        assert own[:12] == short[:12], (name, own, short)
+
+
+def test_unknown_command_is_a_usage_error():
+    r = CliRunner().invoke(cli, ["scna"])
+    assert r.exit_code == 2
+    assert "No such command" in r.output
