@@ -5,8 +5,9 @@
     ... fm.feed(octets, now) -> Outcome | None     (None: keep waiting until deadline)
     ... fm.expire(now)       -> (retry octets, new deadline) or Outcome(no answer)
 
-The engine keeps the FCB per station (reference §2.3), repeats the same FCB on a retry, checks that a
-reply comes from the addressed station and is addressed to us, and counts what it saw.
+The engine keeps the FCB per station (reference §2.3), repeats the same FCB on a retry, restarts the
+sequence (FCV=0, FCB=1) after a request that got no valid reply at all, checks that a reply comes from
+the addressed station and is addressed to us, and counts what it saw.
 
 Receiving: octets that cannot start a telegram (line noise before a reply) are skipped and counted
 once per run as one illegal frame; the reply that follows is taken. A telegram that starts and then
@@ -242,6 +243,9 @@ class FdlMaster:
             self._spoilt = False
             self.deadline = now + self._timeout
             return self._pending, self.deadline
+        if self._uses_fcb:
+            # failed transaction: the next request to this station restarts the FCB sequence
+            self._fcb[self._da].failed()
         c = self.counters_for(self._da)
         c.retries += self._retries
         c.illegal += self._illegal
