@@ -84,3 +84,107 @@ def test_after_a_failed_transaction_no_stale_input_is_marked_fresh(timing):
     assert (c.retries, c.no_answer) == (4, 4)
     assert plan.expected_counters(3)["failed_attempts"] == c.retries + c.no_answer == 8
     assert c.reparams == 0 and st.in_data_exchange
+
+
+def _silent_cycles(m, plan, st, retries=1):
+    """Drop every reply of MAX_SILENT Data_Exchange requests (each with its retries)."""
+    for _ in range(MAX_SILENT * (1 + retries)):
+        plan.inject_next(3, "drop")
+    for _ in range(MAX_SILENT):
+        assert st.in_data_exchange
+        m.step(st)
+    assert st.state == "absent" and not plan.queue
+
+
+@pytest.mark.parametrize("timing", ["instant", "virtual"])
+def test_silence_shorter_than_the_watchdog_resumes_data_exchange_without_set_prm(timing):
+    m, bus, slave = _echo_master(timing, retries=1, wd_ms=500)
+    plan = bus.faults = FaultPlan()
+    set_prm = _count_set_prm(bus)
+    st = m.stations[3]
+    t0 = m.link.now()
+    _silent_cycles(m, plan, st)
+    if timing == "virtual":
+        assert m.link.now() - t0 < 0.5          # the silence really was shorter than the watchdog
+    for n in range(1, 6):
+        assert m.exchange(3, bytes([0, n])) == bytes([0, n])
+    assert st.in_data_exchange and st.fresh_inputs
+    assert set_prm[0] == 0                      # no Set_Prm reached the bus
+    c = m.fdl.counters[3]
+    assert c.reparams == 0 and c.no_answer == MAX_SILENT
+    assert slave.model.left == []               # the station never left data exchange
+    assert slave.stats["watchdog_expired"] == 0 and slave.state == "Data_Exch"
+
+
+def test_silence_on_a_yaskawa_drive_does_not_trip_it():
+    link = open_link("sim://?stations=7:yaskawa&timing=virtual")
+    m = Master(link, BusParams.for_baud(19200, retries=1))
+    slave = link.bus.slave(7)
+    m.add_station(7, SlaveConfig(ident=slave.model.ident, cfg=slave.model.real_cfg(), wd_ms=500))
+    m.bring_up(7)
+    left = []
+    orig = slave.model.on_leave_data_exchange
+    slave.model.on_leave_data_exchange = lambda now, why: (left.append(why), orig(now, why))
+    plan = link.bus.faults = FaultPlan()
+    set_prm = _count_set_prm(link.bus)
+    st = m.stations[7]
+    out = st.outputs
+    for _ in range(MAX_SILENT * 2):
+        plan.inject_next(7, "drop")
+    for _ in range(MAX_SILENT + 5):
+        m.exchange(7, out)
+    assert st.in_data_exchange and left == [] and set_prm[0] == 0
+    assert m.fdl.counters[7].reparams == 0 and m.fdl.counters[7].no_answer == MAX_SILENT
+    link.close()
+
+
+def test_silence_longer_than_the_watchdog_reparameterises_as_before():
+    m, bus, slave = _echo_master("virtual", retries=1, wd_ms=500)
+    plan = bus.faults = FaultPlan()
+    set_prm = _count_set_prm(bus)
+    st = m.stations[3]
+    _silent_cycles(m, plan, st)
+    m.link.sleep(0.6)                           # nothing reaches the station for > 500 ms
+    for n in range(1, 4):
+        assert m.exchange(3, bytes([0, n])) == bytes([0, n])
+    assert slave.stats["watchdog_expired"] == 1 and slave.model.left == ["watchdog"]
+    assert set_prm[0] == 1 and m.fdl.counters[3].reparams == 1
+    assert st.in_data_exchange
+
+
+def test_silence_with_the_station_locked_by_another_master_is_not_resumed():
+    """Diag from a station now parameterised by master 5: not ours to resume."""
+    from profidrive_cli.dp import services as S
+    from profidrive_cli.dp.station import ABSENT, StationMachine
+    from profidrive_cli.fdl.master import Outcome
+    sm = StationMachine(3, SlaveConfig(ident=ECHO_IDENT, cfg=ECHO_CFG, wd_ms=500), 2)
+    sm.state, sm._was_in_dx = "data_exchange", True
+    dx = sm.next_request(0.0)
+    for _ in range(MAX_SILENT):
+        sm.on_outcome(dx, Outcome("no answer"), 0.0)
+    assert sm.state == ABSENT
+    req = sm.next_request(0.0)
+    assert req.service == "Slave_Diag"
+    # st1 0, st2 0x0C (WD_On + fixed), master 5, ident ours: in data exchange, but with master 5
+    diag = S.SlaveDiag(0x00, 0x0C, 0x00, 5, ECHO_IDENT, b"").encode()
+    reply = F.Frame(F.SD2, 2, 3, F.response_fc(F.DL), diag, 0x3E, 0x3C)
+    sm.on_outcome(req, Outcome("reply", reply), 0.0)
+    assert sm.state == "locked"
+    # the same with master 2 (us): resumed
+    sm2 = StationMachine(3, SlaveConfig(ident=ECHO_IDENT, cfg=ECHO_CFG, wd_ms=500), 2)
+    sm2.state, sm2._was_in_dx = "data_exchange", True
+    for _ in range(MAX_SILENT):
+        sm2.on_outcome(dx, Outcome("no answer"), 0.0)
+    diag = S.SlaveDiag(0x00, 0x0C, 0x00, 2, ECHO_IDENT, b"").encode()
+    sm2.on_outcome(req, Outcome("reply", F.Frame(F.SD2, 2, 3, F.response_fc(F.DL), diag, 0x3E, 0x3C)),
+                   0.0)
+    assert sm2.state == "data_exchange" and sm2.counters.reparams == 0
+    # with Prm_Req (st2 0x05, master 0xFF: watchdog expired): start-up again, one reparam
+    sm3 = StationMachine(3, SlaveConfig(ident=ECHO_IDENT, cfg=ECHO_CFG, wd_ms=500), 2)
+    sm3.state, sm3._was_in_dx = "data_exchange", True
+    for _ in range(MAX_SILENT):
+        sm3.on_outcome(dx, Outcome("no answer"), 0.0)
+    diag = S.SlaveDiag(0x02, 0x05, 0x00, 0xFF, ECHO_IDENT, b"").encode()
+    sm3.on_outcome(req, Outcome("reply", F.Frame(F.SD2, 2, 3, F.response_fc(F.DL), diag, 0x3E, 0x3C)),
+                   0.0)
+    assert sm3.state == "set_prm" and sm3.counters.reparams == 1
