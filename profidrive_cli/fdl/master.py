@@ -9,6 +9,9 @@ The engine keeps the FCB per station (reference §2.3), repeats the same FCB on 
 sequence (FCV=0, FCB=1) after a request that got no valid reply at all, checks that a reply comes from
 the addressed station and is addressed to us, and counts what it saw.
 
+Octets the link flags as received with a parity or framing error (LineOctets.errors, link/parity.py)
+spoil the attempt like a telegram that broke: one illegal frame plus one retry.
+
 Receiving: octets that cannot start a telegram (line noise before a reply) are skipped and counted
 once per run as one illegal frame; the reply that follows is taken. A telegram that starts and then
 breaks (FCS, length, end delimiter) spoils the rest of the attempt: everything up to the deadline is
@@ -172,6 +175,15 @@ class FdlMaster:
     def feed(self, data: bytes, now: float) -> Outcome | None:
         if self._pending is None:
             return None
+        errors = getattr(data, "errors", None)
+        if errors:
+            # octets the UART flagged (parity / framing error, link/parity.py): what is complete
+            # before the first one still counts; from there on the attempt is spoilt
+            res = self.feed(bytes(data[:errors[0]]), now)
+            if res is not None or self._pending is None:
+                return res
+            self._line_error(now)
+            return None
         if self._spoilt:
             # a telegram broke in this attempt: drop everything until the line is idle again
             self.deadline = max(self.deadline, now + self._idle_wait())
@@ -206,6 +218,19 @@ class FdlMaster:
                 self._illegal += 1          # token, another master's request, a foreign reply
                 continue
             return self._done(r)
+
+    def _line_error(self, now: float) -> None:
+        """A character arrived with a parity or framing error: the telegram it belongs to is
+        corrupt, treated like one that broke (one illegal frame, nothing more taken in this
+        attempt, then the retry)."""
+        if self._spoilt:
+            self.deadline = max(self.deadline, now + self._idle_wait())
+            return
+        if not (self._in_garbage and not len(self._rx)):
+            self._illegal += 1          # (a noise run already counted is not counted twice)
+        self._spoilt = True
+        self._rx.reset()
+        self.deadline = max(self.deadline, now + self._idle_wait())
 
     def _idle_wait(self) -> float:
         """How long the line must stay quiet after garbage before a retry: TSYN and one character,

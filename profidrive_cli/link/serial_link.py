@@ -2,6 +2,14 @@
 
 8 data bits, even parity, 1 stop bit. Optional kernel RS-485 mode (pyserial RS485Settings) and
 suppression of the adapter's own echo on 2-wire adapters that hear themselves.
+
+Parity errors: on a POSIX serial device the port checks parity and marks each character that
+arrived with a parity or framing error (termios INPCK + PARMRK, link/parity.py); read() returns it
+as LineOctets whose .errors name the flagged positions, and the FDL master takes the telegram as
+corrupt (one illegal frame, the attempt repeated). Without this a character with a wrong parity bit
+would pass as a good octet and PROFIBUS would lose the Hamming distance 4 it gets from the parity
+bit. Ptys carry no parity (opened without when they refuse it, and never marked); URL ports
+(socket://, rfc2217://, loop://, sim://) are untouched.
 """
 
 from __future__ import annotations
@@ -17,6 +25,7 @@ import serial.rs485
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.fdl.timing import BAUD_NAMES
 from profidrive_cli.link.base import Link, LinkLost, precise_sleep
+from profidrive_cli.link.parity import ParityMarkingSerial
 
 if "profidrive_cli.link" not in serial.protocol_handler_packages:
     serial.protocol_handler_packages.append("profidrive_cli.link")
@@ -26,11 +35,21 @@ def _is_pty(port: str) -> bool:
     return "://" not in port and os.path.realpath(port).startswith(("/dev/pts/", "/dev/pty"))
 
 
+def _marks_parity(port: str) -> bool:
+    """A POSIX serial device (not a pty, not a URL): parity errors are checked and marked."""
+    return (ParityMarkingSerial is not None and "://" not in port
+            and not port.upper().startswith("COM") and not _is_pty(port))
+
+
 def open_serial(port: str, baud: int, rs485: bool = False, timeout: float = 0.0,
                 _retry: bool = False) -> serial.SerialBase:
     """Open a pyserial port for PROFIBUS; one-line errors for missing / busy / forbidden ports."""
     try:
-        ser = serial.serial_for_url(port, do_not_open=True)
+        if not _retry and _marks_parity(port):
+            ser = ParityMarkingSerial()          # not opened until .open()
+            ser.port = port
+        else:
+            ser = serial.serial_for_url(port, do_not_open=True)
         ser.baudrate = baud
         ser.bytesize = serial.EIGHTBITS
         ser.parity = serial.PARITY_NONE if _retry else serial.PARITY_EVEN
