@@ -44,7 +44,7 @@ def scan_cmd(opts, first, last, gsd_dir):
         raise UsageError(f"--from {first} is above --to {last}")
     opts.require_port()
     rates = BAUD_RATES if opts.baud == "auto" else (opts.baud_rate(),)
-    result, used_baud = [], None
+    result, used_baud, noise = [], None, 0
     for baud in rates:
         master = opts.open_master(baud)
         try:
@@ -54,6 +54,8 @@ def scan_cmd(opts, first, last, gsd_dir):
                 with Progress(console=err, transient=True) as prog:
                     task = prog.add_task(f"scanning at {BAUD_NAMES[baud]}", total=last - first + 1)
                     result = scan(master, first, last, progress=lambda a: prog.advance(task))
+            # corrupt telegrams and noise runs seen while probing (every address, found or not)
+            noise = sum(c.illegal for c in master.fdl.counters.values())
         finally:
             master.link.close()
         if opts.baud == "auto" and not opts.json:
@@ -62,13 +64,16 @@ def scan_cmd(opts, first, last, gsd_dir):
             used_baud = baud
             break
     if opts.json:
-        emit_json({"port": opts.port, "baud": used_baud, "stations": [
+        emit_json({"port": opts.port, "baud": used_baud, "line_noise": noise, "stations": [
             {"address": e.address, "type": e.station_type,
              "ident": f"0x{e.ident:04X}" if e.ident is not None else None,
              "state": e.diag.state_words(opts.master_address) if e.diag else e.error,
              "device": device_name(e.ident, gsd_dir) if e.ident is not None else "",
              "diag": _diag_json(e.diag), "counters": e.counters} for e in result]})
         return
+    if noise:
+        err.print(f"the line is noisy: {noise} corrupt or unexpected telegram(s) during the scan "
+                  f"(check termination, shielding, the baud rate and other masters)")
     if not result:
         out.print(f"no station answered on {opts.port}"
                   + (" at any DP baud rate" if opts.baud == "auto" else
