@@ -133,6 +133,12 @@ class FdlMaster:
             return 0
         return F.missing(self._rx.buf)
 
+    def telegram_octets(self) -> int:
+        """Length of the reply telegram being received, as far as its start delimiter and length
+        octet tell (0: none started)."""
+        rest = self.missing()
+        return len(self._rx.buf) + rest if rest else 0
+
     def abort(self) -> None:
         """Forget the request in progress (the link went away under it)."""
         self._pending = None

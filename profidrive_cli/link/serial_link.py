@@ -27,6 +27,15 @@ from profidrive_cli.fdl.timing import BAUD_NAMES
 from profidrive_cli.link.base import Link, LinkLost, precise_sleep
 from profidrive_cli.link.parity import ParityMarkingSerial
 
+try:
+    from serial.urlhandler.protocol_socket import Serial as _SocketSerial
+except ImportError:                          # pragma: no cover
+    class _SocketSerial:                     # (no socket:// in this pyserial)
+        pass
+
+#: the most one read takes from a socket:// port (more than any telegram)
+_SOCKET_CHUNK = 4096
+
 if "profidrive_cli.link" not in serial.protocol_handler_packages:
     serial.protocol_handler_packages.append("profidrive_cli.link")
 
@@ -102,8 +111,12 @@ def read_available(ser: serial.SerialBase, timeout: float) -> bytes:
 
     On a POSIX device the wait is a select() on its fd: changing pyserial's timeout would call
     tcsetattr on every read (slow, and refused by some ptys). URL ports (socket://, sim://) take
-    the timeout directly (no termios there).
+    the timeout directly (no termios there). Every kind returns all octets already there: serial
+    devices and most URLs by in_waiting, socket:// (whose in_waiting says only 0 or 1) by one
+    non-blocking read of up to _SOCKET_CHUNK octets.
     """
+    if isinstance(ser, _SocketSerial):
+        return _read_socket(ser, timeout)
     n = ser.in_waiting
     if n:
         return ser.read(n)
@@ -127,6 +140,22 @@ def read_available(ser: serial.SerialBase, timeout: float) -> bytes:
         return b""
     n = ser.in_waiting
     return first + (ser.read(n) if n else b"")
+
+
+def _read_socket(ser, timeout: float) -> bytes:
+    """socket:// reports only whether data waits (in_waiting 0 or 1): take everything that is
+    there with one non-blocking read (timeout 0: one select and one recv) instead of an octet at
+    a time; wait for the first octet only when nothing is there."""
+    ser.timeout = 0
+    data = ser.read(_SOCKET_CHUNK)
+    if data or timeout <= 0:
+        return data
+    ser.timeout = timeout
+    first = ser.read(1)
+    if not first:
+        return b""
+    ser.timeout = 0
+    return first + ser.read(_SOCKET_CHUNK)
 
 
 class SerialLink(Link):
