@@ -188,3 +188,18 @@ def test_ptys_and_urls_are_not_marked():
         ser = serial_link.open_serial(url, 19200)
         assert not isinstance(ser, P.ParityMarkingSerial)
         ser.close()
+
+
+def test_simulated_station_drops_a_request_with_a_flagged_octet():
+    """`pdrive sim --port` on a real device reads through the marking port too: a request with a
+    parity error is not executed (a real station discards it), the next clean one is."""
+    bus = build_bus("sim://?stations=3:fuji-g1")
+    req = F.encode(F.Frame(F.SD2, 3, 2, F.request_fc(F.SRD_HIGH, fcb=True, fcv=False), b"", 60, 62))
+    for k in range(len(req)):
+        before = bus.slave(3).stats["requests"]
+        assert bus.receive(LineOctets(req, (k,)), 0.0) == [], k
+        assert bus.slave(3).stats["requests"] == before, k
+    n_err = bus.stats.framing_errors
+    assert n_err >= len(req)
+    replies = bus.receive(req, 0.0)
+    assert len(replies) == 1 and bus.slave(3).stats["requests"] == 1
