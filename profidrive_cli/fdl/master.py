@@ -199,7 +199,7 @@ class FdlMaster:
         return (1 + self.params.retries) * self.attempt_cap(request_octets, expect_octets)
 
     def _extend(self, t: float) -> None:
-        """Keep waiting until at least `t`, never beyond the request's cap."""
+        """Keep waiting until at least `t`, never beyond the cap of the attempt in progress."""
         self.deadline = min(max(self.deadline, t), self._hard)
 
     def send_no_reply(self, da: int, function: int, data: bytes = b"", dsap=None, ssap=None) -> bytes:
