@@ -188,3 +188,39 @@ def test_silence_with_the_station_locked_by_another_master_is_not_resumed():
     sm3.on_outcome(req, Outcome("reply", F.Frame(F.SD2, 2, 3, F.response_fc(F.DL), diag, 0x3E, 0x3C)),
                    0.0)
     assert sm3.state == "set_prm" and sm3.counters.reparams == 1
+
+
+def test_lost_replies_over_a_real_pty_never_reparameterise():
+    """The same through a real byte path: `pdrive sim --pty` dropping 70 % of the replies (so
+    requests regularly end without any answer and silences of MAX_SILENT cycles happen), a
+    watchdog far longer than any silence: the station is resumed each time, never re-parameterised."""
+    import json
+    import subprocess
+    import sys
+
+    sim = subprocess.Popen([sys.executable, "-m", "profidrive_cli", "sim", "--pty", "--json", "--plant",
+                            "sim://?stations=3:fuji-g1&drop=0.7&seed=3"],
+                           stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        port = json.loads(sim.stdout.readline())["port"]
+        link = open_link(port, 19200)
+        m = Master(link, BusParams.for_baud(19200, retries=1, link_latency=0.02))
+        m.add_station(3, SlaveConfig(ident=0xFD01, cfg=bytes.fromhex("F3F1"), wd_ms=5000))
+        m.bring_up(3, timeout=30)
+        states = []
+        m.on_event = lambda a, e: states.append(e.data) if e.kind == "state" else None
+        st = m.stations[3]
+        resumed = 0
+        for _ in range(150):
+            m.step(st)
+            if st.state == "absent":
+                m.bring_up(3, timeout=30)
+                resumed += 1
+        c = m.fdl.counters[3]
+        link.close()
+    finally:
+        sim.terminate()
+        sim.wait(10)
+    assert resumed >= 1, c                       # silences did happen (seeded drops)
+    assert c.reparams == 0 and "set_prm" not in states, (c, states)
+    assert c.no_answer >= MAX_SILENT
