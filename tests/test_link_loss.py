@@ -214,6 +214,12 @@ class Proxy:
 
     def cut(self):
         self.alive = False
+        try:
+            # shutdown first: a close() alone leaves the socket listening while the accept thread
+            # is blocked in accept() on it, and the next client would still get through
+            self.srv.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
         self.srv.close()
         for c, u in self.pairs:
             for s in (c, u):

@@ -57,16 +57,21 @@ def scan_cmd(opts, first, last, gsd_dir):
             with Progress(console=err, transient=True) as prog:
                 task = prog.add_task(f"scanning at {BAUD_NAMES[used_baud]}", total=last - first + 1)
                 result = scan(master, first, last, progress=lambda a: prog.advance(task))
+        # corrupt telegrams and noise runs seen while probing (every address, found or not)
+        noise = sum(c.illegal for c in master.fdl.counters.values())
     finally:
         master.link.close()
     if opts.json:
-        emit_json({"port": opts.port, "baud": used_baud, "stations": [
+        emit_json({"port": opts.port, "baud": used_baud, "line_noise": noise, "stations": [
             {"address": e.address, "type": e.station_type,
              "ident": f"0x{e.ident:04X}" if e.ident is not None else None,
              "state": e.diag.state_words(opts.master_address) if e.diag else e.error,
              "device": device_name(e.ident, gsd_dir) if e.ident is not None else "",
              "diag": _diag_json(e.diag), "counters": e.counters} for e in result]})
         return
+    if noise:
+        err.print(f"the line is noisy: {noise} corrupt or unexpected telegram(s) during the scan "
+                  f"(check termination, shielding, the baud rate and other masters)")
     if not result:
         out.print(f"no station answered on {opts.port} at {BAUD_NAMES[used_baud]}"
                   + ("" if opts.baud == "auto" else " (try --baud auto)"))

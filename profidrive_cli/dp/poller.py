@@ -99,6 +99,7 @@ class Master:
         self.link.write(out)
         if not self.link.instant:
             self._sent(out)
+        waited_for = 0       # length of the telegram whose rest was already waited for
         while True:
             chunk = self.link.read(self.fdl.deadline)
             now = self.link.now()
@@ -109,9 +110,15 @@ class Master:
                     return res
                 rest = self.fdl.missing()
                 if rest > 1 and not self.link.instant:
-                    # the rest of a telegram of known length cannot be there sooner: one wait
-                    # instead of a wake-up per octet
-                    self.link.sleep(min(self.fdl.params.chars(rest - 1), self.fdl.deadline - now))
+                    total = self.fdl.telegram_octets()
+                    if total != waited_for:
+                        # the rest of a telegram of known length cannot be there sooner: one wait
+                        # for it instead of a wake-up per octet, and only one per telegram (a
+                        # transport that delivers it in chunks, late, is then simply read: the
+                        # next read wakes when the next chunk is there)
+                        waited_for = total
+                        self.link.sleep(min(self.fdl.params.chars(rest - 1),
+                                            self.fdl.deadline - now))
                 continue
             if now < self.fdl.deadline and not self.link.instant:
                 continue
@@ -121,6 +128,7 @@ class Master:
                 return nxt
             self.link.flush_input()
             self._wait_idle()
+            waited_for = 0
             out, deadline = nxt
             self.link.write(out)
             self._sent(out)

@@ -3,8 +3,15 @@
     Slave_Diag -> Set_Prm -> Chk_Cfg -> Slave_Diag (until ready) -> Data_Exchange
 
 Prm_Req, Cfg_Fault, Prm_Fault and Stat_Diag are honoured; DH/RDH in Data_Exchange -> read the
-diagnosis; RS or repeated silence -> start over (counted as a re-parameterisation when the station
-had reached Data_Exchange; retried start-up steps are not).
+diagnosis; RS -> start over (counted as a re-parameterisation when the station had reached
+Data_Exchange; retried start-up steps are not).
+
+Silence in Data_Exchange (MAX_SILENT requests without a valid reply) -> Slave_Diag first, as a real
+master does: a station that still reports data exchange with us (master address = ours, ident ours,
+no Prm_Req, no Not_Ready / Cfg_Fault / Prm_Fault / Non_Existent / Master_Lock, WD_On as we set it;
+reference §3.3/§3.6) has kept its parameters, its watchdog never expired: Data_Exchange resumes
+without Set_Prm/Chk_Cfg (which would trip a drive) and it is not a re-parameterisation. Otherwise
+(watchdog expired, power cycle, another master) the start-up runs again as after RS.
 next_request(now) says what to send; on_outcome(request, outcome, now) takes what came back.
 """
 
@@ -84,6 +91,7 @@ class StationMachine:
         self._silent = 0
         self._checks = 0
         self._was_in_dx = False        # reached Data_Exchange since the last start-up began
+        self._may_resume = False       # silent in Data_Exchange: resume if the diag still says so
         self.fresh_inputs = False      # set when a Data_Exchange delivered inputs
 
     # -- helpers ------------------------------------------------------------------------------
@@ -94,7 +102,15 @@ class StationMachine:
                 self._was_in_dx = True
             events.append(Event("state", text or STATE_WORDS[state], state))
 
+    def _still_exchanging(self, d: S.SlaveDiag) -> bool:
+        """The diagnosis says the station is still in Data_Exchange with us, on our parameters."""
+        bad1 = ("Station_Non_Existent", "Station_Not_Ready", "Cfg_Fault", "Prm_Fault", "Master_Lock")
+        return (d.master == self.master_address and d.ident == self.config.ident
+                and not any(d.has(b) for b in bad1) and not d.has("Prm_Req")
+                and d.has("WD_On") == (self.config.wd_ms is not None))
+
     def restart(self, events: list, why: str, now: float = 0.0, delay: float = 0.0) -> None:
+        self._may_resume = False
         self.last_error = why
         self.wait_until = now + delay
         self._goto(START, events, f"starting over: {why}")
@@ -132,9 +148,12 @@ class StationMachine:
             if self.state == DATA_EXCH:
                 self._silent += 1
                 if self._silent >= MAX_SILENT:
+                    # read the diagnosis before deciding: the station may still be in data exchange
                     self._silent = 0
-                    self.restart(ev, "station stopped answering", now)
-                    self._goto(ABSENT, ev)
+                    self._may_resume = True
+                    self.last_error = "station stopped answering"
+                    self._goto(ABSENT, ev, "no answer: reading the diagnosis")
+                    ev.append(Event("error", self.last_error))
             elif self.state != ABSENT:
                 self.last_error = f"no answer to {req.service}"
                 self._goto(ABSENT, ev)
@@ -196,6 +215,13 @@ class StationMachine:
         ev.append(Event("diag", d.state_words(self.master_address), d))
         locked_elsewhere = (d.has("Master_Lock") or
                             (d.master not in (0xFF, self.master_address) and not d.has("Prm_Req")))
+        if self.state == ABSENT and self._may_resume:
+            self._may_resume = False
+            if self._still_exchanging(d):
+                self.last_error = ""
+                self._diag_due = d.has("Stat_Diag")    # keep reading it as in Data_Exchange
+                self._goto(DATA_EXCH, ev, "data exchange resumed (the station kept it)")
+                return ev
         if self.state in (START, CFG_FAULT, PRM_FAULT, LOCKED, ABSENT):
             if locked_elsewhere:
                 self.last_error = f"locked by master {d.master}"

@@ -10,6 +10,12 @@ class MasterFcb:
 
     First request after (re)start: FCV=0, FCB=1. Then FCV=1 and FCB toggles after every request that
     got a valid reply. A retry repeats the same FCB (call fc() again without confirm()).
+
+    A transaction that failed (no valid reply after all retries) is a restart (failed()): the next
+    request starts a new sequence with FCV=0, FCB=1 (reference §2.3 rule 1). Keeping the FCB instead
+    (rule 2 only toggles after a valid reply) would make the next, different request look like a
+    repetition to a slave that did execute the lost one: it would answer from its repeat cache
+    without executing it.
     """
 
     __slots__ = ("_started", "_fcb")
@@ -25,6 +31,10 @@ class MasterFcb:
         if not self._started:
             return request_fc(function, fcb=True, fcv=False)
         return request_fc(function, fcb=self._fcb, fcv=True)
+
+    def failed(self) -> None:
+        """The request got no valid reply after all retries: the next one restarts the sequence."""
+        self.reset()
 
     def confirm(self) -> None:
         """The request just sent got a valid reply: the next one uses the other FCB."""

@@ -5,8 +5,12 @@
     ... fm.feed(octets, now) -> Outcome | None     (None: keep waiting until deadline)
     ... fm.expire(now)       -> (retry octets, new deadline) or Outcome(no answer)
 
-The engine keeps the FCB per station (reference §2.3), repeats the same FCB on a retry, checks that a
-reply comes from the addressed station and is addressed to us, and counts what it saw.
+The engine keeps the FCB per station (reference §2.3), repeats the same FCB on a retry, restarts the
+sequence (FCV=0, FCB=1) after a request that got no valid reply at all, checks that a reply comes from
+the addressed station and is addressed to us, and counts what it saw.
+
+Octets the link flags as received with a parity or framing error (LineOctets.errors, link/parity.py)
+spoil the attempt like a telegram that broke: one illegal frame plus one retry.
 
 Receiving: octets that cannot start a telegram (line noise before a reply) are skipped and counted
 once per run as one illegal frame; the reply that follows is taken. A telegram that starts and then
@@ -14,6 +18,11 @@ breaks (FCS, length, end delimiter) spoils the rest of the attempt: everything u
 dropped (reference §2: resynchronise on an idle line) and the request is repeated. So each corrupt
 reply costs exactly one illegal frame plus one retry, a reply from the wrong station the same, a
 missing or late reply one retry, and noise before a good reply one illegal frame only.
+
+Every attempt has a hard cap (attempt_cap: the request, slot time, longest reply, TSYN and the
+latency margin), so a request takes at most (1 + retries) times that (request_cap): a babbling line
+that keeps sending octets cannot push the deadline out for ever; at the cap the attempt has failed,
+its noise counted as illegal, and after the last retry the request counts as not answered.
 """
 
 from __future__ import annotations
@@ -99,6 +108,8 @@ class FdlMaster:
         self._rx = F.Receiver()
         self.deadline = 0.0
         self._timeout = 0.0
+        self._cap = 0.0               # the most one attempt may take, whatever arrives
+        self._hard = float("inf")     # the end of the attempt in progress (its start + _cap)
         self._expect = 255
 
     def counters_for(self, da: int) -> StationCounters:
@@ -121,6 +132,12 @@ class FdlMaster:
         if self._pending is None or self._spoilt or not len(self._rx):
             return 0
         return F.missing(self._rx.buf)
+
+    def telegram_octets(self) -> int:
+        """Length of the reply telegram being received, as far as its start delimiter and length
+        octet tell (0: none started)."""
+        rest = self.missing()
+        return len(self._rx.buf) + rest if rest else 0
 
     def abort(self) -> None:
         """Forget the request in progress (the link went away under it)."""
@@ -153,6 +170,8 @@ class FdlMaster:
         self._timeout = (self.params.chars(len(self._pending)) + self.params.slot_seconds
                          + self.params.link_latency)
         self._expect = expect_octets
+        self._cap = self.attempt_cap(len(self._pending), expect_octets)
+        self._hard = now + self._cap
         self.deadline = now + self._timeout
         self.counters_for(da).requests += 1
         return self._pending, self.deadline
@@ -161,8 +180,27 @@ class FdlMaster:
         """The request (or its retry) was handed to the link at `now`: the reply timeout counts
         from here (a write that took long must not eat the slot time). Returns the deadline."""
         if self._pending is not None:
-            self.deadline = now + self._timeout
+            self._hard = now + self._cap
+            self.deadline = min(now + self._timeout, self._hard)
         return self.deadline
+
+    def attempt_cap(self, request_octets: int, expect_octets: int = 255) -> float:
+        """The most one attempt may take, whatever arrives (a babbling line must not hold the
+        master): the request, the slot time, the longest reply, TSYN and the link's latency margin.
+        Then the attempt has failed (its noise counted as illegal) and the request is repeated or,
+        after the last retry, counts as not answered."""
+        p = self.params
+        reply = min(expect_octets + 9, 255)
+        return p.chars(request_octets) + p.slot_seconds + p.chars(reply) + p.tsyn + p.link_latency
+
+    def request_cap(self, request_octets: int, expect_octets: int = 255) -> float:
+        """The most a whole request may take: (1 + retries) attempts (plus the idle times the
+        poller keeps between them)."""
+        return (1 + self.params.retries) * self.attempt_cap(request_octets, expect_octets)
+
+    def _extend(self, t: float) -> None:
+        """Keep waiting until at least `t`, never beyond the cap of the attempt in progress."""
+        self.deadline = min(max(self.deadline, t), self._hard)
 
     def send_no_reply(self, da: int, function: int, data: bytes = b"", dsap=None, ssap=None) -> bytes:
         """SDN (e.g. Global_Control broadcast): FCB/FCV 0, nothing to wait for."""
@@ -171,17 +209,25 @@ class FdlMaster:
     def feed(self, data: bytes, now: float) -> Outcome | None:
         if self._pending is None:
             return None
+        errors = getattr(data, "errors", None)
+        if errors:
+            # octets the UART flagged (parity / framing error, link/parity.py): what is complete
+            # before the first one still counts; from there on the attempt is spoilt
+            res = self.feed(bytes(data[:errors[0]]), now)
+            if res is not None or self._pending is None:
+                return res
+            self._line_error(now)
+            return None
         if self._spoilt:
             # a telegram broke in this attempt: drop everything until the line is idle again
-            self.deadline = max(self.deadline, now + self._idle_wait())
+            self._extend(now + self._idle_wait())
             return None
         self._rx.feed(data)
         while True:
             r = self._rx.next()
             if r is None:
                 if len(self._rx):
-                    self.deadline = max(self.deadline, now + self.params.chars(self._expect + 9)
-                                        + self.params.link_latency)
+                    self._extend(now + self.params.chars(self._expect + 9) + self.params.link_latency)
                 return None
             if isinstance(r, F.FrameError):
                 if r.kind == F.FrameError.GARBAGE:
@@ -196,7 +242,7 @@ class FdlMaster:
                     self._illegal += 1
                 self._spoilt = True
                 self._rx.reset()
-                self.deadline = max(self.deadline, now + self._idle_wait())
+                self._extend(now + self._idle_wait())
                 return None
             self._in_garbage = False
             if r.sd == F.SC:
@@ -205,6 +251,19 @@ class FdlMaster:
                 self._illegal += 1          # token, another master's request, a foreign reply
                 continue
             return self._done(r)
+
+    def _line_error(self, now: float) -> None:
+        """A character arrived with a parity or framing error: the telegram it belongs to is
+        corrupt, treated like one that broke (one illegal frame, nothing more taken in this
+        attempt, then the retry)."""
+        if self._spoilt:
+            self._extend(now + self._idle_wait())
+            return
+        if not (self._in_garbage and not len(self._rx)):
+            self._illegal += 1          # (a noise run already counted is not counted twice)
+        self._spoilt = True
+        self._rx.reset()
+        self._extend(now + self._idle_wait())
 
     def _idle_wait(self) -> float:
         """How long the line must stay quiet after garbage before a retry: TSYN and one character,
@@ -240,8 +299,12 @@ class FdlMaster:
             self._rx.reset()
             self._in_garbage = False
             self._spoilt = False
+            self._hard = now + self._cap
             self.deadline = now + self._timeout
             return self._pending, self.deadline
+        if self._uses_fcb:
+            # failed transaction: the next request to this station restarts the FCB sequence
+            self._fcb[self._da].failed()
         c = self.counters_for(self._da)
         c.retries += self._retries
         c.illegal += self._illegal

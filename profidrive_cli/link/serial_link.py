@@ -2,6 +2,14 @@
 
 8 data bits, even parity, 1 stop bit. Optional kernel RS-485 mode (pyserial RS485Settings) and
 suppression of the adapter's own echo on 2-wire adapters that hear themselves.
+
+Parity errors: on a POSIX serial device the port checks parity and marks each character that
+arrived with a parity or framing error (termios INPCK + PARMRK, link/parity.py); read() returns it
+as LineOctets whose .errors name the flagged positions, and the FDL master takes the telegram as
+corrupt (one illegal frame, the attempt repeated). Without this a character with a wrong parity bit
+would pass as a good octet and PROFIBUS would lose the Hamming distance 4 it gets from the parity
+bit. Ptys carry no parity (opened without when they refuse it, and never marked); URL ports
+(socket://, rfc2217://, loop://, sim://) are untouched.
 """
 
 from __future__ import annotations
@@ -17,6 +25,16 @@ import serial.rs485
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.fdl.timing import BAUD_NAMES
 from profidrive_cli.link.base import Link, LinkLost, precise_sleep
+from profidrive_cli.link.parity import ParityMarkingSerial
+
+try:
+    from serial.urlhandler.protocol_socket import Serial as _SocketSerial
+except ImportError:                          # pragma: no cover
+    class _SocketSerial:                     # (no socket:// in this pyserial)
+        pass
+
+#: the most one read takes from a socket:// port (more than any telegram)
+_SOCKET_CHUNK = 4096
 
 if "profidrive_cli.link" not in serial.protocol_handler_packages:
     serial.protocol_handler_packages.append("profidrive_cli.link")
@@ -26,11 +44,21 @@ def _is_pty(port: str) -> bool:
     return "://" not in port and os.path.realpath(port).startswith(("/dev/pts/", "/dev/pty"))
 
 
+def _marks_parity(port: str) -> bool:
+    """A POSIX serial device (not a pty, not a URL): parity errors are checked and marked."""
+    return (ParityMarkingSerial is not None and "://" not in port
+            and not port.upper().startswith("COM") and not _is_pty(port))
+
+
 def open_serial(port: str, baud: int, rs485: bool = False, timeout: float = 0.0,
                 _retry: bool = False) -> serial.SerialBase:
     """Open a pyserial port for PROFIBUS; one-line errors for missing / busy / forbidden ports."""
     try:
-        ser = serial.serial_for_url(port, do_not_open=True)
+        if not _retry and _marks_parity(port):
+            ser = ParityMarkingSerial()          # not opened until .open()
+            ser.port = port
+        else:
+            ser = serial.serial_for_url(port, do_not_open=True)
         ser.baudrate = baud
         ser.bytesize = serial.EIGHTBITS
         ser.parity = serial.PARITY_NONE if _retry else serial.PARITY_EVEN
@@ -83,8 +111,12 @@ def read_available(ser: serial.SerialBase, timeout: float) -> bytes:
 
     On a POSIX device the wait is a select() on its fd: changing pyserial's timeout would call
     tcsetattr on every read (slow, and refused by some ptys). URL ports (socket://, sim://) take
-    the timeout directly (no termios there).
+    the timeout directly (no termios there). Every kind returns all octets already there: serial
+    devices and most URLs by in_waiting, socket:// (whose in_waiting says only 0 or 1) by one
+    non-blocking read of up to _SOCKET_CHUNK octets.
     """
+    if isinstance(ser, _SocketSerial):
+        return _read_socket(ser, timeout)
     n = ser.in_waiting
     if n:
         return ser.read(n)
@@ -108,6 +140,22 @@ def read_available(ser: serial.SerialBase, timeout: float) -> bytes:
         return b""
     n = ser.in_waiting
     return first + (ser.read(n) if n else b"")
+
+
+def _read_socket(ser, timeout: float) -> bytes:
+    """socket:// reports only whether data waits (in_waiting 0 or 1): take everything that is
+    there with one non-blocking read (timeout 0: one select and one recv) instead of an octet at
+    a time; wait for the first octet only when nothing is there."""
+    ser.timeout = 0
+    data = ser.read(_SOCKET_CHUNK)
+    if data or timeout <= 0:
+        return data
+    ser.timeout = timeout
+    first = ser.read(1)
+    if not first:
+        return b""
+    ser.timeout = 0
+    return first + ser.read(_SOCKET_CHUNK)
 
 
 class SerialLink(Link):

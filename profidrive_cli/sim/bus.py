@@ -154,17 +154,17 @@ class SimBus:
             self.stats.cancelled += len(self.outbox)
             self.outbox.clear()
         t_req_end = now + (self.params.chars(len(data)) if self.wire else 0.0)
-        self.rx.feed(data)
-        while True:
-            r = self.rx.next()
-            if r is None:
-                break
-            if isinstance(r, F.FrameError):
+        # octets flagged with a parity/framing error by a marking port (link/parity.py, `pdrive sim
+        # --port` on a real device): like a real station, drop the telegram they belong to
+        errors = getattr(data, "errors", ()) or ()
+        start = 0
+        for pos in list(errors) + [len(data)]:
+            self.rx.feed(bytes(data[start:pos]))
+            self._take_requests(t_req_end, out)
+            if pos < len(data):
                 self.stats.framing_errors += 1
-                continue
-            reply = self._dispatch(r, t_req_end)
-            if reply is not None:
-                out.append(reply)
+                self.rx.reset()
+            start = pos + 1
         self.busy_until = max(self.busy_until, t_req_end)
         for r in out:
             self.outbox.append(r)
@@ -172,6 +172,18 @@ class SimBus:
                 self.reply_due_until = max(self.reply_due_until, r.end)
             self.busy_until = max(self.busy_until, r.end)
         return out
+
+    def _take_requests(self, t_req_end: float, out: list) -> None:
+        while True:
+            r = self.rx.next()
+            if r is None:
+                return
+            if isinstance(r, F.FrameError):
+                self.stats.framing_errors += 1
+                continue
+            reply = self._dispatch(r, t_req_end)
+            if reply is not None:
+                out.append(reply)
 
     def _dispatch(self, req: F.Frame, t: float) -> Reply | None:
         if req.sd in (F.SC, F.SD4) or not req.is_request:
