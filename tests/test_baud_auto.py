@@ -247,3 +247,32 @@ def test_capture_chunked_feed_equals_one_feed():
     assert [c.raw for c in whole if c.frame] == frames
     assert [c.raw for c in chunked if c.frame] == frames
     assert b"".join(c.raw for c in whole) == b"".join(c.raw for c in chunked) == data[:len(b"".join(c.raw for c in whole))]
+
+
+def test_pdrive_as_second_client_is_told_the_simulator_is_busy():
+    import subprocess
+    import sys
+    import time
+    bus = build_bus("sim://?stations=3:fuji-g1")
+    ep = server.TcpEndpoint("127.0.0.1", 0)
+    stop = []
+    th = threading.Thread(target=server.serve, args=(bus, ep, lambda: bool(stop)), daemon=True)
+    th.start()
+    try:
+        first = socket.create_connection(ep.address, timeout=5)
+        for _ in range(200):
+            if ep.accepted:
+                break
+            time.sleep(0.01)
+        p = subprocess.run([sys.executable, "-m", "profidrive_cli", "scan", "--to", "5", "--port",
+                            f"socket://127.0.0.1:{ep.address[1]}"], capture_output=True, text=True,
+                           stdin=subprocess.DEVNULL, timeout=60)
+        first.close()
+    finally:
+        stop.append(1)
+        th.join(timeout=5)
+        ep.close()
+    assert p.returncode == 1
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and "busy" in lines[0] and "another client is connected" in lines[0]
+    assert "Traceback" not in p.stderr

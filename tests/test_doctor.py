@@ -204,3 +204,64 @@ def test_permission_problems_are_explained(monkeypatch, in_file, expect):
     assert c["permission"].status == "fail" and expect in c["permission"].detail
     assert "open" not in c and "echo" not in c          # nothing opened without permission
     assert rep.failed
+
+
+# -- the round trip of a real exchange (issue: doctor said all is well over a slow converter) --------
+
+def _tcp_sim(delay_s: float):
+    import threading
+
+    from profidrive_cli.sim import server
+    from profidrive_cli.sim.plant import build_bus
+
+    class SlowEndpoint(server.TcpEndpoint):
+        """A converter that holds every reply `delay_s` before passing it on."""
+
+        def write(self, data):
+            time.sleep(delay_s)
+            super().write(data)
+
+    bus = build_bus("sim://?stations=3:fuji-g1&timing=wire")
+    ep = SlowEndpoint("127.0.0.1", 0)
+    stop = []
+    th = threading.Thread(target=server.serve, args=(bus, ep, lambda: bool(stop)), daemon=True)
+    th.start()
+
+    def close():
+        stop.append(1)
+        th.join(timeout=5)
+        ep.close()
+    return f"socket://127.0.0.1:{ep.address[1]}", close
+
+
+def _check(rep, name):
+    return next(c for c in rep.checks if c.name == name)
+
+
+def test_round_trip_over_a_converter_at_wire_speed_is_ok():
+    from profidrive_cli.link.doctor import OK, diagnose
+    url, close = _tcp_sim(0.0)
+    try:
+        rep = diagnose(url, 19200, listen_s=0.05)
+    finally:
+        close()
+    c = _check(rep, "round trip")
+    # SD1 request 6 octets + TSDR 11 bit + SD1 reply 6 octets at 19.2k: (66 + 11 + 66) / 19200 s
+    assert c.data["wire_ms"] == round(143 / 19200 * 1000, 3)
+    assert c.data["station"] == 3 and len(c.data["round_trips_ms"]) == 5
+    assert c.status == OK, c.detail
+
+
+def test_round_trip_over_a_buffering_converter_warns_and_raises_the_slot_time():
+    from profidrive_cli.link.doctor import WARN, diagnose
+    url, close = _tcp_sim(0.04)
+    try:
+        rep = diagnose(url, 19200, listen_s=0.05, station=3)
+    finally:
+        close()
+    c = _check(rep, "round trip")
+    assert c.status == WARN, c.detail
+    assert min(c.data["round_trips_ms"]) >= 40.0
+    assert "adds up to" in c.detail
+    # the slot time recommended covers the measured delay: > 40 ms at 19.2k = 768 bit
+    assert rep.recommend["slot_time"] > 768

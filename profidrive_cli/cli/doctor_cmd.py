@@ -17,10 +17,13 @@ _MARK = {"ok": "[green]ok[/green]", "warn": "[yellow]warn[/yellow]", "fail": "[r
 @click.option("--probe-address", default=126, show_default=True, type=click.IntRange(0, 126),
               help="Address for the one FDL status request of the echo test (sent only when the "
                    "line is quiet; pick one no station uses).")
+@click.option("--station", default=None, type=click.IntRange(0, 126),
+              help="Measure the round trip to this station (default: the first that answers an FDL "
+                   "status request).")
 @click.option("--listen", "listen_s", default=0.3, show_default=True, type=click.FloatRange(0.0, 10.0),
               help="Seconds to listen for other traffic before transmitting.")
 @bus_options
-def doctor_cmd(opts, probe_address, listen_s):
+def doctor_cmd(opts, probe_address, station, listen_s):
     """Check a serial setup for PROFIBUS: permission, DP baud rates, FTDI latency_timer, echo,
     kernel RS-485; recommend --slot-time and --retries. Without --port: list the ports."""
     from profidrive_cli.link.doctor import diagnose
@@ -30,7 +33,7 @@ def doctor_cmd(opts, probe_address, listen_s):
     if opts.baud == "auto":
         raise UsageError("doctor needs one baud rate for its echo test (--baud RATE)")
     rep = diagnose(opts.port, opts.baud_rate(), opts.master_address, probe_address, opts.rs485,
-                   listen_s)
+                   listen_s, station=station)
     if opts.json:
         emit_json(rep.as_dict())
     else:

@@ -56,6 +56,10 @@ class Report:
     checks: list[Check] = field(default_factory=list)
     baud_rates: dict[int, str] = field(default_factory=dict)    # rate -> "ok" / why refused
     recommend: dict = field(default_factory=dict)
+    #: the line carried traffic before we transmitted (another master): nothing more is sent
+    busy: bool = False
+    #: the slowest FDL status round trip measured, seconds
+    round_trip_s: float | None = None
 
     def add(self, name: str, status: str, detail: str, **data) -> Check:
         c = Check(name, status, detail, data)
@@ -164,7 +168,8 @@ def usb_slot_bits(baud: int, latency_ms: int | None) -> int:
 
 # -- the whole check -----------------------------------------------------------------------------
 def diagnose(port: str, baud: int = 19200, master_address: int = 2, probe_address: int = 126,
-             rs485: bool = False, listen_s: float = 0.3, sysfs: str = "/sys") -> Report:
+             rs485: bool = False, listen_s: float = 0.3, sysfs: str = "/sys",
+             station: int | None = None) -> Report:
     if not 0 <= probe_address <= 126 or probe_address == master_address:
         raise UsageError(f"probe address {probe_address} must be 0..126 and not the master's")
     if port.startswith("sim://"):
@@ -177,6 +182,7 @@ def diagnose(port: str, baud: int = 19200, master_address: int = 2, probe_addres
         if ser is not None:
             rep.baud_rates[baud] = OK
             _echo(rep, ser, port, baud, master_address, probe_address, listen_s)
+            _round_trip(rep, ser, baud, master_address, station)
             ser.close()
         _recommend(rep, baud, usb=False, latency=None, url=True)
         return rep
@@ -249,6 +255,7 @@ def diagnose(port: str, baud: int = 19200, master_address: int = 2, probe_addres
             else:
                 rep.add("rs485", WARN, f"TIOCGRS485: {state}", state=state)
         _echo(rep, ser, port, baud, master_address, probe_address, listen_s)
+        _round_trip(rep, ser, baud, master_address, station)
         ser.close()
     _recommend(rep, baud, on_usb, latency)
     return rep
@@ -341,6 +348,7 @@ def _echo(rep: Report, ser, port: str, baud: int, master: int, probe: int, liste
                 "another master is active (or the baud rate / wiring is wrong); not transmitting",
                 octets=len(before))
         rep.add("echo", SKIP, "not tested on a busy line")
+        rep.busy = True
         return
     rep.add("line", OK, f"quiet for {listen_s:g} s before transmitting")
     req = F.encode(F.Frame(F.SD1, probe, master, F.request_fc(F.FDL_STATUS)))
@@ -373,6 +381,83 @@ def _echo(rep: Report, ser, port: str, baud: int, master: int, probe: int, liste
     rep.recommend["echo"] = echo
 
 
+#: FDL status round trips measured per doctor run
+ROUND_TRIPS = 5
+
+
+def _exchange(ser, req: bytes, timeout: float, echo: bool) -> tuple[float | None, bytes]:
+    """Send `req`, read until one whole telegram came back: (seconds from the end of the write to
+    the last octet, what came) or (None, what came) on timeout."""
+    ser.reset_input_buffer()
+    ser.write(req)
+    t0 = time.monotonic()
+    from profidrive_cli.link.serial_link import read_available
+    got = bytearray()
+    skip = len(req) if echo else 0
+    while True:
+        left = t0 + timeout - time.monotonic()
+        if left <= 0:
+            return None, bytes(got)
+        got += read_available(ser, left)
+        body = got[skip:]
+        r = F.parse(body) if body else None
+        if r is not None and not isinstance(r, F.FrameError):
+            return time.monotonic() - t0, bytes(got)
+
+
+def _round_trip(rep: Report, ser, baud: int, master: int, station: int | None) -> None:
+    """The round trip of a real exchange against its wire time: FDL status requests to `station`
+    (or to the first address that answers one) — a converter or adapter that buffers shows here."""
+    if rep.busy:
+        rep.add("round trip", SKIP, "not measured on a busy line")
+        return
+    p = BusParams.for_baud(baud)
+    echo = bool(rep.recommend.get("echo"))
+    wire = p.chars(6) + p.min_tsdr / baud + p.chars(6)       # SD1 request, TSDR, SD1 reply
+    wire_max = p.chars(6) + p.max_tsdr / baud + p.chars(6)
+    timeout = max(0.2, 20 * wire_max)
+    targets = [station] if station is not None else [a for a in range(0, 127) if a != master]
+    found, times = None, []
+    try:
+        for a in targets:
+            req = F.encode(F.Frame(F.SD1, a, master, F.request_fc(F.FDL_STATUS)))
+            rt, _ = _exchange(ser, req, min(timeout, 0.05) if station is None else timeout, echo)
+            if rt is not None:
+                found, times = a, [rt]
+                break
+        if found is not None:
+            req = F.encode(F.Frame(F.SD1, found, master, F.request_fc(F.FDL_STATUS)))
+            for _ in range(ROUND_TRIPS - 1):
+                rt, _ = _exchange(ser, req, timeout, echo)
+                if rt is not None:
+                    times.append(rt)
+    except Exception as e:
+        rep.add("round trip", FAIL, f"FDL status exchange failed: {e}")
+        return
+    if found is None:
+        rep.add("round trip", INFO if station is None else WARN,
+                "no station answered an FDL status request: nothing to measure"
+                + ("" if station is None else f" (station {station})"))
+        return
+    worst = max(times)
+    data = {"station": found, "round_trips_ms": [round(t * 1000, 3) for t in times],
+            "wire_ms": round(wire * 1000, 3), "wire_max_tsdr_ms": round(wire_max * 1000, 3)}
+    rep.round_trip_s = worst
+    text = (f"station {found}: FDL status round trip {min(times) * 1000:.1f}–{worst * 1000:.1f} ms "
+            f"over {len(times)} exchanges; on the wire {wire * 1000:.1f}–{wire_max * 1000:.1f} ms "
+            f"at {BAUD_NAMES[baud]}")
+    if worst > 2 * wire_max + 0.002:
+        extra = worst - wire
+        rep.add("round trip", WARN, text + f": the port adds up to {extra * 1000:.1f} ms per "
+                "exchange (adapter latency, a buffering converter): cycle rates will be far below "
+                "the wire limit; raise --slot-time above that delay", **data)
+    elif worst < wire:
+        rep.add("round trip", INFO, text + ": faster than the wire, so no real line is behind this "
+                "port (a simulator, or a converter that answers from a buffer)", **data)
+    else:
+        rep.add("round trip", OK, text, **data)
+
+
 def _recommend(rep: Report, baud: int, usb: bool, latency: int | None, url: bool = False) -> None:
     p = BusParams.for_baud(baud)
     echo = rep.recommend.get("echo", False)
@@ -389,6 +474,12 @@ def _recommend(rep: Report, baud: int, usb: bool, latency: int | None, url: bool
         slot, retries = p.tsl, 1
         why = (f"a native UART or a pty: the standard slot time ({p.tsl} bit) and 1 retry; pdrive "
                "adds 20 ms for the operating system on real ports")
+    rt = rep.round_trip_s
+    if rt is not None:
+        need = int((rt - p.chars(6)) * baud * 1.5) + 1      # the measured delay with 50 % margin
+        if need > slot:
+            slot = min(16383, need)
+            why += f"; slot time raised to {slot} bit to cover the measured round trip"
     opts = f"--baud {BAUD_NAMES[baud]} --slot-time {slot} --retries {retries}" + (" --echo" if echo else "")
     rep.recommend.update({"baud": baud, "slot_time": slot, "retries": retries, "options": opts,
                           "why": why})

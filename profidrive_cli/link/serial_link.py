@@ -144,22 +144,29 @@ def read_available(ser: serial.SerialBase, timeout: float) -> bytes:
 
 def _read_socket(ser, timeout: float) -> bytes:
     """socket:// reports only whether data waits (in_waiting 0 or 1): take everything that is
-    there with one non-blocking read (timeout 0: one select and one recv) instead of an octet at
-    a time; wait for the first octet only when nothing is there."""
-    ser.timeout = 0
-    data = ser.read(_SOCKET_CHUNK)
-    if data or timeout <= 0:
-        return data
-    ser.timeout = timeout
-    first = ser.read(1)
-    if not first:
+    there with one recv once the socket is readable (one select, one recv) instead of an octet at a
+    time. pyserial's own read would drop what it had gathered when the peer closes right after
+    sending (a converter's last words); here those octets are returned first, and the next read
+    reports the closed connection."""
+    sock = getattr(ser, "_socket", None)
+    if sock is None:
+        raise serial.SerialException("socket not open")
+    r, _, _ = select.select([sock], [], [], max(0.0, timeout))
+    if not r:
         return b""
-    ser.timeout = 0
-    return first + ser.read(_SOCKET_CHUNK)
+    try:
+        data = sock.recv(_SOCKET_CHUNK)
+    except BlockingIOError:
+        return b""
+    if not data:
+        raise serial.SerialException("socket disconnected")
+    return data
 
 
 class SerialLink(Link):
     def __init__(self, port: str, baud: int = 19200, rs485: bool = False, echo: bool = False):
+        #: the last octets read (for the message when the other end closes the connection)
+        self._recent = b""
         self.name = port
         self.baud = baud
         self.rs485 = rs485
@@ -221,12 +228,25 @@ class SerialLink(Link):
 
     def read(self, deadline: float) -> bytes:
         try:
-            return read_available(self.ser, deadline - self.now())
+            data = read_available(self.ser, deadline - self.now())
         except (serial.SerialException, OSError) as e:
-            raise LinkLost(f"{self.name}: port lost while reading: {e}", self.name) from None
+            raise LinkLost(f"{self.name}: port lost while reading: {e}{self._last_words()}",
+                           self.name) from None
         except TypeError:
             # pyserial raises TypeError from os.read on a closed fd in some versions
             raise LinkLost(f"{self.name}: port closed", self.name) from None
+        if data:
+            self._recent = (self._recent + data)[-160:]
+        return data
+
+    def _last_words(self) -> str:
+        """A converter or `pdrive sim --listen` that refuses a client says why in a text line
+        before it closes the connection: quote it."""
+        tail = getattr(self, "_recent", b"")
+        line = tail.rstrip(b"\r\n").rsplit(b"\n", 1)[-1]
+        if len(line) >= 8 and all(32 <= c < 127 for c in line):
+            return f" (the other end said: {line.decode('ascii')!r})"
+        return ""
 
     def flush_input(self) -> None:
         try:
