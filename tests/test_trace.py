@@ -91,3 +91,11 @@ def test_library_user_configures_the_logger():
         lg.removeHandler(h)
         lg.setLevel(old)
     assert len(records) == 2 and "FDL status" in records[0] and "<-" in records[1]
+
+
+def test_v_shows_retries_on_a_lossy_bus():
+    # every reply of station 3 is dropped: each request is one try + 1 retry (sim default), logged
+    p = _pdrive("diag", "3", "--port", "sim://?stations=3:fuji-g1&drop=1.0", "-v")
+    assert p.returncode == 1
+    assert "station 3: retry (no valid reply in time)" in p.stderr
+    assert "station 3: no valid reply after 1 retry" in p.stderr

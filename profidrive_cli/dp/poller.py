@@ -125,7 +125,12 @@ class Master:
             # (the instant simulator answers at once: an empty read means no answer is coming)
             nxt = self.fdl.expire(now)
             if isinstance(nxt, Outcome):
+                if log.isEnabledFor(logging.INFO) and da != F.BROADCAST and nxt.retries:
+                    log.info("station %d: no valid reply after %d retr%s", da, nxt.retries,
+                             "y" if nxt.retries == 1 else "ies")
                 return nxt
+            if log.isEnabledFor(logging.INFO):
+                log.info("station %d: retry (no valid reply in time)", da)
             self.link.flush_input()
             self._wait_idle()
             waited_for = 0
