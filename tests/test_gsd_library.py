@@ -170,7 +170,8 @@ def test_user_folder_wins_over_library(tmp_path, monkeypatch):
     user.mkdir()
     (user / "fuji_real.gsd").write_bytes(
         b'#Profibus_DP\r\nVendor_Name = "Fuji Electric"\r\nModel_Name = "vendor file"\r\n'
-        b'Ident_Number = 0xFD01\r\nModule = "PPO1" 0xF3, 0xF1\r\nEndModule\r\n')
+        b'Ident_Number = 0xFD01\r\nProtocol_Ident = 0\r\nStation_Type = 0\r\n12M_supp = 1\r\n'
+        b'Module = "PPO1" 0xF3, 0xF1\r\nEndModule\r\n')
     assert library.find_by_ident(0xFD01).model_name == "OPC-G1-PDP (FRENIC-MEGA)"
     assert library.find_by_ident(0xFD01, user).model_name == "vendor file"
     entries = library.list_library(user)
@@ -192,14 +193,19 @@ def test_broken_user_file_is_listed_with_its_error(tmp_path):
     assert len(entries) == 6                                   # the five library files still listed
 
 
+# what every complete GSD file has besides Ident_Number and a Module (gsd.required)
+HEAD = (b'#Profibus_DP\nVendor_Name = "V"\nModel_Name = "M"\nProtocol_Ident = 0\nStation_Type = 0\n'
+        b'9.6_supp = 1\n')
+
+
 def test_cache_reparses_only_when_the_file_changes(tmp_path):
     p = tmp_path / "x.gsd"
-    p.write_bytes(b'#Profibus_DP\nIdent_Number = 0x1111\nModule = "M" 0x10\nEndModule\n')
+    p.write_bytes(HEAD + b'Ident_Number = 0x1111\nModule = "M" 0x10\nEndModule\n')
     g1 = library.parse_cached(p)
     assert library.parse_cached(p) is g1
     assert library.find_by_ident(0x1111, tmp_path) is g1
     time.sleep(0.01)
-    p.write_bytes(b'#Profibus_DP\nIdent_Number = 0x2222\nModule = "M" 0x10\nEndModule\n')
+    p.write_bytes(HEAD + b'Ident_Number = 0x2222\nModule = "M" 0x10\nEndModule\n')
     os.utime(p, ns=(time.time_ns(), time.time_ns() + 10_000_000))
     assert library.parse_cached(p).ident_number == 0x2222
     assert library.find_by_ident(0x1111, tmp_path) is None
