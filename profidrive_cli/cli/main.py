@@ -39,14 +39,30 @@ for _mod, _obj in _COMMANDS:
     cli.add_command(getattr(importlib.import_module(_mod), _obj))
 
 
+def _os_error_text(e: OSError) -> str:
+    """One line: the path(s) and the reason of an OSError."""
+    why = e.strerror or str(e) or type(e).__name__
+    paths = [str(p) for p in (e.filename, e.filename2) if p is not None]
+    text = f"{' -> '.join(paths)}: {why}" if paths else why
+    return " ".join(text.split())[:400]
+
+
 def main(argv=None):
     try:
         rc = cli.main(args=argv, prog_name="pdrive", standalone_mode=False)
     except click.exceptions.Abort:
         click.echo("aborted", err=True)
         sys.exit(130)
+    except click.exceptions.NoArgsIsHelpError as e:
+        e.show()                     # `pdrive gsd` alone: the group's help, as click shows it
+        sys.exit(2)
+    except click.exceptions.UsageError as e:
+        # bad option / argument: one line (click's own form is four), with where to look
+        cmd = e.ctx.command_path if e.ctx is not None else "pdrive"
+        click.echo(f"pdrive: {' '.join(e.format_message().split())} (see '{cmd} --help')", err=True)
+        sys.exit(2)
     except click.ClickException as e:
-        e.show()
+        click.echo(f"pdrive: {' '.join(e.format_message().split())}", err=True)
         sys.exit(2)
     except UsageError as e:
         click.echo(f"pdrive: {e}", err=True)
@@ -58,5 +74,9 @@ def main(argv=None):
         click.echo("interrupted", err=True)
         sys.exit(130)
     except BrokenPipeError:
+        sys.exit(1)
+    except OSError as e:
+        # the last line of defence: each known cause has its own message at the place it happens
+        click.echo(f"pdrive: {_os_error_text(e)}", err=True)
         sys.exit(1)
     sys.exit(rc if isinstance(rc, int) else 0)
