@@ -37,10 +37,10 @@ def short(value: Any) -> str:
     return _short.repr(value)
 
 
-def _one_line(message: str) -> str:
+def _one_line(message: str, limit: int = MAX_MESSAGE_CHARS) -> str:
     m = message.replace("\r", "\\r").replace("\n", "\\n")
-    if len(m) > MAX_MESSAGE_CHARS:
-        m = m[:MAX_MESSAGE_CHARS - 25] + f"... ({len(m)} characters)"
+    if len(m) > limit:
+        m = m[:limit - 25] + f"... ({len(m)} characters)"
     return m
 
 
@@ -49,7 +49,8 @@ class DataFileError(UsageError):
         self.path = str(path)
         self.line = line
         self.message = _one_line(message)
-        where = f"{_one_line(self.path)}:{line}" if line else _one_line(self.path)
+        path_text = _one_line(self.path, 200)
+        where = f"{path_text}:{line}" if line else path_text
         super().__init__(f"{where}: {self.message}")
 
 

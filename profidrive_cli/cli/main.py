@@ -39,12 +39,20 @@ for _mod, _obj in _COMMANDS:
     cli.add_command(getattr(importlib.import_module(_mod), _obj))
 
 
+MAX_LINE = 400
+
+
+def _line(text: str) -> str:
+    """An error message as one line of at most MAX_LINE characters (a pasted value can be huge)."""
+    text = " ".join(str(text).split())
+    return text if len(text) <= MAX_LINE else text[:MAX_LINE - 25] + f"... ({len(text)} characters)"
+
+
 def _os_error_text(e: OSError) -> str:
     """One line: the path(s) and the reason of an OSError."""
     why = e.strerror or str(e) or type(e).__name__
     paths = [str(p) for p in (e.filename, e.filename2) if p is not None]
-    text = f"{' -> '.join(paths)}: {why}" if paths else why
-    return " ".join(text.split())[:400]
+    return _line(f"{' -> '.join(paths)}: {why}" if paths else why)
 
 
 def main(argv=None):
@@ -59,16 +67,16 @@ def main(argv=None):
     except click.exceptions.UsageError as e:
         # bad option / argument: one line (click's own form is four), with where to look
         cmd = e.ctx.command_path if e.ctx is not None else "pdrive"
-        click.echo(f"pdrive: {' '.join(e.format_message().split())} (see '{cmd} --help')", err=True)
+        click.echo(f"pdrive: {_line(e.format_message())} (see '{cmd} --help')", err=True)
         sys.exit(2)
     except click.ClickException as e:
-        click.echo(f"pdrive: {' '.join(e.format_message().split())}", err=True)
+        click.echo(f"pdrive: {_line(e.format_message())}", err=True)
         sys.exit(2)
     except UsageError as e:
-        click.echo(f"pdrive: {e}", err=True)
+        click.echo(f"pdrive: {_line(e)}", err=True)
         sys.exit(2)
     except (BusError, PdriveError) as e:
-        click.echo(f"pdrive: {e}", err=True)
+        click.echo(f"pdrive: {_line(e)}", err=True)
         sys.exit(1)
     except KeyboardInterrupt:
         click.echo("interrupted", err=True)

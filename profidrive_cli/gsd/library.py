@@ -21,7 +21,7 @@ from pathlib import Path
 
 from profidrive_cli import UsageError
 from profidrive_cli.data import gsd_dir, user_gsd_dirs
-from profidrive_cli.datafile import DataFileError, read_input_file
+from profidrive_cli.datafile import DataFileError, read_input_file, short
 from profidrive_cli.gsd.model import Gsd
 from profidrive_cli.gsd.parser import MAX_GSD_BYTES, MAX_NUMBER_CHARS, _decode, parse_gsd
 
@@ -246,7 +246,11 @@ def load_gsd(path_or_ident: str | Path | int, extra_dir: str | Path | None = Non
                              + ("" if extra_dir else " (add your vendor's file with --gsd-dir DIR)"))
         return g
     p = Path(path_or_ident)
-    if p.is_file():
+    try:
+        is_file, exists = p.is_file(), p.exists()
+    except (OSError, ValueError):        # a name too long for a path, a NUL in it
+        is_file = exists = False
+    if is_file:
         return parse_cached(p)
     text = str(path_or_ident)
     ident = _as_ident(text)
@@ -258,6 +262,6 @@ def load_gsd(path_or_ident: str | Path | int, extra_dir: str | Path | None = Non
             for q in gsd_files(folder):
                 if q.name.lower() == want or q.stem.lower() == want:
                     return parse_cached(q)
-    if p.exists():
+    if exists:
         raise DataFileError(p, None, "is not a file")
-    raise UsageError(f"{text}: no such GSD file, ident or library name (try `pdrive gsd list`)")
+    raise UsageError(f"{short(text)[1:-1]}: no such GSD file, ident or library name (try `pdrive gsd list`)")
