@@ -211,3 +211,29 @@ def test_cache_reparses_only_when_the_file_changes(tmp_path):
     assert library.find_by_ident(0x1111, tmp_path) is None
     with pytest.raises(DataFileError, match="file not found"):
         library.parse_cached(tmp_path / "gone.gsd")
+
+
+def test_broken_user_file_is_skipped_with_a_warning_not_used(tmp_path, monkeypatch):
+    """A user file that claims an ident but does not parse never shadows the library's file."""
+    seen = []
+    monkeypatch.setattr(library, "warn_hook", seen.append)
+    library.clear_cache()
+    (tmp_path / "YASKCUT.GSD").write_bytes((gsd_dir() / "YASK00CA.GSD").read_bytes()[:600])
+    g = library.find_by_ident(0x00CA, tmp_path)
+    assert g is not None and Path(g.path).name == "YASK00CA.GSD"
+    assert library.find_path_by_ident(0x00CA, tmp_path).name == "YASK00CA.GSD"
+    assert len(seen) == 1 and "YASKCUT.GSD:24: incomplete GSD file" in seen[0]     # once per process
+    assert library.station_name(0x00CA, tmp_path) == g.title
+
+
+def test_env_folder_missing_is_an_error_like_gsd_dir(tmp_path, monkeypatch):
+    seen = []
+    monkeypatch.setattr(library, "warn_hook", seen.append)
+    library.clear_cache()
+    monkeypatch.setenv("PDRIVE_GSD_DIR", str(tmp_path / "nope"))
+    with pytest.raises(UsageError, match=f"PDRIVE_GSD_DIR {tmp_path / 'nope'}: no such folder"):
+        library.list_library()
+    with pytest.raises(UsageError, match="no such folder"):
+        library.load_gsd("0x00CA")
+    assert library.station_name(0xFD06) == "Moeller DE6-NET-DP (DF6/DV6)"      # naming only warns
+    assert seen == [f"PDRIVE_GSD_DIR {tmp_path / 'nope'}: no such folder (ignored)"]
