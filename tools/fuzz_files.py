@@ -1,6 +1,6 @@
-"""Fuzz pdrive's file inputs: mutated GSD files through `pdrive gsd show` (table and --json) and mutated
-checklists through `pdrive checklist validate`, in process through cli.main.main() (the same code path
-as the command line, without a process start per case).
+"""Fuzz pdrive's file inputs: mutated GSD files through `pdrive gsd show` (table and --json) and
+`gsd prm`, mutated checklists through `pdrive checklist validate`, in process through cli.main.main()
+(the same code path as the command line, without a process start per case).
 
 A case passes when pdrive exits with 0, 1 or 2, prints no traceback, and finishes within --hang
 seconds. Anything else (an exception escaping main(), a traceback, a timeout) is written to
@@ -156,8 +156,12 @@ def fuzz(kind: str, n: int, seed: int, hang_s: float, out_dir: Path | None, tmp:
         data = (mutate_gsd(rng, seed_data[k]) if kind == "gsd"
                 else mutate_yaml(rng, seed_data[k].decode("utf-8")))
         path.write_bytes(data)
-        runs = ([["gsd", "show", str(path), "--json"]] + ([["gsd", "show", str(path)]] if i % 4 == 0 else [])
-                if kind == "gsd" else [["checklist", "validate", str(path)]])
+        if kind == "gsd":                 # every file as JSON; every 4th also as tables, and Set_Prm
+            runs = [["gsd", "show", str(path), "--json"]]
+            if i % 4 == 0:
+                runs += [["gsd", "show", str(path)], ["gsd", "prm", str(path), "-m", "1", "--json"]]
+        else:
+            runs = [["checklist", "validate", str(path)]]
         for argv in runs:
             t0 = time.monotonic()
             verdict, code, detail = run_main(argv, hang_s)
