@@ -74,7 +74,8 @@ def test_list_library_and_user_dir(tmp_path):
     d = json.loads(res.output)
     assert sorted(e["ident_hex"] for e in d) == ["0x00CA", "0x0BE7", "0xFD01", "0xFD02", "0xFD06"]
     (tmp_path / "mine.gsd").write_text('#Profibus_DP\nIdent_Number = 0x00CA\nModel_Name = "mine"\n'
-                                       'Module = "M" 0x10\nEndModule\n')
+                                       'Vendor_Name = "me"\nProtocol_Ident = 0\nStation_Type = 0\n'
+                                       '1.5M_supp = 1\nModule = "M" 0x10\nEndModule\n')
     res = run("list", "--gsd-dir", str(tmp_path), columns=250)
     assert res.exit_code == 0
     assert "mine.gsd" in res.output and "(overridden by mine.gsd)" in res.output

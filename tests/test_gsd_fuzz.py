@@ -167,3 +167,49 @@ def test_structured_gsd_only_raises_datafileerror_then_usageerror(text):
                     continue
                 assert len(r.user_prm) <= 237
                 assert r.cfg == m.cfg
+
+
+# ---- mutated real files, through the whole command (the seeded subset of tools/fuzz_files.py)
+
+def _fuzz_tool():
+    import importlib.util
+    from pathlib import Path
+    path = Path(__file__).resolve().parent.parent / "tools" / "fuzz_files.py"
+    spec = importlib.util.spec_from_file_location("fuzz_files", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_mutated_library_gsd_files_give_exit_0_or_2_never_a_crash(tmp_path, monkeypatch):
+    """300 seeded mutations of the library's GSD files (huge numbers, truncation, byte flips, swapped
+    lines) through `gsd show --json`: every run ends with exit 0 or 2 and no traceback, within 5 s."""
+    import signal
+    fz = _fuzz_tool()
+    monkeypatch.delenv("PDRIVE_GSD_DIR", raising=False)
+    old = signal.signal(signal.SIGALRM, fz._alarm)
+    try:
+        c = fz.fuzz("gsd", 300, seed=2024, hang_s=5.0, out_dir=None, tmp=tmp_path)
+    finally:
+        signal.signal(signal.SIGALRM, old)
+    assert (c["crash"], c["hang"]) == (0, 0)
+    assert c["exit1"] == 0 and c["exit0"] > 0 and c["exit2"] > 0     # both outcomes were exercised
+
+
+def test_huge_numbers_in_gsd_are_one_error_with_the_line():
+    """A 5000-digit decimal or hex number (over Python's 4300-digit int/str limit) is a DataFileError
+    at its line, not a ValueError; so is a 5000-digit module reference."""
+    for num, line in (("9" * 5000, 3), ("0x" + "F" * 5000, 3)):
+        text = f"#Profibus_DP\nVendor_Name = \"V\"\nIdent_Number = {num}\n"
+        try:
+            parse_gsd_text(text, "n.gsd")
+        except DataFileError as e:
+            assert (e.line, "number too long") == (line, e.message.split(" (")[0].split(": ", 1)[1])
+        else:
+            raise AssertionError("accepted")
+    try:
+        parse_gsd_text('#Profibus_DP\nModule = "M" 0x11\n' + "1" * 5000 + "\nEndModule\n", "m.gsd")
+    except DataFileError as e:
+        assert e.line == 3 and "reference number too long" in e.message
+    else:
+        raise AssertionError("accepted")

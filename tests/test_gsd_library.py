@@ -170,7 +170,8 @@ def test_user_folder_wins_over_library(tmp_path, monkeypatch):
     user.mkdir()
     (user / "fuji_real.gsd").write_bytes(
         b'#Profibus_DP\r\nVendor_Name = "Fuji Electric"\r\nModel_Name = "vendor file"\r\n'
-        b'Ident_Number = 0xFD01\r\nModule = "PPO1" 0xF3, 0xF1\r\nEndModule\r\n')
+        b'Ident_Number = 0xFD01\r\nProtocol_Ident = 0\r\nStation_Type = 0\r\n12M_supp = 1\r\n'
+        b'Module = "PPO1" 0xF3, 0xF1\r\nEndModule\r\n')
     assert library.find_by_ident(0xFD01).model_name == "OPC-G1-PDP (FRENIC-MEGA)"
     assert library.find_by_ident(0xFD01, user).model_name == "vendor file"
     entries = library.list_library(user)
@@ -192,16 +193,47 @@ def test_broken_user_file_is_listed_with_its_error(tmp_path):
     assert len(entries) == 6                                   # the five library files still listed
 
 
+# what every complete GSD file has besides Ident_Number and a Module (gsd.required)
+HEAD = (b'#Profibus_DP\nVendor_Name = "V"\nModel_Name = "M"\nProtocol_Ident = 0\nStation_Type = 0\n'
+        b'9.6_supp = 1\n')
+
+
 def test_cache_reparses_only_when_the_file_changes(tmp_path):
     p = tmp_path / "x.gsd"
-    p.write_bytes(b'#Profibus_DP\nIdent_Number = 0x1111\nModule = "M" 0x10\nEndModule\n')
+    p.write_bytes(HEAD + b'Ident_Number = 0x1111\nModule = "M" 0x10\nEndModule\n')
     g1 = library.parse_cached(p)
     assert library.parse_cached(p) is g1
     assert library.find_by_ident(0x1111, tmp_path) is g1
     time.sleep(0.01)
-    p.write_bytes(b'#Profibus_DP\nIdent_Number = 0x2222\nModule = "M" 0x10\nEndModule\n')
+    p.write_bytes(HEAD + b'Ident_Number = 0x2222\nModule = "M" 0x10\nEndModule\n')
     os.utime(p, ns=(time.time_ns(), time.time_ns() + 10_000_000))
     assert library.parse_cached(p).ident_number == 0x2222
     assert library.find_by_ident(0x1111, tmp_path) is None
     with pytest.raises(DataFileError, match="file not found"):
         library.parse_cached(tmp_path / "gone.gsd")
+
+
+def test_broken_user_file_is_skipped_with_a_warning_not_used(tmp_path, monkeypatch):
+    """A user file that claims an ident but does not parse never shadows the library's file."""
+    seen = []
+    monkeypatch.setattr(library, "warn_hook", seen.append)
+    library.clear_cache()
+    (tmp_path / "YASKCUT.GSD").write_bytes((gsd_dir() / "YASK00CA.GSD").read_bytes()[:600])
+    g = library.find_by_ident(0x00CA, tmp_path)
+    assert g is not None and Path(g.path).name == "YASK00CA.GSD"
+    assert library.find_path_by_ident(0x00CA, tmp_path).name == "YASK00CA.GSD"
+    assert len(seen) == 1 and "YASKCUT.GSD:24: incomplete GSD file" in seen[0]     # once per process
+    assert library.station_name(0x00CA, tmp_path) == g.title
+
+
+def test_env_folder_missing_is_an_error_like_gsd_dir(tmp_path, monkeypatch):
+    seen = []
+    monkeypatch.setattr(library, "warn_hook", seen.append)
+    library.clear_cache()
+    monkeypatch.setenv("PDRIVE_GSD_DIR", str(tmp_path / "nope"))
+    with pytest.raises(UsageError, match=f"PDRIVE_GSD_DIR {tmp_path / 'nope'}: no such folder"):
+        library.list_library()
+    with pytest.raises(UsageError, match="no such folder"):
+        library.load_gsd("0x00CA")
+    assert library.station_name(0xFD06) == "Moeller DE6-NET-DP (DF6/DV6)"      # naming only warns
+    assert seen == [f"PDRIVE_GSD_DIR {tmp_path / 'nope'}: no such folder (ignored)"]

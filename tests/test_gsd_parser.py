@@ -438,3 +438,40 @@ def test_missing_file_and_folder():
         parse_gsd(BROKEN / "nope.gsd")
     with pytest.raises(DataFileError, match="folder"):
         parse_gsd(BROKEN)
+
+
+def test_truncated_library_file_is_an_error_naming_what_is_missing(tmp_path):
+    """YASK00CA.GSD cut at 600 bytes ends inside `Protocol_Ident` (line 24): no Protocol_Ident,
+    Station_Type, baud rate or Module is left. Before, it parsed as a device with 0 modules."""
+    p = tmp_path / "YASKCUT.GSD"
+    p.write_bytes((HERE.parent / "gsd" / "YASK00CA.GSD").read_bytes()[:600])
+    with pytest.raises(DataFileError) as ei:
+        parse_gsd(p)
+    assert str(ei.value) == (f"{p}:24: incomplete GSD file (truncated?): missing Protocol_Ident, Station_Type, "
+                             "a supported baud rate (<baud>_supp = 1), a Module")
+
+
+def test_required_keywords_each_missing_is_named(tmp_path):
+    full = ['Vendor_Name = "V"', 'Model_Name = "M"', "Ident_Number = 0x1234", "Protocol_Ident = 0",
+            "Station_Type = 0", "12M_supp = 1", 'Module = "m" 0x11', "EndModule"]
+    names = ["Vendor_Name", "Model_Name", "Ident_Number", "Protocol_Ident", "Station_Type",
+             "a supported baud rate (<baud>_supp = 1)", "a Module"]
+    p = tmp_path / "x.gsd"
+    p.write_text("#Profibus_DP\n" + "\n".join(full) + "\n")
+    g = parse_gsd(p)                                  # complete; no GSD_Revision: accepted, with a warning
+    assert g.warnings == [f"{p}:1: no GSD_Revision line (a revision-0 file: accepted)"]
+    for i, name in enumerate(names):
+        lines = full[:i] + full[i + 1:] if i < 6 else full[:6]
+        p.write_text("#Profibus_DP\n" + "\n".join(lines) + "\n")
+        with pytest.raises(DataFileError, match="missing " + name.replace("(", r"\(").replace(")", r"\)") + r"\Z"):
+            parse_gsd(p)
+
+
+@needs_testdata
+def test_every_real_file_has_the_required_keywords():
+    """All ten real files and the library files pass the completeness check; the Eurotherm file has no
+    GSD_Revision (a revision-0 file) and is accepted with a warning."""
+    for f in real_files() + sorted((HERE.parent / "gsd").glob("*.GSD")):
+        g = parse_gsd(f)
+        rev_warn = [w for w in g.warnings if "GSD_Revision" in w]
+        assert bool(rev_warn) == (f.name == "eurotherm_tc3001_pbslave.gsd"), f

@@ -21,8 +21,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from profidrive_cli import PdriveError, UsageError
 from profidrive_cli.datafile import DataFileError, LineDict, LineList, load_yaml_text, read_text
 
@@ -172,8 +170,8 @@ def parse_var_assignments(items: list[str] | tuple[str, ...]) -> dict:
         if not eq or not _NAME_RE.match(name):
             raise UsageError(f"--var {item!r}: expected NAME=VALUE (NAME: letters, digits, _)")
         try:
-            v = yaml.safe_load(text) if text.strip() else ""
-        except yaml.YAMLError:
+            v = load_yaml_text(text, f"--var {name}") if text.strip() else ""
+        except DataFileError:
             v = text
         if not isinstance(v, (str, int, float, bool)) or v is None:
             v = text

@@ -11,6 +11,15 @@ from profidrive_cli import UsageError
 from profidrive_cli.cli.common import emit_json, err, out
 
 
+def _host_port(listen: str) -> tuple[str, int]:
+    """--listen HOST:PORT (HOST may be empty: 127.0.0.1; PORT 0..65535, 0 picks a free one)."""
+    host, colon, p = listen.rpartition(":")
+    p = p.strip()
+    if not colon or not (p.isascii() and p.isdigit()) or len(p) > 5 or int(p) > 65535:
+        raise UsageError(f"--listen needs HOST:PORT with PORT 0..65535, got {listen[:80]!r}")
+    return host or "127.0.0.1", int(p)
+
+
 @click.command("sim")
 @click.option("--pty", "use_pty", is_flag=True, help="Create a pty and print its path.")
 @click.option("--listen", default=None, metavar="HOST:PORT", help="Serve on a TCP port.")
@@ -38,13 +47,11 @@ def sim_cmd(use_pty, listen, serial_port, plant, baud, as_json):
         ep = server.PtyEndpoint()
         where = ep.path
     elif listen:
-        host, _, p = listen.rpartition(":")
+        host, port = _host_port(listen)
         try:
-            ep = server.TcpEndpoint(host or "127.0.0.1", int(p))
-        except ValueError:
-            raise UsageError(f"--listen needs HOST:PORT, got {listen!r}") from None
+            ep = server.TcpEndpoint(host, port)
         except OSError as e:
-            raise UsageError(f"--listen {listen}: {e.strerror}") from None
+            raise UsageError(f"--listen {listen}: {e.strerror or e}") from None
         where = f"socket://{ep.address[0]}:{ep.address[1]}"
     else:
         ep = server.SerialEndpoint(serial_port, b)

@@ -5,25 +5,46 @@ lookup by ident searches the user folders first.
 Parsed files are cached per path, keyed by (mtime, size), so naming every station of a bus scan parses each
 file once per process. A lookup by ident first reads only the `Ident_Number` line of each candidate file
 (also cached), then parses the one that matches.
+
+A file that does not parse (or is incomplete) never shadows another: lookups skip it with one warning on
+stderr that names it. A user folder that does not exist is an error, whether it comes from --gsd-dir or
+$PDRIVE_GSD_DIR (station naming in a bus scan only warns and goes on with the library).
 """
 
 from __future__ import annotations
 
+import os
 import re
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 from profidrive_cli import UsageError
 from profidrive_cli.data import gsd_dir, user_gsd_dirs
-from profidrive_cli.datafile import DataFileError
+from profidrive_cli.datafile import DataFileError, read_input_file, short
 from profidrive_cli.gsd.model import Gsd
-from profidrive_cli.gsd.parser import _decode, parse_gsd
+from profidrive_cli.gsd.parser import MAX_GSD_BYTES, MAX_NUMBER_CHARS, _decode, parse_gsd
 
 # .gsd is the default language; .gse English, .gsg German, .gsf French, .gsi Italian, .gsp Portuguese,
 # .gss Spanish. In one folder, for one file stem, the first in this order is used.
 GSD_SUFFIXES = (".gsd", ".gse", ".gsg", ".gsf", ".gsi", ".gsp", ".gss")
 
 _IDENT = re.compile(r"^[ \t]*Ident_Number[ \t]*=[ \t]*(0[xX][0-9a-fA-F]+|[0-9]+)", re.I | re.M)
+
+_warned: set[str] = set()
+
+
+def _warn_stderr(message: str) -> None:
+    sys.stderr.write(f"pdrive: warning: {message}\n")
+
+
+warn_hook = _warn_stderr     # where skipped files / folders are reported (once per message and process)
+
+
+def _warn(message: str) -> None:
+    if message not in _warned:
+        _warned.add(message)
+        warn_hook(message)
 
 _parsed: dict[str, tuple[tuple[int, int], Gsd]] = {}
 _idents: dict[str, tuple[tuple[int, int], int | None]] = {}
@@ -37,6 +58,7 @@ def _stamp(p: Path) -> tuple[int, int]:
 def clear_cache() -> None:
     _parsed.clear()
     _idents.clear()
+    _warned.clear()
 
 
 def parse_cached(path: str | Path) -> Gsd:
@@ -69,27 +91,41 @@ def quick_ident(path: str | Path) -> int | None:
     if hit and hit[0] == stamp:
         return hit[1]
     try:
-        text, _ = _decode(p.read_bytes())
-    except OSError:
+        text, _ = _decode(read_input_file(p, "GSD file", MAX_GSD_BYTES))
+    except DataFileError:
         return None
     m = _IDENT.search(text)
     ident = None
-    if m:
+    if m and len(m.group(1)) <= MAX_NUMBER_CHARS:
         t = m.group(1)
         ident = int(t[2:], 16) if t[:2].lower() == "0x" else int(t)
     _idents[key] = (stamp, ident)
     return ident
 
 
-def _user_dirs(extra_dir: str | Path | None) -> list[Path]:
-    if extra_dir is not None and not Path(extra_dir).is_dir():
-        raise UsageError(f"--gsd-dir {extra_dir}: no such folder")
-    return [d for d in user_gsd_dirs(str(extra_dir) if extra_dir is not None else None) if d.is_dir()]
+def _user_dirs(extra_dir: str | Path | None, strict: bool = True) -> list[Path]:
+    """--gsd-dir, then each folder of $PDRIVE_GSD_DIR. One that is not a folder raises UsageError
+    (strict) or is skipped with a warning."""
+    labelled = []
+    if extra_dir is not None:
+        labelled.append(("--gsd-dir", Path(extra_dir)))
+    labelled += [("PDRIVE_GSD_DIR", d) for d in user_gsd_dirs(None)]
+    out = []
+    for label, d in labelled:
+        if d.is_dir():
+            out.append(d)
+            continue
+        why = "not a folder" if os.path.exists(d) else "no such folder"
+        if strict:
+            raise UsageError(f"{label} {d}: {why}")
+        _warn(f"{label} {d}: {why} (ignored)")
+    return out
 
 
-def search_dirs(extra_dir: str | Path | None = None) -> list[tuple[Path, str]]:
-    """(folder, "user" | "library") in lookup order: user folders first."""
-    out = [(d, "user") for d in _user_dirs(extra_dir)]
+def search_dirs(extra_dir: str | Path | None = None, strict: bool = True) -> list[tuple[Path, str]]:
+    """(folder, "user" | "library") in lookup order: user folders first. A user folder that is not a
+    folder raises UsageError (strict) or is skipped with a warning."""
+    out = [(d, "user") for d in _user_dirs(extra_dir, strict)]
     lib = gsd_dir()
     if lib.is_dir():
         out.append((lib, "library"))
@@ -154,40 +190,48 @@ def list_library(extra_dir: str | Path | None = None) -> list[LibraryEntry]:
     return out
 
 
-def find_path_by_ident(ident: int, extra_dir: str | Path | None = None) -> Path | None:
-    for folder, _ in search_dirs(extra_dir):
+def _find(ident: int, extra_dir: str | Path | None, strict: bool = True) -> tuple[Path, Gsd] | None:
+    """The first file (user folders first) whose Ident_Number is `ident` and that parses; a candidate
+    that does not parse is skipped with a warning naming it, so it never shadows a good file."""
+    for folder, _ in search_dirs(extra_dir, strict):
         for p in gsd_files(folder):
-            if quick_ident(p) == ident:
-                return p
+            if quick_ident(p) != ident:
+                continue
+            try:
+                g = parse_cached(p)
+            except DataFileError as e:
+                _warn(f"skipped a GSD file that does not parse: {e}")
+                continue
+            if g.ident_number == ident:
+                return p, g
     return None
+
+
+def find_path_by_ident(ident: int, extra_dir: str | Path | None = None) -> Path | None:
+    """The path of the GSD file find_by_ident would use; None if no file has the ident."""
+    hit = _find(ident, extra_dir)
+    return None if hit is None else hit[0]
 
 
 def find_by_ident(ident: int, extra_dir: str | Path | None = None) -> Gsd | None:
-    """The GSD for a PROFIBUS ident number: user folders first, then the library; None if no file has it.
-    A matching file that does not parse raises its DataFileError."""
-    for folder, _ in search_dirs(extra_dir):
-        for p in gsd_files(folder):
-            if quick_ident(p) == ident:
-                g = parse_cached(p)
-                if g.ident_number == ident:
-                    return g
-    return None
+    """The GSD for a PROFIBUS ident number: user folders first, then the library; None if no readable
+    file has it. Files that do not parse are skipped with a warning; a missing user folder raises."""
+    hit = _find(ident, extra_dir)
+    return None if hit is None else hit[1]
 
 
 def station_name(ident: int, extra_dir: str | Path | None = None) -> str | None:
-    """"Vendor Model" for an ident, for naming stations in a bus scan; None when unknown or unreadable."""
-    try:
-        g = find_by_ident(ident, extra_dir)
-    except (DataFileError, UsageError):
-        return None
-    return None if g is None else g.title
+    """"Vendor Model" for an ident, for naming stations in a bus scan; None when unknown. Missing user
+    folders and broken files are reported as warnings, not errors: a name is only a label."""
+    hit = _find(ident, extra_dir, strict=False)
+    return None if hit is None else hit[1].title
 
 
 def _as_ident(text: str) -> int | None:
     t = text.strip()
     if re.fullmatch(r"0[xX][0-9a-fA-F]{1,4}", t):
         return int(t, 16)
-    if t.isascii() and t.isdigit() and int(t) <= 0xFFFF:
+    if t.isascii() and t.isdigit() and len(t) <= 5 and int(t) <= 0xFFFF:
         return int(t)
     return None
 
@@ -202,7 +246,11 @@ def load_gsd(path_or_ident: str | Path | int, extra_dir: str | Path | None = Non
                              + ("" if extra_dir else " (add your vendor's file with --gsd-dir DIR)"))
         return g
     p = Path(path_or_ident)
-    if p.is_file():
+    try:
+        is_file, exists = p.is_file(), p.exists()
+    except (OSError, ValueError):        # a name too long for a path, a NUL in it
+        is_file = exists = False
+    if is_file:
         return parse_cached(p)
     text = str(path_or_ident)
     ident = _as_ident(text)
@@ -214,6 +262,6 @@ def load_gsd(path_or_ident: str | Path | int, extra_dir: str | Path | None = Non
             for q in gsd_files(folder):
                 if q.name.lower() == want or q.stem.lower() == want:
                     return parse_cached(q)
-    if p.exists():
+    if exists:
         raise DataFileError(p, None, "is not a file")
-    raise UsageError(f"{text}: no such GSD file, ident or library name (try `pdrive gsd list`)")
+    raise UsageError(f"{short(text)[1:-1]}: no such GSD file, ident or library name (try `pdrive gsd list`)")

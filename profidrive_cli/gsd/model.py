@@ -261,6 +261,7 @@ class Gsd:
     unknown: list[tuple[str, int]] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     start_line: int = 0            # line of #Profibus_DP
+    end_line: int = 0              # number of the last line of the file
 
     # ---- generic access
     def get(self, keyword: str, default: Any = None) -> Any:

@@ -22,8 +22,9 @@ import re
 from pathlib import Path
 from typing import Any
 
-from profidrive_cli.datafile import DataFileError
+from profidrive_cli.datafile import DataFileError, read_input_file
 from profidrive_cli.dp.cfg import CfgError, decode_cfg
+from profidrive_cli.gsd.required import check_complete
 from profidrive_cli.gsd.model import (
     BAUDS, INT_TYPES, DiagArea, ExtUserPrmData, Gsd, Module, PrmBlock, PrmConst, PrmRef, PrmText, Slot,
     UnitDiagType,
@@ -33,6 +34,10 @@ _SPLIT = re.compile(r"\r\n|\r|\n")
 _HEAD = re.compile(r"\s*([^\s=(]+)\s*(?:\(([^)]*)\))?\s*(=)?\s*(.*)\Z", re.S)
 _TOK = re.compile(r'"([^"]*)"|([-,@])|([^\s,"@-]+)')
 _NUM = re.compile(r"0[xX][0-9a-fA-F]+\Z|[0-9]+\Z")
+
+# input limits: the largest real GSD file we know is ~190 kB; a GSD number never needs more than 32 bits
+MAX_GSD_BYTES = 4 * 1024 * 1024
+MAX_NUMBER_CHARS = 24
 
 # Set_Prm DU is at most 244 octets, 7 of them the standard part: User_Prm_Data <= 237 octets.
 MAX_USER_PRM_LEN = 237
@@ -158,6 +163,9 @@ class _Toks:
                 t.append((punct, None))
             else:
                 if _NUM.match(word):
+                    if len(word) > MAX_NUMBER_CHARS:
+                        raise DataFileError(parser.path, line, f"{what}: number too long ({len(word)} "
+                                                               f"characters: {word[:12]}...)")
                     t.append(("n", int(word[2:], 16) if word[1:2] in ("x", "X") else int(word)))
                 else:
                     t.append(("w", word))
@@ -313,6 +321,7 @@ class _Parser:
             raise self.err(line, f"{_BLOCK_NAMES[kind]}{name} not terminated: "
                                  f"{_END_NAMES[_BLOCKS[kind]]} missing before the end of the file")
         self.finish()
+        self.gsd.end_line = len(lines)
         return self.gsd
 
     # ------------------------------------------------------------------ dispatch
@@ -557,6 +566,9 @@ class _Parser:
     def in_module(self, line, kw_raw, kw, args, eq, rest) -> None:
         mod: Module = self.stack[-1][1]
         if kw.isascii() and kw.isdigit() and args is None and not rest.strip():
+            if len(kw) > MAX_NUMBER_CHARS:
+                raise self.err(line, f"Module {mod.display_name!r}: reference number too long "
+                                     f"({len(kw)} digits)")
             if mod.reference is not None:
                 self.warn(line, f"Module {mod.display_name!r}: second reference number {kw}")
             mod.reference = int(kw)
@@ -700,14 +712,9 @@ def parse_gsd_bytes(data: bytes, path: str | Path = "<bytes>") -> Gsd:
 
 
 def parse_gsd(path: str | Path) -> Gsd:
-    """Read and parse one GSD file (Latin-1 or UTF-8). Raises DataFileError(path, line, ...)."""
+    """Read and parse one GSD file (Latin-1 or UTF-8; a regular file of at most MAX_GSD_BYTES) and check
+    that it has what a DP slave's GSD must have (gsd.required). Raises DataFileError(path, line, ...)."""
     p = Path(path)
-    try:
-        data = p.read_bytes()
-    except FileNotFoundError:
-        raise DataFileError(p, None, "file not found") from None
-    except IsADirectoryError:
-        raise DataFileError(p, None, "is a folder, not a GSD file") from None
-    except OSError as e:
-        raise DataFileError(p, None, f"cannot read: {e.strerror or e}") from None
-    return parse_gsd_bytes(data, p)
+    g = parse_gsd_bytes(read_input_file(p, "GSD file", MAX_GSD_BYTES), p)
+    check_complete(g, g.end_line)
+    return g
