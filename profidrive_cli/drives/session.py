@@ -83,13 +83,15 @@ from typing import Any, Callable
 from profidrive_cli import BusError, PdriveError, UsageError
 from profidrive_cli.drives.base import DriveError, DriveStatus, FaultRecord, ParamValue, value_text
 from profidrive_cli.drives.profile import Profile, all_profiles, load_profile, profile_for_ident
+from profidrive_cli.drives.values import danger, raw_value_problem, value_problem
 
 DEFAULT_WATCHDOG_MS = 500
 CAP_REAL_HZ = 100.0          # default cycle-rate cap over real ports
 CAP_SIM_HZ = 50.0            # ... and on the instant simulator
 COAST_TIMEOUT_S = 10.0
 DEFAULT_STOP_TIMEOUT_S = 30.0
-DUMP_FORMAT = 1
+DUMP_FORMAT = 2              # 2: `count:` and a final `end: pdrive_dump` line (truncation is detected)
+DUMP_END = "pdrive_dump"
 
 #: deceleration-time parameter per family when the profile's `profidrive.ramps` names none
 _DECEL_CODES = {"fuji": "F08", "moeller": "F003", "yaskawa": "C1-02"}
@@ -355,6 +357,8 @@ class ParamRow:
     result: str
     reason: str = ""
     new_value: Any = None
+    line: int = 0                  # the row's line in the file (0: unknown)
+    why: str = ""                  # for 'skipped': unknown | read-only | not restored | dangerous
 
     def to_dict(self) -> dict:
         return {k: v for k, v in dataclasses.asdict(self).items()}
@@ -993,35 +997,72 @@ class DriveSession:
         self.param_info(code)                 # unknown codes: the closest ones / the right family
         return self.drive.read_param(code.strip())
 
-    def _check_write(self, info: ParamInfo, value) -> None:
+    def danger_of(self, info: ParamInfo) -> str | None:
+        """What writing this parameter does, in words, when the profile marks it `dangerous: true`
+        (also when it is reached by its raw PNU/index or register); None otherwise."""
+        if info.param is not None:
+            return danger(info.param)
+        d = self.drive
+        try:
+            if hasattr(d, "resolve_param"):
+                ref = d.resolve_param(info.code)
+                hits = [q for q in self.profile.parameters.values()
+                        if q.pnu is not None and q.pnu == ref.pnu and (q.index or 0) == (ref.subindex or 0)]
+            else:
+                reg, _ = d._resolve(info.code)
+                hits = [q for q in self.profile.parameters.values() if q.register == reg]
+        except (UsageError, DriveError, AttributeError):
+            return None
+        return next((danger(q) for q in hits if danger(q)), None)
+
+    def check_dangerous(self, info: ParamInfo, allow_dangerous: bool = False) -> None:
+        """UsageError (exit 2) for a dangerous parameter unless allow_dangerous."""
+        what = self.danger_of(info)
+        if what and not allow_dangerous:
+            raise UsageError(f"{info.code} ({info.name}) is dangerous: writing it {what}; nothing was "
+                             f"written (add --allow-dangerous to write it)")
+
+    def _check_write(self, info: ParamInfo, value, allow_dangerous: bool = False) -> None:
+        """Every check before a write, no bus traffic: writable, dangerous, exact value (resolution,
+        range, listed codes, wire width: drives/values.py)."""
         p = info.param
         if p is not None and not p.writable:
             raise UsageError(f"{info.code} ({info.name}) is read-only")
-        if p is not None:
-            d = self.drive
-            msg = None
-            if hasattr(d, "check_value") and hasattr(d, "resolve_param"):
-                msg = d.check_value(d.resolve_param(info.code), value)
-            else:
-                msg = p.check_range(value)
-            if msg:
-                raise UsageError(msg)
+        self.check_dangerous(info, allow_dangerous)
+        d = self.drive
+        if hasattr(d, "check_value") and hasattr(d, "resolve_param"):
+            msg = d.check_value(d.resolve_param(info.code), value)
+        elif p is not None:
+            msg = value_problem(p, value)
+        else:
+            msg = raw_value_problem(info.code, value, 16)
+        if msg:
+            raise UsageError(msg)
 
-    def write_param(self, code: str, value, *, check_running: bool = True) -> ParamValue:
-        """Checked write (writable, range + unit, stop-only parameters while running); returns the
-        value read back from the drive."""
+    def stopped_for(self, info: ParamInfo) -> str | None:
+        """None when the parameter may be written now; else why not (stop-only while running)."""
+        if info.access != "stop":
+            return None
+        st = self.drive.cycle()
+        if st.running or not st.stopped:
+            hz = Sample(0, st, self._fmax[0] if self._fmax else float(self.profile.max_frequency_default),
+                        0, 0, {}).actual_hz
+            return (f"{info.code} ({info.name}) can only be changed while the motor is "
+                    f"stopped (the drive is {st.state}" + (f", {hz:g} Hz" if hz else "") + "); stop it first")
+        return None
+
+    def write_param(self, code: str, value, *, check_running: bool = True,
+                    allow_dangerous: bool = False) -> ParamValue:
+        """Checked write (writable, not dangerous unless allow_dangerous, exact value, stop-only
+        parameters while running); returns the value read back from the drive."""
         info = self.param_info(code)
         if isinstance(value, str):
             value = self.parse_value(code, value, info)
-        self._check_write(info, value)
-        if check_running and info.access == "stop":
-            st = self.drive.cycle()
-            if st.running or not st.stopped:
-                hz = Sample(0, st, self._fmax[0] if self._fmax else float(self.profile.max_frequency_default),
-                            0, 0, {}).actual_hz
-                raise DriveError(f"{info.code} ({info.name}) can only be changed while the motor is "
-                                 f"stopped (the drive is {st.state}"
-                                 + (f", {hz:g} Hz" if hz else "") + "); stop it first")
+        self._check_write(info, value, allow_dangerous)
+        if check_running:
+            why = self.stopped_for(info)
+            if why:
+                raise DriveError(why)
         return self.drive.write_param(code.strip(), value)
 
     def notes(self) -> list[str]:
@@ -1149,11 +1190,13 @@ class DriveSession:
                         "family": prof.family, "title": prof.title, "layout": self.layout,
                         "port": getattr(self.master.link, "name", "")},
             "date": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+            "count": len(settings),
             "parameters": settings,
             "readonly": readonly,
         }
         if failed:
             doc["unreadable"] = failed
+        doc["end"] = DUMP_END              # the last line: a file cut anywhere lacks it
         return doc
 
     def _no_channel_words(self) -> str:
@@ -1184,6 +1227,7 @@ class DriveSession:
         st = doc.get("station")
         if st is not None and not isinstance(st, dict):
             raise DataFileError(path, doc.line_of("station"), "'station' must be a mapping")
+        doc["_warnings"] = _check_complete(path, doc, params)
         doc["_path"] = str(path)
         return doc
 
@@ -1205,93 +1249,201 @@ class DriveSession:
                          f"{self.address}")
         return notes
 
-    def compare(self, doc: dict, progress: Callable[[int, int, str], None] | None = None
-                ) -> list[ParamRow]:
+    def compare(self, doc: dict, progress: Callable[[int, int, str], None] | None = None,
+                allow_dangerous: bool = False, check_identity: bool = True) -> list[ParamRow]:
         """Each parameter of the file against the drive: 'unchanged', 'differs', 'missing' (cannot
-        be read), 'skipped' (read-only / not restorable)."""
+        be read), 'skipped' (unknown code / read-only / not restorable / dangerous; .why says which)."""
         d = self._need_drive()
         if not d.has_param_channel:
             raise DriveError(self._no_channel_words())
-        for n in self._check_identity(doc):
-            self._warn(n)
+        if check_identity:
+            for n in self._check_identity(doc):
+                self._warn(n)
         rows: list[ParamRow] = []
-        items = list(doc["parameters"].items())
+        params = doc["parameters"]
+        items = list(params.items())
         for i, (code, v) in enumerate(items):
             if progress:
                 progress(i, len(items), str(code))
             want = v.get("value") if isinstance(v, dict) else v
+            line = params.line_of(code) if hasattr(params, "line_of") else 0
             code = str(code)
             try:
                 info = self.param_info(code)
             except UsageError as e:
-                rows.append(ParamRow(code, "", "", want, None, "skipped", str(e)))
+                rows.append(ParamRow(code, "", "", want, None, "skipped", str(e), line=line or 0,
+                                     why="unknown"))
                 continue
             p = info.param
             base = code.split("[", 1)[0]
             pdef = self.profile.param(base) or p
             if pdef is not None:
                 why = _not_restored(self.profile, pdef) if pdef.writable else "read-only"
-                if why:
-                    rows.append(ParamRow(code, info.name, info.unit, want, None, "skipped", why))
+                if why and not (allow_dangerous and why.startswith("dangerous")):
+                    kind = ("read-only" if why == "read-only" else
+                            "dangerous" if why.startswith("dangerous") else "not restored")
+                    rows.append(ParamRow(code, info.name, info.unit, want, None, "skipped", why,
+                                         line=line or 0, why=kind))
                     continue
             try:
                 pv = d.read_param(code)
             except (DriveError, UsageError) as e:
-                rows.append(ParamRow(code, info.name, info.unit, want, None, "missing", str(e)))
+                if isinstance(e, BusError) and not isinstance(e, DriveError):
+                    raise
+                rows.append(ParamRow(code, info.name, info.unit, want, None, "missing", str(e),
+                                     line=line or 0))
                 continue
             same = _same_value(pv.value, want, pdef.scale if pdef is not None else None)
             rows.append(ParamRow(code, pv.name or info.name, pv.unit or info.unit, want, pv.value,
-                                 "unchanged" if same else "differs"))
+                                 "unchanged" if same else "differs", line=line or 0))
         if progress:
             progress(len(items), len(items), "")
         return rows
 
-    def restore(self, doc: dict, dry_run: bool = False,
-                progress: Callable[[int, int, str], None] | None = None) -> list[ParamRow]:
-        """Write what differs, read each write back. Rows: applied / refused (why) / unchanged
-        (dry run: 'would apply' instead of writing)."""
-        rows = self.compare(doc, progress)
+    def restore_problems(self, doc: dict, rows: list[ParamRow], allow_dangerous: bool = False
+                         ) -> list[str]:
+        """Every reason not to write anything, one line each (no bus writes; the rows from compare()).
+        Marks dangerous rows 'skipped' unless allow_dangerous."""
+        problems: list[str] = []
+        path = doc.get("_path", "the file")
+        st = doc.get("station") or {}
+        name = st.get("profile")
+        if name and name != self.profile.name:
+            try:
+                other = load_profile(str(name)).name
+            except UsageError:
+                other = None
+            if other != self.profile.name:
+                problems.append(f"{path}: dumped from a {name} station ({st.get('title', '')}); station "
+                                f"{self.address} is {_family_words(self.profile)}")
+        ident = st.get("ident")
+        if ident is not None:
+            try:
+                fid = int(str(ident), 0)
+            except ValueError:
+                fid = None
+            if fid != self.ident:
+                problems.append(f"{path}: dumped from a station with ident {ident}; station {self.address} "
+                                f"reports 0x{self.ident:04X}")
         running = None
         for r in rows:
-            if r.result != "differs":
-                if r.result in ("missing",):
-                    r.result, r.reason = "refused", f"cannot read it: {r.reason}"
+            where = f"{path}:{r.line}" if r.line else path
+            if r.result == "missing":
+                problems.append(f"{where}: {r.code}: cannot be read from the drive: {r.reason}")
+                continue
+            if r.result == "skipped" and r.why == "unknown":
+                problems.append(f"{where}: {r.code}: {r.reason}")
+                continue
+            if r.result == "skipped" and r.why == "dangerous":
+                r.reason = (f"dangerous: writing it {self.danger_of(self.param_info(r.code)) or r.reason} "
+                            f"(--allow-dangerous writes it)")
+                continue
+            if r.result == "skipped" and r.why == "read-only":
+                problems.append(f"{where}: {r.code} ({r.name}) is read-only")
+                continue
+            if r.result not in ("differs", "unchanged"):
                 continue
             info = self.param_info(r.code)
-            try:
-                self._check_write(info, r.file_value)
-            except UsageError as e:
-                r.result, r.reason = "refused", str(e)
+            what = self.danger_of(info)
+            if what and not allow_dangerous:
+                r.result, r.reason, r.why = ("skipped", f"dangerous: writing it {what} "
+                                             f"(--allow-dangerous writes it)", "dangerous")
                 continue
-            if info.access == "stop":
+            try:
+                self._check_write(info, r.file_value, allow_dangerous=True)
+            except UsageError as e:
+                problems.append(f"{where}: {e}")
+                continue
+            if r.result == "differs" and info.access == "stop":
                 if running is None:
-                    st = self.drive.cycle()
-                    running = st.running or not st.stopped
+                    stc = self.drive.cycle()
+                    running = stc.running or not stc.stopped
                 if running:
-                    r.result, r.reason = "refused", "can only be changed while the motor is stopped"
-                    continue
-            if dry_run:
+                    problems.append(f"{where}: {r.code} ({r.name}) can only be changed while the motor is "
+                                    f"stopped, and the drive is running; stop it first")
+        return problems
+
+    def restore(self, doc: dict, dry_run: bool = False,
+                progress: Callable[[int, int, str], None] | None = None,
+                allow_dangerous: bool = False) -> list[ParamRow]:
+        """Validate every row first (identity, existence, exact value, writability, dangerous, drive
+        stopped where needed): any problem -> RestoreRefused listing them all, nothing written. Then
+        write what differs, reading each write back. Rows: applied / unchanged / skipped / would
+        apply (dry run). A write that fails, or a link lost mid-way -> RestoreInterrupted with the
+        rows: 'applied' landed, 'unknown' was being written, 'not written' were not reached."""
+        for w in doc.get("_warnings", []):
+            self._warn(w)
+        rows = self.compare(doc, progress, allow_dangerous=allow_dangerous, check_identity=False)
+        problems = self.restore_problems(doc, rows, allow_dangerous)
+        if problems:
+            raise RestoreRefused(problems)
+        todo = [r for r in rows if r.result == "differs"]
+        if dry_run:
+            for r in todo:
                 r.result = "would apply"
-                continue
+            return rows
+        for r in todo:
+            r.result = "not written"
+        for r in todo:
+            r.result = "unknown"
             try:
-                pv = self.drive.write_param(r.code, r.file_value)
+                self.drive.write_param(r.code, r.file_value)
+                back = self.drive.read_param(r.code)
+            except BusError as e:
+                r.reason = f"the write or its read-back did not complete: {e}"
+                raise RestoreInterrupted(rows, e) from e
             except UsageError as e:
                 r.result, r.reason = "refused", str(e)
-                continue
-            except DriveError as e:
-                r.result, r.reason = "refused", str(e)
-                continue
-            try:
-                back = self.drive.read_param(r.code)
-            except DriveError:
-                back = pv
+                raise RestoreInterrupted(rows, e) from e
             r.new_value = back.value
             pdef = self.profile.param(r.code.split("[", 1)[0])
             if _same_value(back.value, r.file_value, pdef.scale if pdef is not None else None):
                 r.result = "applied"
             else:
                 r.result, r.reason = "refused", f"the drive kept {value_text(back.value, back.unit)}"
+                raise RestoreInterrupted(rows, DriveError(f"{r.code}: {r.reason}"))
         return rows
+
+
+class RestoreRefused(UsageError):
+    """The file has problems; nothing was written. .problems: one line each."""
+
+    def __init__(self, problems: list[str]):
+        more = f" (and {len(problems) - 1} more problem(s))" if len(problems) > 1 else ""
+        super().__init__(f"nothing was written: {problems[0]}{more}")
+        self.problems = problems
+
+
+class RestoreInterrupted(BusError):
+    """A restore stopped part-way (link lost, a write refused). .rows say what landed."""
+
+    def __init__(self, rows: list[ParamRow], cause: BaseException):
+        landed = sum(r.result == "applied" for r in rows)
+        left = sum(r.result in ("not written", "unknown", "refused") for r in rows)
+        super().__init__(f"restore interrupted: {cause}; {landed} row(s) written and read back, "
+                         f"{left} not (see the table)")
+        self.rows = rows
+        self.cause = cause
+
+
+def _check_complete(path, doc, params) -> list[str]:
+    """A format-2 dump must carry `count:` = the number of parameters and end with `end: pdrive_dump`
+    (so a file cut anywhere is refused). Older files have neither: accepted with a warning."""
+    from profidrive_cli.datafile import DataFileError
+    fmt = doc.get("pdrive_dump")
+    if not isinstance(fmt, int) or isinstance(fmt, bool) or fmt < 2:
+        return [f"{path} has no end marker (written by an older pdrive or by hand): pdrive cannot tell "
+                f"whether it is complete; check that it lists every parameter you mean to restore"]
+    keys = list(doc.keys())
+    if doc.get("end") != DUMP_END or keys[-1] != "end":
+        raise DataFileError(path, None, f"the file is incomplete (no final 'end: {DUMP_END}' line): it "
+                            f"was cut off; dump the drive again or use an intact copy")
+    count = doc.get("count")
+    if not isinstance(count, int) or isinstance(count, bool) or count != len(params):
+        raise DataFileError(path, doc.line_of("count") if "count" in doc else None,
+                            f"the file is incomplete or edited: 'count: {count}' but {len(params)} "
+                            f"parameter(s) under 'parameters'")
+    return []
 
 
 def _not_restored(profile: Profile, p) -> str:
