@@ -500,7 +500,8 @@ def _print_rows(opts, s, rows, what: str, dry_run: bool, interrupted: str | None
         if interrupted is not None:
             d["interrupted"] = interrupted
             d["landed"] = [r.code for r in rows if r.result == "applied"]
-            d["not_landed"] = [r.code for r in rows if r.result in ("not written", "unknown", "refused")]
+            d["uncertain"] = [r.code for r in rows if r.result == "unknown"]   # sent, not read back
+            d["not_landed"] = [r.code for r in rows if r.result in ("not written", "refused")]
         emit_json(d)
         return
     shown = [r for r in rows if r.result not in ("unchanged", "skipped") or opts.verbose
