@@ -105,7 +105,8 @@ def test_dangerous_parameters_of_each_profile_say_what_happens():
     ("o27", "10.7", "nearest 10 or 11", 0),
     ("F07", "0.05", "resolution 0.1 s; nearest 0 s or 0.1 s", 6.0),
     ("F07", "2.55", "nearest 2.5 s or 2.6 s", 6.0),
-    ("F07", "nan", "expected a number", 6.0),
+    ("F07", "nan", "nan is not a value a parameter can hold", 6.0),
+    ("F07", "inf", "inf is not a value a parameter can hold", 6.0),
 ])
 def test_param_set_refuses_a_value_it_would_round(sim, pdrive, code, text, words, factory):
     r = pdrive("param", "set", "3", code, text)
@@ -318,3 +319,31 @@ def test_failed_dump_keeps_the_old_file_link_dropped(sim, pdrive, tmp_path, monk
 def test_dump_path_is_checked_before_the_bus(pdrive, tmp_path):
     r = pdrive("param", "dump", "3", "-o", str(tmp_path / "no" / "d.yaml"), port=str(tmp_path / "ttyNONE"))
     assert r.exit_code == 2 and "does not exist" in r.stderr
+
+
+# -- the same over a real byte path: `pdrive sim --pty` (state persists between commands) ------------
+
+def test_over_a_pty_nothing_rounded_nothing_dangerous_no_partial_restore(tmp_path):
+    import subprocess
+    from conftest import pdrive_cmd
+    from test_pty_bus import _start_sim, _stop
+    sim, info = _start_sim(["--pty"])
+    port = info["port"]
+
+    def pd(*args):
+        return subprocess.run(pdrive_cmd() + list(args) + ["--port", port], capture_output=True, text=True,
+                              timeout=120)
+    try:
+        for args in (("3", "o27", "10.7", "--yes"), ("3", "F07", "0.05", "--yes"), ("3", "P04", "2", "--yes")):
+            r = pd("param", "set", *args)
+            assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+        f = tmp_path / "bad.yaml"
+        f.write_text("parameters:\n  F08: {value: 7.5}\n  F07: {value: 99999}\n")
+        r = pd("param", "restore", "3", str(f), "--yes")
+        assert r.returncode == 2 and f"{f}:3:" in r.stderr, r.stderr
+        r = pd("param", "get", "3", "o27", "F07", "F08", "P04", "--json")
+        assert r.returncode == 0, r.stderr
+        got = {p["code"]: p["value"] for p in json.loads(r.stdout)["parameters"]}
+        assert got == {"o27": 0, "F07": 6.0, "F08": 6.0, "P04": 0}
+    finally:
+        assert _stop(sim) == 0

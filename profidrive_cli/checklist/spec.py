@@ -25,7 +25,7 @@ import yaml
 
 from profidrive_cli import PdriveError, UsageError
 from profidrive_cli.datafile import DataFileError, LineDict, LineList, load_yaml_text, read_text
-from profidrive_cli.drives.values import danger, value_problem
+from profidrive_cli.drives.values import danger, profile_value_problem
 
 STEP_TYPES = ("expect_identity", "read", "write", "save", "run", "stop", "expect_status", "wait", "faults",
               "reset_fault", "prompt", "note")
@@ -714,7 +714,7 @@ class _Validator:
         if p is not None:
             if not p.writable:
                 self.fail(d.line_of("param"), f"{w}: {t.label} ({p.name}) is read-only")
-            msg = _value_problem(st.profile, p, value)
+            msg = profile_value_problem(st.profile, p, value)
             if msg:
                 self.fail(d.line_of("value"), f"{w}: {msg} (station {st.name!r})")
             if p.access == "stop" and state["running"]:
@@ -928,16 +928,6 @@ def resolve_param(profile, code: str, layout: str | None = None) -> tuple[str, A
             if near:
                 msg += f"; closest {profile.family} codes: {', '.join(near)}"
         raise UsageError(msg) from None
-
-
-def _value_problem(profile, p, value) -> str | None:
-    """The exact-value check every write uses (drives/values.py): resolution, range, listed codes,
-    wire width; Toyo's 400 V class scale where it applies."""
-    scale = None
-    if profile.family == "toyo":
-        from profidrive_cli.drives.toyo import effective_scale
-        scale = effective_scale(profile, p)
-    return value_problem(p, value, scale=scale)
 
 
 def _range_problem(p, value) -> str | None:

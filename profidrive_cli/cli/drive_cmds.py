@@ -20,7 +20,7 @@ from profidrive_cli.cli import render_drive as R
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.drives.session import (DriveSession, RestoreInterrupted, RestoreRefused,
                                            SessionTerminated)
-from profidrive_cli.drives.values import danger
+from profidrive_cli.drives.values import danger, profile_value_problem
 from profidrive_cli.outfile import OutputFile, check_output_path
 from profidrive_cli.link.base import LinkLost
 
@@ -375,6 +375,12 @@ def param_set(opts, args, save, yes, allow_dangerous, profile_name, ppo, fmt, wa
         if what and not allow_dangerous:
             raise UsageError(f"{code} is dangerous: writing it {what}; nothing was written "
                              f"(add --allow-dangerous, and confirm, to write it)")
+        p = session.profile.param(code.strip())
+        if p is not None and _is_number(text):       # refused before anyone is asked
+            v = int(text, 16) if text.strip().lower().lstrip("-").startswith("0x") else float(text)
+            msg = profile_value_problem(session.profile, p, v)
+            if msg:
+                raise UsageError(msg)
         words = f"write {code} = {text}" + (f" — DANGEROUS: {what}" if what else "")
         _confirmer(opts, yes, words)(session)
 

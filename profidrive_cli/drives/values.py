@@ -202,6 +202,17 @@ def value_problem(p, value, scale=None, label: str | None = None) -> str | None:
     return None
 
 
+def profile_value_problem(profile, p, value) -> str | None:
+    """value_problem() with the scale the family uses for this profile (Toyo: the 400 V class scale):
+    for checks made from the profile alone, before a drive is connected (checklist validate, the
+    prompt of param set)."""
+    scale = None
+    if profile.family == "toyo":
+        from profidrive_cli.drives.toyo import effective_scale
+        scale = effective_scale(profile, p)
+    return value_problem(p, value, scale=scale)
+
+
 def raw_value_problem(label: str, value, bits: int = 16) -> str | None:
     """For raw PNU / register access (no profile entry): a whole number that fits `bits` (a negative
     number is taken as two's complement)."""
