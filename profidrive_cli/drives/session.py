@@ -50,12 +50,16 @@ Public API (stable; everything else is internal)
     Speed:    fmax(override=None) -> (hz, source words);  percent_for_hz(hz, fmax_override=None)
     Bus:      counters -> dict (master.fdl.counters_for(address));  achieved_hz;  cycles
     Params:   param_info(code) -> ParamInfo (UsageError with the closest codes / the station's family);
-              parse_value(code, text);  read_param(code);  write_param(code, value) (checks: writable,
-              range + unit, stop-only while running; returns the value read back);  save() -> str;
-              fault_history();  current_fault();  clear_fault()
-    Files:    dump(progress=None) -> dict (YAML-ready: station identity + parameters);
-              load_dump(path) -> dict (file:line errors);  compare(doc, progress=None) -> [ParamRow];
-              restore(doc, dry_run=False, progress=None) -> [ParamRow] (only what differs, read back)
+              parse_value(code, text);  read_param(code);  write_param(code, value, allow_dangerous=False)
+              (checks: writable, not dangerous, exact value -- resolution, range, codes, wire width:
+              drives/values.py --, stop-only while running; returns the value read back);
+              danger_of(info) -> str | None;  save() -> str;  fault_history();  current_fault();  clear_fault()
+    Files:    dump(progress=None) -> dict (YAML-ready: station identity + parameters, count, end marker);
+              load_dump(path) -> dict (file:line errors; a cut-off format-2 file is refused);
+              compare(doc, progress=None) -> [ParamRow];
+              restore(doc, dry_run=False, progress=None, allow_dangerous=False) -> [ParamRow]: every row
+              checked before the first write (RestoreRefused(.problems), nothing written); only what
+              differs is written and read back; RestoreInterrupted(.rows) when a write fails part-way
 
     Module functions: find_drive_stations(master, first=0, last=125) -> [DriveStation];
     choose_profile(ident, name=None) -> (Profile, warnings); resolve_layout(profile, layout, ppo, fmt);
