@@ -85,8 +85,11 @@ from pathlib import Path
 from typing import Any, Callable
 
 from profidrive_cli import BusError, PdriveError, UsageError
-from profidrive_cli.drives.base import DriveError, DriveStatus, FaultRecord, ParamValue, value_text
+from profidrive_cli.drives.base import DriveError, DriveStatus, FaultRecord, ParamValue
 from profidrive_cli.drives.profile import Profile, all_profiles, load_profile, profile_for_ident
+from profidrive_cli.drives import restore as _restore
+from profidrive_cli.drives.restore import (DUMP_END, DUMP_FORMAT, RestoreInterrupted,  # noqa: F401
+                                           RestoreRefused, check_complete)
 from profidrive_cli.drives.values import danger, raw_value_problem, value_problem
 
 DEFAULT_WATCHDOG_MS = 500
@@ -94,8 +97,6 @@ CAP_REAL_HZ = 100.0          # default cycle-rate cap over real ports
 CAP_SIM_HZ = 50.0            # ... and on the instant simulator
 COAST_TIMEOUT_S = 10.0
 DEFAULT_STOP_TIMEOUT_S = 30.0
-DUMP_FORMAT = 2              # 2: `count:` and a final `end: pdrive_dump` line (truncation is detected)
-DUMP_END = "pdrive_dump"
 
 #: deceleration-time parameter per family when the profile's `profidrive.ramps` names none
 _DECEL_CODES = {"fuji": "F08", "moeller": "F003", "yaskawa": "C1-02"}
@@ -1231,7 +1232,7 @@ class DriveSession:
         st = doc.get("station")
         if st is not None and not isinstance(st, dict):
             raise DataFileError(path, doc.line_of("station"), "'station' must be a mapping")
-        doc["_warnings"] = _check_complete(path, doc, params)
+        doc["_warnings"] = check_complete(path, doc, params)
         doc["_path"] = str(path)
         return doc
 
@@ -1306,148 +1307,15 @@ class DriveSession:
 
     def restore_problems(self, doc: dict, rows: list[ParamRow], allow_dangerous: bool = False
                          ) -> list[str]:
-        """Every reason not to write anything, one line each (no bus writes; the rows from compare()).
-        Marks dangerous rows 'skipped' unless allow_dangerous."""
-        problems: list[str] = []
-        path = doc.get("_path", "the file")
-        st = doc.get("station") or {}
-        name = st.get("profile")
-        if name and name != self.profile.name:
-            try:
-                other = load_profile(str(name)).name
-            except UsageError:
-                other = None
-            if other != self.profile.name:
-                problems.append(f"{path}: dumped from a {name} station ({st.get('title', '')}); station "
-                                f"{self.address} is {_family_words(self.profile)}")
-        ident = st.get("ident")
-        if ident is not None:
-            try:
-                fid = int(str(ident), 0)
-            except ValueError:
-                fid = None
-            if fid != self.ident:
-                problems.append(f"{path}: dumped from a station with ident {ident}; station {self.address} "
-                                f"reports 0x{self.ident:04X}")
-        running = None
-        for r in rows:
-            where = f"{path}:{r.line}" if r.line else path
-            if r.result == "missing":
-                problems.append(f"{where}: {r.code}: cannot be read from the drive: {r.reason}")
-                continue
-            if r.result == "skipped" and r.why == "unknown":
-                problems.append(f"{where}: {r.code}: {r.reason}")
-                continue
-            if r.result == "skipped" and r.why == "dangerous":
-                r.reason = (f"dangerous: writing it {self.danger_of(self.param_info(r.code)) or r.reason} "
-                            f"(--allow-dangerous writes it)")
-                continue
-            if r.result == "skipped" and r.why == "read-only":
-                problems.append(f"{where}: {r.code} ({r.name}) is read-only")
-                continue
-            if r.result not in ("differs", "unchanged"):
-                continue
-            info = self.param_info(r.code)
-            what = self.danger_of(info)
-            if what and not allow_dangerous:
-                r.result, r.reason, r.why = ("skipped", f"dangerous: writing it {what} "
-                                             f"(--allow-dangerous writes it)", "dangerous")
-                continue
-            try:
-                self._check_write(info, r.file_value, allow_dangerous=True)
-            except UsageError as e:
-                problems.append(f"{where}: {e}")
-                continue
-            if r.result == "differs" and info.access == "stop":
-                if running is None:
-                    stc = self.drive.cycle()
-                    running = stc.running or not stc.stopped
-                if running:
-                    problems.append(f"{where}: {r.code} ({r.name}) can only be changed while the motor is "
-                                    f"stopped, and the drive is running; stop it first")
-        return problems
+        """Every reason not to write anything, one line each (drives/restore.py)."""
+        return _restore.restore_problems(self, doc, rows, allow_dangerous)
 
     def restore(self, doc: dict, dry_run: bool = False,
                 progress: Callable[[int, int, str], None] | None = None,
                 allow_dangerous: bool = False) -> list[ParamRow]:
-        """Validate every row first (identity, existence, exact value, writability, dangerous, drive
-        stopped where needed): any problem -> RestoreRefused listing them all, nothing written. Then
-        write what differs, reading each write back. Rows: applied / unchanged / skipped / would
-        apply (dry run). A write that fails, or a link lost mid-way -> RestoreInterrupted with the
-        rows: 'applied' landed, 'unknown' was being written, 'not written' were not reached."""
-        for w in doc.get("_warnings", []):
-            self._warn(w)
-        rows = self.compare(doc, progress, allow_dangerous=allow_dangerous, check_identity=False)
-        problems = self.restore_problems(doc, rows, allow_dangerous)
-        if problems:
-            raise RestoreRefused(problems)
-        todo = [r for r in rows if r.result == "differs"]
-        if dry_run:
-            for r in todo:
-                r.result = "would apply"
-            return rows
-        for r in todo:
-            r.result = "not written"
-        for r in todo:
-            r.result = "unknown"
-            try:
-                self.drive.write_param(r.code, r.file_value)
-                back = self.drive.read_param(r.code)
-            except BusError as e:
-                r.reason = f"the write or its read-back did not complete: {e}"
-                raise RestoreInterrupted(rows, e) from e
-            except UsageError as e:
-                r.result, r.reason = "refused", str(e)
-                raise RestoreInterrupted(rows, e) from e
-            r.new_value = back.value
-            pdef = self.profile.param(r.code.split("[", 1)[0])
-            if _same_value(back.value, r.file_value, pdef.scale if pdef is not None else None):
-                r.result = "applied"
-            else:
-                r.result, r.reason = "refused", f"the drive kept {value_text(back.value, back.unit)}"
-                raise RestoreInterrupted(rows, DriveError(f"{r.code}: {r.reason}"))
-        return rows
-
-
-class RestoreRefused(UsageError):
-    """The file has problems; nothing was written. .problems: one line each."""
-
-    def __init__(self, problems: list[str]):
-        more = f" (and {len(problems) - 1} more problem(s))" if len(problems) > 1 else ""
-        super().__init__(f"nothing was written: {problems[0]}{more}")
-        self.problems = problems
-
-
-class RestoreInterrupted(BusError):
-    """A restore stopped part-way (link lost, a write refused). .rows say what landed."""
-
-    def __init__(self, rows: list[ParamRow], cause: BaseException):
-        landed = sum(r.result == "applied" for r in rows)
-        left = sum(r.result in ("not written", "unknown", "refused") for r in rows)
-        super().__init__(f"restore interrupted: {cause}; {landed} row(s) written and read back, "
-                         f"{left} not (see the table)")
-        self.rows = rows
-        self.cause = cause
-
-
-def _check_complete(path, doc, params) -> list[str]:
-    """A format-2 dump must carry `count:` = the number of parameters and end with `end: pdrive_dump`
-    (so a file cut anywhere is refused). Older files have neither: accepted with a warning."""
-    from profidrive_cli.datafile import DataFileError
-    fmt = doc.get("pdrive_dump")
-    if not isinstance(fmt, int) or isinstance(fmt, bool) or fmt < 2:
-        return [f"{path} has no end marker (written by an older pdrive or by hand): pdrive cannot tell "
-                f"whether it is complete; check that it lists every parameter you mean to restore"]
-    keys = list(doc.keys())
-    if doc.get("end") != DUMP_END or keys[-1] != "end":
-        raise DataFileError(path, None, f"the file is incomplete (no final 'end: {DUMP_END}' line): it "
-                            f"was cut off; dump the drive again or use an intact copy")
-    count = doc.get("count")
-    if not isinstance(count, int) or isinstance(count, bool) or count != len(params):
-        raise DataFileError(path, doc.line_of("count") if "count" in doc else None,
-                            f"the file is incomplete or edited: 'count: {count}' but {len(params)} "
-                            f"parameter(s) under 'parameters'")
-    return []
+        """Validate every row, then write what differs, reading each write back (drives/restore.py):
+        RestoreRefused (nothing written) / RestoreInterrupted (which rows landed)."""
+        return _restore.restore(self, doc, dry_run, progress, allow_dangerous)
 
 
 def _not_restored(profile: Profile, p) -> str:
