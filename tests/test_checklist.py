@@ -60,6 +60,11 @@ BAD_STEPS = [
     ("  - wait: {seconds: 1, foo: 2}\n", 5, "unknown field 'foo'"),
     ("  - read: F03\n    on_fail: maybe\n", 6, "on_fail must be stop or continue"),
     ("  - write: {param: H03, value: 1}\n", 5, "dangerous"),
+    ("  - write: {param: P04, value: 2}\n", 5, "add 'allow_dangerous: true' to the step"),
+    ("  - write: {param: o27, value: 10.7}\n", 5, "o27 = 10.7 cannot be held exactly"),
+    ("  - write: {param: F07, value: 0.05}\n", 5, "resolution 0.1 s; nearest 0 s or 0.1 s"),
+    ("  - write: {param: F07, value: 2.55}\n", 5, "nearest 2.5 s or 2.6 s"),
+    ("  - write: {param: F07, value: 2, allow_dangerous: yes please}\n", 5, "'allow_dangerous' must be true"),
     ("  - read: F03\n    write: {param: F07, value: 1}\n", 6, "one step type per step"),
     ("  - run: {hz: 10, percent: 20}\n", 5, "either hz or percent"),
     ("  - read: {param: F03, expect: 60, range: [1, 2]}\n", 5, "not both"),
@@ -191,6 +196,15 @@ def test_wrong_expectation_fails_there_records_the_value_and_leaves_the_drive_st
     d = make_drive(DirectChannel(m, b"\xf3\xf1", start=1000.0), sr.spec.profile, "ppo1")
     st = d.status()
     assert not st.running and st.speed_hz == 0.0
+
+
+def test_a_dangerous_write_runs_only_when_the_step_allows_it():
+    cl = load_checklist_text(HEAD + "  - write: {param: P04, value: 2, allow_dangerous: true}\n", "t.yaml")
+    step = cl.stations[0].steps[0]
+    assert step.args["allow_dangerous"] is True and "dangerous, allowed" in step.title
+    res, models = run_text(HEAD + "  - write: {param: P04, value: 2, allow_dangerous: true}\n"
+                                  "  - read: {param: P04, expect: 2}\n")
+    assert [r.status for r in res.stations[0].steps] == [PASSED, PASSED]
 
 
 def test_on_fail_continue_goes_on_and_still_fails_the_run():

@@ -156,7 +156,8 @@ def test_dump_change_restore(sim, pdrive, tmp_path, address):
     f = tmp_path / f"s{address}.yaml"
     d = json.loads(ok(pdrive("param", "dump", str(address), "-o", str(f), "--json")).stdout)
     text = f.read_text()
-    assert "pdrive_dump: 1" in text and f"address: {address}" in text
+    assert "pdrive_dump: 2" in text and f"address: {address}" in text
+    assert text.endswith("end: pdrive_dump\n") and "count: " in text
     if address == 5:
         assert d["settings"] == 0 and d["readonly"] > 10        # monitors only (see the profile)
         r = ok(pdrive("param", "restore", "5", str(f)))

@@ -8,6 +8,7 @@ from dataclasses import replace
 
 import pytest
 
+from profidrive_cli import UsageError
 from profidrive_cli.datafile import DataFileError
 from profidrive_cli.drives import decode_area as generic_decode_area
 from profidrive_cli.drives import make_drive as generic_make_drive
@@ -240,10 +241,14 @@ def test_e1_04_read_and_write_by_native_name(prof, layout):
 @pytest.mark.parametrize("layout", ["extended1", "extended2"])
 def test_e1_04_write_out_of_range_refused_by_drive(prof, layout):
     model, ch, d = rig(prof, layout)
+    with pytest.raises(UsageError, match=r"500 Hz is outside 40..400 Hz"):
+        d.write_param("E1-04", 500.0)                  # the profile's range: refused before sending
+    with pytest.raises(UsageError, match=r"resolution 0.1 Hz; nearest 50 Hz or 50.1 Hz"):
+        d.write_param("E1-04", 50.05)                  # never rounded (issue 12)
     with pytest.raises(ParamError) as e:
-        d.write_param("E1-04", 500.0)
+        d.write_param("REG0x0303", 5000)               # raw register, 500.0 Hz: the drive judges it
     assert e.value.number == 0x21                      # the manual's data content fault
-    assert "data content error" in str(e.value) and "40..400 Hz" in str(e.value)
+    assert "data content error" in str(e.value)
     assert model.param("E1-04") == 60.0
 
 
@@ -423,7 +428,11 @@ def test_profile_marks_register_sources(prof):
     src = {c: p.extra.get("register_source") for c, p in prof.parameters.items()}
     assert src["PWR"] == "printed"
     assert src["E1-04"] == src["b1-01"] == src["b1-02"] == "inferred"
-    assert all(s in ("printed", "inferred", "external") for s in src.values())
+    # every parameter with a register says where the register comes from; A1-03 and T1-01 are in the
+    # profile only to be marked dangerous (no register published: see the decisions)
+    assert all(s in ("printed", "inferred", "external") for c, s in src.items()
+               if prof.parameters[c].register is not None)
+    assert sorted(c for c, p in prof.parameters.items() if p.register is None) == ["A1-03", "T1-01"]
     assert prof.param("E1-04").access == "stop" and prof.max_frequency_param == "E1-04"
     assert {a.code for a in prof.alarms} >= {"BUS", "EF0", "OPE05", "OPE06", "CPF20", "CPF23"}
     assert len(prof.raw["decisions"]) >= 10

@@ -12,7 +12,7 @@ Per row: code (keypad code; PNU<n> where the list prints none or a duplicate), n
 (= 1 / multiplier), min/max (engineering units, from the printed range), access (R/W -> rw,
 R/WOS -> stop, RO -> ro), bytes (1, 2, 4 on the wire) and size (16 or 32 bits), signed where the range
 is negative. Family keys: bytes, format (code | hex), ranges (several allowed intervals), df6 (false
-= not on DF6), df6_max, note. The decisions behind the special cases are in the profile's
+= not on DF6), df6_max, note, dangerous + danger (the common keys). The decisions behind the special cases are in the profile's
 `decisions:` list.
 """
 
@@ -34,6 +34,15 @@ SCALE = {"*1": 1, "*10": 0.1, "*100": 0.01, "*1000": 0.001, "Code": 1, "Bit": 1,
          "*1/10": 10}
 ACCESS = {"R/W": "rw", "R/WOS": "stop", "RO": "ro"}
 UNIT = {"(%)": "%", "pls": "pulses", "Bits": "bits", "times": "", "hex": ""}
+
+# parameters whose writing erases settings or moves the motor on its own (issue 12; the profile's
+# decisions say why): `dangerous: true` and what happens, in words
+DANGER = {
+    261: "selects what an initialisation erases (1 = the fault history, 2 = the fault history and every "
+         "setting back to factory values)",
+    321: "arms motor auto-tuning: the next run command measures the motor instead of running it at the "
+         "reference (2 = the motor turns during the measurement) and overwrites the motor constants",
+}
 
 # names printed damaged in the manual (our wording)
 NAME_FIX = {
@@ -199,6 +208,9 @@ def rows_from_csv(path: Path) -> list[dict]:
             row["df6_max"] = int(v) if v.is_integer() and "." not in df6 else v
         if pnu in NOTES:
             row["note"] = NOTES[pnu]
+        if pnu in DANGER:
+            row["dangerous"] = True
+            row["danger"] = DANGER[pnu]
         out.append(row)
     for p in PROFIDRIVE_ROWS:
         row = dict(p)

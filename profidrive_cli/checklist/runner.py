@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from typing import Any, Callable
 
+from profidrive_cli.drives.values import danger
 from profidrive_cli import PdriveError, __version__
 from profidrive_cli.checklist.spec import Checklist, StationSpec, Step, _fmt
 
@@ -529,10 +530,15 @@ class Runner:
             before = d.read_param(t.code).value
         except PdriveError:
             pass                          # write-only, or unreadable before: the read-back decides
+        allow = bool(a.get("allow_dangerous"))
         if h.session is not None:
-            h.session.write_param(t.code, value)      # writable, range + unit, stop-only while running
+            # writable, not dangerous unless the step allows it, exact value, stop-only while running
+            h.session.write_param(t.code, value, allow_dangerous=allow)
         else:
-            d.write_param(t.code, value)
+            if danger(t.param) and not allow:
+                raise StepFailed(f"{t.label} is dangerous ({danger(t.param)}); the step needs "
+                                 f"allow_dangerous: true")
+            d.write_param(t.code, value)              # the codec's own exact-value check
         rb = d.read_param(t.code)
         u = f" {rb.unit}" if rb.unit else ""
         r.measured = {"param": rb.code, "before": before, "written": value, "read_back": rb.value,

@@ -23,6 +23,7 @@ from typing import Any
 
 from profidrive_cli import PdriveError, UsageError
 from profidrive_cli.datafile import DataFileError, LineDict, LineList, load_yaml_text, read_text
+from profidrive_cli.drives.values import danger, profile_value_problem
 
 STEP_TYPES = ("expect_identity", "read", "write", "save", "run", "stop", "expect_status", "wait", "faults",
               "reset_fault", "prompt", "note")
@@ -699,26 +700,32 @@ class _Validator:
         return {"param": t, "expect": expect, "tolerance": tol, "min": lo, "max": hi}, title
 
     def step_write(self, st, rs, body, state):
-        d = self.fields(rs, body, ("param", "value"), None, ("param", "value"))
+        d = self.fields(rs, body, ("param", "value", "allow_dangerous"), None, ("param", "value"))
         w = f"step {rs.index} (write)"
         self._no_channel(st, rs)
         t = self.code_field(st, rs, d)
         value = self.num(rs, d, "value", required=True)
+        allow = d.get("allow_dangerous", False)
+        if not isinstance(allow, bool):
+            self.fail(d.line_of("allow_dangerous"), f"{w}: 'allow_dangerous' must be true or false, got {allow!r}")
         p = t.param
         if p is not None:
             if not p.writable:
                 self.fail(d.line_of("param"), f"{w}: {t.label} ({p.name}) is read-only")
-            msg = _range_problem(p, value)
+            msg = profile_value_problem(st.profile, p, value)
             if msg:
                 self.fail(d.line_of("value"), f"{w}: {msg} (station {st.name!r})")
             if p.access == "stop" and state["running"]:
                 self.fail(rs.line, f"{w}: {t.label} can only be changed while the motor is stopped, and an "
                           f"earlier run step leaves it running; put a stop step before it")
-            if p.extra.get("dangerous"):
-                self.err(d.line_of("param"), f"{w}: {t.label} ({p.name}) is marked dangerous in the profile "
-                         f"and is not allowed in a checklist; use pdrive param set")
+            what = danger(p)
+            if what and not allow:
+                self.err(d.line_of("param"), f"{w}: {t.label} ({p.name}) is dangerous: writing it {what}; "
+                         f"add 'allow_dangerous: true' to the step to write it")
         u = f" {t.unit}" if t.unit else ""
-        return {"param": t, "value": value}, f"write {t.label} = {_fmt(value)}{u}"
+        return ({"param": t, "value": value, "allow_dangerous": allow},
+                f"write {t.label} = {_fmt(value)}{u}" + (" (dangerous, allowed)" if allow and p is not None
+                                                         and danger(p) else ""))
 
     def step_save(self, st, rs, body, state):
         self.fields(rs, body, ())

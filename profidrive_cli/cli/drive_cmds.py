@@ -19,7 +19,10 @@ from profidrive_cli.cli.common import (bus_options, confirm_real_port, emit_json
                                        station_address)
 from profidrive_cli.cli import render_drive as R
 from profidrive_cli.drives.base import DriveError
-from profidrive_cli.drives.session import DriveSession, SessionTerminated
+from profidrive_cli.drives.session import (DriveSession, RestoreInterrupted, RestoreRefused,
+                                           SessionTerminated)
+from profidrive_cli.drives.values import danger, profile_value_problem
+from profidrive_cli.outfile import OutputFile, check_output_path
 from profidrive_cli.link.base import LinkLost
 from profidrive_cli.outfile import check_output_path
 
@@ -343,11 +346,15 @@ def param_get(opts, args, profile_name, ppo, fmt, watchdog_ms):
 @click.argument("args", nargs=-1, required=True, metavar="[ADDRESS] CODE VALUE")
 @click.option("--save", is_flag=True, help="Store to non-volatile memory afterwards (where the card can).")
 @click.option("--yes", is_flag=True, help="Do not ask before writing on a real port.")
+@click.option("--allow-dangerous", is_flag=True,
+              help="Needed (besides the confirmation) to write a parameter the profile marks dangerous "
+                   "(data initialisation, auto-tuning).")
 @drive_options
 @bus_options
 @_terminations
-def param_set(opts, args, save, yes, profile_name, ppo, fmt, watchdog_ms):
-    """Write one parameter: range-checked first, read back after."""
+def param_set(opts, args, save, yes, allow_dangerous, profile_name, ppo, fmt, watchdog_ms):
+    """Write one parameter: checked first (a value the parameter cannot hold exactly is refused,
+    never rounded), read back after."""
     address, rest = _split_address(args, 2)
     bad = [a for a in rest if a.startswith("--")]
     if bad:
@@ -355,16 +362,31 @@ def param_set(opts, args, save, yes, profile_name, ppo, fmt, watchdog_ms):
     if len(rest) != 2 or (address is None and rest[0].isdigit() and not _is_number(rest[1])):
         raise UsageError("param set: expected [ADDRESS] CODE VALUE")
     code, text = rest
-    before = _confirmer(opts, yes, f"write {code} = {text}")
+
+    def before(session):
+        # the profile is known here, the drive is not connected yet: nothing has been written
+        what = danger(session.profile.param(code.strip()))
+        if what and not allow_dangerous:
+            raise UsageError(f"{code} is dangerous: writing it {what}; nothing was written "
+                             f"(add --allow-dangerous, and confirm, to write it)")
+        p = session.profile.param(code.strip())
+        if p is not None and _is_number(text):       # refused before anyone is asked
+            v = int(text, 16) if text.strip().lower().lstrip("-").startswith("0x") else float(text)
+            msg = profile_value_problem(session.profile, p, v)
+            if msg:
+                raise UsageError(msg)
+        words = f"write {code} = {text}" + (f" — DANGEROUS: {what}" if what else "")
+        _confirmer(opts, yes, words)(session)
+
     with _session(opts, address, profile_name, ppo, fmt, watchdog_ms, before=before) as s:
         info = s.param_info(code)
         value = s.parse_value(code, text, info)
-        s._check_write(info, value)
+        s._check_write(info, value, allow_dangerous)
         try:
             old = s.read_param(code) if info.access != "wo" else None
         except DriveError:
             old = None
-        new = s.write_param(code, value)
+        new = s.write_param(code, value, allow_dangerous=allow_dangerous)
         saved = s.save() if save else None
         notes = s.notes()
     if opts.json:
@@ -387,17 +409,17 @@ def param_set(opts, args, save, yes, profile_name, ppo, fmt, watchdog_ms):
 @bus_options
 @_terminations
 def param_dump(opts, address, output, profile_name, ppo, fmt, watchdog_ms):
-    """Read every readable parameter into a YAML file (with the station's identity and profile)."""
+    """Read every readable parameter into a YAML file (with the station's identity and profile).
+    An existing file is replaced only when the dump is complete."""
     import yaml
-    try:
-        f = open(output, "w", encoding="utf-8")
-    except OSError as e:
-        raise UsageError(f"-o {output}: {e.strerror or e}") from None
-    with f, _session(opts, address, profile_name, ppo, fmt, watchdog_ms) as s:
+    check_output_path(output, "-o")             # before the bus is opened
+    with _session(opts, address, profile_name, ppo, fmt, watchdog_ms) as s:
         doc = _with_progress(opts, "reading parameters", lambda prog: s.dump(prog))
+    with OutputFile(output, "w") as f:
         f.write(f"# pdrive parameter dump of station {s.address} ({s.profile.title})\n"
-                f"# restore with: pdrive param restore {s.address} {output}\n")
-        yaml.safe_dump(doc, f, sort_keys=False, allow_unicode=True, width=120)
+                f"# restore with: pdrive param restore {s.address} {output}\n"
+                f"# the last line must be 'end: pdrive_dump': a file without it is incomplete\n")
+        f.write(yaml.safe_dump(doc, sort_keys=False, allow_unicode=True, width=120))
     n_set, n_ro, n_bad = len(doc["parameters"]), len(doc["readonly"]), len(doc.get("unreadable", {}))
     if opts.json:
         emit_json({"file": output, "address": s.address, "profile": s.profile.name, "settings": n_set,
@@ -419,23 +441,39 @@ def _file_args(args, what: str):
 @click.argument("args", nargs=-1, required=True, metavar="[ADDRESS] FILE.yaml")
 @click.option("--dry-run", is_flag=True, help="Show what would be written; write nothing.")
 @click.option("--yes", is_flag=True, help="Do not ask before writing on a real port.")
+@click.option("--allow-dangerous", is_flag=True,
+              help="Also write rows the profile marks dangerous (skipped otherwise).")
 @drive_options
 @bus_options
 @_terminations
-def param_restore(opts, args, dry_run, yes, profile_name, ppo, fmt, watchdog_ms):
-    """Write back what differs from a dump; each write is read back. Ends with a table."""
+def param_restore(opts, args, dry_run, yes, allow_dangerous, profile_name, ppo, fmt, watchdog_ms):
+    """Write back what differs from a dump. Every row is checked first (drive identity, code, exact
+    value, writability, motor stopped where needed): any problem and nothing is written. Each write
+    is read back. Ends with a table."""
     address, path = _file_args(args, "restore")
     doc = DriveSession.load_dump(path)
     before = None if dry_run else _confirmer(opts, yes, f"restore parameters from {path}")
-    with _session(opts, address, profile_name, ppo, fmt, watchdog_ms, before=before) as s:
-        rows = _with_progress(opts, "comparing", lambda prog: s.restore(doc, dry_run=dry_run, progress=prog))
-        notes = s.notes()
+    try:
+        with _session(opts, address, profile_name, ppo, fmt, watchdog_ms, before=before) as s:
+            rows = _with_progress(opts, "comparing", lambda prog: s.restore(
+                doc, dry_run=dry_run, progress=prog, allow_dangerous=allow_dangerous))
+            notes = s.notes()
+    except RestoreRefused as e:
+        if opts.json:
+            emit_json({"file": path, "written": 0, "problems": e.problems})
+        else:
+            for line in e.problems:
+                err.print(escape(line))
+        raise UsageError(f"{path}: {len(e.problems)} problem(s); nothing was written") from None
+    except RestoreInterrupted as e:
+        _print_rows(opts, s, e.rows, "restore", False, interrupted=str(e))
+        raise
     _print_rows(opts, s, rows, "restore", dry_run)
     for n in notes:
         err.print(escape(f"note: {n}"))
-    if any(r.result == "refused" for r in rows):
-        raise DriveError(f"station {s.address}: {sum(r.result == 'refused' for r in rows)} "
-                         f"parameter(s) refused (see the table)")
+    skipped = [r.code for r in rows if r.why == "dangerous"]
+    if skipped and not opts.json:
+        err.print(escape(f"skipped (dangerous; --allow-dangerous writes them): {', '.join(skipped)}"))
 
 
 @param_group.command("diff")
@@ -452,15 +490,22 @@ def param_diff(opts, args, profile_name, ppo, fmt, watchdog_ms):
     _print_rows(opts, s, rows, "diff", False)
 
 
-def _print_rows(opts, s, rows, what: str, dry_run: bool) -> None:
+def _print_rows(opts, s, rows, what: str, dry_run: bool, interrupted: str | None = None) -> None:
     counts: dict[str, int] = {}
     for r in rows:
         counts[r.result] = counts.get(r.result, 0) + 1
     if opts.json:
-        emit_json({"address": s.address, "profile": s.profile.name, "dry_run": dry_run,
-                   "counts": counts, "rows": [r.to_dict() for r in rows]})
+        d = {"address": s.address, "profile": s.profile.name, "dry_run": dry_run,
+             "counts": counts, "rows": [r.to_dict() for r in rows]}
+        if interrupted is not None:
+            d["interrupted"] = interrupted
+            d["landed"] = [r.code for r in rows if r.result == "applied"]
+            d["uncertain"] = [r.code for r in rows if r.result == "unknown"]   # sent, not read back
+            d["not_landed"] = [r.code for r in rows if r.result in ("not written", "refused")]
+        emit_json(d)
         return
-    shown = [r for r in rows if r.result not in ("unchanged", "skipped") or opts.verbose]
+    shown = [r for r in rows if r.result not in ("unchanged", "skipped") or opts.verbose
+             or r.why == "dangerous"]
     if what == "diff":
         cols = ("code", "name", "file", "drive", "result", "reason")
         title = f"station {s.address}: {counts.get('differs', 0)} parameter(s) differ from the file"
@@ -471,7 +516,8 @@ def _print_rows(opts, s, rows, what: str, dry_run: bool) -> None:
         out.print(R.rows_table(shown, title, cols))
     else:
         out.print(escape(title))
-    order = ("applied", "would apply", "refused", "differs", "unchanged", "missing", "skipped")
+    order = ("applied", "would apply", "refused", "unknown", "not written", "differs", "unchanged", "missing",
+             "skipped")
     out.print(", ".join(f"{counts[k]} {k}" for k in order if counts.get(k)) or "nothing in the file")
 
 

@@ -29,7 +29,7 @@ from profidrive_cli import UsageError
 from profidrive_cli.datafile import DataFileError, LineDict
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.base import DriveError, DriveStatus, FaultRecord, ParamError, ParamValue
-from profidrive_cli.drives.profile import per_profile
+from profidrive_cli.drives.profile import COMMON_EXTRA_KEYS, per_profile
 
 # =============================================================================================
 # profile keys
@@ -113,7 +113,7 @@ def _build_config(profile) -> FujiConfig:
     path = profile.path or "<profile>"
     c = FujiConfig()
     for p in profile.parameters.values():
-        unknown = set(p.extra) - FAMILY_PARAM_KEYS
+        unknown = set(p.extra) - FAMILY_PARAM_KEYS - COMMON_EXTRA_KEYS
         if unknown:
             raise DataFileError(path, p.line, f"{p.code}: unknown key(s) {', '.join(sorted(unknown))} "
                                 f"(Fuji keys: {', '.join(sorted(FAMILY_PARAM_KEYS))})")

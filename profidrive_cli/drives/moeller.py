@@ -22,8 +22,9 @@ from dataclasses import dataclass
 
 from profidrive_cli.datafile import DataFileError, LineDict
 from profidrive_cli.drives import profidrive as pd
+from profidrive_cli.drives.values import value_problem
 from profidrive_cli.drives.base import DriveError, DriveStatus, ParamError, ParamValue
-from profidrive_cli.drives.profile import per_profile
+from profidrive_cli.drives.profile import COMMON_EXTRA_KEYS, per_profile
 
 FAMILY_PARAM_KEYS = {"bytes", "format", "ranges", "df6", "df6_max", "note", "array"}
 FORMATS = ("code", "hex", "bits")
@@ -80,7 +81,7 @@ def _validate_params(profile) -> None:
             raise DataFileError(path, p.line, f"{p.code}: df6 must be true or false")
         if "df6_max" in p.extra and not isinstance(p.extra["df6_max"], (int, float)):
             raise DataFileError(path, p.line, f"{p.code}: df6_max must be a number")
-        unknown = set(p.extra) - FAMILY_PARAM_KEYS
+        unknown = set(p.extra) - FAMILY_PARAM_KEYS - COMMON_EXTRA_KEYS
         if unknown:
             raise DataFileError(path, p.line, f"{p.code}: unknown key(s) {', '.join(sorted(unknown))}"
                                 f" (Moeller keys: {', '.join(sorted(FAMILY_PARAM_KEYS))})")
@@ -280,13 +281,11 @@ class MoellerDrive(pd.ProfidriveDrive):
     def check_value(self, ref: pd.ParamRef, value) -> str | None:
         p = ref.param
         if p is None:
-            return None
+            return super().check_value(ref, value)
         u = f" {p.unit}" if p.unit else ""
-        if not in_ranges(p, value):
-            rg = p.extra.get("ranges")
-            allowed = ", ".join(f"{lo:g}..{hi:g}" if lo != hi else f"{lo:g}" for lo, hi in rg) \
-                if rg else f"{p.min:g}..{p.max:g}"
-            return f"{p.code} ({p.name}): {value:g}{u} is outside {allowed}{u}"
+        msg = value_problem(p, value)            # resolution, ranges, byte width (drives/values.py)
+        if msg:
+            return msg
         if ("df6" in p.extra or "df6_max" in p.extra) and self.pkw is not None:
             dev = self.device()
             if dev.startswith("DF"):

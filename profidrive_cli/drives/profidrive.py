@@ -91,6 +91,7 @@ from typing import Iterable, Sequence
 
 from profidrive_cli import UsageError
 from profidrive_cli.datafile import DataFileError, LineDict
+from profidrive_cli.drives.values import raw_value_problem, value_problem
 from profidrive_cli.drives.base import (Drive, DriveError, DriveStatus, FaultRecord, ParamError,
                                         ParamValue)
 
@@ -1190,7 +1191,10 @@ class ProfidriveDrive(Drive):
         return raw & ((1 << bits) - 1)
 
     def check_value(self, ref: ParamRef, value) -> str | None:
-        return ref.param.check_range(value) if ref.param is not None else None
+        """The exact-value check (drives/values.py): resolution, range, codes, wire width."""
+        if ref.param is not None:
+            return value_problem(ref.param, value)
+        return raw_value_problem(ref.label, value, ref.size)
 
     def write_refused_message(self, ref: ParamRef, value, result: PkwResult) -> str:
         stop_only = self.cfg.error_numbers.get("stop_only")

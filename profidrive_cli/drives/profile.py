@@ -156,6 +156,10 @@ def _get(path, node: LineDict, key: str, types, required=True, default=None):
     return v
 
 
+#: keys every family accepts in a parameter (kept in ParamDef.extra): `dangerous: true` + `danger:` text
+#: (what writing it does, in words) -- written only on an explicit --allow-dangerous (drives/values.py)
+COMMON_EXTRA_KEYS = {"dangerous", "danger"}
+
 _PARAM_KEYS = {"code", "name", "unit", "scale", "min", "max", "access", "default", "pnu", "index",
                "register", "signed", "size"}
 
@@ -189,6 +193,13 @@ def _param(path, node) -> ParamDef:
         raise _err(path, node, "min", f"{p.code}: min {p.min} > max {p.max}")
     if p.scale == 0:
         raise _err(path, node, "scale", f"{p.code}: scale must not be 0")
+    if "dangerous" in node and not isinstance(node["dangerous"], bool):
+        raise _err(path, node, "dangerous", f"{p.code}: 'dangerous' must be true or false")
+    if "danger" in node:
+        if not isinstance(node["danger"], str) or not node["danger"].strip():
+            raise _err(path, node, "danger", f"{p.code}: 'danger' must be a text saying what writing it does")
+        if node.get("dangerous") is not True:
+            raise _err(path, node, "danger", f"{p.code}: 'danger' needs 'dangerous: true'")
     return p
 
 

@@ -50,12 +50,16 @@ Public API (stable; everything else is internal)
     Speed:    fmax(override=None) -> (hz, source words);  percent_for_hz(hz, fmax_override=None)
     Bus:      counters -> dict (master.fdl.counters_for(address));  achieved_hz;  cycles
     Params:   param_info(code) -> ParamInfo (UsageError with the closest codes / the station's family);
-              parse_value(code, text);  read_param(code);  write_param(code, value) (checks: writable,
-              range + unit, stop-only while running; returns the value read back);  save() -> str;
-              fault_history();  current_fault();  clear_fault()
-    Files:    dump(progress=None) -> dict (YAML-ready: station identity + parameters);
-              load_dump(path) -> dict (file:line errors);  compare(doc, progress=None) -> [ParamRow];
-              restore(doc, dry_run=False, progress=None) -> [ParamRow] (only what differs, read back)
+              parse_value(code, text);  read_param(code);  write_param(code, value, allow_dangerous=False)
+              (checks: writable, not dangerous, exact value -- resolution, range, codes, wire width:
+              drives/values.py --, stop-only while running; returns the value read back);
+              danger_of(info) -> str | None;  save() -> str;  fault_history();  current_fault();  clear_fault()
+    Files:    dump(progress=None) -> dict (YAML-ready: station identity + parameters, count, end marker);
+              load_dump(path) -> dict (file:line errors; a cut-off format-2 file is refused);
+              compare(doc, progress=None) -> [ParamRow];
+              restore(doc, dry_run=False, progress=None, allow_dangerous=False) -> [ParamRow]: every row
+              checked before the first write (RestoreRefused(.problems), nothing written); only what
+              differs is written and read back; RestoreInterrupted(.rows) when a write fails part-way
 
     Module functions: find_drive_stations(master, first=0, last=125) -> [DriveStation];
     choose_profile(ident, name=None) -> (Profile, warnings); resolve_layout(profile, layout, ppo, fmt);
@@ -81,15 +85,18 @@ from pathlib import Path
 from typing import Any, Callable
 
 from profidrive_cli import BusError, PdriveError, UsageError
-from profidrive_cli.drives.base import DriveError, DriveStatus, FaultRecord, ParamValue, value_text
+from profidrive_cli.drives.base import DriveError, DriveStatus, FaultRecord, ParamValue
 from profidrive_cli.drives.profile import Profile, all_profiles, load_profile, profile_for_ident
+from profidrive_cli.drives import restore as _restore
+from profidrive_cli.drives.restore import (DUMP_END, DUMP_FORMAT, RestoreInterrupted,  # noqa: F401
+                                           RestoreRefused, check_complete)
+from profidrive_cli.drives.values import danger, raw_value_problem, value_problem
 
 DEFAULT_WATCHDOG_MS = 500
 CAP_REAL_HZ = 100.0          # default cycle-rate cap over real ports
 CAP_SIM_HZ = 50.0            # ... and on the instant simulator
 COAST_TIMEOUT_S = 10.0
 DEFAULT_STOP_TIMEOUT_S = 30.0
-DUMP_FORMAT = 1
 
 #: deceleration-time parameter per family when the profile's `profidrive.ramps` names none
 _DECEL_CODES = {"fuji": "F08", "moeller": "F003", "yaskawa": "C1-02"}
@@ -355,6 +362,8 @@ class ParamRow:
     result: str
     reason: str = ""
     new_value: Any = None
+    line: int = 0                  # the row's line in the file (0: unknown)
+    why: str = ""                  # for 'skipped': unknown | read-only | not restored | dangerous
 
     def to_dict(self) -> dict:
         return {k: v for k, v in dataclasses.asdict(self).items()}
@@ -1021,35 +1030,72 @@ class DriveSession:
         self.param_info(code)                 # unknown codes: the closest ones / the right family
         return self.drive.read_param(code.strip())
 
-    def _check_write(self, info: ParamInfo, value) -> None:
+    def danger_of(self, info: ParamInfo) -> str | None:
+        """What writing this parameter does, in words, when the profile marks it `dangerous: true`
+        (also when it is reached by its raw PNU/index or register); None otherwise."""
+        if info.param is not None:
+            return danger(info.param)
+        d = self.drive
+        try:
+            if hasattr(d, "resolve_param"):
+                ref = d.resolve_param(info.code)
+                hits = [q for q in self.profile.parameters.values()
+                        if q.pnu is not None and q.pnu == ref.pnu and (q.index or 0) == (ref.subindex or 0)]
+            else:
+                reg, _ = d._resolve(info.code)
+                hits = [q for q in self.profile.parameters.values() if q.register == reg]
+        except (UsageError, DriveError, AttributeError):
+            return None
+        return next((danger(q) for q in hits if danger(q)), None)
+
+    def check_dangerous(self, info: ParamInfo, allow_dangerous: bool = False) -> None:
+        """UsageError (exit 2) for a dangerous parameter unless allow_dangerous."""
+        what = self.danger_of(info)
+        if what and not allow_dangerous:
+            raise UsageError(f"{info.code} ({info.name}) is dangerous: writing it {what}; nothing was "
+                             f"written (add --allow-dangerous to write it)")
+
+    def _check_write(self, info: ParamInfo, value, allow_dangerous: bool = False) -> None:
+        """Every check before a write, no bus traffic: writable, dangerous, exact value (resolution,
+        range, listed codes, wire width: drives/values.py)."""
         p = info.param
         if p is not None and not p.writable:
             raise UsageError(f"{info.code} ({info.name}) is read-only")
-        if p is not None:
-            d = self.drive
-            msg = None
-            if hasattr(d, "check_value") and hasattr(d, "resolve_param"):
-                msg = d.check_value(d.resolve_param(info.code), value)
-            else:
-                msg = p.check_range(value)
-            if msg:
-                raise UsageError(msg)
+        self.check_dangerous(info, allow_dangerous)
+        d = self.drive
+        if hasattr(d, "check_value") and hasattr(d, "resolve_param"):
+            msg = d.check_value(d.resolve_param(info.code), value)
+        elif p is not None:
+            msg = value_problem(p, value)
+        else:
+            msg = raw_value_problem(info.code, value, 16)
+        if msg:
+            raise UsageError(msg)
 
-    def write_param(self, code: str, value, *, check_running: bool = True) -> ParamValue:
-        """Checked write (writable, range + unit, stop-only parameters while running); returns the
-        value read back from the drive."""
+    def stopped_for(self, info: ParamInfo) -> str | None:
+        """None when the parameter may be written now; else why not (stop-only while running)."""
+        if info.access != "stop":
+            return None
+        st = self.drive.cycle()
+        if st.running or not st.stopped:
+            hz = Sample(0, st, self._fmax[0] if self._fmax else float(self.profile.max_frequency_default),
+                        0, 0, {}).actual_hz
+            return (f"{info.code} ({info.name}) can only be changed while the motor is "
+                    f"stopped (the drive is {st.state}" + (f", {hz:g} Hz" if hz else "") + "); stop it first")
+        return None
+
+    def write_param(self, code: str, value, *, check_running: bool = True,
+                    allow_dangerous: bool = False) -> ParamValue:
+        """Checked write (writable, not dangerous unless allow_dangerous, exact value, stop-only
+        parameters while running); returns the value read back from the drive."""
         info = self.param_info(code)
         if isinstance(value, str):
             value = self.parse_value(code, value, info)
-        self._check_write(info, value)
-        if check_running and info.access == "stop":
-            st = self.drive.cycle()
-            if st.running or not st.stopped:
-                hz = Sample(0, st, self._fmax[0] if self._fmax else float(self.profile.max_frequency_default),
-                            0, 0, {}).actual_hz
-                raise DriveError(f"{info.code} ({info.name}) can only be changed while the motor is "
-                                 f"stopped (the drive is {st.state}"
-                                 + (f", {hz:g} Hz" if hz else "") + "); stop it first")
+        self._check_write(info, value, allow_dangerous)
+        if check_running:
+            why = self.stopped_for(info)
+            if why:
+                raise DriveError(why)
         return self.drive.write_param(code.strip(), value)
 
     def notes(self) -> list[str]:
@@ -1177,11 +1223,13 @@ class DriveSession:
                         "family": prof.family, "title": prof.title, "layout": self.layout,
                         "port": getattr(self.master.link, "name", "")},
             "date": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+            "count": len(settings),
             "parameters": settings,
             "readonly": readonly,
         }
         if failed:
             doc["unreadable"] = failed
+        doc["end"] = DUMP_END              # the last line: a file cut anywhere lacks it
         return doc
 
     def _no_channel_words(self) -> str:
@@ -1212,6 +1260,7 @@ class DriveSession:
         st = doc.get("station")
         if st is not None and not isinstance(st, dict):
             raise DataFileError(path, doc.line_of("station"), "'station' must be a mapping")
+        doc["_warnings"] = check_complete(path, doc, params)
         doc["_path"] = str(path)
         return doc
 
@@ -1233,93 +1282,68 @@ class DriveSession:
                          f"{self.address}")
         return notes
 
-    def compare(self, doc: dict, progress: Callable[[int, int, str], None] | None = None
-                ) -> list[ParamRow]:
+    def compare(self, doc: dict, progress: Callable[[int, int, str], None] | None = None,
+                allow_dangerous: bool = False, check_identity: bool = True) -> list[ParamRow]:
         """Each parameter of the file against the drive: 'unchanged', 'differs', 'missing' (cannot
-        be read), 'skipped' (read-only / not restorable)."""
+        be read), 'skipped' (unknown code / read-only / not restorable / dangerous; .why says which)."""
         d = self._need_drive()
         if not d.has_param_channel:
             raise DriveError(self._no_channel_words())
-        for n in self._check_identity(doc):
-            self._warn(n)
+        if check_identity:
+            for n in self._check_identity(doc):
+                self._warn(n)
         rows: list[ParamRow] = []
-        items = list(doc["parameters"].items())
+        params = doc["parameters"]
+        items = list(params.items())
         for i, (code, v) in enumerate(items):
             if progress:
                 progress(i, len(items), str(code))
             want = v.get("value") if isinstance(v, dict) else v
+            line = params.line_of(code) if hasattr(params, "line_of") else 0
             code = str(code)
             try:
                 info = self.param_info(code)
             except UsageError as e:
-                rows.append(ParamRow(code, "", "", want, None, "skipped", str(e)))
+                rows.append(ParamRow(code, "", "", want, None, "skipped", str(e), line=line or 0,
+                                     why="unknown"))
                 continue
             p = info.param
             base = code.split("[", 1)[0]
             pdef = self.profile.param(base) or p
             if pdef is not None:
                 why = _not_restored(self.profile, pdef) if pdef.writable else "read-only"
-                if why:
-                    rows.append(ParamRow(code, info.name, info.unit, want, None, "skipped", why))
+                if why and not (allow_dangerous and why.startswith("dangerous")):
+                    kind = ("read-only" if why == "read-only" else
+                            "dangerous" if why.startswith("dangerous") else "not restored")
+                    rows.append(ParamRow(code, info.name, info.unit, want, None, "skipped", why,
+                                         line=line or 0, why=kind))
                     continue
             try:
                 pv = d.read_param(code)
             except (DriveError, UsageError) as e:
-                rows.append(ParamRow(code, info.name, info.unit, want, None, "missing", str(e)))
+                if isinstance(e, BusError) and not isinstance(e, DriveError):
+                    raise
+                rows.append(ParamRow(code, info.name, info.unit, want, None, "missing", str(e),
+                                     line=line or 0))
                 continue
             same = _same_value(pv.value, want, pdef.scale if pdef is not None else None)
             rows.append(ParamRow(code, pv.name or info.name, pv.unit or info.unit, want, pv.value,
-                                 "unchanged" if same else "differs"))
+                                 "unchanged" if same else "differs", line=line or 0))
         if progress:
             progress(len(items), len(items), "")
         return rows
 
+    def restore_problems(self, doc: dict, rows: list[ParamRow], allow_dangerous: bool = False
+                         ) -> list[str]:
+        """Every reason not to write anything, one line each (drives/restore.py)."""
+        return _restore.restore_problems(self, doc, rows, allow_dangerous)
+
     def restore(self, doc: dict, dry_run: bool = False,
-                progress: Callable[[int, int, str], None] | None = None) -> list[ParamRow]:
-        """Write what differs, read each write back. Rows: applied / refused (why) / unchanged
-        (dry run: 'would apply' instead of writing)."""
-        rows = self.compare(doc, progress)
-        running = None
-        for r in rows:
-            if r.result != "differs":
-                if r.result in ("missing",):
-                    r.result, r.reason = "refused", f"cannot read it: {r.reason}"
-                continue
-            info = self.param_info(r.code)
-            try:
-                self._check_write(info, r.file_value)
-            except UsageError as e:
-                r.result, r.reason = "refused", str(e)
-                continue
-            if info.access == "stop":
-                if running is None:
-                    st = self.drive.cycle()
-                    running = st.running or not st.stopped
-                if running:
-                    r.result, r.reason = "refused", "can only be changed while the motor is stopped"
-                    continue
-            if dry_run:
-                r.result = "would apply"
-                continue
-            try:
-                pv = self.drive.write_param(r.code, r.file_value)
-            except UsageError as e:
-                r.result, r.reason = "refused", str(e)
-                continue
-            except DriveError as e:
-                r.result, r.reason = "refused", str(e)
-                continue
-            try:
-                back = self.drive.read_param(r.code)
-            except DriveError:
-                back = pv
-            r.new_value = back.value
-            pdef = self.profile.param(r.code.split("[", 1)[0])
-            if _same_value(back.value, r.file_value, pdef.scale if pdef is not None else None):
-                r.result = "applied"
-            else:
-                r.result, r.reason = "refused", f"the drive kept {value_text(back.value, back.unit)}"
-        return rows
+                progress: Callable[[int, int, str], None] | None = None,
+                allow_dangerous: bool = False) -> list[ParamRow]:
+        """Validate every row, then write what differs, reading each write back (drives/restore.py):
+        RestoreRefused (nothing written) / RestoreInterrupted (which rows landed)."""
+        return _restore.restore(self, doc, dry_run, progress, allow_dangerous)
 
 
 def _not_restored(profile: Profile, p) -> str:

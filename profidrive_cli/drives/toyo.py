@@ -30,7 +30,8 @@ from profidrive_cli import UsageError
 from profidrive_cli.datafile import DataFileError, LineDict
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.base import DriveError, DriveStatus, FaultRecord, ParamError, ParamValue
-from profidrive_cli.drives.profile import per_profile
+from profidrive_cli.drives.profile import COMMON_EXTRA_KEYS, per_profile
+from profidrive_cli.drives.values import value_problem
 
 FAMILY_PARAM_KEYS = {"power_cycle", "format", "bits", "plc", "scale_400v", "traceback", "note"}
 FIELD_KINDS = ("ctw", "zsw", "run_cmd", "bits", "speed", "scaled", "date", "raw", "param")
@@ -120,7 +121,7 @@ def _build_config(profile) -> ToyoConfig:
     if c.voltage_class not in (200, 400):
         raise _err(profile, doc, "voltage_class", "voltage_class must be 200 or 400")
     for p in profile.parameters.values():
-        unknown = set(p.extra) - FAMILY_PARAM_KEYS
+        unknown = set(p.extra) - FAMILY_PARAM_KEYS - COMMON_EXTRA_KEYS
         if unknown:
             raise DataFileError(path, p.line, f"{p.code}: unknown key(s) {', '.join(sorted(unknown))} "
                                 f"(Toyo keys: {', '.join(sorted(FAMILY_PARAM_KEYS))})")
@@ -670,6 +671,11 @@ class ToyoDrive(pd.ProfidriveDrive):
 
     def raw_to_value(self, ref: pd.ParamRef, raw: int):
         return value_from_wire(self.profile, ref.param, raw) if ref.param is not None else raw & 0xFFFF
+
+    def check_value(self, ref: pd.ParamRef, value) -> str | None:
+        if ref.param is None:
+            return super().check_value(ref, value)
+        return value_problem(ref.param, value, scale=effective_scale(self.profile, ref.param))
 
     def value_to_raw(self, ref: pd.ParamRef, value) -> int:
         return wire_from_value(self.profile, ref.param, value) if ref.param is not None else int(value) & 0xFFFF

@@ -34,6 +34,7 @@ from typing import Any
 
 from profidrive_cli import UsageError
 from profidrive_cli.datafile import DataFileError, LineDict
+from profidrive_cli.drives.values import raw_value_problem, value_problem
 from profidrive_cli.drives.base import (Drive, DriveError, DriveStatus, FaultRecord, ParamError,
                                         ParamValue)
 
@@ -1138,6 +1139,9 @@ class YaskawaDrive(Drive):
         if self.params is None:
             raise self._no_channel()
         reg, p = self._resolve(code)
+        msg = self.check_value(p, value) if p is not None else raw_value_problem(code, value, 16)
+        if msg:
+            raise UsageError(msg)
         if p is not None:
             if not p.writable:
                 raise DriveError(f"{p.code} ({p.name}) is read-only")
@@ -1150,8 +1154,9 @@ class YaskawaDrive(Drive):
             raw = int(value)
         if not 0 <= raw <= 0xFFFF:
             raise UsageError(f"{code}: {value!r} does not fit a 16-bit register")
-        # No local range check: the drive's own limits are authoritative (they differ between F7, G7,
-        # P7 and depend on other settings); its refusal (0x21 / 0x22) is explained below.
+        # The profile's limits were checked above (exact value, listed codes, min..max); the drive's own
+        # limits (they differ between F7, G7, P7 and depend on other settings) may be narrower: its
+        # refusal (0x21 / 0x22) is explained below.
         try:
             self.write_registers(reg, [raw])
         except ParamError as e:
@@ -1160,6 +1165,12 @@ class YaskawaDrive(Drive):
             self._fmax = None
             self._o1_03 = None
         return self.read_param(code)
+
+    def check_value(self, p, value) -> str | None:
+        """The exact-value check (drives/values.py) against the profile's entry: resolution, the
+        listed codes, min..max, the 16-bit register. The drive may still refuse a value its own
+        limits (which differ between F7, G7 and P7) do not allow."""
+        return value_problem(p, value)
 
     def _unit_registers(self) -> set[int]:
         regs = set()

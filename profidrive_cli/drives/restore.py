@@ -1,0 +1,179 @@
+"""Restoring a parameter dump: the dump file's completeness (count and end marker) and restore as
+validate-all-then-write, for drives.session.DriveSession (its restore() and restore_problems() call
+these with the session).
+
+Format 2 dumps carry `count:` (the number of rows under `parameters:`) and end with the line
+`end: pdrive_dump`, so a file cut off anywhere is refused; older files (format 1, hand-written) have
+neither and are accepted with a warning (docs/commands.md records the decision).
+
+restore(): every row is checked before the first write -- the station's profile and ident against the
+file's, the code exists and is readable, writable, the value is one the parameter holds exactly
+(drives/values.py), stop-only parameters need the motor stopped; dangerous rows are skipped unless
+allow_dangerous. Any problem -> RestoreRefused(.problems, one line each with file:line), nothing
+written. Then only what differs is written, each write read back; a failure part-way (link lost, a
+refusal) -> RestoreInterrupted(.rows): 'applied' landed, 'unknown' was in flight, 'not written' was not
+reached.
+"""
+
+from __future__ import annotations
+
+from profidrive_cli import BusError, UsageError
+from profidrive_cli.drives.base import DriveError, value_text
+from profidrive_cli.drives.profile import load_profile
+
+DUMP_FORMAT = 2              # 2: `count:` and a final `end: pdrive_dump` line (truncation is detected)
+DUMP_END = "pdrive_dump"
+
+
+class RestoreRefused(UsageError):
+    """The file has problems; nothing was written. .problems: one line each."""
+
+    def __init__(self, problems: list[str]):
+        more = f" (and {len(problems) - 1} more problem(s))" if len(problems) > 1 else ""
+        super().__init__(f"nothing was written: {problems[0]}{more}")
+        self.problems = problems
+
+
+class RestoreInterrupted(BusError):
+    """A restore stopped part-way (link lost, a write refused). .rows say what landed."""
+
+    def __init__(self, rows: list, cause: BaseException):
+        landed = sum(r.result == "applied" for r in rows)
+        left = sum(r.result in ("not written", "unknown", "refused") for r in rows)
+        super().__init__(f"restore interrupted: {cause}; {landed} row(s) written and read back, "
+                         f"{left} not (see the table)")
+        self.rows = rows
+        self.cause = cause
+
+
+def check_complete(path, doc, params) -> list[str]:
+    """A format-2 dump must carry `count:` = the number of parameters and end with `end: pdrive_dump`
+    (so a file cut anywhere is refused). Older files have neither: accepted with a warning."""
+    from profidrive_cli.datafile import DataFileError
+    fmt = doc.get("pdrive_dump")
+    if not isinstance(fmt, int) or isinstance(fmt, bool) or fmt < 2:
+        return [f"{path} has no end marker (written by an older pdrive or by hand): pdrive cannot tell "
+                f"whether it is complete; check that it lists every parameter you mean to restore"]
+    keys = list(doc.keys())
+    if doc.get("end") != DUMP_END or keys[-1] != "end":
+        raise DataFileError(path, None, f"the file is incomplete (no final 'end: {DUMP_END}' line): it "
+                            f"was cut off; dump the drive again or use an intact copy")
+    count = doc.get("count")
+    if not isinstance(count, int) or isinstance(count, bool) or count != len(params):
+        raise DataFileError(path, doc.line_of("count") if "count" in doc else None,
+                            f"the file is incomplete or edited: 'count: {count}' but {len(params)} "
+                            f"parameter(s) under 'parameters'")
+    return []
+
+
+def _same_value(a, b, scale):
+    from profidrive_cli.drives.session import _same_value as same
+    return same(a, b, scale)
+
+
+def _family_words(p) -> str:
+    return f"{p.name} ({p.title}, family {p.family}, ident 0x{p.ident:04X})"
+
+
+def restore_problems(session, doc: dict, rows: list, allow_dangerous: bool = False) -> list[str]:
+    """Every reason not to write anything, one line each (no bus writes; the rows from compare()).
+    Marks dangerous rows 'skipped' unless allow_dangerous."""
+    problems: list[str] = []
+    path = doc.get("_path", "the file")
+    st = doc.get("station") or {}
+    name = st.get("profile")
+    if name and name != session.profile.name:
+        try:
+            other = load_profile(str(name)).name
+        except UsageError:
+            other = None
+        if other != session.profile.name:
+            problems.append(f"{path}: dumped from a {name} station ({st.get('title', '')}); station "
+                            f"{session.address} is {_family_words(session.profile)}")
+    ident = st.get("ident")
+    if ident is not None:
+        try:
+            fid = int(str(ident), 0)
+        except ValueError:
+            fid = None
+        if fid != session.ident:
+            problems.append(f"{path}: dumped from a station with ident {ident}; station {session.address} "
+                            f"reports 0x{session.ident:04X}")
+    running = None
+    for r in rows:
+        where = f"{path}:{r.line}" if r.line else path
+        if r.result == "missing":
+            problems.append(f"{where}: {r.code}: cannot be read from the drive: {r.reason}")
+            continue
+        if r.result == "skipped" and r.why == "unknown":
+            problems.append(f"{where}: {r.code}: {r.reason}")
+            continue
+        if r.result == "skipped" and r.why == "dangerous":
+            r.reason = (f"dangerous: writing it {session.danger_of(session.param_info(r.code)) or r.reason} "
+                        f"(--allow-dangerous writes it)")
+            continue
+        if r.result == "skipped" and r.why == "read-only":
+            problems.append(f"{where}: {r.code} ({r.name}) is read-only")
+            continue
+        if r.result not in ("differs", "unchanged"):
+            continue
+        info = session.param_info(r.code)
+        what = session.danger_of(info)
+        if what and not allow_dangerous:
+            r.result, r.reason, r.why = ("skipped", f"dangerous: writing it {what} "
+                                         f"(--allow-dangerous writes it)", "dangerous")
+            continue
+        try:
+            session._check_write(info, r.file_value, allow_dangerous=True)
+        except UsageError as e:
+            problems.append(f"{where}: {e}")
+            continue
+        if r.result == "differs" and info.access == "stop":
+            if running is None:
+                stc = session.drive.cycle()
+                running = stc.running or not stc.stopped
+            if running:
+                problems.append(f"{where}: {r.code} ({r.name}) can only be changed while the motor is "
+                                f"stopped, and the drive is running; stop it first")
+    return problems
+
+
+def restore(session, doc: dict, dry_run: bool = False, progress=None,
+            allow_dangerous: bool = False) -> list:
+    """Validate every row first (identity, existence, exact value, writability, dangerous, drive
+    stopped where needed): any problem -> RestoreRefused listing them all, nothing written. Then
+    write what differs, reading each write back. Rows: applied / unchanged / skipped / would
+    apply (dry run). A write that fails, or a link lost mid-way -> RestoreInterrupted with the
+    rows: 'applied' landed, 'unknown' was being written, 'not written' were not reached."""
+    for w in doc.get("_warnings", []):
+        session._warn(w)
+    rows = session.compare(doc, progress, allow_dangerous=allow_dangerous, check_identity=False)
+    problems = restore_problems(session, doc, rows, allow_dangerous)
+    if problems:
+        raise RestoreRefused(problems)
+    todo = [r for r in rows if r.result == "differs"]
+    if dry_run:
+        for r in todo:
+            r.result = "would apply"
+        return rows
+    for r in todo:
+        r.result = "not written"
+    for r in todo:
+        r.result = "unknown"
+        try:
+            session.drive.write_param(r.code, r.file_value)
+            back = session.drive.read_param(r.code)
+        except BusError as e:
+            r.reason = f"the write or its read-back did not complete: {e}"
+            raise RestoreInterrupted(rows, e) from e
+        except UsageError as e:
+            r.result, r.reason = "refused", str(e)
+            raise RestoreInterrupted(rows, e) from e
+        r.new_value = back.value
+        pdef = session.profile.param(r.code.split("[", 1)[0])
+        if _same_value(back.value, r.file_value, pdef.scale if pdef is not None else None):
+            r.result = "applied"
+        else:
+            r.result, r.reason = "refused", f"the drive kept {value_text(back.value, back.unit)}"
+            raise RestoreInterrupted(rows, DriveError(f"{r.code}: {r.reason}"))
+    return rows
