@@ -411,7 +411,7 @@ def test_over_sim_bus_both_cards():
     from profidrive_cli.link import open_link
 
     link = open_link("sim://?stations=3:fuji-g1,4:fuji-pdp3&baud=1500000&trip=3:OC1&trip=4:OL4"
-                     "&faults=4:Er5")
+                     "&faults=4:Er5", 1500000)
     try:
         m = Master(link, BusParams.for_baud(1500000, retries=1))
         for addr, name, layout, code in ((3, "fuji-g1", "ppo1", "OC1"), (4, "fuji-pdp3", "ppo2", "OL4")):

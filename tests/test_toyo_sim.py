@@ -350,7 +350,7 @@ def test_over_sim_bus_mode0_and_mode1():
     from profidrive_cli.fdl.timing import BusParams
     from profidrive_cli.link import open_link
 
-    link = open_link("sim://?stations=5:toyo,8:toyo&baud=1500000&trip=5:OV&trip=8:UV&faults=8:COMM")
+    link = open_link("sim://?stations=5:toyo,8:toyo&baud=1500000&trip=5:OV&trip=8:UV&faults=8:COMM", 1500000)
     try:
         m = Master(link, BusParams.for_baud(1500000, retries=1))
         prof = load_profile("toyo")

@@ -22,9 +22,8 @@ from profidrive_cli.drives.base import DriveError
 from profidrive_cli.drives.session import (DriveSession, RestoreInterrupted, RestoreRefused,
                                            SessionTerminated)
 from profidrive_cli.drives.values import danger, profile_value_problem
-from profidrive_cli.outfile import OutputFile, check_output_path
 from profidrive_cli.link.base import LinkLost
-from profidrive_cli.outfile import check_output_path
+from profidrive_cli.outfile import OutputFile, check_output_path
 
 
 # =============================================================================================

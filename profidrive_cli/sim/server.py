@@ -15,6 +15,7 @@ from __future__ import annotations
 import os
 import select
 import socket
+import threading
 import time
 import tty
 
@@ -50,6 +51,20 @@ class PtyEndpoint:
 #: what a second client hears before its connection is closed (one client at a time, like a
 #: converter; a silent bus would send its user looking for a wiring fault)
 BUSY_LINE = b"pdrive sim: busy - another client is connected; try again when it has gone\r\n"
+
+
+def _send_and_close(sock: socket.socket, line: bytes, linger_s: float = 1.0) -> None:
+    try:
+        sock.settimeout(linger_s)
+        sock.sendall(line)
+        sock.shutdown(socket.SHUT_WR)
+        end = time.monotonic() + linger_s
+        while time.monotonic() < end and sock.recv(4096):
+            pass                       # drain what the client sent until it closes
+    except OSError:
+        pass
+    finally:
+        sock.close()
 
 
 class TcpEndpoint:
@@ -104,13 +119,9 @@ class TcpEndpoint:
         except OSError:
             return
         self.refused += 1
-        try:
-            extra.settimeout(0.5)
-            extra.sendall(BUSY_LINE)
-        except OSError:
-            pass
-        finally:
-            extra.close()
+        # say why, then close gracefully: a socket closed with unread input (the client's first
+        # request) is reset, and a reset can discard the line before the client reads it
+        threading.Thread(target=_send_and_close, args=(extra, BUSY_LINE), daemon=True).start()
 
     def write(self, data: bytes) -> None:
         if self.conn is not None:
