@@ -38,10 +38,11 @@ PKG = "profidrive_cli"
 
 #: module (under profidrive_cli/) -> the tests that are about it
 MODULES: dict[str, list[str]] = {
-    "fdl/frames.py": ["tests/test_fdl_frames.py"],
+    "fdl/frames.py": ["tests/test_fdl_frames.py", "tests/test_frames_edges.py"],
     "fdl/fcb.py": ["tests/test_fcb.py"],
-    "dp/services.py": ["tests/test_dp_services.py", "tests/test_watchdog_factors.py"],
-    "dp/cfg.py": ["tests/test_dp_services.py"],
+    "dp/services.py": ["tests/test_dp_services.py", "tests/test_watchdog_factors.py",
+                       "tests/test_dp_services_edges.py"],
+    "dp/cfg.py": ["tests/test_dp_services.py", "tests/test_cfg_identifiers.py"],
     "dp/station.py": ["tests/test_master_sim.py", "tests/test_sim_slave.py"],
     "fdl/timing.py": ["tests/test_bus_timing_reference.py", "tests/test_timed_sim.py"],
     "drives/profidrive.py": ["tests/test_profidrive_core.py", "tests/test_profidrive_sim.py"],
