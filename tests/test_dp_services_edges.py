@@ -97,3 +97,48 @@ def test_set_slave_add_octets():
     assert (b.new_address, b.ident, b.no_add_chg, b.extra) == (9, 0x80E0, True, bytes.fromhex("AA BB"))
     with pytest.raises(S.ServiceError, match="Set_Slave_Add needs 4 octets, got 3"):
         S.SetSlaveAdd.decode(bytes(3))
+
+
+# §3.4 extended diagnosis blocks, worked by hand from the header/body tables
+def test_ext_diag_blocks_field_by_field():
+    ident, chan, dev = S.decode_ext_diag(bytes.fromhex("44 00 01 00 88 41 21 04 10 20 30"))
+    assert (ident.kind, ident.raw, ident.modules) == ("identifier", bytes.fromhex("44 00 01 00"), [8])
+    assert (chan.kind, chan.raw, chan.module, chan.channel, chan.direction, chan.width, chan.error) == (
+        "channel", bytes.fromhex("88 41 21"), 8, 1, "input", "bit", "short circuit")
+    assert (dev.kind, dev.raw) == ("device", bytes.fromhex("04 10 20 30"))
+    # identifier bit field: LSB first, octet by octet -> modules 0, 7, 9, 15
+    (b,) = S.decode_ext_diag(bytes.fromhex("43 81 82"))
+    assert b.modules == [0, 7, 9, 15]
+
+
+@pytest.mark.parametrize("octets,direction,width,error", [
+    ("81 C5 C9", "input/output", "2 words", "error"),                           # 0xC5: 11, ch 5; 0xC9: 110, 9
+    ("81 85 A5", "output", "word", "overtemperature"),
+    ("81 05 0F", "?", "invalid width", "reserved error 15"),                    # dir 00, width 000
+    ("81 45 F0", "input", "invalid width", "manufacturer-specific error 16"),   # width 111
+    ("81 45 3F", "input", "bit", "manufacturer-specific error 31"),
+])
+def test_channel_block_words(octets, direction, width, error):
+    (c,) = S.decode_ext_diag(bytes.fromhex(octets))
+    assert (c.module, c.channel, c.direction, c.width, c.error) == (1, 5, direction, width, error)
+
+
+@pytest.mark.parametrize("octets,kinds,last_raw", [
+    ("C1 00", ["reserved"], "C1 00"),                   # bits 7..6 = 11: stop parsing
+    ("02 AA C1 00 02 BB", ["device", "reserved"], "C1 00 02 BB"),
+    ("81 05", ["reserved"], "81 05"),                   # channel block cut short
+    ("05 01 02", ["reserved"], "05 01 02"),             # length 5, 3 present
+    ("00 01", ["reserved"], "00 01"),                   # length 0 is no block
+    ("01 02 AA", ["device", "device"], "02 AA"),        # length 1: the header alone
+])
+def test_ext_diag_stops_at_reserved_or_truncated(octets, kinds, last_raw):
+    blocks = S.decode_ext_diag(bytes.fromhex(octets))
+    assert [b.kind for b in blocks] == kinds
+    assert blocks[-1].raw == bytes.fromhex(last_raw)
+
+
+def test_slave_diag_keeps_the_octets_after_six_as_ext():
+    d = S.SlaveDiag.decode(bytes.fromhex("08 0C 00 02 00 CA 44 00 01 00"))
+    assert (d.st1, d.st2, d.master, d.ident) == (0x08, 0x0C, 2, 0x00CA)
+    assert d.ext == bytes.fromhex("44 00 01 00")
+    assert [b.modules for b in d.ext_blocks()] == [[8]]

@@ -105,3 +105,39 @@ def test_sd2_header_errors_name_the_octet_and_drop_one(raw, detail):
         else:
             assert isinstance(r, F.FrameError) and r.kind == F.FrameError.LENGTH
             assert r.detail == detail and r.used == 1
+
+
+def test_fc_defaults():
+    assert F.request_fc(F.SRD_HIGH) == 0x4D          # FCB and FCV clear unless asked
+    assert F.response_fc(F.DL) == 0x08               # station type: slave unless asked
+
+
+def test_sd2_second_delimiter_checked_as_soon_as_it_arrives():
+    r = F.parse(bytes.fromhex("68 05 05 10"))
+    assert isinstance(r, F.FrameError) and r.detail == "second SD2 missing" and r.used == 1
+
+
+@pytest.mark.parametrize("raw,kind,detail", [
+    ("77", F.FrameError.GARBAGE, "0x77 is no start delimiter"),
+    ("10 22 02 49 6C 16", F.FrameError.FCS, "FCS 0x6C wrong"),                 # sum is 0x6D
+    ("10 22 02 49 6D 00", F.FrameError.ED, "end delimiter 0x00"),
+    ("10 A2 02 49 ED 16", F.FrameError.SAP, "DSAP announced but missing"),     # DA ext, no DU
+    ("10 22 82 49 ED 16", F.FrameError.SAP, "SSAP announced but missing"),     # SA ext, no DU
+    ("68 04 04 68 A2 82 49 3C A9 16", F.FrameError.SAP, "SSAP announced but missing"),  # DSAP only
+])
+def test_receiver_errors_say_what_and_drop_one_octet(raw, kind, detail):
+    r = F.parse(bytes.fromhex(raw))
+    assert isinstance(r, F.FrameError)
+    assert (r.kind, r.detail, r.used) == (kind, detail, 1)
+
+
+# F.missing: octets still to come for the telegram at buf[pos]; §2 lengths: SD1 6, SD3 14, SD4 3,
+# SD2 LE + 6 (7 at least while LE is unknown); 1 for anything else; 0 for nothing
+@pytest.mark.parametrize("raw,pos,left", [
+    ("", 0, 0), ("10", 0, 5), ("10 03 02", 0, 3), ("A2", 0, 13), ("DC 03", 0, 1), ("DC", 0, 2),
+    ("68", 0, 6), ("68 05", 0, 9), ("68 05 05 68 8A 82 6D 3C 3E F3", 0, 1), ("E5", 0, 1),
+    ("77", 0, 1), ("00 00 10", 2, 5), ("00 68 05", 1, 9), ("00 00", 2, 0),
+    ("10 03 02 49 4E 16", 0, 1),                     # complete: still at least 1
+])
+def test_missing_octets(raw, pos, left):
+    assert F.missing(bytes.fromhex(raw), pos) == left

@@ -139,8 +139,11 @@ def run_module(module: str, tests: list[str], args) -> dict:
     killed = sum(1 for s in res.values() if s in ("killed", "timeout", "segfault"))
     survived = sorted(n for n, s in res.items() if s in ("survived", "suspicious"))
     checked = killed + len(survived)
+    # "no tests": no selected test runs that function at all (a gap too, listed apart)
+    untested = sorted(n for n, s in res.items() if s == "no tests")
     out = {"module": module, "mutants": len(res), "checked": checked, "killed": killed,
-           "survived": survived, "score": (killed / checked) if checked else None,
+           "survived": survived, "no_tests": untested,
+           "score": (killed / checked) if checked else None,
            "seconds": round(took), "timed_out": timed_out, "returncode": p.returncode,
            "workdir": str(workdir)}
     if args.survivors:
@@ -183,7 +186,8 @@ def main(argv=None) -> int:
             score = "n/a" if r["score"] is None else f"{100 * r['score']:.1f} %"
             note = " (timed out: partial)" if r["timed_out"] else ""
             print(f"{m:24} {r['killed']:4d} / {r['checked']:4d} killed  {score:>8}  "
-                  f"{len(r['survived'])} survived  {r['seconds']} s{note}", flush=True)
+                  f"{len(r['survived'])} survived, {len(r['no_tests'])} in code no selected test "
+                  f"runs  {r['seconds']} s{note}", flush=True)
             for n in r["survived"]:
                 print(f"    survived: {n}")
                 if args.survivors:
