@@ -68,6 +68,7 @@ def test_empty_slot_and_fourteen_manufacturer_octets():
     assert decode_cfg(h("00 F1"))[0].describe() == "empty slot"
     (m,) = decode_cfg(bytes([0x0E]) + bytes(range(14)))
     assert m.manufacturer == bytes(range(14)) and len(m.raw) == 15
+    assert m.consistent is False and (m.inputs, m.outputs) == (0, 0)     # no length octets
 
 
 @pytest.mark.parametrize("raw,message", [
