@@ -146,7 +146,8 @@ steps:
 
 def test_var_assignments_are_typed():
     assert parse_var_assignments(["a=0.5", "b=10", "c=fast", "d="]) == {"a": 0.5, "b": 10, "c": "fast", "d": ""}
-    with pytest.raises(Exception):
+    from profidrive_cli import UsageError
+    with pytest.raises(UsageError, match="--var 'no-equals': expected NAME=VALUE"):
         parse_var_assignments(["no-equals"])
 
 

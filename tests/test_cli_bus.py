@@ -46,7 +46,8 @@ def test_port_from_environment():
 
 def test_no_port_says_how():
     r = CliRunner().invoke(cli, ["scan"], env={"PDRIVE_PORT": ""})
-    assert r.exit_code != 0
+    from profidrive_cli import UsageError
+    assert isinstance(r.exception, UsageError)                   # exit 2 (tests/test_exit_codes.py)
     assert "sim://" in str(r.exception or r.output)
 
 
@@ -66,7 +67,8 @@ def test_diag_json():
 
 def test_io_wrong_cfg_reports_cfg_fault_in_words():
     r = run("io", "7", "--port", "sim://", "--cfg", "F1")
-    assert r.exit_code != 0
+    from profidrive_cli import BusError
+    assert isinstance(r.exception, BusError)                     # exit 1 (tests/test_exit_codes.py)
     assert "configuration fault" in str(r.exception)
 
 
@@ -87,7 +89,8 @@ def test_io_right_cfg_exchanges_data():
 ])
 def test_bad_input_one_line(args, msg):
     r = run(*args)
-    assert r.exit_code != 0
+    from profidrive_cli import PdriveError
+    assert isinstance(r.exception, PdriveError), r.exception    # one line, no traceback; codes: test_exit_codes.py
     assert msg in str(r.exception) + r.output
 
 

@@ -55,8 +55,16 @@ def test_short_ack_and_token():
 
 
 def test_fcs_vectors():
-    assert F.fcs(bytes([1, 2, 3])) == 6
-    assert F.fcs(bytes([0xDF, 0x9F])) == 0x7E
+    """Reference §2: FCS = sum of DA..last DU octet mod 256 (vectors [1, 2, 3] -> 6 and
+    [0xDF, 0x9F] -> 0x7E), through the encoder and the receiver the master and the sim use."""
+    assert F.encode(F.Frame(F.SD1, 1, 2, 3)) == bytes.fromhex("10 01 02 03 06 16")
+    # DA 0x5F | ext 0x80 = 0xDF, SA 0x1F | ext = 0x9F, FC 0, DSAP 0, SSAP 0: the sum wraps to 0x7E
+    assert F.encode(F.Frame(F.SD2, 0x5F, 0x1F, 0, b"\x00", dsap=0, ssap=0))[-2] == 0x7E
+    f, used = F.parse(bytes.fromhex("10 01 02 03 06 16"))
+    assert (f.da, f.sa, f.fc, used) == (1, 2, 3, 6)
+    for wrong in (0x05, 0x07, 0x06 ^ 0x80):
+        err = F.parse(bytes([0x10, 1, 2, 3, wrong, 0x16]))
+        assert isinstance(err, F.FrameError) and err.kind == F.FrameError.FCS
 
 
 def test_start_delimiter_choice():

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+from profidrive_cli import UsageError
 from profidrive_cli.drives import make_drive
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.base import DriveError, ParamError
@@ -284,7 +285,7 @@ def test_quick_and_coast_stop(prof):
     t0 = ch.now()
     drive.stop("normal")
     assert 4.9 < ch.now() - t0 < 5.2                          # F003 = 5 s from 50 Hz
-    with pytest.raises(Exception, match="stop mode"):
+    with pytest.raises(UsageError, match="stop mode"):
         drive.stop("sideways")
 
 

@@ -8,6 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from profidrive_cli import UsageError
 from profidrive_cli.datafile import DataFileError
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.profidrive import Ctw, State, Target
@@ -459,7 +460,7 @@ def test_resolve_codes():
     assert (r.code, r.pnu) == ("F002", 23)
     r = pd.resolve_code(prof, "PNU1999")
     assert (r.code, r.param) == ("PNU1999", None)
-    with pytest.raises(Exception, match="unknown parameter"):
+    with pytest.raises(UsageError, match="unknown parameter"):
         pd.resolve_code(prof, "ZZZ9")
 
 

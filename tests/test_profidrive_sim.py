@@ -241,10 +241,11 @@ def test_trip_while_running_coasts(prof):
 
 def test_save_edge(prof):
     model, ch, drive = rig(prof)
+    before = dict(model.values)
     drive.save()
     drive.save()
     assert model.saves == 2
-    model.values  # store unaffected
+    assert model.values == before       # saving stores what is there: no value changes
     assert model.pkw_answer(PkwFrame(2, 971, 0, 1)).ak == 1 and model.saves == 2   # no edge
 
 

@@ -34,8 +34,11 @@ def test_scan_through_socat_pty_pair(socat_pair):
     a, b = socat_pair
     sim, info = _start_sim(["--port", a])
     try:
-        assert info["stations"] == {"3": "fuji-g1", "4": "fuji-pdp3", "5": "toyo", "6": "moeller",
-                                    "7": "yaskawa"} or len(info["stations"]) == 5
+        # the default plant (sim/plant.py); the sim names a station by its profile or an alias
+        from profidrive_cli.drives.profile import load_profile
+        assert {a: load_profile(n).name for a, n in info["stations"].items()} == {
+            "3": "fuji-opc-g1-pdp", "4": "fuji-opc-pdp3", "5": "toyo-pbus66z",
+            "6": "moeller-de6-net-dp", "7": "yaskawa-si-p1"}
         r = subprocess.run(pdrive_cmd() + ["scan", "--port", b, "--json"], capture_output=True,
                            text=True, timeout=120)
         assert r.returncode == 0, r.stderr

@@ -4,6 +4,7 @@ from pathlib import Path
 
 import pytest
 
+from profidrive_cli import UsageError
 from profidrive_cli.drives import make_drive
 from conftest import drive_on_bus
 from profidrive_cli.drives import profidrive as pd
@@ -188,7 +189,7 @@ def test_error_answers():
     assert d.request(f(6, 708, toyo.traceback_ind(0, 5))).error == 101     # nothing recorded yet
     with pytest.raises(DriveError, match="does not support"):
         d.request(pd.PkwFrame(3, 688))                     # the codec knows tasks 1, 2, 6 only
-    with pytest.raises(Exception, match="does not publish its PNU"):
+    with pytest.raises(UsageError, match="does not publish its PNU"):
         d.read_param("A-00")
     with pytest.raises(ParamError, match="read-only"):
         d.write_param("dc-voltage", 1)

@@ -1,0 +1,33 @@
+"""docs/architecture.md names the modules of each layer; every module it names must exist there
+(it once listed dp/diag.py and dp/slave.py, which never did)."""
+
+import re
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PKG = ROOT / "profidrive_cli"
+
+
+def named_modules():
+    """(layer folder, module file) for every `name.py` in the layer list at the top of the doc."""
+    text = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
+    block = text.split("## ", 1)[0]
+    layer = None
+    for line in block.splitlines():
+        m = re.match(r"    (\w+)/\s", line)
+        if m:
+            layer = m.group(1)
+        if layer is None:
+            continue
+        for name in re.findall(r"(?<![\w/.])(\w+\.py)\b", line):
+            yield layer, name
+        for path in re.findall(r"\b(\w+/\w+\.py)\b", line):     # written with its folder: link/x.py
+            yield path.split("/")[0], path.split("/")[1]
+
+
+def test_every_module_the_architecture_doc_names_exists():
+    pairs = set(named_modules())
+    assert len(pairs) >= 15                      # the parser found the list at all
+    missing = sorted(f"{d}/{f}" for d, f in pairs
+                     if not (PKG / d / f).is_file() and not (ROOT / d / f).is_file())
+    assert missing == []
