@@ -50,8 +50,6 @@ def test_scan_finding_nothing_is_1(capsys, monkeypatch):
     assert rc == 1 and "no station answered" in out
 
 
-@pytest.mark.xfail(strict=True, reason="production bug: `scan --json` exits 0 when no station "
-                   "answers (the table form exits 1); cli/bus_cmds.py is not this slice's to change")
 def test_scan_json_finding_nothing_is_1_too(capsys, monkeypatch):
     rc, out, _ = pdrive(capsys, monkeypatch, "scan", "--port", "sim://", "--from", "10", "--to", "20",
                         "--json")

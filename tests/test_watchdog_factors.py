@@ -60,3 +60,17 @@ def test_never_shorter_and_within_one_fact2_step(ms):
     assert ms <= armed < ms + 10 * f2 + 10
     if ms <= 2550:
         assert f2 == 1
+
+
+def test_the_shortest_representable_watchdog_not_below_the_request():
+    """10 ms x WD_Fact_1 x WD_Fact_2 (each 1..255): the armed watchdog is the smallest product that
+    is not shorter than asked. 5101 ms: 511 units = 7 x 73 exactly (5110 ms), not 3 x 171 (5130 ms)."""
+    import bisect
+    from profidrive_cli.dp.services import watchdog_factors
+    assert watchdog_factors(5101) in ((73, 7), (7, 73))
+    products = sorted({a * b for a in range(1, 256) for b in range(1, 256)})
+    for units in list(range(1, 3000)) + list(range(3000, 65026, 37)) + [65024, 65025]:
+        f1, f2 = watchdog_factors(units * 10)
+        assert 1 <= f1 <= 255 and 1 <= f2 <= 255
+        best = products[bisect.bisect_left(products, units)]
+        assert f1 * f2 == best, (units, f1, f2, best)

@@ -68,6 +68,8 @@ def scan_cmd(opts, first, last, gsd_dir):
              "state": e.diag.state_words(opts.master_address) if e.diag else e.error,
              "device": device_name(e.ident, gsd_dir) if e.ident is not None else "",
              "diag": _diag_json(e.diag), "counters": e.counters} for e in result]})
+        if not result:
+            raise SystemExit(1)         # the same exit code as the table: nobody answered
         return
     if noise:
         err.print(f"the line is noisy: {noise} corrupt or unexpected telegram(s) during the scan "

@@ -56,15 +56,26 @@ SetPrmHeader = cs.Struct(
 
 
 def watchdog_factors(ms: float) -> tuple[int, int]:
-    """Watchdog time in ms -> (WD_Fact_1, WD_Fact_2) with 10 ms base, rounded up, both 1..255."""
+    """Watchdog time in ms -> (WD_Fact_1, WD_Fact_2) with 10 ms base, both 1..255: the shortest
+    watchdog the factors can hold that is not shorter than asked (rounded up, never down), the
+    smaller WD_Fact_2 on a tie (so up to 2550 ms WD_Fact_2 = 1)."""
     units = max(1, -(-int(round(ms)) // 10))        # ceil(ms / 10)
     if units > 255 * 255:
         raise ValueError(f"watchdog {ms} ms exceeds 650 s")
+    best = None
     for f2 in range(1, 256):
         f1 = -(-units // f2)
-        if f1 <= 255:
-            return f1, f2
-    raise ValueError(f"watchdog {ms} ms not representable")
+        if f1 > 255:
+            continue
+        if f1 < 1:
+            break
+        if best is None or f1 * f2 < best[0] * best[1]:
+            best = (f1, f2)
+            if f1 * f2 == units:
+                break
+    if best is None:
+        raise ValueError(f"watchdog {ms} ms not representable")
+    return best
 
 
 @dataclass
