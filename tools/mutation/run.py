@@ -39,11 +39,13 @@ PKG = "profidrive_cli"
 #: module (under profidrive_cli/) -> the tests that are about it
 MODULES: dict[str, list[str]] = {
     "fdl/frames.py": ["tests/test_fdl_frames.py", "tests/test_frames_edges.py"],
-    "fdl/fcb.py": ["tests/test_fcb.py"],
+    "fdl/fcb.py": ["tests/test_fcb.py", "tests/test_fcb_slave.py", "tests/test_lost_reply.py"],
+    "fdl/master.py": ["tests/test_master_sim.py", "tests/test_fcb.py", "tests/test_lost_reply.py",
+                      "tests/test_babble.py", "tests/test_parity.py"],
     "dp/services.py": ["tests/test_dp_services.py", "tests/test_watchdog_factors.py",
                        "tests/test_dp_services_edges.py"],
     "dp/cfg.py": ["tests/test_dp_services.py", "tests/test_cfg_identifiers.py"],
-    "dp/station.py": ["tests/test_master_sim.py", "tests/test_sim_slave.py"],
+    "dp/station.py": ["tests/test_master_sim.py", "tests/test_sim_slave.py", "tests/test_lost_reply.py"],
     "fdl/timing.py": ["tests/test_bus_timing_reference.py", "tests/test_timed_sim.py"],
     "drives/profidrive.py": ["tests/test_profidrive_core.py", "tests/test_profidrive_sim.py"],
     "drives/fuji.py": ["tests/test_fuji_vectors.py", "tests/test_fuji_sim.py"],
