@@ -207,8 +207,9 @@ _config_cache: dict[int, tuple[object, ProfidriveConfig]] = {}
 def config(profile) -> ProfidriveConfig:
     """The profile's ProfidriveConfig (validated once, cached per profile object).
 
-    A family module drives/<family>.py may define `profidrive_config(profile) -> ProfidriveConfig`
-    to build it from its own profile keys; otherwise the `profidrive:` section is read.
+    A family codec (drives/<family>.py or the package drives/<family>/) may define
+    `profidrive_config(profile) -> ProfidriveConfig` to build it from its own profile keys;
+    otherwise the `profidrive:` section is read.
     """
     hit = _config_cache.get(id(profile))
     if hit is not None and hit[0] is profile:
