@@ -1,0 +1,396 @@
+"""ProfidriveDrive: the Drive interface (drives/base.py) over a PPO layout, generic PROFIdrive V2.
+
+Couples the sans-IO pieces (ppo, words, scaling, pkw, pnu, params) with a CyclicChannel; the channel
+does the waiting, nothing here sleeps. Family drives (Fuji, Moeller, Toyo) subclass it and fill its
+hooks. `make_drive` makes `family: profidrive` work.
+"""
+
+from __future__ import annotations
+
+from profidrive_cli import UsageError
+from profidrive_cli.drives.base import (Drive, DriveError, DriveStatus, FaultRecord, ParamError,
+                                        ParamValue)
+from profidrive_cli.drives.values import raw_value_problem, value_problem
+from profidrive_cli.drives.profidrive.config import ProfidriveConfig, config
+from profidrive_cli.drives.profidrive.params import ParamRef, resolve_code
+from profidrive_cli.drives.profidrive.pkw import (REQUEST_TEXT, PkwChannel, PkwFrame, PkwResult,
+                                                  read_request, write_request)
+from profidrive_cli.drives.profidrive.pnu import (PNU_BAUD, PNU_CONTROL_RIGHTS, PNU_CONTROL_WORD,
+                                                  PNU_DEVICE_ID, PNU_EDIT_RIGHTS,
+                                                  PNU_NODE_ADDRESS, PNU_PROFILE, PNU_STATUS_WORD,
+                                                  decode_baud, decode_device_id,
+                                                  fault_memory_requests, pzd_map_pnu,
+                                                  pzd_map_write, save_requests)
+from profidrive_cli.drives.profidrive.ppo import (PpoArea, decode_area_bytes, encode_area,
+                                                  ppo_layout)
+from profidrive_cli.drives.profidrive.scaling import n2_from_percent, n2_to_percent, to_signed16
+from profidrive_cli.drives.profidrive.words import (Ctw, State, Stw, Target, next_control_word,
+                                                    state_from_status, target_reached)
+
+class ProfidriveDrive(Drive):
+    """The Drive interface over a PPO layout (drives/base.py), generic PROFIdrive V2.
+
+    Keeps a command (target state, reference, extra control bits, PZD3.. words) and sends it every
+    cycle; blocking calls cycle until the drive answers or `timeout` passes.
+
+    Subclass hooks (family codecs override what differs):
+      resolve_param(code) -> ParamRef            code -> PNU/subindex/array/size
+      raw_to_value(ref, raw) / value_to_raw(ref, value)   wire integer <-> engineering value
+      check_value(ref, value) -> str | None      range check before a write (None = ok)
+      write_refused_message(ref, value, result) -> str    the one-line error for a refused write
+      start_hint(status) -> str                  appended when start() times out
+      status_extras(area, status) -> None        add family flags/raw words to a DriveStatus
+      control_extra_bits() -> int                bits ORed into every control word
+    """
+
+    family = "profidrive"
+
+    def __init__(self, channel, profile, layout: str | None = None,
+                 cfg: ProfidriveConfig | None = None):
+        super().__init__(channel, profile, layout)
+        self.cfg = cfg or config(profile)
+        self.ppo = ppo_layout(profile, self.layout)
+        self.target: Target | None = None          # None = passive (control word 0, bit 10 = 0)
+        self.reference = 0                          # N2 word
+        self.extra_bits = self.cfg.held_ctw_bits
+        self.pzd_out: list[int] = [0] * max(0, self.ppo.pzd_out - 2)
+        self.pkw: PkwChannel | None = None
+        if self.ppo.pkw:
+            self.pkw = PkwChannel(timeout=self.cfg.pkw_timeout,
+                                  zero_after_error=self.cfg.zero_after_error,
+                                  zero_between_identical=self.cfg.zero_between_identical,
+                                  error_texts=self.cfg.error_texts,
+                                  max_zero_cycles=self.cfg.max_zero_cycles)
+        self.last_ctw: int | None = None
+        self.last_stw: int | None = None
+        self.last_area: PpoArea | None = None
+        self.last_status: DriveStatus | None = None
+        self._pkw_result: PkwResult | None = None
+        self._fmax: float | None = None
+
+    # -- hooks -------------------------------------------------------------------------------
+    @property
+    def has_param_channel(self) -> bool:
+        return self.pkw is not None
+
+    def control_extra_bits(self) -> int:
+        return self.extra_bits
+
+    def resolve_param(self, code: str) -> ParamRef:
+        return resolve_code(self.profile, code, self.cfg)
+
+    def raw_to_value(self, ref: ParamRef, raw: int):
+        p = ref.param
+        if p is None:
+            return raw
+        if p.size == 16:
+            raw &= 0xFFFF
+        return p.from_raw(raw)
+
+    def value_to_raw(self, ref: ParamRef, value) -> int:
+        p = ref.param
+        raw = int(value) if p is None else p.to_raw(value)
+        bits = ref.size
+        return raw & ((1 << bits) - 1)
+
+    def check_value(self, ref: ParamRef, value) -> str | None:
+        """The exact-value check (drives/values.py): resolution, range, codes, wire width."""
+        if ref.param is not None:
+            return value_problem(ref.param, value)
+        return raw_value_problem(ref.label, value, ref.size)
+
+    def write_refused_message(self, ref: ParamRef, value, result: PkwResult) -> str:
+        stop_only = self.cfg.error_numbers.get("stop_only")
+        if result.error is not None and result.error == stop_only:
+            return (f"{ref.label} can only be changed while the motor is stopped "
+                    f"(drive answered error {result.error}: {result.error_text}); stop it first")
+        if result.error is not None and result.error == self.cfg.error_numbers.get("no_rights") \
+                or (result.response is not None and result.response.ak == 8):
+            return (f"{ref.label}: the drive gives no parameter change rights "
+                    f"({result.describe_error()}); set PNU {PNU_EDIT_RIGHTS} = 1")
+        return f"{ref.label}: the drive refused the value {value}: {result.describe_error()}"
+
+    def start_hint(self, status: DriveStatus) -> str:
+        return ("check that the drive takes commands from the bus (control-word bit 10 is sent "
+                "as 1; the drive's command-source parameters)")
+
+    def status_extras(self, area: PpoArea, status: DriveStatus) -> None:
+        return None
+
+    # -- one cycle ---------------------------------------------------------------------------
+    def _control_word(self) -> int:
+        if self.target is None:
+            return 0
+        stw = self.last_stw if self.last_stw is not None else int(Stw.SWITCHING_ON_INHIBITED)
+        moving = None
+        if self.last_area is not None and len(self.last_area.pzd) > 1:
+            moving = to_signed16(self.last_area.pzd[1]) != 0
+        return next_control_word(stw, self.target, self.control_extra_bits(),
+                                 previous=self.last_ctw, moving=moving)
+
+    def _exchange_area(self, pzd_words: list[int]) -> PpoArea:
+        """One Data_Exchange: this cycle's PKW words + `pzd_words` out, the decoded input area
+        back; a PKW answer that completes is kept for the waiting request."""
+        pkw_words = self.pkw.outputs() if self.pkw else None
+        out = PpoArea(pkw_words, pzd_words)
+        inputs = self.channel.exchange(encode_area(self.ppo, out, "request"))
+        area = decode_area_bytes(self.ppo, inputs, "response")
+        self.last_area = area
+        if self.pkw is not None and area.pkw is not None:
+            res = self.pkw.feed(area.pkw, self.channel.now())
+            if res is not None:
+                self._pkw_result = res
+        return area
+
+    def cycle(self) -> DriveStatus:
+        ctw = self._control_word()
+        area = self._exchange_area([ctw, self.reference] + list(self.pzd_out))
+        self.last_ctw = ctw
+        self.last_stw = area.word1
+        st = self._decode_status(area)
+        self.last_status = st
+        return st
+
+    def _decode_status(self, area: PpoArea) -> DriveStatus:
+        stw, mav = area.word1, area.word2
+        moving = to_signed16(mav) != 0
+        state = state_from_status(stw, moving)
+        pct = n2_to_percent(mav)
+        fmax = self._fmax if self._fmax is not None else float(self.profile.max_frequency_default)
+        names = self.cfg.stw_names
+        flags = {names.get(b, f"bit {b}"): bool(stw >> b & 1) for b in range(16) if b in names}
+        raw = {"status_word": stw, "actual": mav}
+        for i, w in enumerate(area.pzd[2:], start=3):
+            raw[f"pzd{i}"] = w
+        st = DriveStatus(state=state.value, running=state in (State.S4, State.S5),
+                         fault=state is State.FAULT, flags=flags, speed_percent=round(pct, 4),
+                         speed_hz=round(pct * fmax / 100.0, 4),
+                         reference_percent=round(n2_to_percent(self.reference), 4), raw=raw)
+        self.status_extras(area, st)
+        return st
+
+    # -- PKW ---------------------------------------------------------------------------------
+    def request(self, frame: PkwFrame, timeout: float | None = None) -> PkwResult:
+        """Run one PKW request to completion (keeps cyclic data going)."""
+        if self.pkw is None:
+            raise DriveError(f"{self.profile.name}: layout {self.layout} has no parameter channel "
+                             f"(use a PPO with PKW: {', '.join(n for n, l in self.profile.layouts.items() if l.pkw) or 'none'})")
+        if self.cfg.supported_requests is not None and frame.ak not in self.cfg.supported_requests:
+            raise DriveError(f"{self.profile.name}: the card does not support request "
+                             f"AK {frame.ak} ({REQUEST_TEXT.get(frame.ak, '?')})")
+        self._pkw_result = None
+        self.pkw.submit(frame, self.channel.now())
+        end = self.channel.now() + (timeout if timeout is not None else self.pkw.timeout) + 1.0
+        while self._pkw_result is None:
+            self.cycle()
+            if self._pkw_result is None and self.channel.now() > end:
+                self.pkw.cancel()
+                raise DriveError(f"no answer to the parameter request for PNU {frame.pnu}")
+        res, self._pkw_result = self._pkw_result, None
+        return res
+
+    def read_raw(self, pnu: int, subindex: int = 0, array: bool | None = None) -> int:
+        if array is None:
+            array = pnu in self.cfg.array_pnus
+        res = self.request(read_request(pnu, subindex, array))
+        if not res.ok:
+            raise ParamError(f"PNU {pnu}" + (f"[{subindex}]" if subindex else "")
+                             + f": {res.describe_error()}", res.error)
+        return res.value
+
+    def write_raw(self, pnu: int, value: int, subindex: int = 0, array: bool | None = None,
+                  long: bool = False) -> int:
+        if array is None:
+            array = pnu in self.cfg.array_pnus
+        res = self.request(write_request(pnu, value, subindex, array, long))
+        if not res.ok:
+            raise ParamError(f"PNU {pnu}" + (f"[{subindex}]" if subindex else "")
+                             + f": {res.describe_error()}", res.error)
+        return res.value
+
+    def read_param(self, code: str) -> ParamValue:
+        ref = self.resolve_param(code)
+        res = self.request(read_request(ref.pnu, ref.subindex, ref.array))
+        if not res.ok:
+            raise ParamError(f"{ref.label}: the drive refused the read: {res.describe_error()}",
+                             res.error)
+        return self._param_value(ref, res.value)
+
+    def _param_value(self, ref: ParamRef, wire: int) -> ParamValue:
+        raw = wire & 0xFFFF if ref.size == 16 else wire & 0xFFFFFFFF
+        value = self.raw_to_value(ref, raw)
+        unit = ref.param.unit if ref.param is not None else ""
+        return ParamValue(ref.code, ref.name, raw, value, unit)
+
+    def write_param(self, code: str, value) -> ParamValue:
+        ref = self.resolve_param(code)
+        p = ref.param
+        if p is not None and not p.writable:
+            raise ParamError(f"{ref.label} is read-only", self.cfg.error_numbers.get("read_only"))
+        msg = self.check_value(ref, value)
+        if msg:
+            raise ParamError(msg, self.cfg.error_numbers.get("out_of_range"))
+        raw = self.value_to_raw(ref, value)
+        res = self.request(write_request(ref.pnu, raw, ref.subindex, ref.array, ref.size == 32))
+        if not res.ok:
+            raise ParamError(self.write_refused_message(ref, value, res), res.error)
+        if self.profile.max_frequency_param and ref.param is not None \
+                and ref.code == self.profile.max_frequency_param:
+            self._fmax = None
+        if p is not None and p.access == "wo":
+            return self._param_value(ref, raw)
+        return self.read_param(code)
+
+    def save(self) -> None:
+        if self.cfg.save_pnu is None:
+            raise DriveError(f"{self.profile.name}: this card has no separate save command")
+        for frame in save_requests(self.cfg.save_pnu):
+            res = self.request(frame)
+            if not res.ok:
+                raise ParamError(f"save (PNU {self.cfg.save_pnu} 0 -> 1): {res.describe_error()}",
+                                 res.error)
+
+    def alarm_record(self, position: str, raw: int) -> FaultRecord:
+        if raw == 0:
+            return FaultRecord(position, 0, [], ["no fault"])
+        alarms = self.profile.alarms_for(raw)
+        if not alarms:
+            return FaultRecord(position, raw, [f"?{raw}"], [f"unknown fault number {raw}"])
+        return FaultRecord(position, raw, [a.code for a in alarms], [a.meaning for a in alarms])
+
+    def fault_history(self) -> list[FaultRecord]:
+        out = []
+        for pos, frame in fault_memory_requests(self.cfg):
+            res = self.request(frame)
+            if not res.ok:
+                raise ParamError(f"fault memory PNU {frame.pnu}[{frame.subindex}]: "
+                                 f"{res.describe_error()}", res.error)
+            out.append(self.alarm_record(pos, res.value & 0xFFFF))
+        return out
+
+    def max_frequency(self) -> float:
+        if self._fmax is None:
+            if self.pkw is not None and self.profile.max_frequency_param:
+                self._fmax = float(self.read_param(self.profile.max_frequency_param).value)
+            else:
+                self._fmax = float(self.profile.max_frequency_default)
+        return self._fmax
+
+    def card_info(self) -> dict[str, object]:
+        """PNU 918 address, 963 baud, 964 device, 965 profile, 927/928 rights, 967/968 last words.
+        Entries the card does not support are None."""
+        out: dict[str, object] = {}
+        for key, pnu in (("node_address", PNU_NODE_ADDRESS), ("baud", PNU_BAUD),
+                         ("device", PNU_DEVICE_ID), ("profile_version", PNU_PROFILE),
+                         ("edit_rights", PNU_EDIT_RIGHTS), ("control_rights", PNU_CONTROL_RIGHTS),
+                         ("control_word", PNU_CONTROL_WORD), ("status_word", PNU_STATUS_WORD)):
+            try:
+                v = self.read_raw(pnu) & 0xFFFF
+            except ParamError:
+                out[key] = None
+                continue
+            if key == "baud" and self.cfg.baud_codes:
+                out[key] = decode_baud(v, self.cfg)
+            elif key == "device" and self.cfg.device_ids:
+                out[key] = f"0x{v:04X} ({decode_device_id(v, self.cfg)})"
+            elif key in ("control_word", "status_word", "device"):
+                out[key] = f"0x{v:04X}"
+            else:
+                out[key] = v
+        return out
+
+    # -- PZD3.. ------------------------------------------------------------------------------
+    def set_pzd(self, n: int, raw: int) -> None:
+        """Set output word PZDn (n >= 3) to a raw value."""
+        if not 3 <= n < 3 + len(self.pzd_out):
+            raise DriveError(f"layout {self.layout} has no output PZD{n}")
+        self.pzd_out[n - 3] = raw & 0xFFFF
+
+    def pzd_mapping(self, direction: str) -> list[int]:
+        n = (self.ppo.pzd_out if direction == "setpoint" else self.ppo.pzd_in) - 2
+        pnu = pzd_map_pnu(direction, self.cfg)
+        return [self.read_raw(pnu, i, array=True) & 0xFFFF for i in range(1, n + 1)]
+
+    def map_pzd(self, direction: str, slot: int, pnu: int) -> None:
+        res = self.request(pzd_map_write(direction, slot, pnu, self.cfg))
+        if not res.ok:
+            raise ParamError(f"PZD{slot + 2} mapping: {res.describe_error()}", res.error)
+
+    # -- motion ------------------------------------------------------------------------------
+    def _ensure_fmax(self) -> None:
+        """Learn the drive's max frequency once (PKW), else fall back to the profile default."""
+        if self.pkw is not None and self._fmax is None:
+            try:
+                self.max_frequency()
+            except DriveError:
+                self._fmax = float(self.profile.max_frequency_default)
+
+    def status(self) -> DriveStatus:
+        self._ensure_fmax()
+        st = self.cycle()
+        if st.fault and self.pkw is not None:
+            try:
+                rec = self.alarm_record("current", self.read_raw(
+                    self.cfg.fault_memory_pnu, self.cfg.fault_subindexes[0], array=True) & 0xFFFF)
+                st.fault_code = "/".join(rec.codes) or None
+            except DriveError:
+                pass
+        return st
+
+    def set_speed(self, percent: float) -> None:
+        self.reference = n2_from_percent(percent)
+        self.cycle()
+
+    def jog(self, on: bool = True) -> None:
+        if on:
+            self.extra_bits |= int(Ctw.JOG1)
+        else:
+            self.extra_bits &= ~int(Ctw.JOG1)
+        self.cycle()
+
+    def _go(self, target: Target, timeout: float, what: str, hint: bool = False) -> DriveStatus:
+        self.target = target
+        try:
+            return self.cycles_until(
+                lambda st: target_reached(st.raw["status_word"], target,
+                                          moving=abs(st.speed_percent or 0) > 0), timeout, what)
+        except DriveError as e:
+            if hint and self.last_status is not None:
+                raise DriveError(f"{e}; {self.start_hint(self.last_status)}") from None
+            raise
+
+    def start(self, timeout: float = 5.0) -> DriveStatus:
+        st = self.cycle()
+        if st.fault:
+            raise DriveError("the drive is in fault: acknowledge it first (reset)")
+        if self.pkw is not None and self._fmax is None:
+            self.max_frequency()
+        return self._go(Target.OPERATE, timeout, "operation", hint=True)
+
+    def stop(self, mode: str = "normal", wait: bool = True, timeout: float = 30.0) -> DriveStatus:
+        target = {"normal": Target.OFF1, "ramp": Target.OFF1, "off1": Target.OFF1,
+                  "quick": Target.OFF3, "off3": Target.OFF3,
+                  "coast": Target.OFF2, "off2": Target.OFF2}.get(mode)
+        if target is None:
+            raise UsageError(f"stop mode must be normal, quick or coast, got {mode!r}")
+        self.target = target
+        st = self.cycle()
+        if not wait:
+            return st
+        return self.cycles_until(
+            lambda s: s.fault or (s.stopped and target_reached(
+                s.raw["status_word"], target, moving=abs(s.speed_percent or 0) > 0)),
+            timeout, f"the drive to stop ({mode})")
+
+    def reset_fault(self, timeout: float = 5.0) -> DriveStatus:
+        st = self.cycle()
+        if not st.fault:
+            return st
+        self.target = Target.ACK
+        return self.cycles_until(lambda s: not s.fault, timeout,
+                                 "the fault to clear (is its cause still present?)")
+
+
+def make_drive(channel, profile, layout: str | None = None) -> ProfidriveDrive:
+    """Family `profidrive`: a plain PROFIdrive V2 drive configured only by its profile."""
+    return ProfidriveDrive(channel, profile, layout)
