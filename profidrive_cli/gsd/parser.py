@@ -26,8 +26,8 @@ from profidrive_cli.datafile import DataFileError, read_input_file
 from profidrive_cli.dp.cfg import CfgError, decode_cfg
 from profidrive_cli.gsd.required import check_complete
 from profidrive_cli.gsd.model import (
-    BAUDS, INT_TYPES, DiagArea, ExtUserPrmData, Gsd, Module, PrmBlock, PrmConst, PrmRef, PrmText, Slot,
-    UnitDiagType,
+    BAUDS, INT_TYPES, MAX_USER_PRM_LEN, DiagArea, ExtUserPrmData, Gsd, Module, PrmBlock, PrmConst, PrmRef,
+    PrmText, Slot, UnitDiagType,
 )
 
 _SPLIT = re.compile(r"\r\n|\r|\n")
@@ -38,9 +38,6 @@ _NUM = re.compile(r"0[xX][0-9a-fA-F]+\Z|[0-9]+\Z")
 # input limits: the largest real GSD file we know is ~190 kB; a GSD number never needs more than 32 bits
 MAX_GSD_BYTES = 4 * 1024 * 1024
 MAX_NUMBER_CHARS = 24
-
-# Set_Prm DU is at most 244 octets, 7 of them the standard part: User_Prm_Data <= 237 octets.
-MAX_USER_PRM_LEN = 237
 
 _BAUD_SUFFIXES = tuple(s.lower() for s, _, _ in BAUDS)
 _BAUD_KEY = re.compile(r"(maxtsdr|maxtsd|tsdi|trdy|tqui|tset|transmission_delay|reaction_delay)_("
