@@ -36,7 +36,7 @@ from typing import Any, Iterable, Mapping, Sequence
 
 from profidrive_cli import UsageError
 from profidrive_cli.gsd.model import (
-    MAX_USER_PRM_LEN, DiagArea, ExtUserPrmData, Gsd, Module, PrmBlock, select_module, select_modules,
+    MAX_USER_PRM_LEN, DiagArea, ExtUserPrmData, Gsd, Module, PrmBlock, select_modules,
 )
 
 # ---------------------------------------------------------------- Set_Prm user data
