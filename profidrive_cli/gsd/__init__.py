@@ -1,5 +1,6 @@
-"""GSD files: parser (parser.py), data model and module lookup (model.py), Set_Prm / Chk_Cfg / unit-diag interpreter
-(interp.py) and the device library lookup (library.py)."""
+"""GSD files: text stage (lexer.py), parser (parser.py: builds the model), data model and module lookup
+(model.py), Set_Prm / Chk_Cfg / unit-diag interpreter (interp.py: reads the model) and the device
+library lookup (library.py)."""
 
 from profidrive_cli.gsd.interp import (
     PrmField, PrmResult, build_prm, chk_cfg, decode_unit_diag, user_params,
