@@ -1,4 +1,5 @@
-"""Interpreting a parsed GSD (reads gsd/model.py, never the parser): Set_Prm user-parameter bytes, Chk_Cfg bytes, unit diagnosis.
+"""Interpreting a parsed GSD: Set_Prm user-parameter bytes, Chk_Cfg bytes, unit diagnosis. It reads
+the model (gsd/model.py) and never the parser.
 
 User_Prm_Data (reference §5), per block:
     device block   = User_Prm_Data padded/cut to User_Prm_Data_Len (zeros when absent)

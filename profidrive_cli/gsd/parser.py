@@ -4,9 +4,9 @@ Two small stages, plain Python; this module builds the model (gsd/model.py) and 
 gsd/required.py, dp/cfg.py and datafile.py:
 
 1. lines (gsd/lexer.py): decode (UTF-8 if the bytes are valid UTF-8, else Latin-1), split on
-   CRLF / CR / LF (mixed is fine), skip everything before the `#Profibus_DP` line, cut `;` comments (not inside strings) and join
-   `\\` continuations (also inside number lists and strings) into logical lines that remember the
-   physical line they started on.
+   CRLF / CR / LF (mixed is fine), skip everything before the `#Profibus_DP` line, cut `;` comments
+   (not inside strings) and join `\\` continuations (also inside number lists and strings) into
+   logical lines that remember the physical line they started on.
 2. statements: each logical line is `Keyword[(args)] [=] value`, keywords compared case-insensitively.
    A small stack of open blocks (PrmText, ExtUserPrmData, Module, Data_Area, Unit_Diag_Area,
    UnitDiagType, SlotDefinition, ...) decides what a keyword means.
