@@ -221,7 +221,7 @@ def test_second_tcp_client_is_told_busy():
 # -- sniff decoding: garbage runs are one entry; chunked feeding equals one feed ----------------------
 
 def test_capture_garbage_run_is_one_entry_and_frames_after_it_are_found():
-    from profidrive_cli.fdl.capture import Capture
+    from profidrive_cli.dp.capture import Capture
     req = F.encode(F.make(3, 2, F.request_fc(F.FDL_STATUS)))    # SD1 10 03 02 49 4E 16
     assert req == bytes.fromhex("10 03 02 49 4E 16")
     noise = bytes([0x00, 0x55, 0xAA, 0x99, 0x01])               # none of them can start a telegram
@@ -231,7 +231,7 @@ def test_capture_garbage_run_is_one_entry_and_frames_after_it_are_found():
 
 def test_capture_chunked_feed_equals_one_feed():
     import random
-    from profidrive_cli.fdl.capture import Capture, merge_errors
+    from profidrive_cli.dp.capture import Capture, merge_errors
     rnd = random.Random(7)
     frames = [F.encode(F.make(a, 2, F.request_fc(F.SRD_HIGH, True, True), bytes([a] * 4), 58, 62))
               for a in range(3, 10)]

@@ -95,7 +95,7 @@ def test_bad_input_one_line(args, msg):
 
 
 def test_sniff_from_file_and_pcap(tmp_path):
-    from profidrive_cli.fdl.capture import LINKTYPE_PROFIBUS_DL, read_pcap
+    from profidrive_cli.dp.capture import LINKTYPE_PROFIBUS_DL, read_pcap
     raw = bytes.fromhex("10 22 02 49 6D 16 10 02 22 00 24 16 55 "
                         "68 05 05 68 8A 82 6D 3C 3E F3 16 E5")
     f = tmp_path / "cap.raw"

@@ -36,6 +36,22 @@ def test_sim_is_named_a_simulator():
     assert r.exit_code == 0 and "simulator" in r.output
 
 
+def test_sim_report_comes_from_the_opened_port_stations_faults_and_bad_urls():
+    # doctor asks the sim:// port itself (sim/protocol_sim.py); the plant's facts arrive unchanged:
+    # the stations of the URL, fault injection, and a bad URL as a failed check with the plant's line
+    r = run("--port", "sim://?stations=3:fuji-g1,7:yaskawa&drop=0.1", "--json")
+    assert r.exit_code == 0, r.output
+    c = checks(json.loads(r.output))
+    assert c["simulator"]["stations"] == {"3": "fuji-opc-g1-pdp", "7": "yaskawa"}
+    assert c["simulator"]["timing"] == "instant" and c["simulator"]["baud"] == 19200
+    assert "stations 3 fuji-opc-g1-pdp, 7 yaskawa; 19.2k" in c["simulator"]["detail"]
+    assert c["simulator"]["detail"].endswith("; fault injection on")
+    r = run("--port", "sim://?bogus=1", "--json")
+    assert r.exit_code == 1
+    c = checks(json.loads(r.output))
+    assert c["simulator"]["status"] == "fail" and "unknown option(s) bogus" in c["simulator"]["detail"]
+
+
 def test_missing_port_fails_with_exit_1():
     r = run("--port", "/dev/ttyNOPE0", "--json")
     assert r.exit_code == 1

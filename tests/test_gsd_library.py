@@ -27,7 +27,7 @@ from profidrive_cli.data import gsd_dir
 from profidrive_cli.datafile import DataFileError
 from profidrive_cli.gsd import build_prm, decode_unit_diag, parse_gsd
 from profidrive_cli.gsd import library
-from profidrive_cli.gsd.interp import select_module
+from profidrive_cli.gsd.model import select_module
 
 HERE = Path(__file__).resolve().parent
 SPEC = Path(os.environ.get("PDRIVE_SPEC_DIR", HERE.parents[1] / "shared" / "spec"))

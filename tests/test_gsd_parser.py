@@ -15,7 +15,8 @@ import pytest
 from profidrive_cli import UsageError
 from profidrive_cli.datafile import DataFileError
 from profidrive_cli.gsd import build_prm, chk_cfg, decode_unit_diag, parse_gsd, parse_gsd_bytes, parse_gsd_text
-from profidrive_cli.gsd.interp import device_user_prm, select_module
+from profidrive_cli.gsd.interp import device_user_prm
+from profidrive_cli.gsd.model import select_module
 
 HERE = Path(__file__).resolve().parent
 BROKEN = HERE / "data" / "gsd_broken"

@@ -92,7 +92,7 @@ def test_sniff_raw_and_pcap_over_a_real_byte_path(socat_pair, tmp_path):
             p.kill()
     assert p.returncode == 0, err
     assert raw.read_bytes() == sent
-    from profidrive_cli.fdl.capture import read_pcap
+    from profidrive_cli.dp.capture import read_pcap
     _, pkts = read_pcap(pcap.read_bytes())
     assert [x[1] for x in pkts] == [sent[:6], sent[6:12], sent[12:]]
     r = run("sniff", "--from-file", raw)

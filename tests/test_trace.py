@@ -6,7 +6,7 @@ import subprocess
 import sys
 import time
 
-from profidrive_cli.fdl.capture import LINKTYPE_PROFIBUS_DL, read_pcap
+from profidrive_cli.dp.capture import LINKTYPE_PROFIBUS_DL, read_pcap
 
 
 def _pdrive(*args):

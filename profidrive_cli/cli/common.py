@@ -157,7 +157,7 @@ def configure_logging(verbose: int) -> None:
 def _open_trace(path: str):
     """The --trace recorder: a pcap written beside the target and renamed over it when the command
     ends (whatever way it ends: the trace of a failure is the useful one)."""
-    from profidrive_cli.fdl.capture import PcapWriter
+    from profidrive_cli.dp.capture import PcapWriter
     from profidrive_cli.outfile import OutputFile
     f = OutputFile(path, "wb", what="trace file")
     f.open()

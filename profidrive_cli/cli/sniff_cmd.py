@@ -9,7 +9,7 @@ import click
 from profidrive_cli import UsageError
 from profidrive_cli.cli.common import bus_options, emit_json, out
 from profidrive_cli.datafile import read_input_file
-from profidrive_cli.fdl.capture import Capture, PcapWriter, format_line, merge_errors
+from profidrive_cli.dp.capture import Capture, PcapWriter, format_line, merge_errors
 from profidrive_cli.outfile import OutputFile, check_output_path
 
 
@@ -103,7 +103,7 @@ def sniff_cmd(opts, duration, pcap_file, raw_out, raw_file):
 
 
 def _truncated(cap):
-    from profidrive_cli.fdl.capture import Captured
+    from profidrive_cli.dp.capture import Captured
     raw = bytes(cap.rx.buf)
     cap.rx.reset()
     return Captured(cap._t, raw, None, "truncated frame at end of input")

@@ -6,7 +6,7 @@ a reply ("<-"), through the same capture decoder `pdrive sniff` uses, and each t
 
 - logged on the `profidrive_cli.trace` logger at DEBUG (time since the link was opened, direction,
   SD, addresses, SAPs, FC in words, the DP service's name, the data in hex), and
-- written to a pcap recorder, when one is given (anything with write(t, raw): fdl.capture.PcapWriter).
+- written to a pcap recorder, when one is given (anything with write(t, raw): dp.capture.PcapWriter).
 
 The DP service steps (station start-up, diagnosis, retries, re-parameterisation) are logged by the
 poller on `profidrive_cli.dp` at INFO (`-v`). A library user configures these loggers like any other.
@@ -17,7 +17,7 @@ from __future__ import annotations
 import logging
 import time
 
-from profidrive_cli.fdl.capture import Capture, format_line, merge_errors
+from profidrive_cli.dp.capture import Capture, format_line, merge_errors
 from profidrive_cli.link.base import Link
 
 log = logging.getLogger("profidrive_cli.trace")

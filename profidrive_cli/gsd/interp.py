@@ -1,4 +1,5 @@
-"""Interpreting a parsed GSD: module selection, Set_Prm user-parameter bytes, Chk_Cfg bytes, unit diagnosis.
+"""Interpreting a parsed GSD: Set_Prm user-parameter bytes, Chk_Cfg bytes, unit diagnosis. It reads
+the model (gsd/model.py) and never the parser.
 
 User_Prm_Data (reference §5), per block:
     device block   = User_Prm_Data padded/cut to User_Prm_Data_Len (zeros when absent)
@@ -10,10 +11,7 @@ User_Prm_Data (reference §5), per block:
                      followed by its PROFIsafe F_Ext_* block, appended in module order.
 Chk_Cfg = the selected modules' identifier octets verbatim (0x00 empty-slot octets included).
 
-Module selection: a Module object, an int (1-based position in the file, as `pdrive gsd show` numbers
-them), or a string: the exact name (then case-insensitive, surrounding blanks ignored), a position
-("3"), or "PPOn" which picks the first module whose name carries PPO number n ("PPO3", "PPO Type 3",
-"PPO-03, ..." all match "PPO3").
+Module selection (select_module / select_modules) is the model's lookup (gsd/model.py).
 
 A module parameter named "[SlotNumber]" (Siemens convention: the configuration tool fills in the module's
 slot) gets Modul_Offset + its 0-based position in the selection, unless overridden or outside its range.
@@ -38,69 +36,9 @@ from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping, Sequence
 
 from profidrive_cli import UsageError
-from profidrive_cli.gsd.model import DiagArea, ExtUserPrmData, Gsd, Module, PrmBlock
-from profidrive_cli.gsd.parser import MAX_USER_PRM_LEN
-
-_PPO_SEL = re.compile(r"\s*ppo[\s_-]*(?:type[\s_-]*)?0*(\d+)\s*\Z", re.I)
-
-
-def _ppo_pattern(n: int) -> re.Pattern:
-    return re.compile(r"ppo[\s_-]*(?:type[\s_-]*)?0*" + str(n) + r"(?!\d)", re.I)
-
-
-# ---------------------------------------------------------------- module selection
-def select_module(gsd: Gsd, selector: int | str | Module) -> Module:
-    if isinstance(selector, Module):
-        return selector
-    mods = gsd.modules
-    if not mods:
-        raise UsageError(f"{gsd.path}: the GSD defines no modules")
-    if isinstance(selector, bool) or not isinstance(selector, (int, str)):
-        raise UsageError(f"bad module selector {selector!r}")
-    if isinstance(selector, int):
-        if 1 <= selector <= len(mods):
-            return mods[selector - 1]
-        raise UsageError(f"module number {selector} out of range 1..{len(mods)} ({gsd.title})")
-    sel = selector
-    for m in mods:
-        if m.name == sel:
-            return m
-    key = sel.strip().casefold()
-    for m in mods:
-        if m.name.strip().casefold() == key:
-            return m
-    if key.isascii() and key.isdigit():
-        return select_module(gsd, int(key))
-    pm = _PPO_SEL.match(sel)
-    if pm:
-        pat = _ppo_pattern(int(pm.group(1)))
-        for m in mods:
-            if pat.search(m.name):
-                return m
-    prefix = [m for m in mods if m.name.strip().casefold().startswith(key)] if key else []
-    if len(prefix) == 1:
-        return prefix[0]
-    names = ", ".join(f"{m.index}: {m.display_name!r}" for m in mods[:12])
-    more = f" ... ({len(mods)} modules)" if len(mods) > 12 else ""
-    amb = f" ({len(prefix)} names start with it)" if len(prefix) > 1 else ""
-    raise UsageError(f"no module {selector!r} in {gsd.title}{amb}; modules: {names}{more}")
-
-
-def select_modules(gsd: Gsd, selection: Iterable[int | str | Module] | None) -> list[Module]:
-    sel = list(selection or [])
-    if not sel:
-        if not gsd.modular_station and len(gsd.modules) == 1:
-            return [gsd.modules[0]]
-        if len(gsd.modules) == 1:
-            return [gsd.modules[0]]
-        names = ", ".join(f"{m.index}: {m.display_name!r}" for m in gsd.modules[:12])
-        raise UsageError(f"choose the module(s) for {gsd.title}: {names}")
-    mods = [select_module(gsd, s) for s in sel]
-    mm = gsd.max_module
-    if gsd.modular_station and mm is not None and len(mods) > mm:
-        raise UsageError(f"{len(mods)} modules chosen but {gsd.title} takes at most {mm} (Max_Module)")
-    return mods
-
+from profidrive_cli.gsd.model import (
+    MAX_USER_PRM_LEN, DiagArea, ExtUserPrmData, Gsd, Module, PrmBlock, select_modules,
+)
 
 # ---------------------------------------------------------------- Set_Prm user data
 @dataclass

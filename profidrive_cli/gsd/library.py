@@ -23,7 +23,8 @@ from profidrive_cli import UsageError
 from profidrive_cli.data import gsd_dir, user_gsd_dirs
 from profidrive_cli.datafile import DataFileError, read_input_file, short
 from profidrive_cli.gsd.model import Gsd
-from profidrive_cli.gsd.parser import MAX_GSD_BYTES, MAX_NUMBER_CHARS, _decode, parse_gsd
+from profidrive_cli.gsd.lexer import MAX_GSD_BYTES, MAX_NUMBER_CHARS, decode
+from profidrive_cli.gsd.parser import parse_gsd
 
 # .gsd is the default language; .gse English, .gsg German, .gsf French, .gsi Italian, .gsp Portuguese,
 # .gss Spanish. In one folder, for one file stem, the first in this order is used.
@@ -91,7 +92,7 @@ def quick_ident(path: str | Path) -> int | None:
     if hit and hit[0] == stamp:
         return hit[1]
     try:
-        text, _ = _decode(read_input_file(p, "GSD file", MAX_GSD_BYTES))
+        text, _ = decode(read_input_file(p, "GSD file", MAX_GSD_BYTES))
     except DataFileError:
         return None
     m = _IDENT.search(text)

@@ -4,13 +4,21 @@ Every value the parser read is kept in `Gsd.values` under its canonical keyword 
 Yaskawa spelling `MaxTsd_<baud>` is stored as `maxtsdr_<baud>`), with the line it came from in
 `Gsd.value_lines`. Unknown keywords are kept there too (raw text) and listed in `Gsd.unknown`.
 The properties below are the keywords a DP master needs, typed and with the standard's defaults.
+
+Module selection (select_module, Gsd.find_module) is the model's own lookup: a Module object, an int
+(1-based position in the file, as `pdrive gsd show` numbers them), or a string: the exact name (then
+case-insensitive, surrounding blanks ignored), a position ("3"), or "PPOn" which picks the first module
+whose name carries PPO number n ("PPO3", "PPO Type 3", "PPO-03, ..." all match "PPO3").
+
+The model imports nothing of gsd/: the parser builds it, the interpreter (interp.py) reads it.
 """
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any
+from typing import Any, Iterable
 
 from profidrive_cli import UsageError
 from profidrive_cli.dp.cfg import CfgModule, decode_cfg
@@ -31,6 +39,9 @@ BAUDS: tuple[tuple[str, int, int], ...] = (
 )
 _BAUD_BY_KEY = {s.lower(): (s, bps, d) for s, bps, d in BAUDS}
 _BAUD_BY_BPS = {bps: (s, bps, d) for s, bps, d in BAUDS}
+
+# Set_Prm DU is at most 244 octets, 7 of them the standard part: User_Prm_Data <= 237 octets.
+MAX_USER_PRM_LEN = 237
 
 # Value range of each ExtUserPrmData type (Bit/BitArea ranges follow from the bit count).
 INT_TYPES: dict[str, tuple[int, int, int]] = {   # name -> (octets, min, max)
@@ -383,5 +394,65 @@ class Gsd:
 
     # ---- modules
     def find_module(self, selector: int | str | Module) -> Module:
-        from profidrive_cli.gsd.interp import select_module
         return select_module(self, selector)
+
+
+# ---------------------------------------------------------------- module selection
+_PPO_SEL = re.compile(r"\s*ppo[\s_-]*(?:type[\s_-]*)?0*(\d+)\s*\Z", re.I)
+
+
+def _ppo_pattern(n: int) -> re.Pattern:
+    return re.compile(r"ppo[\s_-]*(?:type[\s_-]*)?0*" + str(n) + r"(?!\d)", re.I)
+
+
+def select_module(gsd: Gsd, selector: int | str | Module) -> Module:
+    if isinstance(selector, Module):
+        return selector
+    mods = gsd.modules
+    if not mods:
+        raise UsageError(f"{gsd.path}: the GSD defines no modules")
+    if isinstance(selector, bool) or not isinstance(selector, (int, str)):
+        raise UsageError(f"bad module selector {selector!r}")
+    if isinstance(selector, int):
+        if 1 <= selector <= len(mods):
+            return mods[selector - 1]
+        raise UsageError(f"module number {selector} out of range 1..{len(mods)} ({gsd.title})")
+    sel = selector
+    for m in mods:
+        if m.name == sel:
+            return m
+    key = sel.strip().casefold()
+    for m in mods:
+        if m.name.strip().casefold() == key:
+            return m
+    if key.isascii() and key.isdigit():
+        return select_module(gsd, int(key))
+    pm = _PPO_SEL.match(sel)
+    if pm:
+        pat = _ppo_pattern(int(pm.group(1)))
+        for m in mods:
+            if pat.search(m.name):
+                return m
+    prefix = [m for m in mods if m.name.strip().casefold().startswith(key)] if key else []
+    if len(prefix) == 1:
+        return prefix[0]
+    names = ", ".join(f"{m.index}: {m.display_name!r}" for m in mods[:12])
+    more = f" ... ({len(mods)} modules)" if len(mods) > 12 else ""
+    amb = f" ({len(prefix)} names start with it)" if len(prefix) > 1 else ""
+    raise UsageError(f"no module {selector!r} in {gsd.title}{amb}; modules: {names}{more}")
+
+
+def select_modules(gsd: Gsd, selection: Iterable[int | str | Module] | None) -> list[Module]:
+    sel = list(selection or [])
+    if not sel:
+        if not gsd.modular_station and len(gsd.modules) == 1:
+            return [gsd.modules[0]]
+        if len(gsd.modules) == 1:
+            return [gsd.modules[0]]
+        names = ", ".join(f"{m.index}: {m.display_name!r}" for m in gsd.modules[:12])
+        raise UsageError(f"choose the module(s) for {gsd.title}: {names}")
+    mods = [select_module(gsd, s) for s in sel]
+    mm = gsd.max_module
+    if gsd.modular_station and mm is not None and len(mods) > mm:
+        raise UsageError(f"{len(mods)} modules chosen but {gsd.title} takes at most {mm} (Max_Module)")
+    return mods

@@ -1,11 +1,12 @@
 """GSD parser for files as found in the wild (reference §5).
 
-Two small stages, plain Python:
+Two small stages, plain Python; this module builds the model (gsd/model.py) and may touch gsd/lexer.py,
+gsd/required.py, dp/cfg.py and datafile.py:
 
-1. lines: decode (UTF-8 if the bytes are valid UTF-8, else Latin-1), split on CRLF / CR / LF (mixed is
-   fine), skip everything before the `#Profibus_DP` line, cut `;` comments (not inside strings) and join
-   `\\` continuations (also inside number lists and strings) into logical lines that remember the
-   physical line they started on.
+1. lines (gsd/lexer.py): decode (UTF-8 if the bytes are valid UTF-8, else Latin-1), split on
+   CRLF / CR / LF (mixed is fine), skip everything before the `#Profibus_DP` line, cut `;` comments
+   (not inside strings) and join `\\` continuations (also inside number lists and strings) into
+   logical lines that remember the physical line they started on.
 2. statements: each logical line is `Keyword[(args)] [=] value`, keywords compared case-insensitively.
    A small stack of open blocks (PrmText, ExtUserPrmData, Module, Data_Area, Unit_Diag_Area,
    UnitDiagType, SlotDefinition, ...) decides what a keyword means.
@@ -24,23 +25,13 @@ from typing import Any
 
 from profidrive_cli.datafile import DataFileError, read_input_file
 from profidrive_cli.dp.cfg import CfgError, decode_cfg
+from profidrive_cli.gsd.lexer import HEAD, MAX_GSD_BYTES, MAX_NUMBER_CHARS, NUM, SPLIT, Toks, decode, logical_lines
 from profidrive_cli.gsd.required import check_complete
 from profidrive_cli.gsd.model import (
-    BAUDS, INT_TYPES, DiagArea, ExtUserPrmData, Gsd, Module, PrmBlock, PrmConst, PrmRef, PrmText, Slot,
-    UnitDiagType,
+    BAUDS, INT_TYPES, MAX_USER_PRM_LEN, DiagArea, ExtUserPrmData, Gsd, Module, PrmBlock, PrmConst, PrmRef,
+    PrmText, Slot, UnitDiagType,
 )
 
-_SPLIT = re.compile(r"\r\n|\r|\n")
-_HEAD = re.compile(r"\s*([^\s=(]+)\s*(?:\(([^)]*)\))?\s*(=)?\s*(.*)\Z", re.S)
-_TOK = re.compile(r'"([^"]*)"|([-,@])|([^\s,"@-]+)')
-_NUM = re.compile(r"0[xX][0-9a-fA-F]+\Z|[0-9]+\Z")
-
-# input limits: the largest real GSD file we know is ~190 kB; a GSD number never needs more than 32 bits
-MAX_GSD_BYTES = 4 * 1024 * 1024
-MAX_NUMBER_CHARS = 24
-
-# Set_Prm DU is at most 244 octets, 7 of them the standard part: User_Prm_Data <= 237 octets.
-MAX_USER_PRM_LEN = 237
 
 _BAUD_SUFFIXES = tuple(s.lower() for s, _, _ in BAUDS)
 _BAUD_KEY = re.compile(r"(maxtsdr|maxtsd|tsdi|trdy|tqui|tset|transmission_delay|reaction_delay)_("
@@ -113,128 +104,6 @@ slot_number alarm_supp
 """.split())
 
 
-def _decode(data: bytes) -> tuple[str, str]:
-    try:
-        text = data.decode("utf-8")
-        enc = "ascii" if text.isascii() else "utf-8"
-    except UnicodeDecodeError:
-        text = data.decode("latin-1")
-        enc = "latin-1"
-    if text.startswith("\ufeff"):
-        text = text[1:]
-    return text, enc
-
-
-def _strip_comment(raw: str, in_str: bool) -> tuple[str, bool]:
-    """Cut a `;` comment that is outside strings; return (kept text, inside-a-string at the end)."""
-    if '"' not in raw:
-        if in_str:
-            return raw, True
-        j = raw.find(";")
-        return (raw if j < 0 else raw[:j]), False
-    parts = raw.split('"')
-    out: list[str] = []
-    state = in_str
-    for k, p in enumerate(parts):
-        if k:
-            out.append('"')
-            state = not state
-        if not state:
-            j = p.find(";")
-            if j >= 0:
-                out.append(p[:j])
-                return "".join(out), False
-        out.append(p)
-    return "".join(out), state
-
-
-class _Toks:
-    """Tokens of one value: ('s', text) strings, ('n', int) numbers, ('-'|','|'@', None), ('w', text)."""
-
-    __slots__ = ("t", "i", "p", "line", "what")
-
-    def __init__(self, text: str, parser: "_Parser", line: int, what: str):
-        t: list[tuple[str, Any]] = []
-        for m in _TOK.finditer(text):
-            s, punct, word = m.groups()
-            if s is not None:
-                t.append(("s", s))
-            elif punct is not None:
-                t.append((punct, None))
-            else:
-                if _NUM.match(word):
-                    if len(word) > MAX_NUMBER_CHARS:
-                        raise DataFileError(parser.path, line, f"{what}: number too long ({len(word)} "
-                                                               f"characters: {word[:12]}...)")
-                    t.append(("n", int(word[2:], 16) if word[1:2] in ("x", "X") else int(word)))
-                else:
-                    t.append(("w", word))
-        self.t = t
-        self.i = 0
-        self.p = parser
-        self.line = line
-        self.what = what
-
-    def error(self, msg: str) -> DataFileError:
-        return DataFileError(self.p.path, self.line, f"{self.what}: {msg}")
-
-    def at_end(self) -> bool:
-        return self.i >= len(self.t)
-
-    def peek(self) -> str | None:
-        return self.t[self.i][0] if self.i < len(self.t) else None
-
-    def _show(self) -> str:
-        kind, v = self.t[self.i]
-        return {"s": f'"{v}"', "n": str(v), "w": str(v)}.get(kind, kind)
-
-    def int(self, what: str = "number", signed: bool = False) -> int:
-        neg = False
-        if signed and self.peek() == "-":
-            neg = True
-            self.i += 1
-        if self.at_end():
-            raise self.error(f"{what} missing")
-        kind, v = self.t[self.i]
-        if kind != "n":
-            raise self.error(f"bad number {self._show()!s} (expected {what})" if kind == "w"
-                             else f"expected {what}, found {self._show()}")
-        self.i += 1
-        return -v if neg else v
-
-    def string(self, what: str = "string") -> str:
-        if self.at_end():
-            raise self.error(f"{what} missing")
-        kind, v = self.t[self.i]
-        if kind != "s":
-            raise self.error(f'expected a "quoted" {what}, found {self._show()}')
-        self.i += 1
-        return v
-
-    def skip(self, punct: str) -> bool:
-        if self.peek() == punct:
-            self.i += 1
-            return True
-        return False
-
-    def int_list(self, what: str, lo: int | None = None, hi: int | None = None,
-                 signed: bool = False) -> list[int]:
-        out: list[int] = []
-        while not self.at_end():
-            v = self.int(what, signed=signed)
-            if (lo is not None and v < lo) or (hi is not None and v > hi):
-                raise self.error(f"{what} {v} out of range {lo}..{hi}")
-            out.append(v)
-            if not self.skip(","):
-                if not self.at_end() and self.peek() not in ("n", "-"):
-                    raise self.error(f"unexpected {self._show()}")
-        return out
-
-    def end(self) -> None:
-        if not self.at_end():
-            raise self.error(f"unexpected {self._show()} after the value")
-
-
 class _Parser:
     def __init__(self, path: str):
         self.path = path
@@ -249,8 +118,8 @@ class _Parser:
     def err(self, line: int, msg: str) -> DataFileError:
         return DataFileError(self.path, line, msg)
 
-    def toks(self, text: str, line: int, what: str) -> _Toks:
-        return _Toks(text, self, line, what)
+    def toks(self, text: str, line: int, what: str) -> Toks:
+        return Toks(text, self.path, line, what)
 
     def args_int(self, args: str | None, line: int, kw: str, signed: bool = False) -> int:
         if args is None:
@@ -260,43 +129,9 @@ class _Parser:
         t.end()
         return v
 
-    # ------------------------------------------------------------------ lines
-    def logical_lines(self, lines: list[str], start: int):
-        buf: list[str] = []
-        first = 0
-        in_str = False
-        str_line = 0
-        for i in range(start, len(lines)):
-            lineno = i + 1
-            was_in_str = in_str
-            part, in_str = _strip_comment(lines[i], in_str)
-            if in_str and not was_in_str:
-                str_line = lineno          # the string still open at the end started on this line
-            stripped = part.rstrip()
-            if stripped.endswith("\\"):
-                if not buf:
-                    first = lineno
-                    buf.append(stripped[:-1])
-                else:
-                    buf.append(stripped[:-1] if was_in_str else " " + stripped[:-1].lstrip())
-                continue
-            if in_str:
-                raise self.err(str_line, "unterminated string (closing \" missing)")
-            if buf:
-                buf.append(part if was_in_str else " " + part.lstrip())
-                text = "".join(buf)
-                buf = []
-                yield first, text
-            else:
-                yield lineno, part
-        if in_str:
-            raise self.err(str_line, "unterminated string (closing \" missing)")
-        if buf:
-            yield first, "".join(buf)
-
     # ------------------------------------------------------------------ entry
     def parse(self, text: str) -> Gsd:
-        lines = _SPLIT.split(text)
+        lines = SPLIT.split(text)
         start = None
         for i, raw in enumerate(lines):
             if raw.lstrip()[:12].lower() == "#profibus_dp":
@@ -305,10 +140,10 @@ class _Parser:
         if start is None:
             raise self.err(1, "not a GSD file: no '#Profibus_DP' line")
         self.gsd.start_line = start + 1
-        for line, text_ in self.logical_lines(lines, start + 1):
+        for line, text_ in logical_lines(self.path, lines, start + 1):
             if not text_ or text_.isspace():
                 continue
-            m = _HEAD.match(text_)
+            m = HEAD.match(text_)
             if m is None:
                 self.gsd.unknown.append((text_.strip(), line))
                 self.warn(line, f"line not understood: {text_.strip()[:40]!r} (ignored)")
@@ -459,7 +294,7 @@ class _Parser:
             g.values.setdefault(kw, []).append(block)
             self.stack.append((kw, block, line))
         else:
-            if _NUM.match(kw):
+            if NUM.match(kw):
                 self.gsd.unknown.append((kw_raw, line))
                 self.warn(line, f"stray number {kw_raw!r} outside a Module (ignored)")
                 return
@@ -707,7 +542,7 @@ def parse_gsd_text(text: str, path: str | Path = "<string>", encoding: str = "as
 
 
 def parse_gsd_bytes(data: bytes, path: str | Path = "<bytes>") -> Gsd:
-    text, enc = _decode(data)
+    text, enc = decode(data)
     return parse_gsd_text(text, path, enc)
 
 

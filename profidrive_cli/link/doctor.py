@@ -262,24 +262,29 @@ def diagnose(port: str, baud: int = 19200, master_address: int = 2, probe_addres
 
 
 def _simulator(port: str) -> Report:
-    from profidrive_cli.sim.plant import build_bus
+    """Asked through the opened port: the sim:// handler (sim/protocol_sim.py) describes its segment,
+    so link/ needs nothing of sim/."""
+    from profidrive_cli.link.serial_link import open_serial
     rep = Report(port, "simulator")
     try:
-        bus = build_bus(port)
-    except UsageError as e:
+        ser = open_serial(port, 19200)
+    except (UsageError, BusError) as e:
         rep.add("simulator", FAIL, str(e))
         return rep
-    stations = ", ".join(f"{a} {s.model.family}" for a, s in sorted(bus.slaves.items()))
+    try:
+        info = ser.simulator_info()
+    finally:
+        ser.close()
+    stations = ", ".join(f"{a} {family}" for a, family in info["stations"].items())
     timing = {"instant": "instant (no wire time)", "wire": "wire time",
-              "virtual": "wire time on a simulated clock"}[bus.timing]
+              "virtual": "wire time on a simulated clock"}[info["timing"]]
     rep.add("simulator", INFO, f"{port} is pdrive's built-in simulator, not hardware: stations "
-            f"{stations}; {BAUD_NAMES[bus.params.baud]}, {timing}"
-            + ("; fault injection on" if bus.faults is not None else ""),
-            stations={a: s.model.family for a, s in sorted(bus.slaves.items())},
-            timing=bus.timing, baud=bus.params.baud)
+            f"{stations}; {BAUD_NAMES[info['baud']]}, {timing}"
+            + ("; fault injection on" if info["faults"] else ""),
+            stations=dict(info["stations"]), timing=info["timing"], baud=info["baud"])
     rep.add("hardware", SKIP, "nothing to check: give --port with a real device (e.g. /dev/ttyUSB0)")
     rep.baud_rates = {b: OK for b in BAUD_RATES}
-    rep.recommend = {"baud": bus.params.baud, "slot_time": None, "retries": 1,
+    rep.recommend = {"baud": info["baud"], "slot_time": None, "retries": 1,
                      "options": "", "why": "the simulator needs no latency margin"}
     return rep
 

@@ -36,8 +36,10 @@ except ImportError:                          # pragma: no cover
 #: the most one read takes from a socket:// port (more than any telegram)
 _SOCKET_CHUNK = 4096
 
-if "profidrive_cli.link" not in serial.protocol_handler_packages:
-    serial.protocol_handler_packages.append("profidrive_cli.link")
+# sim:// is registered by name: pyserial imports profidrive_cli.sim.protocol_sim only when a sim://
+# URL is opened, so link/ never imports sim/ (the handler lives with the plant it builds)
+if "profidrive_cli.sim" not in serial.protocol_handler_packages:
+    serial.protocol_handler_packages.append("profidrive_cli.sim")
 
 
 def _is_pty(port: str) -> bool:

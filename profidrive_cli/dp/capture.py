@@ -1,11 +1,15 @@
-"""Passive capture: frames with timestamps from a byte stream; pcap files (LINKTYPE_PROFIBUS_DL = 257)."""
+"""Passive capture: frames with timestamps from a byte stream; pcap files (LINKTYPE_PROFIBUS_DL = 257).
+
+In dp/ because it names each telegram's DP service (dp/services.py: SAP -> Set_Prm, Slave_Diag, ...);
+it touches fdl.frames and dp.services only and is sans-IO (octets and times in, records out).
+"""
 
 from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
 
-from profidrive_cli.dp.services import SERVICE_NAMES, service_name
+from profidrive_cli.dp.services import service_name
 from profidrive_cli.fdl import frames as F
 
 LINKTYPE_PROFIBUS_DL = 257
@@ -154,4 +158,4 @@ def read_pcap(data: bytes) -> tuple[int, list[tuple[float, bytes]]]:
     return linktype, pkts
 
 
-__all__ = ["Capture", "Captured", "PcapWriter", "read_pcap", "merge_errors", "SERVICE_NAMES"]
+__all__ = ["Capture", "Captured", "PcapWriter", "read_pcap", "merge_errors"]

@@ -1,6 +1,8 @@
 """pyserial URL handler for sim:// — the built-in simulated bus opens like any port.
 
-pyserial finds it because profidrive_cli.link adds itself to serial.protocol_handler_packages.
+It lives in sim/ (it builds the plant) and may touch sim/ and link.base; link/ only names this package
+in serial.protocol_handler_packages (a string, so importing link/ does not import the plant) and
+pyserial imports this module the first time a sim:// URL is opened.
 Writes go to a SimBus (sim/bus.py); reply octets become readable at the time the bus says each one is
 complete on the wire: at once for timing=instant, after real wire time for timing=wire (the reader
 sleeps like a real port), and on a simulated clock for timing=virtual (reads advance the clock
@@ -63,6 +65,13 @@ class Serial(SerialBase):
             self.locked_baud = self.bus.params.baud
         self._unplugged = False
         self.is_open = True
+
+    def simulator_info(self) -> dict:
+        """What `pdrive doctor` reports about the simulated segment behind this open port: the
+        stations {address: family}, the timing, the baud rate and whether faults are injected."""
+        bus = self.bus
+        return {"stations": {a: s.model.family for a, s in sorted(bus.slaves.items())},
+                "timing": bus.timing, "baud": bus.params.baud, "faults": bus.faults is not None}
 
     def close(self):
         self.is_open = False

@@ -1,0 +1,232 @@
+"""The house rules, read from the source: which layer may import which, no import cycles, no module
+over 600 lines. Every import counts, also those inside functions (a lazy import is still a dependency).
+
+Layers, lowest first, and what each may import (besides the standard library, its own layer and the
+top-level modules profidrive_cli/__init__, datafile, outfile, data):
+
+    fdl        nothing of pdrive. Sans-IO frames and bus timing: bytes and times in, bytes and deadlines
+               out; it knows no port, so it imports nothing of link/ either.
+    link       fdl. Decision (from the code): link/ is the port, and it reads fdl's pure tables: the
+               baud-rate names for its error lines (serial_link.py) and the frames doctor.py sends for
+               its round-trip probe. Bytes still flow link -> fdl -> dp at run time; at import time
+               fdl is the floor because it needs nothing at all.
+    dp         fdl, link (the poller waits on the link's clock and raises its LinkLost)
+    gsd        dp and below (dp.cfg decodes the module identifiers)
+    drives     gsd and below (drives/session.py still opens links until session/ takes it over)
+    sim        drives and below (the drive models reuse the codecs); sim:// is registered from here
+    session    sim and below (profidrive_cli/session/, being built from drives/session.py)
+    checklist  session and below
+    cli        everything (checklist included); profidrive_cli/__main__ counts as cli
+    top-level  (__init__, datafile, outfile, data) nothing of any layer
+
+Each failure names file:line and the import.
+"""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+PKG = ROOT / "profidrive_cli"
+
+ORDER = ("fdl", "link", "dp", "gsd", "drives", "sim", "session", "checklist", "cli")
+TOP = "top"
+TOP_MODULES = {"profidrive_cli", "profidrive_cli.datafile", "profidrive_cli.outfile", "profidrive_cli.data"}
+
+#: layer -> the layers it may import (its own and the top-level modules always)
+ALLOWED = {layer: set(ORDER[:i + 1]) | {TOP} for i, layer in enumerate(ORDER)}
+ALLOWED[TOP] = {TOP}
+
+MAX_LINES = 600
+
+#: import cycles that live in modules other engineers of issue 15 are splitting right now
+#: (drives/values.py:211 imports drives.toyo inside a function, drives/restore.py:70 imports
+#: drives.session inside a function); tolerated only as exactly these sets, any other cycle fails.
+#: Remove the entries when the house slices are merged.
+KNOWN_CYCLES_UNTIL_MERGE = [
+    {"profidrive_cli.drives.profidrive", "profidrive_cli.drives.toyo", "profidrive_cli.drives.values"},
+    {"profidrive_cli.drives.restore", "profidrive_cli.drives.session"},
+]
+
+
+def _modules() -> dict[str, Path]:
+    mods = {}
+    for f in sorted(PKG.rglob("*.py")):
+        parts = f.relative_to(ROOT).with_suffix("").parts
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        mods[".".join(parts)] = f
+    return mods
+
+
+MODULES = _modules()
+
+
+def layer_of(module: str) -> str:
+    parts = module.split(".")
+    if module in TOP_MODULES:
+        return TOP
+    if module == "profidrive_cli.__main__":
+        return "cli"
+    if len(parts) >= 2 and parts[1] in ORDER:
+        return parts[1]
+    raise AssertionError(f"{module}: in no layer; add it to ORDER or TOP_MODULES in tests/test_layering.py")
+
+
+def _resolve(name: str) -> str | None:
+    """The pdrive module an imported name loads (the longest existing prefix), or None."""
+    while name and name not in MODULES:
+        name = name.rpartition(".")[0]
+    return name or None
+
+
+def imports_of(module: str, path: Path) -> list[tuple[int, str, str]]:
+    """(line, target module, import text) for every pdrive import in the file, at any depth."""
+    is_pkg = path.name == "__init__.py"
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.split(".")[0] == "profidrive_cli":
+                    out.append((node.lineno, a.name, f"import {a.name}"))
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = module.split(".") if is_pkg else module.split(".")[:-1]
+                base = base[:len(base) - (node.level - 1)]
+                src = ".".join(base + ([node.module] if node.module else []))
+            else:
+                src = node.module or ""
+            if src.split(".")[0] != "profidrive_cli":
+                continue
+            text = f"from {'.' * node.level}{node.module or ''} import {', '.join(a.name for a in node.names)}"
+            for a in node.names:
+                full = f"{src}.{a.name}"
+                out.append((node.lineno, full if full in MODULES else src, text))
+    result = []
+    for line, target, text in out:
+        mod = _resolve(target)
+        if mod is not None and mod != module and (line, mod, text) not in result:
+            result.append((line, mod, text))
+    return result
+
+
+GRAPH = {m: imports_of(m, p) for m, p in MODULES.items()}
+
+
+def _where(path: Path, line: int) -> str:
+    return f"{path.relative_to(ROOT)}:{line}"
+
+
+def test_every_module_is_in_a_layer_and_the_rules_cover_the_package():
+    assert {"profidrive_cli.fdl.frames", "profidrive_cli.link.base", "profidrive_cli.dp.poller",
+            "profidrive_cli.gsd.parser", "profidrive_cli.cli.main"} <= set(MODULES)
+    assert sum(len(v) for v in GRAPH.values()) > 100        # the parser sees the imports at all
+    for m in MODULES:
+        layer_of(m)
+
+
+def test_imports_follow_the_layer_order():
+    bad = []
+    for m, edges in GRAPH.items():
+        src = layer_of(m)
+        for line, target, text in edges:
+            dst = layer_of(target)
+            if dst not in ALLOWED[src]:
+                bad.append(f"{_where(MODULES[m], line)}: {text} ({src} must not import {dst})")
+    assert not bad, "imports against the layer order:\n" + "\n".join(bad)
+
+
+def _cycles(graph: dict[str, list[tuple[int, str, str]]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found = []
+    counter = 0
+    for root in graph:
+        if root in index:
+            continue
+        work = [(root, iter(sorted({t for _, t, _ in graph[root]})))]
+        index[root] = low[root] = counter
+        counter += 1
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            v, it = work[-1]
+            for w in it:
+                if w not in index:
+                    index[w] = low[w] = counter
+                    counter += 1
+                    stack.append(w)
+                    on_stack.add(w)
+                    work.append((w, iter(sorted({t for _, t, _ in graph[w]}))))
+                    break
+                if w in on_stack:
+                    low[v] = min(low[v], index[w])
+            else:
+                work.pop()
+                if work:
+                    low[work[-1][0]] = min(low[work[-1][0]], low[v])
+                if low[v] == index[v]:
+                    comp = []
+                    while True:
+                        w = stack.pop()
+                        on_stack.discard(w)
+                        comp.append(w)
+                        if w == v:
+                            break
+                    if len(comp) > 1:
+                        found.append(sorted(comp))
+    return found
+
+
+def test_cycle_finder_finds_a_cycle():
+    # the finder itself, on graphs made up here: a -> b -> c -> a is one cycle, d (reached from c)
+    # none; e <-> f a second one
+    graph = {"a": [(1, "b", "")], "b": [(1, "c", "")], "c": [(1, "a", ""), (2, "d", "")], "d": []}
+    assert _cycles(graph) == [["a", "b", "c"]]
+    graph.update({"d": [(1, "e", "")], "e": [(1, "f", "")], "f": [(1, "e", "")]})
+    assert sorted(_cycles(graph)) == [["a", "b", "c"], ["e", "f"]]
+    assert _cycles({"a": [(1, "b", "")], "b": []}) == []
+
+
+def test_no_import_cycles_between_modules():
+    bad = []
+    for comp in _cycles(GRAPH):
+        if set(comp) in KNOWN_CYCLES_UNTIL_MERGE:
+            continue
+        members = set(comp)
+        edges = [f"  {_where(MODULES[m], line)}: {text}"
+                 for m in comp for line, t, text in GRAPH[m] if t in members]
+        bad.append("cycle " + " <-> ".join(comp) + ":\n" + "\n".join(edges))
+    assert not bad, "import cycles:\n" + "\n".join(bad)
+
+
+@pytest.mark.xfail(strict=False, reason="until the house slices are merged")
+def test_no_module_over_600_lines():
+    big = []
+    for m, p in MODULES.items():
+        n = len(p.read_text(encoding="utf-8").splitlines())
+        if n > MAX_LINES:
+            big.append(f"{p.relative_to(ROOT)}: {n} lines (at most {MAX_LINES}: split it by concern)")
+    assert not big, "\n".join(big)
+
+
+def test_importing_link_loads_nothing_of_sim_and_sim_urls_still_open():
+    # sim:// is registered by name (pyserial's protocol_handler_packages): the handler lives in sim/
+    # and is imported only when a sim:// URL is opened
+    code = ("import sys\n"
+            "import profidrive_cli.link, profidrive_cli.link.serial_link, profidrive_cli.link.doctor\n"
+            "print('BEFORE', sorted(m for m in sys.modules if m.startswith('profidrive_cli.sim')))\n"
+            "from profidrive_cli.link import open_link\n"
+            "link = open_link('sim://')\n"
+            "print('HANDLER', type(link.ser).__module__)\n")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=ROOT)
+    assert "BEFORE []" in p.stdout, p.stdout + p.stderr
+    assert "HANDLER profidrive_cli.sim.protocol_sim" in p.stdout, p.stdout + p.stderr
