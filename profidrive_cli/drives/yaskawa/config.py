@@ -1,0 +1,210 @@
+"""Yaskawa profile keys: the `yaskawa:` section, layouts, registers, alarms and LED table, validated
+with file:line (DataFileError); plus the register names and 'REG0x..' codes used to address them.
+
+May touch: datafile, codec (FORMATS). Reads the profile, writes nothing but its cache on the profile.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+from profidrive_cli.datafile import DataFileError, LineDict
+from profidrive_cli.drives.yaskawa.codec import FORMATS
+
+# ---------------------------------------------------------------------------------------------------
+# Family keys of the profile (validated with file:line)
+# ---------------------------------------------------------------------------------------------------
+
+LED_STATES = ("off", "green", "red", "green-flash", "red-flash")
+REGISTER_SOURCES = ("printed", "inferred", "external")
+ALARM_KINDS = ("fault", "ope", "cpf", "alarm")
+
+
+@dataclass
+class YaskawaConfig:
+    reference_unit_hz: float = 0.01
+    feedback_unit_hz: float = 0.1
+    o1_03: int = 0
+    rated_current_a: float | None = None
+    fast_stop_input: int | None = None
+    timeout_s: float = 1.0
+    settle_cycles: int = 1
+    enter_register: int | None = None
+    fault_history: list[tuple[str, str]] = field(default_factory=list)   # (position, param code)
+    alarm_kinds: dict[str, str] = field(default_factory=dict)            # code -> fault|ope|cpf|alarm
+    led_diagnostics: list[dict] = field(default_factory=list)
+
+
+def _num(path, node: LineDict, key, default, types=(int, float), allow_none=False):
+    if key not in node:
+        return default
+    v = node[key]
+    if v is None and allow_none:
+        return None
+    if isinstance(v, bool) or not isinstance(v, types):
+        raise DataFileError(path, node.line_of(key), f"'{key}' must be a number, got {v!r}")
+    return v
+
+
+def family_config(profile) -> YaskawaConfig:
+    """Validate and return the Yaskawa keys of a profile (cached on the profile object)."""
+    cached = getattr(profile, "_yaskawa_config", None)
+    if cached is not None:
+        return cached
+    path = profile.path or profile.name
+    raw = profile.raw if isinstance(profile.raw, LineDict) else LineDict()
+    cfg = YaskawaConfig()
+
+    layouts_node = raw.get("layouts")
+    for name, lay in profile.layouts.items():
+        line = layouts_node.line_of(name) if isinstance(layouts_node, LineDict) else None
+        lnode = layouts_node.get(name) if isinstance(layouts_node, LineDict) else None
+        if name not in FORMATS:
+            raise DataFileError(path, line, f"layout '{name}': the yaskawa codec knows "
+                                f"{', '.join(FORMATS)}")
+        if lay.cfg != FORMATS[name].cfg:
+            if isinstance(lnode, LineDict):
+                line = lnode.line_of("cfg")
+            raise DataFileError(path, line, f"layout '{name}': cfg must be {FORMATS[name].cfg.hex(' ').upper()}")
+
+    y = raw.get("yaskawa", LineDict())
+    if not isinstance(y, LineDict):
+        raise DataFileError(path, raw.line_of("yaskawa"), "'yaskawa' must be a mapping")
+    cfg.reference_unit_hz = float(_num(path, y, "reference_unit_hz", cfg.reference_unit_hz))
+    cfg.feedback_unit_hz = float(_num(path, y, "feedback_unit_hz", cfg.feedback_unit_hz))
+    for k in ("reference_unit_hz", "feedback_unit_hz"):
+        if getattr(cfg, k) <= 0:
+            raise DataFileError(path, y.line_of(k), f"'{k}' must be > 0")
+    cfg.o1_03 = _num(path, y, "o1_03", 0, int)
+    if not 0 <= cfg.o1_03 <= 39999:
+        raise DataFileError(path, y.line_of("o1_03"), "'o1_03' must be 0..39999")
+    rc = _num(path, y, "rated_current_a", None, allow_none=True)
+    if rc is not None and rc <= 0:
+        raise DataFileError(path, y.line_of("rated_current_a"), "'rated_current_a' must be > 0 or null")
+    cfg.rated_current_a = None if rc is None else float(rc)
+    fs = _num(path, y, "fast_stop_input", None, int, allow_none=True)
+    if fs is not None and not 3 <= fs <= 12:
+        raise DataFileError(path, y.line_of("fast_stop_input"),
+                            "'fast_stop_input' must be a multi-function input 3..12 or null")
+    cfg.fast_stop_input = fs
+
+    hsn = y.get("handshake", LineDict())
+    if not isinstance(hsn, LineDict):
+        raise DataFileError(path, y.line_of("handshake"), "'handshake' must be a mapping")
+    cfg.timeout_s = float(_num(path, hsn, "timeout_s", 1.0))
+    cfg.settle_cycles = _num(path, hsn, "settle_cycles", 1, int)
+    if cfg.timeout_s <= 0 or cfg.settle_cycles < 1:
+        raise DataFileError(path, hsn.line, "handshake: timeout_s must be > 0 and settle_cycles >= 1")
+
+    en = y.get("enter_register")
+    if en is not None:
+        if not isinstance(en, LineDict) or not isinstance(en.get("register"), int):
+            raise DataFileError(path, y.line_of("enter_register"),
+                                "'enter_register' must be a mapping with an integer 'register'")
+        _check_source(path, en)
+        cfg.enter_register = en["register"]
+
+    fh = y.get("fault_history", [])
+    if not isinstance(fh, list):
+        raise DataFileError(path, y.line_of("fault_history"), "'fault_history' must be a list")
+    for i, item in enumerate(fh):
+        line = fh.line_of(i) if hasattr(fh, "line_of") else None
+        if not isinstance(item, LineDict) or not isinstance(item.get("position"), str) \
+                or not isinstance(item.get("param"), str):
+            raise DataFileError(path, line, "fault_history entries need 'position' and 'param' (strings)")
+        p = profile.param(item["param"])
+        if p is None or p.register is None:
+            raise DataFileError(path, item.line_of("param"),
+                                f"fault_history: {item['param']} is not a parameter with a register")
+        cfg.fault_history.append((item["position"], p.code))
+
+    for code, p in profile.parameters.items():
+        node = _param_node(raw, p.line)
+        src = p.extra.get("register_source")
+        if src is not None and src not in REGISTER_SOURCES:
+            raise DataFileError(path, node.line_of("register_source") if node else p.line,
+                                f"{code}: register_source must be one of {', '.join(REGISTER_SOURCES)}")
+        vals = p.extra.get("values")
+        if vals is not None and not isinstance(vals, dict):
+            raise DataFileError(path, node.line_of("values") if node else p.line,
+                                f"{code}: 'values' must be a mapping of value -> meaning")
+        if p.register is not None and not 0 <= p.register <= 0xFFFF:
+            raise DataFileError(path, node.line_of("register") if node else p.line,
+                                f"{code}: register must be 0..0xFFFF")
+
+    alarms = raw.get("alarms", [])
+    for i, a in enumerate(alarms if isinstance(alarms, list) else []):
+        if not isinstance(a, LineDict):
+            continue
+        kind = a.get("kind", "fault")
+        if kind not in ALARM_KINDS:
+            raise DataFileError(path, a.line_of("kind"), f"alarm kind must be one of {', '.join(ALARM_KINDS)}")
+        cfg.alarm_kinds[str(a.get("code")).upper()] = kind
+
+    leds = raw.get("led_diagnostics", [])
+    if not isinstance(leds, list):
+        raise DataFileError(path, raw.line_of("led_diagnostics"), "'led_diagnostics' must be a list")
+    for item in leds:
+        if not isinstance(item, LineDict):
+            raise DataFileError(path, getattr(item, "line", None), "an LED row must be a mapping")
+        for k in ("pwr", "com", "err", "wd"):
+            if item.get(k) is False:        # YAML 1.1 reads a bare `off` as false
+                item[k] = "off"
+            if item.get(k) not in LED_STATES:
+                raise DataFileError(path, item.line_of(k) if k in item else item.line,
+                                    f"LED row: '{k}' must be one of {', '.join(LED_STATES)}")
+        if not isinstance(item.get("condition"), str):
+            raise DataFileError(path, item.line, "LED row: 'condition' (text) is missing")
+        cfg.led_diagnostics.append({k: str(v) for k, v in item.items()})
+
+    decisions = raw.get("decisions", [])
+    if not isinstance(decisions, list) or not all(isinstance(d, str) for d in decisions):
+        raise DataFileError(path, raw.line_of("decisions"), "'decisions' must be a list of strings")
+
+    try:
+        profile._yaskawa_config = cfg
+    except AttributeError:   # pragma: no cover - a frozen profile object
+        pass
+    return cfg
+
+
+def _check_source(path, node: LineDict) -> None:
+    src = node.get("register_source")
+    if src is not None and src not in REGISTER_SOURCES:
+        raise DataFileError(path, node.line_of("register_source"),
+                            f"register_source must be one of {', '.join(REGISTER_SOURCES)}")
+
+
+def _param_node(raw: LineDict, line: int) -> LineDict | None:
+    for node in raw.get("parameters", []) or []:
+        if isinstance(node, LineDict) and node.line == line:
+            return node
+    return None
+
+
+def led_diagnosis(profile, pwr: str, com: str, err: str, wd: str) -> dict:
+    """The LED table row for a state (pwr, com, err, wd), or an 'unspecified' row (spec §1.7)."""
+    for row in family_config(profile).led_diagnostics:
+        if (row["pwr"], row["com"], row["err"], row["wd"]) == (pwr, com, err, wd):
+            return row
+    return {"pwr": pwr, "com": com, "err": err, "wd": wd, "condition": "Unspecified option error",
+            "cause": "LED combination not in the manual's table", "remedy": "Treat as an option fault"}
+
+
+def register_name(profile, reg: int) -> str | None:
+    for p in profile.parameters.values():
+        if p.register == reg:
+            return p.code
+    return None
+
+
+_REG_RE = re.compile(r"^REG(?:0X([0-9A-F]{1,4})|([0-9]{1,5}))$", re.IGNORECASE)
+
+
+def parse_register_code(code: str) -> int | None:
+    """'REG0x0180' (hex) or 'REG384' (decimal) -> register number; None if not that form."""
+    m = _REG_RE.match(code.strip())
+    if not m:
+        return None
+    return int(m.group(1), 16) if m.group(1) else int(m.group(2))

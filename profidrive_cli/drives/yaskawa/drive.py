@@ -1,0 +1,428 @@
+"""YaskawaDrive: the Drive interface (drives/base.py) over a CyclicChannel for the SI-P1 card.
+
+Couples the sans-IO codec and ParamAccess machine with the channel: builds the output image each
+cycle, decodes the status, runs parameter requests through the handshake. May touch: drives/base,
+drives/values, and this package's codec, paramaccess and config.
+"""
+
+from __future__ import annotations
+
+from profidrive_cli import UsageError
+from profidrive_cli.drives.base import (Drive, DriveError, DriveStatus, FaultRecord, ParamError,
+                                        ParamValue)
+from profidrive_cli.drives.values import raw_value_problem, value_problem
+from profidrive_cli.drives.yaskawa.codec import (COMMAND_BITS, FORMATS, FrequencyScale, decode_status,
+                                                 mfi_bit, pack_words, unpack_words)
+from profidrive_cli.drives.yaskawa.config import family_config, parse_register_code, register_name
+from profidrive_cli.drives.yaskawa.paramaccess import ParamAccess, ParamRequest, ParamResult, error_text
+
+FAMILY = "yaskawa"
+
+
+class YaskawaDrive(Drive):
+    family = FAMILY
+
+    def __init__(self, channel, profile, layout: str | None = None):
+        super().__init__(channel, profile, layout)
+        if self.layout not in profile.layouts or self.layout not in FORMATS:
+            raise UsageError(f"{profile.name}: no layout '{self.layout}' (known: {', '.join(profile.layouts)})")
+        self.cfg = family_config(profile)
+        self.fmt = FORMATS[self.layout]
+        self.order = profile.word_order
+        self.params = (ParamAccess(self.fmt, self.cfg.timeout_s, self.cfg.settle_cycles)
+                       if self.fmt.has_params else None)
+        self._result: ParamResult | None = None
+        # command state
+        self._run = False
+        self._ref_percent = 0.0
+        self._ref_raw = 0
+        self._base_block = False
+        self._fast_stop = False
+        self._external_fault = False
+        self._mfi: set[int] = set()
+        self._pulses: dict[int, int] = {}
+        self.torque_reference = 0.0          # % (flux vector only)
+        # cached drive settings (read through the handshake when there is a parameter channel)
+        self._fmax: float | None = None
+        self._o1_03: int | None = None
+        self.last: DriveStatus | None = None
+
+    # -- cyclic --------------------------------------------------------------------------------
+    @property
+    def has_param_channel(self) -> bool:
+        return self.fmt.has_params
+
+    def command_word(self) -> int:
+        w = 0
+        if self._run:
+            w |= 1 << (COMMAND_BITS["reverse_run"] if self._ref_percent < 0 else COMMAND_BITS["forward_run"])
+        if self._base_block:
+            w |= 1 << COMMAND_BITS["external_base_block"]
+        if self._external_fault:
+            w |= 1 << COMMAND_BITS["external_fault"]
+        for n in self._mfi:
+            w |= 1 << mfi_bit(n)
+        if self._fast_stop and self.cfg.fast_stop_input:
+            w |= 1 << mfi_bit(self.cfg.fast_stop_input)
+        for bit, left in self._pulses.items():
+            if left > 0:
+                w |= 1 << bit
+        return w
+
+    def output_image(self) -> bytes:
+        vals = {"command": self.command_word(), "reference": self._ref_raw,
+                "torque_reference": int(round(self.torque_reference * 10)) & 0xFFFF}
+        img = pack_words([vals.get(n, 0) for n in self.fmt.out_words], self.order)
+        if self.params is not None:
+            img += bytes(self.fmt.param_offset - len(img)) + self.params.outputs()
+        return img
+
+    def cycle(self) -> DriveStatus:
+        inputs = self.channel.exchange(self.output_image())
+        if len(inputs) != self.fmt.size:
+            raise DriveError(f"yaskawa {self.layout}: station answered {len(inputs)} octets, "
+                             f"expected {self.fmt.size}")
+        for bit in list(self._pulses):
+            self._pulses[bit] -= 1
+            if self._pulses[bit] <= 0:
+                del self._pulses[bit]
+        if self.params is not None:
+            r = self.params.feed(inputs[self.fmt.param_offset:], self.channel.now())
+            if r is not None:
+                self._result = r
+        self.last = self._decode(inputs)
+        return self.last
+
+    def _scale(self) -> FrequencyScale:
+        o1 = self._o1_03 if self._o1_03 is not None else self.cfg.o1_03
+        fmax = self._fmax if self._fmax is not None else float(self.profile.max_frequency_default)
+        return FrequencyScale(o1, fmax, self.cfg.reference_unit_hz, self.cfg.feedback_unit_hz)
+
+    def _decode(self, inputs: bytes) -> DriveStatus:
+        names = self.fmt.in_words
+        words = dict(zip(names, unpack_words(inputs[:2 * len(names)], self.order)))
+        fl = decode_status(words["status"])
+        scale = self._scale()
+        hz = scale.raw_to_hz(words["speed_feedback"], "feedback")
+        if fl["reverse"]:
+            hz = -hz
+        pct = round(100.0 * hz / scale.max_hz, 3) if scale.max_hz else None
+        ref_pct = self._ref_percent
+        if "frequency_reference" in words and scale.max_hz:
+            ref_hz = scale.raw_to_hz(words["frequency_reference"], "feedback")
+            ref_pct = round(100.0 * ref_hz / scale.max_hz * (-1 if self._ref_percent < 0 else 1), 3)
+        if fl["fault"]:
+            state = "fault"
+        elif fl["ope_error"]:
+            state = "OPE setting error"
+        elif fl["running"]:
+            state = "running reverse" if fl["reverse"] else "running forward"
+        elif self._base_block:
+            state = "base block"
+        elif not fl["ready"]:
+            state = "not ready"
+        else:
+            state = "stopped"
+        return DriveStatus(state=state, running=fl["running"], fault=fl["fault"], flags=fl,
+                           speed_percent=pct, speed_hz=hz, reference_percent=ref_pct,
+                           raw=dict(words))
+
+    # -- motion --------------------------------------------------------------------------------
+    def _hint_not_remote(self, st: DriveStatus) -> str:
+        if st.flags.get("remote"):
+            return ""
+        return ("; the status word says local: the drive takes its run command from the bus only "
+                "when b1-02 = 3 (option card)")
+
+    def start(self, timeout: float = 5.0) -> DriveStatus:
+        st = self.cycle()
+        if st.fault:
+            raise DriveError("yaskawa: the drive is in fault; reset it first (pdrive reset)")
+        self._prepare_reference()
+        self._base_block = False
+        self._fast_stop = False
+        self._run = True
+        try:
+            st = self.cycles_until(lambda s: s.running or s.fault, timeout, "the drive to run")
+        except DriveError as e:
+            raise DriveError(f"{e}{self._hint_not_remote(self.last or st)}") from None
+        if st.fault:
+            self._run = False
+            raise DriveError(f"yaskawa: the drive tripped while starting{self._fault_suffix()}")
+        return st
+
+    def stop(self, mode: str = "normal", wait: bool = True, timeout: float = 30.0) -> DriveStatus:
+        if mode == "quick":
+            if self.cfg.fast_stop_input is None:
+                raise DriveError("yaskawa SI-P1: the command word has no fast-stop bit; program a "
+                                 "multi-function input for fast stop and name it in the profile "
+                                 "(yaskawa.fast_stop_input), or use a normal or coast stop")
+            self._fast_stop = True
+        elif mode == "coast":
+            self._base_block = True     # external base block: output cut, the motor coasts
+        elif mode != "normal":
+            raise UsageError(f"stop mode must be normal, quick or coast, got {mode!r}")
+        self._run = False               # run bit off: the drive stops by b1-03 (ramp by default)
+        if not wait:
+            return self.cycle()
+        st = self.cycles_until(lambda s: (not s.running and s.flags["zero_speed"]) or s.fault,
+                               timeout, "the drive to stop")
+        self._fast_stop = False
+        return st
+
+    def set_speed(self, percent: float) -> None:
+        if not -100.0 <= percent <= 100.0:
+            raise UsageError(f"speed {percent:g} % is outside -100..100 % of the maximum frequency")
+        self._ref_percent = float(percent)
+        self._prepare_reference()
+
+    def _prepare_reference(self) -> None:
+        if self.has_param_channel:
+            self._read_units()
+        scale = self._scale()
+        hz = abs(self._ref_percent) / 100.0 * scale.max_hz
+        self._ref_raw = min(scale.hz_to_raw(hz, "reference"), 0xFFFF)
+
+    def _read_units(self) -> None:
+        if self._fmax is None:
+            self._fmax = self.max_frequency()
+        if self._o1_03 is None:
+            p = self.profile.param("o1-03")
+            self._o1_03 = int(self.read_param("o1-03").raw) if p is not None and p.register is not None \
+                else self.cfg.o1_03
+
+    def set_mfi(self, n: int, on: bool) -> None:
+        """Multi-function input n (3..12) of the command word (its function is set in the drive)."""
+        mfi_bit(n)
+        (self._mfi.add if on else self._mfi.discard)(n)
+
+    def external_fault(self, on: bool = True) -> None:
+        """Command-word bit 8: the drive trips with EF0 while it is set."""
+        self._external_fault = on
+
+    def reset_fault(self, timeout: float = 5.0) -> DriveStatus:
+        self._run = False
+        self._external_fault = False
+        self._pulses[COMMAND_BITS["fault_reset"]] = 2     # a pulse, never left set
+        while self._pulses:
+            self.cycle()
+        try:
+            return self.cycles_until(lambda s: not s.fault, timeout, "the fault to clear")
+        except DriveError:
+            raise DriveError(f"yaskawa: the fault is still present after the reset pulse; remove its "
+                             f"cause first{self._fault_suffix()}") from None
+
+    def clear_error_log(self) -> None:
+        """Pulse command-word bit 14 (Clear Error Log)."""
+        self._pulses[COMMAND_BITS["clear_error_log"]] = 2
+        while self._pulses:
+            self.cycle()
+
+    def status(self) -> DriveStatus:
+        st = self.cycle()
+        if st.fault and self.has_param_channel:
+            code = self._current_fault_code()
+            if code:
+                st.fault_code = code
+        return st
+
+    def _current_fault_code(self) -> str | None:
+        cur = next((c for pos, c in self.cfg.fault_history if pos == "current"), None)
+        if cur is None:
+            return None
+        try:
+            raw = self.read_param(cur).raw
+        except DriveError:
+            return None
+        if not raw:
+            return None
+        al = self.profile.alarms_for(raw)
+        return "/".join(a.code for a in al) if al else f"0x{raw:04X}"
+
+    def _fault_suffix(self) -> str:
+        if not self.has_param_channel:
+            return ""
+        code = self._current_fault_code()
+        return f" (fault {code})" if code else ""
+
+    # -- parameters ----------------------------------------------------------------------------
+    def _no_channel(self) -> DriveError:
+        return DriveError("yaskawa basic layout (3 words) has no parameter access; configure "
+                          "extended1 (16 words) or extended2 (6 words)")
+
+    def _transact(self, req: ParamRequest) -> ParamResult:
+        if self.params is None:
+            raise self._no_channel()
+        self._result = None
+        self.params.submit(req, self.channel.now())
+        while self._result is None:
+            self.cycle()
+        r, self._result = self._result, None
+        if r.timeout:
+            raise DriveError(f"yaskawa: {r.message}")
+        if not r.ok:
+            raise ParamError(f"yaskawa: {r.message}", r.error_code)
+        return r
+
+    def read_registers(self, start: int, count: int = 1) -> list[int]:
+        """Read `count` consecutive MEMOBUS registers (extended1: up to 4 per request)."""
+        if self.params is None:
+            raise self._no_channel()
+        out: list[int] = []
+        while count > 0:
+            n = min(count, self.fmt.max_registers)
+            out += self._transact(ParamRequest.read(start, n)).values
+            start, count = start + n, count - n
+        return out
+
+    def write_registers(self, start: int, values) -> None:
+        if self.params is None:
+            raise self._no_channel()
+        values = list(values)
+        while values:
+            chunk, values = values[:self.fmt.max_registers], values[self.fmt.max_registers:]
+            self._transact(ParamRequest.write(start, chunk))
+            start += len(chunk)
+
+    def _resolve(self, code: str):
+        reg = parse_register_code(code)
+        if reg is not None:
+            if reg > 0xFFFF:
+                raise UsageError(f"{code}: register numbers are 16 bits")
+            return reg, None
+        p = self.profile.param(code)
+        if p is None:
+            raise UsageError(f"{self.profile.name}: unknown parameter {code!r} (use a code from the "
+                             f"profile or a raw register such as REG0x0180)")
+        if p.register is None:
+            raise DriveError(f"{p.code}: the profile gives no MEMOBUS register for it")
+        return p.register, p
+
+    def _value(self, code: str, p, raw: int) -> ParamValue:
+        if p is None:
+            n = register_name(self.profile, self._resolve(code)[0])
+            reg = parse_register_code(code)
+            return ParamValue(code=f"REG0x{reg:04X}", name=f"MEMOBUS register{' (' + n + ')' if n else ''}",
+                              raw=raw, value=raw)
+        return ParamValue(code=p.code, name=p.name, raw=raw, value=p.from_raw(raw), unit=p.unit)
+
+    def read_param(self, code: str) -> ParamValue:
+        if self.params is None:
+            raise self._no_channel()
+        reg, p = self._resolve(code)
+        raw = self.read_registers(reg, 1)[0]
+        return self._value(code, p, raw)
+
+    def write_param(self, code: str, value: float | int) -> ParamValue:
+        if self.params is None:
+            raise self._no_channel()
+        reg, p = self._resolve(code)
+        msg = self.check_value(p, value) if p is not None else raw_value_problem(code, value, 16)
+        if msg:
+            raise UsageError(msg)
+        if p is not None:
+            if not p.writable:
+                raise DriveError(f"{p.code} ({p.name}) is read-only")
+            raw = p.to_raw(value)
+            if p.signed and raw < 0:
+                raw += 0x10000
+        else:
+            if float(value) != int(value):
+                raise UsageError(f"{code}: raw register values are integers, got {value!r}")
+            raw = int(value)
+        if not 0 <= raw <= 0xFFFF:
+            raise UsageError(f"{code}: {value!r} does not fit a 16-bit register")
+        # The profile's limits were checked above (exact value, listed codes, min..max); the drive's own
+        # limits (they differ between F7, G7, P7 and depend on other settings) may be narrower: its
+        # refusal (0x21 / 0x22) is explained below.
+        try:
+            self.write_registers(reg, [raw])
+        except ParamError as e:
+            raise ParamError(self._explain(code, p, value, e), e.number) from None
+        if p is not None and p.code.upper() in ("E1-04", "O1-03") or reg in self._unit_registers():
+            self._fmax = None
+            self._o1_03 = None
+        return self.read_param(code)
+
+    def check_value(self, p, value) -> str | None:
+        """The exact-value check (drives/values.py) against the profile's entry: resolution, the
+        listed codes, min..max, the 16-bit register. The drive may still refuse a value its own
+        limits (which differ between F7, G7 and P7) do not allow."""
+        return value_problem(p, value)
+
+    def _unit_registers(self) -> set[int]:
+        regs = set()
+        for c in ("E1-04", "o1-03"):
+            p = self.profile.param(c)
+            if p is not None and p.register is not None:
+                regs.add(p.register)
+        return regs
+
+    def _explain(self, code: str, p, value, e: ParamError) -> str:
+        what = f"{p.code} ({p.name})" if p else code
+        u = f" {p.unit}" if p is not None and p.unit else ""
+        msg = f"yaskawa: {what}: the drive refused {value:g}{u}: error {error_text(e.number or 0)}"
+        if e.number == 0x21 and p is not None and p.min is not None and p.max is not None:
+            msg += f" (profile range {p.min:g}..{p.max:g}{u})"
+        if e.number == 0x22 and self.last is not None and self.last.running and p is not None \
+                and p.access == "stop":
+            msg += f"; {p.code} can be changed only while the drive is stopped"
+        return msg
+
+    def save(self) -> None:
+        """Write the ENTER command register (stores the parameters in the drive's EEPROM)."""
+        if self.params is None:
+            raise self._no_channel()
+        if self.cfg.enter_register is None:
+            raise DriveError("yaskawa: the profile names no ENTER command register "
+                             "(yaskawa.enter_register); the SI-P1 manual does not give one")
+        try:
+            self.write_registers(self.cfg.enter_register, [0])
+        except ParamError as e:
+            raise ParamError(f"yaskawa: ENTER (register 0x{self.cfg.enter_register:04X}) refused: "
+                             f"{error_text(e.number or 0)}", e.number) from None
+
+    def fault_history(self) -> list[FaultRecord]:
+        if self.params is None:
+            raise self._no_channel()
+        if not self.cfg.fault_history:
+            raise DriveError("yaskawa: the profile names no fault registers (yaskawa.fault_history)")
+        regs = [(pos, self.profile.param(c).register) for pos, c in self.cfg.fault_history]
+        values = self._read_many([r for _, r in regs])
+        out = []
+        for pos, reg in regs:
+            raw = values[reg]
+            if not raw:
+                continue
+            al = self.profile.alarms_for(raw)
+            if al:
+                out.append(FaultRecord(pos, raw, [a.code for a in al], [a.meaning for a in al]))
+            else:
+                out.append(FaultRecord(pos, raw, [f"0x{raw:04X}"],
+                                       ["not in the profile's fault table (see the drive's MODBUS manual)"]))
+        return out
+
+    def _read_many(self, regs: list[int]) -> dict[int, int]:
+        """Read a set of registers, grouping consecutive runs up to the format's registers/request."""
+        out: dict[int, int] = {}
+        todo = sorted(set(regs))
+        while todo:
+            start = todo[0]
+            n = 1
+            while n < self.fmt.max_registers and start + n in todo:
+                n += 1
+            for i, v in enumerate(self.read_registers(start, n)):
+                out[start + i] = v
+            todo = [r for r in todo if r not in out]
+        return out
+
+    def max_frequency(self) -> float:
+        if not self.has_param_channel or not self.profile.max_frequency_param:
+            return float(self.profile.max_frequency_default)
+        if self._fmax is None:
+            self._fmax = float(self.read_param(self.profile.max_frequency_param).value)
+        return self._fmax
+
+
+def make_drive(channel, profile, layout: str | None = None) -> YaskawaDrive:
+    return YaskawaDrive(channel, profile, layout)
