@@ -206,11 +206,10 @@ def profile_value_problem(profile, p, value) -> str | None:
     """value_problem() with the scale the family uses for this profile (Toyo: the 400 V class scale):
     for checks made from the profile alone, before a drive is connected (checklist validate, the
     prompt of param set)."""
-    scale = None
-    if profile.family == "toyo":
-        from profidrive_cli.drives.toyo import effective_scale
-        scale = effective_scale(profile, p)
-    return value_problem(p, value, scale=scale)
+    from profidrive_cli.drives import codec_module
+    # a family whose wire scale depends on the drive's settings says so (Toyo: the 400 V class)
+    hook = getattr(codec_module(profile), "effective_scale", None)
+    return value_problem(p, value, scale=hook(profile, p) if hook else None)
 
 
 def raw_value_problem(label: str, value, bits: int = 16) -> str | None:
