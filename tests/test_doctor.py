@@ -13,7 +13,7 @@ from click.testing import CliRunner
 from conftest import pdrive_cmd
 from profidrive_cli import UsageError
 from profidrive_cli.cli.main import cli
-from profidrive_cli.link import doctor
+from profidrive_cli.dp import doctor
 
 
 def run(*args):
@@ -255,7 +255,7 @@ def _check(rep, name):
 
 
 def test_round_trip_over_a_converter_at_wire_speed_is_ok():
-    from profidrive_cli.link.doctor import OK, diagnose
+    from profidrive_cli.dp.doctor import OK, diagnose
     url, close = _tcp_sim(0.0)
     try:
         rep = diagnose(url, 19200, listen_s=0.05)
@@ -269,7 +269,7 @@ def test_round_trip_over_a_converter_at_wire_speed_is_ok():
 
 
 def test_round_trip_over_a_buffering_converter_warns_and_raises_the_slot_time():
-    from profidrive_cli.link.doctor import WARN, diagnose
+    from profidrive_cli.dp.doctor import WARN, diagnose
     url, close = _tcp_sim(0.04)
     try:
         rep = diagnose(url, 19200, listen_s=0.05, station=3)

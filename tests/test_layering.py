@@ -4,13 +4,11 @@ over 600 lines. Every import counts, also those inside functions (a lazy import 
 Layers, lowest first, and what each may import (besides the standard library, its own layer and the
 top-level modules profidrive_cli/__init__, datafile, outfile, data):
 
-    fdl        nothing of pdrive. Sans-IO frames and bus timing: bytes and times in, bytes and deadlines
-               out; it knows no port, so it imports nothing of link/ either.
-    link       fdl. Decision (from the code): link/ is the port, and it reads fdl's pure tables: the
-               baud-rate names for its error lines (serial_link.py) and the frames doctor.py sends for
-               its round-trip probe. Bytes still flow link -> fdl -> dp at run time; at import time
-               fdl is the floor because it needs nothing at all.
-    dp         fdl, link (the poller waits on the link's clock and raises its LinkLost)
+    link       nothing of pdrive: bytes in and out of a port (the sim:// handler is named, not imported)
+    fdl        link at most; today nothing. Sans-IO frames and bus timing: bytes and times in, bytes and
+               deadlines out.
+    dp         fdl, link (the poller waits on the link's clock and raises its LinkLost; doctor.py
+               sends its FDL probes through a port)
     gsd        dp and below (dp.cfg decodes the module identifiers)
     drives     gsd and below (drives/session.py still opens links until session/ takes it over)
     sim        drives and below (the drive models reuse the codecs); sim:// is registered from here
@@ -34,7 +32,7 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 PKG = ROOT / "profidrive_cli"
 
-ORDER = ("fdl", "link", "dp", "gsd", "drives", "sim", "session", "checklist", "cli")
+ORDER = ("link", "fdl", "dp", "gsd", "drives", "sim", "session", "checklist", "cli")
 TOP = "top"
 TOP_MODULES = {"profidrive_cli", "profidrive_cli.datafile", "profidrive_cli.outfile", "profidrive_cli.data"}
 
@@ -221,7 +219,7 @@ def test_importing_link_loads_nothing_of_sim_and_sim_urls_still_open():
     # sim:// is registered by name (pyserial's protocol_handler_packages): the handler lives in sim/
     # and is imported only when a sim:// URL is opened
     code = ("import sys\n"
-            "import profidrive_cli.link, profidrive_cli.link.serial_link, profidrive_cli.link.doctor\n"
+            "import profidrive_cli.link, profidrive_cli.link.serial_link, profidrive_cli.dp.doctor\n"
             "print('BEFORE', sorted(m for m in sys.modules if m.startswith('profidrive_cli.sim')))\n"
             "from profidrive_cli.link import open_link\n"
             "link = open_link('sim://')\n"

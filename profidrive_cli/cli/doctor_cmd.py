@@ -1,5 +1,5 @@
 """pdrive doctor: check a serial setup (permission, baud rates, USB latency, echo, RS-485) and
-recommend slot time and retries. The checks live in link/doctor.py; this is rendering only."""
+recommend slot time and retries. The checks live in dp/doctor.py; this is rendering only."""
 
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ _MARK = {"ok": "[green]ok[/green]", "warn": "[yellow]warn[/yellow]", "fail": "[r
 def doctor_cmd(opts, probe_address, station, listen_s):
     """Check a serial setup for PROFIBUS: permission, DP baud rates, FTDI latency_timer, echo,
     kernel RS-485; recommend --slot-time and --retries. Without --port: list the ports."""
-    from profidrive_cli.link.doctor import diagnose
+    from profidrive_cli.dp.doctor import diagnose
     if not opts.port:
         _list_ports(opts)
         return

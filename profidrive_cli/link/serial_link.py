@@ -23,7 +23,6 @@ import serial
 import serial.rs485
 
 from profidrive_cli import BusError, UsageError
-from profidrive_cli.fdl.timing import BAUD_NAMES
 from profidrive_cli.link.base import Link, LinkLost, precise_sleep
 from profidrive_cli.link.parity import ParityMarkingSerial
 
@@ -76,7 +75,7 @@ def open_serial(port: str, baud: int, rs485: bool = False, timeout: float = 0.0,
         return ser
     except ValueError as e:
         if "baud" in str(e).lower():
-            raise BusError(f"{port}: the port refuses {BAUD_NAMES.get(baud, baud)} baud ({e})") from None
+            raise BusError(f"{port}: the port refuses {_rate_text(baud)} baud ({e})") from None
         raise UsageError(f"{port}: {e}") from None
     except serial.SerialException as e:
         raise BusError(_explain_open_error(port, e)) from None
@@ -89,7 +88,7 @@ def open_serial(port: str, baud: int, rs485: bool = False, timeout: float = 0.0,
                 # EINVAL: parity means nothing there, so open it without
                 return open_serial(port, baud, rs485, timeout, _retry=True)
             raise BusError(f"{port}: the device refuses the serial settings "
-                           f"(8E1 at {BAUD_NAMES.get(baud, baud)}): {e.args[-1]}") from None
+                           f"(8E1 at {_rate_text(baud)}): {e.args[-1]}") from None
         raise
 
 
@@ -163,6 +162,11 @@ def _read_socket(ser, timeout: float) -> bytes:
     if not data:
         raise serial.SerialException("socket disconnected")
     return data
+
+
+def _rate_text(baud: int) -> str:
+    """19200 -> '19.2k', 1500000 -> '1.5M' (the DP rates' usual names)."""
+    return f"{baud / 1e6:g}M" if baud >= 1000000 else f"{baud / 1e3:g}k" if baud >= 1000 else str(baud)
 
 
 class SerialLink(Link):
