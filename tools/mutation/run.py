@@ -50,7 +50,7 @@ MODULES: dict[str, list[str]] = {
     "drives/moeller.py": ["tests/test_moeller_codec.py", "tests/test_moeller_sim.py"],
     "drives/toyo.py": ["tests/test_toyo_vectors.py", "tests/test_toyo_sim.py"],
     "drives/yaskawa.py": ["tests/test_yaskawa_codec.py", "tests/test_yaskawa_drive.py"],
-    "drives/session.py": ["tests/test_escalation.py", "tests/test_session.py", "tests/test_run_safety.py"],
+    "session/safestop.py": ["tests/test_escalation.py", "tests/test_session.py", "tests/test_run_safety.py"],
     "checklist/runner.py": ["tests/test_checklist_bands.py", "tests/test_checklist.py"],
 }
 
