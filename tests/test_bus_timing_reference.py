@@ -84,7 +84,7 @@ def test_data_exchange_cycle_rate_and_idle_times_match_the_reference(baud, cfg, 
 def test_session_knows_the_documented_ppo1_rate_at_19200():
     """The default cycle rate a session picks (`pdrive run`'s "bus limit"): 37.6/s for PPO1 at
     19.2k (docs/commands.md), 57.5/s for PPO3."""
-    from profidrive_cli.drives.session import wire_limit_hz
+    from profidrive_cli.session import wire_limit_hz
     assert wire_limit_hz(19200, 12, 12) == pytest.approx(37.647, abs=0.001)
     assert wire_limit_hz(19200, 4, 4) == pytest.approx(57.485, abs=0.001)
     assert wire_limit_hz(12000000, 12, 12) == pytest.approx(21857.9, abs=0.1)

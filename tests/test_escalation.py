@@ -10,7 +10,7 @@ simulator) measures how long it really waited before coasting.
 import pytest
 
 from profidrive_cli.cli.common import BusOptions
-from profidrive_cli.drives.session import DriveSession
+from profidrive_cli.session import DriveSession
 
 URL = "sim://?timing=virtual"
 

@@ -12,8 +12,8 @@ import pytest
 from profidrive_cli import UsageError
 from profidrive_cli.cli.main import main
 from profidrive_cli.drives.profile import load_profile
-from profidrive_cli.drives import session as S
-from profidrive_cli.drives.session import DriveSession
+from profidrive_cli import session as S
+from profidrive_cli.session import DriveSession
 from profidrive_cli.drives.values import danger, value_problem
 
 from test_session import session

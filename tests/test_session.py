@@ -9,8 +9,8 @@ import pytest
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.cli.common import BusOptions
 from profidrive_cli.drives.base import DriveError
-from profidrive_cli.drives.session import (DriveSession, SessionTerminated, find_drive_stations,
-                                           resolve_layout, wire_limit_hz)
+from profidrive_cli.session import (DriveSession, SessionTerminated, find_drive_stations,
+                                    resolve_layout, wire_limit_hz)
 from profidrive_cli.drives.profile import load_profile
 from profidrive_cli.fdl.timing import wire_time_data_exchange
 

@@ -34,7 +34,7 @@ class Terminated(KeyboardInterrupt):
 
 
 def _interrupts() -> tuple:
-    from profidrive_cli.drives.session import SessionTerminated
+    from profidrive_cli.session import SessionTerminated
     return (KeyboardInterrupt, SessionTerminated)
 
 
@@ -815,7 +815,7 @@ def session_opener(master, *, cycle_hz: float | None = None, watchdog_ms: float 
     """open_station for Runner: one DriveSession per station on a shared master (the caller closes its
     link after the run). The session identifies the station, refuses a station of another family,
     parameterises it with the watchdog armed, and on exit stops the drive safely and releases it."""
-    from profidrive_cli.drives.session import DEFAULT_WATCHDOG_MS, DriveSession
+    from profidrive_cli.session import DEFAULT_WATCHDOG_MS, DriveSession
 
     @contextlib.contextmanager
     def open_station(spec: StationSpec):

@@ -19,8 +19,8 @@ from profidrive_cli.cli.common import (bus_options, confirm_real_port, emit_json
                                        station_address)
 from profidrive_cli.cli import render_drive as R
 from profidrive_cli.drives.base import DriveError
-from profidrive_cli.drives.session import (DriveSession, RestoreInterrupted, RestoreRefused,
-                                           SessionTerminated)
+from profidrive_cli.session import (DriveSession, RestoreInterrupted, RestoreRefused,
+                                    SessionTerminated)
 from profidrive_cli.drives.values import danger, profile_value_problem
 from profidrive_cli.link.base import LinkLost
 from profidrive_cli.outfile import OutputFile, check_output_path

@@ -1,10 +1,6 @@
-"""Restoring a parameter dump: the dump file's completeness (count and end marker) and restore as
-validate-all-then-write, for drives.session.DriveSession (its restore() and restore_problems() call
-these with the session).
-
-Format 2 dumps carry `count:` (the number of rows under `parameters:`) and end with the line
-`end: pdrive_dump`, so a file cut off anywhere is refused; older files (format 1, hand-written) have
-neither and are accepted with a warning (docs/commands.md records the decision).
+"""Restoring a parameter dump as validate-all-then-write, for session.DriveSession (its restore() and
+restore_problems() call these with the session). Writes parameters only through
+drives.base.Drive.write_param, each read back; the file itself is loaded by dumpfile.py.
 
 restore(): every row is checked before the first write -- the station's profile and ident against the
 file's, the code exists and is readable, writable, the value is one the parameter holds exactly
@@ -20,9 +16,9 @@ from __future__ import annotations
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.drives.base import DriveError, value_text
 from profidrive_cli.drives.profile import load_profile
-
-DUMP_FORMAT = 2              # 2: `count:` and a final `end: pdrive_dump` line (truncation is detected)
-DUMP_END = "pdrive_dump"
+from profidrive_cli.session.backup import same_value
+from profidrive_cli.session.discovery import family_words
+from profidrive_cli.session.params import check_write
 
 
 class RestoreRefused(UsageError):
@@ -46,35 +42,6 @@ class RestoreInterrupted(BusError):
         self.cause = cause
 
 
-def check_complete(path, doc, params) -> list[str]:
-    """A format-2 dump must carry `count:` = the number of parameters and end with `end: pdrive_dump`
-    (so a file cut anywhere is refused). Older files have neither: accepted with a warning."""
-    from profidrive_cli.datafile import DataFileError
-    fmt = doc.get("pdrive_dump")
-    if not isinstance(fmt, int) or isinstance(fmt, bool) or fmt < 2:
-        return [f"{path} has no end marker (written by an older pdrive or by hand): pdrive cannot tell "
-                f"whether it is complete; check that it lists every parameter you mean to restore"]
-    keys = list(doc.keys())
-    if doc.get("end") != DUMP_END or keys[-1] != "end":
-        raise DataFileError(path, None, f"the file is incomplete (no final 'end: {DUMP_END}' line): it "
-                            f"was cut off; dump the drive again or use an intact copy")
-    count = doc.get("count")
-    if not isinstance(count, int) or isinstance(count, bool) or count != len(params):
-        raise DataFileError(path, doc.line_of("count") if "count" in doc else None,
-                            f"the file is incomplete or edited: 'count: {count}' but {len(params)} "
-                            f"parameter(s) under 'parameters'")
-    return []
-
-
-def _same_value(a, b, scale):
-    from profidrive_cli.drives.session import _same_value as same
-    return same(a, b, scale)
-
-
-def _family_words(p) -> str:
-    return f"{p.name} ({p.title}, family {p.family}, ident 0x{p.ident:04X})"
-
-
 def restore_problems(session, doc: dict, rows: list, allow_dangerous: bool = False) -> list[str]:
     """Every reason not to write anything, one line each (no bus writes; the rows from compare()).
     Marks dangerous rows 'skipped' unless allow_dangerous."""
@@ -89,7 +56,7 @@ def restore_problems(session, doc: dict, rows: list, allow_dangerous: bool = Fal
             other = None
         if other != session.profile.name:
             problems.append(f"{path}: dumped from a {name} station ({st.get('title', '')}); station "
-                            f"{session.address} is {_family_words(session.profile)}")
+                            f"{session.address} is {family_words(session.profile)}")
     ident = st.get("ident")
     if ident is not None:
         try:
@@ -124,7 +91,7 @@ def restore_problems(session, doc: dict, rows: list, allow_dangerous: bool = Fal
                                          f"(--allow-dangerous writes it)", "dangerous")
             continue
         try:
-            session._check_write(info, r.file_value, allow_dangerous=True)
+            check_write(session, info, r.file_value, allow_dangerous=True)
         except UsageError as e:
             problems.append(f"{where}: {e}")
             continue
@@ -171,7 +138,7 @@ def restore(session, doc: dict, dry_run: bool = False, progress=None,
             raise RestoreInterrupted(rows, e) from e
         r.new_value = back.value
         pdef = session.profile.param(r.code.split("[", 1)[0])
-        if _same_value(back.value, r.file_value, pdef.scale if pdef is not None else None):
+        if same_value(back.value, r.file_value, pdef.scale if pdef is not None else None):
             r.result = "applied"
         else:
             r.result, r.reason = "refused", f"the drive kept {value_text(back.value, back.unit)}"

@@ -1,0 +1,231 @@
+"""Dump and compare: which parameters of the profile the connected station has and which of them
+are settings (restored) or read-only / excluded (read, never restored); reading them all into a
+YAML-ready document with the station's identity (dumpfile.py: format, end marker); comparing a loaded
+file row by row against the drive (ParamRow). Reads parameters only; never writes (restore.py does).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+from typing import Any, Callable
+
+from profidrive_cli import BusError, UsageError
+from profidrive_cli.drives.base import DriveError
+from profidrive_cli.drives.profile import Profile, load_profile
+from profidrive_cli.session.discovery import family_words
+from profidrive_cli.session.dumpfile import DUMP_END, DUMP_FORMAT
+from profidrive_cli.session.params import param_info
+
+
+@dataclass
+class ParamRow:
+    """One line of restore / diff: result applied | refused | unchanged | would apply | differs |
+    missing (in the file, not readable) | skipped."""
+    code: str
+    name: str
+    unit: str
+    file_value: Any
+    drive_value: Any
+    result: str
+    reason: str = ""
+    new_value: Any = None
+    line: int = 0                  # the row's line in the file (0: unknown)
+    why: str = ""                  # for 'skipped': unknown | read-only | not restored | dangerous
+
+    def to_dict(self) -> dict:
+        return {k: v for k, v in dataclasses.asdict(self).items()}
+
+
+def same_value(a, b, scale: float | None) -> bool:
+    try:
+        fa, fb = float(a), float(b)
+    except (TypeError, ValueError):
+        return a == b
+    tol = abs(scale) / 2.0 if scale else 1e-9
+    return abs(fa - fb) <= max(tol * 0.999, 1e-9)
+
+
+def not_restored(profile: Profile, p) -> str:
+    """Why a writable parameter is never written back by `restore` ('' = it is)."""
+    if p.extra.get("dangerous"):
+        return "dangerous (initialisation / auto-tuning)"
+    if p.access == "wo":
+        return "a command, not a setting"
+    if profile.family == "fuji" and p.code[:1].upper() == "S" and p.code[1:].isdigit():
+        return "command data (S codes), not a setting"
+    if p.pnu in (927, 928) and profile.family != "yaskawa":
+        return "access rights, left as they are"
+    if p.pnu in (970, 971) and profile.family != "yaskawa":
+        return "a command, not a setting"
+    return ""
+
+
+def dump_plan(sess) -> list[tuple[str, Any, str]]:
+    """(code, ParamDef, kind) for every parameter of the profile that the family can read:
+    kind 'setting' (restored), 'readonly', or 'excluded: why' (read, never restored)."""
+    out = []
+    sess._need_drive()
+    for p in sess.profile.parameters.values():
+        if p.access == "wo":
+            continue
+        if sess.profile.family == "yaskawa":
+            if p.register is None:
+                continue
+        elif p.pnu is None:
+            continue
+        if p.extra.get("traceback"):
+            continue                          # Toyo traceback channels: 4 x 100 samples each
+        if not exists_on_device(sess, p):
+            continue
+        kind = "setting" if p.writable else "readonly"
+        why = not_restored(sess.profile, p)
+        if why and p.writable:
+            kind = f"excluded: {why}"
+        arr = p.extra.get("array")
+        if isinstance(arr, int) and not isinstance(arr, bool) and arr > 1:
+            if p.writable and not why:
+                for i in range(1, arr + 1):
+                    out.append((f"{p.code}[{i}]", p, kind))
+            continue                           # read-only arrays (fault memory): `pdrive faults`
+        out.append((p.code, p, kind))
+    return out
+
+
+def exists_on_device(sess, p) -> bool:
+    """False for parameters the connected device variant does not have (Moeller: `df6: false`
+    on a DF6) and for fault memories (`pdrive faults` reads those)."""
+    fam = sess.profile.family
+    d = sess.drive
+    if fam == "toyo" and p.pnu == getattr(getattr(d, "tc", None), "history_pnu", None):
+        return False
+    if fam == "moeller" and p.extra.get("df6") is False and hasattr(d, "device"):
+        try:
+            return not d.device().startswith("DF")
+        except (DriveError, UsageError):
+            return True
+    return True
+
+
+def dump(sess, progress: Callable[[int, int, str], None] | None = None) -> dict:
+    """Read every readable parameter; a YAML-ready document with the station's identity."""
+    d = sess._need_drive()
+    if not d.has_param_channel:
+        raise DriveError(no_channel_words(sess))
+    plan = dump_plan(sess)
+    settings: dict[str, Any] = {}
+    readonly: dict[str, Any] = {}
+    failed: dict[str, str] = {}
+    for i, (code, p, kind) in enumerate(plan):
+        if progress:
+            progress(i, len(plan), code)
+        try:
+            pv = d.read_param(code)
+        except (DriveError, UsageError) as e:
+            failed[code] = str(e)
+            continue
+        entry = {"value": pv.value}
+        if pv.unit:
+            entry["unit"] = pv.unit
+        entry["name"] = pv.name or p.name
+        if kind == "setting":
+            settings[code] = entry
+        else:
+            if kind.startswith("excluded"):
+                entry["not_restored"] = kind.split(": ", 1)[1]
+            readonly[code] = entry
+    if progress:
+        progress(len(plan), len(plan), "")
+    prof = sess.profile
+    doc = {
+        "pdrive_dump": DUMP_FORMAT,
+        "station": {"address": sess.address, "ident": f"0x{sess.ident:04X}", "profile": prof.name,
+                    "family": prof.family, "title": prof.title, "layout": sess.layout,
+                    "port": getattr(sess.master.link, "name", "")},
+        "date": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        "count": len(settings),
+        "parameters": settings,
+        "readonly": readonly,
+    }
+    if failed:
+        doc["unreadable"] = failed
+    doc["end"] = DUMP_END              # the last line: a file cut anywhere lacks it
+    return doc
+
+
+def no_channel_words(sess) -> str:
+    with_pkw = [n for n, lay in sess.profile.layouts.items() if lay.pkw]
+    return (f"{sess.profile.name}: layout {sess.layout} has no parameter channel"
+            + (f" (use --ppo/--format {' | '.join(with_pkw)})" if with_pkw else ""))
+
+
+def identity_notes(sess, doc: dict) -> list[str]:
+    st = doc.get("station") or {}
+    name = st.get("profile")
+    notes = []
+    if name and name != sess.profile.name:
+        try:
+            other = load_profile(str(name))
+        except UsageError:
+            other = None
+        if other is None or other.name != sess.profile.name:
+            raise UsageError(f"{doc.get('_path', 'the file')} was dumped from a {name} station "
+                             f"({st.get('title', '')}); station {sess.address} is "
+                             f"{family_words(sess.profile)}")
+    if st.get("address") is not None and st.get("address") != sess.address:
+        notes.append(f"the file was dumped from station {st.get('address')}; writing to station "
+                     f"{sess.address}")
+    return notes
+
+
+def compare(sess, doc: dict, progress: Callable[[int, int, str], None] | None = None,
+            allow_dangerous: bool = False, check_identity: bool = True) -> list[ParamRow]:
+    """Each parameter of the file against the drive: 'unchanged', 'differs', 'missing' (cannot
+    be read), 'skipped' (unknown code / read-only / not restorable / dangerous; .why says which)."""
+    d = sess._need_drive()
+    if not d.has_param_channel:
+        raise DriveError(no_channel_words(sess))
+    if check_identity:
+        for n in identity_notes(sess, doc):
+            sess._warn(n)
+    rows: list[ParamRow] = []
+    params = doc["parameters"]
+    items = list(params.items())
+    for i, (code, v) in enumerate(items):
+        if progress:
+            progress(i, len(items), str(code))
+        want = v.get("value") if isinstance(v, dict) else v
+        line = params.line_of(code) if hasattr(params, "line_of") else 0
+        code = str(code)
+        try:
+            info = param_info(sess, code)
+        except UsageError as e:
+            rows.append(ParamRow(code, "", "", want, None, "skipped", str(e), line=line or 0,
+                                 why="unknown"))
+            continue
+        p = info.param
+        base = code.split("[", 1)[0]
+        pdef = sess.profile.param(base) or p
+        if pdef is not None:
+            why = not_restored(sess.profile, pdef) if pdef.writable else "read-only"
+            if why and not (allow_dangerous and why.startswith("dangerous")):
+                kind = ("read-only" if why == "read-only" else
+                        "dangerous" if why.startswith("dangerous") else "not restored")
+                rows.append(ParamRow(code, info.name, info.unit, want, None, "skipped", why,
+                                     line=line or 0, why=kind))
+                continue
+        try:
+            pv = d.read_param(code)
+        except (DriveError, UsageError) as e:
+            if isinstance(e, BusError) and not isinstance(e, DriveError):
+                raise
+            rows.append(ParamRow(code, info.name, info.unit, want, None, "missing", str(e),
+                                 line=line or 0))
+            continue
+        same = same_value(pv.value, want, pdef.scale if pdef is not None else None)
+        rows.append(ParamRow(code, pv.name or info.name, pv.unit or info.unit, want, pv.value,
+                             "unchanged" if same else "differs", line=line or 0))
+    if progress:
+        progress(len(items), len(items), "")
+    return rows

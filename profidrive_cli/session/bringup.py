@@ -1,0 +1,61 @@
+"""Bring-up: parameterise and configure the chosen station (Set_Prm with the DP watchdog and the
+GSD's User_Prm_Data, Chk_Cfg of the layout), reach Data_Exchange at the session's rate, and build the
+family's Drive on a MeteredChannel; remember when anything may have set the motor turning. Talks to
+the bus through dp.poller.Master only; starts nothing.
+"""
+
+from __future__ import annotations
+
+from profidrive_cli import BusError
+from profidrive_cli.session.cycle import MeteredChannel
+from profidrive_cli.session.cyclelog import CycleLog
+
+
+def connect(sess):
+    """Set_Prm (watchdog, the GSD's User_Prm_Data), Chk_Cfg of the layout, Data_Exchange at the
+    session's rate through a MeteredChannel (with the --log hook), then the family's Drive."""
+    from profidrive_cli.drives import make_drive
+    from profidrive_cli.dp.station import SlaveConfig
+    assert sess.profile is not None and sess.layout is not None
+    lay = sess.profile.layouts[sess.layout]
+    sc = SlaveConfig(ident=sess.ident, cfg=lay.cfg, user_prm=user_prm(sess),
+                     wd_ms=sess.watchdog_ms)
+    sess.master.add_station(sess.address, sc)
+    try:
+        sess.master.bring_up(sess.address, timeout=3.0, fail_fast=True)
+    except BusError as e:
+        raise BusError(f"{e} (profile {sess.profile.name}, layout {sess.layout}: Chk_Cfg "
+                       f"{lay.cfg.hex(' ').upper()})") from None
+    period = 1.0 / sess.cycle_hz if sess.cycle_hz else 0.0
+    sess.channel = MeteredChannel(sess.master.channel(sess.address, period))
+    sess._t0 = sess.channel.now()
+    if sess.log_csv:
+        sess.cyclelog = CycleLog(sess.log_csv, sess.channel, sess._t0, lambda: sess.drive, sess._warn)
+    drive = make_drive(sess.channel, sess.profile, sess.layout)
+    track_motion(sess, drive)
+    sess.drive = drive
+    return drive
+
+
+def user_prm(sess) -> bytes:
+    """The device's default User_Prm_Data from its GSD (library or PDRIVE_GSD_DIR), else none."""
+    try:
+        from profidrive_cli.gsd.interp import device_user_prm
+        from profidrive_cli.gsd.library import find_by_ident
+        g = find_by_ident(sess.ident)
+        return device_user_prm(g) if g is not None else b""
+    except Exception:       # a broken user GSD must not keep the drive from starting
+        return b""
+
+
+def track_motion(sess, drive) -> None:
+    """Remember when anything may have set the motor turning (start / jog), whoever called it."""
+    for name in ("start", "jog"):
+        orig = getattr(drive, name, None)
+        if orig is None:
+            continue
+
+        def wrapped(*a, _orig=orig, **k):
+            sess._may_run = True
+            return _orig(*a, **k)
+        setattr(drive, name, wrapped)

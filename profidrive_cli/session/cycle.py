@@ -1,0 +1,138 @@
+"""The metered cycle: the Data_Exchange rate (the wire limit for one station at the baud rate, the
+default cap, a warning for a rate above the wire), MeteredChannel (counts exchanges, measures the
+achieved rate, calls hooks after each one) and Sample, one decoded cycle as a live view shows it.
+Reads fdl/timing.py; wraps a dp StationChannel; no bus traffic of its own.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+from typing import Callable
+
+from profidrive_cli.drives.base import DriveStatus
+
+CAP_REAL_HZ = 100.0          # default cycle-rate cap over real ports
+CAP_SIM_HZ = 50.0            # ... and on the instant simulator
+
+
+def wire_limit_hz(baud: int, out_octets: int, in_octets: int) -> float:
+    """The highest Data_Exchange rate the wire allows for one station (request + TSDR + reply + TID1)."""
+    from profidrive_cli.fdl.timing import wire_time_data_exchange
+    return 1.0 / wire_time_data_exchange(baud, out_octets, in_octets)
+
+
+def default_cycle_hz(link, wire_hz: float) -> float:
+    cap = CAP_SIM_HZ if getattr(link, "instant", False) else CAP_REAL_HZ
+    return min(cap, wire_hz)
+
+
+class MeteredChannel:
+    """drives.base.CyclicChannel around dp.poller.StationChannel: counts exchanges, measures the
+    achieved rate over the last two seconds, and calls hooks(t, outputs, inputs) after each one."""
+
+    def __init__(self, inner, window_s: float = 2.0):
+        self.inner = inner
+        self.window_s = window_s
+        self.cycles = 0
+        self.hooks: list[Callable[[float, bytes, bytes], None]] = []
+        self._times: deque[float] = deque(maxlen=4096)
+
+    def now(self) -> float:
+        return self.inner.now()
+
+    def exchange(self, outputs: bytes) -> bytes:
+        inputs = self.inner.exchange(outputs)
+        t = self.inner.now()
+        self.cycles += 1
+        self._times.append(t)
+        for h in self.hooks:
+            h(t, outputs, inputs)
+        return inputs
+
+    @property
+    def rate(self) -> float:
+        """Exchanges per second over the last `window_s` seconds (0 before two exchanges)."""
+        if len(self._times) < 2:
+            return 0.0
+        last = self._times[-1]
+        first = None
+        n = 0
+        for t in reversed(self._times):
+            if last - t > self.window_s:
+                break
+            first = t
+            n += 1
+        if first is None or n < 2 or last <= first:
+            return 0.0
+        return (n - 1) / (last - first)
+
+
+@dataclass
+class Sample:
+    """One decoded cycle with everything a live view shows."""
+    t: float                       # seconds since the session reached data exchange
+    status: DriveStatus
+    fmax_hz: float
+    cycle_hz: float                # achieved
+    cycles: int
+    counters: dict
+
+    @property
+    def actual_percent(self) -> float | None:
+        return self.status.speed_percent
+
+    @property
+    def actual_hz(self) -> float | None:
+        p = self.status.speed_percent
+        return None if p is None else round(p * self.fmax_hz / 100.0, 3)
+
+    @property
+    def reference_percent(self) -> float | None:
+        return self.status.reference_percent
+
+    @property
+    def reference_hz(self) -> float | None:
+        p = self.status.reference_percent
+        return None if p is None else round(p * self.fmax_hz / 100.0, 3)
+
+    def to_dict(self) -> dict:
+        st = self.status
+        return {"t": round(self.t, 3), "state": st.state, "running": st.running, "fault": st.fault,
+                "stopped": st.stopped, "fault_code": st.fault_code,
+                "flags": [k for k, v in st.flags.items() if v],
+                "reference_hz": self.reference_hz, "reference_percent": self.reference_percent,
+                "actual_hz": self.actual_hz, "actual_percent": self.actual_percent,
+                "cycle_hz": round(self.cycle_hz, 2), "cycles": self.cycles,
+                "counters": self.counters, "raw": dict(st.raw)}
+
+
+def choose_rate(sess) -> None:
+    """Set sess.wire_hz (the bus limit for its station and layout) and sess.cycle_hz (asked, or the
+    default); a rate above the wire limit adds a warning (sess._warn)."""
+    lay = sess.profile.layouts[sess.layout]
+    baud = sess.master.params.baud
+    sess.wire_hz = wire_limit_hz(baud, lay.output_len, lay.input_len)
+    if sess.requested_cycle_hz is None:
+        sess.cycle_hz = default_cycle_hz(sess.master.link, sess.wire_hz)
+    else:
+        sess.cycle_hz = float(sess.requested_cycle_hz)
+        if sess.cycle_hz > sess.wire_hz * 1.0001:
+            from profidrive_cli.fdl.timing import BAUD_NAMES
+            sess._warn(f"--cycle-hz {sess.cycle_hz:g} is more than {BAUD_NAMES.get(baud, baud)} "
+                       f"allows for this station ({sess.wire_hz:.1f} Hz: "
+                       f"{1000.0 / sess.wire_hz:.1f} ms per Data_Exchange of "
+                       f"{lay.output_len}/{lay.input_len} octets); on a real bus the wire sets "
+                       f"the pace")
+
+
+def make_sample(sess, st: DriveStatus) -> Sample:
+    """A Sample of status `st` on the session's clock (also remembered as sess.final_status)."""
+    if sess._fmax is not None:
+        fmax = sess._fmax[0]
+    else:
+        fmax = getattr(sess.drive, "_fmax", None) or float(sess.profile.max_frequency_default)
+    sess.final_status = st
+    return Sample(sess.channel.now() - sess._t0, st, float(fmax), sess.achieved_hz,
+                  sess.cycles, sess.counters)
+

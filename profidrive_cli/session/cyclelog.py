@@ -1,0 +1,108 @@
+"""The --log CSV: one row per Data_Exchange (time, cycle, control word, reference, status word,
+actual, output and input octets), written through outfile.OutputFile to a temporary file beside the
+target and renamed over it when the session closes, also after Ctrl-C or a trip (the log of such a
+run is the one wanted). A write that fails mid-run never disturbs the cycle (nor the stop): logging
+ends, the temporary file is dropped, the old file stays, and `error` holds the OutputWriteError the
+session raises on close (exit 1). Reads the drive's layout only to name the words; no bus traffic.
+"""
+
+from __future__ import annotations
+
+import csv
+from typing import Callable
+
+from profidrive_cli.outfile import OutputFile, OutputWriteError
+
+
+class CycleLog:
+    """Opened at once (header row written); hooked onto `channel` (a MeteredChannel). `drive_of()`
+    gives the Drive whose layout names the words (None before it exists); `warn(text)` is told when
+    logging stops. close() renames the file into place (or keeps the error in .error)."""
+
+    def __init__(self, path, channel, t0: float, drive_of: Callable[[], object],
+                 warn: Callable[[str], None]):
+        self.path = path
+        self.channel = channel
+        self.t0 = t0
+        self.drive_of = drive_of
+        self.warn = warn
+        #: OutputWriteError when the --log file could not be written
+        self.error: OutputWriteError | None = None
+        out = OutputFile(path, "w", newline="", what="--log")
+        out.open()
+        self._file = out
+        self._writer = csv.writer(out.file)
+        channel.hooks.append(self.log_cycle)
+        self._row(["time_s", "cycle", "control_word", "reference", "status_word",
+                   "actual", "outputs", "inputs"])
+
+    def log_cycle(self, t: float, outputs: bytes, inputs: bytes) -> None:
+        if self._file is None:
+            return
+        ctw, ref, stw, act = cycle_words(self.drive_of(), outputs, inputs)
+        self._row([f"{t - self.t0:.4f}", self.channel.cycles, _hex4(ctw), _s16(ref), _hex4(stw),
+                   _s16(act), outputs.hex(), inputs.hex()])
+
+    def _row(self, row: list) -> None:
+        try:
+            self._writer.writerow(row)
+        except OSError as e:
+            self._failed(e)
+
+    def _failed(self, e: OSError) -> None:
+        out, self._file = self._file, None
+        kept = out.path.is_file()           # a regular file there: it stays as it was
+        out.discard()
+        self.error = OutputWriteError(f"--log {self.path}: write failed: {e.strerror or e}"
+                                      + ("; the previous file is untouched" if kept else ""))
+        self.warn(f"{self.error}; logging stopped")
+
+    def close(self) -> None:
+        out, self._file = self._file, None
+        if out is None:
+            return
+        try:
+            out.commit()
+        except OutputWriteError as e:
+            self.error = e
+
+
+def _hex4(v) -> str:
+    return "" if v is None else f"0x{v & 0xFFFF:04X}"
+
+
+def _s16(v) -> str:
+    if v is None:
+        return ""
+    v &= 0xFFFF
+    return str(v - 0x10000 if v & 0x8000 else v)
+
+
+def cycle_words(drive, outputs: bytes, inputs: bytes) -> tuple[int | None, int | None, int | None, int | None]:
+    """(control word, reference, status word, actual) of one exchange, whatever the family."""
+    try:
+        fmt = getattr(drive, "fmt", None)
+        if fmt is not None and hasattr(fmt, "out_words"):           # Yaskawa fast I/O words
+            order = drive.profile.word_order
+            ow = [int.from_bytes(outputs[i:i + 2], order) for i in range(0, 2 * len(fmt.out_words), 2)]
+            iw = [int.from_bytes(inputs[i:i + 2], order) for i in range(0, 2 * len(fmt.in_words), 2)]
+            o = dict(zip(fmt.out_words, ow))
+            n = dict(zip(fmt.in_words, iw))
+            return o.get("command"), o.get("reference"), n.get("status"), n.get("speed_feedback")
+        ppo = getattr(drive, "ppo", None)
+        if ppo is not None:
+            from profidrive_cli.drives import profidrive as pd
+            out = pd.decode_area_bytes(ppo, outputs, "request").pzd
+            inp = pd.decode_area_bytes(ppo, inputs, "response").pzd
+            tl = getattr(drive, "tl", None)
+            if tl is not None:                                      # Toyo: named words
+                plch = getattr(drive, "plch", False)
+                o = dict(zip(tl.words("request", plch), out))
+                n = dict(zip(tl.words("response", plch), inp))
+                return (o.get("ctw", o.get("run_cmd")), o.get("speed_ref"),
+                        n.get("zsw", n.get("status_flag")), n.get("motor_speed"))
+            return (out[0] if out else None, out[1] if len(out) > 1 else None,
+                    inp[0] if inp else None, inp[1] if len(inp) > 1 else None)
+    except Exception:
+        pass
+    return None, None, None, None

@@ -1,0 +1,294 @@
+"""DriveSession: one drive station in Data_Exchange behind the Drive interface, with a safe stop on
+every way out. Ties the session's parts together and keeps their shared state; the work is done in
+discovery.py, cycle.py, bringup.py, motion.py, safestop.py + signals.py, cyclelog.py, params.py,
+backup.py + dumpfile.py + restore.py (the API is described in session/__init__.py). No click and no
+rich here.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any, Callable
+
+from profidrive_cli import PdriveError, UsageError
+from profidrive_cli.drives.base import DriveStatus, FaultRecord, ParamValue
+from profidrive_cli.drives.profile import Profile
+import profidrive_cli.session.backup as backup
+import profidrive_cli.session.bringup as bringup
+import profidrive_cli.session.dumpfile as dumpfile
+import profidrive_cli.session.motion as motion
+import profidrive_cli.session.params as params
+import profidrive_cli.session.restore as _restore
+import profidrive_cli.session.safestop as safestop
+from profidrive_cli.session.cycle import MeteredChannel, Sample, choose_rate, make_sample
+from profidrive_cli.session.cyclelog import CycleLog
+from profidrive_cli.session.discovery import DriveStation, locate
+from profidrive_cli.session.params import ParamInfo
+from profidrive_cli.session.backup import ParamRow
+from profidrive_cli.session.safestop import StopReport
+from profidrive_cli.session.signals import SignalGuard
+
+DEFAULT_WATCHDOG_MS = 500
+
+
+class DriveSession:
+    """See session/__init__.py for the constructor's arguments and the API."""
+
+    def __init__(self, master, address: int | None = None, *, profile: str | None = None,
+                 layout: str | None = None, ppo: int | None = None, fmt: str | None = None,
+                 watchdog_ms: float = DEFAULT_WATCHDOG_MS, cycle_hz: float | None = None,
+                 stop_timeout: float | None = None, close_link: bool = True,
+                 handle_signals: bool = True,
+                 before_connect: Callable[["DriveSession"], None] | None = None,
+                 on_message: Callable[[str], None] | None = None,
+                 log_csv: str | Path | None = None, env: dict | None = None):
+        if address is not None and not 0 <= address <= 125:
+            raise UsageError(f"station address {address} outside 0..125")
+        if not 10 <= watchdog_ms <= 650000:
+            raise UsageError(f"watchdog {watchdog_ms:g} ms outside 10..650000 ms")
+        if cycle_hz is not None and cycle_hz < 0:
+            raise UsageError(f"cycle rate {cycle_hz:g} Hz must be positive")
+        self.master = master
+        self.requested_address = address
+        self.profile_name = profile
+        self._layout_args = (layout, ppo, fmt)
+        self.watchdog_ms = float(watchdog_ms)
+        self.requested_cycle_hz = cycle_hz
+        self.stop_timeout_s = stop_timeout
+        self.close_link = close_link
+        self.handle_signals = handle_signals
+        self.before_connect = before_connect
+        self.on_message = on_message
+        #: called with each Sample while the session waits for a stop (also the stop on exit)
+        self.on_sample: Callable[[Sample], None] | None = None
+        self.log_csv = log_csv
+        self.env = os.environ if env is None else env
+
+        self.station: DriveStation | None = None
+        self.address: int | None = None
+        self.ident: int | None = None
+        self.profile: Profile | None = None
+        self.layout: str | None = None
+        self.drive = None
+        self.channel: MeteredChannel | None = None
+        self.cycle_hz: float = 0.0
+        self.wire_hz: float = 0.0
+        self.warnings: list[str] = []
+        self.messages: list[str] = []
+        self.link_lost = False
+        self.stop_report: StopReport | None = None
+        self.final_status: DriveStatus | None = None
+        self.comm_loss_text: str | None = None
+        self._may_run = False
+        self._t0 = 0.0
+        self._decel_s: float | None = None
+        self._fmax: tuple[float, str] | None = None
+        self._fmax_override: float | None = None
+        self.signals = SignalGuard(handle_signals)
+        self._closed = False
+        #: the --log CSV once connected (cyclelog.CycleLog)
+        self.cyclelog: CycleLog | None = None
+
+
+    # -- messages ------------------------------------------------------------------------------
+    def _warn(self, text: str) -> None:
+        self.warnings.append(text)
+        if self.on_message:
+            self.on_message(f"warning: {text}")
+
+    def _say(self, text: str) -> None:
+        self.messages.append(text)
+        if self.on_message:
+            self.on_message(text)
+
+    # -- context manager -----------------------------------------------------------------------
+    def __enter__(self) -> "DriveSession":
+        self.signals.install()
+        try:
+            self.open()
+        except BaseException as e:
+            self.close(e)
+            raise
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        self.close(exc)
+        return False
+
+    def open(self) -> "DriveSession":
+        if self.station is None:
+            self.identify()
+        if self.drive is None:
+            if self.before_connect is not None:
+                self.before_connect(self)
+            self.connect()
+        return self
+
+    def identify(self) -> DriveStation:
+        """Step 1: which station, which profile, which layout; the cycle rate (discovery.py, cycle.py)."""
+        locate(self)
+        choose_rate(self)
+        return self.station
+
+    def connect(self):
+        """Step 2: Set_Prm/Chk_Cfg, Data_Exchange, the family's Drive (bringup.py)."""
+        return bringup.connect(self)
+
+    def close(self, exc: BaseException | None = None) -> None:
+        """Safe stop (if the drive may be running), release the station, close the link. Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        self.signals.guard()
+        try:
+            safestop.shutdown(self, exc)
+        finally:
+            if self.cyclelog is not None:
+                self.cyclelog.close()
+            if self.close_link:
+                try:
+                    self.master.link.close()
+                except Exception:
+                    pass
+            self.signals.restore()
+        if self.log_error is not None:
+            if exc is None:
+                raise self.log_error          # the run went well, its log did not: exit 1
+            self._say(str(self.log_error))
+
+    @property
+    def log_error(self):
+        """OutputWriteError when the --log file could not be written (raised by close())."""
+        return self.cyclelog.error if self.cyclelog is not None else None
+
+    # -- bus figures ----------------------------------------------------------------------------
+    @property
+    def counters(self) -> dict:
+        if self.address is None:
+            return {}
+        return self.master.fdl.counters_for(self.address).as_dict()
+
+    @property
+    def achieved_hz(self) -> float:
+        return self.channel.rate if self.channel is not None else 0.0
+
+    @property
+    def cycles(self) -> int:
+        return self.channel.cycles if self.channel is not None else 0
+
+    @property
+    def may_run(self) -> bool:
+        return self._may_run
+
+    def _need_drive(self):
+        if self.drive is None:
+            raise PdriveError("DriveSession: not connected (use it as a context manager or call open())")
+        return self.drive
+
+    def _sample(self, st: DriveStatus) -> Sample:
+        return make_sample(self, st)
+
+    # -- speed and motion (motion.py) -------------------------------------------------------------
+    def fmax(self, override: float | None = None) -> tuple[float, str]:
+        return motion.fmax(self, override)
+
+    def percent_for_hz(self, hz: float, fmax_override: float | None = None) -> float:
+        return motion.percent_for_hz(self, hz, fmax_override)
+
+    def set_reference(self, percent: float) -> None:
+        motion.set_reference(self, percent)
+
+    def start(self, percent: float | None = None, timeout: float = 5.0) -> Sample:
+        return motion.start(self, percent, timeout)
+
+    def poll(self) -> Sample:
+        return motion.poll(self)
+
+    def status(self) -> Sample:
+        return motion.status(self)
+
+    # -- the safe stop (safestop.py) --------------------------------------------------------------
+    def stop_timeout(self, percent: float | None = None) -> float:
+        return safestop.stop_timeout(self, percent)
+
+    def stop(self, on_sample: Callable[[Sample], None] | None = None,
+             timeout: float | None = None) -> StopReport:
+        """The family's normal stop; wait (bounded) until the drive reports stopped; coast if it does
+        not. A second SIGINT/SIGTERM during the wait (when signals are handled) coasts at once.
+        The report is also kept in .stop_report."""
+        self.stop_report = safestop.stop(self, on_sample or self.on_sample, timeout)
+        return self.stop_report
+
+    # -- parameters (params.py) -------------------------------------------------------------------
+    def param_info(self, code: str) -> ParamInfo:
+        return params.param_info(self, code)
+
+    def parse_value(self, code: str, text: str | float | int, info: ParamInfo | None = None):
+        return params.parse_value(self, code, text, info)
+
+    def read_param(self, code: str) -> ParamValue:
+        return params.read_param(self, code)
+
+    def danger_of(self, info: ParamInfo) -> str | None:
+        return params.danger_of(self, info)
+
+    def check_dangerous(self, info: ParamInfo, allow_dangerous: bool = False) -> None:
+        params.check_dangerous(self, info, allow_dangerous)
+
+    def _check_write(self, info: ParamInfo, value, allow_dangerous: bool = False) -> None:
+        params.check_write(self, info, value, allow_dangerous)
+
+    def stopped_for(self, info: ParamInfo) -> str | None:
+        return params.stopped_for(self, info)
+
+    def write_param(self, code: str, value, *, check_running: bool = True,
+                    allow_dangerous: bool = False) -> ParamValue:
+        return params.write_param(self, code, value, check_running=check_running,
+                                  allow_dangerous=allow_dangerous)
+
+    def notes(self) -> list[str]:
+        return params.notes(self)
+
+    def save_support(self) -> str:
+        return params.save_support(self)
+
+    def save(self) -> str:
+        return params.save(self)
+
+    # -- faults ---------------------------------------------------------------------------------
+    def current_fault(self) -> Sample:
+        return self.status()
+
+    def fault_history(self) -> list[FaultRecord]:
+        return self._need_drive().fault_history()
+
+    def clear_fault(self, timeout: float = 5.0) -> Sample:
+        """Acknowledge the current fault (the cause must be gone). The history stays."""
+        st = self._need_drive().reset_fault(timeout=timeout)
+        return self._sample(st)
+
+    # -- dump / compare / restore (backup.py, dumpfile.py, restore.py) ----------------------------
+    def dump_plan(self) -> list[tuple[str, Any, str]]:
+        return backup.dump_plan(self)
+
+    def dump(self, progress: Callable[[int, int, str], None] | None = None) -> dict:
+        return backup.dump(self, progress)
+
+    load_dump = staticmethod(dumpfile.load_dump)
+
+    def compare(self, doc: dict, progress: Callable[[int, int, str], None] | None = None,
+                allow_dangerous: bool = False, check_identity: bool = True) -> list[ParamRow]:
+        return backup.compare(self, doc, progress, allow_dangerous, check_identity)
+
+    def restore_problems(self, doc: dict, rows: list[ParamRow], allow_dangerous: bool = False
+                         ) -> list[str]:
+        """Every reason not to write anything, one line each (restore.py)."""
+        return _restore.restore_problems(self, doc, rows, allow_dangerous)
+
+    def restore(self, doc: dict, dry_run: bool = False,
+                progress: Callable[[int, int, str], None] | None = None,
+                allow_dangerous: bool = False) -> list[ParamRow]:
+        """Validate every row, then write what differs, reading each write back (restore.py):
+        RestoreRefused (nothing written) / RestoreInterrupted (which rows landed)."""
+        return _restore.restore(self, doc, dry_run, progress, allow_dangerous)

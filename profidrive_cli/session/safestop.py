@@ -1,0 +1,204 @@
+"""The safe stop: the family's normal stop with a bounded wait (from the drive's deceleration time
+where it can be read), escalation to a coast stop when the drive does not stop or a second signal
+hurries it, and the shutdown on every way out of a session (stop if the drive may be running,
+release the station; with the link lost, say what the station's watchdog and the drive will do).
+Sends only stop commands (drives.base.Drive.stop) and the release; reads parameters only to size the
+wait and to name the comm-loss behaviour.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+from profidrive_cli import PdriveError, UsageError
+from profidrive_cli.drives.base import DriveError, DriveStatus
+from profidrive_cli.session.cycle import make_sample
+
+COAST_TIMEOUT_S = 10.0
+DEFAULT_STOP_TIMEOUT_S = 30.0
+
+#: deceleration-time parameter per family when the profile's `profidrive.ramps` names none
+_DECEL_CODES = {"fuji": "F08", "moeller": "F003", "yaskawa": "C1-02"}
+#: what the drive does when the master goes silent, per family (when it cannot be read)
+_COMM_LOSS_WORDS = {
+    "fuji": "its o27/o28 setting (o27 = 3 or 13..15 ignores the loss: the motor keeps running)",
+    "moeller": "P002 (0 = trip E70 and coast; 1 = keep running on the last command)",
+    "toyo": "protection 18 (COMM): the inverter trips and coasts",
+    "yaskawa": "a BUS fault after the option's communication timeout (the drive stops by its BUS "
+               "fault setting)",
+}
+
+
+@dataclass
+class StopReport:
+    how: str                       # "normal", "coast", "not needed", "not sent (link lost)", "failed"
+    stopped: bool
+    seconds: float = 0.0
+    message: str = ""
+    status: DriveStatus | None = None
+
+    def to_dict(self) -> dict:
+        return {"how": self.how, "stopped": self.stopped, "seconds": round(self.seconds, 3),
+                "message": self.message,
+                "state": self.status.state if self.status is not None else None}
+
+
+def read_decel(sess) -> float | None:
+    d = sess.drive
+    if not d.has_param_channel:
+        return None
+    code = getattr(getattr(d, "cfg", None), "ramps", {}) or {}
+    code = code.get("decel") if isinstance(code, dict) else None
+    code = code or _DECEL_CODES.get(sess.profile.family)
+    if not code or sess.profile.param(code) is None:
+        return None
+    try:
+        return float(d.read_param(code).value)
+    except (DriveError, UsageError, ValueError, TypeError):
+        return None
+
+
+def read_comm_loss(sess) -> str:
+    d = sess.drive
+    fam = sess.profile.family
+    try:
+        if fam == "fuji" and d.has_param_channel and hasattr(d, "comm_loss_setting"):
+            return d.comm_loss_setting()
+        if fam == "moeller" and d.has_param_channel and hasattr(d, "comm_loss_setting"):
+            vals = d.comm_loss_setting()
+            first = next(iter(vals.values()))
+            keep = int(first.raw) == 1
+            return (f"{first.code} = {first.raw}: " +
+                    ("the drive keeps running on the last command" if keep else
+                     "the drive trips (E70) and coasts"))
+    except (DriveError, UsageError):
+        pass
+    return _COMM_LOSS_WORDS.get(fam, "its communication-loss setting")
+
+
+def stop_timeout(sess, percent: float | None = None) -> float:
+    if sess.stop_timeout_s is not None:
+        return float(sess.stop_timeout_s)
+    if sess._decel_s is None:
+        return DEFAULT_STOP_TIMEOUT_S
+    frac = 1.0
+    if percent is not None:
+        frac = min(1.0, abs(percent) / 100.0)
+    return max(5.0, min(600.0, 1.5 * sess._decel_s * frac + 3.0))
+
+
+def stop(sess, on_sample, timeout) -> StopReport:
+    """Normal stop, bounded wait, coast if it does not stop (or a signal hurries it)."""
+    d = sess._need_drive()
+    t_start = sess.channel.now()
+    last = d.last_status if hasattr(d, "last_status") else None
+    last = last or getattr(d, "last", None)
+    pct = last.speed_percent if last is not None else None
+    limit = timeout if timeout is not None else sess.stop_timeout(pct)
+    st = None
+    why = ""
+    try:
+        d.stop("normal", wait=False)
+        st = wait_stopped(sess, limit, on_sample)
+        if st is not None:
+            sess._may_run = False
+            how = "normal"
+            msg = (f"the drive is in fault{f' ({st.fault_code})' if st.fault_code else ''}: "
+                   f"its output is off" if st.fault else "stopped")
+            return StopReport(how, True, sess.channel.now() - t_start, msg, st)
+        why = ("stop hurried by a second signal" if sess.signals.hurry else
+               f"not stopped after {limit:g} s")
+    except DriveError as e:
+        why = f"normal stop failed: {e}"
+    # escalate: coast (OFF2 / base block / run bit off)
+    sess._warn(f"{why}: coasting")
+    try:
+        d.stop("coast", wait=False)
+        sess.signals.hurry = False
+        st = wait_stopped(sess, COAST_TIMEOUT_S, on_sample)
+    except DriveError as e:
+        return StopReport("failed", False, sess.channel.now() - t_start,
+                          f"{why}; coast stop not possible: {e}", sess.final_status)
+    if st is None:
+        return StopReport("failed", False, sess.channel.now() - t_start,
+                          f"{why}; the drive does not report stopped after a coast stop either",
+                          sess.final_status)
+    sess._may_run = False
+    return StopReport("coast", True, sess.channel.now() - t_start, f"{why}; coasted", st)
+
+
+def wait_stopped(sess, timeout: float, on_sample) -> DriveStatus | None:
+    d = sess.drive
+    end = sess.channel.now() + timeout
+    while True:
+        st = d.cycle()
+        if on_sample is not None:
+            on_sample(make_sample(sess, st))
+        else:
+            sess.final_status = st
+        if st.fault or st.stopped:
+            if st.fault and st.fault_code is None:
+                try:
+                    st = d.status()
+                except DriveError:
+                    pass
+            return st
+        if sess.signals.hurry or sess.channel.now() > end:
+            return None
+
+
+def link_lost_words(sess, e: BaseException) -> str:
+    fam_text = sess.comm_loss_text or _COMM_LOSS_WORDS.get(
+        sess.profile.family if sess.profile else "", "its communication-loss setting")
+    return (f"link lost ({e}): pdrive cannot send a stop. The station's DP watchdog "
+            f"({sess.watchdog_ms:g} ms) takes it out of data exchange within "
+            f"{sess.watchdog_ms / 1000.0:g} s of the last telegram; the drive then stops by "
+            f"{fam_text}")
+
+
+def shutdown(sess, exc: BaseException | None) -> None:
+    from profidrive_cli.link.base import LinkLost
+    if isinstance(exc, LinkLost):
+        sess.link_lost = True
+    if sess.drive is None or sess.address is None:
+        return
+    if sess.link_lost:
+        if sess._may_run:
+            sess.stop_report = StopReport("not sent (link lost)", False, 0.0,
+                                          link_lost_words(sess, exc))
+            sess._say(sess.stop_report.message)
+        return
+    if exc is not None:
+        # an interrupted request may have left a reply on the line: start clean
+        try:
+            time.sleep(min(0.05, sess.master.params.reply_timeout(64)))
+            sess.master.link.flush_input()
+        except Exception:
+            pass
+    if sess._may_run:
+        try:
+            r = sess.stop()
+            if r.how == "normal":
+                sess._say(f"stopped (normal stop, {r.seconds:.1f} s)" if not (r.status and r.status.fault)
+                          else r.message)
+            elif r.how == "coast":
+                sess._say(f"stopped by a coast stop after {r.seconds:.1f} s ({r.message})")
+            else:
+                sess._say(f"could not confirm the stop: {r.message}")
+        except LinkLost as e:
+            sess.link_lost = True
+            sess.stop_report = StopReport("not sent (link lost)", False, 0.0, link_lost_words(sess, e))
+            sess._say(sess.stop_report.message)
+            return
+        except PdriveError as e:
+            sess.stop_report = StopReport("failed", False, 0.0, f"stop failed: {e}")
+            sess._say(f"stop failed: {e}; the station's watchdog ({sess.watchdog_ms:g} ms) "
+                      f"ends data exchange when pdrive lets go")
+    elif sess.stop_report is None:
+        sess.stop_report = StopReport("not needed", True, 0.0, "not started by this session",
+                                      sess.final_status)
+    try:
+        sess.master.release(sess.address)
+    except PdriveError:
+        pass
