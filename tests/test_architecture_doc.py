@@ -9,18 +9,27 @@ PKG = ROOT / "profidrive_cli"
 
 
 def named_modules():
-    """(layer folder, module file) for every `name.py` in the layer list at the top of the doc."""
+    """(folder, module file) for every `name.py` in the module list at the top of the doc. A line
+    `    name/  ...` opens a folder at its indentation (a deeper one is a sub-package of the folder
+    above it); `name.py` on the lines below it are that folder's modules."""
     text = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
     block = text.split("## ", 1)[0]
-    layer = None
+    stack: list[tuple[int, str]] = []          # (indent, folder name)
     for line in block.splitlines():
-        m = re.match(r"    (\w+)/\s", line)
+        m = re.match(r"( +)(\w+)/(\s|$)", line)
+        indent = len(line) - len(line.lstrip(" "))
         if m:
-            layer = m.group(1)
-        if layer is None:
+            while stack and stack[-1][0] >= indent:
+                stack.pop()
+            stack.append((indent, m.group(2)))
+        elif line.strip():
+            while stack and stack[-1][0] >= indent:
+                stack.pop()
+        if not stack:
             continue
+        folder = "/".join(name for _, name in stack)
         for name in re.findall(r"(?<![\w/.])(\w+\.py)\b", line):
-            yield layer, name
+            yield folder, name
         for path in re.findall(r"\b(\w+/\w+\.py)\b", line):     # written with its folder: link/x.py
             yield path.split("/")[0], path.split("/")[1]
 
