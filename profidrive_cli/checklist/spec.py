@@ -24,7 +24,7 @@ from typing import Any
 
 from profidrive_cli import PdriveError, UsageError
 from profidrive_cli.checklist.fields import FieldChecker, ParamTarget, Skip, fmt, line_at, tname
-from profidrive_cli.checklist.steps import STEP_TYPES, STEPS
+from profidrive_cli.checklist.steps import STEPS
 from profidrive_cli.datafile import DataFileError, LineDict, LineList, load_yaml_text, read_text
 
 COMMON_KEYS = ("name", "on_fail", "stations")
@@ -444,22 +444,23 @@ class _Validator(FieldChecker):
         return out
 
     def raw_step(self, index, ln, node, default_on_fail) -> "_RawStep":
+        step_types = tuple(STEPS)                    # the registry: checklist/steps/
         if isinstance(node, str):                     # bare step: "- save", "- stop", "- reset_fault"
             key = node.strip()
-            if key not in STEP_TYPES:
-                self.fail(ln, f"step {index}: {self.unknown_key(key, STEP_TYPES, 'step type')}")
+            if key not in step_types:
+                self.fail(ln, f"step {index}: {self.unknown_key(key, step_types, 'step type')}")
             return _RawStep(index, key, ln, None, ln, None, default_on_fail, None)
         if not isinstance(node, LineDict):
             self.fail(ln, f"step {index}: a step must be a mapping such as `- write: {{param: F07, value: 2}}`, "
                       f"got {tname(node)}")
-        types = [k for k in node if k in STEP_TYPES]
-        others = [k for k in node if k not in STEP_TYPES and k not in COMMON_KEYS]
+        types = [k for k in node if k in step_types]
+        others = [k for k in node if k not in step_types and k not in COMMON_KEYS]
         for k in others:
-            self.err(node.line_of(k), f"step {index}: " + self.unknown_key(k, STEP_TYPES + COMMON_KEYS,
-                                                                            "step type or key"))
+            self.err(node.line_of(k), f"step {index}: " + self.unknown_key(k, step_types + COMMON_KEYS,
+                                                                           "step type or key"))
         if not types:
             if not others:
-                self.fail(ln, f"step {index}: no step type (one of {', '.join(STEP_TYPES)})")
+                self.fail(ln, f"step {index}: no step type (one of {', '.join(step_types)})")
             raise Skip()
         if len(types) > 1:
             self.fail(node.line_of(types[1]), f"step {index}: one step type per step, found "

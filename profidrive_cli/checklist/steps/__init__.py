@@ -16,6 +16,4 @@ from profidrive_cli.checklist.steps.base import StepFailed, StepType
 STEPS: dict[str, StepType] = {m.STEP.name: m.STEP for m in (
     expect_identity, read, write, save, run, stop, expect_status, wait, faults, reset_fault, prompt, note)}
 
-STEP_TYPES = tuple(STEPS)
-
-__all__ = ["STEPS", "STEP_TYPES", "StepFailed", "StepType"]
+__all__ = ["STEPS", "StepFailed", "StepType"]
