@@ -1,10 +1,10 @@
 """The checklist's field toolkit: what every step type's schema check is built from.
 
 FieldChecker collects problems with file:line (err, fail) and reads a step's fields (fields, num,
-code_field, no_channel); ParamTarget is a parameter resolved for one station's profile. It knows the
-YAML shape (datafile.LineDict / LineList) and the profiles (drives/), nothing of stations on a bus, of the
-checklist header (spec.py) or of running (runner.py). spec.py's validator is a FieldChecker; each step type
-in checklist/steps/ gets it to check its own fields.
+code_field, need_param_channel); ParamTarget is a parameter resolved for one station's profile. It knows
+the YAML shape (datafile.LineDict / LineList) and the profiles (drives/), nothing of stations on a bus, of
+the checklist header (spec.py) or of running (runner.py). spec.py's validator is a FieldChecker; each step
+type in checklist/steps/ gets it to check its own fields.
 """
 
 from __future__ import annotations
@@ -151,7 +151,8 @@ class FieldChecker:
                       f"got {tname(v)}")
         return self.param(st, str(v), d.line_of(key), f"step {rs.index} ({rs.type})")
 
-    def no_channel(self, st, rs):
+    def need_param_channel(self, st, rs):
+        """Fail the step when the station's layout has no parameter channel (PKW / handshake)."""
         if not layout_has_params(st.profile, st.layout):
             self.fail(rs.line, f"step {rs.index} ({rs.type}): station {st.name!r} uses layout {st.layout}, "
                       f"which has no parameter channel (choose a layout with one, e.g. "

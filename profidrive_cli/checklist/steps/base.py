@@ -4,7 +4,7 @@ A step type is one StepType subclass in its own module under checklist/steps/, r
 steps/__init__.py. It holds its schema and its execution together:
 
     validate(check, st, rs, body, state) -> (args, title)
-        check: the FieldChecker collecting file:line problems (fields, num, code_field, no_channel,
+        check: the FieldChecker collecting file:line problems (fields, num, code_field, need_param_channel,
         err, fail); st: the StationSpec; rs: the raw step (index, type, line, body_line); body: the
         step's mapping or scalar after variable substitution; state: what earlier steps leave behind
         on this station ({"running": bool}). Returns the typed args and the title in words, or raises

@@ -9,6 +9,7 @@ from __future__ import annotations
 from profidrive_cli import PdriveError
 from profidrive_cli.checklist.steps.base import StepFailed, StepType, hex4
 
+
 class ExpectIdentity(StepType):
     name = "expect_identity"
 

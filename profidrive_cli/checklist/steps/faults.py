@@ -11,6 +11,7 @@ import difflib
 from profidrive_cli.checklist.fields import layout_has_params, tname
 from profidrive_cli.checklist.steps.base import StepFailed, StepType
 
+
 class Faults(StepType):
     name = "faults"
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from profidrive_cli.checklist.steps.base import StepType
 
+
 class Note(StepType):
     name = "note"
 

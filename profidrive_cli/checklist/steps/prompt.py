@@ -10,6 +10,7 @@ import threading
 
 from profidrive_cli.checklist.steps.base import StepFailed, StepType
 
+
 class Prompt(StepType):
     name = "prompt"
 

@@ -9,13 +9,14 @@ from __future__ import annotations
 from profidrive_cli.checklist.fields import fmt, is_num, range_problem
 from profidrive_cli.checklist.steps.base import StepFailed, StepType, close_to
 
+
 class Read(StepType):
     name = "read"
 
     def validate(self, check, st, rs, body, state):
         d = check.fields(rs, body, ("param", "expect", "tolerance", "min", "max", "range"), "param", ("param",))
         w = f"step {rs.index} (read)"
-        check.no_channel(st, rs)
+        check.need_param_channel(st, rs)
         t = check.code_field(st, rs, d)
         expect = check.num(rs, d, "expect")
         tol = check.num(rs, d, "tolerance", minimum=0)

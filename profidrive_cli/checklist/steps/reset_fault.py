@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from profidrive_cli.checklist.steps.base import StepFailed, StepType, status_dict
 
+
 class ResetFault(StepType):
     name = "reset_fault"
 

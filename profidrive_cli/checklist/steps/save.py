@@ -8,12 +8,13 @@ from __future__ import annotations
 
 from profidrive_cli.checklist.steps.base import StepType
 
+
 class Save(StepType):
     name = "save"
 
     def validate(self, check, st, rs, body, state):
         check.fields(rs, body, ())
-        check.no_channel(st, rs)
+        check.need_param_channel(st, rs)
         return {}, "save parameters to non-volatile memory"
 
     def execute(self, run, sr, r, d, h):

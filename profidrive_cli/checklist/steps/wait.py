@@ -9,6 +9,7 @@ from __future__ import annotations
 from profidrive_cli.checklist.fields import fmt
 from profidrive_cli.checklist.steps.base import StepType, status_dict
 
+
 class Wait(StepType):
     name = "wait"
 

@@ -11,13 +11,14 @@ from profidrive_cli.checklist.fields import fmt
 from profidrive_cli.checklist.steps.base import StepFailed, StepType, close_to
 from profidrive_cli.drives.values import danger, profile_value_problem
 
+
 class Write(StepType):
     name = "write"
 
     def validate(self, check, st, rs, body, state):
         d = check.fields(rs, body, ("param", "value", "allow_dangerous"), None, ("param", "value"))
         w = f"step {rs.index} (write)"
-        check.no_channel(st, rs)
+        check.need_param_channel(st, rs)
         t = check.code_field(st, rs, d)
         value = check.num(rs, d, "value", required=True)
         allow = d.get("allow_dangerous", False)
