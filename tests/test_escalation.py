@@ -2,7 +2,7 @@
 
 A drive that does not come to a stop is coasted after 1.5 x its deceleration time (scaled by the
 speed it was running at) + 3 s, at least 5 s and at most 600 s; 30 s when the deceleration time
-cannot be read (docs/commands.md "the safe stop"; drives/session.py module doc). The expected
+cannot be read (docs/commands.md "the safe stop"; session/ package doc). The expected
 times below are worked by hand from that rule, and the session's own clock (the virtual-time
 simulator) measures how long it really waited before coasting.
 """

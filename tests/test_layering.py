@@ -10,9 +10,9 @@ top-level modules profidrive_cli/__init__, datafile, outfile, data):
     dp         fdl, link (the poller waits on the link's clock and raises its LinkLost; doctor.py
                sends its FDL probes through a port)
     gsd        dp and below (dp.cfg decodes the module identifiers)
-    drives     gsd and below (drives/session.py still opens links until session/ takes it over)
+    drives     gsd and below
     sim        drives and below (the drive models reuse the codecs); sim:// is registered from here
-    session    sim and below (profidrive_cli/session/, being built from drives/session.py)
+    session    sim and below (profidrive_cli/session/)
     checklist  session and below
     cli        everything (checklist included); profidrive_cli/__main__ counts as cli
     top-level  (__init__, datafile, outfile, data) nothing of any layer
@@ -42,13 +42,6 @@ ALLOWED[TOP] = {TOP}
 
 MAX_LINES = 600
 
-#: import cycles that live in modules other engineers of issue 15 are splitting right now
-#: (drives/values.py:211 imports drives.toyo inside a function, drives/restore.py:70 imports
-#: drives.session inside a function); tolerated only as exactly these sets, any other cycle fails.
-#: Remove the entries when the house slices are merged.
-KNOWN_CYCLES_UNTIL_MERGE = [
-    {"profidrive_cli.drives.restore", "profidrive_cli.drives.session"},
-]
 
 
 def _modules() -> dict[str, Path]:
@@ -196,8 +189,6 @@ def test_cycle_finder_finds_a_cycle():
 def test_no_import_cycles_between_modules():
     bad = []
     for comp in _cycles(GRAPH):
-        if set(comp) in KNOWN_CYCLES_UNTIL_MERGE:
-            continue
         members = set(comp)
         edges = [f"  {_where(MODULES[m], line)}: {text}"
                  for m in comp for line, t, text in GRAPH[m] if t in members]
@@ -205,7 +196,6 @@ def test_no_import_cycles_between_modules():
     assert not bad, "import cycles:\n" + "\n".join(bad)
 
 
-@pytest.mark.xfail(strict=False, reason="until the house slices are merged")
 def test_no_module_over_600_lines():
     big = []
     for m, p in MODULES.items():

@@ -1,4 +1,4 @@
-"""drives.session.DriveSession on the in-process simulated bus: station choice, profile and layout
+"""session.DriveSession on the in-process simulated bus: station choice, profile and layout
 checks, cycle rate, the safe stop on every way out, parameters, dump / restore."""
 
 import csv

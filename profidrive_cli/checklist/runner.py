@@ -1,7 +1,7 @@
 """Run a validated checklist on drives, one station after another, and collect what was measured.
 
 The runner does not open ports or sessions itself: `open_station(spec)` is a context manager that yields a
-StationHandle (a Drive plus the identity the bus reported). In pdrive that is drives.session.DriveSession
+StationHandle (a Drive plus the identity the bus reported). In pdrive that is session.DriveSession
 (see session_opener), which on exit always stops the drive safely and releases the station; tests may hand
 in a DirectChannel-backed opener. All waiting uses the drive's own clock (channel.now()), so a run on a
 simulated clock takes no real time.
@@ -9,12 +9,15 @@ simulated clock takes no real time.
 Safety: a failed step with on_fail: stop, an exception, Ctrl-C or SIGTERM end the station's steps, the
 runner stops the drive (normal stop, bounded, then coast) and the session's exit stops it again if needed.
 The drive's status after that is part of the report ("left stopped").
+
+Each step is run by its step type (checklist/steps/, looked up by name in steps.STEPS): the runner gives it
+itself (dry_run, yes, ask, progress, cycle_for), the results and the drive; timing, on_fail, the observer,
+errors and the safe stop are done here once for every type.
 """
 
 from __future__ import annotations
 
 import contextlib
-import math
 import signal
 import threading
 import time
@@ -22,9 +25,10 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from typing import Any, Callable
 
-from profidrive_cli.drives.values import danger
 from profidrive_cli import PdriveError, __version__
-from profidrive_cli.checklist.spec import Checklist, StationSpec, Step, _fmt
+from profidrive_cli.checklist.spec import Checklist, StationSpec, Step
+from profidrive_cli.checklist.steps import STEPS
+from profidrive_cli.checklist.steps.base import StepFailed, hex4, status_dict
 
 PASSED, FAILED, ERROR, SKIPPED, NOT_RUN = "passed", "failed", "error", "skipped", "not run"
 
@@ -187,7 +191,7 @@ class RunResult:
 class StationHandle:
     """What open_station yields: the Drive, and the identity the bus reported for the station.
 
-    session: the drives.session.DriveSession behind it (None in tests on a bare Drive); when present its
+    session: the session.DriveSession behind it (None in tests on a bare Drive); when present its
     checked write_param, save and safe stop are used. closed(): after the station is left, what the
     safe stop on the way out did (dict for the report)."""
     drive: Any
@@ -207,10 +211,6 @@ class Observer:
     def step_finished(self, station: StationResult, result: StepResult) -> None: ...
     def station_finished(self, station: StationResult) -> None: ...
     def run_finished(self, run: RunResult) -> None: ...
-
-
-class StepFailed(Exception):
-    """An expectation was not met: the step fails with this message (measured values already recorded)."""
 
 
 # =============================================================================================
@@ -339,8 +339,7 @@ class Runner:
         self._progress_at = 0.0
         self.obs.step_started(sr, r)
         try:
-            fn = getattr(self, f"do_{r.step.type}")
-            msg = fn(sr, r, handle.drive, handle)
+            msg = STEPS[r.step.type].execute(self, sr, r, handle.drive, handle)
             r.status = PASSED
             r.message = msg or ""
         except StepFailed as e:
@@ -361,8 +360,9 @@ class Runner:
             r.duration_s = time.monotonic() - t0
             self.obs.step_finished(sr, r)
 
-    # -- helpers -------------------------------------------------------------------------------
-    def _progress(self, sr, r, text: str, force: bool = False) -> None:
+    # -- what step types use ------------------------------------------------------------------
+    def progress(self, sr, r, text: str, force: bool = False) -> None:
+        """Tell the observer how a step is getting on (at most every progress_interval s unless force)."""
         t = time.monotonic()
         if force or t - self._progress_at >= self.progress_interval:
             self._progress_at = t
@@ -402,13 +402,13 @@ class Runner:
                     except PdriveError:
                         st = d.stop("coast", wait=True, timeout=DEFAULT_SAFE_STOP_S)
                         how = "coast stop"
-            sr.final_status = {**_status_dict(st), "stop": how}
+            sr.final_status = {**status_dict(st), "stop": how}
         except _interrupts():
             raise
         except Exception as e:        # noqa: BLE001 - the session's exit still stops it
             sr.final_status = {"error": f"could not confirm the drive stopped: {e}"}
 
-    def _cycle_for(self, sr, r, drive, seconds: float, text: str = "") -> Any:
+    def cycle_for(self, sr, r, drive, seconds: float, text: str = "") -> Any:
         """Keep exchanging cyclic data for `seconds` on the drive's clock; returns the last status."""
         ch = drive.channel
         end = ch.now() + seconds
@@ -416,305 +416,8 @@ class Runner:
         while ch.now() < end:
             st = drive.cycle()
             if text:
-                self._progress(sr, r, f"{text} ({max(0.0, end - ch.now()):.1f} s left)")
+                self.progress(sr, r, f"{text} ({max(0.0, end - ch.now()):.1f} s left)")
         return st
-
-    # =========================================================================================
-    # one method per step type: return a message on success, raise StepFailed / PdriveError
-    # =========================================================================================
-
-    def do_note(self, sr, r, d, h):
-        r.measured = {"text": r.step.args["text"]}
-        return r.step.args["text"]
-
-    def do_prompt(self, sr, r, d, h):
-        text = r.step.args["text"]
-        r.expected = {"answer": "yes"}
-        if self.dry_run:
-            r.measured = {"answer": "yes", "by": "dry run"}
-            return "dry run: taken as confirmed"
-        if self.yes:
-            r.measured = {"answer": "yes", "by": "--yes"}
-            return "confirmed by --yes"
-        if self.ask is None:
-            r.measured = {"answer": None, "by": "nobody"}
-            raise StepFailed("no operator to confirm (not a terminal): run with --yes to confirm prompts")
-        # ask in a thread and keep the drive's cyclic data (and the watchdog) going meanwhile
-        box: dict = {}
-
-        def asker():
-            try:
-                box["answer"] = bool(self.ask(text))
-            except BaseException as e:    # noqa: BLE001 - EOF / interrupt at the prompt
-                box["error"] = e
-        t = threading.Thread(target=asker, name="checklist-prompt", daemon=True)
-        t.start()
-        while t.is_alive():
-            d.cycle()
-            t.join(0.02)
-        if "error" in box:
-            e = box["error"]
-            if isinstance(e, KeyboardInterrupt):
-                raise e
-            if isinstance(e, EOFError):
-                raise StepFailed("no answer (end of input)")
-            raise StepFailed(f"prompt failed: {e}")
-        r.measured = {"answer": "yes" if box["answer"] else "no", "by": "operator"}
-        if not box["answer"]:
-            raise StepFailed("the operator answered no")
-        return "confirmed by the operator"
-
-    def do_wait(self, sr, r, d, h):
-        s = float(r.step.args["seconds"])
-        st = self._cycle_for(sr, r, d, s, "waiting")
-        r.measured = {"seconds": s, "status": _status_dict(st)}
-        return ""
-
-    def do_expect_identity(self, sr, r, d, h):
-        a = r.step.args
-        idt = h.identity or {}
-        got_ident = idt.get("ident")
-        expect_ident = a["ident"]
-        note = ""
-        if self.dry_run and expect_ident != sr.spec.profile.ident and got_ident == sr.spec.profile.ident:
-            note = (f"dry run: the simulator answers with the profile's ident 0x{got_ident:04X}; "
-                    f"0x{expect_ident:04X} is checked on the plant")
-            expect_ident = got_ident
-        r.expected = {"ident": _hex(a["ident"]), "profile": a["profile"], "gsd": a["gsd"]}
-        r.measured = {"ident": _hex(got_ident), "profile": idt.get("profile"), "gsd": idt.get("gsd"),
-                      "address": idt.get("address"), "layout": idt.get("layout")}
-        for k in ("dp_state", "warnings", "device", "name", "vendor", "card"):
-            if idt.get(k):
-                r.measured[k] = idt[k]
-        problems = []
-        if got_ident != expect_ident:
-            problems.append(f"ident {_hex(got_ident)}, expected {_hex(expect_ident)}")
-        if idt.get("profile") is not None and idt.get("profile") != a["profile"]:
-            problems.append(f"profile {idt.get('profile')}, expected {a['profile']}")
-        if a["gsd"] and not self.dry_run:
-            g = idt.get("gsd")
-            if g is None or _gsd_name(g) != _gsd_name(a["gsd"]):
-                problems.append(f"GSD {g or 'none found for the ident'}, expected {a['gsd']}")
-        if problems:
-            raise StepFailed("; ".join(problems))
-        return note or f"ident {_hex(got_ident)}, profile {idt.get('profile')}"
-
-    def do_read(self, sr, r, d, h):
-        a = r.step.args
-        t = a["param"]
-        pv = d.read_param(t.code)
-        u = f" {pv.unit}" if pv.unit else ""
-        r.measured = {"param": pv.code, "value": pv.value, "unit": pv.unit, "raw": pv.raw}
-        v = pv.value
-        if a["expect"] is not None:
-            tol = a["tolerance"] if a["tolerance"] is not None else t.step_tolerance
-            r.expected = {"value": a["expect"], "tolerance": a["tolerance"] or 0, "unit": t.unit}
-            if not _close(v, a["expect"], tol):
-                raise StepFailed(f"{pv.code} = {_fmt(v)}{u}, expected {_fmt(a['expect'])}{u}"
-                                 + (f" ± {_fmt(a['tolerance'])}" if a["tolerance"] else ""))
-        elif a["min"] is not None or a["max"] is not None:
-            r.expected = {"min": a["min"], "max": a["max"], "unit": t.unit}
-            if (a["min"] is not None and v < a["min"] - 1e-9) or (a["max"] is not None and v > a["max"] + 1e-9):
-                lo = _fmt(a["min"]) if a["min"] is not None else "-inf"
-                hi = _fmt(a["max"]) if a["max"] is not None else "inf"
-                raise StepFailed(f"{pv.code} = {_fmt(v)}{u}, expected {lo}..{hi}{u}")
-        return f"{pv.code} = {_fmt(v)}{u}"
-
-    def do_write(self, sr, r, d, h):
-        a = r.step.args
-        t = a["param"]
-        value = a["value"]
-        r.expected = {"value": value, "unit": t.unit}
-        before = None
-        try:
-            before = d.read_param(t.code).value
-        except PdriveError:
-            pass                          # write-only, or unreadable before: the read-back decides
-        allow = bool(a.get("allow_dangerous"))
-        if h.session is not None:
-            # writable, not dangerous unless the step allows it, exact value, stop-only while running
-            h.session.write_param(t.code, value, allow_dangerous=allow)
-        else:
-            if danger(t.param) and not allow:
-                raise StepFailed(f"{t.label} is dangerous ({danger(t.param)}); the step needs "
-                                 f"allow_dangerous: true")
-            d.write_param(t.code, value)              # the codec's own exact-value check
-        rb = d.read_param(t.code)
-        u = f" {rb.unit}" if rb.unit else ""
-        r.measured = {"param": rb.code, "before": before, "written": value, "read_back": rb.value,
-                      "unit": rb.unit, "raw": rb.raw}
-        if not _close(rb.value, value, t.step_tolerance):
-            raise StepFailed(f"{rb.code}: wrote {_fmt(value)}{u}, read back {_fmt(rb.value)}{u}")
-        notes = getattr(d, "notes", None)
-        extra = ""
-        if notes:
-            extra = "; " + "; ".join(dict.fromkeys(notes))
-            notes.clear()
-        changed = "unchanged" if before is not None and _close(before, value, t.step_tolerance) else \
-            (f"was {_fmt(before)}{u}" if before is not None else "")
-        return f"{rb.code} = {_fmt(rb.value)}{u} (read back" + (f"; {changed}" if changed else "") + ")" + extra
-
-    def do_save(self, sr, r, d, h):
-        if h.session is not None:
-            how = h.session.save_support()
-            msg = h.session.save()        # 'automatic' cards: every write is already stored
-            r.measured = {"saved": True, "how": how}
-            return msg
-        d.save()
-        r.measured = {"saved": True, "how": "command"}
-        return "saved to non-volatile memory"
-
-    def do_run(self, sr, r, d, h):
-        a = r.step.args
-        sign = -1.0 if a["direction"] == "reverse" else 1.0
-        target = sign * float(a["speed"])
-        tol = float(a["tolerance"])
-        unit = a["unit"]
-        u = " Hz" if unit == "hz" else " %"
-        r.expected = {"speed": target, "unit": "Hz" if unit == "hz" else "%", "tolerance": tol,
-                      "within_s": a["within"], "hold_s": a["duration"]}
-        ch = d.channel
-
-        def actual(s):
-            if unit == "hz":
-                if s.speed_hz is not None:
-                    return s.speed_hz
-                if s.speed_percent is not None:
-                    return s.speed_percent * d.max_frequency() / 100.0
-                return None
-            return s.speed_percent
-
-        st0 = d.status()
-        v0 = actual(st0)
-        # reversing a turning motor: the actual has to pass through standstill before it can count (a
-        # drive that reports the commanded direction with an unsigned speed would otherwise look
-        # "reached" at the first cycle)
-        through_zero = bool(st0.running and v0 is not None and v0 * target < 0 and abs(v0) > tol)
-        t_start = ch.now()
-        if unit == "hz":
-            d.set_speed_hz(target)
-        else:
-            d.set_speed(target)
-        st = d.status()
-        if not st.running:
-            st = d.start(timeout=float(a["within"]))
-        deadline = t_start + float(a["within"])
-        reached_at = None
-        while True:
-            v = actual(st)
-            if st.fault:
-                r.measured = _run_measured(st, v, None, None, None, unit)
-                raise StepFailed(f"the drive tripped while accelerating ({st.fault_code or st.state})")
-            if through_zero and v is not None and abs(v) <= tol:
-                through_zero = False
-            if v is not None and abs(v - target) <= tol and not through_zero:
-                reached_at = ch.now()
-                break
-            if ch.now() > deadline:
-                r.measured = _run_measured(st, v, None, None, None, unit)
-                raise StepFailed(f"actual {_fmt(_r(v))}{u} after {_fmt(a['within'])} s, expected "
-                                 f"{_fmt(target)}{u} ± {_fmt(tol)}")
-            self._progress(sr, r, f"accelerating: {_fmt(_r(v))}{u} -> {_fmt(target)}{u}")
-            st = d.cycle()
-        reach_s = reached_at - t_start
-        lo = hi = actual(st)
-        hold_end = ch.now() + float(a["duration"])
-        while ch.now() < hold_end:
-            st = d.cycle()
-            v = actual(st)
-            if st.fault:
-                r.measured = _run_measured(st, v, reach_s, lo, hi, unit)
-                raise StepFailed(f"the drive tripped while running ({st.fault_code or st.state})")
-            if v is not None:
-                lo, hi = min(lo, v), max(hi, v)
-                if abs(v - target) > tol:
-                    r.measured = _run_measured(st, v, reach_s, lo, hi, unit)
-                    raise StepFailed(f"actual left the band: {_fmt(_r(v))}{u} while holding "
-                                     f"{_fmt(target)}{u} ± {_fmt(tol)}")
-            self._progress(sr, r, f"holding {_fmt(_r(v))}{u} ({max(0.0, hold_end - ch.now()):.1f} s left)")
-        v = actual(st)
-        r.measured = _run_measured(st, v, reach_s, lo, hi, unit)
-        return f"within ± {_fmt(tol)}{u} of {_fmt(target)}{u} after {reach_s:.2f} s" + (
-            f", held {_fmt(a['duration'])} s at {_fmt(_r(lo))}..{_fmt(_r(hi))}{u}" if a["duration"] else "") + \
-            f"; {_fmt(_r(v))}{u} at the end"
-
-    def do_stop(self, sr, r, d, h):
-        a = r.step.args
-        ch = d.channel
-        t0 = ch.now()
-        r.expected = {"stopped": True, "within_s": a["within"]}
-        st = d.stop(a["mode"], wait=True, timeout=float(a["within"]))
-        took = ch.now() - t0
-        r.measured = {"stopped": st.stopped, "after_s": round(took, 3), **_status_dict(st)}
-        if not st.stopped:
-            raise StepFailed(f"not stopped after {took:.1f} s (state {st.state}, speed {_fmt(_r(st.speed_hz))} Hz)")
-        return f"stopped after {took:.2f} s ({st.state})"
-
-    def do_expect_status(self, sr, r, d, h):
-        a = r.step.args
-        flags, state_text = a["flags"], a["state"]
-        r.expected = {**{k: v for k, v in flags.items()}, **({"state": state_text} if state_text else {})}
-        ch = d.channel
-        end = ch.now() + float(a["within"])
-        while True:
-            st = d.status()
-            got = {k: _flag(st, k) for k in flags}
-            bad = [k for k, v in flags.items() if got[k] != v]
-            state_ok = state_text is None or state_text.lower() in (st.state or "").lower()
-            if (not bad and state_ok) or ch.now() >= end:
-                break
-            self._progress(sr, r, "waiting for " + ", ".join(bad or ["state"]))
-        r.measured = {**got, "state": st.state, "speed_hz": _r(st.speed_hz), "speed_percent": _r(st.speed_percent),
-                      "fault_code": st.fault_code}
-        problems = [f"{k} is {'yes' if got[k] else 'no'}, expected {'yes' if flags[k] else 'no'}" for k in bad]
-        if not state_ok:
-            problems.insert(0, f"state {st.state!r}, expected {state_text!r}")
-        if problems:
-            raise StepFailed("; ".join(problems))
-        return f"state {st.state}"
-
-    def do_faults(self, sr, r, d, h):
-        a = r.step.args
-        st = d.status()
-        need_history = a["history"] or a["expect"] != "none"
-        hist = d.fault_history() if need_history else []
-        entries = [{"position": f.position, "raw": f.raw, "codes": f.codes, "meanings": f.meanings}
-                   for f in hist]
-        recorded = [e for e in entries if e["raw"] and e["codes"]]
-        r.measured = {"fault": st.fault, "current": st.fault_code, "state": st.state}
-        if need_history:
-            r.measured["history"] = entries
-        if a["expect"] == "none":
-            r.expected = {"fault": False, **({"history": []} if a["history"] else {})}
-            if st.fault:
-                raise StepFailed(f"the drive is in fault ({st.fault_code or st.state})")
-            if a["history"] and recorded:
-                raise StepFailed("fault history not empty: " + ", ".join(
-                    f"{e['position']}: {'/'.join(e['codes'])}" for e in recorded))
-            return "no fault" + (", history empty" if a["history"] else "")
-        code = a["expect"]
-        r.expected = {"code": code, "where": "history" if a["history"] else "current"}
-        if a["history"]:
-            if any(code.upper() in (c.upper() for c in e["codes"]) for e in recorded):
-                return f"{code} is in the fault history"
-            raise StepFailed(f"{code} is not in the fault history (" +
-                             (", ".join("/".join(e["codes"]) for e in recorded) or "empty") + ")")
-        current = {c.upper() for c in ([st.fault_code] if st.fault_code else [])}
-        if st.fault and recorded:
-            current |= {c.upper() for c in recorded[0]["codes"]}
-        if st.fault and code.upper() in current:
-            return f"current fault {code}"
-        raise StepFailed(f"current fault is {st.fault_code or ('/'.join(sorted(current)) if st.fault else 'none')}, "
-                         f"expected {code}")
-
-    def do_reset_fault(self, sr, r, d, h):
-        before = d.status()
-        st = d.reset_fault()
-        r.measured = {"fault_before": before.fault, "code_before": before.fault_code, **_status_dict(st)}
-        r.expected = {"fault": False}
-        if st.fault:
-            raise StepFailed(f"still in fault after the reset ({st.fault_code or st.state})")
-        return "fault acknowledged" if before.fault else "no fault to acknowledge"
 
 
 DEFAULT_SAFE_STOP_S = 30.0
@@ -725,68 +428,10 @@ DEFAULT_SAFE_STOP_S = 30.0
 # =============================================================================================
 
 
-def _hex(v) -> str | None:
-    return f"0x{v:04X}" if isinstance(v, int) else v
-
-
-def _gsd_name(text: str) -> str:
-    from pathlib import PurePath
-    return PurePath(str(text).replace("\\", "/")).name.lower()
-
-
-def _close(a, b, tol) -> bool:
-    try:
-        return abs(float(a) - float(b)) <= float(tol) + 1e-9
-    except (TypeError, ValueError):
-        return a == b
-
-
-def _r(v):
-    if v is None or not isinstance(v, float):
-        return v
-    return round(v, 3) if math.isfinite(v) else v
-
-
-def _flag(st, name: str) -> bool:
-    if name == "running":
-        return bool(st.running)
-    if name == "fault":
-        return bool(st.fault)
-    if name == "stopped":
-        return bool(st.stopped)
-    if name in st.flags:
-        return bool(st.flags[name])
-    low = name.lower()
-    for k, v in st.flags.items():
-        if k.lower() == low:
-            return bool(v)
-    return False
-
-
-def _status_dict(st) -> dict:
-    if st is None:
-        return {}
-    return {"state": st.state, "running": st.running, "stopped": st.stopped, "fault": st.fault,
-            "fault_code": st.fault_code, "speed_hz": _r(st.speed_hz), "speed_percent": _r(st.speed_percent),
-            "flags": {k: v for k, v in st.flags.items() if v}}
-
-
-def _run_measured(st, v, reach_s, lo, hi, unit) -> dict:
-    key = "actual_hz" if unit == "hz" else "actual_percent"
-    out = {key: _r(v), "reached_after_s": round(reach_s, 3) if reach_s is not None else None,
-           "state": st.state, "speed_hz": _r(st.speed_hz), "speed_percent": _r(st.speed_percent)}
-    if lo is not None:
-        out["hold_min"] = _r(lo)
-        out["hold_max"] = _r(hi)
-    if st.fault:
-        out["fault_code"] = st.fault_code
-    return out
-
-
 def _identity_dict(identity) -> dict:
     out = {}
     for k, v in dict(identity or {}).items():
-        out[k] = _hex(v) if k == "ident" else v
+        out[k] = hex4(v) if k == "ident" else v
     return out
 
 
@@ -801,7 +446,7 @@ def _snapshot_targets(spec: StationSpec) -> list:
 
 
 # =============================================================================================
-# opening stations through drives.session.DriveSession
+# opening stations through session.DriveSession
 # =============================================================================================
 
 

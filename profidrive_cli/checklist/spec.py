@@ -3,45 +3,35 @@
 A checklist is a header (name, port defaults, variables, stations with the identity each must have) and a
 list of steps. Every step is a mapping with exactly one step-type key (`write: {param: F07, value: 2.0}`)
 plus the common keys `name`, `on_fail` and `stations`. Steps run on every station in turn (or only on the
-stations a step names). docs/checklists.md is the user's reference; this module is the one that decides.
+stations a step names). docs/checklists.md is the user's reference; this module decides the file format.
 
-Validation is done per station, after variable substitution, against the station's profile: unknown step
-type, missing field, wrong type, unknown parameter for the family, read-only target, value outside the
-parameter's range, stop-only parameter written while the checklist has the motor running, unknown alarm
-code, unknown status flag. Every problem is collected with file:line; ChecklistError carries them all.
+Validation is done per station, after variable substitution, against the station's profile. This module
+checks the header, the stations (address, profile, ident, GSD, layout, snapshot), variables and each
+step's common keys and step-type key; the step type's own fields (missing, wrong type, unknown parameter,
+read-only target, value outside the range, stop-only parameter while running, unknown alarm code or status
+flag) are checked by the step type in checklist/steps/. Every problem is collected with file:line;
+ChecklistError carries them all. It may import fields.py, steps/, datafile, drives/ (profiles) and gsd/.
 """
 
 from __future__ import annotations
 
 import difflib
 import hashlib
-import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from profidrive_cli import PdriveError, UsageError
+from profidrive_cli.checklist.fields import FieldChecker, ParamTarget, Skip, fmt, line_at, tname
+from profidrive_cli.checklist.steps import STEPS
 from profidrive_cli.datafile import DataFileError, LineDict, LineList, load_yaml_text, read_text
-from profidrive_cli.drives.values import danger, profile_value_problem
 
-STEP_TYPES = ("expect_identity", "read", "write", "save", "run", "stop", "expect_status", "wait", "faults",
-              "reset_fault", "prompt", "note")
 COMMON_KEYS = ("name", "on_fail", "stations")
 ON_FAIL = ("stop", "continue")
-STOP_MODES = ("normal", "quick", "coast")
-DIRECTIONS = ("forward", "reverse")
 HEADER_KEYS = ("name", "description", "port", "baud", "master_address", "on_fail", "variables", "snapshot",
                "stations", "steps")
 STATION_KEYS = ("name", "address", "profile", "ident", "gsd", "layout", "variables", "snapshot")
-
-# generic status names every family answers (DriveStatus fields), besides the family's own flags
-GENERIC_FLAGS = ("running", "fault", "stopped")
-
-DEFAULT_RUN_WITHIN_S = 10.0
-DEFAULT_TOL_HZ = 0.5
-DEFAULT_TOL_PERCENT = 1.0
-DEFAULT_STOP_WITHIN_S = 30.0
 
 _VAR_RE = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)\}")
 _NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
@@ -61,24 +51,8 @@ class ChecklistError(DataFileError):
 
 
 # =============================================================================================
-# the validated model
+# the validated model (ParamTarget, a resolved parameter, lives in fields.py)
 # =============================================================================================
-
-
-@dataclass
-class ParamTarget:
-    """A parameter a step reads or writes, resolved for one station's profile."""
-    code: str                      # as the checklist wrote it (after variables)
-    label: str                     # canonical code for the family ("F07", "PNU947[9]", "REG0x0180")
-    param: Any = None              # profile ParamDef, None for raw addresses
-    unit: str = ""
-
-    @property
-    def step_tolerance(self) -> float:
-        """Half a wire step: what a read-back may differ by after scaling."""
-        if self.param is not None and self.param.scale:
-            return abs(float(self.param.scale)) / 2 + 1e-9
-        return 1e-9
 
 
 @dataclass
@@ -199,72 +173,24 @@ def load_checklist_text(text: str, path: str | Path = "<string>", overrides: dic
 
 
 # =============================================================================================
-# validation
+# validation: the header, stations, variables and the step list; each step's own fields are checked by
+# its step type (checklist/steps/), through the FieldChecker this validator is
 # =============================================================================================
 
 
-def _tname(v) -> str:
-    if isinstance(v, bool):
-        return "true/false"
-    if isinstance(v, (int, float)):
-        return "a number"
-    if isinstance(v, str):
-        return "text"
-    if isinstance(v, list):
-        return "a list"
-    if isinstance(v, dict):
-        return "a mapping"
-    if v is None:
-        return "nothing"
-    return type(v).__name__
-
-
-def _is_num(v) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-
-
-def _fmt(v) -> str:
-    return f"{v:g}" if isinstance(v, float) else str(v)
-
-
-def _line(node, key=None, default=0) -> int:
-    if key is not None and isinstance(node, LineDict):
-        return node.line_of(key)
-    if key is not None and isinstance(node, LineList) and isinstance(key, int):
-        return node.line_of(key)
-    return getattr(node, "line", default) or default
-
-
-class _Skip(Exception):
-    """Abandon the current item (its error is already recorded)."""
-
-
-class _Validator:
+class _Validator(FieldChecker):
     def __init__(self, path: Path, overrides: dict):
-        self.path = path
+        super().__init__(path)
         self.overrides = overrides
-        self.errors: list[DataFileError] = []
-        self._seen: set[tuple[int | None, str]] = set()
-
-    # -- errors --------------------------------------------------------------------------------
-    def err(self, line: int | None, msg: str) -> None:
-        key = (line, msg)
-        if key not in self._seen:           # the same problem found for several stations: once
-            self._seen.add(key)
-            self.errors.append(DataFileError(self.path, line, msg))
-
-    def fail(self, line: int | None, msg: str):
-        self.err(line, msg)
-        raise _Skip()
 
     # -- header --------------------------------------------------------------------------------
     def checklist(self, doc, sha: str) -> Checklist | None:
         if not isinstance(doc, LineDict):
-            self.err(_line(doc, default=1), "a checklist must be a YAML mapping with name, stations and steps")
+            self.err(line_at(doc, default=1), "a checklist must be a YAML mapping with name, stations and steps")
             return None
         for k in doc:
             if k not in HEADER_KEYS:
-                self.err(doc.line_of(k), self._unknown_key(k, HEADER_KEYS, "header key"))
+                self.err(doc.line_of(k), self.unknown_key(k, HEADER_KEYS, "header key"))
         name = self.opt(doc, "name", str, required=True, default="")
         description = self.opt(doc, "description", str, default="")
         port = self.opt(doc, "port", str)
@@ -297,7 +223,7 @@ class _Validator:
         for i, snode in enumerate(stations_node or []):
             try:
                 st = self.station(stations_node, i, snode, variables, snapshot_node)
-            except _Skip:
+            except Skip:
                 continue
             if any(s.name == st.name for s in stations):
                 self.err(st.line, f"station name {st.name!r} used twice (give each station its own `name`)")
@@ -328,15 +254,10 @@ class _Validator:
                 return True
         return False
 
-    def _unknown_key(self, k, known, what) -> str:
-        close = difflib.get_close_matches(str(k), list(known), 1)
-        return f"unknown {what} {k!r}" + (f" (did you mean {close[0]}?)" if close else
-                                          f" (known: {', '.join(known)})")
-
     def opt(self, node: LineDict, key: str, types, required=False, default=None, what: str = ""):
         if key not in node:
             if required:
-                self.err(_line(node), f"{what}missing field '{key}'")
+                self.err(line_at(node), f"{what}missing field '{key}'")
             return default
         v = node[key]
         ok = isinstance(v, types) and not (isinstance(v, bool) and bool not in (
@@ -345,7 +266,7 @@ class _Validator:
             want = {str: "text", int: "an integer", float: "a number", list: "a list", dict: "a mapping",
                     LineDict: "a mapping", bool: "true or false"}
             tn = " or ".join(want.get(t, t.__name__) for t in (types if isinstance(types, tuple) else (types,)))
-            self.err(node.line_of(key), f"{what}'{key}' must be {tn}, got {_tname(v)} {v!r}")
+            self.err(node.line_of(key), f"{what}'{key}' must be {tn}, got {tname(v)} {v!r}")
             return default
         return v
 
@@ -355,12 +276,12 @@ class _Validator:
         if not vs:
             return out
         for k, v in vs.items():
-            ln = vs.line_of(k) if isinstance(vs, LineDict) else _line(node, key)
+            ln = vs.line_of(k) if isinstance(vs, LineDict) else line_at(node, key)
             if not isinstance(k, str) or not _NAME_RE.match(k):
                 self.err(ln, f"variable name {k!r}: use letters, digits and _ (not starting with a digit)")
                 continue
             if not isinstance(v, (str, int, float, bool)):
-                self.err(ln, f"variable {k}: a value must be a number or text, got {_tname(v)}")
+                self.err(ln, f"variable {k}: a value must be a number or text, got {tname(v)}")
                 continue
             out[k] = v
         return out
@@ -379,7 +300,7 @@ class _Validator:
                 name = mm.group(1)
                 if name not in variables:
                     self.fail(line, self._undefined(name, variables, where))
-                return _fmt(variables[name])
+                return fmt(variables[name])
             return _VAR_RE.sub(rep, value)
         if isinstance(value, LineDict):
             out = LineDict()
@@ -404,10 +325,10 @@ class _Validator:
         from profidrive_cli.drives.profile import load_profile
         ln = lst.line_of(i)
         if not isinstance(node, LineDict):
-            self.fail(ln, f"station {i + 1}: must be a mapping with address and profile, got {_tname(node)}")
+            self.fail(ln, f"station {i + 1}: must be a mapping with address and profile, got {tname(node)}")
         for k in node:
             if k not in STATION_KEYS:
-                self.err(node.line_of(k), self._unknown_key(k, STATION_KEYS, "station key"))
+                self.err(node.line_of(k), self.unknown_key(k, STATION_KEYS, "station key"))
         own = self.variables(node, "variables")
         variables = {**global_vars, **{k: v for k, v in own.items() if k not in self.overrides}}
         w = f"station {i + 1}"
@@ -418,7 +339,7 @@ class _Validator:
         node = resolved
         address = self.opt(node, "address", int, required=True, what=f"{w}: ")
         if address is None:
-            raise _Skip()
+            raise Skip()
         if not 0 <= address <= 125:
             self.fail(node.line_of("address"), f"{w}: address {address} outside 0..125")
         name = self.opt(node, "name", (str, int), default=None)
@@ -426,7 +347,7 @@ class _Validator:
         w = f"station {name!r}"
         pname = self.opt(node, "profile", str, required=True, what=f"{w}: ")
         if pname is None:
-            raise _Skip()
+            raise Skip()
         try:
             profile = load_profile(pname)
         except PdriveError as e:
@@ -474,16 +395,16 @@ class _Validator:
                 cl = src.line_of(j) if isinstance(src, LineList) else ln
                 try:
                     c = self.subst(c, variables, cl, where)
-                except _Skip:
+                except Skip:
                     continue
                 codes.append((c, cl))
         for c, cl in codes:
             if not isinstance(c, (str, int)) or isinstance(c, bool):
-                self.err(cl, f"snapshot: a parameter code must be text, got {_tname(c)}")
+                self.err(cl, f"snapshot: a parameter code must be text, got {tname(c)}")
                 continue
             try:
                 t = self.param(st, str(c), cl, "snapshot")
-            except _Skip:
+            except Skip:
                 continue
             if all(t.label != s.label for s in st.snapshot):
                 st.snapshot.append(t)
@@ -511,13 +432,6 @@ class _Validator:
         return ident
 
     # -- parameters ----------------------------------------------------------------------------
-    def param(self, st: StationSpec, code: str, line: int, where: str) -> ParamTarget:
-        try:
-            label, p = resolve_param(st.profile, code, st.layout)
-        except PdriveError as e:
-            self.fail(line, f"{where}: {e} (station {st.name!r})")
-        return ParamTarget(code=code, label=label, param=p, unit=(p.unit if p is not None else ""))
-
     # -- steps: structure (same for every station) ---------------------------------------------
     def raw_steps(self, lst, default_on_fail) -> list["_RawStep"]:
         out = []
@@ -525,33 +439,34 @@ class _Validator:
             ln = lst.line_of(i) if isinstance(lst, LineList) else 0
             try:
                 out.append(self.raw_step(i + 1, ln, node, default_on_fail))
-            except _Skip:
+            except Skip:
                 continue
         return out
 
     def raw_step(self, index, ln, node, default_on_fail) -> "_RawStep":
+        step_types = tuple(STEPS)                    # the registry: checklist/steps/
         if isinstance(node, str):                     # bare step: "- save", "- stop", "- reset_fault"
             key = node.strip()
-            if key not in STEP_TYPES:
-                self.fail(ln, f"step {index}: {self._unknown_key(key, STEP_TYPES, 'step type')}")
+            if key not in step_types:
+                self.fail(ln, f"step {index}: {self.unknown_key(key, step_types, 'step type')}")
             return _RawStep(index, key, ln, None, ln, None, default_on_fail, None)
         if not isinstance(node, LineDict):
             self.fail(ln, f"step {index}: a step must be a mapping such as `- write: {{param: F07, value: 2}}`, "
-                      f"got {_tname(node)}")
-        types = [k for k in node if k in STEP_TYPES]
-        others = [k for k in node if k not in STEP_TYPES and k not in COMMON_KEYS]
+                      f"got {tname(node)}")
+        types = [k for k in node if k in step_types]
+        others = [k for k in node if k not in step_types and k not in COMMON_KEYS]
         for k in others:
-            self.err(node.line_of(k), f"step {index}: " + self._unknown_key(k, STEP_TYPES + COMMON_KEYS,
-                                                                            "step type or key"))
+            self.err(node.line_of(k), f"step {index}: " + self.unknown_key(k, step_types + COMMON_KEYS,
+                                                                           "step type or key"))
         if not types:
             if not others:
-                self.fail(ln, f"step {index}: no step type (one of {', '.join(STEP_TYPES)})")
-            raise _Skip()
+                self.fail(ln, f"step {index}: no step type (one of {', '.join(step_types)})")
+            raise Skip()
         if len(types) > 1:
             self.fail(node.line_of(types[1]), f"step {index}: one step type per step, found "
                       f"{' and '.join(types)} (make them two steps)")
         if others:
-            raise _Skip()
+            raise Skip()
         t = types[0]
         name = self.opt(node, "name", (str, int), what=f"step {index}: ")
         on_fail = self.opt(node, "on_fail", str, default=default_on_fail, what=f"step {index}: ")
@@ -581,289 +496,12 @@ class _Validator:
                 continue
             try:
                 body = self.subst(rs.body, st.variables, rs.body_line, f"step {rs.index} ({rs.type})")
-                args, title = getattr(self, f"step_{rs.type}")(st, rs, body, state)
-            except _Skip:
+                args, title = STEPS[rs.type].validate(self, st, rs, body, state)
+            except Skip:
                 continue
             out.append(Step(index=rs.index, type=rs.type, line=rs.line, args=args, title=title, name=rs.name,
                             on_fail=rs.on_fail))
         return out
-
-    def fields(self, rs, body, allowed: tuple, shorthand: str | None = None, required: tuple = ()) -> LineDict:
-        """The step's mapping (or its shorthand scalar as `shorthand: value`), unknown keys rejected."""
-        w = f"step {rs.index} ({rs.type})"
-        if body is None:
-            d = LineDict()
-            d.line, d.key_lines = rs.body_line, {}
-        elif isinstance(body, LineDict):
-            d = body
-        elif shorthand is not None and not isinstance(body, (list, dict)):
-            d = LineDict({shorthand: body})
-            d.line, d.key_lines = rs.body_line, {shorthand: rs.body_line}
-        else:
-            self.fail(rs.body_line, f"{w}: expected a mapping with {', '.join(allowed) or 'no fields'}, "
-                      f"got {_tname(body)}")
-        bad = False
-        for k in d:
-            if k not in allowed:
-                self.err(d.line_of(k), f"{w}: " + self._unknown_key(k, allowed, "field") if allowed else
-                         f"{w}: takes no fields, got {k!r}")
-                bad = True
-        for k in required:
-            if k not in d:
-                self.err(rs.body_line, f"{w}: missing field '{k}'")
-                bad = True
-        if bad:
-            raise _Skip()
-        return d
-
-    def num(self, rs, d: LineDict, key, default=None, minimum=None, positive=False, required=False):
-        w = f"step {rs.index} ({rs.type})"
-        if key not in d:
-            if required:
-                self.fail(d.line or rs.body_line, f"{w}: missing field '{key}'")
-            return default
-        v = d[key]
-        if not _is_num(v):
-            self.fail(d.line_of(key), f"{w}: '{key}' must be a number, got {_tname(v)} {v!r}")
-        if minimum is not None and v < minimum:
-            self.fail(d.line_of(key), f"{w}: '{key}' must be at least {_fmt(minimum)}, got {_fmt(v)}")
-        if positive and v <= 0:
-            self.fail(d.line_of(key), f"{w}: '{key}' must be above 0, got {_fmt(v)}")
-        return v
-
-    def code_field(self, st, rs, d, key="param") -> ParamTarget:
-        v = d[key]
-        if not isinstance(v, (str, int)) or isinstance(v, bool):
-            self.fail(d.line_of(key), f"step {rs.index} ({rs.type}): '{key}' must be a parameter code, "
-                      f"got {_tname(v)}")
-        return self.param(st, str(v), d.line_of(key), f"step {rs.index} ({rs.type})")
-
-    def _no_channel(self, st, rs):
-        if not _layout_has_params(st.profile, st.layout):
-            self.fail(rs.line, f"step {rs.index} ({rs.type}): station {st.name!r} uses layout {st.layout}, "
-                      f"which has no parameter channel (choose a layout with one, e.g. "
-                      f"{_param_layouts(st.profile)})")
-
-    # one method per step type: (station, raw step, substituted body, static state) -> (args, title)
-    def step_expect_identity(self, st, rs, body, state):
-        d = self.fields(rs, body, ("ident", "profile", "gsd"))
-        ident = st.ident
-        if "ident" in d:
-            ident = d["ident"]
-            if not isinstance(ident, int) or isinstance(ident, bool) or not 0 <= ident <= 0xFFFF:
-                self.fail(d.line_of("ident"), f"step {rs.index} (expect_identity): 'ident' must be 0..0xFFFF")
-        profile = st.profile.name
-        if "profile" in d:
-            from profidrive_cli.drives.profile import load_profile
-            try:
-                profile = load_profile(str(d["profile"])).name
-            except PdriveError as e:
-                self.fail(d.line_of("profile"), f"step {rs.index} (expect_identity): {e}")
-        gsd = d.get("gsd", st.gsd)
-        args = {"ident": ident, "profile": profile, "gsd": gsd}
-        return args, f"identity: ident 0x{ident:04X}, profile {profile}" + (f", GSD {gsd}" if gsd else "")
-
-    def step_read(self, st, rs, body, state):
-        d = self.fields(rs, body, ("param", "expect", "tolerance", "min", "max", "range"), "param", ("param",))
-        w = f"step {rs.index} (read)"
-        self._no_channel(st, rs)
-        t = self.code_field(st, rs, d)
-        expect = self.num(rs, d, "expect")
-        tol = self.num(rs, d, "tolerance", minimum=0)
-        lo, hi = self.num(rs, d, "min"), self.num(rs, d, "max")
-        if "range" in d:
-            r = d["range"]
-            if not (isinstance(r, list) and len(r) == 2 and all(_is_num(x) for x in r) and r[0] <= r[1]):
-                self.fail(d.line_of("range"), f"{w}: 'range' must be [low, high] with low <= high, got {r!r}")
-            if lo is not None or hi is not None:
-                self.fail(d.line_of("range"), f"{w}: give either range or min/max, not both")
-            lo, hi = r
-        if expect is not None and (lo is not None or hi is not None):
-            self.fail(d.line_of("expect"), f"{w}: give either expect (with tolerance) or a range, not both")
-        if tol is not None and expect is None:
-            self.fail(d.line_of("tolerance"), f"{w}: tolerance needs expect")
-        if lo is not None and hi is not None and lo > hi:
-            self.fail(d.line_of("min"), f"{w}: min {_fmt(lo)} is above max {_fmt(hi)}")
-        u = f" {t.unit}" if t.unit else ""
-        if expect is not None:
-            if t.param is not None:
-                msg = _range_problem(t.param, expect)
-                if msg:
-                    self.err(d.line_of("expect"), f"{w}: expected value can never be read: {msg}")
-            title = f"read {t.label}, expect {_fmt(expect)}{u}" + (f" ± {_fmt(tol)}" if tol else "")
-        elif lo is not None or hi is not None:
-            title = f"read {t.label}, expect " + (
-                f"{_fmt(lo)}..{_fmt(hi)}{u}" if lo is not None and hi is not None else
-                f">= {_fmt(lo)}{u}" if lo is not None else f"<= {_fmt(hi)}{u}")
-        else:
-            title = f"read {t.label}"
-        return {"param": t, "expect": expect, "tolerance": tol, "min": lo, "max": hi}, title
-
-    def step_write(self, st, rs, body, state):
-        d = self.fields(rs, body, ("param", "value", "allow_dangerous"), None, ("param", "value"))
-        w = f"step {rs.index} (write)"
-        self._no_channel(st, rs)
-        t = self.code_field(st, rs, d)
-        value = self.num(rs, d, "value", required=True)
-        allow = d.get("allow_dangerous", False)
-        if not isinstance(allow, bool):
-            self.fail(d.line_of("allow_dangerous"), f"{w}: 'allow_dangerous' must be true or false, got {allow!r}")
-        p = t.param
-        if p is not None:
-            if not p.writable:
-                self.fail(d.line_of("param"), f"{w}: {t.label} ({p.name}) is read-only")
-            msg = profile_value_problem(st.profile, p, value)
-            if msg:
-                self.fail(d.line_of("value"), f"{w}: {msg} (station {st.name!r})")
-            if p.access == "stop" and state["running"]:
-                self.fail(rs.line, f"{w}: {t.label} can only be changed while the motor is stopped, and an "
-                          f"earlier run step leaves it running; put a stop step before it")
-            what = danger(p)
-            if what and not allow:
-                self.err(d.line_of("param"), f"{w}: {t.label} ({p.name}) is dangerous: writing it {what}; "
-                         f"add 'allow_dangerous: true' to the step to write it")
-        u = f" {t.unit}" if t.unit else ""
-        return ({"param": t, "value": value, "allow_dangerous": allow},
-                f"write {t.label} = {_fmt(value)}{u}" + (" (dangerous, allowed)" if allow and p is not None
-                                                         and danger(p) else ""))
-
-    def step_save(self, st, rs, body, state):
-        self.fields(rs, body, ())
-        self._no_channel(st, rs)
-        return {}, "save parameters to non-volatile memory"
-
-    def step_run(self, st, rs, body, state):
-        d = self.fields(rs, body, ("hz", "percent", "direction", "duration", "tolerance", "within"))
-        w = f"step {rs.index} (run)"
-        if ("hz" in d) == ("percent" in d):
-            self.fail(rs.body_line, f"{w}: give the speed as either hz or percent")
-        unit = "hz" if "hz" in d else "percent"
-        speed = self.num(rs, d, unit, positive=True)
-        direction = d.get("direction", "forward")
-        if direction not in DIRECTIONS:
-            self.fail(d.line_of("direction"), f"{w}: direction must be forward or reverse, got {direction!r}")
-        if unit == "percent" and speed > 100:
-            self.fail(d.line_of("percent"), f"{w}: percent {_fmt(speed)} is above 100 (the max frequency)")
-        if unit == "hz":
-            fp = st.profile.param(st.profile.max_frequency_param or "")
-            top = fp.max if fp is not None and fp.max is not None else None
-            if top is not None and speed > top:
-                self.fail(d.line_of("hz"), f"{w}: {_fmt(speed)} Hz is above what {st.profile.name} can run "
-                          f"({fp.code} max {_fmt(top)} Hz)")
-        duration = self.num(rs, d, "duration", default=0.0, minimum=0)
-        tol = self.num(rs, d, "tolerance", default=DEFAULT_TOL_HZ if unit == "hz" else DEFAULT_TOL_PERCENT,
-                       positive=True)
-        within = self.num(rs, d, "within", default=DEFAULT_RUN_WITHIN_S, positive=True)
-        state["running"] = True
-        u = " Hz" if unit == "hz" else " %"
-        title = (f"run {direction} at {_fmt(speed)}{u} (± {_fmt(tol)}{u} within {_fmt(within)} s)"
-                 + (f", hold {_fmt(duration)} s" if duration else ""))
-        return {"unit": unit, "speed": speed, "direction": direction, "duration": duration, "tolerance": tol,
-                "within": within}, title
-
-    def step_stop(self, st, rs, body, state):
-        d = self.fields(rs, body, ("mode", "within"), "mode")
-        mode = d.get("mode", "normal")
-        if mode not in STOP_MODES:
-            self.fail(d.line_of("mode"), f"step {rs.index} (stop): mode must be normal, quick or coast, "
-                      f"got {mode!r}")
-        within = self.num(rs, d, "within", default=DEFAULT_STOP_WITHIN_S, positive=True)
-        state["running"] = False
-        return {"mode": mode, "within": within}, f"stop ({mode}), stopped within {_fmt(within)} s"
-
-    def step_expect_status(self, st, rs, body, state):
-        w = f"step {rs.index} (expect_status)"
-        if not isinstance(body, LineDict) or not body:
-            self.fail(rs.body_line, f"{w}: expected a mapping of status flags to true/false, e.g. "
-                      f"{{running: false, fault: false}}")
-        flags = {}
-        state_text = None
-        within = 0.0
-        known = list(dict.fromkeys(list(GENERIC_FLAGS) + st.flag_names))
-        n_errors = len(self.errors)
-        lower = {k.lower(): k for k in known}
-        for k, v in body.items():
-            ln = body.line_of(k)
-            if k == "state":
-                if not isinstance(v, str):
-                    self.err(ln, f"{w}: 'state' must be text (part of the state name), got {_tname(v)}")
-                state_text = str(v)
-                continue
-            if k == "within":
-                if not _is_num(v) or v < 0:
-                    self.err(ln, f"{w}: 'within' must be a number of seconds >= 0, got {v!r}")
-                else:
-                    within = float(v)
-                continue
-            if not isinstance(v, bool):
-                self.err(ln, f"{w}: flag {k!r} must be true or false, got {_tname(v)} {v!r}")
-                continue
-            name = lower.get(str(k).lower())
-            if name is None and not str(k).lower().startswith("fault: "):
-                close = difflib.get_close_matches(str(k), known, 3, 0.5)
-                self.err(ln, f"{w}: {st.profile.name} has no status flag {k!r}"
-                         + (f" (did you mean {', '.join(repr(c) for c in close)}?)" if close else
-                            f" (flags: {', '.join(known)})"))
-                continue
-            flags[name or str(k)] = v
-        if len(self.errors) > n_errors:
-            raise _Skip()
-        if not flags and state_text is None:
-            self.fail(rs.body_line, f"{w}: nothing to check (name flags, or state)")
-        parts = [f"{k} = {'yes' if v else 'no'}" for k, v in flags.items()]
-        if state_text:
-            parts.insert(0, f"state ~ {state_text!r}")
-        return {"flags": flags, "state": state_text, "within": within}, "status: " + ", ".join(parts)
-
-    def step_wait(self, st, rs, body, state):
-        d = self.fields(rs, body, ("seconds",), "seconds", ("seconds",))
-        s = self.num(rs, d, "seconds", minimum=0)
-        return {"seconds": s}, f"wait {_fmt(s)} s"
-
-    def step_faults(self, st, rs, body, state):
-        d = self.fields(rs, body, ("expect", "history"), "expect")
-        w = f"step {rs.index} (faults)"
-        expect = d.get("expect", "none")
-        if expect is None:
-            expect = "none"
-        if not isinstance(expect, (str, int)) or isinstance(expect, bool):
-            self.fail(d.line_of("expect"), f"{w}: 'expect' must be none or an alarm code, got {_tname(expect)}")
-        expect = str(expect)
-        history = d.get("history", False)
-        if not isinstance(history, bool):
-            self.fail(d.line_of("history"), f"{w}: 'history' must be true or false, got {history!r}")
-        if expect.lower() != "none":
-            a = st.profile.alarm_by_code(expect)
-            if a is None:
-                codes = [x.code for x in st.profile.alarms]
-                close = difflib.get_close_matches(expect, codes, 3, 0.5)
-                self.fail(d.line_of("expect"), f"{w}: {st.profile.name} has no alarm {expect!r}"
-                          + (f" (did you mean {', '.join(close)}?)" if close else ""))
-            expect = a.code
-        if (history or expect != "none") and not _layout_has_params(st.profile, st.layout):
-            self.fail(rs.line, f"{w}: reading the fault history needs a parameter channel; layout "
-                      f"{st.layout} has none")
-        if expect == "none":
-            title = "no active fault" + (" and an empty fault history" if history else "")
-        else:
-            title = f"fault {expect} " + ("in the fault history" if history else "is the current fault")
-        return {"expect": expect, "history": history}, title
-
-    def step_reset_fault(self, st, rs, body, state):
-        self.fields(rs, body, ("within",))
-        return {}, "reset (acknowledge) the fault"
-
-    def step_prompt(self, st, rs, body, state):
-        d = self.fields(rs, body, ("text",), "text", ("text",))
-        if not isinstance(d["text"], str) or not d["text"].strip():
-            self.fail(d.line_of("text"), f"step {rs.index} (prompt): 'text' must be the question for the operator")
-        return {"text": d["text"].strip()}, f"operator: {d['text'].strip()}"
-
-    def step_note(self, st, rs, body, state):
-        d = self.fields(rs, body, ("text",), "text", ("text",))
-        if not isinstance(d["text"], (str, int, float)):
-            self.fail(d.line_of("text"), f"step {rs.index} (note): 'text' must be text")
-        return {"text": str(d["text"]).strip()}, f"note: {str(d['text']).strip()}"
 
 
 @dataclass
@@ -879,78 +517,8 @@ class _RawStep:
 
 
 # =============================================================================================
-# profile helpers (no bus)
+# status flag names of a profile (from a simulated drive, no bus)
 # =============================================================================================
-
-
-class _NoChannel:
-    """A CyclicChannel that refuses traffic: builds a family's Drive only to resolve codes."""
-
-    def exchange(self, outputs: bytes) -> bytes:
-        raise UsageError("internal: validation tried to talk to a drive")
-
-    def now(self) -> float:
-        return 0.0
-
-
-def resolve_param(profile, code: str, layout: str | None = None) -> tuple[str, Any]:
-    """(canonical label, ParamDef or None for a raw address) for `code` in this profile's family, the way
-    the family's Drive resolves it; UsageError naming the closest codes when it is unknown."""
-    from profidrive_cli.drives import make_drive
-    drive = make_drive(_NoChannel(), profile, layout or profile.default_layout)
-    text = str(code).strip()
-    try:
-        if hasattr(drive, "resolve_param"):
-            ref = drive.resolve_param(text)
-            return ref.code, ref.param
-        p = profile.param(text)
-        if p is not None:
-            if p.register is None and p.pnu is None:
-                raise UsageError(f"{p.code}: the profile gives no address for it")
-            return p.code, p
-        from profidrive_cli.drives import codec_module
-        parse = getattr(codec_module(profile), "parse_register_code", None)
-        reg = parse(text) if parse else None
-        if reg is not None and 0 <= reg <= 0xFFFF:
-            return f"REG0x{reg:04X}", None
-        raise UsageError(f"unknown parameter '{code}' in profile {profile.name}")
-    except UsageError as e:
-        msg = str(e)
-        if "unknown" in msg.lower():
-            from profidrive_cli.session import profiles_with_code, suggest_codes
-            others = sorted({p.family for p in profiles_with_code(text) if p.family != profile.family})
-            near = suggest_codes(profile, text, 3)
-            msg = f"unknown parameter '{text}' for {profile.name}"
-            if others:
-                msg += f" ({text} is a {'/'.join(others)} code; this station is family {profile.family})"
-            if near:
-                msg += f"; closest {profile.family} codes: {', '.join(near)}"
-        raise UsageError(msg) from None
-
-
-def _range_problem(p, value) -> str | None:
-    """The profile's limits for a value (Moeller-style `ranges` lists first), None when inside."""
-    rg = p.extra.get("ranges")
-    u = f" {p.unit}" if p.unit else ""
-    if rg:
-        if any(lo - 1e-9 <= value <= hi + 1e-9 for lo, hi in rg):
-            return None
-        allowed = ", ".join(f"{lo:g}..{hi:g}" if lo != hi else f"{lo:g}" for lo, hi in rg)
-        return f"{p.code} ({p.name}): {value:g}{u} is outside {allowed}{u}"
-    lo = p.min - 1e-9 if p.min is not None else None
-    hi = p.max + 1e-9 if p.max is not None else None
-    if (lo is not None and value < lo) or (hi is not None and value > hi):
-        return (f"{p.code} ({p.name}): {value:g}{u} is outside "
-                f"{'-inf' if p.min is None else f'{p.min:g}'}..{'inf' if p.max is None else f'{p.max:g}'}{u}")
-    return None
-
-
-def _layout_has_params(profile, layout: str) -> bool:
-    return bool(profile.layouts[layout].pkw)
-
-
-def _param_layouts(profile) -> str:
-    return ", ".join(n for n, l in profile.layouts.items() if l.pkw) or "none"
 
 
 _flag_cache: dict[tuple[str, str], list[str]] = {}

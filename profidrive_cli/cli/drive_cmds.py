@@ -1,6 +1,6 @@
 """pdrive run / status / param (get, set, dump, restore, diff) / faults — drive operations from the shell.
 
-All protocol and safety logic lives in drives/session.py (DriveSession); this module parses the
+All protocol and safety logic lives in session/ (DriveSession); this module parses the
 command line, asks for confirmation before writing to a real port, and renders (render_drive.py).
 """
 

@@ -1,0 +1,31 @@
+"""Step type `save`: store the parameters in the drive's non-volatile memory.
+
+validate() checks the step's fields for one station (file:line, through the FieldChecker);
+execute() runs it on the station's Drive for the Runner. Imports only the checklist toolkits
+(fields.py, steps/base.py) and drives/."""
+
+from __future__ import annotations
+
+from profidrive_cli.checklist.steps.base import StepType
+
+
+class Save(StepType):
+    name = "save"
+
+    def validate(self, check, st, rs, body, state):
+        check.fields(rs, body, ())
+        check.need_param_channel(st, rs)
+        return {}, "save parameters to non-volatile memory"
+
+    def execute(self, run, sr, r, d, h):
+        if h.session is not None:
+            how = h.session.save_support()
+            msg = h.session.save()        # 'automatic' cards: every write is already stored
+            r.measured = {"saved": True, "how": how}
+            return msg
+        d.save()
+        r.measured = {"saved": True, "how": "command"}
+        return "saved to non-volatile memory"
+
+
+STEP = Save()

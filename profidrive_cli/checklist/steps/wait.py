@@ -1,0 +1,28 @@
+"""Step type `wait`: keep the cyclic exchange going for some seconds.
+
+validate() checks the step's fields for one station (file:line, through the FieldChecker);
+execute() runs it on the station's Drive for the Runner. Imports only the checklist toolkits
+(fields.py, steps/base.py) and drives/."""
+
+from __future__ import annotations
+
+from profidrive_cli.checklist.fields import fmt
+from profidrive_cli.checklist.steps.base import StepType, status_dict
+
+
+class Wait(StepType):
+    name = "wait"
+
+    def validate(self, check, st, rs, body, state):
+        d = check.fields(rs, body, ("seconds",), "seconds", ("seconds",))
+        s = check.num(rs, d, "seconds", minimum=0)
+        return {"seconds": s}, f"wait {fmt(s)} s"
+
+    def execute(self, run, sr, r, d, h):
+        s = float(r.step.args["seconds"])
+        st = run.cycle_for(sr, r, d, s, "waiting")
+        r.measured = {"seconds": s, "status": status_dict(st)}
+        return ""
+
+
+STEP = Wait()
