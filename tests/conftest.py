@@ -60,3 +60,43 @@ def drive_on_bus(master, address, profile, layout, wd_ms=500):
                                             wd_ms=wd_ms))
     master.bring_up(address)
     return make_drive(StationChannel(master, address), profile, layout)
+
+
+class TcpSim:
+    """`pdrive sim --listen` in a thread of the test process, so a test can look at the bus directly.
+
+        with TcpSim("sim://?stations=3:fuji-g1") as srv:
+            srv.url        socket://127.0.0.1:PORT
+            srv.bus        the SimBus behind it
+            srv.ep         the TcpEndpoint (accepted, refused, request_drop())
+
+    `endpoint` makes the endpoint (a subclass to model a slow converter, say)."""
+
+    def __init__(self, plant: str, endpoint=None):
+        import threading
+
+        from profidrive_cli.sim import server
+        from profidrive_cli.sim.plant import build_bus
+        self.bus = build_bus(plant)
+        self.ep = (endpoint or server.TcpEndpoint)("127.0.0.1", 0)
+        self.url = f"socket://127.0.0.1:{self.ep.address[1]}"
+        self._stop = []
+        self._th = threading.Thread(target=server.serve,
+                                    args=(self.bus, self.ep, lambda: bool(self._stop)), daemon=True)
+        self._th.start()
+
+    def wait_accepted(self, n: int = 1, timeout: float = 5.0) -> None:
+        end = time.monotonic() + timeout
+        while self.ep.accepted < n and time.monotonic() < end:
+            time.sleep(0.01)
+
+    def close(self) -> None:
+        self._stop.append(1)
+        self._th.join(timeout=5)
+        self.ep.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

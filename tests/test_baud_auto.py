@@ -3,13 +3,13 @@ one FDL status per empty address in a scan, and a busy second client of `pdrive 
 
 import json
 import socket
-import threading
 
 from profidrive_cli.dp import baud as B
 from profidrive_cli.dp import scan as scan_mod
 from profidrive_cli.fdl import frames as F
 from profidrive_cli.sim import server
-from profidrive_cli.sim.plant import build_bus
+
+from conftest import TcpSim
 
 
 def _run(*args):
@@ -183,19 +183,10 @@ def test_scan_on_sim_one_request_per_empty_address():
 # -- pdrive sim --listen: a second client is told it is busy ------------------------------------------
 
 def test_second_tcp_client_is_told_busy():
-    bus = build_bus("sim://?stations=3:fuji-g1")
-    ep = server.TcpEndpoint("127.0.0.1", 0)
-    stop = []
-    th = threading.Thread(target=server.serve, args=(bus, ep, lambda: bool(stop)), daemon=True)
-    th.start()
-    try:
-        first = socket.create_connection(ep.address, timeout=5)
-        import time
-        for _ in range(200):
-            if ep.accepted:
-                break
-            time.sleep(0.01)
-        second = socket.create_connection(ep.address, timeout=5)
+    with TcpSim("sim://?stations=3:fuji-g1") as srv:
+        first = socket.create_connection(srv.ep.address, timeout=5)
+        srv.wait_accepted(1)
+        second = socket.create_connection(srv.ep.address, timeout=5)
         got = b""
         while True:
             chunk = second.recv(200)
@@ -204,7 +195,7 @@ def test_second_tcp_client_is_told_busy():
             got += chunk
         assert got == server.BUSY_LINE
         assert b"busy" in got
-        assert ep.refused == 1 and ep.accepted == 1
+        assert srv.ep.refused == 1 and srv.ep.accepted == 1
         # the first client is still served: an FDL status to station 3 is answered
         first.sendall(F.encode(F.make(3, 2, F.request_fc(F.FDL_STATUS))))
         first.settimeout(5)
@@ -212,10 +203,6 @@ def test_second_tcp_client_is_told_busy():
         assert reply and reply[0] in (F.SD1, F.SC)
         first.close()
         second.close()
-    finally:
-        stop.append(1)
-        th.join(timeout=5)
-        ep.close()
 
 
 # -- sniff decoding: garbage runs are one entry; chunked feeding equals one feed ----------------------
@@ -252,26 +239,13 @@ def test_capture_chunked_feed_equals_one_feed():
 def test_pdrive_as_second_client_is_told_the_simulator_is_busy():
     import subprocess
     import sys
-    import time
-    bus = build_bus("sim://?stations=3:fuji-g1")
-    ep = server.TcpEndpoint("127.0.0.1", 0)
-    stop = []
-    th = threading.Thread(target=server.serve, args=(bus, ep, lambda: bool(stop)), daemon=True)
-    th.start()
-    try:
-        first = socket.create_connection(ep.address, timeout=5)
-        for _ in range(200):
-            if ep.accepted:
-                break
-            time.sleep(0.01)
+    with TcpSim("sim://?stations=3:fuji-g1") as srv:
+        first = socket.create_connection(srv.ep.address, timeout=5)
+        srv.wait_accepted(1)
         p = subprocess.run([sys.executable, "-m", "profidrive_cli", "scan", "--to", "5", "--port",
-                            f"socket://127.0.0.1:{ep.address[1]}"], capture_output=True, text=True,
+                            srv.url], capture_output=True, text=True,
                            stdin=subprocess.DEVNULL, timeout=60)
         first.close()
-    finally:
-        stop.append(1)
-        th.join(timeout=5)
-        ep.close()
     assert p.returncode == 1
     lines = p.stderr.strip().splitlines()
     assert len(lines) == 1 and "busy" in lines[0] and "another client is connected" in lines[0]

@@ -225,10 +225,8 @@ def test_permission_problems_are_explained(monkeypatch, in_file, expect):
 # -- the round trip of a real exchange (issue: doctor said all is well over a slow converter) --------
 
 def _tcp_sim(delay_s: float):
-    import threading
-
+    from conftest import TcpSim
     from profidrive_cli.sim import server
-    from profidrive_cli.sim.plant import build_bus
 
     class SlowEndpoint(server.TcpEndpoint):
         """A converter that holds every reply `delay_s` before passing it on."""
@@ -237,17 +235,8 @@ def _tcp_sim(delay_s: float):
             time.sleep(delay_s)
             super().write(data)
 
-    bus = build_bus("sim://?stations=3:fuji-g1&timing=wire")
-    ep = SlowEndpoint("127.0.0.1", 0)
-    stop = []
-    th = threading.Thread(target=server.serve, args=(bus, ep, lambda: bool(stop)), daemon=True)
-    th.start()
-
-    def close():
-        stop.append(1)
-        th.join(timeout=5)
-        ep.close()
-    return f"socket://127.0.0.1:{ep.address[1]}", close
+    srv = TcpSim("sim://?stations=3:fuji-g1&timing=wire", endpoint=SlowEndpoint)
+    return srv.url, srv.close
 
 
 def _check(rep, name):

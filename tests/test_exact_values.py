@@ -10,36 +10,13 @@ import math
 import pytest
 
 from profidrive_cli import UsageError
-from profidrive_cli.cli.main import main
 from profidrive_cli.drives.profile import load_profile
 from profidrive_cli import session as S
 from profidrive_cli.session import DriveSession
 from profidrive_cli.drives.values import danger, value_problem
 
+from test_drive_cmds import pdrive  # noqa: F401  (the fixture: main() as a user runs it)
 from test_session import session
-
-
-class Result:
-    def __init__(self, exit_code, stdout, stderr):
-        self.exit_code, self.stdout, self.stderr = exit_code, stdout, stderr
-        self.output = stdout + stderr
-
-
-@pytest.fixture
-def pdrive(capsys, monkeypatch):
-    monkeypatch.setenv("PDRIVE_PORT", "")
-    monkeypatch.delenv("PDRIVE_STATION", raising=False)
-
-    def run(*args, port="sim://"):
-        capsys.readouterr()
-        try:
-            main(list(args) + ["--port", port])
-            code = 0
-        except SystemExit as e:
-            code = e.code if isinstance(e.code, int) else (0 if e.code is None else 1)
-        o = capsys.readouterr()
-        return Result(code, o.out, o.err)
-    return run
 
 
 def get(pdrive, address, code):

@@ -17,7 +17,7 @@ import time
 
 import pytest
 
-from conftest import pdrive_cmd
+from conftest import TcpSim, pdrive_cmd
 from profidrive_cli import BusError
 from profidrive_cli.dp.poller import Master
 from profidrive_cli.dp.station import SlaveConfig
@@ -25,8 +25,6 @@ from profidrive_cli.drives import make_drive
 from profidrive_cli.drives.profile import load_profile
 from profidrive_cli.fdl.timing import BusParams
 from profidrive_cli.link import LinkLost, open_link
-from profidrive_cli.sim import server
-from profidrive_cli.sim.plant import build_bus
 
 FUJI = SlaveConfig(ident=0xFD01, cfg=bytes.fromhex("F3F1"), wd_ms=200)
 
@@ -110,13 +108,9 @@ def test_reconnect_gives_up_when_the_port_stays_away(tmp_path):
 # -- pdrive's sim server over TCP, in a thread: look at the bus directly ----------------------------
 
 def test_tcp_drop_watchdog_stops_drive_and_reconnect_restores():
-    bus = build_bus("sim://?stations=3:fuji-g1")
-    ep = server.TcpEndpoint("127.0.0.1", 0)
-    stop = []
-    th = threading.Thread(target=server.serve, args=(bus, ep, lambda: bool(stop)), daemon=True)
-    th.start()
-    try:
-        m = Master(open_link(f"socket://127.0.0.1:{ep.address[1]}"), _real_params())
+    with TcpSim("sim://?stations=3:fuji-g1") as srv:
+        bus, ep = srv.bus, srv.ep
+        m = Master(open_link(srv.url), _real_params())
         d = _running_fuji(m)
         model = bus.slave(3).model
         assert model.running
@@ -137,10 +131,6 @@ def test_tcp_drop_watchdog_stops_drive_and_reconnect_restores():
         assert c.reparams == 1 and m.reconnects == 1 and m.link_losses == 1
         m.release(3)
         m.link.close()
-    finally:
-        stop.append(1)
-        th.join(5)
-        ep.close()
 
 
 # -- `pdrive sim --listen` behind a proxy that drops the connection -------------------------------

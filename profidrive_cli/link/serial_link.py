@@ -256,9 +256,17 @@ class SerialLink(Link):
 
     def flush_input(self) -> None:
         try:
-            self.ser.reset_input_buffer()
+            if isinstance(self.ser, _SocketSerial):
+                # drop what is there, but remember it: a converter's last words may be in it
+                while True:
+                    data = _read_socket(self.ser, 0.0)
+                    if not data:
+                        break
+                    self._recent = (self._recent + data)[-160:]
+            else:
+                self.ser.reset_input_buffer()
         except (serial.SerialException, OSError) as e:
-            raise LinkLost(f"{self.name}: port lost: {e}", self.name) from None
+            raise LinkLost(f"{self.name}: port lost: {e}{self._last_words()}", self.name) from None
 
     def close(self) -> None:
         try:

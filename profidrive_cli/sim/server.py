@@ -54,8 +54,16 @@ BUSY_LINE = b"pdrive sim: busy - another client is connected; try again when it 
 
 
 def _send_and_close(sock: socket.socket, line: bytes, linger_s: float = 1.0) -> None:
+    """Tell a refused client why, then close gracefully. The line goes out after the client's
+    first request (or after `linger_s` of silence): a port that empties its input right after
+    connecting (pyserial's socket:// does) would otherwise throw it away. Closing with unread input
+    would reset the connection and could discard the line too, so the input is drained first."""
     try:
         sock.settimeout(linger_s)
+        try:
+            sock.recv(4096)
+        except OSError:
+            pass
         sock.sendall(line)
         sock.shutdown(socket.SHUT_WR)
         end = time.monotonic() + linger_s
