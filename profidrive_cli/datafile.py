@@ -6,6 +6,13 @@ never a device or a FIFO. `load_yaml_text` is the only way it reads YAML: yaml.S
 with limits (size, nesting depth, digits of a number), aliases refused, and every construction error
 (`!!float x`, a bad `!!timestamp`, ...) reported as file:line. Mappings load as LineDict and sequences
 as LineList; both remember the line of the node and of each key / item (1-based).
+
+Speed: when PyYAML has libyaml, its C parser (yaml._yaml.CParser) makes the events and the same Python
+composer and constructors as the pure loader build the data (seven times faster for the shipped
+profiles), so the limits, the refusal of aliases, the data and the line numbers are the same either way
+(tests/test_yaml_loaders.py checks every shipped profile and example checklist). Without libyaml, or
+with PDRIVE_PURE_YAML=1 in the environment, the pure-Python parser is used. `load_yaml_head` reads
+only the first top-level keys of a file (the profile index).
 """
 
 from __future__ import annotations
@@ -17,8 +24,16 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+from yaml.composer import Composer
+from yaml.constructor import SafeConstructor
+from yaml.resolver import Resolver
 
 from profidrive_cli import UsageError
+
+try:                                    # libyaml's event parser, when PyYAML was built with it
+    from yaml._yaml import CParser as _CParser
+except ImportError:                     # pragma: no cover - depends on the PyYAML build
+    _CParser = None
 
 # limits for YAML data files (checklists, parameter dumps, profiles): the largest real one is ~30 kB
 MAX_YAML_BYTES = 4 * 1024 * 1024
@@ -127,12 +142,12 @@ _CONSTRUCT_ERRORS = (ValueError, TypeError, AttributeError, OverflowError, KeyEr
 _NUMBER_TAGS = frozenset({"tag:yaml.org,2002:int", "tag:yaml.org,2002:float"})
 
 
-class _Loader(yaml.SafeLoader):
-    """SafeLoader with limits: no aliases, bounded depth, bounded numbers, construction errors marked."""
+class _Limits:
+    """Mixed in before a loader's Composer and SafeConstructor: no aliases, bounded depth, bounded
+    numbers, construction errors marked. Depth is checked before the composer descends, so a deeply
+    nested file never reaches Python's (or C's) recursion limit."""
 
-    def __init__(self, stream):
-        super().__init__(stream)
-        self._depth = 0
+    _depth = 0
 
     def compose_node(self, parent, index):
         if self.check_event(yaml.AliasEvent):
@@ -194,32 +209,116 @@ def _construct_sequence(loader: _Loader, node: yaml.SequenceNode) -> LineList:
     return lst
 
 
-_Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
-_Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_SEQUENCE_TAG, _construct_sequence)
+class _PureLoader(_Limits, yaml.SafeLoader):
+    """The pure-Python loader: yaml.SafeLoader (safe construction only) with the limits."""
 
 
-def load_yaml_text(text: str, path: str | Path = "<string>") -> Any:
+if _CParser is not None:
+    class _CLoader(_Limits, Composer, _CParser, SafeConstructor, Resolver):
+        """libyaml's parser makes the events; PyYAML's Python Composer (ahead of CParser's own C
+        composer in the MRO, so the limits above apply node by node), SafeConstructor and Resolver do
+        the rest, exactly as in _PureLoader."""
+
+        def __init__(self, stream):
+            _CParser.__init__(self, stream)
+            SafeConstructor.__init__(self)
+            Resolver.__init__(self)
+            Composer.__init__(self)
+else:                                   # pragma: no cover - depends on the PyYAML build
+    _CLoader = None
+
+for _cls in filter(None, (_PureLoader, _CLoader)):
+    _cls.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+    _cls.add_constructor(yaml.resolver.BaseResolver.DEFAULT_SEQUENCE_TAG, _construct_sequence)
+
+_Loader = _PureLoader                   # the name older code and tests know
+
+
+def _loader_class(pure: bool | None):
+    if pure is None:
+        pure = os.environ.get("PDRIVE_PURE_YAML", "") not in ("", "0")
+    return _PureLoader if pure or _CLoader is None else _CLoader
+
+
+class _errors_as_data_file_error:
+    """Every YAML or construction error raised inside as one DataFileError with file:line."""
+
+    def __init__(self, path):
+        self.path = path
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, typ, e, tb):
+        if e is None or isinstance(e, DataFileError):
+            return False
+        path = self.path
+        if isinstance(e, yaml.MarkedYAMLError):
+            mark = e.problem_mark or e.context_mark
+            line = mark.line + 1 if mark else None
+            msg = e.problem or str(e)
+            if e.context:
+                msg = f"{e.context}: {msg}"
+            raise DataFileError(path, line, f"YAML error: {msg}") from None
+        if isinstance(e, yaml.YAMLError):
+            raise DataFileError(path, None, f"YAML error: {e}") from None
+        if isinstance(e, _CONSTRUCT_ERRORS):    # from a constructor run after construct_object returned
+            raise DataFileError(path, None, f"YAML error: {short(str(e))[1:-1]}") from None
+        return False
+
+
+def load_yaml_text(text: str, path: str | Path = "<string>", *, pure: bool | None = None) -> Any:
     """The one YAML loader of pdrive. Raises DataFileError (file:line, one line) for anything that is
-    not a bounded, alias-free YAML document of plain safe types."""
+    not a bounded, alias-free YAML document of plain safe types. pure=True: PyYAML's pure-Python parser
+    even when libyaml is there (None: libyaml unless PDRIVE_PURE_YAML is set)."""
     if len(text) > MAX_YAML_BYTES:
         raise DataFileError(path, None, f"too large: {len(text)} characters (limit {MAX_YAML_BYTES})")
-    try:
-        loader = _Loader(text)  # a yaml.SafeLoader subclass: safe construction only
+    with _errors_as_data_file_error(path):
+        loader = _loader_class(pure)(text)
         try:
             return loader.get_single_data()
         finally:
             loader.dispose()
-    except yaml.MarkedYAMLError as e:
-        mark = e.problem_mark or e.context_mark
-        line = mark.line + 1 if mark else None
-        msg = e.problem or str(e)
-        if e.context:
-            msg = f"{e.context}: {msg}"
-        raise DataFileError(path, line, f"YAML error: {msg}") from None
-    except yaml.YAMLError as e:
-        raise DataFileError(path, None, f"YAML error: {e}") from None
-    except _CONSTRUCT_ERRORS as e:      # from a constructor run after construct_object returned
-        raise DataFileError(path, None, f"YAML error: {short(str(e))[1:-1]}") from None
+
+
+def load_yaml_head(text: str, keys, path: str | Path = "<string>", *,
+                   pure: bool | None = None) -> LineDict | None:
+    """The top-level keys `keys` of a YAML mapping document, read only as far as needed: parsing
+    stops once all of them were seen, so a file whose first lines hold them is read only that far.
+    Values (and line numbers) are what load_yaml_text gives for those keys; None if the document is
+    not a mapping. Errors and limits as load_yaml_text, for the part read (what follows is not
+    checked: load the whole file before trusting it)."""
+    if len(text) > MAX_YAML_BYTES:
+        raise DataFileError(path, None, f"too large: {len(text)} characters (limit {MAX_YAML_BYTES})")
+    want = set(keys)
+    with _errors_as_data_file_error(path):
+        loader = _loader_class(pure)(text)
+        try:
+            loader.get_event()                              # StreamStart
+            if not loader.check_event(yaml.DocumentStartEvent):
+                return None
+            loader.get_event()
+            if not loader.check_event(yaml.MappingStartEvent):
+                return None
+            start = loader.get_event()
+            out = LineDict()
+            out.line = start.start_mark.line + 1
+            out.key_lines = {}
+            loader._depth = 1                               # the root mapping's children, as in a full load
+            while want and not loader.check_event(yaml.MappingEndEvent):
+                knode = loader.compose_node(None, None)
+                vnode = loader.compose_node(None, None)
+                if not isinstance(knode, yaml.ScalarNode):
+                    continue
+                key = loader.construct_object(knode, deep=True)
+                if not isinstance(key, str) or key not in want:
+                    continue
+                want.discard(key)
+                out[key] = loader.construct_object(vnode, deep=True)
+                out.key_lines[key] = knode.start_mark.line + 1
+            return out
+        finally:
+            loader.dispose()
 
 
 def load_yaml(path: str | Path, what: str = "data file") -> Any:
