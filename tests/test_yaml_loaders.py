@@ -163,3 +163,76 @@ def test_pdrive_pure_yaml_gives_the_same_command_output():
         assert r.returncode == 0, r.stderr
         outs.append(r.stdout)
     assert outs[0] == outs[1] and "PNU 23" in outs[0]
+
+
+# ------------------------------------------------------------------ the direct path (events -> data)
+
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+_scalars = st.one_of(st.integers(-10**30, 10**30), st.floats(allow_nan=False), st.booleans(), st.none(),
+                     st.text(max_size=12), st.dates(),
+                     st.sampled_from(["0x1F", "0o17", "1_000", "+5", ".inf", "-.Inf", ".NaN", "yes", "Off", "~",
+                                      "2001-12-14t21:59:43.10-05:00", "1:30", "0b101", "<<", "=", "", "012"]))
+_docs = st.recursive(_scalars, lambda inner: st.one_of(
+    st.lists(inner, max_size=4), st.dictionaries(st.one_of(st.text(max_size=6), st.integers(0, 99)), inner,
+                                                 max_size=4)), max_leaves=25)
+
+
+def _c_node_path(text):
+    loader = datafile._CLoader(text)
+    try:
+        return loader.get_single_data()
+    finally:
+        loader.dispose()
+
+
+@needs_libyaml
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_the_shipped_files_take_the_direct_path(path):
+    text = path.read_text(encoding="utf-8")
+    loader = datafile._CLoader(text)
+    try:
+        direct = datafile._direct_data(loader)      # raises _Fallback if it gave up
+    finally:
+        loader.dispose()
+    _same(load_yaml_text(text, path, pure=True), direct, path.name)
+
+
+@needs_libyaml
+@settings(max_examples=300, deadline=None)
+@given(doc=_docs, flow=st.sampled_from([None, True, False]), width=st.sampled_from([8, 80]))
+def test_the_direct_path_builds_what_the_node_path_builds(doc, flow, width):
+    import yaml
+    text = yaml.safe_dump(doc, default_flow_style=flow, width=width, allow_unicode=True)
+    loader = datafile._CLoader(text)
+    try:
+        direct = datafile._direct_data(loader)
+    except datafile._Fallback:
+        return                                       # left to the node path: nothing to compare
+    finally:
+        loader.dispose()
+    _same(_c_node_path(text), direct)
+
+
+@needs_libyaml
+@pytest.mark.parametrize("text", [
+    "a: &x 1\n", "a: !!str 1\n", "<<: {b: 1}\nc: 2\n", "a: 1\n---\nb: 2\n", "? [1]\n: 2\n", "a: 1\na: 2\n",
+    "", "a: " + "1" * 200 + "\n", "= : 1\n", "a: [1, 2\n",
+])
+def test_the_direct_path_leaves_the_unusual_to_the_node_path(text):
+    """Tags, anchors, merge keys, several documents, complex keys, duplicates, long numbers, errors."""
+    loader = datafile._CLoader(text)
+    try:
+        with pytest.raises(datafile._Fallback):
+            datafile._direct_data(loader)
+    finally:
+        loader.dispose()
+    try:
+        expected = load_yaml_text(text, "f.yaml", pure=True)
+    except DataFileError as e:
+        with pytest.raises(DataFileError) as ei:
+            load_yaml_text(text, "f.yaml", pure=False)
+        assert ei.value.line == e.line
+    else:
+        _same(expected, load_yaml_text(text, "f.yaml", pure=False))
