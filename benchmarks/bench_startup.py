@@ -5,7 +5,9 @@
 Each round runs every command once, in turn (interleaved, so machine load hits all alike); the
 figure per command is the median wall time over the rounds, and its ratio to the median of
 `python -c "import click"` in the same rounds. Run from the repository root (or with pdrive
-installed): the commands are started as `python -m profidrive_cli …`.
+installed): the commands are started as `python -m profidrive_cli …`. PYTHONDONTWRITEBYTECODE is
+removed from the commands' environment and one round is run first and not counted, so the figures are
+those of an installation with its .pyc files (without them every run compiles pdrive's modules anew).
 """
 
 from __future__ import annotations
@@ -36,13 +38,15 @@ def main() -> None:
     a = ap.parse_args()
     env = dict(os.environ)
     env["PYTHONPATH"] = HERE + os.pathsep + env.get("PYTHONPATH", "")
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
     times: dict[str, list[float]] = {name: [] for name, _ in CASES}
-    for _ in range(a.rounds):
+    for r in range(a.rounds + 1):
         for name, cmd in CASES:
             t = time.perf_counter()
             subprocess.run(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                            stdin=subprocess.DEVNULL, check=True, cwd=HERE)
-            times[name].append(time.perf_counter() - t)
+            if r:                   # round 0 writes the .pyc files
+                times[name].append(time.perf_counter() - t)
     ref = statistics.median(times["import click"])
     print(f"python {sys.version.split()[0]}, {os.cpu_count()} CPUs, {a.rounds} interleaved rounds")
     for name, _ in CASES:

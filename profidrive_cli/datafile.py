@@ -311,7 +311,7 @@ def _direct_data(loader) -> Any:
         if not loader.check_event(yaml.DocumentStartEvent):
             raise _Fallback                                 # an empty stream: None, by the node path
         loader.get_event()
-        data = _direct_node(loader, 1)
+        data = _direct_node(loader, loader.get_event(), 1, _implicit_table(type(loader)))
         loader.get_event()                                  # DocumentEnd
         if not loader.check_event(yaml.StreamEndEvent):
             raise _Fallback                                 # a second document: an error, by the node path
@@ -320,45 +320,69 @@ def _direct_data(loader) -> Any:
         raise _Fallback from None
 
 
-def _direct_node(loader, depth: int) -> Any:
+_implicit_tables: dict = {}
+
+
+def _implicit_table(cls) -> dict:
+    """Resolver.resolve for plain scalars as a table: first character -> [(tag, regexp)], the
+    class's implicit resolvers for that character followed by the wildcard ones (what resolve tries)."""
+    table = _implicit_tables.get(cls)
+    if table is None:
+        res = cls.yaml_implicit_resolvers
+        wild = list(res.get(None, []))
+        table = {ch: list(rs) + wild for ch, rs in res.items() if ch is not None}
+        table[None] = wild
+        _implicit_tables[cls] = table
+    return table
+
+
+def _direct_node(loader, ev, depth: int, table: dict) -> Any:
     if depth > MAX_YAML_DEPTH:
         raise _Fallback
-    ev = loader.get_event()
     kind = type(ev)
     if kind is yaml.AliasEvent or ev.anchor is not None or ev.tag not in (None, "!"):
         raise _Fallback
     if kind is yaml.ScalarEvent:
-        tag = loader.resolve(yaml.ScalarNode, ev.value, ev.implicit)
+        value = ev.value
+        tag = _STR_TAG
+        if ev.implicit[0]:                                  # as Resolver.resolve does (tag None or "!")
+            for t, regexp in table.get(value[:1], table[None]):
+                if regexp.match(value):
+                    tag = t
+                    break
         if tag == _STR_TAG:
-            return ev.value
-        if tag not in _DIRECT_TAGS or (tag in _NUMBER_TAGS and len(ev.value) > MAX_NUMBER_CHARS):
+            return value
+        if tag not in _DIRECT_TAGS or (tag in _NUMBER_TAGS and len(value) > MAX_NUMBER_CHARS):
             raise _Fallback
-        node = yaml.ScalarNode(tag, ev.value, ev.start_mark, ev.end_mark, ev.style)
+        node = yaml.ScalarNode(tag, value, ev.start_mark, ev.end_mark, ev.style)
         return loader.yaml_constructors[tag](loader, node)
+    get_event = loader.get_event
     if kind is yaml.SequenceStartEvent:
         lst = LineList()
         lst.line = ev.start_mark.line + 1
         lst.item_lines = lines = []
-        while not loader.check_event(yaml.SequenceEndEvent):
-            lines.append(loader.peek_event().start_mark.line + 1)
-            lst.append(_direct_node(loader, depth + 1))
-        loader.get_event()
-        return lst
+        while True:
+            item = get_event()
+            if type(item) is yaml.SequenceEndEvent:
+                return lst
+            lines.append(item.start_mark.line + 1)
+            lst.append(_direct_node(loader, item, depth + 1, table))
     if kind is yaml.MappingStartEvent:
         d = LineDict()
         d.line = ev.start_mark.line + 1
         d.key_lines = key_lines = {}
-        while not loader.check_event(yaml.MappingEndEvent):
-            kev = loader.peek_event()
-            if type(kev) is not yaml.ScalarEvent:
+        while True:
+            kev = get_event()
+            kkind = type(kev)
+            if kkind is yaml.MappingEndEvent:
+                return d
+            if kkind is not yaml.ScalarEvent:
                 raise _Fallback
-            key = _direct_node(loader, depth + 1)
+            key = _direct_node(loader, kev, depth + 1, table)
             if key in d:
                 raise _Fallback                             # a duplicate key: an error, by the node path
             key_lines[key] = kev.start_mark.line + 1
-            d[key] = _direct_node(loader, depth + 1)
-        loader.get_event()
-        return d
+            d[key] = _direct_node(loader, get_event(), depth + 1, table)
     raise _Fallback
 
 
