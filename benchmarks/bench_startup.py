@@ -31,6 +31,8 @@ CASES = [
      [sys.executable, "-m", "profidrive_cli", "decode", "moeller", "--ppo", "1", "--request",
       "3017 0000 0000 0190 047F 2000"]),
     ("pdrive scan --port sim://", [sys.executable, "-m", "profidrive_cli", "scan", "--port", "sim://"]),
+    ("pdrive scan --port 'sim://?stations=3:fuji-g1'",
+     [sys.executable, "-m", "profidrive_cli", "scan", "--port", "sim://?stations=3:fuji-g1"]),
 ]
 
 
@@ -58,10 +60,10 @@ def main() -> None:
     cref = statistics.median(cpu["import click"])
     print(f"python {sys.version.split()[0]}, {os.cpu_count()} CPUs, {a.rounds} interleaved rounds"
           f" (load average {os.getloadavg()[0]:.1f})")
-    print(f"{'':<45} {'wall':>9}  {'ratio':>6}   {'CPU':>9}  {'ratio':>6}")
+    print(f"{'':<48} {'wall':>9}  {'ratio':>6}   {'CPU':>9}  {'ratio':>6}")
     for name, _ in CASES:
         med, cmed = statistics.median(times[name]), statistics.median(cpu[name])
-        print(f"{name:<45} {med * 1000:6.1f} ms  {med / ref:5.2f}x   {cmed * 1000:6.1f} ms  {cmed / cref:5.2f}x")
+        print(f"{name:<48} {med * 1000:6.1f} ms  {med / ref:5.2f}x   {cmed * 1000:6.1f} ms  {cmed / cref:5.2f}x")
 
 
 if __name__ == "__main__":
