@@ -90,6 +90,15 @@ def test_every_limit_holds_under_both_parsers(pure, text, line, words):
 
 
 @pytest.mark.parametrize("pure", LOADERS)
+def test_a_lone_surrogate_is_a_data_file_error_not_a_traceback(pure):
+    """libyaml cannot even take such a text (it is not UTF-8): the pure reader refuses it."""
+    for load in (lambda t: load_yaml_text(t, "f.yaml", pure=pure),
+                 lambda t: load_yaml_head(t, ("b",), "f.yaml", pure=pure)):
+        with pytest.raises(DataFileError, match=r"f.yaml: YAML error: unacceptable character #xdc80"):
+            load("a: \udc80\n")
+
+
+@pytest.mark.parametrize("pure", LOADERS)
 def test_a_document_too_large_is_refused_before_parsing(pure):
     with pytest.raises(DataFileError, match="too large"):
         load_yaml_text("a: 1\n" + "#" * MAX_YAML_BYTES, "f.yaml", pure=pure)
