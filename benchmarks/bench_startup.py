@@ -4,14 +4,18 @@
 
 Each round runs every command once, in turn (interleaved, so machine load hits all alike); the
 figure per command is the median wall time over the rounds, and its ratio to the median of
-`python -c "import click"` in the same rounds. Run from the repository root (or with pdrive
-installed): the commands are started as `python -m profidrive_cli …`.
+`python -c "import click"` in the same rounds; then the same for the CPU time (user + system) of the
+command's process, which another process's load on the machine disturbs much less than the wall time. Run from the repository root (or with pdrive
+installed): the commands are started as `python -m profidrive_cli …`. PYTHONDONTWRITEBYTECODE is
+removed from the commands' environment and one round is run first and not counted, so the figures are
+those of an installation with its .pyc files (without them every run compiles pdrive's modules anew).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -27,6 +31,8 @@ CASES = [
      [sys.executable, "-m", "profidrive_cli", "decode", "moeller", "--ppo", "1", "--request",
       "3017 0000 0000 0190 047F 2000"]),
     ("pdrive scan --port sim://", [sys.executable, "-m", "profidrive_cli", "scan", "--port", "sim://"]),
+    ("pdrive scan --port 'sim://?stations=3:fuji-g1'",
+     [sys.executable, "-m", "profidrive_cli", "scan", "--port", "sim://?stations=3:fuji-g1"]),
 ]
 
 
@@ -36,18 +42,28 @@ def main() -> None:
     a = ap.parse_args()
     env = dict(os.environ)
     env["PYTHONPATH"] = HERE + os.pathsep + env.get("PYTHONPATH", "")
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
     times: dict[str, list[float]] = {name: [] for name, _ in CASES}
-    for _ in range(a.rounds):
+    cpu: dict[str, list[float]] = {name: [] for name, _ in CASES}
+    for r in range(a.rounds + 1):
         for name, cmd in CASES:
             t = time.perf_counter()
+            before = resource.getrusage(resource.RUSAGE_CHILDREN)
             subprocess.run(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                            stdin=subprocess.DEVNULL, check=True, cwd=HERE)
-            times[name].append(time.perf_counter() - t)
+            wall = time.perf_counter() - t
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
+            if r:                   # round 0 writes the .pyc files
+                times[name].append(wall)
+                cpu[name].append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
     ref = statistics.median(times["import click"])
-    print(f"python {sys.version.split()[0]}, {os.cpu_count()} CPUs, {a.rounds} interleaved rounds")
+    cref = statistics.median(cpu["import click"])
+    print(f"python {sys.version.split()[0]}, {os.cpu_count()} CPUs, {a.rounds} interleaved rounds"
+          f" (load average {os.getloadavg()[0]:.1f})")
+    print(f"{'':<48} {'wall':>9}  {'ratio':>6}   {'CPU':>9}  {'ratio':>6}")
     for name, _ in CASES:
-        med = statistics.median(times[name])
-        print(f"{name:<45} {med * 1000:7.1f} ms  {med / ref:5.2f}x import click")
+        med, cmed = statistics.median(times[name]), statistics.median(cpu[name])
+        print(f"{name:<48} {med * 1000:6.1f} ms  {med / ref:5.2f}x   {cmed * 1000:6.1f} ms  {cmed / cref:5.2f}x")
 
 
 if __name__ == "__main__":

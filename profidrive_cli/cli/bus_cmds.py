@@ -7,7 +7,6 @@ import signal
 import threading
 
 import click
-from rich.progress import Progress
 from rich.table import Table
 
 from profidrive_cli import BusError, UsageError
@@ -54,6 +53,7 @@ def scan_cmd(opts, first, last, gsd_dir):
         if opts.json or not err.is_terminal:
             result = scan(master, first, last)
         else:
+            from rich.progress import Progress      # only on a terminal: rich.progress is slow to import
             with Progress(console=err, transient=True) as prog:
                 task = prog.add_task(f"scanning at {BAUD_NAMES[used_baud]}", total=last - first + 1)
                 result = scan(master, first, last, progress=lambda a: prog.advance(task))

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from profidrive_cli.data import profiles_dir
-from profidrive_cli.datafile import DataFileError, LineDict, load_yaml
+from profidrive_cli.datafile import DataFileError, LineDict, load_yaml, load_yaml_head, read_text
 from profidrive_cli.dp.cfg import CfgError, decode_cfg, io_sizes, parse_hex
 
 ProfileError = DataFileError
@@ -299,34 +299,123 @@ def per_profile(build):
     return get
 
 
-_cache: dict[Path, Profile] = {}
+# ------------------------------------------------------------------------------------------------ index
+#
+# A command needs one profile (decode, run, a sim:// station) or the one with a given ident (naming a
+# station): the index reads only each file's first top-level keys (profile, aliases, family, identity;
+# datafile.load_yaml_head stops parsing there), and only the file asked for is loaded in full. Both
+# the index entries and the loaded profiles are cached per process, keyed by (path, mtime, size).
+
+INDEX_KEYS = ("profile", "aliases", "family", "identity")
 
 
-def all_profiles() -> list[Profile]:
+@dataclass(frozen=True)
+class IndexEntry:
+    """What the index knows of one profile file without loading it. name is None when the file's
+    first keys could not be read as a profile header: such a file cannot load either, and is loaded
+    (raising its file:line error) only when no readable profile answers a lookup."""
+    path: Path
+    name: str | None = None
+    aliases: tuple[str, ...] = ()
+    family: str | None = None
+    ident: int | None = None
+
+    def answers_to(self, key: str) -> bool:
+        return self.name is not None and (self.name == key or key in (a.lower() for a in self.aliases))
+
+
+_Stamp = tuple[int, int]
+_index: dict[Path, tuple[_Stamp, IndexEntry]] = {}
+_cache: dict[Path, tuple[_Stamp, Profile]] = {}
+
+
+def _stamp(path: Path) -> _Stamp | None:
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return st.st_mtime_ns, st.st_size
+
+
+def clear_cache() -> None:
+    _index.clear()
+    _cache.clear()
+
+
+def _read_entry(path: Path) -> IndexEntry:
+    try:
+        head = load_yaml_head(read_text(path, "profile"), INDEX_KEYS, path)
+    except DataFileError:
+        return IndexEntry(path)
+    if head is None:
+        return IndexEntry(path)
+    name, family, identity = head.get("profile"), head.get("family"), head.get("identity")
+    aliases = head.get("aliases", [])
+    ident = identity.get("ident") if isinstance(identity, LineDict) else None
+    if not (isinstance(name, str) and isinstance(family, str) and isinstance(aliases, list)
+            and isinstance(ident, int) and not isinstance(ident, bool)):
+        return IndexEntry(path)
+    return IndexEntry(path, name, tuple(str(a) for a in aliases), family, ident)
+
+
+def profile_index() -> list[IndexEntry]:
+    """One entry per profiles/*.yaml file, sorted by file name."""
     out = []
     for p in sorted(profiles_dir().glob("*.yaml")):
-        if p not in _cache:
-            _cache[p] = load_profile_file(p)
-        out.append(_cache[p])
+        stamp = _stamp(p)
+        hit = _index.get(p)
+        if hit is None or hit[0] != stamp:
+            hit = (stamp, _read_entry(p))
+            _index[p] = hit
+        out.append(hit[1])
     return out
 
 
+def _load_cached(path: Path) -> Profile:
+    stamp = _stamp(path)
+    hit = _cache.get(path)
+    if hit is None or hit[0] != stamp:
+        hit = (stamp, load_profile_file(path))
+        _cache[path] = hit
+    return hit[1]
+
+
+def all_profiles() -> list[Profile]:
+    """Every shipped profile, loaded in full (a broken file raises its file:line error)."""
+    return [_load_cached(e.path) for e in profile_index()]
+
+
+def _lookup(match) -> Profile | None:
+    """The first profile (by file name) whose index entry matches and whose full load confirms it;
+    files the index cannot read are loaded only if no readable one matches (raising their error)."""
+    entries = profile_index()
+    for e in entries:
+        if match(e):
+            p = _load_cached(e.path)
+            if match(IndexEntry(e.path, p.name, tuple(p.aliases), p.family, p.ident)):
+                return p
+    for e in entries:
+        if e.name is None:
+            p = _load_cached(e.path)        # raises: a file the index cannot read does not load
+            if match(IndexEntry(e.path, p.name, tuple(p.aliases), p.family, p.ident)):
+                return p
+    return None
+
+
 def load_profile(name: str) -> Profile:
-    """By profile name, alias, or a path to a .yaml file."""
+    """By profile name, alias, or a path to a .yaml file. Loads only that profile's file."""
     if name.endswith((".yaml", ".yml")) or "/" in name:
         return load_profile_file(name)
     key = name.lower()
-    profs = all_profiles()
-    for p in profs:
-        if p.name == key or key in (a.lower() for a in p.aliases):
-            return p
-    known = ", ".join(sorted(p.name for p in profs))
+    p = _lookup(lambda e: e.answers_to(key))
+    if p is not None:
+        return p
+    known = ", ".join(sorted(e.name for e in profile_index() if e.name))
     from profidrive_cli import UsageError
     raise UsageError(f"unknown profile '{name}' (known: {known or 'none'})")
 
 
 def profile_for_ident(ident: int) -> Profile | None:
-    for p in all_profiles():
-        if p.ident == ident:
-            return p
-    return None
+    """The first profile (by file name) with this PROFIBUS ident; None if none has it. Loads only
+    that profile's file."""
+    return _lookup(lambda e: e.name is not None and e.ident == ident)
