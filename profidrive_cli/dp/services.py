@@ -8,7 +8,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import construct as cs
+import functools
+import struct
 
 # SAPs (slave DSAP / master SSAP)
 SAP_SET_SLAVE_ADD = 55
@@ -43,16 +44,26 @@ class ServiceError(ValueError):
 # ---------------------------------------------------------------------------------------------
 # Set_Prm
 
-SetPrmHeader = cs.Struct(
-    "station_status" / cs.BitStruct(
-        "lock_req" / cs.Flag, "unlock_req" / cs.Flag, "sync_req" / cs.Flag,
-        "freeze_req" / cs.Flag, "wd_on" / cs.Flag, "reserved" / cs.BitsInteger(3)),
-    "wd_fact_1" / cs.Int8ub,
-    "wd_fact_2" / cs.Int8ub,
-    "min_tsdr" / cs.Int8ub,
-    "ident" / cs.Int16ub,
-    "group" / cs.Int8ub,
-)
+@functools.cache
+def _set_prm_header():
+    """The fixed Set_Prm header layout (construct: built on first use, so importing dp/ stays cheap
+    for commands that never build a Set_Prm)."""
+    import construct as cs
+    return cs.Struct(
+        "station_status" / cs.BitStruct(
+            "lock_req" / cs.Flag, "unlock_req" / cs.Flag, "sync_req" / cs.Flag,
+            "freeze_req" / cs.Flag, "wd_on" / cs.Flag, "reserved" / cs.BitsInteger(3)),
+        "wd_fact_1" / cs.Int8ub,
+        "wd_fact_2" / cs.Int8ub,
+        "min_tsdr" / cs.Int8ub,
+        "ident" / cs.Int16ub,
+        "group" / cs.Int8ub,
+    )
+
+
+#: the six standard Slave_Diag octets: st1, st2, st3, master address, ident (big-endian); a plain
+#: struct, because `scan` decodes one per station and need not load construct for it
+_DIAG_HEADER = struct.Struct(">BBBBH")
 
 
 def watchdog_factors(ms: float) -> tuple[int, int]:
@@ -93,7 +104,7 @@ class SetPrm:
 
     def encode(self) -> bytes:
         f1, f2 = self.wd_factors or (watchdog_factors(self.wd_ms) if self.wd_ms else (1, 1))
-        return SetPrmHeader.build(dict(
+        return _set_prm_header().build(dict(
             station_status=dict(lock_req=self.lock, unlock_req=self.unlock, sync_req=self.sync,
                                 freeze_req=self.freeze, wd_on=self.wd_ms is not None, reserved=0),
             wd_fact_1=f1, wd_fact_2=f2, min_tsdr=self.min_tsdr, ident=self.ident,
@@ -103,7 +114,7 @@ class SetPrm:
     def decode(cls, du: bytes) -> "SetPrm":
         if len(du) < 7:
             raise ServiceError(f"Set_Prm needs 7 octets, got {len(du)}")
-        h = SetPrmHeader.parse(du[:7])
+        h = _set_prm_header().parse(du[:7])
         s = h.station_status
         wd = h.wd_fact_1 * h.wd_fact_2 * 10.0 if s.wd_on else None
         return cls(ident=h.ident, wd_ms=wd, lock=s.lock_req, unlock=s.unlock_req, sync=s.sync_req,
@@ -231,19 +242,15 @@ class SlaveDiag:
     ident: int
     ext: bytes = b""
 
-    DiagHeader = cs.Struct("st1" / cs.Int8ub, "st2" / cs.Int8ub, "st3" / cs.Int8ub,
-                           "master" / cs.Int8ub, "ident" / cs.Int16ub)
-
     def encode(self) -> bytes:
-        return self.DiagHeader.build(dict(st1=self.st1, st2=self.st2, st3=self.st3,
-                                          master=self.master, ident=self.ident)) + self.ext
+        return _DIAG_HEADER.pack(self.st1, self.st2, self.st3, self.master, self.ident) + self.ext
 
     @classmethod
     def decode(cls, du: bytes) -> "SlaveDiag":
         if len(du) < 6:
             raise ServiceError(f"Slave_Diag reply needs 6 octets, got {len(du)}")
-        h = cls.DiagHeader.parse(du[:6])
-        return cls(h.st1, h.st2, h.st3, h.master, h.ident, bytes(du[6:]))
+        st1, st2, st3, master, ident = _DIAG_HEADER.unpack_from(du, 0)
+        return cls(st1, st2, st3, master, ident, bytes(du[6:]))
 
     def has(self, name: str) -> bool:
         if name in ST1:

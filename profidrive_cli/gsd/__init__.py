@@ -1,15 +1,34 @@
 """GSD files: text stage (lexer.py), parser (parser.py: builds the model), data model and module lookup
 (model.py), Set_Prm / Chk_Cfg / unit-diag interpreter (interp.py: reads the model) and the device
-library lookup (library.py)."""
+library lookup (library.py).
 
-from profidrive_cli.gsd.interp import (
-    PrmField, PrmResult, build_prm, chk_cfg, decode_unit_diag, user_params,
-)
-from profidrive_cli.gsd.model import BAUDS, ExtUserPrmData, Gsd, Module, PrmBlock, select_module, select_modules
-from profidrive_cli.gsd.parser import parse_gsd, parse_gsd_bytes, parse_gsd_text
+The names below are loaded from their module on first use (PEP 562), so that `scan`, which only asks
+the library for a station's name, does not import the parser and the interpreter.
+"""
 
-__all__ = [
-    "BAUDS", "ExtUserPrmData", "Gsd", "Module", "PrmBlock", "PrmField", "PrmResult", "build_prm", "chk_cfg",
-    "decode_unit_diag", "parse_gsd", "parse_gsd_bytes", "parse_gsd_text", "select_module", "select_modules",
-    "user_params",
-]
+from __future__ import annotations
+
+import importlib
+
+_WHERE = {
+    "PrmField": "interp", "PrmResult": "interp", "build_prm": "interp", "chk_cfg": "interp",
+    "decode_unit_diag": "interp", "user_params": "interp",
+    "BAUDS": "model", "ExtUserPrmData": "model", "Gsd": "model", "Module": "model",
+    "PrmBlock": "model", "select_module": "model", "select_modules": "model",
+    "parse_gsd": "parser", "parse_gsd_bytes": "parser", "parse_gsd_text": "parser",
+}
+
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str):
+    mod = _WHERE.get(name)
+    if mod is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{mod}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_WHERE))
