@@ -205,3 +205,43 @@ def test_write_fd_takes_partial_writes(monkeypatch):
     finally:
         os.close(r)
         os.close(w)
+
+
+# -- reads -----------------------------------------------------------------------------------------
+
+def test_pty_reads_go_to_the_fd_not_through_pyserial(socat_pair, monkeypatch):
+    """os.read on the fd: pyserial's in_waiting (an ioctl) and read (a select of its own) are not
+    used; what has arrived comes back whole, nothing in time is b''."""
+    a, b = socat_pair
+    link = open_link(a, 19200)
+    peer = serial.Serial(b, timeout=2)
+
+    def no(*args, **kw):
+        raise AssertionError("pyserial read path used")
+    monkeypatch.setattr(serial.Serial, "read", no)
+    monkeypatch.setattr(serial.Serial, "in_waiting", property(no))
+    try:
+        assert link.read(link.now() + 0.05) == b""
+        peer.write(bytes.fromhex("68 05 05 68 02 03 08 01 02 10 16"))
+        peer.flush()
+        got = b""
+        deadline = link.now() + 2.0
+        while len(got) < 11 and link.now() < deadline:
+            got += link.read(deadline)
+        assert got == bytes.fromhex("68 05 05 68 02 03 08 01 02 10 16")
+    finally:
+        link.close()
+        peer.close()
+
+
+def test_pty_read_after_the_other_end_closed_is_link_lost():
+    import pty
+    mfd, sfd = pty.openpty()
+    link = open_link(os.ttyname(sfd), 19200)
+    os.close(sfd)
+    try:
+        os.close(mfd)                                  # the other end goes away
+        with pytest.raises(LinkLost):
+            link.read(link.now() + 1.0)
+    finally:
+        link.close()

@@ -118,6 +118,8 @@ def read_available(ser: serial.SerialBase, timeout: float) -> bytes:
     """
     if isinstance(ser, _SocketSerial):
         return _read_socket(ser, timeout)
+    if FD_IO and type(ser) is serial.Serial and os.name == "posix":
+        return _read_fd(ser, timeout)
     n = ser.in_waiting
     if n:
         return ser.read(n)
@@ -143,6 +145,37 @@ def read_available(ser: serial.SerialBase, timeout: float) -> bytes:
     return first + (ser.read(n) if n else b"")
 
 
+#: the most one read takes from a POSIX fd (more than any telegram)
+_FD_CHUNK = 4096
+
+
+def _read_fd(ser: serial.Serial, timeout: float) -> bytes:
+    """A plain POSIX device or pty (pyserial opens it non-blocking, VMIN = VTIME = 0): os.read of
+    what is there; when nothing is, one select() for at most `timeout` s and os.read again.
+    pyserial's in_waiting + read would add an ioctl and a select() of its own to every read
+    (parity-marking ports keep pyserial's read: it unescapes the marks)."""
+    fd = ser.fd
+    if fd is None:
+        raise serial.SerialException("port not open")
+    try:
+        data = os.read(fd, _FD_CHUNK)       # b"" = nothing there (VMIN = 0), not end of file
+    except BlockingIOError:
+        data = b""
+    if data or timeout <= 0:
+        return data
+    r, _, _ = select.select([fd], [], [], timeout)
+    if not r:
+        return b""
+    try:
+        data = os.read(fd, _FD_CHUNK)
+    except BlockingIOError:
+        return b""
+    if not data:
+        # readable but nothing to read: the other end went away (EOF on a pty/USB unplug)
+        raise serial.SerialException("device reports readiness to read but returned no data")
+    return data
+
+
 def _read_socket(ser, timeout: float) -> bytes:
     """socket:// reports only whether data waits (in_waiting 0 or 1): take everything that is
     there with one recv once the socket is readable (one select, one recv) instead of an octet at a
@@ -164,10 +197,15 @@ def _read_socket(ser, timeout: float) -> bytes:
     return data
 
 
+#: reads and writes on POSIX devices and ptys with os.read / os.write on the fd (False: through
+#: pyserial, for comparison in benchmarks/bench_pty_cpu.py)
+FD_IO = True
+
+
 def posix_fd(ser: serial.SerialBase) -> int | None:
     """The file descriptor of a POSIX serial device or pty that pyserial opened (None for URL
-    ports, Windows ports and closed ports)."""
-    if os.name != "posix" or not isinstance(ser, serial.Serial):
+    ports, Windows ports and closed ports, and with FD_IO off)."""
+    if not FD_IO or os.name != "posix" or not isinstance(ser, serial.Serial):
         return None
     fd = getattr(ser, "fd", None)
     return fd if isinstance(fd, int) else None
