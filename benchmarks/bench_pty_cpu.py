@@ -12,7 +12,10 @@ per exchange, while the exchange rate shows the waiting did not get slower.
 --pyserial-io     read and write through pyserial (in_waiting + read: an ioctl and a select() more
                   per read; write: a select() after every write) instead of os.read / os.write
 --old             both: what pdrive did before
---compare          alternate runs as now and as --old. One JSON line per run.
+--compare         alternate runs as now and as --old
+--plant five      the simulated plant holds five drives (the exchanges still go to station 3);
+--timing instant  the simulated stations answer at once (what limits the rate is then the
+                  master, the pty and the sim server's loop). One JSON line per run.
 """
 
 from __future__ import annotations
@@ -33,11 +36,15 @@ from profidrive_cli.fdl.timing import BusParams, wire_time_data_exchange  # noqa
 from profidrive_cli.link import open_link, serial_link  # noqa: E402
 
 PLANT = "sim://?stations=3:fuji-g1&timing=wire&baud={baud}"
+#: --plant five: the default plant's five drives, station 3 the one exchanged with
+FIVE = "sim://?stations=3:fuji-g1,4:fuji-pdp3,5:toyo,6:moeller,7:yaskawa&timing={timing}&baud={baud}"
 
 
-def run(baud: int, seconds: float, spin: bool, pyserial_io: bool) -> dict:
+def run(baud: int, seconds: float, spin: bool, pyserial_io: bool, plant: str = PLANT,
+        timing: str = "wire") -> dict:
+    url = plant.format(baud=baud, timing=timing).replace("timing=wire", f"timing={timing}")
     sim = subprocess.Popen([sys.executable, "-m", "profidrive_cli", "sim", "--json", "--baud", str(baud),
-                            "--plant", PLANT.format(baud=baud), "--pty"],
+                            "--plant", url, "--pty"],
                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
                            cwd=os.path.dirname(HERE))
     try:
@@ -62,7 +69,7 @@ def run(baud: int, seconds: float, spin: bool, pyserial_io: bool) -> dict:
     finally:
         sim.terminate()
         sim.wait(10)
-    return {"baud": baud, "spin": spin, "pyserial_io": pyserial_io, "exchanges": n,
+    return {"baud": baud, "plant": url, "spin": spin, "pyserial_io": pyserial_io, "exchanges": n,
             "seconds": round(took, 3), "rate_hz": round(n / took, 1),
             "wire_limit_hz": round(1 / wire_time_data_exchange(baud, 12, 12), 1),
             "cpu_us_per_exchange": round(cpu / n * 1e6, 1), "retries": c.retries}
@@ -77,14 +84,17 @@ def main(argv=None) -> None:
     ap.add_argument("--pyserial-io", action="store_true")
     ap.add_argument("--old", action="store_true")
     ap.add_argument("--compare", action="store_true", help="alternate new and --old runs")
+    ap.add_argument("--plant", choices=("one", "five"), default="one")
+    ap.add_argument("--timing", choices=("wire", "instant"), default="wire")
     a = ap.parse_args(argv)
+    plant = FIVE if a.plant == "five" else PLANT
     for _ in range(a.repeat):
         if a.compare:
-            print(json.dumps(run(a.baud, a.seconds, False, False)), flush=True)
-            print(json.dumps(run(a.baud, a.seconds, True, True)), flush=True)
+            print(json.dumps(run(a.baud, a.seconds, False, False, plant, a.timing)), flush=True)
+            print(json.dumps(run(a.baud, a.seconds, True, True, plant, a.timing)), flush=True)
         else:
-            print(json.dumps(run(a.baud, a.seconds, a.spin or a.old, a.pyserial_io or a.old)),
-                  flush=True)
+            print(json.dumps(run(a.baud, a.seconds, a.spin or a.old, a.pyserial_io or a.old,
+                                 plant, a.timing)), flush=True)
 
 
 if __name__ == "__main__":
