@@ -167,3 +167,25 @@ def test_io_stopped_by_an_exception_mid_run_still_ends_with_the_drive_stopped(si
     assert int.from_bytes(last[10:12], "big") > 0            # it was turning when the exception came
     st = json.loads(run("status", "6", "--port", port, "--json").output)
     assert st["stopped"] and not st["running"] and not st["fault"] and st["speed_hz"] == 0.0, st
+
+
+def test_io_text_rows_are_plain_lines(monkeypatch):
+    """Per-cycle rows of `io` go out as plain text, not through rich (issue 16: ~60 µs a row):
+    one line per cycle, `cycle  in: octets`. Cfg 5F 6F: 16 input words = 32 input octets."""
+    import re
+
+    from profidrive_cli.cli import common
+    through_rich = []
+    real = common.out.print
+
+    def spy(*a, **k):
+        through_rich.append(a)
+        return real(*a, **k)
+    monkeypatch.setattr(common.out, "print", spy)
+    r = run("io", "7", "--port", "sim://", "--cfg", "5F 6F", "--count", "3")
+    assert r.exit_code == 0, r.output
+    rows = [line for line in r.output.splitlines() if " in: " in line]
+    assert len(rows) == 3
+    for i, line in enumerate(rows):
+        assert re.fullmatch(rf" {{4}}{i}  in: [0-9a-f]{{2}}( [0-9a-f]{{2}}){{31}}", line), line
+    assert not any(" in: " in str(a) for args in through_rich for a in args)

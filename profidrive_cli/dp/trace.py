@@ -31,6 +31,7 @@ class TraceLink(Link):
         self.is_simulator = inner.is_simulator
         self.instant = inner.instant
         self.latency = inner.latency
+        self.us_timing = inner.us_timing
         self._t0 = inner.now()
         self._wall0 = wall_clock()
         self._tx = Capture()

@@ -28,6 +28,7 @@ from profidrive_cli.drives.profile import COMMON_EXTRA_KEYS, per_profile
 
 FAMILY_PARAM_KEYS = {"bytes", "format", "ranges", "df6", "df6_max", "note", "array"}
 FORMATS = ("code", "hex", "bits")
+_STW_CONTROL_REQUESTED = int(pd.Stw.CONTROL_REQUESTED)
 
 
 # =============================================================================================
@@ -305,7 +306,8 @@ class MoellerDrive(pd.ProfidriveDrive):
 
     def status_extras(self, area: pd.PpoArea, status: DriveStatus) -> None:
         ctw = self.last_ctw or 0
-        status.flags["bus gives commands"] = bool(area.word1 & pd.Stw.CONTROL_REQUESTED) and \
+        # a plain int: IntFlag arithmetic here would cost a microsecond on every cycle
+        status.flags["bus gives commands"] = bool(area.word1 & _STW_CONTROL_REQUESTED) and \
             not ctw >> self.mc.commands_invalid_bit & 1
         status.raw["control_word"] = ctw
 

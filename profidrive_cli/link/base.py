@@ -5,7 +5,8 @@
                             for the first one; b"" when nothing came in time
     flush_input()           drop whatever is buffered (after a timeout, before a retry)
     now()                   the clock deadlines are expressed in (time.monotonic for real ports)
-    sleep(seconds)          wait on that clock (the poller's only way to pass time)
+    sleep(seconds)          wait on that clock (the poller's only way to pass time): a plain sleep,
+                            or precise_sleep when the link keeps µs timing (`us_timing`)
     reopen()                close and open the same port again (after LinkLost); raises BusError
                             (LinkLost included) while the port is not back
     close()
@@ -22,7 +23,9 @@ from profidrive_cli import BusError
 
 
 #: the last part of a wait is spent polling the clock: the OS wakes a sleeping thread ~0.1 ms late,
-#: which at 187.5 kbit/s and above is more than the idle times the master has to keep
+#: which at 187.5 kbit/s and above is more than the idle times the master has to keep. Only worth its
+#: CPU on a link that keeps µs timing itself (Link.us_timing): a pty, a USB adapter or a TCP
+#: converter adds a millisecond or more of its own, and there the spin would burn CPU for nothing.
 SPIN_S = 0.0002
 
 
@@ -35,6 +38,18 @@ def precise_sleep(seconds: float, clock=time.monotonic) -> None:
         time.sleep(seconds - SPIN_S)
     while clock() < end:
         pass
+
+
+def plain_sleep(seconds: float, clock=time.monotonic) -> None:
+    """Sleep without spinning: never returns early (the OS may wake the thread a little late)."""
+    if seconds <= 0:
+        return
+    end = clock() + seconds
+    while True:
+        time.sleep(seconds)
+        seconds = end - clock()
+        if seconds <= 0:
+            return
 
 
 class LinkLost(BusError):
@@ -59,6 +74,11 @@ class Link(ABC):
     #: seconds the transport itself adds to every reply, when it knows (the simulator: 0);
     #: None = unknown, the master keeps the latency margin of its BusParams
     latency: float | None = None
+    #: True when the transport keeps sub-millisecond timing (the wire-timed simulator, a link that
+    #: drives the line itself): sleep() then spins for the last SPIN_S to meet the bus's idle
+    #: times. False (ptys, USB adapters, TCP: a millisecond or more of latency of their own):
+    #: sleep() sleeps, spending no CPU on precision the line cannot keep.
+    us_timing: bool = False
 
     @abstractmethod
     def write(self, data: bytes) -> None: ...
@@ -73,7 +93,10 @@ class Link(ABC):
         return time.monotonic()
 
     def sleep(self, seconds: float) -> None:
-        precise_sleep(seconds)
+        if self.us_timing:
+            precise_sleep(seconds)
+        else:
+            plain_sleep(seconds)
 
     def reopen(self) -> None:
         raise LinkLost(f"{self.name or 'the link'}: cannot be reopened", self.name)

@@ -23,7 +23,7 @@ import serial
 import serial.rs485
 
 from profidrive_cli import BusError, UsageError
-from profidrive_cli.link.base import Link, LinkLost, precise_sleep
+from profidrive_cli.link.base import Link, LinkLost, plain_sleep, precise_sleep
 from profidrive_cli.link.parity import ParityMarkingSerial
 
 try:
@@ -118,6 +118,8 @@ def read_available(ser: serial.SerialBase, timeout: float) -> bytes:
     """
     if isinstance(ser, _SocketSerial):
         return _read_socket(ser, timeout)
+    if FD_IO and type(ser) is serial.Serial and os.name == "posix":
+        return _read_fd(ser, timeout)
     n = ser.in_waiting
     if n:
         return ser.read(n)
@@ -143,6 +145,37 @@ def read_available(ser: serial.SerialBase, timeout: float) -> bytes:
     return first + (ser.read(n) if n else b"")
 
 
+#: the most one read takes from a POSIX fd (more than any telegram)
+_FD_CHUNK = 4096
+
+
+def _read_fd(ser: serial.Serial, timeout: float) -> bytes:
+    """A plain POSIX device or pty (pyserial opens it non-blocking, VMIN = VTIME = 0): os.read of
+    what is there; when nothing is, one select() for at most `timeout` s and os.read again.
+    pyserial's in_waiting + read would add an ioctl and a select() of its own to every read
+    (parity-marking ports keep pyserial's read: it unescapes the marks)."""
+    fd = ser.fd
+    if fd is None:
+        raise serial.SerialException("port not open")
+    try:
+        data = os.read(fd, _FD_CHUNK)       # b"" = nothing there (VMIN = 0), not end of file
+    except BlockingIOError:
+        data = b""
+    if data or timeout <= 0:
+        return data
+    r, _, _ = select.select([fd], [], [], timeout)
+    if not r:
+        return b""
+    try:
+        data = os.read(fd, _FD_CHUNK)
+    except BlockingIOError:
+        return b""
+    if not data:
+        # readable but nothing to read: the other end went away (EOF on a pty/USB unplug)
+        raise serial.SerialException("device reports readiness to read but returned no data")
+    return data
+
+
 def _read_socket(ser, timeout: float) -> bytes:
     """socket:// reports only whether data waits (in_waiting 0 or 1): take everything that is
     there with one recv once the socket is readable (one select, one recv) instead of an octet at a
@@ -162,6 +195,45 @@ def _read_socket(ser, timeout: float) -> bytes:
     if not data:
         raise serial.SerialException("socket disconnected")
     return data
+
+
+#: reads and writes on POSIX devices and ptys with os.read / os.write on the fd (False: through
+#: pyserial, for comparison in benchmarks/bench_pty_cpu.py)
+FD_IO = True
+
+
+def posix_fd(ser: serial.SerialBase) -> int | None:
+    """The file descriptor of a POSIX serial device or pty that pyserial opened (None for URL
+    ports, Windows ports and closed ports, and with FD_IO off)."""
+    if not FD_IO or os.name != "posix" or not isinstance(ser, serial.Serial):
+        return None
+    fd = getattr(ser, "fd", None)
+    return fd if isinstance(fd, int) else None
+
+
+def write_fd(fd: int, data: bytes, timeout: float) -> None:
+    """All of `data` to a (non-blocking) POSIX fd with os.write.
+
+    pyserial's Serial.write does the same and then a select() after every write, even when the
+    kernel took everything at once (about a quarter of the CPU of an exchange over a pty). Here
+    select() is called only when the kernel's buffer is full, to wait at most `timeout` s in all for
+    room; serial.SerialTimeoutException when none comes (the adapter stopped sending)."""
+    view = memoryview(data)
+    deadline = None
+    while view:
+        try:
+            n = os.write(fd, view)
+        except BlockingIOError:
+            n = 0
+        view = view[n:]
+        if not view:
+            return
+        now = time.monotonic()
+        if deadline is None:
+            deadline = now + timeout
+        if now >= deadline:
+            raise serial.SerialTimeoutException("Write timeout")
+        select.select([], [fd], [], deadline - now)
 
 
 def _rate_text(baud: int) -> str:
@@ -189,6 +261,11 @@ class SerialLink(Link):
         self.instant = self.bus is not None and not self.bus.wire
         # the simulator adds no latency of its own; a real port's is unknown
         self.latency = 0.0 if self.bus is not None else None
+        # only the simulator keeps µs timing: ptys, USB adapters and TCP converters add a
+        # millisecond or more of their own, so waits there sleep instead of spinning
+        self.us_timing = self.bus is not None
+        #: writes go straight to the fd with os.write on POSIX devices and ptys (write_fd)
+        self._posix = posix_fd(self.ser) is not None
         self._sim_sleep = getattr(self.ser, "sim_sleep", None) if self.bus is not None else None
         self._clock = getattr(self.ser, "clock", time.monotonic) if self.bus is not None \
             else time.monotonic
@@ -202,8 +279,10 @@ class SerialLink(Link):
             return
         if self._sim_sleep is not None:
             self._sim_sleep(seconds)
-        else:
+        elif self.us_timing:
             precise_sleep(seconds)
+        else:
+            plain_sleep(seconds)
 
     def reopen(self) -> None:
         """Close and open the same port again (after LinkLost). BusError while it is not back.
@@ -213,7 +292,13 @@ class SerialLink(Link):
 
     def write(self, data: bytes) -> None:
         try:
-            self.ser.write(data)
+            if self._posix:
+                fd = self.ser.fd                  # None once closed: the port is gone
+                if fd is None:
+                    raise LinkLost(f"{self.name}: port closed", self.name)
+                write_fd(fd, data, self.ser.write_timeout or 2.0)
+            else:
+                self.ser.write(data)
             if self.echo:
                 self._swallow_echo(data)
         except serial.SerialTimeoutException:

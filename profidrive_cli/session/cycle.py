@@ -29,7 +29,11 @@ def default_cycle_hz(link, wire_hz: float) -> float:
 
 class MeteredChannel:
     """drives.base.CyclicChannel around dp.poller.StationChannel: counts exchanges, measures the
-    achieved rate over the last two seconds, and calls hooks(t, outputs, inputs) after each one."""
+    achieved rate over the last two seconds (at most the last 4,096 exchanges), and calls
+    hooks(t, outputs, inputs) after each one.
+
+    The window is kept up to date as exchanges come in (timestamps older than `window_s` before the
+    newest one are dropped on append), so `rate` is O(1): a live view reads it on every cycle."""
 
     def __init__(self, inner, window_s: float = 2.0):
         self.inner = inner
@@ -42,10 +46,15 @@ class MeteredChannel:
         return self.inner.now()
 
     def exchange(self, outputs: bytes) -> bytes:
-        inputs = self.inner.exchange(outputs)
-        t = self.inner.now()
+        inner = self.inner
+        inputs = inner.exchange(outputs)
+        t = inner.now()
         self.cycles += 1
-        self._times.append(t)
+        times = self._times
+        times.append(t)
+        window = self.window_s
+        while t - times[0] > window:
+            times.popleft()
         for h in self.hooks:
             h(t, outputs, inputs)
         return inputs
@@ -53,19 +62,14 @@ class MeteredChannel:
     @property
     def rate(self) -> float:
         """Exchanges per second over the last `window_s` seconds (0 before two exchanges)."""
-        if len(self._times) < 2:
+        times = self._times
+        n = len(times)
+        if n < 2:
             return 0.0
-        last = self._times[-1]
-        first = None
-        n = 0
-        for t in reversed(self._times):
-            if last - t > self.window_s:
-                break
-            first = t
-            n += 1
-        if first is None or n < 2 or last <= first:
+        span = times[-1] - times[0]
+        if span <= 0:
             return 0.0
-        return (n - 1) / (last - first)
+        return (n - 1) / span
 
 
 @dataclass

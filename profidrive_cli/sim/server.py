@@ -193,10 +193,15 @@ class SerialEndpoint:
             return b""
 
     def write(self, data: bytes) -> None:
+        from profidrive_cli.link.serial_link import posix_fd, write_fd
         if self.ser is None:
             return
         try:
-            self.ser.write(data)
+            fd = posix_fd(self.ser)
+            if fd is not None:
+                write_fd(fd, data, self.ser.write_timeout or 2.0)   # no select after each write
+            else:
+                self.ser.write(data)
         except Exception:
             self._lost()
 
@@ -205,18 +210,30 @@ class SerialEndpoint:
             self.ser.close()
 
 
-def serve(bus: SimBus, endpoint, stop=lambda: False, poll: float = 0.005, clock=time.monotonic) -> None:
-    """Run until stop() is true. Reply octets go out at the times the bus gives."""
+#: how often every station's timers run (watchdogs, the models' ramps) while the bus is served
+TICK_S = 0.005
+
+
+def serve(bus: SimBus, endpoint, stop=lambda: False, poll: float = 0.005, clock=time.monotonic,
+          tick_s: float = TICK_S) -> None:
+    """Run until stop() is true. Reply octets go out at the times the bus gives.
+
+    Every station's timers run every `tick_s` (and a station a request addresses runs its own
+    first, sim/slave.py handle), not on every pass of the loop: with several stations, ticking
+    them all for each chunk of octets read cost more than answering the master."""
+    next_tick = clock()
     while not stop():
-        timeout = poll
+        now = clock()
+        if now >= next_tick:
+            bus.tick(now)
+            next_tick = now + tick_s
+        timeout = min(poll, max(0.0, next_tick - now))
         nxt = bus.next_time()
         if nxt is not None:
-            timeout = max(0.0, min(poll, nxt - clock()))
+            timeout = max(0.0, min(timeout, nxt - now))
         data = endpoint.read(timeout)
-        now = clock()
-        bus.tick(now)
         if data:
-            bus.receive(data, now)
+            bus.receive(data, clock())
         out = bus.take(clock())
         if out:
             endpoint.write(out)

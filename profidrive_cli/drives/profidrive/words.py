@@ -55,6 +55,17 @@ RUN_BITS = Ctw.ENABLE_OPERATION | Ctw.ENABLE_RFG | Ctw.UNFREEZE_RFG | Ctw.ENABLE
 DERIVED_BITS = Ctw.ON | Ctw.NO_OFF2 | Ctw.NO_OFF3 | Ctw.ENABLE_OPERATION | Ctw.FAULT_ACK \
     | Ctw.CONTROL_BY_PLC
 
+# The same bits as plain ints for the per-cycle functions below: IntFlag arithmetic builds a new
+# enum member on every `&` / `|` (about a microsecond each), and a drive decodes a status word and
+# computes a control word on every Data_Exchange.
+_ON, _NO_OFF2, _NO_OFF3 = int(Ctw.ON), int(Ctw.NO_OFF2), int(Ctw.NO_OFF3)
+_ENABLE_OPERATION, _FAULT_ACK = int(Ctw.ENABLE_OPERATION), int(Ctw.FAULT_ACK)
+_CONTROL_BY_PLC, _JOG1, _JOG2 = int(Ctw.CONTROL_BY_PLC), int(Ctw.JOG1), int(Ctw.JOG2)
+_RUN_BITS = int(RUN_BITS)
+_NOT_DERIVED = ~int(DERIVED_BITS) & 0xFFFF
+_BASE = _NO_OFF2 | _NO_OFF3 | _CONTROL_BY_PLC
+_STW_FAULT, _STW_INHIBITED = int(Stw.FAULT), int(Stw.SWITCHING_ON_INHIBITED)
+
 
 def bit_list(word: int, names: dict[int, str]) -> list[str]:
     """Names of the set bits (unnamed set bits as 'bit n')."""
@@ -79,21 +90,24 @@ def state_from_status(stw: int, moving: bool | None = None) -> State:
     S3 and S5 (and S2 while an OFF1 ramp is still running) look the same in the status word;
     pass `moving` (actual value != 0) to tell them apart. Without it S5 is never reported.
     """
-    if stw & Stw.FAULT:
+    if stw & _STW_FAULT:
         return State.FAULT
-    if stw & Stw.SWITCHING_ON_INHIBITED:
+    if stw & _STW_INHIBITED:
         return State.S1
     low = stw & 0x7
     if low == 0b111:
         return State.S4
-    if low in (0b011, 0b001, 0b000):
+    if low in _LOW_STATES:
         if moving:
             return State.S5
-        return {0b011: State.S3, 0b001: State.S2, 0b000: State.S1}[low]
+        return _LOW_STATES[low]
     # inconsistent patterns (bit 1 or 2 without bit 0): go by the highest bit
     if low & 0b100:
         return State.S4
     return State.S3 if low & 0b010 else State.S1
+
+
+_LOW_STATES = {0b011: State.S3, 0b001: State.S2, 0b000: State.S1}
 
 
 class Target(str, Enum):
@@ -138,35 +152,34 @@ def next_control_word(status_word: int, target: "Target | str", extra_bits: int 
     In fault every target except ACK gets its word with bit 7 low; the drive is never acknowledged
     without being asked to.
     """
-    t = Target.parse(target)
+    t = target if isinstance(target, Target) else Target.parse(target)
     state = state_from_status(status_word, moving)
-    extra = int(extra_bits) & ~int(DERIVED_BITS) & 0xFFFF
-    base = int(Ctw.NO_OFF2 | Ctw.NO_OFF3 | Ctw.CONTROL_BY_PLC) | extra
-    run = base | int(Ctw.ON | RUN_BITS)
+    base = _BASE | (int(extra_bits) & _NOT_DERIVED)
+    run = base | _ON | _RUN_BITS
 
     if t is Target.OFF2:
-        return run & ~int(Ctw.NO_OFF2)
+        return run & ~_NO_OFF2
     if t is Target.OFF3:
-        return run & ~int(Ctw.NO_OFF3)
+        return run & ~_NO_OFF3
     if t is Target.DISABLE:
-        return run & ~int(Ctw.ENABLE_OPERATION)
+        return run & ~_ENABLE_OPERATION
     if state is State.FAULT:
-        if t is Target.ACK and previous is not None and not previous & Ctw.FAULT_ACK:
-            return base | int(Ctw.FAULT_ACK)
+        if t is Target.ACK and previous is not None and not previous & _FAULT_ACK:
+            return base | _FAULT_ACK
         return base
     if t is Target.ACK:
         return base
-    if t in (Target.READY, Target.OFF1):
+    if t is Target.READY or t is Target.OFF1:
         # keep operation enabled while a ramp may still be running: clearing bit 3 would coast
-        keep = state in (State.S4, State.S5) or (
-            previous is not None and bool(previous & Ctw.ENABLE_OPERATION)
-            and bool(previous & Ctw.NO_OFF2) and bool(previous & Ctw.NO_OFF3)
+        keep = state is State.S4 or state is State.S5 or (
+            previous is not None and bool(previous & _ENABLE_OPERATION)
+            and bool(previous & _NO_OFF2) and bool(previous & _NO_OFF3)
             and state is not State.S1)
-        return base | int(RUN_BITS) if keep else base
+        return base | _RUN_BITS if keep else base
     if state is State.S1:
         return base                       # every way up starts with OFF1 in S1
     if t is Target.SWITCHED_ON:
-        return base | int(Ctw.ON)
+        return base | _ON
     return run                            # OPERATE
 
 

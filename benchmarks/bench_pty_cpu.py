@@ -1,0 +1,101 @@
+"""CPU per Data_Exchange over a pty at 19.2k against `pdrive sim --pty`, and the exchange rate.
+
+The master runs in this process (dp.poller.Master over link.SerialLink, link latency margin 20 ms as
+for a real port); the simulated station answers octet by octet at wire time (plant timing=wire) in a
+`pdrive sim` subprocess. The figure is this process's CPU time (time.process_time: user + system)
+per exchange, while the exchange rate shows the waiting did not get slower.
+
+    python benchmarks/bench_pty_cpu.py [--seconds S] [--baud RATE] [--repeat N] [--spin] [--pyserial-io]
+
+--spin            spin on the clock for the last 0.2 ms of every wait (link.base.precise_sleep), as
+                  pdrive did on every link before it knew which links keep µs timing
+--pyserial-io     read and write through pyserial (in_waiting + read: an ioctl and a select() more
+                  per read; write: a select() after every write) instead of os.read / os.write
+--old             both: what pdrive did before
+--compare         alternate runs as now and as --old
+--plant five      the simulated plant holds five drives (the exchanges still go to station 3);
+--timing instant  the simulated stations answer at once (what limits the rate is then the
+                  master, the pty and the sim server's loop). One JSON line per run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.dirname(HERE))
+
+from profidrive_cli.dp.poller import Master  # noqa: E402
+from profidrive_cli.dp.station import SlaveConfig  # noqa: E402
+from profidrive_cli.fdl.timing import BusParams, wire_time_data_exchange  # noqa: E402
+from profidrive_cli.link import open_link, serial_link  # noqa: E402
+
+PLANT = "sim://?stations=3:fuji-g1&timing=wire&baud={baud}"
+#: --plant five: the default plant's five drives, station 3 the one exchanged with
+FIVE = "sim://?stations=3:fuji-g1,4:fuji-pdp3,5:toyo,6:moeller,7:yaskawa&timing={timing}&baud={baud}"
+
+
+def run(baud: int, seconds: float, spin: bool, pyserial_io: bool, plant: str = PLANT,
+        timing: str = "wire") -> dict:
+    url = plant.format(baud=baud, timing=timing).replace("timing=wire", f"timing={timing}")
+    sim = subprocess.Popen([sys.executable, "-m", "profidrive_cli", "sim", "--json", "--baud", str(baud),
+                            "--plant", url, "--pty"],
+                           stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+                           cwd=os.path.dirname(HERE))
+    try:
+        port = json.loads(sim.stdout.readline())["port"]
+        serial_link.FD_IO = not pyserial_io
+        link = open_link(port, baud)
+        link.us_timing = spin                   # (SerialLink.sleep spins only with us_timing)
+        m = Master(link, BusParams.for_baud(baud, retries=2, link_latency=0.02))
+        m.add_station(3, SlaveConfig(ident=0xFD01, cfg=bytes.fromhex("F3F1")))
+        m.bring_up(3)
+        for _ in range(5):
+            m.exchange(3, bytes(12))
+        c = m.fdl.counters[3]
+        before = c.data_exchanges
+        cpu0, t0 = time.process_time(), time.monotonic()
+        while time.monotonic() - t0 < seconds:
+            m.exchange(3, bytes(12))
+        took, cpu = time.monotonic() - t0, time.process_time() - cpu0
+        n = c.data_exchanges - before
+        m.release(3)
+        link.close()
+    finally:
+        sim.terminate()
+        sim.wait(10)
+    return {"baud": baud, "plant": url, "spin": spin, "pyserial_io": pyserial_io, "exchanges": n,
+            "seconds": round(took, 3), "rate_hz": round(n / took, 1),
+            "wire_limit_hz": round(1 / wire_time_data_exchange(baud, 12, 12), 1),
+            "cpu_us_per_exchange": round(cpu / n * 1e6, 1), "retries": c.retries}
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--seconds", type=float, default=5.0)
+    ap.add_argument("--baud", type=int, default=19200)
+    ap.add_argument("--repeat", type=int, default=1)
+    ap.add_argument("--spin", action="store_true")
+    ap.add_argument("--pyserial-io", action="store_true")
+    ap.add_argument("--old", action="store_true")
+    ap.add_argument("--compare", action="store_true", help="alternate new and --old runs")
+    ap.add_argument("--plant", choices=("one", "five"), default="one")
+    ap.add_argument("--timing", choices=("wire", "instant"), default="wire")
+    a = ap.parse_args(argv)
+    plant = FIVE if a.plant == "five" else PLANT
+    for _ in range(a.repeat):
+        if a.compare:
+            print(json.dumps(run(a.baud, a.seconds, False, False, plant, a.timing)), flush=True)
+            print(json.dumps(run(a.baud, a.seconds, True, True, plant, a.timing)), flush=True)
+        else:
+            print(json.dumps(run(a.baud, a.seconds, a.spin or a.old, a.pyserial_io or a.old,
+                                 plant, a.timing)), flush=True)
+
+
+if __name__ == "__main__":
+    main()
