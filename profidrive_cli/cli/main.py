@@ -29,6 +29,8 @@ COMMANDS = {
             "GSD device description files: show, list, build Set_Prm."),
     "io": ("profidrive_cli.cli.bus_cmds", "io_cmd",
            "Bring any DP slave to Data_Exchange and show its inputs."),
+    "jog": ("profidrive_cli.cli.jog_cmd", "jog_cmd",
+            "Jog a drive with the card's own jog function; a safe stop on every exit."),
     "param": ("profidrive_cli.cli.drive_cmds", "param_group",
               "Read and write drive parameters by their native codes."),
     "run": ("profidrive_cli.cli.drive_cmds", "run_cmd",

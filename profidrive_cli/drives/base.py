@@ -127,8 +127,21 @@ class Drive(ABC):
         fmax = self.max_frequency()
         self.set_speed(100.0 * hz / fmax)
 
-    def jog(self, on: bool = True) -> None:
-        raise DriveError(f"{self.family}: jog is not supported by this card")
+    # -- jog (the card's own jog / inching function) -----------------------------------------
+    supports_jog: bool = False
+
+    def jog_refusal(self) -> str:
+        """Why this card cannot jog over the bus (one line; only asked when supports_jog is False)."""
+        return f"{self.family}: jog is not supported by this card"
+
+    def jog_reference(self) -> str | None:
+        """The parameter code holding the jog speed (e.g. Moeller A038), None where the card has none."""
+        return None
+
+    def jog(self, on: bool = True, reverse: bool = False) -> None:
+        """Jog on (forward or reverse) or off; one cycle. Jog off returns to standstill at the card's
+        own braking; the caller then stops the drive the normal way (stop)."""
+        raise DriveError(self.jog_refusal())
 
     @abstractmethod
     def reset_fault(self, timeout: float = 5.0) -> DriveStatus:

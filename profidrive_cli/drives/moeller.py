@@ -297,6 +297,24 @@ class MoellerDrive(pd.ProfidriveDrive):
                     return f"{p.code} ({p.name}): {value:g}{u} is above the DF6 maximum {mx:g}{u}"
         return None
 
+    # -- jog: CTW bit 8 "inching 1" at A038 from "Enable operation" (spec 3.1, manual L542-543) --
+    supports_jog = True
+
+    def jog(self, on: bool = True, reverse: bool = False) -> None:
+        """Inching 1: operation (bits 0-6, 10) with HSW = 0 and bit 8; reverse = bit 11 (REV), the
+        direction of every run on this card (sign of HSW XOR bit 11). Bit 9 (inching 2) is not used."""
+        rev = 1 << self.mc.reverse_bit
+        if on:
+            self.extra_bits = (self.extra_bits | rev) if reverse else (self.extra_bits & ~rev)
+        super().jog(on)
+        if not on:
+            self.extra_bits &= ~rev
+
+    def stop(self, mode: str = "normal", wait: bool = True, timeout: float = 30.0) -> DriveStatus:
+        if self.extra_bits & int(pd.Ctw.JOG1):
+            self.extra_bits &= ~(1 << self.mc.reverse_bit)     # the jog's direction ends with it
+        return super().stop(mode, wait, timeout)
+
     def start_hint(self, status: DriveStatus) -> str:
         mc = self.mc
         return (f"the card gives run commands only with {mc.commands_param} = {mc.commands_bus_value} "

@@ -17,6 +17,7 @@ from profidrive_cli.drives.profile import Profile
 import profidrive_cli.session.backup as backup
 import profidrive_cli.session.bringup as bringup
 import profidrive_cli.session.dumpfile as dumpfile
+import profidrive_cli.session.jog as _jog
 import profidrive_cli.session.motion as motion
 import profidrive_cli.session.params as params
 import profidrive_cli.session.restore as _restore
@@ -207,6 +208,21 @@ class DriveSession:
 
     def status(self) -> Sample:
         return motion.status(self)
+
+    # -- jog (jog.py) -----------------------------------------------------------------------------
+    def jog_refusal(self) -> str | None:
+        """Why this station cannot jog (one line), None when it can."""
+        return _jog.refusal(self)
+
+    def jog_speed(self) -> ParamValue | None:
+        return _jog.jog_speed(self)
+
+    def jog(self, reverse: bool = False, timeout: float = 5.0) -> Sample:
+        """The card's jog on (UsageError where the card has none); stop() ends it."""
+        return _jog.start(self, reverse, timeout)
+
+    def release_jog(self) -> Sample:
+        return _jog.release(self)
 
     # -- the safe stop (safestop.py) --------------------------------------------------------------
     def stop_timeout(self, percent: float | None = None) -> float:

@@ -295,7 +295,7 @@ class ProfidriveModel(SlaveModel):
         if ctw & Ctw.JOG1:
             jog = self.jog_frequency()
             if jog is not None:
-                return jog
+                return jog * self.reference_sign(ctw)      # Moeller: bit 11 reverses the jog too
         if not ctw & Ctw.ENABLE_RFG:
             return 0.0
         if not ctw & Ctw.UNFREEZE_RFG:

@@ -170,6 +170,12 @@ class ToyoModel(ProfidriveModel):
             return -self.jog_percent * self.max_frequency() / 100.0
         return None
 
+    def _transition(self, ctw: int, prev: int, now: float) -> None:
+        if (self.state is State.S3 and self.freq != 0.0 and not ctw & Ctw.ON
+                and ctw & Ctw.NO_OFF2 and ctw & Ctw.NO_OFF3):
+            return      # OFF1 after a jog: ramps down on the deceleration time first (tick), then S2
+        super()._transition(ctw, prev, now)
+
     @property
     def jogging(self) -> bool:
         return self.state in (State.S3, State.S4) and (self._jog_target() is not None or

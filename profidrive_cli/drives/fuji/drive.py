@@ -72,9 +72,14 @@ class FujiDrive(pd.ProfidriveDrive):
             self.notes.append(f"{ref.code} takes effect after the inverter is switched off and on")
         return pv
 
-    def jog(self, on: bool = True) -> None:
-        raise DriveError(f"{self.profile.name}: CTW bits 8 and 9 are not used by this card; there is no jog "
-                         f"over PROFIBUS (use a reference instead)")
+    supports_jog = False
+
+    def jog_refusal(self) -> str:
+        return (f"{self.profile.name}: CTW bits 8 and 9 are not used by this card; there is no jog "
+                f"over PROFIBUS (use run with a low speed instead)")
+
+    def jog(self, on: bool = True, reverse: bool = False) -> None:
+        raise DriveError(self.jog_refusal())
 
     def start_hint(self, status: DriveStatus) -> str:
         hint = ("the card takes CTW/MRV only with y98 = 3 (run and frequency from PROFIBUS), CTW bits "

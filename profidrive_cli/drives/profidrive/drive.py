@@ -341,11 +341,30 @@ class ProfidriveDrive(Drive):
         self.reference = n2_from_percent(percent)
         self.cycle()
 
-    def jog(self, on: bool = True) -> None:
+    @property
+    def supports_jog(self) -> bool:        # type: ignore[override]
+        return self.cfg.jog_reference is not None
+
+    def jog_refusal(self) -> str:
+        return (f"{self.profile.name}: the profile names no jog function (profidrive: jog_reference), so "
+                f"pdrive does not set CTW bit 8")
+
+    def jog_reference(self) -> str | None:
+        return self.cfg.jog_reference
+
+    def jog(self, on: bool = True, reverse: bool = False) -> None:
+        """Jog 1 (CTW bit 8) from the operation state with a zero reference; a card without a jog
+        reference (or without jog) refuses (supports_jog, jog_refusal)."""
+        if not self.supports_jog:
+            raise DriveError(self.jog_refusal())
+        if reverse:
+            raise DriveError(f"{self.family}: this card has no reverse jog")
         if on:
+            self.reference = 0
             self.extra_bits |= int(Ctw.JOG1)
+            self.target = Target.OPERATE
         else:
-            self.extra_bits &= ~int(Ctw.JOG1)
+            self.extra_bits &= ~int(Ctw.JOG1 | Ctw.JOG2)
         self.cycle()
 
     def _go(self, target: Target, timeout: float, what: str, hint: bool = False) -> DriveStatus:
@@ -373,6 +392,7 @@ class ProfidriveDrive(Drive):
                   "coast": Target.OFF2, "off2": Target.OFF2}.get(mode)
         if target is None:
             raise UsageError(f"stop mode must be normal, quick or coast, got {mode!r}")
+        self.extra_bits &= ~int(Ctw.JOG1 | Ctw.JOG2)       # a stop ends a jog too
         self.target = target
         st = self.cycle()
         if not wait:

@@ -270,7 +270,20 @@ class ToyoDrive(pd.ProfidriveDrive):
             return st
         return self.cycles_until(lambda s: s.fault or s.stopped, timeout, "the drive to stop")
 
+    @property
+    def supports_jog(self) -> bool:        # type: ignore[override]
+        return not self.plch
+
+    def jog_refusal(self) -> str:
+        return (f"{self.profile.name}: with the built-in PLC in use (PLCH) the jog bit goes to PLC contact "
+                f"I00021, not to the inverter (spec 3.4); pdrive does not jog through a PLC program")
+
+    def jog_reference(self) -> str | None:
+        return None        # the PBUS66-Z manual names no jog-speed parameter (set on the VF66 itself)
+
     def jog(self, on: bool = True, reverse: bool = False) -> None:
+        """Mode 0: CTW bit 8 (forward) / 9 (reverse) with bits 4-6 = 0 from "switched on" (spec 3.1,
+        3.3; manual L2725-2731, L2919). Mode 1: run-command bit 1 (jog) with bit 2 (reverse)."""
         if self.mode == 1:
             self.run_cmd = (self.run_cmd | 0x2) if on else (self.run_cmd & ~0x2)
             if on:

@@ -21,6 +21,12 @@ FAMILY = "yaskawa"
 
 class YaskawaDrive(Drive):
     family = FAMILY
+    supports_jog = False
+
+    def jog_refusal(self) -> str:
+        return (f"{self.profile.name}: the SI-P1 run command word has no jog bit (bit 0 forward run, bit 1 "
+                f"reverse run, the others multi-function inputs whose function the drive's own H1 settings "
+                f"choose); use run with a low speed instead")
 
     def __init__(self, channel, profile, layout: str | None = None):
         super().__init__(channel, profile, layout)
