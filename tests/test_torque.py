@@ -233,6 +233,10 @@ def test_cli_toyo_torque_run_on_sim_json():
 def test_over_a_pty_yaskawa_torque_run_then_stopped():
     sim, port = _start_sim()
     try:
+        # a card without a torque word is refused before the real-port question (no --yes here)
+        r = pdrive("run", "6", "--torque", "20", "--port", port)
+        assert r.returncode == 2 and r.stderr.startswith("pdrive: --torque: moeller:"), r.stderr
+        assert "--yes" not in r.stderr
         r = pdrive("run", "7", "--torque", "20", "--duration", "1", "--port", port, "--yes")
         assert r.returncode == 1 and "A1-02 = 3" in r.stderr      # open-loop vector: refused
         r = pdrive("param", "set", "7", "A1-02", "3", "--port", port, "--yes")

@@ -154,7 +154,8 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
     if log_path is not None:                 # checked before the bus is opened: nothing moves first
         check_output_path(log_path, "--log")
     session = _session(opts, address, profile_name, ppo, fmt, watchdog_ms, cycle_hz=cycle_hz,
-                       before=_confirmer(opts, yes, what), log=log_path)
+                       before=run_torque.guard(_confirmer(opts, yes, what), torque, torque_limit),
+                       log=log_path)
     view = R.RunView(mode)
     end = {"reason": "", "stop": None}
     started = False

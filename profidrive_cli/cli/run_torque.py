@@ -5,6 +5,7 @@ The card's own check (does this layout carry the word?) runs in session/torque.p
 from __future__ import annotations
 
 from profidrive_cli import UsageError
+from profidrive_cli.drives.torque import NO_TORQUE
 
 
 def prepare(hz, percent, reverse, torque, torque_limit):
@@ -34,3 +35,18 @@ def header(torque, torque_limit) -> dict:
     if torque_limit is not None:
         out["torque_limit_percent"] = torque_limit
     return out
+
+
+def guard(before, torque, torque_limit):
+    """The before-connect callback, preceded by the family's refusal (Fuji, Moeller: no torque word)
+    so that a real port is not even asked about a run the card cannot do."""
+    if torque is None and torque_limit is None:
+        return before
+
+    def check_then_before(session):
+        fam = session.profile.family
+        if fam in NO_TORQUE:
+            raise UsageError(f"{'--torque' if torque is not None else '--torque-limit'}: {NO_TORQUE[fam]}")
+        if before is not None:
+            before(session)
+    return check_then_before
