@@ -236,7 +236,9 @@ class YaskawaDrive(Drive):
 
     def torque_notes(self) -> list[str]:
         notes = ["the SI-P1 torque word is a torque reference in torque control (d5-01 = 1 on the drive) "
-                 "and a torque limit in speed control, in flux vector control only (A1-02 = 3)"]
+                 "and a torque limit in speed control, in flux vector control only (A1-02 = 3); in torque "
+                 "control the drive limits the speed as d5-03 says (1 = by the frequency reference: give "
+                 "--hz as the speed limit)"]
         if not self.has_param_channel:
             notes.append(f"layout {self.layout} has no parameter channel: A1-02 was not checked")
         return notes
