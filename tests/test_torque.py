@@ -253,3 +253,11 @@ def test_over_a_pty_yaskawa_torque_run_then_stopped():
         assert st["stopped"] and not st["running"] and st["torque_percent"] == 0.0
     finally:
         _stop_sim(sim)
+
+
+def test_cli_text_lines_show_torque_reference_and_actual():
+    r = pdrive("run", "5", "--format", "toyo", "--torque", "20", "--duration", "2", "--port", "sim://",
+               timeout=120)
+    assert r.returncode == 0, r.stderr
+    running = r.stdout.split("-- running", 1)[1].split("-- stopping", 1)[0]
+    assert "torque ref 20.0 % actual 20.0 %" in running, r.stdout
