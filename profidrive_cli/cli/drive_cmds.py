@@ -18,6 +18,7 @@ from profidrive_cli import BusError, UsageError
 from profidrive_cli.cli.common import (bus_options, confirm_real_port, emit_json, err, out,
                                        station_address)
 from profidrive_cli.cli import render_drive as R
+from profidrive_cli.cli import run_torque
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.session import (DriveSession, RestoreInterrupted, RestoreRefused,
                                     SessionTerminated)
@@ -109,6 +110,11 @@ def _split_address(args: tuple[str, ...], min_rest: int) -> tuple[int | None, li
 @click.option("--hz", type=float, default=None, help="Speed reference in Hz (negative = reverse).")
 @click.option("--percent", type=float, default=None, help="Speed reference in % of the max frequency.")
 @click.option("--reverse", is_flag=True, help="Run in reverse.")
+@click.option("--torque", "torque", type=float, default=None, metavar="PERCENT",
+              help="Torque control with this reference in % of rated torque (negative or --reverse = "
+              "reverse); the speed, if given, is sent as the speed reference. Toyo and Yaskawa only.")
+@click.option("--torque-limit", "torque_limit", type=float, default=None, metavar="PERCENT",
+              help="Speed run with this torque limit in % of rated torque (Yaskawa only).")
 @click.option("--duration", type=float, default=None, metavar="S",
               help="Seconds from the start command to the stop (default: until q / Ctrl-C).")
 @click.option("--fmax", type=float, default=None, metavar="HZ",
@@ -123,16 +129,15 @@ def _split_address(args: tuple[str, ...], min_rest: int) -> tuple[int | None, li
               "not restarted.")
 @bus_options
 @_terminations
-def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, reverse, duration, fmax,
-            cycle_hz, yes, log_path, reconnect_s):
-    """Run a drive at a speed and show it live; stops it safely on every exit.
+def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, reverse, torque, torque_limit,
+            duration, fmax, cycle_hz, yes, log_path, reconnect_s):
+    """Run a drive at a speed (or a torque) and show it live; stops it safely on every exit.
 
-    Keys (on a terminal): up/down change the speed, r reverses, space stops/starts, q quits.
+    Keys (on a terminal): up/down change the speed (the torque with --torque), r reverses, space
+    stops/starts, q quits.
     """
-    if (hz is None) == (percent is None):
-        raise UsageError("give the speed with --hz F or --percent P (one of them)")
     for name, v in (("--hz", hz), ("--percent", percent), ("--fmax", fmax), ("--duration", duration),
-                    ("--cycle-hz", cycle_hz)):
+                    ("--cycle-hz", cycle_hz), ("--torque", torque), ("--torque-limit", torque_limit)):
         if v is not None and not math.isfinite(v):
             raise UsageError(f"{name}: not a number")
     if percent is not None and not -100.0 <= percent <= 100.0:
@@ -145,12 +150,12 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
         raise UsageError(f"--fmax {fmax:g} must be above 0 Hz")
     interactive = not opts.json and sys.stdin.isatty() and sys.stdout.isatty()
     mode = "json" if opts.json else ("live" if sys.stdout.isatty() else "text")
-    speed_words = f"{hz:g} Hz" if hz is not None else f"{percent:g} %"
-    what = f"run the drive at {speed_words}{' reverse' if reverse else ''}"
+    torque, percent, what = run_torque.prepare(hz, percent, reverse, torque, torque_limit)
     if log_path is not None:                 # checked before the bus is opened: nothing moves first
         check_output_path(log_path, "--log")
     session = _session(opts, address, profile_name, ppo, fmt, watchdog_ms, cycle_hz=cycle_hz,
-                       before=_confirmer(opts, yes, what), log=log_path)
+                       before=run_torque.guard(_confirmer(opts, yes, what), torque, torque_limit),
+                       log=log_path)
     view = R.RunView(mode)
     end = {"reason": "", "stop": None}
     started = False
@@ -163,6 +168,7 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
     session.on_sample = stopping
     try:
         with session as s:
+            s.check_torque(torque, torque_limit)          # the card's reason before anything shows
             fmax_hz, src = s.fmax(fmax)
             pct = percent if percent is not None else s.percent_for_hz(hz, fmax)
             if reverse:
@@ -173,11 +179,15 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
                         "fmax_hz": fmax_hz, "fmax_source": src, "reference_percent": round(pct, 4),
                         "reference_hz": round(pct * fmax_hz / 100.0, 3),
                         "cycle_hz_target": round(s.cycle_hz, 3), "wire_hz": round(s.wire_hz, 3),
-                        "watchdog_ms": s.watchdog_ms, "duration_s": duration, "warnings": s.warnings})
+                        "watchdog_ms": s.watchdog_ms, "duration_s": duration, "warnings": s.warnings,
+                        **run_torque.header(torque, torque_limit)})
             if interactive:
                 view.hint = "up/down speed · r reverse · space stop/start · q quit"
             view.set_phase("starting")
-            sample = s.start(pct)
+            if torque is not None or torque_limit is not None:
+                sample = s.start_torque(torque, torque_limit, pct)
+            else:
+                sample = s.start(pct)
             started = True
             t_start = sample.t
             view.set_phase("running", sample)
@@ -223,6 +233,10 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
                     for k in keys.keys():
                         if k == "q":
                             quit_now = True
+                        elif k in ("up", "down", "r") and running and torque is not None:
+                            step_t = 1.0 if k == "up" else -1.0
+                            torque = -torque if k == "r" else max(-100.0, min(100.0, torque + step_t))
+                            s.set_torque(torque)
                         elif k in ("up", "down") and running:
                             pct = max(-100.0, min(100.0, pct + (step if k == "up" else -step) *
                                                   (1 if pct >= 0 else -1)))
@@ -240,7 +254,10 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
                                 view.set_phase(f"stopped ({rep.how}) — space starts, q quits")
                             else:
                                 view.set_phase("starting")
-                                s.start(pct)
+                                if torque is not None or torque_limit is not None:
+                                    s.start_torque(torque, torque_limit, pct)
+                                else:
+                                    s.start(pct)
                                 running = True
                                 view.set_phase("running")
                     if quit_now:

@@ -56,6 +56,24 @@ def counter_words(c: dict) -> str:
 # =============================================================================================
 
 
+def torque_fields(st) -> dict:
+    """The torque keys of a status where the card has them (torque runs, cards with a torque word)."""
+    out = {}
+    if getattr(st, "torque_ref_percent", None) is not None:
+        out["torque_ref_percent"] = st.torque_ref_percent
+    if getattr(st, "torque_percent", None) is not None:
+        out["torque_percent"] = st.torque_percent
+    return out
+
+
+def torque_words(st) -> str:
+    d = torque_fields(st)
+    if not d:
+        return ""
+    return (f"  torque ref {fmt_num(d.get('torque_ref_percent'), 1, '%')} "
+            f"actual {fmt_num(d.get('torque_percent'), 1, '%')}")
+
+
 class RunView:
     """mode 'live' (rich Live on a terminal), 'text' (a line a second) or 'json' (one object per
     update, at most `json_hz` per second, plus start/phase/end events)."""
@@ -115,7 +133,8 @@ class RunView:
         if self.mode == "json":
             if force or now - self._last_emit >= self.json_period:
                 self._last_emit = now
-                emit_json({"event": "update", "phase": self.phase, **sample.to_dict()})
+                emit_json({"event": "update", "phase": self.phase, **sample.to_dict(),
+                           **torque_fields(sample.status)})
         elif self.mode == "text":
             if force or now - self._last_text >= 1.0:
                 self._last_text = now
@@ -128,7 +147,7 @@ class RunView:
                 f"({fmt_num(s.reference_percent, 1, '%')})  actual {fmt_num(s.actual_hz, 2, 'Hz')} "
                 f"({fmt_num(s.actual_percent, 1, '%')})  {s.cycle_hz:5.1f} cycles/s  "
                 f"retries {s.counters.get('retries', 0)} errors "
-                f"{s.counters.get('no_answer', 0) + s.counters.get('illegal', 0)}{fault}")
+                f"{s.counters.get('no_answer', 0) + s.counters.get('illegal', 0)}{torque_words(st)}{fault}")
 
     def finish(self, end: dict) -> None:
         if self._live is not None:
@@ -167,6 +186,9 @@ class RunView:
         t.add_row("status bits", Text(flag_words(st.flags)))
         t.add_row("reference", Text(f"{fmt_num(s.reference_hz, 2, 'Hz')}   {fmt_num(s.reference_percent, 2, '%')}"))
         t.add_row("actual", Text(f"{fmt_num(s.actual_hz, 2, 'Hz')}   {fmt_num(s.actual_percent, 2, '%')}"))
+        if torque_fields(st):
+            t.add_row("torque", Text(f"reference {fmt_num(st.torque_ref_percent, 1, '%')}   "
+                                     f"actual {fmt_num(st.torque_percent, 1, '%')}"))
         t.add_row("max frequency", Text(f"{s.fmax_hz:g} Hz {h.get('fmax_source', '')}"))
         t.add_row("cycle", Text(f"{s.cycle_hz:.1f} /s (target {h.get('cycle_hz_target', 0):.1f}, "
                                 f"bus limit {h.get('wire_hz', 0):.1f})   {s.cycles} exchanges"))
@@ -252,7 +274,7 @@ def status_dict(session, sample) -> dict:
             "fault_code": st.fault_code, "flags": dict(st.flags),
             "speed_hz": sample.actual_hz, "speed_percent": sample.actual_percent,
             "reference_percent": sample.reference_percent, "fmax_hz": fmax, "fmax_source": src,
-            "raw": dict(st.raw), "counters": sample.counters}
+            "raw": dict(st.raw), "counters": sample.counters, **torque_fields(st)}
 
 
 def print_status(d: dict) -> None:
@@ -264,6 +286,8 @@ def print_status(d: dict) -> None:
               f"{d['fmax_hz']:g} Hz, {escape(d['fmax_source'])})")
     if d.get("reference_percent") is not None:
         out.print(f"  reference: {fmt_num(d['reference_percent'], 2, '%')}")
+    if d.get("torque_percent") is not None:
+        out.print(f"  torque: {fmt_num(d['torque_percent'], 1, '%')} of rated")
     out.print(f"  fault:  {escape(d['fault_code'] or ('yes (code not readable)' if d['fault'] else 'none'))}")
     on = [k for k, v in d["flags"].items() if v]
     off = [k for k, v in d["flags"].items() if not v]

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from profidrive_cli import BusError
+from profidrive_cli.drives.torque import no_torque_reason
 
 
 class CyclicChannel(Protocol):
@@ -51,6 +52,8 @@ class DriveStatus:
     reference_percent: float | None = None
     fault_code: str | None = None     # current fault as the family names it ("OC1", "E05", ...)
     raw: dict[str, int] = field(default_factory=dict)   # raw words (status word, actual value, ...)
+    torque_ref_percent: float | None = None   # torque reference sent, % of rated (torque runs only)
+    torque_percent: float | None = None       # torque the card reports, % of rated (where it has a word)
 
     @property
     def stopped(self) -> bool:
@@ -142,6 +145,31 @@ class Drive(ABC):
         """Jog on (forward or reverse) or off; one cycle. Jog off returns to standstill at the card's
         own braking; the caller then stops the drive the normal way (stop)."""
         raise DriveError(self.jog_refusal())
+
+    # -- torque (drives/torque.py: the family-independent checks) -----------------------------
+    def torque_support(self) -> str | None:
+        """None when this card and layout carry a torque reference word, else the one-line reason."""
+        return no_torque_reason(self.family)
+
+    def torque_limit_support(self) -> str | None:
+        """None when this card and layout carry a torque limit word, else the one-line reason."""
+        return no_torque_reason(self.family)
+
+    def torque_resolution(self) -> float:
+        """Percent of rated torque per count of the torque words."""
+        return 1.0
+
+    def set_torque(self, percent: float | None) -> None:
+        """Torque control with this reference (% of rated, negative = reverse); None = speed control."""
+        raise DriveError(self.torque_support() or f"{self.family}: torque is not supported")
+
+    def set_torque_limit(self, percent: float | None) -> None:
+        """Torque limit in % of rated while speed controlled; None = no limit from the bus."""
+        raise DriveError(self.torque_limit_support() or f"{self.family}: torque limit is not supported")
+
+    def torque_notes(self) -> list[str]:
+        """What the drive's own settings must be for the torque words to act (for warnings)."""
+        return []
 
     @abstractmethod
     def reset_fault(self, timeout: float = 5.0) -> DriveStatus:

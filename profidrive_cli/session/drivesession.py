@@ -22,6 +22,7 @@ import profidrive_cli.session.motion as motion
 import profidrive_cli.session.params as params
 import profidrive_cli.session.restore as _restore
 import profidrive_cli.session.safestop as safestop
+import profidrive_cli.session.torque as torque
 from profidrive_cli.session.cycle import MeteredChannel, Sample, choose_rate, make_sample
 from profidrive_cli.session.cyclelog import CycleLog
 from profidrive_cli.session.discovery import DriveStation, locate
@@ -202,6 +203,17 @@ class DriveSession:
 
     def start(self, percent: float | None = None, timeout: float = 5.0) -> Sample:
         return motion.start(self, percent, timeout)
+
+    def start_torque(self, torque_percent: float | None, limit_percent: float | None = None,
+                     percent: float | None = None, timeout: float = 5.0) -> Sample:
+        """A torque run (torque.py): torque reference or torque limit, then start."""
+        return torque.start(self, torque_percent, limit_percent, percent, timeout)
+
+    def check_torque(self, torque_percent: float | None, limit_percent: float | None = None) -> None:
+        torque.check(self, torque_percent, limit_percent)
+
+    def set_torque(self, percent: float) -> None:
+        torque.set_torque(self, percent)
 
     def poll(self) -> Sample:
         return motion.poll(self)

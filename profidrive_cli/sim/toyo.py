@@ -14,6 +14,11 @@
   * commands from the network need b-11 = 3 (or b-11 = 0 with b-09 = 2), the speed b-10 = 3 (or 0 with
     b-09 = 2); bus_control=True seeds J-00 = 4, b-10 = b-11 = b-12 = 3, C-00 = 1. Those console codes
     have no published PNU, so set them with `defaults`.
+  * torque (sim choices): bus_control also seeds i-07 = 4 (speed/torque switched by multi-function
+    input 2 bit 1) and i-08 = 2 (torque command from the option); torque control while running with
+    i-08 = 2 and i-07 = 1..3, or i-07 = 4 with that bit on; the axis then follows sim/torque_axis.py
+    (torque command 5000 = rated, limited at A-00); the torque word reports the torque produced.
+    The sim does not model that i-07/i-08 cannot be set in V/f mode.
   * ramps: Toyo's acceleration/deceleration parameters have no published PNU: accel_s / decel_s /
     quick_s (0 -> A-00) stand in for them; the accel/decel set bits select 1x..4x those times.
   * PKW: tasks 1/2/6, busy = response 0 for pkw_latency cycles, errors 0/1/2/3/101/102; monitors
@@ -33,6 +38,7 @@ from collections import deque
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives import toyo as ty
 from profidrive_cli.drives.profidrive import Ctw, State
+from profidrive_cli.sim import torque_axis
 from profidrive_cli.sim.profidrive_model import ProfidriveModel, _ramp
 
 # protection code -> (fault flag word 1 or 2, bit)
@@ -43,7 +49,7 @@ COMM_TIMEOUT = 18
 FAN_FAILURE = 26
 EXT_FAULTS = (29, 30, 31, 32)
 MONITOR_FIRST, MONITOR_LAST = 677, 698
-BUS_CONTROL_DEFAULTS = {"J-00": 4, "b-10": 3, "b-11": 3, "b-12": 3, "C-00": 1}
+BUS_CONTROL_DEFAULTS = {"J-00": 4, "b-10": 3, "b-11": 3, "b-12": 3, "C-00": 1, "i-07": 4, "i-08": 2}
 
 
 class ToyoModel(ProfidriveModel):
@@ -72,6 +78,8 @@ class ToyoModel(ProfidriveModel):
         self.block = 0
         self.run_cmd = 0
         self.mf_input2 = 0
+        self.torque_cmd = 0.0                          # % of rated, from the torque command word
+        self.torque_out: float | None = None           # torque produced while torque controlled
         self.fan_failure = False
         self.comm_error = False
         self.had_exchange = False
@@ -181,8 +189,25 @@ class ToyoModel(ProfidriveModel):
         return self.state in (State.S3, State.S4) and (self._jog_target() is not None or
                                                        (self.state is State.S3 and self.freq != 0.0))
 
+    def torque_controlled(self) -> bool:
+        """i-08 = 2 and i-07 = 1..3, or 4 with multi-function input 2 bit 1 (spec §10, Table 3.8)."""
+        if self._v("i-08") != 2:
+            return False
+        i07 = self._v("i-07")
+        return i07 in (1, 2, 3) or (i07 == 4 and bool(self.mf_input2 & 0x2))
+
     def tick(self, now: float) -> None:
         last = self._last_tick
+        if self.state is State.S4 and self.torque_controlled():
+            self._last_tick = now
+            if last is not None and now > last:
+                self.freq, self.torque_out = torque_axis.step(self.freq, self.torque_cmd,
+                                                             self.max_frequency(), now - last)
+                self._sample()
+            return
+        self.torque_out = None
+        if self.state is State.S5 and self.torque_controlled():
+            self.freq = 0.0              # in torque control OFF1 / OFF3 are coast stops (spec §11)
         if self.state in (State.S3, State.S4) and (self._jog_target() is not None
                                                    or (self.state is State.S3 and self.freq != 0.0)):
             self._last_tick = now
@@ -221,6 +246,8 @@ class ToyoModel(ProfidriveModel):
             self.run_cmd = w["run_cmd"] if self.mode == 1 else (w["run_cmd"] & ~0x7)
         if "mf_input2" in w:
             self._mf_input2(w["mf_input2"], now)
+        if "torque_ref" in w:
+            self.torque_cmd = pd.to_signed16(w["torque_ref"]) * 100.0 / 5000
         speed = w.get("speed_ref", 0)
         if self.mode == 0:
             self.apply_control(w.get("ctw", 0), speed, now)
@@ -318,10 +345,15 @@ class ToyoModel(ProfidriveModel):
         p = self.profile.param("current")
         cur_raw = round(cur / p.scale) if p is not None and p.scale else 0
         table = {677: 0x0066, 678: 0x0100, 679: 0x0100, 680: self.status_flag(), 681: ff1, 682: ff2,
-                 683: self.mf_output(), 684: fw, 685: fw, 686: cur_raw, 687: round(abs(self.freq) / fmax * 1500),
+                 683: self.mf_output(), 684: fw, 685: fw, 686: cur_raw, 687: self._torque_raw(),
                  688: self._dc_raw(), 689: self._vout_raw(), 690: fw, 691: 0, 692: 400,
                  693: 1024 if running else 0}
         return table.get(pnu, 0) & 0xFFFF
+
+    def _torque_raw(self) -> int:
+        if self.torque_out is not None:
+            return round(self.torque_out * 50)                     # 5000 = rated torque
+        return round(abs(self.freq) / self.max_frequency() * 1500)
 
     def _input_word(self, name: str) -> int:
         if name == "zsw":

@@ -32,12 +32,22 @@ Simulator choices (not from the manual):
   standstill when running, rising to 80 % at max frequency, +20 % while accelerating;
   register 0x0037 (output power) in 0.1 kW from an assumed 3.7 kW motor;
 - forward and reverse together: the drive stops and shows the alarm bit.
+- torque (spec §2.4: bytes 4-5 torque reference / limit, 6-7 compensation, 0.1 %, flux vector only):
+  the option d5_01 stands for the drive parameter d5-01 (torque control select; the profile has no
+  register for it), default 1. With A1-02 = 3 (flux vector) and d5_01 = 1 a running drive is torque
+  controlled: the axis follows sim/torque_axis.py under the torque word, limited at E1-04 (the
+  frequency reference is not used as a speed limit). With A1-02 = 3 and d5_01 = 0 a non-zero
+  torque word is a torque limit: the speed stops rising where the load of sim/torque_axis.py
+  reaches it. Bytes 4-5 of the input report the torque produced (0.1 %): in torque control the
+  reference (or the load at the speed limit), in speed control the load of sim/torque_axis.py plus
+  20 % while accelerating. In other control methods the torque words are ignored.
 """
 
 from __future__ import annotations
 
 import struct
 
+from profidrive_cli.sim import torque_axis
 from profidrive_cli.sim.model import SlaveModel
 
 # command word bits (spec §2.2)
@@ -58,11 +68,15 @@ CFGS = {"basic": b"\x72", "extended1": b"\x5f\x6f", "extended2": b"\x55\x65"}
 ERR_FUNCTION, ERR_ADDRESS, ERR_QUANTITY, ERR_RANGE, ERR_WRITE = 0x01, 0x02, 0x03, 0x21, 0x22
 
 
+def _s16(w: int) -> int:
+    return w - 0x10000 if w & 0x8000 else w
+
+
 class YaskawaModel(SlaveModel):
     family = "yaskawa"
 
     def __init__(self, profile, b1_01=3, b1_02=3, processing_ms=12.0, comm_timeout=1.0,
-                 fast_stop_input=None, rated_kw=3.7, bus_fault="running", **params):
+                 fast_stop_input=None, rated_kw=3.7, bus_fault="running", d5_01=1, **params):
         super().__init__(profile.ident, {k: CFGS[k] for k in profile.layouts if k in CFGS},
                          name=profile.title, user_prm_len=0, max_diag_len=6)
         self.profile = profile
@@ -76,6 +90,7 @@ class YaskawaModel(SlaveModel):
         self.comm_timeout = float(comm_timeout)
         self.fast_stop_input = int(fast_stop_input) if fast_stop_input not in (None, "", "none") else None
         self.rated_kw = float(rated_kw)
+        self.d5_01 = int(d5_01)
         if bus_fault not in ("running", "always", "never"):
             raise ValueError(f"yaskawa sim: bus_fault must be running, always or never, got {bus_fault!r}")
         self.bus_fault = bus_fault
@@ -105,6 +120,8 @@ class YaskawaModel(SlaveModel):
         self.alarm = False
         self._cmd = 0
         self._ref_raw = 0
+        self._torque_raw = 0            # output bytes 4-5, 0.1 % (extended1, basic)
+        self.torque_out: float | None = None
         self._prev_cmd = 0
         self._run_latched = False       # running incl. the ramp down after the run bit went off
         self._coasting = False
@@ -227,8 +244,21 @@ class YaskawaModel(SlaveModel):
         n = self.fast_stop_input
         return n is not None and bool(self._cmd >> MFI_BITS[n] & 1)
 
+    def torque_controlled(self) -> bool:
+        """Flux vector (A1-02 = 3) and d5-01 = 1 (see the module docstring)."""
+        return int(self._get("A1-02", 0)) == 3 and self.d5_01 == 1
+
+    def _torque_limit_hz(self) -> float | None:
+        """In flux-vector speed control, the speed at which the load reaches the torque limit."""
+        if int(self._get("A1-02", 0)) != 3 or self.d5_01 == 1 or self._torque_raw == 0:
+            return None
+        lim = abs(_s16(self._torque_raw)) / 10.0
+        frac = (lim - torque_axis.LOAD_STATIC) / torque_axis.LOAD_SPEED
+        return max(0.0, min(1.0, frac)) * self.fmax
+
     def _step(self, dt: float) -> None:
         target, run = self._target()
+        self.torque_out = None
         cut = self.fault is not None or self._cmd >> BASE_BLOCK & 1 or self.ope is not None
         if not run and not cut and self._run_latched and int(self._get("b1-03", 0)) == 1:
             cut = True                  # b1-03 = 1: coast to stop
@@ -243,6 +273,14 @@ class YaskawaModel(SlaveModel):
             self.out_hz = 0.0
             return
         fmax = self.fmax
+        if run and self.torque_controlled():
+            torque = _s16(self._torque_raw) / 10.0
+            self.out_hz, self.torque_out = torque_axis.step(self.out_hz, torque, fmax, dt)
+            self.accelerating = False
+            return
+        lim = self._torque_limit_hz()
+        if lim is not None and abs(target) > lim:
+            target = lim if target > 0 else -lim
         t_acc = max(self._time("C1-01"), 1e-3)
         t_dec = max(self._time("C1-09" if self._fast_stop_active() else "C1-02"), 1e-3)
         f = self.out_hz
@@ -267,6 +305,7 @@ class YaskawaModel(SlaveModel):
         self._comm = True
         self._last_rx = now
         cmd, ref = struct.unpack_from(self.order + "HH", outputs, 0)
+        self._torque_raw = struct.unpack_from(self.order + "H", outputs, 4)[0] if size >= 6 else 0
         self._apply_command(cmd, now)
         self._ref_raw = ref
         self._step(0.0)
@@ -314,7 +353,12 @@ class YaskawaModel(SlaveModel):
         cur = 0.0
         if running:
             cur = 0.3 + 0.5 * f / fmax + (0.2 if self.accelerating else 0.0)
-        vals = {"status": st, "feedback": fb, "torque": int(round(cur * 1000)) if running else 0,
+        if self.torque_out is not None:
+            torque = self.torque_out
+        else:
+            torque = (torque_axis.load_percent(f, fmax) + (20.0 if self.accelerating else 0.0)) \
+                * (-1 if self.out_hz < 0 else 1) if running else 0.0
+        vals = {"status": st, "feedback": fb, "torque": int(round(torque * 10)) & 0xFFFF,
                 "pg": 0, "fref": int(round(self._reference_hz() / self._hz_per_count("fb"))), "fout": fb,
                 "current": int(round(cur * 8192)), "ain": 0}
         return [min(vals[n], 0xFFFF) for n in names]

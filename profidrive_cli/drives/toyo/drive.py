@@ -2,7 +2,8 @@
 state machine; mode 1 (toyo, toyo_plch) the run-command word. Parameters go through the core's PKW
 channel with this package's frames and scaling; faults from the history PNU; traceback reads.
 
-May touch: drives/profidrive, drives/base, drives/values, and this package's config, codec, params.
+May touch: drives/profidrive, drives/base, drives/values, drives/torque, and this package's config, codec,
+params.
 """
 
 from __future__ import annotations
@@ -14,7 +15,11 @@ from profidrive_cli.drives.toyo.codec import (bit_names, decode_history_word, sp
 from profidrive_cli.drives.toyo.config import toyo_config
 from profidrive_cli.drives.toyo.params import (_toyo_frame, effective_scale, frame_for, param_at,
                                                resolve_param, value_from_wire, wire_from_value)
+from profidrive_cli.drives.torque import torque_counts
 from profidrive_cli.drives.values import value_problem
+
+TORQUE_RES = 100.0 / 5000          # % of rated torque per count (spec §4.2: 5000 = rated torque)
+TORQUE_SELECT = 0x0002             # multi-function input 2 bit 1: speed/torque control select (Table 3.8)
 
 
 class ToyoDrive(pd.ProfidriveDrive):
@@ -31,6 +36,7 @@ class ToyoDrive(pd.ProfidriveDrive):
         self.run_cmd = 0                      # mode 1 run-command / multi-function input 1
         self.mf_input2 = 0
         self.torque_ref = 0
+        self.torque_mode = False              # run --torque: torque command word + MFI 2 bit 1
         self.words_out: dict[str, int] = {}
         self.jogging = False
         self._reset_pulse = 0
@@ -217,6 +223,10 @@ class ToyoDrive(pd.ProfidriveDrive):
                              reference_percent=round(ref_pct, 4), raw=raw)
         if st.fault and (ff1 or ff2):
             st.fault_code = self._flag_fault_code(ff1, ff2)
+        if "torque" in w:
+            st.torque_percent = round(pd.to_signed16(w["torque"]) * TORQUE_RES, 4)
+        if self.torque_mode:
+            st.torque_ref_percent = round(pd.to_signed16(self.torque_ref) * TORQUE_RES, 4)
         return st
 
     def _fan_bit(self) -> int:
@@ -257,6 +267,10 @@ class ToyoDrive(pd.ProfidriveDrive):
             raise DriveError(f"{e}; {self.start_hint(self.last_status)}") from None
 
     def stop(self, mode: str = "normal", wait: bool = True, timeout: float = 30.0) -> DriveStatus:
+        if self.torque_mode:
+            # in torque control OFF1/OFF3 are coast stops (spec §11): back to speed control first,
+            # so the stop ramps
+            self.set_torque(None)
         if self.mode == 0:
             self.jogging = False
             self.extra_bits &= ~int(pd.Ctw.JOG1 | pd.Ctw.JOG2)
@@ -300,6 +314,45 @@ class ToyoDrive(pd.ProfidriveDrive):
             self.extra_bits &= ~int(pd.Ctw.JOG1 | pd.Ctw.JOG2)
             self.target = pd.Target.READY
         self.cycle()
+
+    # -- torque (spec §2.4-2.10, §4.2: torque command 5000 = rated; MFI 2 bit 1 speed/torque) ---
+    def torque_support(self) -> str | None:
+        if "torque_ref" in self.tl.words("request", self.plch):
+            return None
+        return (f"toyo: layout {self.layout}{' with PLCH on' if self.plch else ''} has no torque command "
+                f"word (PPO2, PPO4, PPO5 and the Toyo frame with PLCH off have one)")
+
+    def torque_limit_support(self) -> str | None:
+        return ("toyo: the PBUS66-Z has no torque limit word (the VF66 torque limits are inverter "
+                "settings); use --torque for torque control")
+
+    def torque_resolution(self) -> float:
+        return TORQUE_RES
+
+    def _switches_torque(self) -> bool:
+        return "mf_input2" in self.tl.words("request", self.plch)
+
+    def set_torque(self, percent: float | None) -> None:
+        why = self.torque_support()
+        if why:
+            raise DriveError(why)
+        if percent is None:
+            self.torque_mode = False
+            self.torque_ref = 0
+            self.mf_input2 &= ~TORQUE_SELECT
+        else:
+            self.torque_mode = True
+            self.torque_ref = torque_counts(percent, TORQUE_RES) & 0xFFFF
+            if self._switches_torque():
+                self.mf_input2 |= TORQUE_SELECT
+        self.cycle()
+
+    def torque_notes(self) -> list[str]:
+        how = ("i-07 = 4 (speed/torque switched by multi-function input 2 bit 1, which pdrive sets)"
+               if self._switches_torque() else
+               f"i-07 = 1, 2 or 3 (layout {self.layout} has no multi-function input 2 to switch it)")
+        return [f"the VF66 follows the torque command only in a vector mode with i-08 = 2 (torque from "
+                f"the option) and {how}; otherwise it stays speed controlled"]
 
     def reset_fault(self, timeout: float = 5.0) -> DriveStatus:
         if self.mode == 0:

@@ -2,7 +2,7 @@
 
 Couples the sans-IO codec and ParamAccess machine with the channel: builds the output image each
 cycle, decodes the status, runs parameter requests through the handshake. May touch: drives/base,
-drives/values, and this package's codec, paramaccess and config.
+drives/values, drives/torque, and this package's codec, paramaccess and config.
 """
 
 from __future__ import annotations
@@ -10,13 +10,16 @@ from __future__ import annotations
 from profidrive_cli import UsageError
 from profidrive_cli.drives.base import (Drive, DriveError, DriveStatus, FaultRecord, ParamError,
                                         ParamValue)
+from profidrive_cli.drives.torque import torque_counts
 from profidrive_cli.drives.values import raw_value_problem, value_problem
-from profidrive_cli.drives.yaskawa.codec import (COMMAND_BITS, FORMATS, FrequencyScale, decode_status,
+from profidrive_cli.drives.yaskawa.codec import (COMMAND_BITS, FORMATS, FrequencyScale, _s16, decode_status,
                                                  mfi_bit, pack_words, unpack_words)
 from profidrive_cli.drives.yaskawa.config import family_config, parse_register_code, register_name
 from profidrive_cli.drives.yaskawa.paramaccess import ParamAccess, ParamRequest, ParamResult, error_text
 
 FAMILY = "yaskawa"
+
+TORQUE_RES = 0.1                   # % per count (spec §2.4 / §2.7: 0.1 %)
 
 
 class YaskawaDrive(Drive):
@@ -47,7 +50,9 @@ class YaskawaDrive(Drive):
         self._external_fault = False
         self._mfi: set[int] = set()
         self._pulses: dict[int, int] = {}
-        self.torque_reference = 0.0          # % (flux vector only)
+        self.torque_reference = 0.0          # % (flux vector only): reference, or limit in speed control
+        self.torque_compensation = 0.0       # % (extended1 bytes 6-7, flux vector only)
+        self._torque_mode = False            # run --torque (else the word is a limit, or 0)
         # cached drive settings (read through the handshake when there is a parameter channel)
         self._fmax: float | None = None
         self._o1_03: int | None = None
@@ -61,7 +66,8 @@ class YaskawaDrive(Drive):
     def command_word(self) -> int:
         w = 0
         if self._run:
-            w |= 1 << (COMMAND_BITS["reverse_run"] if self._ref_percent < 0 else COMMAND_BITS["forward_run"])
+            rev = self.torque_reference < 0 if self._torque_mode else self._ref_percent < 0
+            w |= 1 << (COMMAND_BITS["reverse_run"] if rev else COMMAND_BITS["forward_run"])
         if self._base_block:
             w |= 1 << COMMAND_BITS["external_base_block"]
         if self._external_fault:
@@ -77,7 +83,8 @@ class YaskawaDrive(Drive):
 
     def output_image(self) -> bytes:
         vals = {"command": self.command_word(), "reference": self._ref_raw,
-                "torque_reference": int(round(self.torque_reference * 10)) & 0xFFFF}
+                "torque_reference": int(round(self.torque_reference * 10)) & 0xFFFF,
+                "torque_compensation": int(round(self.torque_compensation * 10)) & 0xFFFF}
         img = pack_words([vals.get(n, 0) for n in self.fmt.out_words], self.order)
         if self.params is not None:
             img += bytes(self.fmt.param_offset - len(img)) + self.params.outputs()
@@ -129,9 +136,14 @@ class YaskawaDrive(Drive):
             state = "not ready"
         else:
             state = "stopped"
-        return DriveStatus(state=state, running=fl["running"], fault=fl["fault"], flags=fl,
-                           speed_percent=pct, speed_hz=hz, reference_percent=ref_pct,
-                           raw=dict(words))
+        st = DriveStatus(state=state, running=fl["running"], fault=fl["fault"], flags=fl,
+                         speed_percent=pct, speed_hz=hz, reference_percent=ref_pct,
+                         raw=dict(words))
+        if "torque_reference" in words:          # extended1 input bytes 4-5 (spec §2.4), 0.1 % presumed
+            st.torque_percent = round(_s16(words["torque_reference"]) * TORQUE_RES, 3)
+        if self._torque_mode:
+            st.torque_ref_percent = self.torque_reference
+        return st
 
     # -- motion --------------------------------------------------------------------------------
     def _hint_not_remote(self, st: DriveStatus) -> str:
@@ -158,6 +170,9 @@ class YaskawaDrive(Drive):
         return st
 
     def stop(self, mode: str = "normal", wait: bool = True, timeout: float = 30.0) -> DriveStatus:
+        if self._torque_mode:
+            self._torque_mode = False       # no torque from the bus; the run bit off stops by b1-03
+            self.torque_reference = 0.0
         if mode == "quick":
             if self.cfg.fast_stop_input is None:
                 raise DriveError("yaskawa SI-P1: the command word has no fast-stop bit; program a "
@@ -175,6 +190,64 @@ class YaskawaDrive(Drive):
                                timeout, "the drive to stop")
         self._fast_stop = False
         return st
+
+    # -- torque (spec §2.4, §2.6: bytes 4-5 torque reference / limit, 6-7 compensation, 0.1 %) -----
+    def torque_support(self) -> str | None:
+        if "torque_reference" in self.fmt.out_words:
+            return None
+        return (f"yaskawa: layout {self.layout} has no torque word (the basic and extended1 layouts "
+                f"have one)")
+
+    def torque_limit_support(self) -> str | None:
+        return self.torque_support()
+
+    def torque_resolution(self) -> float:
+        return TORQUE_RES
+
+    def _check_flux_vector(self) -> None:
+        p = self.profile.param("A1-02")
+        if not self.has_param_channel or p is None or p.register is None:
+            return
+        a102 = int(self.read_param("A1-02").raw)
+        if a102 != 3:
+            raise DriveError(f"yaskawa: the torque word acts only in flux vector control (A1-02 = 3); "
+                             f"the drive has A1-02 = {a102}")
+
+    def set_torque(self, percent: float | None) -> None:
+        why = self.torque_support()
+        if why:
+            raise DriveError(why)
+        if percent is None:
+            self._torque_mode = False
+            self.torque_reference = 0.0
+        else:
+            counts = torque_counts(percent, TORQUE_RES)
+            self._check_flux_vector()
+            self._torque_mode = True
+            self.torque_reference = round(counts * TORQUE_RES, 1)
+        self.cycle()
+
+    def set_torque_limit(self, percent: float | None) -> None:
+        why = self.torque_limit_support()
+        if why:
+            raise DriveError(why)
+        if percent is not None and percent <= 0:
+            raise UsageError(f"--torque-limit {percent:g} %: must be above 0 %")
+        counts = torque_counts(percent, TORQUE_RES, "--torque-limit") if percent is not None else 0
+        if percent is not None:
+            self._check_flux_vector()
+        self._torque_mode = False
+        self.torque_reference = round(counts * TORQUE_RES, 1)
+        self.cycle()
+
+    def torque_notes(self) -> list[str]:
+        notes = ["the SI-P1 torque word is a torque reference in torque control (d5-01 = 1 on the drive) "
+                 "and a torque limit in speed control, in flux vector control only (A1-02 = 3); in torque "
+                 "control the drive limits the speed as d5-03 says (1 = by the frequency reference: give "
+                 "--hz as the speed limit)"]
+        if not self.has_param_channel:
+            notes.append(f"layout {self.layout} has no parameter channel: A1-02 was not checked")
+        return notes
 
     def set_speed(self, percent: float) -> None:
         if not -100.0 <= percent <= 100.0:
