@@ -118,3 +118,31 @@ def test_read_tolerance_both_sides(args, outcome):
     assert r.measured["value"] == 3.0
     if outcome == FAILED:
         assert "F07 = 3 s, expected" in r.message
+
+
+def test_reversing_counts_the_target_once_the_speed_has_crossed_zero():
+    """A reversing run step: the speed must pass standstill before the target counts. At a low cycle
+    rate (a loaded machine, a slow bus) no sample may land inside ± tolerance of zero: crossing to
+    the target's sign is the same proof. Here the simulated motor jumps from +1.5 to -1.5 Hz, so no
+    sample is within ± 0.5 Hz of zero; the step must still pass (it failed after `within` s)."""
+    def disturb(model):
+        real_tick = model.tick
+        seen = {}
+
+        def tick(now):
+            real_tick(now)
+            if model.freq > 9.0:
+                seen["forward"] = True              # the first step reached its speed
+            if seen.get("forward") and 0.0 < model.freq < 1.5:
+                model.freq = -1.5                   # on the way back: across zero in one jump
+        model.tick = tick
+    text = HEAD + """\
+  - write: {param: F07, value: 1.0}
+  - write: {param: F08, value: 1.0}
+  - run: {hz: 10, tolerance: 0.5}
+  - run: {hz: 10, direction: reverse, tolerance: 0.5, within: 10}
+  - stop: {within: 5}
+"""
+    res = run_text(text, disturb)
+    steps = res.stations[0].steps
+    assert [s.status for s in steps[2:5]] == [PASSED, PASSED, PASSED], [s.message for s in steps]

@@ -88,7 +88,9 @@ class Run(StepType):
             if st.fault:
                 r.measured = run_measured(st, v, None, None, None, unit)
                 raise StepFailed(f"the drive tripped while accelerating ({st.fault_code or st.state})")
-            if through_zero and v is not None and abs(v) <= tol:
+            if through_zero and v is not None and (abs(v) <= tol or v * target > 0):
+                # standstill seen, or the sign already crossed to the target's (at a low cycle
+                # rate no sample need land within ± tol of zero)
                 through_zero = False
             if v is not None and abs(v - target) <= tol and not through_zero:
                 reached_at = ch.now()
