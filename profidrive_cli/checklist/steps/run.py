@@ -73,6 +73,7 @@ class Run(StepType):
         # drive that reports the commanded direction with an unsigned speed would otherwise look
         # "reached" at the first cycle)
         through_zero = bool(st0.running and v0 is not None and v0 * target < 0 and abs(v0) > tol)
+        min_abs = abs(v0) if v0 is not None else 0.0
         t_start = ch.now()
         if unit == "hz":
             d.set_speed_hz(target)
@@ -88,10 +89,14 @@ class Run(StepType):
             if st.fault:
                 r.measured = run_measured(st, v, None, None, None, unit)
                 raise StepFailed(f"the drive tripped while accelerating ({st.fault_code or st.state})")
-            if through_zero and v is not None and (abs(v) <= tol or v * target > 0):
-                # standstill seen, or the sign already crossed to the target's (at a low cycle
-                # rate no sample need land within ± tol of zero)
-                through_zero = False
+            if through_zero and v is not None:
+                # standstill seen: a sample within ± tol of zero, or the magnitude fell and is
+                # rising again (at a low cycle rate no sample need land near zero). Not the sign
+                # alone: a drive that reports the commanded direction with the speed's magnitude
+                # shows the target's sign while it still decelerates.
+                min_abs = min(min_abs, abs(v))
+                if abs(v) <= tol or (min_abs < abs(v0) - tol and abs(v) > min_abs + tol):
+                    through_zero = False
             if v is not None and abs(v - target) <= tol and not through_zero:
                 reached_at = ch.now()
                 break
