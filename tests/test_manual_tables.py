@@ -1,0 +1,81 @@
+"""The manual-table defects of issue 17: what the simulated cards answer and how values are shown,
+checked against the manuals' tables (spec lines quoted per test)."""
+
+from __future__ import annotations
+
+import pytest
+
+from profidrive_cli.drives import profidrive as pd
+from profidrive_cli.drives.profidrive import PkwFrame
+from profidrive_cli.drives.profile import load_profile
+from profidrive_cli.sim.plant import build_bus
+
+
+def _station(url: str, address: int):
+    bus = build_bus(url)
+    model = bus.slaves[address].model
+    model.edit_rights = 1
+    return model
+
+
+def _read(model, pnu: int) -> PkwFrame:
+    return model.pkw_answer(PkwFrame(1, pnu, 0, 0))
+
+
+# --- PNU 918 / 963 -------------------------------------------------------------------------------
+
+# moeller-de6-net-dp.md 6.3 (src L716-728, Table 7): "| 0 | 12 Mbit/s |" ... "| 5 | 187.5 kbit/s |"
+# ... "| 8 | 19.2 kbit/s |", "| 9 | 9.6 kbit/s |"
+# fuji-opc-g1-pdp.md 6 (src L1046-1051, L2700-2706): "| 2 | 19.2 kbit/s |", "| 5 | 187.5 kbit/s |",
+# "| 7 | 1.5 Mbit/s |"
+@pytest.mark.parametrize("name, baud, code", [
+    ("moeller", "19200", 8), ("moeller", "187500", 5), ("moeller", "9600", 9), ("moeller", "1.5M", 3),
+    ("fuji-g1", "19200", 2), ("fuji-g1", "187500", 5), ("fuji-pdp3", "1.5M", 7), ("fuji-pdp3", "9600", 1),
+])
+def test_sim_pnu963_is_the_cards_own_code_for_the_bus_baud_rate(name, baud, code):
+    m = _station(f"sim://?stations=9:{name}&baud={baud}", 9)
+    r = _read(m, 963)
+    assert (r.ak, r.value) == (1, code)
+
+
+# moeller-de6-net-dp.md 6.1: "| 918 | 0x396 | PROFIBUS-DP slave address | 1..99 | R | Value of the rotary
+# switches |"; fuji-opc-g1-pdp.md: "| 918 | 0x396 | - | Node (station) address | 0-125 | R | - |"
+@pytest.mark.parametrize("name, address", [("moeller", 6), ("moeller", 42), ("fuji-g1", 3),
+                                           ("fuji-pdp3", 17)])
+def test_sim_pnu918_is_the_station_address(name, address):
+    m = _station(f"sim://?stations={address}:{name}", address)
+    r = _read(m, 918)
+    assert (r.ak, r.value) == (1, address)
+
+
+def test_make_model_options_still_pin_address_and_baud_code():
+    from profidrive_cli.sim.moeller import make_model
+    m = make_model(load_profile("moeller"), address=12, baud_code=4)
+    m.on_bus(6, 19200)
+    m.edit_rights = 1
+    assert (_read(m, 918).value, _read(m, 963).value) == (12, 4)
+
+
+# --- a word write is acknowledged with AK 1 -------------------------------------------------------
+
+# moeller-de6-net-dp.md 5.3 (src L451-466): "| 2 | Write parameter value (word) | 1 | 7 or 8 | yes |",
+# "| 3 | Write parameter value (double word) | 2 | 7 or 8 | yes |"
+def test_moeller_sim_answers_a_word_write_with_ak1_even_for_a_4_byte_parameter():
+    m = _station("sim://?stations=6:moeller", 6)
+    f002 = load_profile("moeller").param("F002")          # 1st acceleration time, 4 octets
+    assert f002.extra["bytes"] == 4
+    r = m.pkw_answer(PkwFrame(2, f002.pnu, 0, 400))        # 4.00 s, as a word
+    assert (r.ak, r.pnu, r.value) == (1, f002.pnu, 400)
+    r = m.pkw_answer(PkwFrame(3, f002.pnu, 0, 500))        # the same as a double word
+    assert (r.ak, r.value) == (2, 500)
+    r = m.pkw_answer(PkwFrame(1, f002.pnu, 0, 0))          # a read answers in the parameter's width
+    assert (r.ak, r.value) == (2, 500)
+
+
+# fuji-opc-g1-pdp.md 5.2 (Table 8.9): "| 1 | Parameter value (word) transferred OK: reply to RC 1 and RC 2 |"
+def test_fuji_sim_answers_a_word_write_with_ak1():
+    m = _station("sim://?stations=3:fuji-g1", 3)
+    f07 = load_profile("fuji-g1").param("F07")
+    r = m.pkw_answer(PkwFrame(2, f07.pnu, f07.index, 500))
+    assert r.ak == 1
+    assert pd.RESPONSE_TEXT[r.ak] == "transfer parameter value (word)"
