@@ -79,3 +79,51 @@ def test_fuji_sim_answers_a_word_write_with_ak1():
     r = m.pkw_answer(PkwFrame(2, f07.pnu, f07.index, 500))
     assert r.ak == 1
     assert pd.RESPONSE_TEXT[r.ak] == "transfer parameter value (word)"
+
+
+# --- decode says when a request/response ID is one the card does not use -------------------------
+
+def _pkw(name: str, direction: str, hexwords: str) -> dict:
+    from profidrive_cli.drives import decode_area
+    return decode_area(load_profile(name), "ppo1", direction, bytes.fromhex(hexwords))["pkw"]
+
+
+# fuji-opc-g1-pdp.md 5.2 (Table 8.9, src L884-889): requests "| 3-5 | Not used |", "| 8 | Not used |";
+# responses "| 2, 3 | Not used |", "| 5 | Not used |"
+@pytest.mark.parametrize("direction, ak", [("request", 3), ("request", 4), ("request", 5), ("request", 8),
+                                           ("response", 2), ("response", 3), ("response", 5)])
+def test_decode_names_fuji_ids_the_card_does_not_use(direction, ak):
+    pk = _pkw("fuji-g1", direction, f"{ak:X}104 1A00 0000 0190 0000 0000")
+    assert pk["ak_text"].endswith("(not used by this card)")
+    assert pk["card_supported"] is False
+
+
+# Table 8.9: "| 2 | Write parameter value (word) |", "| 4 | Array-element value (word) transferred OK |"
+@pytest.mark.parametrize("direction, ak", [("request", 1), ("request", 2), ("request", 6), ("request", 7),
+                                           ("request", 9), ("response", 1), ("response", 4),
+                                           ("response", 6), ("response", 7)])
+def test_decode_keeps_fuji_ids_the_card_uses_plain(direction, ak):
+    pk = _pkw("fuji-g1", direction, f"{ak:X}104 1A00 0000 0001 0000 0000")
+    assert "by this card" not in pk["ak_text"]
+    assert "card_supported" not in pk
+
+
+# moeller-de6-net-dp.md 5.3 (src L451-466): "| 4 | Read description element | 3 | 7 | **no** |",
+# "| 5 | Write description element | 3 | 7 | **no** |", "| 8 | ... (array double word) | 5 | 7 or 8 | **no** |";
+# 5.4: "| 3 | Description element transferred | **no** |", "| 5 | ... (array double word) | **no** |"
+@pytest.mark.parametrize("direction, ak, generic", [
+    ("request", 4, "request description element"), ("request", 5, "change description element"),
+    ("request", 8, "change parameter value (array long word)"),
+    ("response", 3, "transfer description element"), ("response", 5, "transfer parameter value (array long word)"),
+    ("response", 9, "parameter change report (word)")])
+def test_decode_names_moeller_ids_the_card_does_not_support(direction, ak, generic):
+    pk = _pkw("moeller", direction, f"{ak:X}017 0000 0000 0190 0000 0000")
+    assert pk["ak_text"] == f"{generic} (not supported by this card)"
+
+
+# moeller 5.3: "| 3 | Write parameter value (double word) | 2 | 7 or 8 | yes |"
+def test_decode_keeps_moeller_supported_ids_plain():
+    pk = _pkw("moeller", "request", "3017 0000 0000 0190 0000 0000")
+    assert pk["ak_text"] == "change parameter value (long word)"
+    pk = _pkw("moeller", "response", "2017 0000 0000 0190 0000 0000")
+    assert pk["ak_text"] == "transfer parameter value (long word)"

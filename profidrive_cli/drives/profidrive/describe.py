@@ -36,6 +36,11 @@ def describe_pkw(profile, frame: PkwFrame, direction: str, cfg: ProfidriveConfig
     d: dict = {"pke": frame.pke, "ak": frame.ak, "ak_text": texts.get(frame.ak, "reserved"),
                "spm": frame.spm, "pnu": frame.pnu, "ind": frame.ind, "subindex": frame.subindex,
                "pwe": frame.value}
+    card = cfg.supported_requests if direction == "request" else cfg.supported_responses
+    if card is not None and frame.ak and frame.ak not in card:
+        # the generic PROFIdrive meaning, but the card's table says it does not use this ID
+        d["card_supported"] = False
+        d["ak_text"] += f" ({cfg.unsupported_text})"
     if frame.ak == 0:
         d["text"] = (f"PKE 0x{frame.pke:04X}: AK 0 ({d['ak_text']}); IND 0x{frame.ind:04X}; "
                      f"PWE 0x{frame.value:08X}")
