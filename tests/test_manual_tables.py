@@ -127,3 +127,93 @@ def test_decode_keeps_moeller_supported_ids_plain():
     assert pk["ak_text"] == "change parameter value (long word)"
     pk = _pkw("moeller", "response", "2017 0000 0000 0190 0000 0000")
     assert pk["ak_text"] == "transfer parameter value (long word)"
+
+
+# --- every `format:` is handled ------------------------------------------------------------------
+
+def test_every_format_each_shipped_profile_uses_has_a_formatter_for_its_family():
+    from profidrive_cli.drives.formats import FORMATS, formatter_for
+    from profidrive_cli.drives.profile import all_profiles
+    used = set()
+    for prof in all_profiles():
+        for p in prof.parameters.values():
+            fmt = p.extra.get("format")
+            if fmt is None:
+                continue
+            used.add(fmt)
+            assert fmt in FORMATS, f"{prof.name} {p.code}: format {fmt!r}"
+            assert formatter_for(prof, fmt) is not None, f"{prof.name} {p.code}: no formatter for {fmt!r}"
+    assert used <= set(FORMATS)
+    assert {"fcode", "alarm", "alarm947", "baud", "bits", "speed", "history", "hex", "code"} <= used
+
+
+def test_a_profile_with_an_unknown_format_is_refused_with_file_and_line(tmp_path):
+    from profidrive_cli.datafile import DataFileError
+    from profidrive_cli.drives.profile import load_profile_file
+    src = load_profile("yaskawa").path.read_text(encoding="utf-8").splitlines()
+    i = next(n for n, line in enumerate(src) if line.lstrip().startswith("- {code:"))
+    src[i] = src[i].replace("{code:", "{format: octal, code:", 1)
+    f = tmp_path / "bad.yaml"
+    f.write_text("\n".join(src) + "\n", encoding="utf-8")
+    with pytest.raises(DataFileError) as e:
+        load_profile_file(f)
+    assert f"bad.yaml:{i + 1}" in str(e.value) and "unknown format 'octal'" in str(e.value)
+
+
+def _text(name, code, raw):
+    from profidrive_cli.drives.formats import display_text
+    prof = load_profile(name)
+    p = prof.param(code)
+    return display_text(prof, p, raw, p.from_raw(raw))
+
+
+# fuji-opc-g1-pdp.md L603: "M16 (latest) ... give the inverter 'alarm code' (decimal)"; L611-616:
+# "| 0 | 0000 | --- | No alarm |", "| 1 | 2301 | OC1 (0c1) | Overcurrent during acceleration |",
+# "| 5 | 2330 | EF (ef) | Ground fault |"
+@pytest.mark.parametrize("name", ["fuji-g1", "fuji-pdp3"])
+def test_fuji_m16_to_m19_show_the_alarm_name(name):
+    assert _text(name, "M16", 1).startswith("1 (OC1 ")
+    assert _text(name, "M19", 5).startswith("5 (EF ")
+    assert _text(name, "M17", 0) == "0 (no alarm)"
+
+
+# fuji-opc-g1-pdp.md L243: "F26 -> group F = 0x04, number 26 = 0x1A, giving assignment '041A'";
+# L240: "| 0x0000 | No assignment (factory default) |"; fuji-opc-pdp3.md L227: "F26 -> 0x041A"
+@pytest.mark.parametrize("name", ["fuji-g1", "fuji-pdp3"])
+@pytest.mark.parametrize("code", ["o40", "o43", "o48", "o51", "PNU915", "PNU916"])
+def test_fuji_pcd_assignments_show_four_hex_digits_and_the_function_code(name, code):
+    assert _text(name, code, 0x041A) == "0x041A (F26)"
+    assert _text(name, code, 0) == "0x0000 (not assigned)"
+
+
+# moeller-de6-net-dp.md 6.3 (src L716-728): "| 0 | 12 Mbit/s |", "| 9 | 9.6 kbit/s |";
+# fuji-opc-g1-pdp.md L579-591: "| 10 | 12 Mbit/s |" (profile: 12M), "| 1 | 9.6 kbit/s |"
+def test_pnu963_shows_each_cards_own_baud_coding():
+    assert _text("moeller", "PNU963", 0) == "0 (12 Mbit/s)"
+    assert _text("moeller", "PNU963", 9) == "9 (9.6 kbit/s)"
+    assert _text("fuji-g1", "PNU963", 10) == "10 (12M)"
+    assert _text("fuji-g1", "PNU963", 1) == "1 (9.6k)"
+
+
+def test_param_get_on_the_sim_shows_alarm_fcode_and_baud_texts():
+    import json
+    import subprocess
+    import sys
+    r = subprocess.run([sys.executable, "-m", "profidrive_cli", "param", "get", "3", "M16", "o40", "PNU963",
+                        "--json", "--port", "sim://?trip=3:OC1&baud=187500", "--baud", "187500"],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    got = {p["code"]: p for p in json.loads(r.stdout)["parameters"]}
+    assert got["M16"]["raw"] == 1 and got["M16"]["text"].startswith("1 (OC1 ")
+    assert got["o40"]["text"].startswith("0x")
+    assert got["PNU963"]["text"] == "5 (187.5k)"          # L588: "| 5 | 187.5 kbit/s |"
+
+
+# decode shows the same texts (the one formatter)
+def test_decode_shows_an_o40_read_response_as_a_function_code():
+    from profidrive_cli.drives import decode_area
+    prof = load_profile("fuji-g1")
+    o40 = prof.param("o40")
+    words = f"1{o40.pnu:03X} {o40.index:02X}00 0000 041A 0000 0000"
+    pk = decode_area(prof, "ppo1", "response", bytes.fromhex(words))["pkw"]
+    assert pk["value_text"] == "0x041A (F26)"

@@ -35,6 +35,7 @@ from pathlib import Path
 from profidrive_cli.data import profiles_dir
 from profidrive_cli.datafile import DataFileError, LineDict, load_yaml
 from profidrive_cli.dp.cfg import CfgError, decode_cfg, io_sizes, parse_hex
+from profidrive_cli.drives.formats import FORMATS
 
 ProfileError = DataFileError
 
@@ -193,6 +194,9 @@ def _param(path, node) -> ParamDef:
         raise _err(path, node, "min", f"{p.code}: min {p.min} > max {p.max}")
     if p.scale == 0:
         raise _err(path, node, "scale", f"{p.code}: scale must not be 0")
+    if "format" in node and node["format"] not in FORMATS:
+        raise _err(path, node, "format", f"{p.code}: unknown format {node['format']!r} "
+                   f"(known: {', '.join(FORMATS)})")
     if "dangerous" in node and not isinstance(node["dangerous"], bool):
         raise _err(path, node, "dangerous", f"{p.code}: 'dangerous' must be true or false")
     if "danger" in node:

@@ -49,7 +49,6 @@ fault_cause_active (True keeps the fault through an acknowledgement), pkw_log, s
 from __future__ import annotations
 
 import math
-import re
 
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.profidrive import Ctw, PkwFrame, State, Stw
@@ -69,15 +68,6 @@ WRITE_ACK = {2: 1, 3: 2, 7: 4, 8: 5}
 
 SPECIAL_READ_ONLY = (pd.PNU_NODE_ADDRESS, pd.PNU_BAUD, pd.PNU_DEVICE_ID, pd.PNU_PROFILE,
                      pd.PNU_CONTROL_WORD, pd.PNU_STATUS_WORD, pd.PNU_FAULT_NUMBER)
-
-
-def baud_code_for(codes: dict[int, str], baud: int) -> int | None:
-    """The card's PNU 963 code for `baud` bit/s from its table (texts like '19.2k', '1.5 Mbit/s')."""
-    for code, text in codes.items():
-        m = re.fullmatch(r"\s*([\d.]+)\s*([kM])(?:bit/s)?\s*", str(text))
-        if m and round(float(m.group(1)) * (1000 if m.group(2) == "k" else 1000000)) == baud:
-            return code
-    return None
 
 
 class ProfidriveModel(SlaveModel):
@@ -490,15 +480,12 @@ class ProfidriveModel(SlaveModel):
         return self._pkw_resp.words()
 
     def on_bus(self, address: int, baud: int) -> None:
-        """PNU 918 answers the station address and PNU 963 the card's own code for the bus baud rate
-        (Moeller: 0 = 12 Mbit/s ... 9 = 9.6 kbit/s, spec 6.3; Fuji: 1 = 9.6k ... 10 = 12M, spec 6), unless
-        make_model was given them."""
+        """PNU 918 = the station address, PNU 963 = the card's own code for the rate (unless given)."""
         if "address" not in self._pinned:
             self.node_address = address
-        if "baud" not in self._pinned:
-            code = baud_code_for(self.cfg.baud_codes, baud)
-            if code is not None:
-                self.baud_code = code
+        code = pd.baud_code_for(self.cfg.baud_codes, baud)
+        if "baud" not in self._pinned and code is not None:
+            self.baud_code = code
 
     def pkw_answer(self, req: PkwFrame) -> PkwFrame:
         """Execute one PKW task and return the response frame."""
@@ -531,9 +518,7 @@ class ProfidriveModel(SlaveModel):
         elif array_req:
             return err("not_array")
         size = p.size if p is not None else 16
-        # a write is acknowledged in the width it was asked in (word 2 -> 1, long word 3 -> 2, array word
-        # 7 -> 4, array long word 8 -> 5: Moeller spec 5.3, src L451-466; Fuji Table 8.9); a read in the
-        # parameter's own width
+        # a write is acknowledged in the width asked (WRITE_ACK), a read in the parameter's own width
         ok_ak = WRITE_ACK.get(req.ak) or ((4 if size == 16 else 5) if is_array else (1 if size == 16 else 2))
         if not write:
             v = self.read_special(req.pnu, req.subindex)

@@ -7,6 +7,7 @@ alarms and the card config; a family module may supply `param_value(profile, par
 from __future__ import annotations
 
 from profidrive_cli import UsageError
+from profidrive_cli.drives.formats import display_text
 from profidrive_cli.drives.profidrive.config import ProfidriveConfig, config
 from profidrive_cli.drives.profidrive.params import format_value, param_for
 from profidrive_cli.drives.profidrive.pkw import (ERROR_RESPONSES, REQUEST_TEXT, RESPONSE_TEXT,
@@ -108,7 +109,7 @@ def _value_text(profile, cfg: ProfidriveConfig, p, frame: PkwFrame, d: dict) -> 
     raw = frame.value & (0xFFFF if p.size == 16 else 0xFFFFFFFF)
     value = _family_value(profile, p, raw)
     d["raw"], d["value"], d["unit"] = raw, value, p.unit
-    return format_value(p, value, raw)
+    return display_text(profile, p, raw, value) or format_value(p, value, raw)
 
 
 def _family_value(profile, p, raw: int):
