@@ -2,8 +2,9 @@
 
 FieldChecker collects problems with file:line (err, fail) and reads a step's fields (fields, num,
 code_field, need_param_channel, need_capability: the profile's capabilities); ParamTarget is a
-parameter resolved for one station's profile. It knows the YAML shape (datafile.LineDict / LineList) and the profiles (drives/), nothing of stations on a bus, of
-the checklist header (spec.py) or of running (runner.py). spec.py's validator is a FieldChecker; each step
+parameter resolved for one station's profile. It knows the YAML shape (datafile.LineDict / LineList)
+and the profiles (drives/), nothing of stations on a bus, of the checklist header (spec.py) or of
+running (runner.py). spec.py's validator is a FieldChecker; each step
 type in checklist/steps/ gets it to check its own fields.
 """
 
