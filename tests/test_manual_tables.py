@@ -217,3 +217,9 @@ def test_decode_shows_an_o40_read_response_as_a_function_code():
     words = f"1{o40.pnu:03X} {o40.index:02X}00 0000 041A 0000 0000"
     pk = decode_area(prof, "ppo1", "response", bytes.fromhex(words))["pkw"]
     assert pk["value_text"] == "0x041A (F26)"
+
+
+# moeller-de6-net-dp.md 6.4 (src L730-759, Table 8): "| 0 | No fault |", "| 1 | Overcurrent (inverter) |"
+def test_moeller_pnu947_shows_the_fault_name():
+    assert _text("moeller", "PNU947", 1).startswith("1 (E01 ")
+    assert _text("moeller", "PNU947", 0) == "0 (no fault)"

@@ -34,7 +34,8 @@ FORMATS = {
     "bits": "a bit field: hex, and the names of the set bits where the family names them (Toyo bits:)",
     "fcode": "a function-code assignment group << 8 | number in four hex digits and the code (Fuji o40-o51)",
     "alarm": "an inverter alarm code in the M-code numbering and its name (Fuji M16-M19)",
-    "alarm947": "a PROFIdrive malfunction code in hex and every alarm it can stand for (PNU947)",
+    "alarm947": "a PNU947 fault-memory entry and every alarm it can stand for (Fuji: malfunction code in hex; "
+                "Moeller: Table 8 fault number)",
     "baud": "the card's own baud-rate code and its rate (PNU963)",
     "speed": "a signed speed word in percent of full scale (Toyo)",
     "history": "a fault-history word: protection, inverter mode, block (Toyo)",
