@@ -3,6 +3,8 @@ checked against the manuals' tables (spec lines quoted per test)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from profidrive_cli.drives import profidrive as pd
@@ -223,3 +225,63 @@ def test_decode_shows_an_o40_read_response_as_a_function_code():
 def test_moeller_pnu947_shows_the_fault_name():
     assert _text("moeller", "PNU947", 1).startswith("1 (E01 ")
     assert _text("moeller", "PNU947", 0) == "0 (no fault)"
+
+
+# --- the code lists against the manuals' tables ----------------------------------------------------
+
+SPEC = Path("/work/shared/spec")
+
+
+def _spec_rows(name: str, header: str) -> list[list[str]]:
+    """The rows of the markdown table right after the line `header` in a spec file."""
+    lines = (SPEC / name).read_text(encoding="utf-8").splitlines()
+    i = lines.index(header) + 2
+    rows = []
+    while i < len(lines) and lines[i].startswith("|"):
+        rows.append([c.strip() for c in lines[i].strip("|").split("|")])
+        i += 1
+    return rows
+
+
+@pytest.mark.skipif(not SPEC.is_dir(), reason="the reference specs are not on this machine")
+@pytest.mark.parametrize("name, spec, header, dec_col, hex_col, code_col", [
+    ("fuji-g1", "fuji-opc-g1-pdp.md",
+     "| M16-M19 code (dec) | PNU947 code (hex) | Mnemonic (source form) | Description |", 0, 1, 2),
+    ("fuji-pdp3", "fuji-opc-pdp3.md", "| PNU947 (hex) | M16-M19 (dec) | Keypad | Meaning |", 1, 0, 2),
+])
+def test_fuji_alarm_table_matches_the_manual_row_by_row(name, spec, header, dec_col, hex_col, code_col):
+    from profidrive_cli.drives.fuji import fuji_config
+    prof = load_profile(name)
+    mcodes = fuji_config(prof).mcodes
+    rows = _spec_rows(spec, header)
+    assert len(rows) > 30
+    for r in rows:
+        if not r[dec_col].isdigit():        # a PNU947 code with no M-code (pdp3: "| FFFF | — (none) | OH6 |")
+            a = prof.alarm_by_code(r[code_col])
+            assert a is not None and a.number == int(r[hex_col], 16) and mcodes.get(a.code) is None
+            continue
+        dec, num = int(r[dec_col]), int(r[hex_col], 16)
+        code = r[code_col].replace("*", "").split(" (")[0].strip()
+        if dec == 0:
+            continue
+        a = prof.alarm_by_code(code)
+        assert a is not None, f"{name}: {code} missing"
+        assert (a.number, mcodes.get(a.code)) == (num, dec), f"{name}: {code}"
+
+
+# moeller-de6-net-dp.md 6.3 and fuji-opc-g1-pdp.md L579-591: the baud-rate code tables
+@pytest.mark.skipif(not SPEC.is_dir(), reason="the reference specs are not on this machine")
+def test_baud_code_tables_match_the_manuals():
+    from profidrive_cli.drives.profidrive.pnu import baud_code_for
+    from profidrive_cli.fdl.timing import parse_baud
+    moeller = {int(r[0]): r[1] for r in _spec_rows("moeller-de6-net-dp.md", "| Value | Baud rate |")}
+    codes = pd.config(load_profile("moeller")).baud_codes
+    assert codes == moeller
+    fuji = {int(r[0]): r[1] for r in _spec_rows("fuji-opc-g1-pdp.md", "| Value | Rate |")}
+    fcodes = pd.config(load_profile("fuji-g1")).baud_codes
+    assert set(fuji) == set(fcodes) == set(range(11))
+    for code, text in fuji.items():
+        if code:                                     # "| 5 | 187.5 kbit/s |" -> 187500 -> code 5
+            num, unit = text.split()[:2]
+            rate = parse_baud(num + ("k" if unit.startswith("k") else "M"))
+            assert baud_code_for(fcodes, rate) == code, text
