@@ -285,3 +285,32 @@ def test_baud_code_tables_match_the_manuals():
             num, unit = text.split()[:2]
             rate = parse_baud(num + ("k" if unit.startswith("k") else "M"))
             assert baud_code_for(fcodes, rate) == code, text
+
+
+# the real byte path: `pdrive sim --pty --baud 187500` and pdrive on the other end; moeller 6.3 (src L716-728):
+# "| 5 | 187.5 kbit/s |"; fuji-opc-g1-pdp.md L588: "| 5 | 187.5 kbit/s |"; PNU 918 = the station address
+def test_pnu918_963_and_texts_over_a_pty():
+    import json
+    import signal
+    import subprocess
+    from conftest import pdrive_cmd
+    sim = subprocess.Popen(pdrive_cmd() + ["sim", "--json", "--pty", "--baud", "187500"],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        port = json.loads(sim.stdout.readline())["port"]
+        got = {}
+        for addr in (3, 6):
+            r = subprocess.run(pdrive_cmd() + ["param", "get", str(addr), "PNU918", "PNU963", "--json",
+                                               "--port", port, "--baud", "187500"],
+                               capture_output=True, text=True, timeout=120)
+            assert r.returncode == 0, r.stderr
+            got[addr] = {p["code"]: p for p in json.loads(r.stdout)["parameters"]}
+        assert got[3]["PNU918"]["value"] == 3 and got[6]["PNU918"]["value"] == 6
+        assert got[3]["PNU963"]["text"] == "5 (187.5k)"
+        assert got[6]["PNU963"]["text"] == "5 (187.5 kbit/s)"
+    finally:
+        sim.send_signal(signal.SIGINT)
+        try:
+            sim.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            sim.kill()
