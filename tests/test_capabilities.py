@@ -155,3 +155,13 @@ def test_the_yaskawa_drive_refuses_a_quick_stop_in_the_same_words():
     with pytest.raises(DriveError) as e:
         drive.stop("quick", wait=False)
     assert str(e.value) == prof.capabilities.refusal("quick_stop", "extended1")
+
+
+def test_require_raises_a_usage_error_with_the_refusal():
+    from profidrive_cli import UsageError
+    caps = load_profile("fuji-g1").capabilities
+    with pytest.raises(UsageError) as e:
+        caps.require("jog", "ppo1")
+    assert str(e.value) == caps.refusal("jog", "ppo1")
+    assert "CTW bits 8 and 9 are not used" in str(e.value)     # fuji-opc-g1-pdp.md L271
+    caps.require("quick_stop", "ppo1")                          # L265: OFF3 with H56

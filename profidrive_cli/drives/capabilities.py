@@ -15,6 +15,7 @@ API (profile.capabilities):
     caps.has(name, layout=None) -> bool      on this layout (None: on any layout)
     caps.why_not(name, layout=None) -> str | None   None when it can, else the one-line reason
     caps.refusal(name, layout=None) -> str | None   the sentence every refusal uses (CLI and checklist)
+    caps.require(name, layout=None)          raise UsageError(refusal) (exit 2): for CLI options
     caps.layouts(name) -> tuple[str, ...]    the layouts where it can
     caps.detail(name) -> dict                the declaration's other keys
     caps.for_layout(layout) -> frozenset     the names the card has on that layout
@@ -96,6 +97,13 @@ class Capabilities:
             return None
         on = f" (layout {layout})" if layout else ""
         return f"{self.profile_name}{on} cannot {CAPABILITIES[name]}: {why}"
+
+    def require(self, name: str, layout: str | None = None) -> None:
+        """UsageError (exit 2, before anything runs) with the refusal when the card cannot."""
+        msg = self.refusal(name, layout)
+        if msg is not None:
+            from profidrive_cli import UsageError
+            raise UsageError(msg)
 
     def detail(self, name: str) -> dict:
         c = self.decl.get(name)
