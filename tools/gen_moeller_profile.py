@@ -11,7 +11,7 @@ YAML is maintained by hand. --check exits 1 if the file would change (for CI).
 Per row: code (keypad code; PNU<n> where the list prints none or a duplicate), name, pnu, unit, scale
 (= 1 / multiplier), min/max (engineering units, from the printed range), access (R/W -> rw,
 R/WOS -> stop, RO -> ro), bytes (1, 2, 4 on the wire) and size (16 or 32 bits), signed where the range
-is negative. Family keys: bytes, format (code | hex), ranges (several allowed intervals), df6 (false
+is negative. Family keys: bytes, format (code | hex | baud | alarm947), ranges (several allowed intervals), df6 (false
 = not on DF6), df6_max, note, dangerous + danger (the common keys). The decisions behind the special cases are in the profile's
 `decisions:` list.
 """
@@ -99,9 +99,9 @@ PROFIDRIVE_ROWS = [
     dict(code="PNU928", name="Process-data control rights (PZD)", pnu=928, min=0, max=1,
          access="rw", bytes=2, format="code"),
     dict(code="PNU947", name="Fault memory (fault numbers)", pnu=947, min=0, max=79, access="ro",
-         bytes=2, array=49, format="code"),
+         bytes=2, array=49, format="alarm947"),   # Table 8 fault numbers, shown with their names
     dict(code="PNU963", name="PROFIBUS baud rate (code)", pnu=963, min=0, max=9, access="ro",
-         bytes=2, format="code"),
+         bytes=2, format="baud"),          # the card's own coding, spec 6.3 (src L716-728)
     dict(code="PNU964", name="Device identification", pnu=964, min=0, max=0xFFFF, access="ro",
          bytes=2, format="hex"),
     dict(code="PNU965", name="PROFIdrive profile version", pnu=965, min=0, max=0xFFFF,

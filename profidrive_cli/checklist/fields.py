@@ -1,9 +1,10 @@
 """The checklist's field toolkit: what every step type's schema check is built from.
 
 FieldChecker collects problems with file:line (err, fail) and reads a step's fields (fields, num,
-code_field, need_param_channel); ParamTarget is a parameter resolved for one station's profile. It knows
-the YAML shape (datafile.LineDict / LineList) and the profiles (drives/), nothing of stations on a bus, of
-the checklist header (spec.py) or of running (runner.py). spec.py's validator is a FieldChecker; each step
+code_field, need_param_channel, need_capability: the profile's capabilities); ParamTarget is a
+parameter resolved for one station's profile. It knows the YAML shape (datafile.LineDict / LineList)
+and the profiles (drives/), nothing of stations on a bus, of the checklist header (spec.py) or of
+running (runner.py). spec.py's validator is a FieldChecker; each step
 type in checklist/steps/ gets it to check its own fields.
 """
 
@@ -157,6 +158,16 @@ class FieldChecker:
             self.fail(rs.line, f"step {rs.index} ({rs.type}): station {st.name!r} uses layout {st.layout}, "
                       f"which has no parameter channel (choose a layout with one, e.g. "
                       f"{param_layouts(st.profile)})")
+
+
+    def need_capability(self, st, rs, name: str, line: int | None = None) -> bool:
+        """Fail the step when the station's card cannot do `name` on its layout (the profile's
+        `capabilities:`), in the words the CLI and the drive use; True when it can."""
+        msg = st.profile.capabilities.refusal(name, st.layout)
+        if msg is None:
+            return True
+        self.fail(line or rs.line, f"step {rs.index} ({rs.type}): station {st.name!r}: {msg}")
+        return False
 
 
 class _NoChannel:

@@ -302,13 +302,16 @@ def param_table(values) -> Table:
     for c in ("code", "name", "value", "raw"):
         t.add_column(c)
     for pv in values:
-        t.add_row(escape(pv.code), escape(pv.name or ""), escape(value_text(pv.value, pv.unit)),
+        t.add_row(escape(pv.code), escape(pv.name or ""), escape(pv.text or value_text(pv.value, pv.unit)),
                   f"{pv.raw} (0x{pv.raw:X})" if isinstance(pv.raw, int) and pv.raw >= 0 else str(pv.raw))
     return t
 
 
 def param_json(pv) -> dict:
-    return {"code": pv.code, "name": pv.name, "value": pv.value, "unit": pv.unit, "raw": pv.raw}
+    d = {"code": pv.code, "name": pv.name, "value": pv.value, "unit": pv.unit, "raw": pv.raw}
+    if getattr(pv, "text", None):
+        d["text"] = pv.text          # the value as the card's tables show it (`format:`)
+    return d
 
 
 def rows_table(rows, title: str, columns=("code", "name", "file", "drive", "result", "reason")) -> Table:

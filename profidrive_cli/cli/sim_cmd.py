@@ -42,7 +42,7 @@ def sim_cmd(use_pty, listen, serial_port, plant, baud, as_json):
         b = parse_baud(baud)
     except ValueError as e:
         raise UsageError(str(e)) from None
-    bus = build_bus(plant)
+    bus = build_bus(plant, default_baud=b)     # PNU 963 of the simulated cards follows --baud
     if use_pty:
         ep = server.PtyEndpoint()
         where = ep.path

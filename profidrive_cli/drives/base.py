@@ -75,6 +75,7 @@ class ParamValue:
     raw: int             # value on the wire
     value: float | int   # engineering value (raw * scale)
     unit: str = ""
+    text: str | None = None   # the value as the card's tables show it (`format:`, drives/formats.py)
 
     def __str__(self) -> str:
         return f"{self.code} = {self.value}{(' ' + self.unit) if self.unit else ''}"

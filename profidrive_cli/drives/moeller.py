@@ -27,7 +27,7 @@ from profidrive_cli.drives.base import DriveError, DriveStatus, ParamError, Para
 from profidrive_cli.drives.profile import COMMON_EXTRA_KEYS, per_profile
 
 FAMILY_PARAM_KEYS = {"bytes", "format", "ranges", "df6", "df6_max", "note", "array"}
-FORMATS = ("code", "hex", "bits")
+FORMATS = ("code", "hex", "bits", "baud", "alarm947")
 _STW_CONTROL_REQUESTED = int(pd.Stw.CONTROL_REQUESTED)
 
 
@@ -212,6 +212,20 @@ def device_name(word: int) -> str:
 
 def baud_text(code: int, profile) -> str:
     return pd.config(profile).baud_codes.get(code, f"invalid baud-rate code {code}")
+
+
+def _baud_format(profile, param, raw, value) -> str:
+    """PNU 963 (`format: baud`): the card's own code and its rate (spec 6.3, src L716-728: 0 = 12 Mbit/s)."""
+    return f"{raw} ({baud_text(raw, profile)})"
+
+
+def _fault_format(profile, param, raw, value) -> str:
+    """PNU 947 (`format: alarm947`): the fault number and its name (spec 6.4, src L730-759, Table 8)."""
+    return f"{raw} ({fault_text(profile, raw)})"
+
+
+#: value texts by `format:` (drives/formats.py); code, hex and bits are the generic ones
+FORMATTERS = {"baud": _baud_format, "alarm947": _fault_format}
 
 
 def fault_text(profile, number: int) -> str:

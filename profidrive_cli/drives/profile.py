@@ -20,6 +20,9 @@ Common schema (every family):
          min: 25.0, max: 500.0, access: stop, default: 60.0}
     alarms:                           # number on the wire -> names (several where a number is shared)
       - {number: 1, code: OC1, meaning: Overcurrent during acceleration}
+    capabilities:                     # what the card can do, per layout (drives/capabilities.py)
+      jog: {param: A038}              # a mapping: it can (optionally `layouts:`, `needs:`, `reason:`)
+      torque: "no torque reference"   # a text: it cannot, and why
     decisions: [...]                  # what we decided where the manual is ambiguous, and why
 
 Family codecs may read further keys (fault_history, handshake, ...) from Profile.raw; they validate them
@@ -35,6 +38,8 @@ from pathlib import Path
 from profidrive_cli.data import profiles_dir
 from profidrive_cli.datafile import DataFileError, LineDict, load_yaml, load_yaml_head, read_text
 from profidrive_cli.dp.cfg import CfgError, decode_cfg, io_sizes, parse_hex
+from profidrive_cli.drives.capabilities import Capabilities, parse_capabilities
+from profidrive_cli.drives.formats import FORMATS
 
 ProfileError = DataFileError
 
@@ -122,6 +127,8 @@ class Profile:
     ident_placeholder: str | None = None
     path: Path | None = None
     raw: LineDict = field(default_factory=LineDict)
+    #: what the card can do (quick_stop, jog, torque, param_channel, monitor_words, ...): drives/capabilities.py
+    capabilities: Capabilities | None = None
 
     def alarms_for(self, number: int) -> list[Alarm]:
         return [a for a in self.alarms if a.number == number]
@@ -193,6 +200,9 @@ def _param(path, node) -> ParamDef:
         raise _err(path, node, "min", f"{p.code}: min {p.min} > max {p.max}")
     if p.scale == 0:
         raise _err(path, node, "scale", f"{p.code}: scale must not be 0")
+    if "format" in node and node["format"] not in FORMATS:
+        raise _err(path, node, "format", f"{p.code}: unknown format {node['format']!r} "
+                   f"(known: {', '.join(FORMATS)})")
     if "dangerous" in node and not isinstance(node["dangerous"], bool):
         raise _err(path, node, "dangerous", f"{p.code}: 'dangerous' must be true or false")
     if "danger" in node:
@@ -274,6 +284,7 @@ def load_profile_file(path: str | Path) -> Profile:
         aliases=[str(a) for a in _get(path, doc, "aliases", list, False, [])],
         path=path,
         raw=doc,
+        capabilities=parse_capabilities(path, doc, name, layouts),
     )
 
 

@@ -14,6 +14,7 @@ from typing import Any
 
 from profidrive_cli import UsageError
 from profidrive_cli.drives.base import DriveError, ParamValue
+from profidrive_cli.drives.formats import display_text
 from profidrive_cli.drives.profile import Profile, all_profiles
 from profidrive_cli.drives.values import danger, raw_value_problem, value_problem
 from profidrive_cli.session.cycle import Sample
@@ -106,7 +107,14 @@ def parse_value(sess, code: str, text: str | float | int, info: ParamInfo | None
 
 def read_param(sess, code: str) -> ParamValue:
     param_info(sess, code)                 # unknown codes: the closest ones / the right family
-    return sess.drive.read_param(code.strip())
+    return with_text(sess.profile, sess.drive.read_param(code.strip()))
+
+
+def with_text(profile, pv: ParamValue) -> ParamValue:
+    """Fill ParamValue.text from the parameter's `format:` (alarm names, function codes, baud rates)."""
+    if pv is not None and pv.text is None:
+        pv.text = display_text(profile, profile.param(pv.code), pv.raw, pv.value)
+    return pv
 
 
 def danger_of(sess, info: ParamInfo) -> str | None:
@@ -179,7 +187,7 @@ def write_param(sess, code: str, value, *, check_running: bool = True,
         why = stopped_for(sess, info)
         if why:
             raise DriveError(why)
-    return sess.drive.write_param(code.strip(), value)
+    return with_text(sess.profile, sess.drive.write_param(code.strip(), value))
 
 
 def notes(sess) -> list[str]:

@@ -36,6 +36,9 @@ class SlaveModel:
         self.input_len = 0
         self.output_len = 0
 
+    def on_bus(self, address: int, baud: int) -> None:
+        """The plant placed this station at `address` on a bus running at `baud` bit/s (PNU 918/963)."""
+
     # -- DP start-up -------------------------------------------------------------------------
     def check_prm(self, user_prm: bytes) -> bool:
         """Return True when the Set_Prm user-parameter octets are acceptable."""

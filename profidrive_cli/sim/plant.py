@@ -107,6 +107,7 @@ def build_bus(url: str, now: float = 0.0, default_baud: int = 19200) -> SimBus:
     for addr, name in stations:
         prof = load_profile(name)
         model = make_model(prof)
+        model.on_bus(addr, baud)
         slaves.append(SimSlave(addr, model))
     addrs = {s.address: s for s in slaves}
     for a in set(trips) | set(seeded):

@@ -63,6 +63,9 @@ STATE_BITS = {
     State.FAULT: Stw.FAULT,
 }
 
+#: request AK of a write -> the positive response AK (PROFIdrive V2; Moeller spec 5.3)
+WRITE_ACK = {2: 1, 3: 2, 7: 4, 8: 5}
+
 SPECIAL_READ_ONLY = (pd.PNU_NODE_ADDRESS, pd.PNU_BAUD, pd.PNU_DEVICE_ID, pd.PNU_PROFILE,
                      pd.PNU_CONTROL_WORD, pd.PNU_STATUS_WORD, pd.PNU_FAULT_NUMBER)
 
@@ -92,6 +95,7 @@ class ProfidriveModel(SlaveModel):
         self.pkw_latency = pkw_latency
         self.node_address = node_address
         self.baud_code = baud_code
+        self._pinned = {k for k, v in (("address", node_address), ("baud", baud_code)) if v}
         self.device_id = device_id
         self.profile_version = profile_version
         # parameter store: code -> raw wire integer
@@ -475,6 +479,14 @@ class ProfidriveModel(SlaveModel):
             return pd.IDLE.words()
         return self._pkw_resp.words()
 
+    def on_bus(self, address: int, baud: int) -> None:
+        """PNU 918 = the station address, PNU 963 = the card's own code for the rate (unless given)."""
+        if "address" not in self._pinned:
+            self.node_address = address
+        code = pd.baud_code_for(self.cfg.baud_codes, baud)
+        if "baud" not in self._pinned and code is not None:
+            self.baud_code = code
+
     def pkw_answer(self, req: PkwFrame) -> PkwFrame:
         """Execute one PKW task and return the response frame."""
         c = self.cfg
@@ -506,7 +518,8 @@ class ProfidriveModel(SlaveModel):
         elif array_req:
             return err("not_array")
         size = p.size if p is not None else 16
-        ok_ak = (4 if size == 16 else 5) if is_array else (1 if size == 16 else 2)
+        # a write is acknowledged in the width asked (WRITE_ACK), a read in the parameter's own width
+        ok_ak = WRITE_ACK.get(req.ak) or ((4 if size == 16 else 5) if is_array else (1 if size == 16 else 2))
         if not write:
             v = self.read_special(req.pnu, req.subindex)
             if v is None:

@@ -10,6 +10,8 @@ from profidrive_cli.checklist.fields import fmt
 from profidrive_cli.checklist.steps.base import StepFailed, StepType, rnd, status_dict
 
 STOP_MODES = ("normal", "quick", "coast")
+#: stop mode -> the capability the card must declare (drives/capabilities.py)
+STOP_CAPABILITY = {"quick": "quick_stop", "coast": "coast_stop"}
 DEFAULT_STOP_WITHIN_S = 30.0
 
 
@@ -22,6 +24,8 @@ class Stop(StepType):
         if mode not in STOP_MODES:
             check.fail(d.line_of("mode"), f"step {rs.index} (stop): mode must be normal, quick or coast, "
                        f"got {mode!r}")
+        elif mode in STOP_CAPABILITY:
+            check.need_capability(st, rs, STOP_CAPABILITY[mode], d.line_of("mode"))
         within = check.num(rs, d, "within", default=DEFAULT_STOP_WITHIN_S, positive=True)
         state["running"] = False
         return {"mode": mode, "within": within}, f"stop ({mode}), stopped within {fmt(within)} s"

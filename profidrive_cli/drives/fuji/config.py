@@ -224,7 +224,10 @@ def profidrive_config(profile) -> pd.ProfidriveConfig:
     # the manual gives no handshake; hold the request until answered, AK 0 between two identical
     # requests (so a retried request after error 104 is a new task)
     cfg.zero_between_identical = True
-    cfg.supported_requests = frozenset({1, 2, 6, 7, 9})
+    # Table 8.9 (spec 5.2): requests 3-5, 8, 10-15 and responses 2, 3, 5, 8-15 are "Not used"
+    cfg.supported_requests = frozenset({0, 1, 2, 6, 7, 9})
+    cfg.supported_responses = frozenset({0, 1, 4, 6, 7})
+    cfg.unsupported_text = "not used by this card"
     cfg.error_texts = dict(pd.GENERIC_ERRORS)
     cfg.error_texts.update(fc.errors)
     cfg.error_numbers.update({"unknown_pnu": 0, "read_only": 1, "out_of_range": 2, "bad_subindex": 3,

@@ -61,7 +61,7 @@ PNU 9xx helpers
         direction "setpoint" (915, master->drive) or "actual" (916, drive->master); slot 1 = PZD3
     fault_memory_requests(cfg) -> list[(position label, PkwFrame)]
     save_requests(pnu=971) -> [write 0, write 1]            the 0->1 edge
-    decode_baud(code, cfg) -> str;  decode_device_id(word, cfg) -> str
+    decode_baud(code, cfg) -> str;  decode_device_id(word, cfg) -> str;  baud_code_for(codes, baud)
 
 Per-card configuration (the profile's `profidrive:` section, validated with file:line errors)
     ProfidriveConfig.from_profile(profile);  config(profile) -> ProfidriveConfig (cached)
@@ -111,8 +111,8 @@ from profidrive_cli.drives.profidrive.pnu import (PNU_BAUD, PNU_CONTROL_RIGHTS, 
                                                   PNU_DEVICE_ID, PNU_EDIT_RIGHTS,
                                                   PNU_FAULT_NUMBER, PNU_NODE_ADDRESS, PNU_PROFILE,
                                                   PNU_PZD_ACTUAL, PNU_PZD_SETPOINT, PNU_SAVE,
-                                                  PNU_STATUS_WORD, decode_baud, decode_device_id,
-                                                  default_fault_positions, fault_memory_requests,
+                                                  PNU_STATUS_WORD, baud_code_for, decode_baud,
+                                                  decode_device_id, default_fault_positions, fault_memory_requests,
                                                   pzd_map_pnu, pzd_map_read, pzd_map_write,
                                                   save_requests)
 from profidrive_cli.drives.profidrive.ppo import (PKW_WORDS, PPO_TYPES, PpoArea, PpoLayout,
@@ -136,7 +136,7 @@ __all__ = ["ARRAY_REQUESTS", "CTW_NAMES", "CTW_ZERO_NAMES", "Ctw", "DERIVED_BITS
            "ProfidriveDrive", "REQUEST_TEXT", "RESPONSE_TEXT", "RUN_BITS", "STW_NAMES", "State",
            "Stw", "Target", "WRITE_REQUESTS", "bit_list", "bytes_to_words", "check_direction",
            "command_from_control_word", "config", "ctw_names", "decimals_for", "decode_area",
-           "decode_area_bytes", "decode_baud", "decode_device_id", "decode_pke",
+           "decode_area_bytes", "baud_code_for", "decode_baud", "decode_device_id", "decode_pke",
            "default_fault_positions", "describe_control_word", "describe_n2", "describe_pkw",
            "describe_status_word", "encode_area", "encode_pke", "fault_memory_requests",
            "format_value", "make_drive", "matches", "n2_from_hz", "n2_from_percent", "n2_to_hz",

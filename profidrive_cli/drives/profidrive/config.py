@@ -36,6 +36,9 @@ class ProfidriveConfig:
     zero_between_identical: bool = False
     max_zero_cycles: int = 20
     supported_requests: frozenset[int] | None = None
+    supported_responses: frozenset[int] | None = None
+    #: what decode appends to a request/response ID outside the card's sets ("not used by this card")
+    unsupported_text: str = "not supported by this card"
     error_texts: dict[int, str] = field(default_factory=lambda: dict(GENERIC_ERRORS))
     error_numbers: dict[str, int] = field(default_factory=lambda: dict(_DEFAULT_ERROR_NUMBERS))
     fault_memory_pnu: int = PNU_FAULT_NUMBER
@@ -90,7 +93,8 @@ class ProfidriveConfig:
         pkw = _map(path, sec, "pkw")
         if pkw:
             _unknown(path, pkw, {"timeout_s", "zero_after_error", "zero_between_identical",
-                                 "max_zero_cycles", "requests", "errors", "error_numbers"},
+                                 "max_zero_cycles", "requests", "responses", "unsupported_text",
+                                 "errors", "error_numbers"},
                      "profidrive.pkw")
             t = pkw.get("timeout_s", cfg.pkw_timeout)
             if not isinstance(t, (int, float)) or isinstance(t, bool) or t <= 0:
@@ -104,6 +108,12 @@ class ProfidriveConfig:
             cfg.max_zero_cycles = _int(path, pkw, "max_zero_cycles", cfg.max_zero_cycles)
             if "requests" in pkw:
                 cfg.supported_requests = frozenset(_int_list(path, pkw, "requests", 0, 15))
+            if "responses" in pkw:
+                cfg.supported_responses = frozenset(_int_list(path, pkw, "responses", 0, 15))
+            if "unsupported_text" in pkw:
+                if not isinstance(pkw["unsupported_text"], str) or not pkw["unsupported_text"].strip():
+                    raise _e(path, pkw, "unsupported_text", "pkw.unsupported_text must be a text")
+                cfg.unsupported_text = pkw["unsupported_text"]
             errs = _map(path, pkw, "errors")
             for k, v in errs.items():
                 if not isinstance(k, int) or not isinstance(v, str):

@@ -7,6 +7,7 @@ alarms and the card config; a family module may supply `param_value(profile, par
 from __future__ import annotations
 
 from profidrive_cli import UsageError
+from profidrive_cli.drives.formats import display_text
 from profidrive_cli.drives.profidrive.config import ProfidriveConfig, config
 from profidrive_cli.drives.profidrive.params import format_value, param_for
 from profidrive_cli.drives.profidrive.pkw import (ERROR_RESPONSES, REQUEST_TEXT, RESPONSE_TEXT,
@@ -36,6 +37,11 @@ def describe_pkw(profile, frame: PkwFrame, direction: str, cfg: ProfidriveConfig
     d: dict = {"pke": frame.pke, "ak": frame.ak, "ak_text": texts.get(frame.ak, "reserved"),
                "spm": frame.spm, "pnu": frame.pnu, "ind": frame.ind, "subindex": frame.subindex,
                "pwe": frame.value}
+    card = cfg.supported_requests if direction == "request" else cfg.supported_responses
+    if card is not None and frame.ak and frame.ak not in card:
+        # the generic PROFIdrive meaning, but the card's table says it does not use this ID
+        d["card_supported"] = False
+        d["ak_text"] += f" ({cfg.unsupported_text})"
     if frame.ak == 0:
         d["text"] = (f"PKE 0x{frame.pke:04X}: AK 0 ({d['ak_text']}); IND 0x{frame.ind:04X}; "
                      f"PWE 0x{frame.value:08X}")
@@ -103,7 +109,7 @@ def _value_text(profile, cfg: ProfidriveConfig, p, frame: PkwFrame, d: dict) -> 
     raw = frame.value & (0xFFFF if p.size == 16 else 0xFFFFFFFF)
     value = _family_value(profile, p, raw)
     d["raw"], d["value"], d["unit"] = raw, value, p.unit
-    return format_value(p, value, raw)
+    return display_text(profile, p, raw, value) or format_value(p, value, raw)
 
 
 def _family_value(profile, p, raw: int):

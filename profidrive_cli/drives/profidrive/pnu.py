@@ -7,6 +7,8 @@ fault_subindexes, fault_positions, baud_codes, device_ids); this module does not
 
 from __future__ import annotations
 
+import re
+
 from profidrive_cli.drives.profidrive.pkw import PkwFrame, read_request, write_request
 
 PNU_PZD_SETPOINT = 915
@@ -51,6 +53,16 @@ def save_requests(pnu: int = PNU_SAVE) -> list[PkwFrame]:
 def fault_memory_requests(cfg) -> list[tuple[str, PkwFrame]]:
     return [(pos, read_request(cfg.fault_memory_pnu, sub, array=True))
             for pos, sub in zip(cfg.fault_positions, cfg.fault_subindexes)]
+
+
+def baud_code_for(codes: dict[int, str], baud: int) -> int | None:
+    """The card's PNU 963 code for `baud` bit/s from its table (texts like '19.2k', '1.5 Mbit/s'): Moeller
+    0 = 12 Mbit/s ... 9 = 9.6 kbit/s (spec 6.3), Fuji 1 = 9.6k ... 10 = 12M; None when not listed."""
+    for code, text in codes.items():
+        m = re.fullmatch(r"\s*([\d.]+)\s*([kM])(?:bit/s)?\s*", str(text))
+        if m and round(float(m.group(1)) * (1000 if m.group(2) == "k" else 1000000)) == baud:
+            return code
+    return None
 
 
 def decode_baud(code: int, cfg) -> str:

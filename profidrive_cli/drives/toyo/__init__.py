@@ -34,6 +34,7 @@ from profidrive_cli.drives.toyo.codec import (RECORDING_TEXT, bit_names, ctw_com
 from profidrive_cli.drives.toyo.config import ToyoConfig, ToyoLayout, profidrive_config, toyo_config
 from profidrive_cli.drives.toyo.describe import decode_area, decode_diag, describe_pkw, describe_word
 from profidrive_cli.drives.toyo.drive import ToyoDrive, make_drive
+from profidrive_cli.drives.toyo.formats import FORMATTERS
 from profidrive_cli.drives.toyo.params import (_toyo_frame, effective_scale, param_at, param_value,
                                                value_from_wire, wire_from_value)
 
@@ -42,4 +43,5 @@ __all__ = ["ToyoConfig", "ToyoDrive", "make_drive", "decode_area", "param_value"
            "toyo_config", "speed_word", "speed_percent", "history_word", "decode_history_word",
            "traceback_ind", "decode_traceback_ind", "decode_diag", "protection", "describe_pkw",
            "ctw_command", "run_cmd_fields", "value_from_wire", "wire_from_value", "ToyoLayout",
-           "RECORDING_TEXT", "bit_names", "describe_word", "effective_scale", "param_at", "_toyo_frame"]
+           "RECORDING_TEXT", "bit_names", "describe_word", "effective_scale", "param_at", "_toyo_frame",
+           "FORMATTERS"]

@@ -276,8 +276,10 @@ class ToyoDrive(pd.ProfidriveDrive):
             self.extra_bits &= ~int(pd.Ctw.JOG1 | pd.Ctw.JOG2)
             return super().stop(mode, wait, timeout)
         if mode not in ("normal", "ramp", "off1"):
-            raise DriveError("mode 1 (Toyo original frame) has only the run bit: use a normal stop, or "
-                             "mode 0 (J-08 = 0) for coast / quick stops")
+            cap = {"quick": "quick_stop", "off3": "quick_stop"}.get(mode, "coast_stop")
+            # the words of the profile's capabilities (the same refusal as checklist validate)
+            raise DriveError(self.profile.capabilities.refusal(cap, self.layout)
+                             or "mode 1 (Toyo original frame) has only the run bit: use a normal stop")
         self.run_cmd &= ~0x3
         st = self.cycle()
         if not wait:

@@ -175,9 +175,9 @@ class YaskawaDrive(Drive):
             self.torque_reference = 0.0
         if mode == "quick":
             if self.cfg.fast_stop_input is None:
-                raise DriveError("yaskawa SI-P1: the command word has no fast-stop bit; program a "
-                                 "multi-function input for fast stop and name it in the profile "
-                                 "(yaskawa.fast_stop_input), or use a normal or coast stop")
+                # the words of the profile's capabilities (the same refusal as checklist validate)
+                raise DriveError(self.profile.capabilities.refusal("quick_stop", self.layout)
+                                 or "yaskawa SI-P1: the command word has no fast-stop bit")
             self._fast_stop = True
         elif mode == "coast":
             self._base_block = True     # external base block: output cut, the motor coasts

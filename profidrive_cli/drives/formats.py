@@ -1,0 +1,65 @@
+"""A parameter's value as text, by the profile's `format:` key: the one place every format is handled.
+
+    FORMATS                                 every `format:` name a profile may use
+    display_text(profile, param, raw, value) -> str | None   the value as the card's tables name it,
+                                            None for a plain number (shown with value_text)
+    formatter_for(profile, fmt)             the family's formatter (its module's FORMATTERS) or a
+                                            generic one (code, hex, bits)
+
+drives/profile.py refuses a `format:` not in FORMATS (file:line); tests/test_manual_tables.py checks
+that every format each shipped profile uses has a formatter for its family. Family formatters live in
+the family (Fuji function codes, M-codes, PNU947/963 in fuji/formats.py; Toyo bit tables, speed and
+history words in toyo/formats.py; Moeller's PNU 963 in moeller.py), found through drives.codec_module. No bus.
+"""
+
+from __future__ import annotations
+
+
+def hex_word(param, raw: int) -> str:
+    return f"0x{raw:0{8 if param.size == 32 else 4}X}"
+
+
+def _plain(profile, param, raw, value):
+    return None
+
+
+def _hex_text(profile, param, raw, value):
+    return hex_word(param, raw)
+
+
+#: every `format:` name a profile may use, and what it means
+FORMATS = {
+    "code": "a selection code: the number as the manual's table lists it",
+    "hex": "a word shown in hex",
+    "bits": "a bit field: hex, and the names of the set bits where the family names them (Toyo bits:)",
+    "fcode": "a function-code assignment group << 8 | number in four hex digits and the code (Fuji o40-o51)",
+    "alarm": "an inverter alarm code in the M-code numbering and its name (Fuji M16-M19)",
+    "alarm947": "a PNU947 fault-memory entry and every alarm it can stand for (Fuji: malfunction code in hex; "
+                "Moeller: Table 8 fault number)",
+    "baud": "the card's own baud-rate code and its rate (PNU963)",
+    "speed": "a signed speed word in percent of full scale (Toyo)",
+    "history": "a fault-history word: protection, inverter mode, block (Toyo)",
+}
+
+#: formatters every family shares; a family module adds or overrides its own in FORMATTERS
+GENERIC = {"code": _plain, "hex": _hex_text, "bits": _hex_text}
+
+
+def formatter_for(profile, fmt: str):
+    """The formatter(profile, param, raw, value) for `fmt` on this profile's family, or None."""
+    from profidrive_cli.drives import codec_module
+    fam = getattr(codec_module(profile), "FORMATTERS", {})
+    return fam.get(fmt) or GENERIC.get(fmt)
+
+
+def display_text(profile, param, raw: int | None, value) -> str | None:
+    """The value as text for a parameter with a `format:`; None when it is shown as a plain number."""
+    if param is None or raw is None or isinstance(raw, bool) or not isinstance(raw, int):
+        return None
+    fmt = param.extra.get("format")
+    if fmt is None:
+        return None
+    fn = formatter_for(profile, fmt)
+    if fn is None:
+        return hex_word(param, raw)
+    return fn(profile, param, raw, value)
