@@ -121,10 +121,13 @@ def _split_address(args: tuple[str, ...], min_rest: int) -> tuple[int | None, li
               flag_value=60.0, help="When the port goes away, wait up to S s (default 60) for it to "
               "come back and resume data exchange; the drive, stopped meanwhile by its watchdog, is "
               "not restarted.")
+@click.option("--monitor", "monitor_spec", default=None, metavar="CODE[,CODE...]|default",
+              help="Monitor values to read while running (the card's codes, e.g. d002,d013; 'default': "
+                   "the profile's set), shown live, in --json and in the --log CSV.")
 @bus_options
 @_terminations
 def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, reverse, duration, fmax,
-            cycle_hz, yes, log_path, reconnect_s):
+            cycle_hz, yes, log_path, reconnect_s, monitor_spec):
     """Run a drive at a speed and show it live; stops it safely on every exit.
 
     Keys (on a terminal): up/down change the speed, r reverses, space stops/starts, q quits.
@@ -149,14 +152,23 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
     what = f"run the drive at {speed_words}{' reverse' if reverse else ''}"
     if log_path is not None:                 # checked before the bus is opened: nothing moves first
         check_output_path(log_path, "--log")
+    mons = []                                # the Monitors, made once the profile is known
+
+    def before(sess):                        # --monitor checked before anything is asked or written
+        if monitor_spec is not None:
+            from profidrive_cli.session.monitors import Monitors, monitor_codes
+            mons.append(Monitors(sess, monitor_codes(sess.profile, sess.layout, monitor_spec)))
+            sess.log_extra = (mons[0].columns(), mons[0].row)
+        _confirmer(opts, yes, what)(sess)
     session = _session(opts, address, profile_name, ppo, fmt, watchdog_ms, cycle_hz=cycle_hz,
-                       before=_confirmer(opts, yes, what), log=log_path)
+                       before=before, log=log_path)
     view = R.RunView(mode)
     end = {"reason": "", "stop": None}
     started = False
     exit_code = 0
 
     def stopping(sample):                    # every stop, also the one on any exit, stays visible
+        view.monitors = None                 # no monitor reads during the stop: show none stale
         if not view.phase.startswith("stopping"):
             view.set_phase("stopping")
         view.update(sample)
@@ -173,7 +185,9 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
                         "fmax_hz": fmax_hz, "fmax_source": src, "reference_percent": round(pct, 4),
                         "reference_hz": round(pct * fmax_hz / 100.0, 3),
                         "cycle_hz_target": round(s.cycle_hz, 3), "wire_hz": round(s.wire_hz, 3),
-                        "watchdog_ms": s.watchdog_ms, "duration_s": duration, "warnings": s.warnings})
+                        "watchdog_ms": s.watchdog_ms, "duration_s": duration, "warnings": s.warnings,
+                        **({"monitors": R.monitor_header(mons[0])} if mons else {})})
+            view.monitors = mons[0] if mons else None
             if interactive:
                 view.hint = "up/down speed · r reverse · space stop/start · q quit"
             view.set_phase("starting")
@@ -206,6 +220,8 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
                             break
                         view.set_phase(f"stopped ({rep.how}) — space starts, q quits")
                         continue
+                    if mons:
+                        mons[0].poll()           # one monitor read per loop, round robin
                     view.update(sample)
                     if running and view.reached_after is None and _at_reference(sample):
                         view.reached_after = round(sample.t - t_start, 3)
@@ -275,6 +291,8 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
         end["cycles"] = session.cycles
         end["counters"] = session.counters
         end["warnings"] = session.warnings
+        if mons:
+            end["monitors"], end["monitors_dropped"] = mons[0].to_dict(), mons[0].dropped
         if view.header:
             view.finish(end)
     if exit_code:
@@ -550,6 +568,7 @@ def faults_cmd(opts, address, clear, yes, profile_name, ppo, fmt, watchdog_ms):
     with _session(opts, address, profile_name, ppo, fmt, watchdog_ms, before=before) as s:
         cur = s.status()
         history = s.fault_history()
+        trips = s.trip_records()
         if clear:
             if cur.status.fault:
                 after = s.clear_fault()
@@ -561,7 +580,8 @@ def faults_cmd(opts, address, clear, yes, profile_name, ppo, fmt, watchdog_ms):
     if opts.json:
         emit_json({"address": s.address, "profile": s.profile.name,
                    "current": {"fault": st.fault, "code": st.fault_code, "state": st.state},
-                   "history": [R.fault_json(r) for r in history], "cleared": cleared})
+                   "history": [R.fault_json(r) for r in history], "trip_records": trips.to_dict(),
+                   "cleared": cleared})
         return
     out.print(f"[bold]station {s.address}[/bold]: {escape(s.profile.name)} — current: "
               + (f"[red]fault {escape(st.fault_code or '(code not readable)')}[/red]" if st.fault
@@ -570,6 +590,7 @@ def faults_cmd(opts, address, clear, yes, profile_name, ppo, fmt, watchdog_ms):
         out.print(R.faults_table(history, "fault history"))
     else:
         out.print("fault history: empty")
+    R.print_trip_records(trips)
     if cleared is not None:
         if cleared["was"] is None and not st.fault:
             out.print("--clear: there was no fault to acknowledge")

@@ -1,0 +1,183 @@
+"""Monitor values while a drive runs (`run --monitor`) and the card's trip records (`faults`).
+
+Monitors are read through the parameter channel, one code per call of `Monitors.poll()`, round robin
+between the cycles the run loop makes: each read runs a few Data_Exchanges with the current command, so
+the drive keeps its control word and the safe stop is unaffected. A code the drive refuses is dropped
+once with a note (e.g. Moeller d012, torque, on a DF6). Trip records are read with the drive's own
+read_param on the codes the profile's `trip_records:` names (drives/monitors.py). No click, no rich.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from profidrive_cli import UsageError
+from profidrive_cli.drives.base import DriveError, ParamError
+from profidrive_cli.drives.monitors import monitor_config, trip_record_config
+
+NO_TRIP_RECORDS = "this card keeps no trip records"
+
+
+def monitor_codes(profile, layout: str, spec: str) -> list[str]:
+    """'default' or 'CODE[,CODE...]' (default may appear among codes) -> the profile's codes, in order.
+    Needs only the profile, so it runs before the bus is touched. Raises UsageError (exit 2) for a
+    code the profile does not have, a layout without a parameter channel, or no default set."""
+    codes: list[str] = []
+    for part in (p.strip() for p in spec.split(",")):
+        if not part:
+            continue
+        if part.lower() == "default":
+            d = monitor_config(profile).default
+            if not d:
+                raise UsageError(f"--monitor default: profile {profile.name} has no default monitor set")
+            codes.extend(d)
+        else:
+            codes.append(part)
+    if not codes:
+        raise UsageError("--monitor: give monitor codes (CODE[,CODE...]) or 'default'")
+    lay = profile.layouts.get(layout)
+    if lay is not None and not lay.pkw:
+        raise UsageError(f"--monitor: layout {layout} of {profile.name} has no parameter channel to read "
+                         f"monitors through (choose a layout with one)")
+    out: list[str] = []
+    for c in codes:
+        p = profile.param(c)
+        if p is None:
+            from profidrive_cli.session.params import suggest_codes
+            near = suggest_codes(profile, c)
+            raise UsageError(f"--monitor {c}: {profile.name} has no parameter {c}"
+                             + (f" (closest: {', '.join(near)})" if near else ""))
+        if p.code not in out:
+            out.append(p.code)
+    return out
+
+
+@dataclass
+class MonitorValue:
+    code: str
+    name: str
+    value: float | int | None = None
+    unit: str = ""
+    raw: int | None = None
+    t: float | None = None
+
+    def to_dict(self) -> dict:
+        return {"value": self.value, "unit": self.unit, "raw": self.raw,
+                "t": round(self.t, 3) if self.t is not None else None}
+
+
+@dataclass
+class Monitors:
+    """Round-robin reader of `codes` through `sess.read_param`."""
+    sess: object
+    codes: list[str]
+    values: dict[str, MonitorValue] = field(default_factory=dict)
+    dropped: dict[str, str] = field(default_factory=dict)
+    _i: int = 0
+
+    def __post_init__(self):
+        for c in self.codes:
+            p = self.sess.profile.param(c)
+            self.values[c] = MonitorValue(c, p.name, unit=p.unit or "")
+
+    @property
+    def active(self) -> list[str]:
+        return [c for c in self.codes if c not in self.dropped]
+
+    def poll(self) -> MonitorValue | None:
+        """Read the next monitor (a few Data_Exchanges); None when none is left. A refused read drops
+        the code (reason in .dropped, told once through the session's message hook)."""
+        act = self.active
+        if not act:
+            return None
+        code = act[self._i % len(act)]
+        self._i += 1
+        try:
+            pv = self.sess.read_param(code)
+        except ParamError as e:              # the drive refused it: it has no such monitor
+            self.dropped[code] = str(e)
+            self.sess._say(f"--monitor {code}: {e}; not monitored")
+            return None
+        except DriveError as e:              # no answer in time: keep the last value, try again later
+            self.sess._say(f"--monitor {code}: {e}")
+            return None
+        mv = self.values[code]
+        mv.value, mv.raw, mv.t = pv.value, pv.raw, self.sess.channel.now() - self.sess._t0
+        if pv.unit:
+            mv.unit = pv.unit
+        return mv
+
+    def poll_all(self) -> None:
+        for _ in list(self.active):
+            self.poll()
+
+    def to_dict(self) -> dict:
+        return {c: self.values[c].to_dict() for c in self.active}
+
+    def columns(self) -> list[str]:
+        """CSV column names: the native code with its unit ('d002 [A]')."""
+        return [f"{c} [{self.values[c].unit}]" if self.values[c].unit else c for c in self.codes]
+
+    def row(self) -> list[str]:
+        return ["" if self.values[c].value is None else f"{self.values[c].value:g}" for c in self.codes]
+
+
+@dataclass
+class TripRecord:
+    position: str
+    fields: list[dict]            # {code, name, value, unit, raw}
+
+    def to_dict(self) -> dict:
+        return {"position": self.position, "fields": self.fields}
+
+
+@dataclass
+class TripRecords:
+    supported: bool
+    records: list[TripRecord] = field(default_factory=list)
+    latest: int | None = None
+    note: str = ""
+
+    def to_dict(self) -> dict:
+        d = {"supported": self.supported, "records": [r.to_dict() for r in self.records]}
+        if self.latest is not None:
+            d["latest"] = self.latest
+        if self.note:
+            d["note"] = self.note
+        return d
+
+
+def trip_records(sess) -> TripRecords:
+    """The card's trip records as the profile's `trip_records:` describes them; empty records are
+    left out (a first field of 0, or a refused first read, as the section's `empty:` says)."""
+    cfg = trip_record_config(sess.profile)
+    if cfg is None:
+        return TripRecords(False, note=NO_TRIP_RECORDS)
+    drive = sess._need_drive()
+    if not drive.has_param_channel:
+        return TripRecords(True, note=f"layout {sess.layout} has no parameter channel: trip records "
+                                      f"not readable")
+    out = TripRecords(True)
+    if cfg.latest:
+        out.latest = int(sess.read_param(cfg.latest).raw)
+    for spec in cfg.records:
+        fields = []
+        for j, code in enumerate(spec.fields):
+            try:
+                pv = sess.read_param(code)
+            except ParamError:
+                if j == 0 and cfg.empty == "error":
+                    return out               # the first empty recording: no older ones
+                raise
+            fields.append({"code": pv.code, "name": pv.name, "value": pv.value, "unit": pv.unit,
+                           "raw": pv.raw})
+            if j == 0 and cfg.empty == "zero" and pv.raw == 0:
+                break
+        if cfg.empty == "zero" and fields and fields[0]["raw"] == 0:
+            continue
+        out.records.append(TripRecord(spec.position, fields))
+    return out
+
+
+__all__ = ["monitor_codes", "Monitors", "MonitorValue", "trip_records", "TripRecords", "TripRecord",
+           "NO_TRIP_RECORDS", "DriveError"]
