@@ -33,6 +33,7 @@ from collections import deque
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives import toyo as ty
 from profidrive_cli.drives.profidrive import Ctw, State
+from profidrive_cli.sim.motor import Motor
 from profidrive_cli.sim.profidrive_model import ProfidriveModel, _ramp
 
 # protection code -> (fault flag word 1 or 2, bit)
@@ -80,6 +81,7 @@ class ToyoModel(ProfidriveModel):
         self.samples: deque = deque(maxlen=self.tc.traceback_points)
         self.first_trip_seen = False
         self._trip_code = 0
+        self.motor = Motor(rated_v=200.0 if self.voltage_class == 200 else 400.0)
 
     # -- configuration -----------------------------------------------------------------------
     def check_cfg(self, cfg: bytes) -> bool:
@@ -189,16 +191,19 @@ class ToyoModel(ProfidriveModel):
                 self.freq = _ramp(self.freq, tgt, fmax / (acc if up else dec) * dt)
         else:
             super().tick(now)
+        self.motor.update(now, self.freq, self.state in (State.S4, State.S5) or self.freq != 0.0)
         if last is not None and now > last:
             self._sample()
 
-    def _sample(self) -> None:
+    def _sample(self, freq: float | None = None) -> None:
         fmax = self.max_frequency()
-        fw = ty.speed_word(self.profile, 100.0 * self.freq / fmax)
+        freq = self.freq if freq is None else freq
+        fw = ty.speed_word(self.profile, 100.0 * freq / fmax)
         rw = ty.speed_word(self.profile, self.ref_pct)
-        i = round(2357 * min(1.0, abs(self.freq) / fmax) * 0.3)
+        i = round(2357 * self.motor.current_a(fmax) / self.motor.rated_a)   # 2357 = 100 % rated
+        tq = round(self.motor.torque_pct(fmax) / 0.02)                        # TB07: 0.02 %/count
         ff1, ff2 = self.fault_flags()
-        self.samples.append((i, i, i, self._dc_raw(), self._vout_raw(), 0, rw, 0, fw, 0, 0, 400, ff1, ff2,
+        self.samples.append((i, i, i, self._dc_raw(), self._vout_raw(), 0, rw, tq & 0xFFFF, fw, 0, 0, 400, ff1, ff2,
                              self.status_flag() & 0x27FF, self.run_cmd & 0xFF))
 
     # -- state machine inputs per mode ----------------------------------------------------------
@@ -308,11 +313,13 @@ class ToyoModel(ProfidriveModel):
         fw = ty.speed_word(self.profile, 100.0 * self.freq / fmax)
         ff1, ff2 = self.fault_flags()
         running = self.freq != 0.0
-        cur = (abs(self.freq) / fmax * 8.0 + (2.0 if running else 0.0))   # a plausible current, A
+        cur = self.motor.current_a(fmax)          # sim/motor.py: load + acceleration
         p = self.profile.param("current")
         cur_raw = round(cur / p.scale) if p is not None and p.scale else 0
+        tq = self.profile.param("torque")
+        tq_raw = round(self.motor.torque_pct(fmax) / tq.scale) if tq is not None and tq.scale else 0
         table = {677: 0x0066, 678: 0x0100, 679: 0x0100, 680: self.status_flag(), 681: ff1, 682: ff2,
-                 683: self.mf_output(), 684: fw, 685: fw, 686: cur_raw, 687: round(abs(self.freq) / fmax * 1500),
+                 683: self.mf_output(), 684: fw, 685: fw, 686: cur_raw, 687: max(-32768, min(32767, tq_raw)),
                  688: self._dc_raw(), 689: self._vout_raw(), 690: fw, 691: 0, 692: 400,
                  693: 1024 if running else 0}
         return table.get(pnu, 0) & 0xFFFF
@@ -404,7 +411,7 @@ class ToyoModel(ProfidriveModel):
         self.first_trip_seen = True
         self.trip_log.insert(0, ty.history_word(number, self.inverter_mode, self.block))
         del self.trip_log[len(self.tc.history_indexes):]
-        self._sample()
+        self._sample(self.last_trip[1] if self.last_trip else None)   # the moment of the trip
         rec = list(self.samples)
         rec = [(0,) * 16] * (self.tc.traceback_points - len(rec)) + rec     # always 100 points
         self.recordings.insert(0, rec)
