@@ -205,3 +205,42 @@ def test_monitors_and_trip_records_over_a_pty():
         assert end["monitors"]["current"]["value"] > 0 and end["monitors"]["dc-voltage"]["value"] == 283.0
     finally:
         assert _stop(sim) == 0
+
+
+# -- the cyclic words: Moeller PZD3.. via PNU 916 (restored after), Fuji PCD1-4 as o48-o51 assign them ------
+
+def test_moeller_ppo2_maps_monitors_into_pzd3_and_restores_pnu916(sim, pdrive):
+    before = [p["raw"] for p in json.loads(ok(pdrive("param", "get", "6", "PNU916[1]", "PNU916[2]",
+                                                      "PNU916[3]", "--ppo", "2", "--json")).stdout)["parameters"]]
+    assert before == [0, 0, 0]
+    r = ok(pdrive("run", "6", "--ppo", "2", "--hz", "20", "--duration", "8", "--monitor", "default", "--json"))
+    mon = _end(r)["monitors"]
+    # d001 is 4 octets: not mappable (spec: PZD words are 2 octets) -> parameter channel;
+    # d002 (PNU 407) and d013 (PNU 417) into PZD3/PZD4; d012 is DV6-only and refused on the DF6
+    assert {c: v["via"] for c, v in mon.items()} == {"d001": "parameter channel", "d002": "cyclic",
+                                                     "d013": "cyclic"}
+    assert mon["d013"]["value"] == pytest.approx(160.0, abs=0.1)
+    ups = [x for x in lines(r) if x.get("event") == "update" and x["raw"].get("pzd3")
+           and x.get("monitors", {}).get("d013", {}).get("raw")]
+    assert ups and ups[-1]["raw"]["pzd4"] == ups[-1]["monitors"]["d013"]["raw"]     # the word itself
+    after = [p["raw"] for p in json.loads(ok(pdrive("param", "get", "6", "PNU916[1]", "PNU916[2]",
+                                                     "PNU916[3]", "--ppo", "2", "--json")).stdout)["parameters"]]
+    assert after == [0, 0, 0]
+
+
+def test_fuji_reads_a_monitor_from_the_pcd_word_o48_assigns(sim, pdrive):
+    # TV17 style: assignment word = group << 8 | number; M = group 3, M12 -> 0x030C
+    ok(pdrive("param", "set", "3", "o49", "0x030C", "--ppo", "2", "--yes"))
+    r = ok(pdrive("run", "3", "--ppo", "2", "--hz", "30", "--duration", "8", "--monitor", "default", "--json"))
+    mon = _end(r)["monitors"]
+    assert mon["M12"]["via"] == "cyclic" and mon["M11"]["via"] == "parameter channel"
+    assert mon["M12"]["value"] == pytest.approx(200.0, abs=0.1)            # 400 V * 30/60 Hz
+    assert mon["M09"]["value"] == pytest.approx(30.0, abs=0.01)
+    assert mon["M07"]["value"] == pytest.approx(30.0, abs=0.05)
+    assert mon["M11"]["value"] == pytest.approx(42.43, abs=0.05)            # 100 * hypot(0.3, 0.3)
+
+
+@pytest.mark.parametrize("address,units", [(3, ["Hz", "%", "V", "%"]), (4, ["Hz", "%", "V", "%"])])
+def test_fuji_default_monitors_have_units(pdrive, address, units):
+    r = ok(pdrive("run", str(address), "--hz", "10", "--duration", "1", "--monitor", "default", "--json"))
+    assert [m["unit"] for m in lines(r)[0]["monitors"]] == units

@@ -159,7 +159,9 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
             from profidrive_cli.session.monitors import Monitors, monitor_codes
             mons.append(Monitors(sess, monitor_codes(sess.profile, sess.layout, monitor_spec)))
             sess.log_extra = (mons[0].columns(), mons[0].row)
-        _confirmer(opts, yes, what)(sess)
+        maps = mons and sess.profile.family == "moeller" and sess.profile.layouts[sess.layout].input_len > 12
+        _confirmer(opts, yes, what + (" (--monitor maps PNU 916 for the session and restores it after)"
+                                      if maps else ""))(sess)
     session = _session(opts, address, profile_name, ppo, fmt, watchdog_ms, cycle_hz=cycle_hz,
                        before=before, log=log_path)
     view = R.RunView(mode)
@@ -176,6 +178,8 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
     try:
         with session as s:
             fmax_hz, src = s.fmax(fmax)
+            if mons:
+                mons[0].map_cyclic()            # before the start; restored after the stop
             pct = percent if percent is not None else s.percent_for_hz(hz, fmax)
             if reverse:
                 pct = -abs(pct)

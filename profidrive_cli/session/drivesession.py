@@ -91,6 +91,8 @@ class DriveSession:
         self.cyclelog: CycleLog | None = None
         #: (column names, row()) the --log CSV writes beside each exchange (set before connecting)
         self.log_extra = None
+        #: called with link_ok after the safe stop on close, before the station is released
+        self.after_stop: list[Callable[[bool], None]] = []
 
 
     # -- messages ------------------------------------------------------------------------------

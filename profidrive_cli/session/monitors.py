@@ -1,6 +1,11 @@
 """Monitor values while a drive runs (`run --monitor`) and the card's trip records (`faults`).
 
-Monitors are read through the parameter channel, one code per call of `Monitors.poll()`, round robin
+Cyclic words first: where the layout has parameter words in its input (PPO2/4/5 beyond STW/MAV),
+  * Moeller: a monitor of at most 2 octets is mapped into PZD3..PZD10 with PNU 916 (volatile, spec
+    2.4 / manual example 2) for the session; Monitors.restore() writes the old assignment back;
+  * Fuji: o48..o51 (= PNU 916) need a power cycle after a change (spec 2.4), so nothing is written:
+    a monitor already assigned to a response PCD word is read from it, the others through the PKW.
+The rest through the parameter channel, one code per call of `Monitors.poll()`, round robin
 between the cycles the run loop makes: each read runs a few Data_Exchanges with the current command, so
 the drive keeps its control word and the safe stop is unaffected. A code the drive refuses is dropped
 once with a note (e.g. Moeller d012, torque, on a DF6). Trip records are read with the drive's own
@@ -73,6 +78,10 @@ class Monitors:
     codes: list[str]
     values: dict[str, MonitorValue] = field(default_factory=dict)
     dropped: dict[str, str] = field(default_factory=dict)
+    #: code -> input PZD index (0-based, STW = 0) of the monitors carried in the cyclic words
+    cyclic: dict[str, int] = field(default_factory=dict)
+    #: (assignment code, old value) to write back on restore()
+    saved_map: list = field(default_factory=list)
     _i: int = 0
 
     def __post_init__(self):
@@ -84,10 +93,83 @@ class Monitors:
     def active(self) -> list[str]:
         return [c for c in self.codes if c not in self.dropped]
 
+    # -- the cyclic words ---------------------------------------------------------------------
+    def map_cyclic(self) -> list[str]:
+        """Put the monitors into the layout's cyclic input words where the card allows (see the
+        module's text). Returns the codes now carried cyclically. Call before the motor starts."""
+        sess = self.sess
+        drive = sess._need_drive()
+        ppo = getattr(drive, "ppo", None)
+        if ppo is None or ppo.pzd_in <= 2 or not drive.has_param_channel:
+            return []
+        fam = sess.profile.family
+        slots = list(range(1, ppo.pzd_in - 1))            # PNU 916 subindex n = input word PZD(n+2)
+        if fam == "fuji":
+            from profidrive_cli.drives.fuji.codes import pcd_assignment_code
+            for n in slots:
+                word = int(sess.read_param(f"o{47 + n}").raw)
+                code = pcd_assignment_code(sess.profile, word)
+                if code in self.codes and code not in self.cyclic:
+                    self.cyclic[code] = 1 + n
+        elif fam == "moeller":
+            free = list(slots)
+            for c in self.codes:
+                p = sess.profile.param(c)
+                if not free or p is None or p.pnu is None or p.size != 16 or c in self.cyclic:
+                    continue
+                n = free.pop(0)
+                key = f"PNU916[{n}]"
+                old = int(sess.read_param(key).raw)
+                try:
+                    sess.write_param(key, p.pnu)
+                except ParamError as e:
+                    sess._say(f"--monitor {c}: not mapped into PZD{n + 2} ({e}); read through the PKW")
+                    continue
+                if not self.saved_map:
+                    sess.after_stop.append(self.restore)
+                self.saved_map.append((key, old))
+                self.cyclic[c] = 1 + n
+        return list(self.cyclic)
+
+    def restore(self, link_ok: bool = True) -> list[str]:
+        """Write the PZD assignment back as it was (DriveSession.after_stop calls it after the safe
+        stop, on every exit); what could not be restored is said and returned, one line each."""
+        if not link_ok:
+            failed = [f"{k} not restored to {old} (link lost)" for k, old in self.saved_map]
+            self.saved_map.clear()
+            for f in failed:
+                self.sess._say(f"--monitor: {f}")
+            return failed
+        failed = []
+        while self.saved_map:
+            key, old = self.saved_map.pop()
+            try:
+                self.sess.write_param(key, old)
+            except Exception as e:            # noqa: BLE001  (the link may be gone: say what is left)
+                failed.append(f"{key} not restored to {old} ({e})")
+        for f in failed:
+            self.sess._say(f"--monitor: {f}")
+        return failed
+
+    def _read_cyclic(self) -> None:
+        drive = self.sess.drive
+        area = getattr(drive, "last_area", None)
+        if area is None or not self.cyclic:
+            return
+        t = self.sess.channel.now() - self.sess._t0
+        for c, i in self.cyclic.items():
+            if i >= len(area.pzd):
+                continue
+            ref = drive.resolve_param(c)
+            pv = drive._param_value(ref, area.pzd[i])
+            mv = self.values[c]
+            mv.value, mv.raw, mv.t = pv.value, pv.raw, t
+
     def poll(self) -> MonitorValue | None:
         """Read the next monitor (a few Data_Exchanges); None when none is left. A refused read drops
         the code (reason in .dropped, told once through the session's message hook)."""
-        act = self.active
+        self._read_cyclic()
+        act = [c for c in self.active if c not in self.cyclic]
         if not act:
             return None
         code = act[self._i % len(act)]
@@ -107,12 +189,9 @@ class Monitors:
             mv.unit = pv.unit
         return mv
 
-    def poll_all(self) -> None:
-        for _ in list(self.active):
-            self.poll()
-
     def to_dict(self) -> dict:
-        return {c: self.values[c].to_dict() for c in self.active}
+        return {c: {**self.values[c].to_dict(), "via": "cyclic" if c in self.cyclic else "parameter channel"}
+                for c in self.active}
 
     def columns(self) -> list[str]:
         """CSV column names: the native code with its unit ('d002 [A]')."""

@@ -23,7 +23,7 @@ from __future__ import annotations
 from profidrive_cli.drives import moeller as mo
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.profidrive import Ctw, State
-from profidrive_cli.sim.motor import Motor
+from profidrive_cli.sim.motor import Motor, store
 from profidrive_cli.sim.profidrive_model import ProfidriveModel
 
 DEVICE_IDS = {"DF6": 0x812C, "DV6": 0x012C}
@@ -113,6 +113,10 @@ class MoellerModel(ProfidriveModel):
         p = pd.param_for(self.profile, req.pnu, req.subindex)
         if p is not None and p.extra.get("df6") is False and self.device == "DF6" and req.ak:
             return pd.PkwFrame(7, req.pnu, req.subindex, self.cfg.error_numbers["unknown_pnu"])
+        if req.ak == 7 and req.pnu in (915, 916) and self.device == "DF6":
+            q = pd.param_for(self.profile, req.value & 0xFFFF)        # a DV6-only parameter cannot be
+            if q is not None and q.extra.get("df6") is False:          # mapped on a DF6 either
+                return pd.PkwFrame(7, req.pnu, req.subindex, self.cfg.error_numbers["out_of_range"])
         return super().pkw_answer(req)
 
     # -- dynamics ----------------------------------------------------------------------------
@@ -125,15 +129,8 @@ class MoellerModel(ProfidriveModel):
         fmax = self.max_frequency()
         for code, v in (("d001", abs(self.freq)), ("d002", self.motor.current_a(fmax)),
                         ("d013", self.motor.voltage_v(fmax)), ("d012", self.motor.torque_pct(fmax))):
-            self._set_monitor(code, v)
+            store(self, code, v)
 
-    def _set_monitor(self, code: str, value: float) -> None:
-        p = self.profile.param(code)
-        if p is None:
-            return
-        lo, hi = p.min if p.min is not None else value, p.max if p.max is not None else value
-        v = min(max(value, lo), hi)
-        self.values[p.code] = self.wire_from_value(p, round(v / p.scale) * p.scale if p.scale else round(v))
 
     def comm_loss_action(self) -> tuple[str, str | None]:
         if self._raw(self.mc.comm_loss_param) == 0:

@@ -54,3 +54,15 @@ class Motor:
 
     def dc_link_v(self) -> float:
         return self.dc_v * (1.0 + self.ripple * math.sin(2.0 * math.pi * 300.0 * self.t))
+
+
+def store(model, code: str, value: float) -> None:
+    """Put an engineering value into a model's parameter store as its wire value: clamped to the
+    parameter's range, rounded to its step. Nothing when the profile has no such code."""
+    p = model.profile.param(code)
+    if p is None:
+        return
+    lo = p.min if p.min is not None else value
+    hi = p.max if p.max is not None else value
+    v = min(max(value, lo), hi)
+    model.values[p.code] = model.wire_from_value(p, round(v / p.scale) * p.scale if p.scale else round(v))
