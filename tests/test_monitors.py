@@ -41,8 +41,9 @@ def test_every_default_monitor_and_trip_record_code_is_one_the_profile_has():
     import re
     seen = 0
     for prof in all_profiles():
-        for c in monitor_config(prof).default:
-            assert prof.param(c) is not None, (prof.name, c)
+        mc = monitor_config(prof)
+        for c in mc.default:
+            assert prof.param(c) is not None or c in mc.words, (prof.name, c)
             seen += 1
         tr = trip_record_config(prof)
         for rec in (tr.records if tr else []):
@@ -244,3 +245,22 @@ def test_fuji_reads_a_monitor_from_the_pcd_word_o48_assigns(sim, pdrive):
 def test_fuji_default_monitors_have_units(pdrive, address, units):
     r = ok(pdrive("run", str(address), "--hz", "10", "--duration", "1", "--monitor", "default", "--json"))
     assert [m["unit"] for m in lines(r)[0]["monitors"]] == units
+
+
+# -- Yaskawa: the fast-I/O input words (spec 2.4: output current = rating / 8192 per count) ---------------
+
+@pytest.mark.parametrize("fmt,expect", [
+    ("extended1", {"output-current", "torque-reference", "PWR"}),
+    ("basic", {"output-current"}),                 # 3-word message: current only, no parameter access
+    ("extended2", {"PWR"}),                        # 6-word message: no current word
+])
+def test_yaskawa_default_monitors_per_layout(pdrive, fmt, expect):
+    r = ok(pdrive("run", "7", "--format", fmt, "--hz", "30", "--duration", "6", "--monitor", "default", "--json"))
+    mon = _end(r)["monitors"]
+    assert set(mon) == expect
+    if "output-current" in mon:
+        # the simulated drive: 30 % + 50 % * f/fmax of its rating at steady speed (sim/yaskawa.py);
+        # 30 of 60 Hz -> 55 % -> round(0.55 * 8192) = 4506 counts -> 4506 * 100 / 8192 %
+        assert mon["output-current"]["raw"] == 4506
+        assert mon["output-current"]["value"] == pytest.approx(4506 * 100 / 8192)
+        assert mon["output-current"]["unit"] == "%"

@@ -225,7 +225,7 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
                         view.set_phase(f"stopped ({rep.how}) — space starts, q quits")
                         continue
                     if mons:
-                        mons[0].poll()           # one monitor read per loop, round robin
+                        mons[0].poll(sample)     # one monitor read per loop, round robin
                     view.update(sample)
                     if running and view.reached_after is None and _at_reference(sample):
                         view.reached_after = round(sample.t - t_start, 3)

@@ -6,6 +6,8 @@ parameter, or a family address form such as Toyo's TB03[0,99]).
 
     monitors:
       default: [d002, d013, d012]        # codes, in display order
+      words:                             # cyclic input words shown as monitors (Yaskawa fast I/O)
+        output-current: {word: current, name: Output current, unit: "%", scale: 0.01220703125}
     trip_records:
       latest: PNU354                     # optional: which record is the newest (1-based)
       empty: zero                        # zero: a record whose first field reads 0 is empty;
@@ -22,8 +24,19 @@ from profidrive_cli.datafile import DataFileError, LineDict, LineList
 
 
 @dataclass
+class MonitorWord:
+    code: str
+    word: str                     # the family's name of the input word (DriveStatus.raw key)
+    name: str
+    unit: str = ""
+    scale: float = 1.0
+    signed: bool = False
+
+
+@dataclass
 class MonitorConfig:
     default: list[str] = field(default_factory=list)
+    words: dict[str, MonitorWord] = field(default_factory=dict)
 
 
 @dataclass
@@ -59,9 +72,18 @@ def monitor_config(profile) -> MonitorConfig:
     if not isinstance(doc, dict):
         raise DataFileError(profile.path, _line(profile.raw, "monitors"), "'monitors' must be a mapping")
     for k in doc:
-        if k != "default":
+        if k not in ("default", "words"):
             raise DataFileError(profile.path, _line(doc, k), f"monitors: unknown key '{k}'")
-    return MonitorConfig(_codes(profile, doc, "default", doc.get("default")))
+    words = {}
+    for code, w in (doc.get("words") or {}).items():
+        if not isinstance(w, dict) or not isinstance(w.get("word"), str) \
+                or not isinstance(w.get("scale", 1.0), (int, float)):
+            raise DataFileError(profile.path, _line(doc["words"], code),
+                                f"monitors.words.{code}: {{word: NAME, name: TEXT, unit: U, scale: NUMBER}}")
+        words[str(code)] = MonitorWord(str(code), w["word"], str(w.get("name", code)), str(w.get("unit", "")),
+                                       float(w.get("scale", 1.0)), bool(w.get("signed", False)))
+    default = _codes(profile, doc, "default", doc.get("default"))
+    return MonitorConfig(default, words)
 
 
 def trip_record_config(profile) -> TripRecordConfig | None:

@@ -27,6 +27,9 @@ def monitor_codes(profile, layout: str, spec: str) -> list[str]:
     """'default' or 'CODE[,CODE...]' (default may appear among codes) -> the profile's codes, in order.
     Needs only the profile, so it runs before the bus is touched. Raises UsageError (exit 2) for a
     code the profile does not have, a layout without a parameter channel, or no default set."""
+    words = monitor_config(profile).words
+    lay = profile.layouts.get(layout)
+    pkw = lay is None or lay.pkw
     codes: list[str] = []
     for part in (p.strip() for p in spec.split(",")):
         if not part:
@@ -35,17 +38,23 @@ def monitor_codes(profile, layout: str, spec: str) -> list[str]:
             d = monitor_config(profile).default
             if not d:
                 raise UsageError(f"--monitor default: profile {profile.name} has no default monitor set")
-            codes.extend(d)
+            # without a parameter channel the default set keeps what the cyclic words carry
+            codes.extend(c for c in d if pkw or c in words)
         else:
             codes.append(part)
     if not codes:
-        raise UsageError("--monitor: give monitor codes (CODE[,CODE...]) or 'default'")
-    lay = profile.layouts.get(layout)
-    if lay is not None and not lay.pkw:
+        raise UsageError("--monitor: give monitor codes (CODE[,CODE...]) or 'default'" if pkw else
+                         f"--monitor: layout {layout} of {profile.name} has no parameter channel to read "
+                         f"monitors through (choose a layout with one)")
+    if not pkw and any(c not in words for c in codes):
         raise UsageError(f"--monitor: layout {layout} of {profile.name} has no parameter channel to read "
                          f"monitors through (choose a layout with one)")
     out: list[str] = []
     for c in codes:
+        if c in words:
+            if c not in out:
+                out.append(c)
+            continue
         p = profile.param(c)
         if p is None:
             from profidrive_cli.session.params import suggest_codes
@@ -85,7 +94,12 @@ class Monitors:
     _i: int = 0
 
     def __post_init__(self):
+        self.words = monitor_config(self.sess.profile).words
         for c in self.codes:
+            w = self.words.get(c)
+            if w is not None:
+                self.values[c] = MonitorValue(c, w.name, unit=w.unit)
+                continue
             p = self.sess.profile.param(c)
             self.values[c] = MonitorValue(c, p.name, unit=p.unit or "")
 
@@ -99,9 +113,19 @@ class Monitors:
         module's text). Returns the codes now carried cyclically. Call before the motor starts."""
         sess = self.sess
         drive = sess._need_drive()
+        in_words = getattr(getattr(drive, "fmt", None), "in_words", ())
+        for c in self.codes:                             # the family's own input words
+            w = self.words.get(c)
+            if w is None:
+                continue
+            if w.word in in_words:
+                self.cyclic[c] = -1
+            else:
+                self.dropped[c] = f"layout {sess.layout} has no '{w.word}' input word"
+                sess._say(f"--monitor {c}: {self.dropped[c]}; not monitored")
         ppo = getattr(drive, "ppo", None)
         if ppo is None or ppo.pzd_in <= 2 or not drive.has_param_channel:
-            return []
+            return list(self.cyclic)
         fam = sess.profile.family
         slots = list(range(1, ppo.pzd_in - 1))            # PNU 916 subindex n = input word PZD(n+2)
         if fam == "fuji":
@@ -151,24 +175,32 @@ class Monitors:
             self.sess._say(f"--monitor: {f}")
         return failed
 
-    def _read_cyclic(self) -> None:
+    def _read_cyclic(self, sample=None) -> None:
         drive = self.sess.drive
         area = getattr(drive, "last_area", None)
-        if area is None or not self.cyclic:
-            return
         t = self.sess.channel.now() - self.sess._t0
         for c, i in self.cyclic.items():
-            if i >= len(area.pzd):
+            w = self.words.get(c)
+            if w is not None:
+                raw = sample.status.raw.get(w.word) if sample is not None else None
+                if raw is not None:
+                    v = raw - 0x10000 if w.signed and raw & 0x8000 else raw
+                    mv = self.values[c]
+                    mv.value, mv.raw, mv.t = round(v * w.scale, 6), raw, t
+                continue
+            if area is None or i >= len(area.pzd):
                 continue
             ref = drive.resolve_param(c)
             pv = drive._param_value(ref, area.pzd[i])
             mv = self.values[c]
             mv.value, mv.raw, mv.t = pv.value, pv.raw, t
 
-    def poll(self) -> MonitorValue | None:
-        """Read the next monitor (a few Data_Exchanges); None when none is left. A refused read drops
-        the code (reason in .dropped, told once through the session's message hook)."""
-        self._read_cyclic()
+    def poll(self, sample=None) -> MonitorValue | None:
+        """Take the cyclic monitors from the last exchange (`sample`: the last Sample, for the
+        family's own input words), then read the next other monitor through the parameter channel
+        (a few Data_Exchanges); None when none is left. A refused read drops the code (reason in
+        .dropped, told once through the session's message hook)."""
+        self._read_cyclic(sample)
         act = [c for c in self.active if c not in self.cyclic]
         if not act:
             return None
