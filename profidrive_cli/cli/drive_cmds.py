@@ -152,16 +152,12 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
     what = f"run the drive at {speed_words}{' reverse' if reverse else ''}"
     if log_path is not None:                 # checked before the bus is opened: nothing moves first
         check_output_path(log_path, "--log")
-    mons = []                                # the Monitors, made once the profile is known
+    mons = []                                # --monitor: checked before anything is asked or written
 
-    def before(sess):                        # --monitor checked before anything is asked or written
-        if monitor_spec is not None:
-            from profidrive_cli.session.monitors import Monitors, monitor_codes
-            mons.append(Monitors(sess, monitor_codes(sess.profile, sess.layout, monitor_spec)))
-            sess.log_extra = (mons[0].columns(), mons[0].row)
-        maps = mons and sess.profile.family == "moeller" and sess.profile.layouts[sess.layout].input_len > 12
-        _confirmer(opts, yes, what + (" (--monitor maps PNU 916 for the session and restores it after)"
-                                      if maps else ""))(sess)
+    def before(sess):
+        from profidrive_cli.session.monitors import setup_monitors
+        mons.extend([setup_monitors(sess, monitor_spec)] if monitor_spec is not None else [])
+        _confirmer(opts, yes, what + (mons[0].question_note() if mons else ""))(sess)
     session = _session(opts, address, profile_name, ppo, fmt, watchdog_ms, cycle_hz=cycle_hz,
                        before=before, log=log_path)
     view = R.RunView(mode)

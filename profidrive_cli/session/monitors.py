@@ -66,6 +66,14 @@ def monitor_codes(profile, layout: str, spec: str) -> list[str]:
     return out
 
 
+def setup_monitors(sess, spec: str) -> "Monitors":
+    """--monitor SPEC for a session whose profile and layout are known (before it connects): the
+    checked Monitors, its columns added to the --log CSV."""
+    mons = Monitors(sess, monitor_codes(sess.profile, sess.layout, spec))
+    sess.log_extra = (mons.columns(), mons.row)
+    return mons
+
+
 @dataclass
 class MonitorValue:
     code: str
@@ -106,6 +114,13 @@ class Monitors:
     @property
     def active(self) -> list[str]:
         return [c for c in self.codes if c not in self.dropped]
+
+    def question_note(self) -> str:
+        """What the confirmation before a real-port run adds: the mapping map_cyclic() will write."""
+        lay = self.sess.profile.layouts.get(self.sess.layout)
+        if self.sess.profile.family == "moeller" and lay is not None and lay.pkw and lay.input_len > 12:
+            return " (--monitor maps PNU 916 for the session and restores it after)"
+        return ""
 
     # -- the cyclic words ---------------------------------------------------------------------
     def map_cyclic(self) -> list[str]:
