@@ -264,3 +264,25 @@ def test_yaskawa_default_monitors_per_layout(pdrive, fmt, expect):
         assert mon["output-current"]["raw"] == 4506
         assert mon["output-current"]["value"] == pytest.approx(4506 * 100 / 8192)
         assert mon["output-current"]["unit"] == "%"
+
+
+def test_pnu916_is_restored_also_when_the_drive_trips_mid_run(sim, pdrive):
+    port = "sim://?drivetrip=0.005&only=6&seed=2"
+    r = pdrive("run", "6", "--ppo", "2", "--hz", "30", "--duration", "20", "--monitor", "d002,d013", "--json",
+               port=port)
+    assert r.exit_code == 1 and "tripped" in r.stderr, r.output
+    assert {c: v["via"] for c, v in _end(r)["monitors"].items()} == {"d002": "cyclic", "d013": "cyclic"}
+    got = json.loads(ok(pdrive("param", "get", "6", "PNU916[1]", "PNU916[2]", "--ppo", "2", "--json",
+                               port=port)).stdout)["parameters"]
+    assert [p["raw"] for p in got] == [0, 0]
+
+
+def test_the_question_before_a_real_port_run_names_the_pnu916_mapping():
+    from types import SimpleNamespace
+    from profidrive_cli.session.monitors import Monitors
+    for layout, note in (("ppo2", True), ("ppo5", True), ("ppo1", False)):
+        sess = SimpleNamespace(profile=load_profile("moeller"), layout=layout)
+        m = Monitors(sess, ["d002"])
+        assert ("maps PNU 916" in m.question_note()) is note, layout
+    sess = SimpleNamespace(profile=load_profile("fuji-g1"), layout="ppo2")
+    assert Monitors(sess, ["M11"]).question_note() == ""      # Fuji: nothing is written
