@@ -195,10 +195,9 @@ class ToyoModel(ProfidriveModel):
         if last is not None and now > last:
             self._sample()
 
-    def _sample(self, freq: float | None = None) -> None:
+    def _sample(self) -> None:
         fmax = self.max_frequency()
-        freq = self.freq if freq is None else freq
-        fw = ty.speed_word(self.profile, 100.0 * freq / fmax)
+        fw = ty.speed_word(self.profile, 100.0 * self.freq / fmax)
         rw = ty.speed_word(self.profile, self.ref_pct)
         i = round(2357 * self.motor.current_a(fmax) / self.motor.rated_a)   # 2357 = 100 % rated
         tq = round(self.motor.torque_pct(fmax) / 0.02)                        # TB07: 0.02 %/count
@@ -411,7 +410,7 @@ class ToyoModel(ProfidriveModel):
         self.first_trip_seen = True
         self.trip_log.insert(0, ty.history_word(number, self.inverter_mode, self.block))
         del self.trip_log[len(self.tc.history_indexes):]
-        self._sample(self.last_trip[1] if self.last_trip else None)   # the moment of the trip
+        self._sample()
         rec = list(self.samples)
         rec = [(0,) * 16] * (self.tc.traceback_points - len(rec)) + rec     # always 100 points
         self.recordings.insert(0, rec)
