@@ -222,6 +222,7 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
                         continue
                     if mons:
                         mons[0].poll(sample)     # one monitor read per loop, round robin
+                        view.monitors = mons[0]  # shown again after a stop (space) and start
                     view.update(sample)
                     if running and view.reached_after is None and _at_reference(sample):
                         view.reached_after = round(sample.t - t_start, 3)
