@@ -127,10 +127,13 @@ def _split_address(args: tuple[str, ...], min_rest: int) -> tuple[int | None, li
               flag_value=60.0, help="When the port goes away, wait up to S s (default 60) for it to "
               "come back and resume data exchange; the drive, stopped meanwhile by its watchdog, is "
               "not restarted.")
+@click.option("--monitor", "monitor_spec", default=None, metavar="CODE[,CODE...]|default",
+              help="Monitor values to read while running (the card's codes, e.g. d002,d013; 'default': "
+                   "the profile's set), shown live, in --json and in the --log CSV.")
 @bus_options
 @_terminations
 def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, reverse, torque, torque_limit,
-            duration, fmax, cycle_hz, yes, log_path, reconnect_s):
+            duration, fmax, cycle_hz, yes, log_path, reconnect_s, monitor_spec):
     """Run a drive at a speed (or a torque) and show it live; stops it safely on every exit.
 
     Keys (on a terminal): up/down change the speed (the torque with --torque), r reverses, space
@@ -153,15 +156,21 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
     torque, percent, what = run_torque.prepare(hz, percent, reverse, torque, torque_limit)
     if log_path is not None:                 # checked before the bus is opened: nothing moves first
         check_output_path(log_path, "--log")
+    mons = []                                # --monitor: checked before anything is asked or written
+
+    def before(sess):
+        from profidrive_cli.session.monitors import setup_monitors
+        mons.extend([setup_monitors(sess, monitor_spec)] if monitor_spec is not None else [])
+        _confirmer(opts, yes, what + (mons[0].question_note() if mons else ""))(sess)
     session = _session(opts, address, profile_name, ppo, fmt, watchdog_ms, cycle_hz=cycle_hz,
-                       before=run_torque.guard(_confirmer(opts, yes, what), torque, torque_limit),
-                       log=log_path)
+                       before=run_torque.guard(before, torque, torque_limit), log=log_path)
     view = R.RunView(mode)
     end = {"reason": "", "stop": None}
     started = False
     exit_code = 0
 
     def stopping(sample):                    # every stop, also the one on any exit, stays visible
+        view.monitors = None                 # no monitor reads during the stop: show none stale
         if not view.phase.startswith("stopping"):
             view.set_phase("stopping")
         view.update(sample)
@@ -170,6 +179,8 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
         with session as s:
             s.check_torque(torque, torque_limit)          # the card's reason before anything shows
             fmax_hz, src = s.fmax(fmax)
+            if mons:
+                mons[0].map_cyclic()            # before the start; restored after the stop
             pct = percent if percent is not None else s.percent_for_hz(hz, fmax)
             if reverse:
                 pct = -abs(pct)
@@ -180,7 +191,9 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
                         "reference_hz": round(pct * fmax_hz / 100.0, 3),
                         "cycle_hz_target": round(s.cycle_hz, 3), "wire_hz": round(s.wire_hz, 3),
                         "watchdog_ms": s.watchdog_ms, "duration_s": duration, "warnings": s.warnings,
-                        **run_torque.header(torque, torque_limit)})
+                        **run_torque.header(torque, torque_limit),
+                        **({"monitors": R.monitor_header(mons[0])} if mons else {})})
+            view.monitors = mons[0] if mons else None
             if interactive:
                 view.hint = "up/down speed · r reverse · space stop/start · q quit"
             view.set_phase("starting")
@@ -216,6 +229,9 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
                             break
                         view.set_phase(f"stopped ({rep.how}) — space starts, q quits")
                         continue
+                    if mons:
+                        mons[0].poll(sample)     # one monitor read per loop, round robin
+                        view.monitors = mons[0]  # shown again after a stop (space) and start
                     view.update(sample)
                     if running and view.reached_after is None and _at_reference(sample):
                         view.reached_after = round(sample.t - t_start, 3)
@@ -292,6 +308,8 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
         end["cycles"] = session.cycles
         end["counters"] = session.counters
         end["warnings"] = session.warnings
+        if mons:
+            end["monitors"], end["monitors_dropped"] = mons[0].to_dict(), mons[0].dropped
         if view.header:
             view.finish(end)
     if exit_code:
@@ -567,6 +585,7 @@ def faults_cmd(opts, address, clear, yes, profile_name, ppo, fmt, watchdog_ms):
     with _session(opts, address, profile_name, ppo, fmt, watchdog_ms, before=before) as s:
         cur = s.status()
         history = s.fault_history()
+        trips = s.trip_records()
         if clear:
             if cur.status.fault:
                 after = s.clear_fault()
@@ -578,7 +597,8 @@ def faults_cmd(opts, address, clear, yes, profile_name, ppo, fmt, watchdog_ms):
     if opts.json:
         emit_json({"address": s.address, "profile": s.profile.name,
                    "current": {"fault": st.fault, "code": st.fault_code, "state": st.state},
-                   "history": [R.fault_json(r) for r in history], "cleared": cleared})
+                   "history": [R.fault_json(r) for r in history], "trip_records": trips.to_dict(),
+                   "cleared": cleared})
         return
     out.print(f"[bold]station {s.address}[/bold]: {escape(s.profile.name)} — current: "
               + (f"[red]fault {escape(st.fault_code or '(code not readable)')}[/red]" if st.fault
@@ -587,6 +607,7 @@ def faults_cmd(opts, address, clear, yes, profile_name, ppo, fmt, watchdog_ms):
         out.print(R.faults_table(history, "fault history"))
     else:
         out.print("fault history: empty")
+    R.print_trip_records(trips)
     if cleared is not None:
         if cleared["was"] is None and not st.fault:
             out.print("--clear: there was no fault to acknowledge")

@@ -93,6 +93,8 @@ class RunView:
         self._live: Live | None = None
         self.reached_after: float | None = None
         self.peak_hz = None
+        #: session.monitors.Monitors of run --monitor, or None
+        self.monitors = None
 
     # -- lifecycle ---------------------------------------------------------------------------
     def start(self, header: dict) -> None:
@@ -133,8 +135,11 @@ class RunView:
         if self.mode == "json":
             if force or now - self._last_emit >= self.json_period:
                 self._last_emit = now
-                emit_json({"event": "update", "phase": self.phase, **sample.to_dict(),
-                           **torque_fields(sample.status)})
+                d = {"event": "update", "phase": self.phase, **sample.to_dict(),
+                     **torque_fields(sample.status)}
+                if self.monitors is not None:
+                    d["monitors"] = self.monitors.to_dict()
+                emit_json(d)
         elif self.mode == "text":
             if force or now - self._last_text >= 1.0:
                 self._last_text = now
@@ -143,11 +148,12 @@ class RunView:
     def _text_line(self, s) -> str:
         st = s.status
         fault = f"  FAULT {st.fault_code or ''}" if st.fault else ""
+        mon = f"  {monitor_words(self.monitors)}" if self.monitors is not None else ""
         return (f"{s.t:7.2f} s  {st.state:<28} ref {fmt_num(s.reference_hz, 2, 'Hz')} "
                 f"({fmt_num(s.reference_percent, 1, '%')})  actual {fmt_num(s.actual_hz, 2, 'Hz')} "
                 f"({fmt_num(s.actual_percent, 1, '%')})  {s.cycle_hz:5.1f} cycles/s  "
                 f"retries {s.counters.get('retries', 0)} errors "
-                f"{s.counters.get('no_answer', 0) + s.counters.get('illegal', 0)}{torque_words(st)}{fault}")
+                f"{s.counters.get('no_answer', 0) + s.counters.get('illegal', 0)}{torque_words(st)}{fault}{mon}")
 
     def finish(self, end: dict) -> None:
         if self._live is not None:
@@ -194,10 +200,26 @@ class RunView:
                                 f"bus limit {h.get('wire_hz', 0):.1f})   {s.cycles} exchanges"))
         t.add_row("bus", Text(counter_words(s.counters)))
         t.add_row("trend", Text(sparkline(self.trend) or " ", style="cyan"))
+        if self.monitors is not None:
+            t.add_row("monitors", Text(monitor_words(self.monitors) or "-"))
         parts = [t]
         if self.hint:
             parts.append(Text(self.hint, style="dim"))
         return Panel(Group(*parts), title=title)
+
+
+def monitor_header(mons) -> list[dict]:
+    """The start event's monitor list: code, name and unit of each."""
+    return [{"code": c, "name": mons.values[c].name, "unit": mons.values[c].unit} for c in mons.codes]
+
+
+def monitor_words(mons) -> str:
+    """'d002 3.4 A · d013 180.5 V' (— until a value was read)."""
+    parts = []
+    for c in mons.active:
+        v = mons.values[c]
+        parts.append(f"{c} " + (value_text(v.value, v.unit) if v.value is not None else "—"))
+    return " · ".join(parts)
 
 
 # =============================================================================================
@@ -339,3 +361,30 @@ def faults_table(records, title: str) -> Table:
 
 def fault_json(r) -> dict:
     return {"position": r.position, "number": r.raw, "codes": list(r.codes), "meanings": list(r.meanings)}
+
+
+def print_trip_records(trips) -> None:
+    """faults: the card's trip records as a table (one row per record, one column per field), or the
+    one line saying the card keeps none / none is stored."""
+    if not trips.supported or trips.note:
+        out.print(f"trip records: {escape(trips.note)}")
+        return
+    latest = f" (newest: record {trips.latest})" if trips.latest is not None else ""
+    if not trips.records:
+        out.print(f"trip records: none stored{latest}")
+        return
+    t = Table(title=f"trip records{latest}", show_header=True)
+    t.add_column("record")
+    names = [f["code"] for f in trips.records[0].fields]
+    for f in trips.records[0].fields:
+        t.add_column(escape(_field_label(f)))
+    for r in trips.records:
+        cells = [escape(value_text(f["value"], f["unit"])) for f in r.fields]
+        t.add_row(escape(r.position), *(cells + [""] * (len(names) - len(cells))))
+    out.print(t)
+
+
+def _field_label(f: dict) -> str:
+    """'Trip record 1 (d081): frequency' -> 'frequency'; the code where the name says nothing."""
+    name = f.get("name") or f["code"]
+    return name.split("): ", 1)[1] if "): " in name else name

@@ -30,7 +30,8 @@ def connect(sess):
     sess.channel = MeteredChannel(sess.master.channel(sess.address, period))
     sess._t0 = sess.channel.now()
     if sess.log_csv:
-        sess.cyclelog = CycleLog(sess.log_csv, sess.channel, sess._t0, lambda: sess.drive, sess._warn)
+        sess.cyclelog = CycleLog(sess.log_csv, sess.channel, sess._t0, lambda: sess.drive, sess._warn,
+                                 getattr(sess, "log_extra", None))
     drive = make_drive(sess.channel, sess.profile, sess.layout)
     track_motion(sess, drive)
     sess.drive = drive

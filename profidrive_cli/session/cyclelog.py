@@ -20,8 +20,10 @@ class CycleLog:
     logging stops. close() renames the file into place (or keeps the error in .error)."""
 
     def __init__(self, path, channel, t0: float, drive_of: Callable[[], object],
-                 warn: Callable[[str], None]):
+                 warn: Callable[[str], None], extra=None):
         self.path = path
+        #: (column names, row()) of values logged beside each exchange (run --monitor), or None
+        self.extra = extra
         self.channel = channel
         self.t0 = t0
         self.drive_of = drive_of
@@ -34,14 +36,14 @@ class CycleLog:
         self._writer = csv.writer(out.file)
         channel.hooks.append(self.log_cycle)
         self._row(["time_s", "cycle", "control_word", "reference", "status_word",
-                   "actual", "outputs", "inputs"])
+                   "actual", "outputs", "inputs"] + (list(extra[0]) if extra else []))
 
     def log_cycle(self, t: float, outputs: bytes, inputs: bytes) -> None:
         if self._file is None:
             return
         ctw, ref, stw, act = cycle_words(self.drive_of(), outputs, inputs)
         self._row([f"{t - self.t0:.4f}", self.channel.cycles, _hex4(ctw), _s16(ref), _hex4(stw),
-                   _s16(act), outputs.hex(), inputs.hex()])
+                   _s16(act), outputs.hex(), inputs.hex()] + (list(self.extra[1]()) if self.extra else []))
 
     def _row(self, row: list) -> None:
         try:

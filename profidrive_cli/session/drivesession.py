@@ -91,6 +91,10 @@ class DriveSession:
         self._closed = False
         #: the --log CSV once connected (cyclelog.CycleLog)
         self.cyclelog: CycleLog | None = None
+        #: (column names, row()) the --log CSV writes beside each exchange (set before connecting)
+        self.log_extra = None
+        #: called with link_ok after the safe stop on close, before the station is released
+        self.after_stop: list[Callable[[bool], None]] = []
 
 
     # -- messages ------------------------------------------------------------------------------
@@ -290,6 +294,11 @@ class DriveSession:
 
     def fault_history(self) -> list[FaultRecord]:
         return self._need_drive().fault_history()
+
+    def trip_records(self):
+        """The card's trip records (session/monitors.py): TripRecords, .supported False when it keeps none."""
+        from profidrive_cli.session.monitors import trip_records
+        return trip_records(self)
 
     def clear_fault(self, timeout: float = 5.0) -> Sample:
         """Acknowledge the current fault (the cause must be gone). The history stays."""

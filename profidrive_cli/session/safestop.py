@@ -168,6 +168,7 @@ def shutdown(sess, exc: BaseException | None) -> None:
             sess.stop_report = StopReport("not sent (link lost)", False, 0.0,
                                           link_lost_words(sess, exc))
             sess._say(sess.stop_report.message)
+        _after_stop(sess, False)
         return
     if exc is not None:
         # an interrupted request may have left a reply on the line: start clean
@@ -190,6 +191,7 @@ def shutdown(sess, exc: BaseException | None) -> None:
             sess.link_lost = True
             sess.stop_report = StopReport("not sent (link lost)", False, 0.0, link_lost_words(sess, e))
             sess._say(sess.stop_report.message)
+            _after_stop(sess, False)
             return
         except PdriveError as e:
             sess.stop_report = StopReport("failed", False, 0.0, f"stop failed: {e}")
@@ -198,7 +200,18 @@ def shutdown(sess, exc: BaseException | None) -> None:
     elif sess.stop_report is None:
         sess.stop_report = StopReport("not needed", True, 0.0, "not started by this session",
                                       sess.final_status)
+    _after_stop(sess, True)
     try:
         sess.master.release(sess.address)
     except PdriveError:
         pass
+
+
+def _after_stop(sess, link_ok: bool) -> None:
+    """The session's after_stop hooks (e.g. restoring a PZD mapping), after the stop and before the
+    station is released; told whether the link still works. Their errors are said, never raised."""
+    for hook in getattr(sess, "after_stop", ()):
+        try:
+            hook(link_ok)
+        except Exception as e:          # noqa: BLE001  (the stop is done; say what was left)
+            sess._say(f"after the stop: {e}")

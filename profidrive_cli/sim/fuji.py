@@ -15,6 +15,7 @@ Dialect on top of sim/profidrive_model.py:
     3 subindex (also PNU947 read without the array request), 4 not an array, 11 stop-only while
     running, 104 busy (while a y97 save runs, or `busy_next` writes for tests), 17 unsupported ID
   * PNU947[1, 9, 17, 25] = the four latest alarms (PROFIdrive codes), M16-M19 = the same as alarm codes
+  * monitors M07 torque, M09 frequency, M11 current, M12 voltage follow the motor (sim/motor.py)
   * o30: by default the model accepts any PPO and sets o30 to match; o30=N (or strict_o30) accepts
     only the PPO that o30 selects (a mismatch is the ERR LED: Chk_Cfg refused)
   * communication loss (DP watchdog, after at least one data exchange) per o27/o28 for a drive in
@@ -28,6 +29,7 @@ from __future__ import annotations
 from profidrive_cli.drives import fuji as fj
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.profidrive import Ctw, State
+from profidrive_cli.sim.motor import Motor, store
 from profidrive_cli.sim.profidrive_model import ProfidriveModel
 
 SAVE_SECONDS = 1.0
@@ -65,6 +67,7 @@ class FujiModel(ProfidriveModel):
         self.last_ctw_in = 0
         m = self.profile.param("M16")
         self._m_pnu = m.pnu if m is not None else None
+        self.motor = Motor()
 
     # -- configuration (o30) ---------------------------------------------------------------------
     def check_cfg(self, cfg: bytes) -> bool:
@@ -276,6 +279,16 @@ class FujiModel(ProfidriveModel):
             self._save_until = None
         super().tick(now)
         self._comm_loss_tick(now)
+        self._monitors(now)
+
+    def _monitors(self, now: float) -> None:
+        """M07 torque, M09 frequency, M11 current (% of rated), M12 voltage from the motor."""
+        m = self.motor
+        m.update(now, self.freq, self.state in (State.S4, State.S5))
+        fmax = self.max_frequency()
+        for code, v in (("M07", m.torque_pct(fmax)), ("M09", abs(self.freq)),
+                        ("M11", 100.0 * m.current_a(fmax) / m.rated_a), ("M12", m.voltage_v(fmax))):
+            store(self, code, v)
 
     # -- cyclic ----------------------------------------------------------------------------------
     def data_exchange(self, outputs: bytes, now: float) -> bytes:

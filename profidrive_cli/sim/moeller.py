@@ -12,6 +12,9 @@ Dialect on top of the generic PROFIdrive model:
   * parameters as 1/2/4-octet wire values (profile `bytes`), R/WOS refused with error 17 while running
   * communication loss: P002 = 0 trips E70 (only a running drive), 1 keeps running
   * trips count d080 (PNU 352) and fill the trip records d081..d086 (PNU 354 points at the latest)
+    with the frequency, current and DC-link voltage at the trip
+  * monitors d001 (frequency), d002 (current), d013 (voltage), d012 (torque) follow the motor
+    (sim/motor.py: current with load and acceleration, voltage with frequency)
   * PNU 964 = 0x812C (DF6) or 0x012C (DV6)
 """
 
@@ -20,6 +23,7 @@ from __future__ import annotations
 from profidrive_cli.drives import moeller as mo
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.profidrive import Ctw, State
+from profidrive_cli.sim.motor import Motor, store
 from profidrive_cli.sim.profidrive_model import ProfidriveModel
 
 DEVICE_IDS = {"DF6": 0x812C, "DV6": 0x012C}
@@ -44,6 +48,7 @@ class MoellerModel(ProfidriveModel):
         self.device = dev
         self.dc_bus_voltage = 560.0 if dev == "DF6" else 540.0
         self.run_seconds = 0.0
+        self.motor = Motor(dc_v=self.dc_bus_voltage)
 
     # -- control source ----------------------------------------------------------------------
     def _raw(self, code: str) -> int:
@@ -108,6 +113,10 @@ class MoellerModel(ProfidriveModel):
         p = pd.param_for(self.profile, req.pnu, req.subindex)
         if p is not None and p.extra.get("df6") is False and self.device == "DF6" and req.ak:
             return pd.PkwFrame(7, req.pnu, req.subindex, self.cfg.error_numbers["unknown_pnu"])
+        if req.ak == 7 and req.pnu in (915, 916) and self.device == "DF6":
+            q = pd.param_for(self.profile, req.value & 0xFFFF)        # a DV6-only parameter cannot be
+            if q is not None and q.extra.get("df6") is False:          # mapped on a DF6 either
+                return pd.PkwFrame(7, req.pnu, req.subindex, self.cfg.error_numbers["out_of_range"])
         return super().pkw_answer(req)
 
     # -- dynamics ----------------------------------------------------------------------------
@@ -116,6 +125,12 @@ class MoellerModel(ProfidriveModel):
         super().tick(now)
         if last is not None and now > last and self.state in (State.S4, State.S5):
             self.run_seconds += now - last
+        self.motor.update(now, self.freq, self.state in (State.S4, State.S5))
+        fmax = self.max_frequency()
+        for code, v in (("d001", abs(self.freq)), ("d002", self.motor.current_a(fmax)),
+                        ("d013", self.motor.voltage_v(fmax)), ("d012", self.motor.torque_pct(fmax))):
+            store(self, code, v)
+
 
     def comm_loss_action(self) -> tuple[str, str | None]:
         if self._raw(self.mc.comm_loss_param) == 0:
@@ -132,7 +147,8 @@ class MoellerModel(ProfidriveModel):
         self.values["PNU354"] = k
         base = 355 + 6 * (k - 1)
         freq = abs(self.last_trip[1]) if self.last_trip else 0.0
-        fields = [number, freq, 0.0, self.dc_bus_voltage, int(self.run_seconds), int(now)]
+        cur = self.motor.current_a(self.max_frequency())     # the motor as at the last tick
+        fields = [number, freq, round(cur, 1), round(self.motor.dc_link_v(), 1), int(self.run_seconds), int(now)]
         for off, v in enumerate(fields):
             p = pd.param_for(self.profile, base + off)
             if p is not None:

@@ -39,6 +39,7 @@ from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives import toyo as ty
 from profidrive_cli.drives.profidrive import Ctw, State
 from profidrive_cli.sim import torque_axis
+from profidrive_cli.sim.motor import Motor
 from profidrive_cli.sim.profidrive_model import ProfidriveModel, _ramp
 
 # protection code -> (fault flag word 1 or 2, bit)
@@ -88,6 +89,7 @@ class ToyoModel(ProfidriveModel):
         self.samples: deque = deque(maxlen=self.tc.traceback_points)
         self.first_trip_seen = False
         self._trip_code = 0
+        self.motor = Motor(rated_v=200.0 if self.voltage_class == 200 else 400.0)
 
     # -- configuration -----------------------------------------------------------------------
     def check_cfg(self, cfg: bytes) -> bool:
@@ -220,6 +222,7 @@ class ToyoModel(ProfidriveModel):
                 self.freq = _ramp(self.freq, tgt, fmax / (acc if up else dec) * dt)
         else:
             super().tick(now)
+        self.motor.update(now, self.freq, self.state in (State.S4, State.S5) or self.freq != 0.0)
         if last is not None and now > last:
             self._sample()
 
@@ -227,9 +230,10 @@ class ToyoModel(ProfidriveModel):
         fmax = self.max_frequency()
         fw = ty.speed_word(self.profile, 100.0 * self.freq / fmax)
         rw = ty.speed_word(self.profile, self.ref_pct)
-        i = round(2357 * min(1.0, abs(self.freq) / fmax) * 0.3)
+        i = round(2357 * self.motor.current_a(fmax) / self.motor.rated_a)   # 2357 = 100 % rated
+        tq = round(self.motor.torque_pct(fmax) / 0.02)                        # TB07: 0.02 %/count
         ff1, ff2 = self.fault_flags()
-        self.samples.append((i, i, i, self._dc_raw(), self._vout_raw(), 0, rw, 0, fw, 0, 0, 400, ff1, ff2,
+        self.samples.append((i, i, i, self._dc_raw(), self._vout_raw(), 0, rw, tq & 0xFFFF, fw, 0, 0, 400, ff1, ff2,
                              self.status_flag() & 0x27FF, self.run_cmd & 0xFF))
 
     # -- state machine inputs per mode ----------------------------------------------------------
@@ -341,11 +345,15 @@ class ToyoModel(ProfidriveModel):
         fw = ty.speed_word(self.profile, 100.0 * self.freq / fmax)
         ff1, ff2 = self.fault_flags()
         running = self.freq != 0.0
-        cur = (abs(self.freq) / fmax * 8.0 + (2.0 if running else 0.0))   # a plausible current, A
+        cur = self.motor.current_a(fmax)          # sim/motor.py: load + acceleration
         p = self.profile.param("current")
         cur_raw = round(cur / p.scale) if p is not None and p.scale else 0
+        tq = self.profile.param("torque")
+        tq_raw = round(self.motor.torque_pct(fmax) / tq.scale) if tq is not None and tq.scale else 0
         table = {677: 0x0066, 678: 0x0100, 679: 0x0100, 680: self.status_flag(), 681: ff1, 682: ff2,
-                 683: self.mf_output(), 684: fw, 685: fw, 686: cur_raw, 687: self._torque_raw(),
+                 683: self.mf_output(), 684: fw, 685: fw, 686: cur_raw,
+                 687: (self._torque_raw() if self.torque_out is not None       # torque control
+                       else max(-32768, min(32767, tq_raw))),                    # the motor model
                  688: self._dc_raw(), 689: self._vout_raw(), 690: fw, 691: 0, 692: 400,
                  693: 1024 if running else 0}
         return table.get(pnu, 0) & 0xFFFF

@@ -1,0 +1,113 @@
+"""The profile's `monitors:` and `trip_records:` sections: which of the card's parameters are its
+monitor values (a default set per family for `run --monitor default`) and where it keeps the records
+of its last trips (Moeller d081..d086, the Toyo traceback). Checked with file:line (DataFileError);
+no bus traffic. Every code named here must be a code the family's drive can read (a profile
+parameter, or a family address form such as Toyo's TB03[0,99]).
+
+    monitors:
+      default: [d002, d013, d012]        # codes, in display order
+      words:                             # cyclic input words shown as monitors (Yaskawa fast I/O)
+        output-current: {word: current, name: Output current, unit: "%", scale: 0.01220703125}
+    trip_records:
+      latest: PNU354                     # optional: which record is the newest (1-based)
+      empty: zero                        # zero: a record whose first field reads 0 is empty;
+                                         # error: the first refused read ends the list
+      records:                           # one list of codes per record, the first names the trip
+        - {position: "1 (d081)", fields: [d081, PNU356, PNU357, PNU358]}
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from profidrive_cli.datafile import DataFileError, LineDict, LineList
+
+
+@dataclass
+class MonitorWord:
+    code: str
+    word: str                     # the family's name of the input word (DriveStatus.raw key)
+    name: str
+    unit: str = ""
+    scale: float = 1.0
+    signed: bool = False
+
+
+@dataclass
+class MonitorConfig:
+    default: list[str] = field(default_factory=list)
+    words: dict[str, MonitorWord] = field(default_factory=dict)
+
+
+@dataclass
+class TripRecordSpec:
+    position: str
+    fields: list[str]
+
+
+@dataclass
+class TripRecordConfig:
+    records: list[TripRecordSpec]
+    latest: str | None = None
+    empty: str = "zero"
+
+
+def _line(node, key=None) -> int | None:
+    if key is not None and isinstance(node, LineDict):
+        return node.line_of(key)
+    return getattr(node, "line", None)
+
+
+def _codes(profile, node, key, items) -> list[str]:
+    if not isinstance(items, list) or not all(isinstance(c, (str, int)) for c in items) or not items:
+        raise DataFileError(profile.path, _line(node, key), f"'{key}' must be a non-empty list of codes")
+    return [str(c) for c in items]
+
+
+def monitor_config(profile) -> MonitorConfig:
+    """The `monitors:` section (an empty default set when there is none)."""
+    doc = profile.raw.get("monitors")
+    if doc is None:
+        return MonitorConfig()
+    if not isinstance(doc, dict):
+        raise DataFileError(profile.path, _line(profile.raw, "monitors"), "'monitors' must be a mapping")
+    for k in doc:
+        if k not in ("default", "words"):
+            raise DataFileError(profile.path, _line(doc, k), f"monitors: unknown key '{k}'")
+    words = {}
+    for code, w in (doc.get("words") or {}).items():
+        if not isinstance(w, dict) or not isinstance(w.get("word"), str) \
+                or not isinstance(w.get("scale", 1.0), (int, float)):
+            raise DataFileError(profile.path, _line(doc["words"], code),
+                                f"monitors.words.{code}: {{word: NAME, name: TEXT, unit: U, scale: NUMBER}}")
+        words[str(code)] = MonitorWord(str(code), w["word"], str(w.get("name", code)), str(w.get("unit", "")),
+                                       float(w.get("scale", 1.0)), bool(w.get("signed", False)))
+    default = _codes(profile, doc, "default", doc.get("default"))
+    return MonitorConfig(default, words)
+
+
+def trip_record_config(profile) -> TripRecordConfig | None:
+    """The `trip_records:` section, or None: the card keeps no trip records."""
+    doc = profile.raw.get("trip_records")
+    if doc is None:
+        return None
+    where = _line(profile.raw, "trip_records")
+    if not isinstance(doc, dict):
+        raise DataFileError(profile.path, where, "'trip_records' must be a mapping")
+    for k in doc:
+        if k not in ("latest", "empty", "records"):
+            raise DataFileError(profile.path, _line(doc, k), f"trip_records: unknown key '{k}'")
+    empty = doc.get("empty", "zero")
+    if empty not in ("zero", "error"):
+        raise DataFileError(profile.path, _line(doc, "empty"), "trip_records.empty: zero or error")
+    recs = doc.get("records")
+    if not isinstance(recs, list) or not recs:
+        raise DataFileError(profile.path, _line(doc, "records"), "trip_records.records: a non-empty list")
+    out = []
+    for i, r in enumerate(recs):
+        line = recs.line_of(i) if isinstance(recs, LineList) else where
+        if not isinstance(r, dict) or "fields" not in r:
+            raise DataFileError(profile.path, line, "trip record: {position: TEXT, fields: [CODE, ...]}")
+        out.append(TripRecordSpec(str(r.get("position", i + 1)), _codes(profile, r, "fields", r["fields"])))
+    latest = doc.get("latest")
+    return TripRecordConfig(out, str(latest) if latest is not None else None, empty)

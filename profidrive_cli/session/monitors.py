@@ -1,0 +1,309 @@
+"""Monitor values while a drive runs (`run --monitor`) and the card's trip records (`faults`).
+
+Cyclic words first: where the layout has parameter words in its input (PPO2/4/5 beyond STW/MAV),
+  * Moeller: a monitor of at most 2 octets is mapped into PZD3..PZD10 with PNU 916 (volatile, spec
+    2.4 / manual example 2) for the session; Monitors.restore() writes the old assignment back;
+  * Fuji: o48..o51 (= PNU 916) need a power cycle after a change (spec 2.4), so nothing is written:
+    a monitor already assigned to a response PCD word is read from it, the others through the PKW.
+The rest through the parameter channel, one code per call of `Monitors.poll()`, round robin
+between the cycles the run loop makes: each read runs a few Data_Exchanges with the current command, so
+the drive keeps its control word and the safe stop is unaffected. A code the drive refuses is dropped
+once with a note (e.g. Moeller d012, torque, on a DF6). Trip records are read with the drive's own
+read_param on the codes the profile's `trip_records:` names (drives/monitors.py). No click, no rich.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from profidrive_cli import UsageError
+from profidrive_cli.drives.base import DriveError, ParamError
+from profidrive_cli.drives.monitors import monitor_config, trip_record_config
+
+NO_TRIP_RECORDS = "this card keeps no trip records"
+
+
+def monitor_codes(profile, layout: str, spec: str) -> list[str]:
+    """'default' or 'CODE[,CODE...]' (default may appear among codes) -> the profile's codes, in order.
+    Needs only the profile, so it runs before the bus is touched. Raises UsageError (exit 2) for a
+    code the profile does not have, a layout without a parameter channel, or no default set."""
+    words = monitor_config(profile).words
+    lay = profile.layouts.get(layout)
+    pkw = lay is None or lay.pkw
+    codes: list[str] = []
+    for part in (p.strip() for p in spec.split(",")):
+        if not part:
+            continue
+        if part.lower() == "default":
+            d = monitor_config(profile).default
+            if not d:
+                raise UsageError(f"--monitor default: profile {profile.name} has no default monitor set")
+            # without a parameter channel the default set keeps what the cyclic words carry
+            codes.extend(c for c in d if pkw or c in words)
+        else:
+            codes.append(part)
+    if not codes:
+        raise UsageError("--monitor: give monitor codes (CODE[,CODE...]) or 'default'" if pkw else
+                         f"--monitor: layout {layout} of {profile.name} has no parameter channel to read "
+                         f"monitors through (choose a layout with one)")
+    if not pkw and any(c not in words for c in codes):
+        raise UsageError(f"--monitor: layout {layout} of {profile.name} has no parameter channel to read "
+                         f"monitors through (choose a layout with one)")
+    out: list[str] = []
+    for c in codes:
+        if c in words:
+            if c not in out:
+                out.append(c)
+            continue
+        p = profile.param(c)
+        if p is None:
+            from profidrive_cli.session.params import suggest_codes
+            near = suggest_codes(profile, c)
+            raise UsageError(f"--monitor {c}: {profile.name} has no parameter {c}"
+                             + (f" (closest: {', '.join(near)})" if near else ""))
+        if p.code not in out:
+            out.append(p.code)
+    return out
+
+
+def setup_monitors(sess, spec: str) -> "Monitors":
+    """--monitor SPEC for a session whose profile and layout are known (before it connects): the
+    checked Monitors, its columns added to the --log CSV."""
+    mons = Monitors(sess, monitor_codes(sess.profile, sess.layout, spec))
+    sess.log_extra = (mons.columns(), mons.row)
+    return mons
+
+
+@dataclass
+class MonitorValue:
+    code: str
+    name: str
+    value: float | int | None = None
+    unit: str = ""
+    raw: int | None = None
+    t: float | None = None
+
+    def to_dict(self) -> dict:
+        return {"value": self.value, "unit": self.unit, "raw": self.raw,
+                "t": round(self.t, 3) if self.t is not None else None}
+
+
+@dataclass
+class Monitors:
+    """Round-robin reader of `codes` through `sess.read_param`."""
+    sess: object
+    codes: list[str]
+    values: dict[str, MonitorValue] = field(default_factory=dict)
+    dropped: dict[str, str] = field(default_factory=dict)
+    #: code -> input PZD index (0-based, STW = 0) of the monitors carried in the cyclic words
+    cyclic: dict[str, int] = field(default_factory=dict)
+    #: (assignment code, old value) to write back on restore()
+    saved_map: list = field(default_factory=list)
+    _i: int = 0
+
+    def __post_init__(self):
+        self.words = monitor_config(self.sess.profile).words
+        for c in self.codes:
+            w = self.words.get(c)
+            if w is not None:
+                self.values[c] = MonitorValue(c, w.name, unit=w.unit)
+                continue
+            p = self.sess.profile.param(c)
+            self.values[c] = MonitorValue(c, p.name, unit=p.unit or "")
+
+    @property
+    def active(self) -> list[str]:
+        return [c for c in self.codes if c not in self.dropped]
+
+    def question_note(self) -> str:
+        """What the confirmation before a real-port run adds: the mapping map_cyclic() will write."""
+        lay = self.sess.profile.layouts.get(self.sess.layout)
+        if self.sess.profile.family == "moeller" and lay is not None and lay.pkw and lay.input_len > 12:
+            return " (--monitor maps PNU 916 for the session and restores it after)"
+        return ""
+
+    # -- the cyclic words ---------------------------------------------------------------------
+    def map_cyclic(self) -> list[str]:
+        """Put the monitors into the layout's cyclic input words where the card allows (see the
+        module's text). Returns the codes now carried cyclically. Call before the motor starts."""
+        sess = self.sess
+        drive = sess._need_drive()
+        in_words = getattr(getattr(drive, "fmt", None), "in_words", ())
+        for c in self.codes:                             # the family's own input words
+            w = self.words.get(c)
+            if w is None:
+                continue
+            if w.word in in_words:
+                self.cyclic[c] = -1
+            else:
+                self.dropped[c] = f"layout {sess.layout} has no '{w.word}' input word"
+                sess._say(f"--monitor {c}: {self.dropped[c]}; not monitored")
+        ppo = getattr(drive, "ppo", None)
+        if ppo is None or ppo.pzd_in <= 2 or not drive.has_param_channel:
+            return list(self.cyclic)
+        fam = sess.profile.family
+        slots = list(range(1, ppo.pzd_in - 1))            # PNU 916 subindex n = input word PZD(n+2)
+        if fam == "fuji":
+            from profidrive_cli.drives.fuji.codes import pcd_assignment_code
+            for n in slots:
+                word = int(sess.read_param(f"o{47 + n}").raw)
+                code = pcd_assignment_code(sess.profile, word)
+                if code in self.codes and code not in self.cyclic:
+                    self.cyclic[code] = 1 + n
+        elif fam == "moeller":
+            free = list(slots)
+            for c in self.codes:
+                p = sess.profile.param(c)
+                if not free or p is None or p.pnu is None or p.size != 16 or c in self.cyclic:
+                    continue
+                n = free.pop(0)
+                key = f"PNU916[{n}]"
+                old = int(sess.read_param(key).raw)
+                try:
+                    sess.write_param(key, p.pnu)
+                except ParamError as e:
+                    sess._say(f"--monitor {c}: not mapped into PZD{n + 2} ({e}); read through the PKW")
+                    continue
+                if not self.saved_map:
+                    sess.after_stop.append(self.restore)
+                self.saved_map.append((key, old))
+                self.cyclic[c] = 1 + n
+        return list(self.cyclic)
+
+    def restore(self, link_ok: bool = True) -> list[str]:
+        """Write the PZD assignment back as it was (DriveSession.after_stop calls it after the safe
+        stop, on every exit); what could not be restored is said and returned, one line each."""
+        if not link_ok:
+            failed = [f"{k} not restored to {old} (link lost)" for k, old in self.saved_map]
+            self.saved_map.clear()
+            for f in failed:
+                self.sess._say(f"--monitor: {f}")
+            return failed
+        failed = []
+        while self.saved_map:
+            key, old = self.saved_map.pop()
+            try:
+                self.sess.write_param(key, old)
+            except Exception as e:            # noqa: BLE001  (the link may be gone: say what is left)
+                failed.append(f"{key} not restored to {old} ({e})")
+        for f in failed:
+            self.sess._say(f"--monitor: {f}")
+        return failed
+
+    def _read_cyclic(self, sample=None) -> None:
+        drive = self.sess.drive
+        area = getattr(drive, "last_area", None)
+        t = self.sess.channel.now() - self.sess._t0
+        for c, i in self.cyclic.items():
+            w = self.words.get(c)
+            if w is not None:
+                raw = sample.status.raw.get(w.word) if sample is not None else None
+                if raw is not None:
+                    v = raw - 0x10000 if w.signed and raw & 0x8000 else raw
+                    mv = self.values[c]
+                    mv.value, mv.raw, mv.t = round(v * w.scale, 6), raw, t
+                continue
+            if area is None or i >= len(area.pzd):
+                continue
+            ref = drive.resolve_param(c)
+            pv = drive._param_value(ref, area.pzd[i])
+            mv = self.values[c]
+            mv.value, mv.raw, mv.t = pv.value, pv.raw, t
+
+    def poll(self, sample=None) -> MonitorValue | None:
+        """Take the cyclic monitors from the last exchange (`sample`: the last Sample, for the
+        family's own input words), then read the next other monitor through the parameter channel
+        (a few Data_Exchanges); None when none is left. A refused read drops the code (reason in
+        .dropped, told once through the session's message hook)."""
+        self._read_cyclic(sample)
+        act = [c for c in self.active if c not in self.cyclic]
+        if not act:
+            return None
+        code = act[self._i % len(act)]
+        self._i += 1
+        try:
+            pv = self.sess.read_param(code)
+        except ParamError as e:              # the drive refused it: it has no such monitor
+            self.dropped[code] = str(e)
+            self.sess._say(f"--monitor {code}: {e}; not monitored")
+            return None
+        except DriveError as e:              # no answer in time: keep the last value, try again later
+            self.sess._say(f"--monitor {code}: {e}")
+            return None
+        mv = self.values[code]
+        mv.value, mv.raw, mv.t = pv.value, pv.raw, self.sess.channel.now() - self.sess._t0
+        if pv.unit:
+            mv.unit = pv.unit
+        return mv
+
+    def to_dict(self) -> dict:
+        return {c: {**self.values[c].to_dict(), "via": "cyclic" if c in self.cyclic else "parameter channel"}
+                for c in self.active}
+
+    def columns(self) -> list[str]:
+        """CSV column names: the native code with its unit ('d002 [A]')."""
+        return [f"{c} [{self.values[c].unit}]" if self.values[c].unit else c for c in self.codes]
+
+    def row(self) -> list[str]:
+        return ["" if self.values[c].value is None else f"{self.values[c].value:g}" for c in self.codes]
+
+
+@dataclass
+class TripRecord:
+    position: str
+    fields: list[dict]            # {code, name, value, unit, raw}
+
+    def to_dict(self) -> dict:
+        return {"position": self.position, "fields": self.fields}
+
+
+@dataclass
+class TripRecords:
+    supported: bool
+    records: list[TripRecord] = field(default_factory=list)
+    latest: int | None = None
+    note: str = ""
+
+    def to_dict(self) -> dict:
+        d = {"supported": self.supported, "records": [r.to_dict() for r in self.records]}
+        if self.latest is not None:
+            d["latest"] = self.latest
+        if self.note:
+            d["note"] = self.note
+        return d
+
+
+def trip_records(sess) -> TripRecords:
+    """The card's trip records as the profile's `trip_records:` describes them; empty records are
+    left out (a first field of 0, or a refused first read, as the section's `empty:` says)."""
+    cfg = trip_record_config(sess.profile)
+    if cfg is None:
+        return TripRecords(False, note=NO_TRIP_RECORDS)
+    drive = sess._need_drive()
+    if not drive.has_param_channel:
+        return TripRecords(True, note=f"layout {sess.layout} has no parameter channel: trip records "
+                                      f"not readable")
+    out = TripRecords(True)
+    if cfg.latest:
+        out.latest = int(sess.read_param(cfg.latest).raw)
+    for spec in cfg.records:
+        fields = []
+        for j, code in enumerate(spec.fields):
+            try:
+                pv = sess.read_param(code)
+            except ParamError:
+                if j == 0 and cfg.empty == "error":
+                    return out               # the first empty recording: no older ones
+                raise
+            fields.append({"code": pv.code, "name": pv.name, "value": pv.value, "unit": pv.unit,
+                           "raw": pv.raw})
+            if j == 0 and cfg.empty == "zero" and pv.raw == 0:
+                break
+        if cfg.empty == "zero" and fields and fields[0]["raw"] == 0:
+            continue
+        out.records.append(TripRecord(spec.position, fields))
+    return out
+
+
+__all__ = ["monitor_codes", "Monitors", "MonitorValue", "trip_records", "TripRecords", "TripRecord",
+           "NO_TRIP_RECORDS", "DriveError"]
