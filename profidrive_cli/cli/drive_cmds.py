@@ -7,23 +7,20 @@ command line, asks for confirmation before writing to a real port, and renders (
 from __future__ import annotations
 
 import functools
-import math
 import sys
 
 import click
 from rich.markup import escape
 from rich.progress import Progress
 
-from profidrive_cli import BusError, UsageError
+from profidrive_cli import UsageError
 from profidrive_cli.cli.common import (bus_options, confirm_real_port, emit_json, err, out,
                                        station_address)
 from profidrive_cli.cli import render_drive as R
-from profidrive_cli.cli import run_torque
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.session import (DriveSession, RestoreInterrupted, RestoreRefused,
                                     SessionTerminated)
 from profidrive_cli.drives.values import danger, profile_value_problem
-from profidrive_cli.link.base import LinkLost
 from profidrive_cli.outfile import OutputFile, check_output_path
 
 
@@ -97,230 +94,6 @@ def _split_address(args: tuple[str, ...], min_rest: int) -> tuple[int | None, li
     if len(args) > min_rest and args[0].isdigit():
         return station_address(int(args[0])), args[1:]
     return None, args
-
-
-# =============================================================================================
-# pdrive run
-# =============================================================================================
-
-
-@click.command("run")
-@click.argument("address", required=False, type=int)
-@drive_options
-@click.option("--hz", type=float, default=None, help="Speed reference in Hz (negative = reverse).")
-@click.option("--percent", type=float, default=None, help="Speed reference in % of the max frequency.")
-@click.option("--reverse", is_flag=True, help="Run in reverse.")
-@click.option("--torque", "torque", type=float, default=None, metavar="PERCENT",
-              help="Torque control with this reference in % of rated torque (negative or --reverse = "
-              "reverse); the speed, if given, is sent as the speed reference. Toyo and Yaskawa only.")
-@click.option("--torque-limit", "torque_limit", type=float, default=None, metavar="PERCENT",
-              help="Speed run with this torque limit in % of rated torque (Yaskawa only).")
-@click.option("--duration", type=float, default=None, metavar="S",
-              help="Seconds from the start command to the stop (default: until q / Ctrl-C).")
-@click.option("--fmax", type=float, default=None, metavar="HZ",
-              help="Max frequency for Hz <-> % when the layout has no parameter channel.")
-@click.option("--cycle-hz", type=float, default=None, metavar="RATE",
-              help="Data_Exchange rate (default: the fastest the bus allows, at most 100/s; 50/s on sim://).")
-@click.option("--yes", is_flag=True, help="Do not ask before running a drive on a real port.")
-@click.option("--log", "log_path", default=None, metavar="FILE.csv", help="CSV of every cycle.")
-@click.option("--reconnect", "reconnect_s", type=float, default=None, metavar="S", is_flag=False,
-              flag_value=60.0, help="When the port goes away, wait up to S s (default 60) for it to "
-              "come back and resume data exchange; the drive, stopped meanwhile by its watchdog, is "
-              "not restarted.")
-@click.option("--monitor", "monitor_spec", default=None, metavar="CODE[,CODE...]|default",
-              help="Monitor values to read while running (the card's codes, e.g. d002,d013; 'default': "
-                   "the profile's set), shown live, in --json and in the --log CSV.")
-@bus_options
-@_terminations
-def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, reverse, torque, torque_limit,
-            duration, fmax, cycle_hz, yes, log_path, reconnect_s, monitor_spec):
-    """Run a drive at a speed (or a torque) and show it live; stops it safely on every exit.
-
-    Keys (on a terminal): up/down change the speed (the torque with --torque), r reverses, space
-    stops/starts, q quits.
-    """
-    for name, v in (("--hz", hz), ("--percent", percent), ("--fmax", fmax), ("--duration", duration),
-                    ("--cycle-hz", cycle_hz), ("--torque", torque), ("--torque-limit", torque_limit)):
-        if v is not None and not math.isfinite(v):
-            raise UsageError(f"{name}: not a number")
-    if percent is not None and not -100.0 <= percent <= 100.0:
-        raise UsageError(f"--percent {percent:g} is outside -100..100")
-    if duration is not None and duration <= 0:
-        raise UsageError(f"--duration {duration:g} must be above 0 s")
-    if cycle_hz is not None and not 0 < cycle_hz <= 10000:
-        raise UsageError(f"--cycle-hz {cycle_hz:g} must be in 0..10000 (exclusive of 0)")
-    if fmax is not None and fmax <= 0:
-        raise UsageError(f"--fmax {fmax:g} must be above 0 Hz")
-    interactive = not opts.json and sys.stdin.isatty() and sys.stdout.isatty()
-    mode = "json" if opts.json else ("live" if sys.stdout.isatty() else "text")
-    torque, percent, what = run_torque.prepare(hz, percent, reverse, torque, torque_limit)
-    if log_path is not None:                 # checked before the bus is opened: nothing moves first
-        check_output_path(log_path, "--log")
-    mons = []                                # --monitor: checked before anything is asked or written
-
-    def before(sess):
-        from profidrive_cli.session.monitors import setup_monitors
-        mons.extend([setup_monitors(sess, monitor_spec)] if monitor_spec is not None else [])
-        _confirmer(opts, yes, what + (mons[0].question_note() if mons else ""))(sess)
-    session = _session(opts, address, profile_name, ppo, fmt, watchdog_ms, cycle_hz=cycle_hz,
-                       before=run_torque.guard(before, torque, torque_limit), log=log_path)
-    view = R.RunView(mode)
-    end = {"reason": "", "stop": None}
-    started = False
-    exit_code = 0
-
-    def stopping(sample):                    # every stop, also the one on any exit, stays visible
-        view.monitors = None                 # no monitor reads during the stop: show none stale
-        if not view.phase.startswith("stopping"):
-            view.set_phase("stopping")
-        view.update(sample)
-    session.on_sample = stopping
-    try:
-        with session as s:
-            s.check_torque(torque, torque_limit)          # the card's reason before anything shows
-            fmax_hz, src = s.fmax(fmax)
-            if mons:
-                mons[0].map_cyclic()            # before the start; restored after the stop
-            pct = percent if percent is not None else s.percent_for_hz(hz, fmax)
-            if reverse:
-                pct = -abs(pct)
-            step = 100.0 / fmax_hz if hz is not None else 1.0     # keys: 1 Hz or 1 %
-            view.start({"address": s.address, "ident": f"0x{s.ident:04X}", "profile": s.profile.name,
-                        "family": s.profile.family, "title": s.profile.title, "layout": s.layout,
-                        "fmax_hz": fmax_hz, "fmax_source": src, "reference_percent": round(pct, 4),
-                        "reference_hz": round(pct * fmax_hz / 100.0, 3),
-                        "cycle_hz_target": round(s.cycle_hz, 3), "wire_hz": round(s.wire_hz, 3),
-                        "watchdog_ms": s.watchdog_ms, "duration_s": duration, "warnings": s.warnings,
-                        **run_torque.header(torque, torque_limit),
-                        **({"monitors": R.monitor_header(mons[0])} if mons else {})})
-            view.monitors = mons[0] if mons else None
-            if interactive:
-                view.hint = "up/down speed · r reverse · space stop/start · q quit"
-            view.set_phase("starting")
-            if torque is not None or torque_limit is not None:
-                sample = s.start_torque(torque, torque_limit, pct)
-            else:
-                sample = s.start(pct)
-            started = True
-            t_start = sample.t
-            view.set_phase("running", sample)
-            running = True
-            keys = R.KeyReader() if interactive else None
-            if keys is not None:
-                keys.__enter__()
-            try:
-                while True:
-                    try:
-                        sample = s.poll()
-                    except LinkLost as e:
-                        if reconnect_s is None:
-                            raise
-                        # the link is gone: nothing can be sent; the station's watchdog stops
-                        # the drive. Wait for the port, resume data exchange, never restart.
-                        view.set_phase(f"link lost ({e}); reconnecting for up to {reconnect_s:g} s")
-                        s.master.reconnect(timeout=reconnect_s)
-                        view.set_phase("link restored: the drive was stopped by its watchdog "
-                                       "and is not restarted")
-                        rep = s.stop()
-                        running = False
-                        if keys is None:
-                            end["reason"] = f"link lost and restored; stop: {rep.how}"
-                            exit_code = 1
-                            break
-                        view.set_phase(f"stopped ({rep.how}) — space starts, q quits")
-                        continue
-                    if mons:
-                        mons[0].poll(sample)     # one monitor read per loop, round robin
-                        view.monitors = mons[0]  # shown again after a stop (space) and start
-                    view.update(sample)
-                    if running and view.reached_after is None and _at_reference(sample):
-                        view.reached_after = round(sample.t - t_start, 3)
-                    if sample.status.fault:
-                        end["reason"] = "the drive tripped" + (f" ({sample.status.fault_code})"
-                                                               if sample.status.fault_code else "")
-                        exit_code = 1
-                        break
-                    if duration is not None and sample.t - t_start >= duration:
-                        end["reason"] = f"duration {duration:g} s reached"
-                        break
-                    if keys is None:
-                        continue
-                    quit_now = False
-                    for k in keys.keys():
-                        if k == "q":
-                            quit_now = True
-                        elif k in ("up", "down", "r") and running and torque is not None:
-                            step_t = 1.0 if k == "up" else -1.0
-                            torque = -torque if k == "r" else max(-100.0, min(100.0, torque + step_t))
-                            s.set_torque(torque)
-                        elif k in ("up", "down") and running:
-                            pct = max(-100.0, min(100.0, pct + (step if k == "up" else -step) *
-                                                  (1 if pct >= 0 else -1)))
-                            s.set_reference(pct)
-                            view.reached_after = None
-                        elif k == "r" and running:
-                            pct = -pct
-                            s.set_reference(pct)
-                            view.reached_after = None
-                        elif k == "space":
-                            if running:
-                                view.set_phase("stopping (space)")
-                                rep = s.stop()
-                                running = False
-                                view.set_phase(f"stopped ({rep.how}) — space starts, q quits")
-                            else:
-                                view.set_phase("starting")
-                                if torque is not None or torque_limit is not None:
-                                    s.start_torque(torque, torque_limit, pct)
-                                else:
-                                    s.start(pct)
-                                running = True
-                                view.set_phase("running")
-                    if quit_now:
-                        end["reason"] = "q pressed"
-                        break
-            finally:
-                if keys is not None:
-                    keys.__exit__(None, None, None)
-            if s.may_run:
-                view.set_phase("stopping", sample)
-                s.stop()
-                if s.stop_report.how in ("normal", "coast"):
-                    view.set_phase("stopped", s._sample(s.final_status) if s.final_status else None)
-    except SessionTerminated:
-        end["reason"] = "SIGTERM"
-        raise
-    except KeyboardInterrupt:
-        end["reason"] = "Ctrl-C"
-        raise
-    except BusError as e:
-        end["reason"] = f"error: {e}"
-        raise
-    finally:
-        rep = session.stop_report
-        end["stop"] = rep.to_dict() if rep is not None else None
-        end["stopped"] = bool(rep.stopped) if rep is not None else not started
-        fs = session.final_status
-        if fs is not None:
-            end["state"] = fs.state
-            end["fault"] = fs.fault
-        end["reached_after_s"] = view.reached_after
-        end["cycles"] = session.cycles
-        end["counters"] = session.counters
-        end["warnings"] = session.warnings
-        if mons:
-            end["monitors"], end["monitors_dropped"] = mons[0].to_dict(), mons[0].dropped
-        if view.header:
-            view.finish(end)
-    if exit_code:
-        raise DriveError(f"station {session.address}: {end['reason']}; the drive is stopped")
-
-
-def _at_reference(sample) -> bool:
-    ref, act = sample.reference_percent, sample.actual_percent
-    if ref is None or act is None:
-        return False
-    return abs(act - ref) <= max(0.01 * abs(ref), 0.05)
 
 
 # =============================================================================================

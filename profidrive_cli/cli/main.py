@@ -33,7 +33,7 @@ COMMANDS = {
             "Jog a drive with the card's own jog function; a safe stop on every exit."),
     "param": ("profidrive_cli.cli.drive_cmds", "param_group",
               "Read and write drive parameters by their native codes."),
-    "run": ("profidrive_cli.cli.drive_cmds", "run_cmd",
+    "run": ("profidrive_cli.cli.run_cmd", "run_cmd",
             "Run a drive at a speed, live; a safe stop on every exit."),
     "scan": ("profidrive_cli.cli.bus_cmds", "scan_cmd",
              "Live list: every station, its type, ident and DP state."),
