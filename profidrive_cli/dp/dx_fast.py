@@ -1,0 +1,46 @@
+"""The Data_Exchange fast path: one cycle of a station already in data exchange, sans Frame objects.
+
+    Master.step(st) -> exchange_fast(master, st)   when master.fast_dx and st.dx_ready(now)
+
+The request comes from a template per FCB state (FdlMaster.dx_request: header + outputs + FCS/ED,
+fdl/fast.py); a reply that is exactly the expected DL telegram is taken by one prefix compare and
+its length, FCS and ED (FdlMaster.dx_feed), the FCB, counters and inputs updated in place
+(StationMachine.took_inputs). Anything else - no reply, a corrupt or foreign one, DH/RDH, RS, an
+SC, another length, octets the UART flagged, a reply in pieces - goes to the general engine
+unchanged (Master._await, FdlMaster.feed/expire, StationMachine.on_outcome), so retries, illegal
+frames, no-answer, the FCB restart after a failure and the per-attempt cap are counted exactly as
+before. Master.fast_dx = False sends every request the general way (tests compare the two).
+"""
+
+from __future__ import annotations
+
+from profidrive_cli.dp.station import Event, StationMachine
+from profidrive_cli.link.base import LinkLost
+
+
+def exchange_fast(m, st: StationMachine) -> bool:
+    """One Data_Exchange for `st` on dp.poller.Master `m`; True (a request was sent)."""
+    link = m.link
+    fdl = m.fdl
+    da = st.address
+    try:
+        m._wait_idle()
+        out = fdl.dx_request(da, st.outputs, link.now(), st.input_len)
+        link.write(out)
+        if not link.instant:
+            m._sent(out)
+        chunk = link.read(fdl.deadline)
+        if chunk:
+            now = link.now()
+            inputs = fdl.dx_feed(chunk, now)
+            if inputs is not None:
+                m._line_free_at = now + fdl.params.tid1_seconds
+                st.took_inputs(inputs)
+                if m.on_event is not None:
+                    m.on_event(da, Event("inputs", "", inputs))
+                return True
+        res = m._await(da, chunk)
+    except LinkLost as e:
+        raise m._link_lost(e) from None
+    m.on_outcome(st, st.dx_request(), res)
+    return True
