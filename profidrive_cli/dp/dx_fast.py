@@ -4,12 +4,14 @@
 
 The request comes from a template per FCB state (FdlMaster.dx_request: header + outputs + FCS/ED,
 fdl/fast.py); a reply that is exactly the expected DL telegram is taken by one prefix compare and
-its length, FCS and ED (FdlMaster.dx_feed), the FCB, counters and inputs updated in place
-(StationMachine.took_inputs). Anything else - no reply, a corrupt or foreign one, DH/RDH, RS, an
-SC, another length, octets the UART flagged, a reply in pieces - goes to the general engine
-unchanged (Master._await, FdlMaster.feed/expire, StationMachine.on_outcome), so retries, illegal
-frames, no-answer, the FCB restart after a failure and the per-attempt cap are counted exactly as
-before. Master.fast_dx = False sends every request the general way (tests compare the two).
+its length, FCS and ED (FdlMaster.dx_feed; a reply in pieces is collected as the general engine
+collects it), the FCB, counters and inputs updated in place (StationMachine.took_inputs). Anything
+else - no reply, a corrupt or foreign one, noise, DH/RDH, RS, an SC, another length, octets the UART
+flagged - goes to the general engine unchanged (FdlMaster.feed/expire in Master._await,
+StationMachine.on_outcome), so retries, illegal frames, no-answer, the FCB restart after a failure
+and the per-attempt cap are counted exactly as before. Waiting is the poller's (Master._await):
+the same reads, sleeps and deadlines. Master.fast_dx = False sends every request the general way
+(the tests compare the two).
 """
 
 from __future__ import annotations
@@ -21,26 +23,20 @@ from profidrive_cli.link.base import LinkLost
 def exchange_fast(m, st: StationMachine) -> bool:
     """One Data_Exchange for `st` on dp.poller.Master `m`; True (a request was sent)."""
     link = m.link
-    fdl = m.fdl
     da = st.address
     try:
         m._wait_idle()
-        out = fdl.dx_request(da, st.outputs, link.now(), st.input_len)
+        out = m.fdl.dx_request(da, st.outputs, link.now(), st.input_len)
         link.write(out)
         if not link.instant:
             m._sent(out)
-        chunk = link.read(fdl.deadline)
-        if chunk:
-            now = link.now()
-            inputs = fdl.dx_feed(chunk, now)
-            if inputs is not None:
-                m._line_free_at = now + fdl.params.tid1_seconds
-                st.took_inputs(inputs)
-                if m.on_event is not None:
-                    m.on_event(da, Event("inputs", "", inputs))
-                return True
-        res = m._await(da, chunk)
+        res = m._await(da, True)
     except LinkLost as e:
         raise m._link_lost(e) from None
-    m.on_outcome(st, st.dx_request(), res)
+    if type(res) is bytes:
+        st.took_inputs(res)
+        if m.on_event is not None:
+            m.on_event(da, Event("inputs", "", res))
+    else:
+        m.on_outcome(st, st.dx_request(), res)
     return True

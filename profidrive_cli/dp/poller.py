@@ -22,7 +22,7 @@ from profidrive_cli.dp.dx_fast import exchange_fast
 from profidrive_cli.dp.station import (CFG_FAULT, LOCKED, PRM_FAULT, RELEASED, STATE_WORDS, Event,
                                        SlaveConfig, StationMachine)
 from profidrive_cli.fdl import frames as F
-from profidrive_cli.fdl.master import REPLY, FdlMaster, Outcome, format_counters
+from profidrive_cli.fdl.master import MORE, REPLY, FdlMaster, Outcome, format_counters
 from profidrive_cli.fdl.timing import BusParams
 from profidrive_cli.link.base import Link, LinkLost
 
@@ -105,18 +105,23 @@ class Master:
             self._sent(out)
         return self._await(da)
 
-    def _await(self, da: int, chunk: bytes | None = None) -> Outcome:
+    def _await(self, da: int, dx: bool = False) -> Outcome | bytes:
         """Wait for the reply to the request just sent (retrying it) until it has an outcome.
-        `chunk`: what a first read already returned (b"": nothing came), not yet given to the engine."""
+        dx: a request from FdlMaster.dx_request; its expected reply is taken by the fast check
+        (then the input octets are returned), anything else by the general engine."""
         waited_for = 0       # length of the telegram whose rest was already waited for
+        fdl = self.fdl
         while True:
-            if chunk is None:
-                chunk = self.link.read(self.fdl.deadline)
+            chunk = self.link.read(fdl.deadline)
             now = self.link.now()
             if chunk:
-                res = self.fdl.feed(chunk, now)
+                res = fdl.dx_feed(chunk, now) if dx else None
+                if res is None:
+                    res = fdl.feed(chunk, now)
+                elif res is MORE:
+                    res = None
                 if res is not None:
-                    self._line_free_at = now + self.fdl.params.tid1_seconds
+                    self._line_free_at = now + fdl.params.tid1_seconds
                     return res
                 rest = self.fdl.missing()
                 if rest > 1 and not self.link.instant:
@@ -129,9 +134,7 @@ class Master:
                         waited_for = total
                         self.link.sleep(min(self.fdl.params.chars(rest - 1),
                                             self.fdl.deadline - now))
-                chunk = None
                 continue
-            chunk = None
             if now < self.fdl.deadline and not self.link.instant:
                 continue
             # (the instant simulator answers at once: an empty read means no answer is coming)

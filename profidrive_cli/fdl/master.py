@@ -35,6 +35,7 @@ from profidrive_cli.fdl.fcb import MasterFcb
 from profidrive_cli.fdl.timing import BusParams
 
 REPLY, NO_ANSWER = "reply", "no answer"
+MORE = "more"       # dx_feed(): the beginning of the expected reply, wait for the rest
 
 #: FCS + ED for every FCS value (the fast path's request tail)
 _TAILS = tuple(bytes((i, F.ED)) for i in range(256))
@@ -224,22 +225,39 @@ class FdlMaster:
         c.requests += 1
         return out
 
-    def dx_feed(self, data: bytes, now: float) -> bytes | None:
-        """The fast check of a Data_Exchange reply: when `data` is exactly the DL reply the template
-        expects (length, header, FCS, ED; nothing received before it in this attempt, no octet
-        flagged by the UART), the request is done as feed() would do it (FCB confirmed, counters)
-        and the input octets are returned. None: nothing was taken, give `data` to feed()."""
+    def dx_feed(self, data: bytes, now: float):
+        """The fast check of a Data_Exchange reply (after dx_request). Returns
+
+            the input octets   the octets so far are exactly the DL reply the template expects
+                               (length, header, FCS, ED; no octet flagged by the UART): the request
+                               is done as feed() would finish it (FCB confirmed, counters)
+            MORE               a true beginning of that reply: kept as feed() would keep it (the
+                               same receive buffer and deadline), wait for the rest
+            None               nothing taken: give `data` to feed(), which finds the same state
+                               as if it had had every octet of this attempt
+        """
         t = self._dx
-        if (t is None or self._pending is None or len(data) != t.reply_len or self._spoilt
-                or self._rx.buf or (type(data) is not bytes and getattr(data, "errors", None))):
+        if (t is None or self._pending is None or self._spoilt
+                or (type(data) is not bytes and getattr(data, "errors", None))):
             return None
+        buf = self._rx.buf
+        got = bytes(buf) + data if buf else data
         head = t.reply_head
+        if len(got) != t.reply_len:
+            if len(got) < t.reply_len and head.startswith(got[:len(head)]):
+                # what feed() does with the beginning of a telegram: keep it, wait for the rest
+                buf += data
+                self._extend(now + self.params.chars(self._expect + 9) + self.params.link_latency)
+                return MORE
+            return None
         end = t.reply_data_end
-        if not data.startswith(head) or data[end + 1] != F.ED:
+        if not got.startswith(head) or got[end + 1] != F.ED:
             return None
-        inputs = data[len(head):end]
-        if (t.reply_fcs + sum(inputs)) & 0xFF != data[end]:
+        inputs = got[len(head):end]
+        if (t.reply_fcs + sum(inputs)) & 0xFF != got[end]:
             return None
+        if buf:
+            buf.clear()
         da = self._da
         self._fcb[da].confirm()
         if self._retries or self._illegal:
