@@ -261,3 +261,65 @@ def test_data_exchange_builds_no_frame_objects(monkeypatch):
     for r in m.link.sent:
         f, used = F.parse(r)
         assert used == len(r) and f.data == outputs and (f.da, f.sa) == (3, 2)
+
+
+# -- the real byte path: a pty to `pdrive sim --pty` ------------------------------------------------
+
+def _pty_sim(plant):
+    import json
+    import subprocess
+    from conftest import pdrive_cmd
+    p = subprocess.Popen(pdrive_cmd() + ["sim", "--json", "--pty", "--plant", plant],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    line = p.stdout.readline()
+    if not line:
+        p.kill()
+        pytest.fail("pdrive sim printed nothing: " + p.stderr.read())
+    return p, json.loads(line)["port"]
+
+
+def _stop(p):
+    import signal
+    p.send_signal(signal.SIGINT)
+    try:
+        p.wait(timeout=10)
+    except Exception:
+        p.kill()
+        raise
+
+
+@pytest.mark.parametrize("faults", ["", "&drop=0.05&flip=0.05&noise=0.05&seed=4"])
+def test_fast_path_over_a_pty(faults):
+    """Replies through a real pty arrive in pieces: the fast path collects them (as the general
+    engine would) and takes them; faults on the way still go through the general engine."""
+    p, port = _pty_sim("sim://?stations=7:yaskawa" + faults)
+    try:
+        link = open_link(port, 19200)
+        m = Master(link, BusParams.for_baud(19200, retries=1))
+        cfg = SlaveConfig(ident=0x00CA, cfg=bytes.fromhex("5F6F"), wd_ms=2000)
+        st = m.add_station(7, cfg)
+        m.bring_up(7)
+        taken = [0]
+        feed = m.fdl.dx_feed
+
+        def counted(data, now):
+            r = feed(data, now)
+            taken[0] += type(r) is bytes
+            return r
+        m.fdl.dx_feed = counted
+        n = 150
+        before = m.fdl.counters[7].data_exchanges
+        for _ in range(n):
+            m.exchange(7, bytes(st.output_len))
+        c = m.fdl.counters[7]
+        assert st.in_data_exchange, st.last_error
+        if not faults:
+            assert (c.retries, c.illegal, c.no_answer) == (0, 0, 0)
+            assert c.data_exchanges - before == taken[0] == n
+        else:
+            assert c.retries > 0 and c.illegal > 0           # the faults reached the master
+            assert taken[0] > n // 2                         # the rest still took the fast path
+            assert c.data_exchanges - before + c.no_answer >= n   # each exchange: inputs or none
+        link.close()
+    finally:
+        _stop(p)

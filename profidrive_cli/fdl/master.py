@@ -198,7 +198,7 @@ class FdlMaster:
         if self._dx_params is not p:
             self._dx_cache.clear()
             self._dx_params = p
-        key = (da, fc, len(outputs), n_in)
+        key = (da, fc, len(outputs), n_in, self.address)
         t = self._dx_cache.get(key)
         if t is None:
             t = self._dx_cache[key] = dx_template(self.address, da, fc, len(outputs), n_in)
