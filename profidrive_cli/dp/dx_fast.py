@@ -25,10 +25,13 @@ def exchange_fast(m, st: StationMachine) -> bool:
     link = m.link
     da = st.address
     try:
-        m._wait_idle()
-        out = m.fdl.dx_request(da, st.outputs, link.now(), st.input_len)
-        link.write(out)
-        if not link.instant:
+        if link.instant:
+            out = m.fdl.dx_request(da, st.outputs, link.now(), st.input_len)
+            link.write(out)
+        else:
+            m._wait_idle()
+            out = m.fdl.dx_request(da, st.outputs, link.now(), st.input_len)
+            link.write(out)
             m._sent(out)
         res = m._await(da, True)
     except LinkLost as e:

@@ -121,7 +121,8 @@ class Master:
                 elif res is MORE:
                     res = None
                 if res is not None:
-                    self._line_free_at = now + fdl.params.tid1_seconds
+                    if not self.link.instant:        # (the instant simulator keeps no idle times)
+                        self._line_free_at = now + fdl.params.tid1_seconds
                     return res
                 rest = self.fdl.missing()
                 if rest > 1 and not self.link.instant:
