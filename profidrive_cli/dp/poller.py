@@ -18,10 +18,11 @@ import time
 
 from profidrive_cli import BusError
 from profidrive_cli.dp import services as S
+from profidrive_cli.dp.dx_fast import exchange_fast
 from profidrive_cli.dp.station import (CFG_FAULT, LOCKED, PRM_FAULT, RELEASED, STATE_WORDS, Event,
                                        SlaveConfig, StationMachine)
 from profidrive_cli.fdl import frames as F
-from profidrive_cli.fdl.master import REPLY, FdlMaster, Outcome, format_counters
+from profidrive_cli.fdl.master import MORE, REPLY, FdlMaster, Outcome, format_counters
 from profidrive_cli.fdl.timing import BusParams
 from profidrive_cli.link.base import Link, LinkLost
 
@@ -39,6 +40,9 @@ class Master:
         self.stations: dict[int, StationMachine] = {}
         self._line_free_at = 0.0     # earliest start of the next request (TSYN / TID1 / TID2 kept)
         self.on_event = None         # callable(address, Event) for live views / logs
+        #: stations in data exchange take the fast path (dp/dx_fast.py); False: the general
+        #: engine for every request (same octets, counters and FCB states, only slower)
+        self.fast_dx = True
         self._rr = 0
         #: how often the port went away, and how often reconnect() brought it back
         self.link_losses = 0
@@ -99,14 +103,26 @@ class Master:
         self.link.write(out)
         if not self.link.instant:
             self._sent(out)
+        return self._await(da)
+
+    def _await(self, da: int, dx: bool = False) -> Outcome | bytes:
+        """Wait for the reply to the request just sent (retrying it) until it has an outcome.
+        dx: a request from FdlMaster.dx_request; its expected reply is taken by the fast check
+        (then the input octets are returned), anything else by the general engine."""
         waited_for = 0       # length of the telegram whose rest was already waited for
+        fdl = self.fdl
         while True:
-            chunk = self.link.read(self.fdl.deadline)
+            chunk = self.link.read(fdl.deadline)
             now = self.link.now()
             if chunk:
-                res = self.fdl.feed(chunk, now)
+                res = fdl.dx_feed(chunk, now) if dx else None
+                if res is None:
+                    res = fdl.feed(chunk, now)
+                elif res is MORE:
+                    res = None
                 if res is not None:
-                    self._line_free_at = now + self.fdl.params.tid1_seconds
+                    if not self.link.instant:        # (the instant simulator keeps no idle times)
+                        self._line_free_at = now + fdl.params.tid1_seconds
                     return res
                 rest = self.fdl.missing()
                 if rest > 1 and not self.link.instant:
@@ -200,17 +216,23 @@ class Master:
     def step(self, st: StationMachine) -> bool:
         """One request for one station (if it wants one now). True if something was sent."""
         now = self.link.now()
+        if self.fast_dx and st.dx_ready(now):
+            return exchange_fast(self, st)
         req = st.next_request(now)
         if req is None:
             return False
         if req.service in ("Set_Prm",):
             self.fdl.reset_station(st.address) if st.state == "start" else None
         res = self.transact(st.address, req.function, req.data, req.dsap, req.ssap, req.expect)
+        self.on_outcome(st, req, res)
+        return True
+
+    def on_outcome(self, st: StationMachine, req, res: Outcome) -> None:
+        """Hand a request's outcome to the station's machine; its events to the listeners."""
         ev = st.on_outcome(req, res, self.link.now())
         if any(e.kind == "state" and e.data == "start" for e in ev):
             self.fdl.reset_station(st.address)
         self._emit(st.address, ev)
-        return True
 
     def poll(self) -> int:
         """One pass: one request to every station that wants one. Returns how many were sent."""

@@ -126,6 +126,23 @@ class StationMachine:
                              f"got {len(data)}")
         self.outputs = bytes(data)
 
+    # -- the Data_Exchange fast path (dp/dx_fast.py) ----------------------------------------------
+    def dx_ready(self, now: float) -> bool:
+        """next_request(now) would be a Data_Exchange (in data exchange, no diagnosis due)."""
+        return self.state == DATA_EXCH and not self._diag_due and now >= self.wait_until
+
+    def dx_request(self) -> DpRequest:
+        """The Data_Exchange request next_request() gives in data exchange."""
+        return DpRequest("Data_Exchange", F.SRD_HIGH, None, None, self.outputs, self.input_len + 9)
+
+    def took_inputs(self, data: bytes) -> None:
+        """A DL reply with exactly input_len octets: what on_outcome() does with it, in place
+        (the caller emits the "inputs" event when someone listens)."""
+        self._silent = 0
+        self.counters.data_exchanges += 1
+        self.inputs = data
+        self.fresh_inputs = True
+
     # -- what to send ---------------------------------------------------------------------------
     def next_request(self, now: float) -> DpRequest | None:
         if now < self.wait_until or self.state == RELEASED:
@@ -138,8 +155,7 @@ class StationMachine:
                              self.config.set_prm().encode(), 1)
         if self.state == CFG:
             return DpRequest("Chk_Cfg", F.SRD_HIGH, S.SAP_CHK_CFG, S.SAP_MASTER, self.config.cfg, 1)
-        return DpRequest("Data_Exchange", F.SRD_HIGH, None, None, self.outputs,
-                         self.input_len + 9)
+        return self.dx_request()
 
     # -- what came back -------------------------------------------------------------------------
     def on_outcome(self, req: DpRequest, out: Outcome, now: float) -> list[Event]:

@@ -30,10 +30,15 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from profidrive_cli.fdl import frames as F
+from profidrive_cli.fdl.fast import DxTemplate, dx_template
 from profidrive_cli.fdl.fcb import MasterFcb
 from profidrive_cli.fdl.timing import BusParams
 
 REPLY, NO_ANSWER = "reply", "no answer"
+MORE = "more"       # dx_feed(): the beginning of the expected reply, wait for the rest
+
+#: FCS + ED for every FCS value (the fast path's request tail)
+_TAILS = tuple(bytes((i, F.ED)) for i in range(256))
 
 
 @dataclass
@@ -111,6 +116,9 @@ class FdlMaster:
         self._cap = 0.0               # the most one attempt may take, whatever arrives
         self._hard = float("inf")     # the end of the attempt in progress (its start + _cap)
         self._expect = 255
+        self._dx: DxTemplate | None = None           # the fast path's template for the request
+        self._dx_cache: dict[tuple, DxTemplate] = {}
+        self._dx_params: BusParams | None = None     # the params the cached templates' times are for
 
     def counters_for(self, da: int) -> StationCounters:
         c = self.counters.get(da)
@@ -157,6 +165,7 @@ class FdlMaster:
             fc = F.request_fc(function)
         frame = F.Frame(F.SD2, da, self.address, fc, bytes(data), dsap, ssap)
         self._pending = F.encode(frame)
+        self._dx = None
         self._da = da
         self._uses_fcb = uses_fcb
         self._retries_left = self.params.retries
@@ -175,6 +184,89 @@ class FdlMaster:
         self.deadline = now + self._timeout
         self.counters_for(da).requests += 1
         return self._pending, self.deadline
+
+    # -- the Data_Exchange fast path (fdl/fast.py) ---------------------------------------------------
+    def dx_request(self, da: int, outputs: bytes, now: float, n_in: int) -> bytes:
+        """request(da, SRD_HIGH, outputs, None, None, now, n_in + 9) from a precomputed template:
+        the same octets, FCB, deadlines and counters, without building a Frame. Returns the octets
+        (the deadline is self.deadline). The reply goes to dx_feed() first."""
+        fcb = self._fcb.get(da)
+        if fcb is None:
+            fcb = self._fcb[da] = MasterFcb()
+        fc = fcb.fc(F.SRD_HIGH)
+        p = self.params
+        if self._dx_params is not p:
+            self._dx_cache.clear()
+            self._dx_params = p
+        key = (da, fc, len(outputs), n_in, self.address)
+        t = self._dx_cache.get(key)
+        if t is None:
+            t = self._dx_cache[key] = dx_template(self.address, da, fc, len(outputs), n_in)
+            t.request_len = n = len(t.head) + len(outputs) + 2
+            t.timeout = p.chars(n) + p.slot_seconds + p.link_latency
+            t.cap = self.attempt_cap(n, n_in + 9)
+        self._pending = out = t.head + outputs + _TAILS[(t.head_fcs + sum(outputs)) & 0xFF]
+        self._dx = t
+        self._da = da
+        self._uses_fcb = True
+        self._retries_left = p.retries
+        self._retries = self._illegal = 0
+        self._in_garbage = self._spoilt = False
+        if self._rx.buf:
+            self._rx.reset()
+        self._timeout = t.timeout
+        self._expect = n_in + 9
+        self._cap = t.cap
+        self._hard = now + t.cap
+        self.deadline = now + t.timeout
+        c = self.counters.get(da)
+        if c is None:
+            c = self.counters[da] = StationCounters()
+        c.requests += 1
+        return out
+
+    def dx_feed(self, data: bytes, now: float):
+        """The fast check of a Data_Exchange reply (after dx_request). Returns
+
+            the input octets   the octets so far are exactly the DL reply the template expects
+                               (length, header, FCS, ED; no octet flagged by the UART): the request
+                               is done as feed() would finish it (FCB confirmed, counters)
+            MORE               a true beginning of that reply: kept as feed() would keep it (the
+                               same receive buffer and deadline), wait for the rest
+            None               nothing taken: give `data` to feed(), which finds the same state
+                               as if it had had every octet of this attempt
+        """
+        t = self._dx
+        if (t is None or self._pending is None or self._spoilt
+                or (type(data) is not bytes and getattr(data, "errors", None))):
+            return None
+        buf = self._rx.buf
+        got = bytes(buf) + data if buf else data
+        head = t.reply_head
+        if len(got) != t.reply_len:
+            if len(got) < t.reply_len and head.startswith(got[:len(head)]):
+                # what feed() does with the beginning of a telegram: keep it, wait for the rest
+                buf += data
+                self._extend(now + self.params.chars(self._expect + 9) + self.params.link_latency)
+                return MORE
+            return None
+        end = t.reply_data_end
+        if not got.startswith(head) or got[end + 1] != F.ED:
+            return None
+        inputs = got[len(head):end]
+        if (t.reply_fcs + sum(inputs)) & 0xFF != got[end]:
+            return None
+        if buf:
+            buf.clear()
+        da = self._da
+        self._fcb[da].confirm()
+        if self._retries or self._illegal:
+            c = self.counters[da]
+            c.retries += self._retries
+            c.illegal += self._illegal
+        self._pending = None
+        self._in_garbage = False
+        return bytes(inputs)
 
     def sent(self, now: float) -> float:
         """The request (or its retry) was handed to the link at `now`: the reply timeout counts

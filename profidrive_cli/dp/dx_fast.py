@@ -1,0 +1,45 @@
+"""The Data_Exchange fast path: one cycle of a station already in data exchange, sans Frame objects.
+
+    Master.step(st) -> exchange_fast(master, st)   when master.fast_dx and st.dx_ready(now)
+
+The request comes from a template per FCB state (FdlMaster.dx_request: header + outputs + FCS/ED,
+fdl/fast.py); a reply that is exactly the expected DL telegram is taken by one prefix compare and
+its length, FCS and ED (FdlMaster.dx_feed; a reply in pieces is collected as the general engine
+collects it), the FCB, counters and inputs updated in place (StationMachine.took_inputs). Anything
+else - no reply, a corrupt or foreign one, noise, DH/RDH, RS, an SC, another length, octets the UART
+flagged - goes to the general engine unchanged (FdlMaster.feed/expire in Master._await,
+StationMachine.on_outcome), so retries, illegal frames, no-answer, the FCB restart after a failure
+and the per-attempt cap are counted exactly as before. Waiting is the poller's (Master._await):
+the same reads, sleeps and deadlines. Master.fast_dx = False sends every request the general way
+(the tests compare the two).
+"""
+
+from __future__ import annotations
+
+from profidrive_cli.dp.station import Event, StationMachine
+from profidrive_cli.link.base import LinkLost
+
+
+def exchange_fast(m, st: StationMachine) -> bool:
+    """One Data_Exchange for `st` on dp.poller.Master `m`; True (a request was sent)."""
+    link = m.link
+    da = st.address
+    try:
+        if link.instant:
+            out = m.fdl.dx_request(da, st.outputs, link.now(), st.input_len)
+            link.write(out)
+        else:
+            m._wait_idle()
+            out = m.fdl.dx_request(da, st.outputs, link.now(), st.input_len)
+            link.write(out)
+            m._sent(out)
+        res = m._await(da, True)
+    except LinkLost as e:
+        raise m._link_lost(e) from None
+    if type(res) is bytes:
+        st.took_inputs(res)
+        if m.on_event is not None:
+            m.on_event(da, Event("inputs", "", res))
+    else:
+        m.on_outcome(st, st.dx_request(), res)
+    return True
