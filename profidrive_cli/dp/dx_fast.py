@@ -17,6 +17,7 @@ the same reads, sleeps and deadlines. Master.fast_dx = False sends every request
 from __future__ import annotations
 
 from profidrive_cli.dp.station import Event, StationMachine
+from profidrive_cli.fdl.timing import frame_octets
 from profidrive_cli.link.base import LinkLost
 
 
@@ -33,6 +34,14 @@ def exchange_fast(m, st: StationMachine) -> bool:
             out = m.fdl.dx_request(da, st.outputs, link.now(), st.input_len)
             link.write(out)
             m._sent(out)
+            if not link.us_timing:
+                # a port without µs timing (pty, USB adapter, TCP): one sleep until the whole
+                # reply can be there (request, min TSDR, reply on the wire), then one read,
+                # instead of waking for its first octet and again for the rest
+                p = m.fdl.params
+                wait = (p.chars(len(out)) + p.min_tsdr / p.baud
+                        + p.chars(frame_octets(st.input_len)))
+                link.sleep(min(wait, m.fdl.deadline - link.now()))
         res = m._await(da, True)
     except LinkLost as e:
         raise m._link_lost(e) from None
