@@ -11,6 +11,7 @@
                                              the min TSDR of Set_Prm; default 11)
     sim://?drop=0.01&powercycle=0.001&...    fault injection (keys in sim/faults.py)
     sim://?trip=3:OC1                        station 3 starts tripped with alarm OC1
+    sim://?set=7:A1-02=3,C1-01=2             station 7 starts with these settings (engineering units)
     sim://?faults=6:E01,E05                  station 6's fault history pre-filled (repeat the key per station)
     sim://?wd=0                              (debug) ignore the watchdog... not offered: the sim always enforces it
 
@@ -31,7 +32,7 @@ from profidrive_cli.sim.model import SlaveModel
 from profidrive_cli.sim.slave import SimSlave
 
 DEFAULT_PLANT = ((3, "fuji-g1"), (4, "fuji-pdp3"), (5, "toyo"), (6, "moeller"), (7, "yaskawa"))
-KNOWN_KEYS = {"stations", "baud", "timing", "trip", "faults", "tsdr", "seed"}
+KNOWN_KEYS = {"stations", "baud", "timing", "trip", "faults", "tsdr", "seed", "set"}
 TIMINGS = ("instant", "wire", "virtual")
 
 
@@ -81,6 +82,35 @@ def _per_station(values: list[str], key: str) -> dict[int, list[str]]:
     return out
 
 
+def _presets(values: list[str]) -> dict[int, dict[str, float]]:
+    """set=ADDR:CODE=VALUE[,CODE=VALUE...] -> {address: {code: value}} (engineering units): the
+    drive's settings as the plant starts (a drive commissioned before, e.g. set=7:A1-02=3)."""
+    out: dict[int, dict[str, float]] = {}
+    for addr, items in _per_station(values, "set").items():
+        for item in items:
+            code, eq, value = item.partition("=")
+            try:
+                out.setdefault(addr, {})[code.strip()] = float(value)
+            except ValueError:
+                raise UsageError(f"sim URL: set={addr}:{item} must be CODE=NUMBER") from None
+            if not eq:
+                raise UsageError(f"sim URL: set={addr}:{item} must be CODE=NUMBER")
+    return out
+
+
+def _preset_options(profile, values: dict[str, float]) -> dict:
+    """The model options that preset `values`: the Yaskawa model takes its parameters as keyword
+    options (E1_04=50), the PROFIdrive models as `defaults`."""
+    if not values:
+        return {}
+    for code in values:
+        if profile.param(code) is None:
+            raise UsageError(f"sim URL: set=: {code} is not a parameter of {profile.name}")
+    if profile.family == "yaskawa":
+        return {code.replace("-", "_"): v for code, v in values.items()}
+    return {"defaults": dict(values)}
+
+
 def build_bus(url: str, now: float = 0.0, default_baud: int = 19200) -> SimBus:
     parts = urlsplit(url)
     if parts.scheme != "sim":
@@ -104,11 +134,18 @@ def build_bus(url: str, now: float = 0.0, default_baud: int = 19200) -> SimBus:
     trips = _per_station(q.get("trip", []), "trip")
     seeded = _per_station(q.get("faults", []), "faults")
     slaves = []
+    presets = _presets(q.get("set", []))
     for addr, name in stations:
         prof = load_profile(name)
-        model = make_model(prof)
+        try:
+            model = make_model(prof, **_preset_options(prof, presets.pop(addr, {})))
+        except ValueError as e:
+            raise UsageError(f"sim URL: set= for station {addr}: {e}") from None
         model.on_bus(addr, baud)
         slaves.append(SimSlave(addr, model))
+    if presets:
+        raise UsageError(f"sim URL: set= for station(s) {', '.join(map(str, sorted(presets)))}, "
+                         f"which are not on the bus")
     addrs = {s.address: s for s in slaves}
     for a in set(trips) | set(seeded):
         if a not in addrs:
