@@ -37,7 +37,7 @@ def test_every_shipped_profile_declares_every_capability():
     ("moeller", "monitor_words", ["ppo2", "ppo4", "ppo5"], ["ppo1", "ppo3"]),
     ("moeller", "torque", [], ["ppo1", "ppo5"]),
     ("moeller", "param_channel", ["ppo1", "ppo2", "ppo5"], ["ppo3", "ppo4"]),
-    ("toyo", "jog", ["ppo1", "ppo3", "toyo", "toyo_plch"], []),
+    ("toyo", "jog", ["ppo1", "ppo3", "toyo"], ["toyo_plch"]),   # PLCH: the jog bit is PLC contact I00021
     ("toyo", "torque", ["ppo2", "ppo4", "ppo5", "toyo"], ["ppo1", "ppo3", "toyo_plch"]),
     ("toyo", "quick_stop", ["ppo1", "ppo5"], ["toyo", "toyo_plch"]),
     ("toyo", "coast_stop", ["ppo2"], ["toyo"]),

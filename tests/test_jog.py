@@ -318,8 +318,11 @@ def test_checklist_validate_refuses_jog_where_the_card_has_none():
         load_checklist_text(HEAD + "  - jog: 1\n", "t.yaml")
     errs = [str(e) for e in ei.value.errors]
     assert len(errs) == 2
-    assert errs[0].startswith("t.yaml:7: step 1 (jog): fuji-opc-g1-pdp: CTW bits 8 and 9 are not used")
-    assert errs[1].startswith("t.yaml:7: step 1 (jog): yaskawa-si-p1: the SI-P1 run command word has no jog bit")
+    # the capability refusal's words (drives/capabilities.py), the same as `pdrive jog` prints
+    assert errs[0].startswith("t.yaml:7: step 1 (jog): fuji-opc-g1-pdp (layout ppo1) cannot jog: "
+                              "CTW bits 8 and 9 are not used")
+    assert errs[1].startswith("t.yaml:7: step 1 (jog): yaskawa-si-p1 (layout extended1) cannot jog: "
+                              "the SI-P1 run command word has no jog bit")
 
 
 def test_checklist_validate_refuses_jog_while_running():

@@ -3,8 +3,9 @@ function over the bus (Drive.supports_jog) and, where not, why (Drive.jog_refusa
 profile and layout alone, without a bus, so `pdrive jog` and `checklist validate` refuse a station that
 cannot jog with the same words before a telegram is sent.
 
-(The profiles' `capabilities:` list, when it comes, answers the same question; this module is the one
-place to connect it.)
+The profile's `capabilities:` declaration (drives/capabilities.py) is asked first, so the words are
+those of `checklist validate` and every other capability refusal; the Drive's own answer stays the
+last word for what the declaration does not cover (tests/test_jog.py checks that the two agree).
 """
 
 from __future__ import annotations
@@ -24,6 +25,11 @@ class _NoBus:
 
 def jog_refusal(profile, layout: str | None = None) -> str | None:
     """None when this profile's card can jog in `layout`, else one line saying why not."""
+    caps = getattr(profile, "capabilities", None)
+    if caps is not None and "jog" in getattr(caps, "decl", {}):
+        why = caps.refusal("jog", layout or profile.default_layout)
+        if why is not None:
+            return why
     from profidrive_cli.drives import make_drive
     d = make_drive(_NoBus(), profile, layout)
     return None if d.supports_jog else d.jog_refusal()
