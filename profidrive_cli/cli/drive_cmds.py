@@ -6,6 +6,7 @@ command line, asks for confirmation before writing to a real port, and renders (
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import sys
 
@@ -13,7 +14,7 @@ import click
 from rich.markup import escape
 from rich.progress import Progress
 
-from profidrive_cli import UsageError
+from profidrive_cli import BusError, UsageError
 from profidrive_cli.cli.common import (bus_options, confirm_real_port, emit_json, err, out,
                                        station_address)
 from profidrive_cli.cli import render_drive as R
@@ -78,6 +79,40 @@ def _terminations(f):
             err.print(f"terminated (signal {e.signum})")
             sys.exit(128 + int(e.signum))
     return wrapper
+
+
+@contextlib.contextmanager
+def run_ending(session, view, end: dict, started, extra=None):
+    """How a run or a jog ends, whatever way it ends: the reason (SIGTERM, Ctrl-C, a bus error), the
+    stop report, the final state, counters and warnings in `end`, and the view's last word.
+    started() says whether the drive was started (for `stopped` when no stop was needed); extra()
+    adds the command's own fields."""
+    try:
+        yield
+    except SessionTerminated:
+        end["reason"] = "SIGTERM"
+        raise
+    except KeyboardInterrupt:
+        end["reason"] = "Ctrl-C"
+        raise
+    except BusError as e:
+        end["reason"] = f"error: {e}"
+        raise
+    finally:
+        rep = session.stop_report
+        end["stop"] = rep.to_dict() if rep is not None else None
+        end["stopped"] = bool(rep.stopped) if rep is not None else not started()
+        fs = session.final_status
+        if fs is not None:
+            end["state"] = fs.state
+            end["fault"] = fs.fault
+        if extra is not None:
+            end.update(extra())
+        end["cycles"] = session.cycles
+        end["counters"] = session.counters
+        end["warnings"] = session.warnings
+        if view.header:
+            view.finish(end)
 
 
 def _is_number(text: str) -> bool:

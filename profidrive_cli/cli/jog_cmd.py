@@ -13,12 +13,12 @@ import time
 
 import click
 
-from profidrive_cli import BusError, UsageError
+from profidrive_cli import UsageError
 from profidrive_cli.cli import render_drive as R
 from profidrive_cli.cli.common import bus_options
-from profidrive_cli.cli.drive_cmds import _confirmer, _session, _terminations, drive_options
+from profidrive_cli.cli.drive_cmds import (_confirmer, _session, _terminations, drive_options,
+                                          run_ending)
 from profidrive_cli.drives.base import DriveError
-from profidrive_cli.session import SessionTerminated
 
 #: On a terminal the jog runs while a key is held: the terminal repeats a held key (after its
 #: auto-repeat delay, typically 250-600 ms); no key for this long counts as released and stops.
@@ -73,7 +73,7 @@ def jog_cmd(opts, address, reverse, duration, yes, profile_name, ppo, fmt, watch
             view.set_phase("stopping")
         view.update(sample)
     session.on_sample = stopping
-    try:
+    with run_ending(session, view, end, lambda: jogged or session.may_run):
         with session as s:
             fmax_hz, src = s.fmax()
             speed = s.jog_speed()
@@ -114,28 +114,6 @@ def jog_cmd(opts, address, reverse, duration, yes, profile_name, ppo, fmt, watch
                 s.stop()
                 if s.stop_report.how in ("normal", "coast"):
                     view.set_phase("stopped", s._sample(s.final_status) if s.final_status else None)
-    except SessionTerminated:
-        end["reason"] = "SIGTERM"
-        raise
-    except KeyboardInterrupt:
-        end["reason"] = "Ctrl-C"
-        raise
-    except BusError as e:
-        end["reason"] = f"error: {e}"
-        raise
-    finally:
-        rep = session.stop_report
-        end["stop"] = rep.to_dict() if rep is not None else None
-        end["stopped"] = bool(rep.stopped) if rep is not None else not (jogged or session.may_run)
-        fs = session.final_status
-        if fs is not None:
-            end["state"] = fs.state
-            end["fault"] = fs.fault
-        end["cycles"] = session.cycles
-        end["counters"] = session.counters
-        end["warnings"] = session.warnings
-        if view.header:
-            view.finish(end)
     if exit_code:
         raise DriveError(f"station {session.address}: {end['reason']}; the drive is stopped")
 

@@ -9,15 +9,15 @@ import sys
 
 import click
 
-from profidrive_cli import BusError, UsageError
+from profidrive_cli import UsageError
 from profidrive_cli.cli import render_drive as R
 from profidrive_cli.cli import run_torque
 from profidrive_cli.cli.common import bus_options
-from profidrive_cli.cli.drive_cmds import _confirmer, _session, _terminations, drive_options
+from profidrive_cli.cli.drive_cmds import (_confirmer, _session, _terminations, drive_options,
+                                          run_ending)
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.link.base import LinkLost
 from profidrive_cli.outfile import check_output_path
-from profidrive_cli.session import SessionTerminated
 
 
 @click.command("run")
@@ -91,7 +91,8 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
             view.set_phase("stopping")
         view.update(sample)
     session.on_sample = stopping
-    try:
+    with run_ending(session, view, end, lambda: started,
+                     extra=lambda: _run_extra(view, mons)):
         with session as s:
             s.check_torque(torque, torque_limit)          # the card's reason before anything shows
             fmax_hz, src = s.fmax(fmax)
@@ -203,33 +204,15 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
                 s.stop()
                 if s.stop_report.how in ("normal", "coast"):
                     view.set_phase("stopped", s._sample(s.final_status) if s.final_status else None)
-    except SessionTerminated:
-        end["reason"] = "SIGTERM"
-        raise
-    except KeyboardInterrupt:
-        end["reason"] = "Ctrl-C"
-        raise
-    except BusError as e:
-        end["reason"] = f"error: {e}"
-        raise
-    finally:
-        rep = session.stop_report
-        end["stop"] = rep.to_dict() if rep is not None else None
-        end["stopped"] = bool(rep.stopped) if rep is not None else not started
-        fs = session.final_status
-        if fs is not None:
-            end["state"] = fs.state
-            end["fault"] = fs.fault
-        end["reached_after_s"] = view.reached_after
-        end["cycles"] = session.cycles
-        end["counters"] = session.counters
-        end["warnings"] = session.warnings
-        if mons:
-            end["monitors"], end["monitors_dropped"] = mons[0].to_dict(), mons[0].dropped
-        if view.header:
-            view.finish(end)
     if exit_code:
         raise DriveError(f"station {session.address}: {end['reason']}; the drive is stopped")
+
+
+def _run_extra(view, mons) -> dict:
+    d = {"reached_after_s": view.reached_after}
+    if mons:
+        d["monitors"], d["monitors_dropped"] = mons[0].to_dict(), mons[0].dropped
+    return d
 
 
 def _at_reference(sample) -> bool:
