@@ -157,9 +157,9 @@ def test_each_diag_read_counts_once():
 
 def test_requests_of_each_step_on_the_wire():
     """Services, SAPs (reference §3: Slave_Diag 60, Set_Prm 61, Chk_Cfg 62, master SAP 62), SRD
-    high (function 13, §2.2) and the reply length each one waits for: SC (1 octet) for Set_Prm and
-    Chk_Cfg, an SD2 frame of 9 + N octets (SD2 LE LEr SD2 DA SA FC, N data, FCS ED) for
-    Data_Exchange with N input octets."""
+    high (function 13, §2.2) and the longest reply in octets (DpRequest.expect): SC (1 octet) for
+    Set_Prm and Chk_Cfg, an SD2 frame of 9 + N octets (SD2 LE LEr SD2 DA SA FC, N data, FCS ED)
+    for Data_Exchange with N input octets."""
     sm = machine()
     r = sm.next_request(0.0)
     assert (r.service, r.function, r.dsap, r.ssap, r.data) == ("Slave_Diag", 13, 60, 62, b"")
@@ -513,3 +513,42 @@ def test_resume_is_decided_by_the_first_diagnosis_only():
     sm.on_outcome(sm.next_request(0.0), Outcome("no answer"), 0.0)
     sm.on_outcome(sm.next_request(0.0), diag(0x02, 0x05, 0xFF), 0.0)   # watchdog expired
     assert sm.state == PRM and sm.counters.reparams == 1
+
+
+def test_first_contact_always_parameterises_even_a_station_that_looks_exchanging():
+    """A station met for the first time is parameterised, whatever its diagnosis says: only a
+    station *we* saw fall silent in Data_Exchange may be resumed (e.g. one left exchanging by an
+    earlier pdrive run with another configuration must get our Set_Prm/Chk_Cfg)."""
+    sm = machine()
+    assert sm.last_diag is None
+    sm.on_outcome(sm.next_request(0.0), Outcome("no answer"), 0.0)
+    assert sm.state == ABSENT
+    sm.on_outcome(sm.next_request(0.0), diag(*EXCHANGING), 0.0)
+    assert sm.state == PRM
+
+
+def test_a_refused_resume_is_not_tried_again_later():
+    """Silent -> diag says Prm_Req -> start-up; if Set_Prm then gets no answer and the next
+    diagnosis looks like data exchange, the start-up still has to run (Set_Prm never arrived)."""
+    sm = machine()
+    silent(sm)
+    sm.on_outcome(sm.next_request(0.0), diag(0x00, 0x0D, US), 0.0)       # Prm_Req
+    assert sm.state == PRM
+    sm.on_outcome(sm.next_request(0.0), Outcome("no answer"), 0.0)
+    assert sm.state == ABSENT
+    sm.on_outcome(sm.next_request(0.0), diag(*EXCHANGING), 0.0)
+    assert sm.state == PRM
+
+
+def test_diag_event_words_name_the_other_master():
+    # parameterised by master 5, no Master_Lock bit: locked for us (reference §3.3 octet 3)
+    sm = machine()
+    ev = sm.on_outcome(sm.next_request(0.0), diag(0x00, 0x04, 5), 0.0)
+    assert "locked by master 5" in ev[0].text
+
+
+def test_master_0xff_means_not_parameterised_not_locked():
+    # 0xFF = not parameterised (reference §3.3); st1 Not_Ready, st2 without Prm_Req
+    sm = machine()
+    sm.on_outcome(sm.next_request(0.0), diag(0x02, 0x04, 0xFF), 0.0)
+    assert sm.state == PRM
