@@ -201,3 +201,22 @@ def test_danger_texts():
         "starts auto-tuning"
     assert V.danger(P(extra={"danger": "text only"})) is None
     assert not V.is_dangerous(None) and V.danger(None) is None
+
+
+# -- the family's scale hook ----------------------------------------------------------------------
+
+def test_profile_value_problem_uses_the_toyo_400v_scale():
+    from dataclasses import replace
+
+    from profidrive_cli.drives.profile import load_profile
+    from profidrive_cli.drives.toyo.config import toyo_config
+    prof = load_profile("toyo-pbus66z")
+    p = prof.param("dc-voltage")                      # scale 0.1 V, 0.2 V on 400 V models
+    assert V.profile_value_problem(prof, p, 0.3) is None
+    p400 = replace(prof)
+    toyo_config(p400).voltage_class = 400
+    msg = V.profile_value_problem(p400, p, 0.3)
+    assert msg is not None and "resolution 0.2 V; nearest 0.2 V or 0.4 V" in msg
+    # a family without the hook: the parameter's own scale
+    fuji = load_profile("fuji-g1")
+    assert V.profile_value_problem(fuji, fuji.param("F07"), 0.05).endswith("nearest 0 s or 0.1 s")
