@@ -63,7 +63,7 @@ MODULES: dict[str, list[str]] = {
     "drives/values.py": ["tests/test_values_mutants.py", "tests/test_exact_values.py"],
     "drives/moeller.py": ["tests/test_moeller_codec.py", "tests/test_moeller_sim.py"],
     "drives/toyo/config.py": ["tests/test_toyo_vectors.py", "tests/test_toyo_sim.py"],
-    "drives/toyo/codec.py": ["tests/test_toyo_vectors.py", "tests/test_toyo_sim.py"],
+    "drives/toyo/codec.py": ["tests/test_toyo_codec_mutants.py", "tests/test_toyo_vectors.py", "tests/test_toyo_sim.py"],
     "drives/toyo/params.py": ["tests/test_toyo_vectors.py", "tests/test_toyo_sim.py"],
     "drives/toyo/describe.py": ["tests/test_toyo_vectors.py", "tests/test_toyo_sim.py"],
     "drives/toyo/drive.py": ["tests/test_toyo_vectors.py", "tests/test_toyo_sim.py"],
