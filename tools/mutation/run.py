@@ -68,7 +68,7 @@ MODULES: dict[str, list[str]] = {
     "drives/toyo/describe.py": ["tests/test_toyo_vectors.py", "tests/test_toyo_sim.py"],
     "drives/toyo/drive.py": ["tests/test_toyo_vectors.py", "tests/test_toyo_sim.py"],
     "drives/yaskawa/codec.py": ["tests/test_yaskawa_codec_mutants.py", "tests/test_yaskawa_codec.py", "tests/test_yaskawa_drive.py"],
-    "drives/yaskawa/paramaccess.py": ["tests/test_yaskawa_codec.py", "tests/test_yaskawa_drive.py"],
+    "drives/yaskawa/paramaccess.py": ["tests/test_yaskawa_paramaccess_mutants.py", "tests/test_yaskawa_codec.py", "tests/test_yaskawa_drive.py"],
     "drives/yaskawa/config.py": ["tests/test_yaskawa_codec.py", "tests/test_yaskawa_drive.py"],
     "drives/yaskawa/describe.py": ["tests/test_yaskawa_codec.py", "tests/test_yaskawa_drive.py"],
     "drives/yaskawa/drive.py": ["tests/test_yaskawa_codec.py", "tests/test_yaskawa_drive.py"],
