@@ -220,3 +220,56 @@ def test_profile_value_problem_uses_the_toyo_400v_scale():
     # a family without the hook: the parameter's own scale
     fuji = load_profile("fuji-g1")
     assert V.profile_value_problem(fuji, fuji.param("F07"), 0.05).endswith("nearest 0 s or 0.1 s")
+
+
+# -- second run: the scale override in every message, scale 0, odd inputs ------------------------
+
+def test_override_scale_in_the_whole_number_message():
+    # a 0.1 profile entry read with an override step of 1: 2.5 lies between 2 and 3
+    assert V.value_problem(P(scale=0.1, min=0, max=100), 2.5, scale=1) == \
+        "X1 = 2.5 cannot be held exactly: X1 takes whole numbers only; nearest 2 or 3"
+
+
+def test_override_scale_in_the_range_message():
+    # step 0.2: 1.4 = 7 steps, outside 0..1.1; the highest 0.2 step inside is 1.0
+    assert V.value_problem(P(scale=0.1, min=0, max=1.1), 1.4, scale=0.2) == \
+        "X1 (Test): 1.4 is outside 0..1.1; nearest 1"
+
+
+def test_override_scale_in_the_wire_word_message():
+    # 16-bit unsigned word of 0.2 steps: 0..13107 (65535 x 0.2); 13107.2 = 65536 steps
+    assert V.value_problem(P(scale=0.1), 13107.2, scale=0.2) == (
+        "X1 (Test): 13107.2 does not fit the parameter's wire word (0..13107); nearest 13107")
+    assert V.nearest_valid(P(scale=0.1), Fraction(40000), scale=0.5) == [Fraction(65535, 2)]
+
+
+def test_scale_0_nearest_uses_whole_numbers_and_open_ends():
+    assert V.nearest_valid(P(scale=0), Fraction(5, 2)) == [2, 3]
+    assert V.value_problem(P(scale=0, min=0), -1) == "X1 (Test): -1 is outside 0..inf; nearest 0"
+    assert V.value_problem(P(scale=0, max=10), 12) == "X1 (Test): 12 is outside -inf..10; nearest 10"
+    assert V.nearest_valid(P(scale=0, max=10), Fraction(12)) == [10]
+
+
+def test_a_range_without_steps_is_skipped_not_the_end():
+    p = P(scale=0.1, extra={"ranges": [[0.05, 0.08], [1, 2]]})
+    assert V.nearest_valid(p, Fraction(1, 2)) == [1]
+    assert V.value_problem(p, 0.5) == "X1 (Test): 0.5 is outside 0.05..0.08, 1..2; nearest 1"
+
+
+def test_ranges_that_are_not_a_list_are_ignored():
+    assert V.value_problem(P(min=0, max=5, extra={"ranges": "0..3"}), 4) is None
+
+
+def test_no_size_means_a_16_bit_word():
+    assert V.value_problem(P(size=0), 65535) is None
+    assert "wire word (0..65535)" in V.value_problem(P(size=0), 65536)
+
+
+def test_code_keys_that_are_no_numbers_are_skipped():
+    assert V.code_values(P(extra={"values": {"X5": "a", 1: "b", "-x": "c"}})) == [(1, 1)]
+
+
+def test_a_value_too_big_for_a_float_is_shown_exactly():
+    v = Fraction(10**400 + 1, 2)
+    msg = V.value_problem(P(scale=1.0), v)
+    assert msg.startswith(f"X1 = {10**400 + 1}/2 cannot be held exactly: X1 takes whole numbers only")
