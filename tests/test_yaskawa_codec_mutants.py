@@ -78,3 +78,16 @@ def test_user_units_with_zero_counts_fall_back_to_hz():
     s = FrequencyScale(10000, 60.0)
     assert s.unit_text("reference") == "0.01 Hz"
     assert s.hz_to_raw(60.0) == 6000
+
+
+def test_default_word_order_is_big_endian_unsigned():
+    # spec D1: big-endian by default; words are 0..0xFFFF (signedness is per field, §2.7)
+    assert unpack_words(bytes.fromhex("0102 FFFF")) == [0x0102, 0xFFFF]
+
+
+@pytest.mark.parametrize("word, signed", [(0xFFFF, -1), (0x8000, -32768), (0x7FFF, 32767), (1, 1),
+                                          (0, 0)])
+def test_signed_fields_are_twos_complement(word, signed):
+    # §2.7 [DERIVED]: torque and analog words are two's complement
+    from profidrive_cli.drives.yaskawa.codec import _s16
+    assert _s16(word) == signed
