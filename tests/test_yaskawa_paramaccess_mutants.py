@@ -269,3 +269,36 @@ def test_frozen_watchdog_is_named_after_more_than_0_2_s():
         t += 0.05
         r2 = pa2.feed(resp(EXT2, "", 0x42), t)
     assert r2.message.endswith("; the handshake watchdog counter is frozen: the option CPU may have stopped")
+
+
+def test_four_register_write_fills_data_1_to_4_msb_first():
+    # spec §4 / E4: data words from byte 4 of the area (bytes 20-27 of the image), MSB first
+    a = encode_param_area(EXT1, ParamRequest.write(0x0100, [0x1234, 0x5678, 0x9ABC, 0xDEF0]), 1)
+    assert a == h("10 01 00 08 12 34 56 78 9A BC DE F0 00 00 00 80")
+
+
+def test_failed_results_carry_request_and_ok_false():
+    for area_text in ("83 00 00 00 00 02", "03 00 38 02 12 34"):
+        pa = ParamAccess(EXT2)
+        drive_to_wait(pa, EXT2)
+        r = pa.feed(resp(EXT2, area_text, 0xE0), 0.1)
+        assert r.ok is False and r.request == ParamRequest.read(0x37)
+    pa = ParamAccess(EXT2, timeout=0.1)
+    drive_to_wait(pa, EXT2)
+    r = pa.feed(resp(EXT2, "", 0x02), 0.2)
+    assert r.ok is False and r.timeout is True and r.request == ParamRequest.read(0x37)
+
+
+def test_watchdog_frozen_note_needs_more_than_0_2_s_and_is_appended():
+    pa = ParamAccess(EXT2, timeout=0.15)
+    pa.feed(resp(EXT2, "", 0x02), 0.0)                       # WD 1 from t = 0
+    pa.submit(ParamRequest.read(0x37), 0.0)
+    r = pa.feed(resp(EXT2, "", 0xA2), 0.25)                  # frozen 0.25 s: noted
+    assert r.message == ("read 0x0037: no reply within 0.15 s (waiting for the option's handshake "
+                         "to settle); the handshake watchdog counter is frozen: the option CPU "
+                         "may have stopped")
+    pa2 = ParamAccess(EXT2, timeout=0.125)
+    pa2.feed(resp(EXT2, "", 0x02), 0.0)
+    pa2.submit(ParamRequest.read(0x37), 0.0)
+    r2 = pa2.feed(resp(EXT2, "", 0xA2), 0.2)                 # exactly 0.2 s: not yet "frozen"
+    assert r2.timeout and "frozen" not in r2.message
