@@ -111,3 +111,14 @@ def test_ctw_command(word, text):
 def test_no_jog_without_on_or_with_off2_off3(word):
     # jog runs from the run-command state (§3.3): not in OFF1 (bit 0 = 0), OFF2 or OFF3
     assert "jog (jog" not in C.ctw_command(word)
+
+
+def test_history_word_defaults_and_unnamed_modes():
+    assert C.history_word(7) == 0x0007                     # mode 0 (V/f), 1st setting block
+    from dataclasses import replace
+
+    from profidrive_cli.drives.toyo.config import toyo_config
+    p = replace(P)
+    toyo_config(p).history_modes = {0: "V/f"}              # a profile naming only mode 0
+    d = C.decode_history_word(p, 0x0207)
+    assert d["mode_text"] == "2" and "; inverter mode 2; setting block 1" in d["text"]
