@@ -76,7 +76,7 @@ MODULES: dict[str, list[str]] = {
     "checklist/runner.py": ["tests/test_checklist_bands.py", "tests/test_checklist.py"],
 }
 
-COPY = ("profidrive_cli", "tests", "profiles", "gsd", "pyproject.toml")
+COPY = ("profidrive_cli", "tests", "profiles", "gsd", "tools", "pyproject.toml")
 
 
 def scratch_copy(module: str, tests: list[str], workdir: Path) -> Path:
@@ -101,7 +101,7 @@ def scratch_copy(module: str, tests: list[str], workdir: Path) -> Path:
         "", "[tool.mutmut]",
         f'source_paths = ["{PKG}"]',
         f'only_mutate = ["*{PKG}/{module}"]',
-        'also_copy = ["profiles/", "gsd/"]',
+        'also_copy = ["profiles/", "gsd/", "tools/"]',   # tests run tools/gen_moeller_profile.py
         "pytest_add_cli_args_test_selection = [" + ", ".join(f'"{t}"' for t in tests) + "]",
         'pytest_add_cli_args = ["-p", "no:cacheprovider", "-x", "-q"]',
         "use_git_change_detection = false",
