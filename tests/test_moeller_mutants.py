@@ -1,0 +1,131 @@
+"""drives/moeller.py: the cases mutation testing found untested (issue 20).
+
+Expected values from ../shared/spec/moeller-de6-net-dp.md and the profile's rows: the node address
+from the two rotary switches (right = tens, 0..9 each), PNU 964 (bit 15 = DF, 0x12C = the "6"
+series), the direction rule (sign of HSW XOR STW bit 11), DF6 limits (df6: false, df6_max), and hand
+calculations of the wire widths (bytes 1/2/4, two's complement).
+"""
+
+from types import SimpleNamespace
+
+import pytest
+
+from profidrive_cli.drives import make_drive
+from profidrive_cli.drives import moeller as mo
+from profidrive_cli.drives.base import ParamError
+from profidrive_cli.drives.profidrive.params import ParamRef
+from profidrive_cli.drives.profile import ParamDef, load_profile
+from profidrive_cli.sim.direct import DirectChannel
+from profidrive_cli.sim.moeller import make_model
+
+
+@pytest.fixture(scope="module")
+def prof():
+    return load_profile("moeller")
+
+
+def rig(prof, layout="ppo1", **opts):
+    model = make_model(prof, **opts)
+    ch = DirectChannel(model, prof.layouts[layout].cfg)
+    return model, make_drive(ch, prof, layout)
+
+
+@pytest.mark.parametrize("right, left, addr", [(0, 0, 0), (9, 9, 99), (0, 9, 9), (9, 0, 90)])
+def test_address_switch_edges(right, left, addr):
+    assert mo.address_from_switches(right, left) == addr
+
+
+@pytest.mark.parametrize("right, left", [(-1, 0), (10, 0), (0, -1), (0, 10)])
+def test_address_switch_limits(right, left):
+    with pytest.raises(ValueError) as e:
+        mo.address_from_switches(right, left)
+    assert str(e.value) == "switch positions are 0..9"
+
+
+def test_device_names():
+    assert mo.device_name(0x0001) == "DV model 1"
+    assert mo.device_name(0x8001) == "DF model 1"
+    assert mo.device_name(0x812D) == "DF model 301"
+
+
+@pytest.mark.parametrize("ctw, hsw, text", [
+    (0x047F, 0x0000, "forward"), (0x0C7F, 0x0000, "reverse"),     # no sign: bit 11 alone
+    (0x047F, 0x0001, "forward"), (0x047F, 0xFFFF, "reverse"), (0x0C7F, 0x0001, "reverse"),
+])
+def test_direction_at_zero_and_one_count(ctw, hsw, text):
+    assert mo.direction_text(ctw, hsw) == text
+
+
+def test_fault_text_lists_every_alarm_of_a_number():
+    two = SimpleNamespace(alarms_for=lambda n: [SimpleNamespace(code="E60", meaning="a"),
+                                                SimpleNamespace(code="E60b", meaning="b")])
+    assert mo.fault_text(two, 60) == "E60 a / E60b b"
+
+
+def P(**kw):
+    return ParamDef(code="X1", name="Test", **kw)
+
+
+def test_in_ranges_edges_with_float_noise_only():
+    p = P(extra={"ranges": [[1, 48], [255, 255]]})
+    assert mo.in_ranges(p, 1) and mo.in_ranges(p, 48) and mo.in_ranges(p, 255)
+    assert mo.in_ranges(p, 48 + 1e-10) and mo.in_ranges(p, 1 - 1e-10)
+    assert not mo.in_ranges(p, 0.5) and not mo.in_ranges(p, 48.5) and not mo.in_ranges(p, 254.5)
+    q = P(min=0.01, max=3600.0)
+    assert mo.in_ranges(q, 0.01) and mo.in_ranges(q, 3600.0)
+    assert not mo.in_ranges(q, 0.005) and not mo.in_ranges(q, 3600.5)
+    assert mo.in_ranges(P(min=0), 10**9) and mo.in_ranges(P(max=0), -10**9)
+    assert not mo.in_ranges(P(max=0), 0.5)
+
+
+def test_raw_pnu_values_keep_their_width(prof):
+    _, drive = rig(prof)
+    ref16 = ParamRef("PNU999", "", 999, 0, False, 16, None)
+    ref32 = ParamRef("PNU999", "", 999, 0, False, 32, None)
+    assert drive.value_to_raw(ref16, -1) == 0xFFFF
+    assert drive.value_to_raw(ref16, 0x12345) == 0x2345
+    assert drive.value_to_raw(ref32, -1) == 0xFFFFFFFF
+    assert drive.value_to_raw(ref16, 7.0) == 7
+    # a raw PNU is checked as a raw 16-bit value
+    assert drive.check_value(ref16, 2.5) == \
+        "PNU999 = 2.5 cannot be held exactly: raw values are whole numbers; nearest 2 or 3"
+    assert drive.check_value(ref16, 70000) == "PNU999: 70000 does not fit 16 bits"
+
+
+def test_df6_maximum_message_and_edge(prof):
+    _, df6 = rig(prof, device="DF6")
+    ref = df6.resolve_param("C001")                 # ranges 1..48, 255; df6_max 39
+    assert df6.check_value(ref, 39) is None
+    assert df6.check_value(ref, 40) == \
+        "C001 (Selection of function in intelligent input 1): 40 is above the DF6 maximum 39"
+    a004 = df6.resolve_param("F002")                # no df6 keys: not checked against the device
+    assert df6.check_value(a004, 5.0) is None
+
+
+def test_df6_maximum_with_unit():
+    p = ParamDef(code="Y1", name="Y", unit="Hz", scale=0.01, min=0, max=400, size=16,
+                 extra={"bytes": 2, "df6_max": 120})
+    drive = SimpleNamespace(pkw=object(), device=lambda: "DF6")
+    ref = ParamRef("Y1", "Y", 1, 0, False, 16, p)
+    assert mo.MoellerDrive.check_value(drive, ref, 130) == "Y1 (Y): 130 Hz is above the DF6 maximum 120 Hz"
+    assert mo.MoellerDrive.check_value(drive, ref, 120) is None
+    # without a parameter channel the device cannot be asked: no DF6 check
+    nopkw = SimpleNamespace(pkw=None, device=lambda: pytest.fail("must not ask the device"))
+    assert mo.MoellerDrive.check_value(nopkw, ref, 130) is None
+    # a parameter without df6 keys never asks the device
+    plain = ParamDef(code="Z1", name="Z", scale=1, min=0, max=10, extra={"bytes": 2})
+    asks = SimpleNamespace(pkw=object(), device=lambda: pytest.fail("must not ask the device"))
+    assert mo.MoellerDrive.check_value(asks, ParamRef("Z1", "Z", 2, 0, False, 16, plain), 5) is None
+
+
+def test_comm_loss_setting_reads_both_slots(prof):
+    _, drive = rig(prof)
+    got = drive.comm_loss_setting()
+    assert set(got) == {"P002", "P001"}
+    assert all(v is not None and v.code in ("P002", "P001") for v in got.values())
+
+
+def test_bus_control_check_names_missing_rights(prof):
+    model, drive = rig(prof)
+    model.control_rights = 0                         # PNU 928 = 0 (spec: process-data rights)
+    assert drive.bus_control_check() == ["PNU 928 = 0: no process-data control rights"]
