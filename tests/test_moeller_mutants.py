@@ -129,3 +129,98 @@ def test_bus_control_check_names_missing_rights(prof):
     model, drive = rig(prof)
     model.control_rights = 0                         # PNU 928 = 0 (spec: process-data rights)
     assert drive.bus_control_check() == ["PNU 928 = 0: no process-data control rights"]
+
+
+# -- wire values ----------------------------------------------------------------------------------
+
+def test_value_from_wire_widths_and_sign():
+    u1 = P(scale=1, extra={"bytes": 1})
+    s1 = P(scale=1, signed=True, extra={"bytes": 1})
+    assert mo.value_from_wire(u1, 0xFF) == 255 and mo.value_from_wire(u1, 0x1FF) == 255
+    assert mo.value_from_wire(s1, 0x80) == -128 and mo.value_from_wire(s1, 0x7F) == 127
+    assert mo.value_from_wire(s1, 0x40) == 64
+    # no `bytes`: the size says it (32 bits = 4 octets)
+    assert mo.value_from_wire(P(scale=1, size=32), 0xFFFFFFFF) == 4294967295
+    assert mo.value_from_wire(P(scale=1, size=32, signed=True), 0xFFFFFFFF) == -1
+    assert mo.value_from_wire(P(scale=0.01, size=32, signed=True), 0xFFFFFF9C) == -1.0
+
+
+def test_wire_from_value_widths():
+    assert mo.wire_from_value(P(scale=1, size=32), -1) == 0xFFFFFFFF
+    assert mo.wire_from_value(P(scale=1, extra={"bytes": 1}), -1) == 0xFF
+    assert mo.wire_from_value(P(scale=0.01, extra={"bytes": 4}, size=32), 4.0) == 400
+    assert mo.wire_from_value(P(scale=0, extra={"bytes": 2}), 7.9) == 7
+
+
+# -- profile validation: one line saying what and where -------------------------------------------
+
+from pathlib import Path
+
+from profidrive_cli.datafile import DataFileError
+from profidrive_cli.drives.profile import load_profile_file
+
+SRC = Path(__file__).resolve().parent.parent / "profiles" / "moeller-de6-net-dp.yaml"
+F002 = 'pnu: 23, unit: "s", scale: 0.01, min: 0.01, max: 3600.0, access: "rw", bytes: 4, size: 32}'
+A001 = '"A001", name: "Selection of frequency command destination", pnu: 189, min: 0, max: 5, access: "stop", bytes: 1, format: "code"'
+
+
+def _load(tmp_path, old, new):
+    text = SRC.read_text(encoding="utf-8")
+    assert old in text
+    dst = tmp_path / "moeller-test.yaml"
+    dst.write_text(text.replace(old, new, 1), encoding="utf-8")
+    return dst, load_profile_file(dst)
+
+
+@pytest.mark.parametrize("old, new, msg, marker", [
+    (F002, F002.replace(", bytes: 4", ""), "F002: missing 'bytes' (1, 2 or 4)", '"F002"'),
+    (F002, F002.replace(", size: 32", ""), "F002: bytes 4 needs size 32, got 16", '"F002"'),
+    (A001, A001.replace("bytes: 1", "bytes: 2, size: 32"), "A001: bytes 2 needs size 16, got 32", '"A001"'),
+    (A001, A001.replace('"code"', '"dec"'), "A001: format must be one of code, hex, bits, got 'dec'",
+     '"A001"'),
+    ("ctw_reverse_bit: 11", "ctw_reverse_bit: 16", "'ctw_reverse_bit' must be an integer 11..15, got 16",
+     "ctw_reverse_bit"),
+    ("ctw_reverse_bit: 11", "ctw_reverse_bit: 10", "'ctw_reverse_bit' must be an integer 11..15, got 10",
+     "ctw_reverse_bit"),
+    ("ctw_reverse_bit: 11", "ctw_reverse_bit: true",
+     "'ctw_reverse_bit' must be an integer 11..15, got True", "ctw_reverse_bit"),
+    ("ctw_reverse_bit: 11", "ctw_reverse_bit: 1.5",
+     "'ctw_reverse_bit' must be an integer 11..15, got 1.5", "ctw_reverse_bit"),
+    ("commands: {param: A002, bus_value: 1}", "commands: {param: A002, bus_value: 256}",
+     "'bus_value' must be an integer 0..255, got 256", "commands:"),
+    ("commands: {param: A002, bus_value: 1}", "commands: {param: A999, bus_value: 1}",
+     "moeller.control_source.commands.param: A999 is not a parameter of this profile", "commands:"),
+])
+def test_profile_errors_say_what_and_where(tmp_path, old, new, msg, marker):
+    path, prof = _load(tmp_path, old, new)
+    with pytest.raises(DataFileError) as e:
+        mo.moeller_config(prof)
+    assert e.value.message == msg
+    line = path.read_text(encoding="utf-8").splitlines()[e.value.line - 1]
+    assert marker in line
+    assert str(e.value).startswith(f"{path}:{e.value.line}:")
+
+
+def test_edge_bits_15_and_bus_value_255_are_accepted(tmp_path):
+    _, prof = _load(tmp_path, "ctw_reverse_bit: 11", "ctw_reverse_bit: 15")
+    assert mo.moeller_config(prof).reverse_bit == 15
+    _, prof = _load(tmp_path, "commands: {param: A002, bus_value: 1}",
+                    "commands: {param: A002, bus_value: 255}")
+    assert mo.moeller_config(prof).commands_bus_value == 255
+
+
+def test_raw_pnu_rows_need_no_bytes(tmp_path):
+    # a PNUnnn row is a plain word: `bytes` may be left out; a named row must have it
+    _, prof = _load(tmp_path, F002, F002 + '\n  - {code: "PNU999", name: "Raw", pnu: 999, access: "ro"}')
+    assert "bytes" not in prof.param("PNU999").extra
+    assert mo.moeller_config(prof).df6_device_id == 0x812C
+
+
+def test_validation_of_a_profile_without_a_path_names_it():
+    from dataclasses import replace
+    bad = ParamDef(code="X9", name="X", line=7)
+    prof = replace(load_profile("moeller"), path=None)
+    prof = replace(prof, parameters={**prof.parameters, "X9": bad})
+    with pytest.raises(DataFileError) as e:
+        mo.moeller_config(prof)
+    assert str(e.value).startswith("<profile>:7:") and "X9: missing 'bytes' (1, 2 or 4)" in str(e.value)
