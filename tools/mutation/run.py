@@ -61,7 +61,7 @@ MODULES: dict[str, list[str]] = {
     "drives/fuji/drive.py": ["tests/test_fuji_vectors.py", "tests/test_fuji_sim.py"],
     "drives/fuji/describe.py": ["tests/test_fuji_vectors.py", "tests/test_fuji_sim.py"],
     "drives/values.py": ["tests/test_values_mutants.py", "tests/test_exact_values.py"],
-    "drives/moeller.py": ["tests/test_moeller_codec.py", "tests/test_moeller_sim.py"],
+    "drives/moeller.py": ["tests/test_moeller_mutants.py", "tests/test_moeller_codec.py", "tests/test_moeller_sim.py"],
     "drives/toyo/config.py": ["tests/test_toyo_vectors.py", "tests/test_toyo_sim.py"],
     "drives/toyo/codec.py": ["tests/test_toyo_codec_mutants.py", "tests/test_toyo_vectors.py", "tests/test_toyo_sim.py"],
     "drives/toyo/params.py": ["tests/test_toyo_vectors.py", "tests/test_toyo_sim.py"],
