@@ -224,3 +224,40 @@ def test_validation_of_a_profile_without_a_path_names_it():
     with pytest.raises(DataFileError) as e:
         mo.moeller_config(prof)
     assert str(e.value).startswith("<profile>:7:") and "X9: missing 'bytes' (1, 2 or 4)" in str(e.value)
+
+
+# -- status flag and decoder ----------------------------------------------------------------------
+
+@pytest.mark.parametrize("zsw, ctw, gives", [
+    (0x0200, 0x047F, True),           # ZSW bit 9 control requested, STW bit 12 = 0
+    (0x0200, 0x147F, False),          # STW bit 12 = 1: commands taken away from the bus
+    (0x0000, 0x047F, False),          # the drive does not request control
+    (0x0200, None, True),             # nothing sent yet: control word 0
+])
+def test_bus_gives_commands_flag(zsw, ctw, gives):
+    me = SimpleNamespace(last_ctw=ctw, mc=mo.MoellerConfig())
+    status = SimpleNamespace(flags={}, raw={})
+    mo.MoellerDrive.status_extras(me, SimpleNamespace(word1=zsw), status)
+    assert status.flags == {"bus gives commands": gives}
+    assert status.raw == {"control_word": ctw or 0}
+
+
+def test_decoder_uses_max_hz_and_the_profile_bits(prof, tmp_path):
+    data = bytes(8) + bytes.fromhex("0C7F 2000")            # STW bit 11 set, HSW +50 %
+    out = mo.decode_area(prof, "ppo1", "request", data, max_hz=100)
+    assert out["reference"]["hz"] == 50.0
+    assert out["control_word"]["direction"] == "reverse"
+    assert out["control_word"]["bus_controls"] == "frequency and commands"
+    assert out["text"][-2] == ("bus controls (with A001 = 2, A002 = 1): frequency and commands; "
+                               "direction reverse (sign of HSW XOR STW bit 11)")
+    assert out["text"][-1].startswith("summary:")
+    # a profile that moves the bits: bit 15 reverses, bit 14 takes the commands away
+    _load(tmp_path, "ctw_reverse_bit: 11\n", "ctw_reverse_bit: 15\n")
+    text = (tmp_path / "moeller-test.yaml").read_text(encoding="utf-8")
+    (tmp_path / "moeller-test.yaml").write_text(
+        text.replace("ctw_commands_invalid_bit: 12", "ctw_commands_invalid_bit: 14"), encoding="utf-8")
+    p2 = load_profile_file(tmp_path / "moeller-test.yaml")
+    out2 = mo.decode_area(p2, "ppo1", "request", bytes(8) + bytes.fromhex("C47F 2000"))
+    assert out2["control_word"]["direction"] == "reverse"
+    assert out2["control_word"]["bus_controls"] == "frequency only"
+    assert "XOR STW bit 15" in out2["text"][-2]
