@@ -186,6 +186,29 @@ def _load(tmp_path, old, new):
      "'ctw_reverse_bit' must be an integer 11..15, got True", "ctw_reverse_bit"),
     ("ctw_reverse_bit: 11", "ctw_reverse_bit: 1.5",
      "'ctw_reverse_bit' must be an integer 11..15, got 1.5", "ctw_reverse_bit"),
+    (A001, A001 + ", ranges: [[5, 1]]", "A001: ranges must be a list of [min, max]", '"A001"'),
+    (A001, A001 + ", ranges: [[0, 1, 2]]", "A001: ranges must be a list of [min, max]", '"A001"'),
+    (A001, A001 + ', ranges: [[0, "x"]]', "A001: ranges must be a list of [min, max]", '"A001"'),
+    (A001, A001 + ", ranges: []", "A001: ranges must be a list of [min, max]", '"A001"'),
+    (A001, A001 + ", ranges: [0, 1]", "A001: ranges must be a list of [min, max]", '"A001"'),
+    (A001, A001 + ", df6: 1", "A001: df6 must be true or false", '"A001"'),
+    (A001, A001 + ', df6_max: "x"', "A001: df6_max must be a number", '"A001"'),
+    (A001, A001 + ", flavour: x",
+     "A001: unknown key(s) flavour (Moeller keys: array, bytes, df6, df6_max, format, note, ranges)",
+     '"A001"'),
+    ("sim_defaults: {A001: 2,", "sim_defaults: {Z999: 1, A001: 2,",
+     "sim_defaults: Z999 is not a parameter of this profile", "sim_defaults"),
+    ("A001: 2, A002: 1, A004: 50", "A001: 2, A002: x, A004: 50", "sim_defaults: A002 must be a number",
+     "sim_defaults"),
+    ("A001: 2, A002: 1, A004: 50", "A001: 2, A002: true, A004: 50", "sim_defaults: A002 must be a number",
+     "sim_defaults"),
+    ("comm_loss: {param: P002, other_param: P001, alarm: E70}", "comm_loss: 5",
+     "comm_loss must be a mapping", "comm_loss"),
+    ("comm_loss: {param: P002, other_param: P001, alarm: E70}",
+     "comm_loss: {param: P002, other_param: Q001, alarm: E70}",
+     "moeller.comm_loss.other_param: Q001 is not a parameter of this profile", "comm_loss"),
+    ("frequency: {param: A001, bus_value: 2}", "frequency: 7",
+     "control_source.frequency must be {param, bus_value}", "frequency"),
     ("commands: {param: A002, bus_value: 1}", "commands: {param: A002, bus_value: 256}",
      "'bus_value' must be an integer 0..255, got 256", "commands:"),
     ("commands: {param: A002, bus_value: 1}", "commands: {param: A999, bus_value: 1}",
@@ -199,6 +222,15 @@ def test_profile_errors_say_what_and_where(tmp_path, old, new, msg, marker):
     line = path.read_text(encoding="utf-8").splitlines()[e.value.line - 1]
     assert marker in line
     assert str(e.value).startswith(f"{path}:{e.value.line}:")
+
+
+def test_comm_loss_without_the_other_slot(tmp_path):
+    _, prof = _load(tmp_path, "comm_loss: {param: P002, other_param: P001, alarm: E70}",
+                    "comm_loss: {param: P002, alarm: E70}")
+    mc = mo.moeller_config(prof)
+    assert (mc.comm_loss_param, mc.comm_loss_other_param, mc.comm_loss_alarm) == ("P002", None, "E70")
+    _, prof = _load(tmp_path, A001, A001 + ", ranges: [[2, 2]]")
+    assert mo.moeller_config(prof).frequency_param == "A001"
 
 
 def test_edge_bits_15_and_bus_value_255_are_accepted(tmp_path):
