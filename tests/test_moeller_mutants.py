@@ -209,6 +209,12 @@ def _load(tmp_path, old, new):
      "moeller.comm_loss.other_param: Q001 is not a parameter of this profile", "comm_loss"),
     ("frequency: {param: A001, bus_value: 2}", "frequency: 7",
      "control_source.frequency must be {param, bus_value}", "frequency"),
+    ("ctw_reverse_bit: 11", "ctw_reverse_bit: 12.5",
+     "'ctw_reverse_bit' must be an integer 11..15, got 12.5", "ctw_reverse_bit"),
+    ("commands: {param: A002, bus_value: 1}", "commands: {param: A002, bus_value: true}",
+     "'bus_value' must be an integer 0..255, got True", "commands:"),
+    ("df6_device_id: 0x812C", "df6_device_id: 0x10000",
+     "'df6_device_id' must be an integer 0..65535, got 65536", "df6_device_id"),
     ("commands: {param: A002, bus_value: 1}", "commands: {param: A002, bus_value: 256}",
      "'bus_value' must be an integer 0..255, got 256", "commands:"),
     ("commands: {param: A002, bus_value: 1}", "commands: {param: A999, bus_value: 1}",
@@ -293,3 +299,54 @@ def test_decoder_uses_max_hz_and_the_profile_bits(prof, tmp_path):
     assert out2["control_word"]["direction"] == "reverse"
     assert out2["control_word"]["bus_controls"] == "frequency only"
     assert "XOR STW bit 15" in out2["text"][-2]
+
+
+
+def test_in_ranges_tolerance_is_inclusive():
+    p = P(extra={"ranges": [[1, 48]]})
+    assert mo.in_ranges(p, 1 - 1e-9) and mo.in_ranges(p, 48 + 1e-9)
+    q = P(min=0.01, max=3600.0)
+    assert mo.in_ranges(q, 0.01 - 1e-9) and mo.in_ranges(q, 3600.0 + 1e-9)
+
+
+def test_control_source_entries_may_leave_out_param_or_bus_value(tmp_path):
+    _, prof = _load(tmp_path, "frequency: {param: A001, bus_value: 2}", "frequency: {bus_value: 2}")
+    assert mo.moeller_config(prof).frequency_param == "A001"
+    _, prof = _load(tmp_path, "commands: {param: A002, bus_value: 1}", "commands: {param: A002}")
+    assert mo.moeller_config(prof).commands_bus_value == 1
+    _, prof = _load(tmp_path, "df6_device_id: 0x812C", "df6_device_id: 0")
+    assert mo.moeller_config(prof).df6_device_id == 0
+
+
+def test_block_style_error_points_at_the_key(tmp_path):
+    path, prof = _load(tmp_path, "commands: {param: A002, bus_value: 1}",
+                       "commands:\n      param: A999\n      bus_value: 1")
+    with pytest.raises(DataFileError) as e:
+        mo.moeller_config(prof)
+    assert path.read_text(encoding="utf-8").splitlines()[e.value.line - 1].strip() == "param: A999"
+
+
+def test_section_errors_of_a_profile_without_a_path(tmp_path):
+    from dataclasses import replace
+    _, prof = _load(tmp_path, "ctw_reverse_bit: 11", "ctw_reverse_bit: 16")
+    with pytest.raises(DataFileError) as e:
+        mo.moeller_config(replace(prof, path=None))
+    assert str(e.value).startswith("<profile>:")
+
+
+def test_bus_control_check_texts_with_a_stub_drive():
+    from profidrive_cli.drives.profidrive import PNU_CONTROL_RIGHTS, PNU_EDIT_RIGHTS
+    good = {"A001": 2, "A002": 1}
+
+    def rights(values):
+        def read_raw(pnu):
+            v = values[pnu]
+            if isinstance(v, Exception):
+                raise v
+            return v
+        return read_raw
+    me = SimpleNamespace(mc=mo.MoellerConfig(), read_param=lambda c: SimpleNamespace(raw=good[c]),
+                         read_raw=rights({PNU_EDIT_RIGHTS: 0, PNU_CONTROL_RIGHTS: 1}))
+    assert mo.MoellerDrive.bus_control_check(me) == ["PNU 927 = 0: no parameter edit rights"]
+    me.read_raw = rights({PNU_EDIT_RIGHTS: 1, PNU_CONTROL_RIGHTS: ParamError("PNU 928: refused")})
+    assert mo.MoellerDrive.bus_control_check(me) == ["PNU 928: refused"]
