@@ -320,7 +320,7 @@ def test_control_source_entries_may_leave_out_param_or_bus_value(tmp_path):
 
 def test_block_style_error_points_at_the_key(tmp_path):
     path, prof = _load(tmp_path, "commands: {param: A002, bus_value: 1}",
-                       "commands:\n      param: A999\n      bus_value: 1")
+                       "commands:\n      bus_value: 1\n      param: A999")   # the key, not the first line
     with pytest.raises(DataFileError) as e:
         mo.moeller_config(prof)
     assert path.read_text(encoding="utf-8").splitlines()[e.value.line - 1].strip() == "param: A999"
