@@ -323,7 +323,7 @@ def test_block_style_error_points_at_the_key(tmp_path):
                        "commands:\n      bus_value: 1\n      param: A999")   # the key, not the first line
     with pytest.raises(DataFileError) as e:
         mo.moeller_config(prof)
-    assert path.read_text(encoding="utf-8").splitlines()[e.value.line - 1].strip() == "param: A999"
+    assert path.read_text(encoding="utf-8").splitlines()[e.value.line - 1].strip().startswith("param: A999")
 
 
 def test_section_errors_of_a_profile_without_a_path(tmp_path):
