@@ -350,3 +350,29 @@ def test_bus_control_check_texts_with_a_stub_drive():
     assert mo.MoellerDrive.bus_control_check(me) == ["PNU 927 = 0: no parameter edit rights"]
     me.read_raw = rights({PNU_EDIT_RIGHTS: 1, PNU_CONTROL_RIGHTS: ParamError("PNU 928: refused")})
     assert mo.MoellerDrive.bus_control_check(me) == ["PNU 928: refused"]
+
+
+@pytest.mark.parametrize("old, new, msg, marker", [
+    ("moeller:\n", "moeller_x:\n", "missing section 'moeller'", None),
+    ("moeller:\n", "moeller: 5\nmoeller_x:\n", "'moeller' must be a mapping", "moeller: 5"),
+    ("  df6_device_id: 0x812C", "  df6_device_id: 0x812C\n  colour: blue",
+     "moeller: unknown key 'colour' (known: comm_loss, control_source, ctw_commands_invalid_bit, "
+     "ctw_reference_invalid_bit, ctw_reverse_bit, df6_device_id, sim_defaults)", "colour: blue"),
+])
+def test_section_errors_exact(tmp_path, old, new, msg, marker):
+    path, prof = _load(tmp_path, old, new)
+    with pytest.raises(DataFileError) as e:
+        mo.moeller_config(prof)
+    assert e.value.message == msg
+    assert str(e.value).startswith(f"{path}:")
+    if marker:
+        assert path.read_text(encoding="utf-8").splitlines()[e.value.line - 1].strip().startswith(marker)
+    else:
+        assert e.value.line is not None
+
+
+def test_two_unknown_parameter_keys_are_listed_sorted(tmp_path):
+    _, prof = _load(tmp_path, A001, A001 + ", zeta: 1, alpha: 2")
+    with pytest.raises(DataFileError) as e:
+        mo.moeller_config(prof)
+    assert e.value.message.startswith("A001: unknown key(s) alpha, zeta (Moeller keys:")
