@@ -45,12 +45,12 @@ MODULES: dict[str, list[str]] = {
     "dp/services.py": ["tests/test_dp_services.py", "tests/test_watchdog_factors.py",
                        "tests/test_dp_services_edges.py"],
     "dp/cfg.py": ["tests/test_dp_services.py", "tests/test_cfg_identifiers.py"],
-    "dp/station.py": ["tests/test_master_sim.py", "tests/test_sim_slave.py", "tests/test_lost_reply.py"],
+    "dp/station.py": ["tests/test_station_mutants.py", "tests/test_master_sim.py", "tests/test_sim_slave.py", "tests/test_lost_reply.py"],
     "fdl/timing.py": ["tests/test_bus_timing_reference.py", "tests/test_timed_sim.py"],
     "drives/profidrive/ppo.py": ["tests/test_profidrive_core.py", "tests/test_profidrive_sim.py"],
-    "drives/profidrive/words.py": ["tests/test_profidrive_core.py", "tests/test_profidrive_sim.py"],
-    "drives/profidrive/scaling.py": ["tests/test_profidrive_core.py", "tests/test_profidrive_sim.py"],
-    "drives/profidrive/pkw.py": ["tests/test_profidrive_core.py", "tests/test_profidrive_sim.py"],
+    "drives/profidrive/words.py": ["tests/test_words_mutants.py", "tests/test_profidrive_core.py", "tests/test_profidrive_sim.py"],
+    "drives/profidrive/scaling.py": ["tests/test_scaling_mutants.py", "tests/test_profidrive_core.py", "tests/test_profidrive_sim.py"],
+    "drives/profidrive/pkw.py": ["tests/test_pkw_mutants.py", "tests/test_profidrive_core.py", "tests/test_profidrive_sim.py"],
     "drives/profidrive/pnu.py": ["tests/test_profidrive_core.py", "tests/test_profidrive_sim.py"],
     "drives/profidrive/config.py": ["tests/test_profidrive_core.py", "tests/test_profidrive_sim.py"],
     "drives/profidrive/params.py": ["tests/test_profidrive_core.py", "tests/test_profidrive_sim.py"],
@@ -60,14 +60,15 @@ MODULES: dict[str, list[str]] = {
     "drives/fuji/codes.py": ["tests/test_fuji_vectors.py", "tests/test_fuji_sim.py"],
     "drives/fuji/drive.py": ["tests/test_fuji_vectors.py", "tests/test_fuji_sim.py"],
     "drives/fuji/describe.py": ["tests/test_fuji_vectors.py", "tests/test_fuji_sim.py"],
-    "drives/moeller.py": ["tests/test_moeller_codec.py", "tests/test_moeller_sim.py"],
+    "drives/values.py": ["tests/test_values_mutants.py", "tests/test_exact_values.py"],
+    "drives/moeller.py": ["tests/test_moeller_mutants.py", "tests/test_moeller_codec.py", "tests/test_moeller_sim.py"],
     "drives/toyo/config.py": ["tests/test_toyo_vectors.py", "tests/test_toyo_sim.py"],
-    "drives/toyo/codec.py": ["tests/test_toyo_vectors.py", "tests/test_toyo_sim.py"],
+    "drives/toyo/codec.py": ["tests/test_toyo_codec_mutants.py", "tests/test_toyo_vectors.py", "tests/test_toyo_sim.py"],
     "drives/toyo/params.py": ["tests/test_toyo_vectors.py", "tests/test_toyo_sim.py"],
     "drives/toyo/describe.py": ["tests/test_toyo_vectors.py", "tests/test_toyo_sim.py"],
     "drives/toyo/drive.py": ["tests/test_toyo_vectors.py", "tests/test_toyo_sim.py"],
-    "drives/yaskawa/codec.py": ["tests/test_yaskawa_codec.py", "tests/test_yaskawa_drive.py"],
-    "drives/yaskawa/paramaccess.py": ["tests/test_yaskawa_codec.py", "tests/test_yaskawa_drive.py"],
+    "drives/yaskawa/codec.py": ["tests/test_yaskawa_codec_mutants.py", "tests/test_yaskawa_codec.py", "tests/test_yaskawa_drive.py"],
+    "drives/yaskawa/paramaccess.py": ["tests/test_yaskawa_paramaccess_mutants.py", "tests/test_yaskawa_codec.py", "tests/test_yaskawa_drive.py"],
     "drives/yaskawa/config.py": ["tests/test_yaskawa_codec.py", "tests/test_yaskawa_drive.py"],
     "drives/yaskawa/describe.py": ["tests/test_yaskawa_codec.py", "tests/test_yaskawa_drive.py"],
     "drives/yaskawa/drive.py": ["tests/test_yaskawa_codec.py", "tests/test_yaskawa_drive.py"],
@@ -75,7 +76,7 @@ MODULES: dict[str, list[str]] = {
     "checklist/runner.py": ["tests/test_checklist_bands.py", "tests/test_checklist.py"],
 }
 
-COPY = ("profidrive_cli", "tests", "profiles", "gsd", "pyproject.toml")
+COPY = ("profidrive_cli", "tests", "profiles", "gsd", "tools", "pyproject.toml")
 
 
 def scratch_copy(module: str, tests: list[str], workdir: Path) -> Path:
@@ -100,7 +101,7 @@ def scratch_copy(module: str, tests: list[str], workdir: Path) -> Path:
         "", "[tool.mutmut]",
         f'source_paths = ["{PKG}"]',
         f'only_mutate = ["*{PKG}/{module}"]',
-        'also_copy = ["profiles/", "gsd/"]',
+        'also_copy = ["profiles/", "gsd/", "tools/"]',   # tests run tools/gen_moeller_profile.py
         "pytest_add_cli_args_test_selection = [" + ", ".join(f'"{t}"' for t in tests) + "]",
         'pytest_add_cli_args = ["-p", "no:cacheprovider", "-x", "-q"]',
         "use_git_change_detection = false",
