@@ -1,3 +1,4 @@
+import contextlib
 import os
 import shutil
 import subprocess
@@ -100,3 +101,37 @@ class TcpSim:
 
     def __exit__(self, *exc):
         self.close()
+
+
+def start_pty_sim(*extra: str):
+    """`pdrive sim --pty --json [extra…]` in a subprocess: (the process, the pty path). Its plant
+    persists between commands, like a real bus."""
+    import json
+    p = subprocess.Popen(pdrive_cmd() + ["sim", "--pty", "--json", *extra], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)
+    line = p.stdout.readline()
+    if not line:
+        p.kill()
+        pytest.fail("pdrive sim printed nothing: " + p.stderr.read())
+    return p, json.loads(line)["port"]
+
+
+def stop_pty_sim(p) -> None:
+    """SIGINT ends `pdrive sim` cleanly; killed if it does not end within 10 s."""
+    import signal
+    p.send_signal(signal.SIGINT)
+    try:
+        p.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        p.kill()
+        p.wait()
+
+
+@contextlib.contextmanager
+def pty_sim_process(*extra: str):
+    """start_pty_sim() for a with-block: yields the pty path, ends the simulator afterwards."""
+    p, port = start_pty_sim(*extra)
+    try:
+        yield port
+    finally:
+        stop_pty_sim(p)

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from conftest import pdrive_cmd
+from conftest import pdrive_cmd, pty_sim_process
 from profidrive_cli.cli.main import cli
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -120,20 +120,8 @@ def test_validate_prints_the_plan_and_lists_every_problem(tmp_path):
 
 @pytest.fixture
 def pty_sim():
-    p = subprocess.Popen(pdrive_cmd() + ["sim", "--json", "--pty", "--plant", "sim://?stations=3:fuji-g1"],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    line = p.stdout.readline()
-    if not line:
-        p.kill()
-        pytest.fail("pdrive sim printed nothing: " + p.stderr.read())
-    try:
-        yield json.loads(line)["port"]
-    finally:
-        p.send_signal(signal.SIGINT)
-        try:
-            p.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            p.kill()
+    with pty_sim_process("--plant", "sim://?stations=3:fuji-g1") as port:
+        yield port
 
 
 def status_of(port):

@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from conftest import pdrive_cmd
+from conftest import pdrive_cmd, pty_sim_process
 from profidrive_cli.checklist.spec import ChecklistError, load_checklist_text
 from profidrive_cli.drives import make_drive
 from profidrive_cli.drives.base import DriveError
@@ -178,21 +178,8 @@ def test_jog_without_a_terminal_needs_a_duration():
 
 @pytest.fixture(scope="module")
 def pty_sim():
-    p = subprocess.Popen(pdrive_cmd() + ["sim", "--pty", "--json"], stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True)
-    line = p.stdout.readline()
-    if not line:
-        p.kill()
-        pytest.fail("pdrive sim printed nothing: " + p.stderr.read())
-    try:
-        yield json.loads(line)["port"]
-    finally:
-        p.send_signal(signal.SIGINT)
-        try:
-            p.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            p.kill()
-            p.wait()
+    with pty_sim_process() as port:
+        yield port
 
 
 def _status(port, address):

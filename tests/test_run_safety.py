@@ -11,28 +11,9 @@ import time
 
 import pytest
 
-from conftest import pdrive_cmd
+from conftest import pdrive_cmd, pty_sim_process, start_pty_sim
 
 RAMPS = {3: ("F07", "F08"), 4: ("F07", "F08"), 6: ("F002", "F003"), 7: ("C1-01", "C1-02")}
-
-
-def _start_sim():
-    p = subprocess.Popen(pdrive_cmd() + ["sim", "--pty", "--json"], stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True)
-    line = p.stdout.readline()
-    if not line:
-        p.kill()
-        pytest.fail("pdrive sim printed nothing: " + p.stderr.read())
-    return p, json.loads(line)["port"]
-
-
-def _stop_sim(p):
-    p.send_signal(signal.SIGINT)
-    try:
-        p.wait(timeout=10)
-    except subprocess.TimeoutExpired:
-        p.kill()
-        p.wait()
 
 
 def pdrive(*args, timeout=60):
@@ -42,8 +23,7 @@ def pdrive(*args, timeout=60):
 
 @pytest.fixture(scope="module")
 def pty_sim(tmp_path_factory):
-    p, port = _start_sim()
-    try:
+    with pty_sim_process() as port:
         # short ramps keep the tests quick (Toyo's are fixed: 5 s to 60 Hz); one restore per station
         for addr, codes in RAMPS.items():
             f = tmp_path_factory.mktemp("ramps") / f"{addr}.yaml"
@@ -51,8 +31,6 @@ def pty_sim(tmp_path_factory):
             r = pdrive("param", "restore", str(addr), str(f), "--port", port, "--yes")
             assert r.returncode == 0 and "2 applied" in r.stdout, r.stdout + r.stderr
         yield port
-    finally:
-        _stop_sim(p)
 
 
 def _status(port, address):
@@ -155,7 +133,7 @@ def test_keys_on_a_terminal(tmp_path):
 
 
 def test_link_loss_during_run_names_the_watchdog():
-    sim, port = _start_sim()
+    sim, port = start_pty_sim()
     p = subprocess.Popen(pdrive_cmd() + ["run", "7", "--hz", "20", "--port", port, "--yes", "--json",
                                          "--watchdog", "400"],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True)
