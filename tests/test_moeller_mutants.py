@@ -176,8 +176,9 @@ def _load(tmp_path, old, new):
     (F002, F002.replace(", bytes: 4", ""), "F002: missing 'bytes' (1, 2 or 4)", '"F002"'),
     (F002, F002.replace(", size: 32", ""), "F002: bytes 4 needs size 32, got 16", '"F002"'),
     (A001, A001.replace("bytes: 1", "bytes: 2, size: 32"), "A001: bytes 2 needs size 16, got 32", '"A001"'),
-    (A001, A001.replace('"code"', '"dec"'), "A001: format must be one of code, hex, bits, got 'dec'",
-     '"A001"'),
+    # a format the profile loader knows (drives/formats.py) but the Moeller card does not use
+    (A001, A001.replace('"code"', '"fcode"'),
+     "A001: format must be one of code, hex, bits, baud, alarm947, got 'fcode'", '"A001"'),
     ("ctw_reverse_bit: 11", "ctw_reverse_bit: 16", "'ctw_reverse_bit' must be an integer 11..15, got 16",
      "ctw_reverse_bit"),
     ("ctw_reverse_bit: 11", "ctw_reverse_bit: 10", "'ctw_reverse_bit' must be an integer 11..15, got 10",
