@@ -26,7 +26,8 @@ from profidrive_cli.sim import torque_axis
 from profidrive_cli.sim.direct import DirectChannel
 from profidrive_cli.sim.toyo import make_model as toyo_model
 from profidrive_cli.sim.yaskawa import make_model as yaskawa_model
-from test_run_safety import _start_sim, _status, _stop_sim, pdrive
+from conftest import start_pty_sim, stop_pty_sim
+from test_run_safety import _status, pdrive
 
 
 class Recorder(DirectChannel):
@@ -231,7 +232,7 @@ def test_cli_toyo_torque_run_on_sim_json():
 # -- through a real byte path: `pdrive sim --pty` (the plant keeps A1-02 between commands) ----
 
 def test_over_a_pty_yaskawa_torque_run_then_stopped():
-    sim, port = _start_sim()
+    sim, port = start_pty_sim()
     try:
         # a card without a torque word is refused before the real-port question (no --yes here)
         r = pdrive("run", "6", "--torque", "20", "--port", port)
@@ -252,7 +253,7 @@ def test_over_a_pty_yaskawa_torque_run_then_stopped():
         st = _status(port, 7)
         assert st["stopped"] and not st["running"] and st["torque_percent"] == 0.0
     finally:
-        _stop_sim(sim)
+        stop_pty_sim(sim)
 
 
 def test_cli_text_lines_show_torque_reference_and_actual():
