@@ -135,3 +135,26 @@ def pty_sim_process(*extra: str):
         yield port
     finally:
         stop_pty_sim(p)
+
+
+def read_until_turning(p, phase: str = "running", deadline_s: float = 20.0, min_hz: float = 1.0):
+    """Read a run's or jog's JSON stream (`p`, a Popen with text stdout) until an update in `phase`
+    shows the motor turning (|actual| above min_hz); return the events so far. Fails the test (and
+    kills the process) when it does not turn within deadline_s."""
+    import json
+    import select
+    events = []
+    end = time.monotonic() + deadline_s
+    while time.monotonic() < end:
+        r, _, _ = select.select([p.stdout], [], [], 0.5)
+        if not r:
+            continue
+        line = p.stdout.readline()
+        if not line:
+            break
+        ev = json.loads(line)
+        events.append(ev)
+        if ev["event"] == "update" and ev["phase"] == phase and abs(ev["actual_hz"] or 0) > min_hz:
+            return events
+    p.kill()
+    pytest.fail(f"the motor never turned ({phase}): {events[-3:]} {p.stderr.read()}")

@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from conftest import pdrive_cmd, pty_sim_process
+from conftest import pdrive_cmd, pty_sim_process, read_until_turning
 from profidrive_cli.checklist.spec import ChecklistError, load_checklist_text
 from profidrive_cli.drives import make_drive
 from profidrive_cli.drives.base import DriveError
@@ -210,21 +210,7 @@ def test_sigterm_during_jog_through_a_pty_leaves_the_drive_stopped(pty_sim, addr
                                          "--json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                          stdin=subprocess.DEVNULL, text=True)
     try:
-        events = []
-        deadline = time.monotonic() + 30
-        while time.monotonic() < deadline:
-            r, _, _ = select.select([p.stdout], [], [], 0.5)
-            if not r:
-                continue
-            line = p.stdout.readline()
-            if not line:
-                break
-            ev = json.loads(line)
-            events.append(ev)
-            if ev["event"] == "update" and ev["phase"] == "jogging" and abs(ev["actual_hz"] or 0) > 1.0:
-                break
-        else:
-            pytest.fail(f"the jog never turned the motor: {events[-3:]}")
+        read_until_turning(p, phase="jogging", deadline_s=30)
         p.send_signal(signal.SIGTERM)
         out, err = p.communicate(timeout=30)
     finally:

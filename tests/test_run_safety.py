@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from conftest import pdrive_cmd, pty_sim_process, start_pty_sim
+from conftest import pdrive_cmd, pty_sim_process, read_until_turning, start_pty_sim
 
 RAMPS = {3: ("F07", "F08"), 4: ("F07", "F08"), 6: ("F002", "F003"), 7: ("C1-01", "C1-02")}
 
@@ -39,25 +39,6 @@ def _status(port, address):
     return json.loads(r.stdout)
 
 
-def _read_until_turning(p, deadline_s=20.0, min_hz=1.0):
-    """Read run's JSON stream until the motor turns (actual above min_hz); return the events."""
-    events = []
-    end = time.monotonic() + deadline_s
-    while time.monotonic() < end:
-        r, _, _ = select.select([p.stdout], [], [], 0.5)
-        if not r:
-            continue
-        line = p.stdout.readline()
-        if not line:
-            break
-        ev = json.loads(line)
-        events.append(ev)
-        if ev["event"] == "update" and ev["phase"] == "running" and abs(ev["actual_hz"] or 0) > min_hz:
-            return events
-    p.kill()
-    pytest.fail(f"run never turned the motor: {events[-3:]} {p.stderr.read()}")
-
-
 @pytest.mark.parametrize("address", [3, 4, 5, 6, 7])
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
 def test_signal_during_run_leaves_the_drive_stopped(pty_sim, address, sig):
@@ -65,7 +46,7 @@ def test_signal_during_run_leaves_the_drive_stopped(pty_sim, address, sig):
                                          "--json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                          stdin=subprocess.DEVNULL, text=True)
     try:
-        _read_until_turning(p)
+        read_until_turning(p)
         p.send_signal(sig)
         out, err = p.communicate(timeout=30)
     finally:
@@ -138,7 +119,7 @@ def test_link_loss_during_run_names_the_watchdog():
                                          "--watchdog", "400"],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True)
     try:
-        _read_until_turning(p, min_hz=0.5)
+        read_until_turning(p, min_hz=0.5)
         sim.kill()                                   # the port goes away mid-run
         sim.wait()
         out, err = p.communicate(timeout=30)
