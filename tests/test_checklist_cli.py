@@ -98,7 +98,7 @@ def test_prompts_without_a_terminal_need_yes(tmp_path):
 
 def test_report_extension_is_checked_before_anything_runs(tmp_path):
     r = run("checklist", "run", EX / "fuji-g1.yaml", "--yes", "--report", tmp_path / "r.pdf")
-    assert r.exit_code == 2 and ".json, .md or .xml" in r.stderr
+    assert r.exit_code == 2 and ".json, .md, .xml or .html" in r.stderr
 
 
 def test_validate_prints_the_plan_and_lists_every_problem(tmp_path):

@@ -13,16 +13,20 @@ from pathlib import Path
 
 from profidrive_cli import UsageError
 from profidrive_cli.checklist.runner import ERROR, FAILED, NOT_RUN, PASSED, SKIPPED, RunResult, StationResult
+from profidrive_cli.checklist.report_words import hexv as _hexv
+from profidrive_cli.checklist.report_words import snap as _snap
+from profidrive_cli.checklist.report_words import val as _val
 from profidrive_cli.outfile import write_text_atomic
 
-FORMATS = {".json": "json", ".md": "markdown", ".markdown": "markdown", ".xml": "junit"}
+FORMATS = {".json": "json", ".md": "markdown", ".markdown": "markdown", ".xml": "junit", ".html": "html",
+           ".htm": "html"}
 
 
 def report_format(path: str | Path) -> str:
     suf = Path(path).suffix.lower()
     if suf not in FORMATS:
-        raise UsageError(f"--report {path}: the file name must end in .json, .md or .xml (the format follows "
-                         f"the extension)")
+        raise UsageError(f"--report {path}: the file name must end in .json, .md, .xml or .html (the format "
+                         f"follows the extension)")
     return FORMATS[suf]
 
 
@@ -33,6 +37,9 @@ def render(result: RunResult, fmt: str) -> str:
         return to_markdown(result)
     if fmt == "junit":
         return to_junit(result)
+    if fmt == "html":
+        from profidrive_cli.checklist.report_html import to_html
+        return to_html(result)
     raise ValueError(fmt)
 
 
@@ -74,18 +81,6 @@ def _md(text) -> str:
     """One table cell: no pipes or newlines."""
     s = "" if text is None else str(text)
     return s.replace("\\", "\\\\").replace("|", "\\|").replace("\n", " ").strip()
-
-
-def _val(v) -> str:
-    if isinstance(v, float):
-        return f"{v:g}"
-    if isinstance(v, dict):
-        return ", ".join(f"{k}: {_val(x)}" for k, x in v.items() if x not in (None, "", [], {}))
-    if isinstance(v, list):
-        return "; ".join(_val(x) for x in v)
-    if isinstance(v, bool):
-        return "yes" if v else "no"
-    return "" if v is None else str(v)
 
 
 def to_markdown(result: RunResult) -> str:
@@ -151,18 +146,6 @@ def _md_station(sr: StationResult) -> list[str]:
     if sr.snapshot_note:
         out += [f"_{_md(sr.snapshot_note)}_", ""]
     return out
-
-
-def _snap(e) -> str:
-    if not e:
-        return "—"
-    if "error" in e:
-        return f"error: {e['error']}"
-    return f"{_val(e['value'])}{(' ' + e['unit']) if e.get('unit') else ''}"
-
-
-def _hexv(v):
-    return f"0x{v:04X}" if isinstance(v, int) and not isinstance(v, bool) else v
 
 
 # =============================================================================================

@@ -26,6 +26,7 @@ from datetime import datetime, timezone
 from typing import Any, Callable
 
 from profidrive_cli import PdriveError, __version__
+from profidrive_cli.checklist import steptrace
 from profidrive_cli.checklist.spec import Checklist, StationSpec, Step
 from profidrive_cli.checklist.steps import STEPS
 from profidrive_cli.checklist.steps.base import StepFailed, hex4, status_dict
@@ -90,6 +91,8 @@ class StepResult:
     started: str | None = None
     finished: str | None = None
     duration_s: float = 0.0
+    #: the drive cycle by cycle during a step that moves it (steptrace.StepTrace; not in the JSON)
+    trace: Any = None
 
     @property
     def ok(self) -> bool:
@@ -339,7 +342,8 @@ class Runner:
         self._progress_at = 0.0
         self.obs.step_started(sr, r)
         try:
-            msg = STEPS[r.step.type].execute(self, sr, r, handle.drive, handle)
+            with self._traced(r, handle.drive):
+                msg = STEPS[r.step.type].execute(self, sr, r, handle.drive, handle)
             r.status = PASSED
             r.message = msg or ""
         except StepFailed as e:
@@ -407,6 +411,16 @@ class Runner:
             raise
         except Exception as e:        # noqa: BLE001 - the session's exit still stops it
             sr.final_status = {"error": f"could not confirm the drive stopped: {e}"}
+
+    @contextlib.contextmanager
+    def _traced(self, r: StepResult, drive):
+        """Record the drive's cycles during a step that moves it (for the HTML report's plots)."""
+        if r.step.type not in steptrace.PLOTTED or not hasattr(drive, "channel"):
+            yield
+            return
+        with steptrace.record(drive) as tr:
+            r.trace = tr
+            yield
 
     def cycle_for(self, sr, r, drive, seconds: float, text: str = "") -> Any:
         """Keep exchanging cyclic data for `seconds` on the drive's clock; returns the last status."""

@@ -41,14 +41,25 @@ def _cfg_json(cfg: bytes | None) -> list | None:
 @click.option("--from", "first", default=0, show_default=True, type=click.IntRange(0, 126))
 @click.option("--to", "last", default=126, show_default=True, type=click.IntRange(0, 126))
 @click.option("--gsd-dir", default=None, help="Extra GSD folder for naming stations.")
+@click.option("--watch", is_flag=True,
+              help="Keep polling: a live list refreshed in place, states in colour, counters and their rates.")
+@click.option("--interval", default=1.0, show_default=True, type=click.FloatRange(min=0.05),
+              help="--watch: seconds between refreshes.")
+@click.option("--duration", default=None, type=click.FloatRange(min=0, min_open=True),
+              help="--watch: stop after this many seconds (default: until Ctrl-C).")
 @bus_options
-def scan_cmd(opts, first, last, gsd_dir):
+def scan_cmd(opts, first, last, gsd_dir, watch, interval, duration):
     """Live list: every station on the bus, its type, ident and DP state."""
     from profidrive_cli.dp.scan import scan
     if first > last:
         raise UsageError(f"--from {first} is above --to {last}")
+    if not watch and duration is not None:
+        raise UsageError("--duration goes with --watch")
     opts.require_port()
     master = opts.open_master()
+    if watch:
+        from profidrive_cli.cli.scan_watch import watch as run_watch
+        raise SystemExit(run_watch(opts, master, first, last, interval, duration, gsd_dir))
     used_baud = opts.baud_rate()
     try:
         if opts.json or not err.is_terminal:

@@ -80,7 +80,7 @@ def validate_cmd(ctx, file, variables, as_json):
 @click.argument("file", type=click.Path(dir_okay=False))
 @bus_options
 @click.option("--report", "reports", multiple=True, metavar="FILE",
-              help="Write a report: .json, .md (Markdown) or .xml (JUnit); repeatable.")
+              help="Write a report: .json, .md (Markdown), .xml (JUnit) or .html (with plots); repeatable.")
 @click.option("--dry-run", is_flag=True,
               help="Validate, then rehearse on a simulated station of each station's profile "
                    "(sim://?stations=ADDR:PROFILE); the plant is not touched.")

@@ -11,7 +11,7 @@ import click
 
 from profidrive_cli import UsageError
 from profidrive_cli.cli import render_drive as R
-from profidrive_cli.cli import run_torque
+from profidrive_cli.cli import run_plot, run_torque
 from profidrive_cli.cli.common import bus_options
 from profidrive_cli.cli.drive_cmds import (_confirmer, _session, _terminations, drive_options,
                                           run_ending)
@@ -39,6 +39,9 @@ from profidrive_cli.outfile import check_output_path
               help="Data_Exchange rate (default: the fastest the bus allows, at most 100/s; 50/s on sim://).")
 @click.option("--yes", is_flag=True, help="Do not ask before running a drive on a real port.")
 @click.option("--log", "log_path", default=None, metavar="FILE.csv", help="CSV of every cycle.")
+@click.option("--plot", "plot_path", default=None, metavar="FILE.svg|FILE.png",
+              help="Plot reference, actual and the monitors over time, written when the run ends "
+                   "(needs matplotlib: pip install 'profidrive-cli[plot]').")
 @click.option("--reconnect", "reconnect_s", type=float, default=None, metavar="S", is_flag=False,
               flag_value=60.0, help="When the port goes away, wait up to S s (default 60) for it to "
               "come back and resume data exchange; the drive, stopped meanwhile by its watchdog, is "
@@ -49,7 +52,7 @@ from profidrive_cli.outfile import check_output_path
 @bus_options
 @_terminations
 def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, reverse, torque, torque_limit,
-            duration, fmax, cycle_hz, yes, log_path, reconnect_s, monitor_spec):
+            duration, fmax, cycle_hz, yes, log_path, reconnect_s, monitor_spec, plot_path):
     """Run a drive at a speed (or a torque) and show it live; stops it safely on every exit.
 
     Keys (on a terminal): up/down change the speed (the torque with --torque), r reverses, space
@@ -72,6 +75,7 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
     torque, percent, what = run_torque.prepare(hz, percent, reverse, torque, torque_limit)
     if log_path is not None:                 # checked before the bus is opened: nothing moves first
         check_output_path(log_path, "--log")
+    plotter = run_plot.RunPlot.prepare(plot_path)          # also before the bus: matplotlib, the path
     mons = []                                # --monitor: checked before anything is asked or written
 
     def before(sess):
@@ -81,6 +85,8 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
     session = _session(opts, address, profile_name, ppo, fmt, watchdog_ms, cycle_hz=cycle_hz,
                        before=run_torque.guard(before, torque, torque_limit), log=log_path)
     view = R.RunView(mode)
+    if plotter is not None:
+        plotter.attach(view)
     end = {"reason": "", "stop": None}
     started = False
     exit_code = 0
@@ -92,7 +98,7 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
         view.update(sample)
     session.on_sample = stopping
     with run_ending(session, view, end, lambda: started,
-                     extra=lambda: _run_extra(view, mons)):
+                     extra=lambda: _run_extra(view, mons)), run_plot.written_at_the_end(plotter, session):
         with session as s:
             s.check_torque(torque, torque_limit)          # the card's reason before anything shows
             fmax_hz, src = s.fmax(fmax)

@@ -1,0 +1,80 @@
+"""What a drive did during a checklist step, cycle by cycle, for the HTML report's plots.
+
+record(drive) shadows the Drive's cycle() for the length of a step (every status a step sees comes
+through it: start, status, the run and stop loops) and keeps (time, actual Hz, actual %, reference
+%) per cycle, bounded. to_plot_trace() turns it into a plot.Trace in Hz where the drive reports Hz
+(the max frequency derived from its own Hz/% pair, no parameter read), else in %.
+"""
+
+from __future__ import annotations
+
+import contextlib
+
+#: step types whose trace is plotted (the ones that move the drive)
+PLOTTED = ("run", "stop", "jog")
+
+#: at most this many cycles are kept per step (a later cycle replaces every other one: halved)
+MAX_CYCLES = 50_000
+
+
+class StepTrace:
+    def __init__(self):
+        self.rows: list[tuple] = []       # (t, speed_hz, speed_percent, reference_percent)
+        self._stride = 1
+        self._n = 0
+
+    def add(self, t, st) -> None:
+        self._n += 1
+        if (self._n - 1) % self._stride:
+            return
+        self.rows.append((t, st.speed_hz, st.speed_percent, st.reference_percent))
+        if len(self.rows) >= MAX_CYCLES:
+            self.rows = self.rows[::2]
+            self._stride *= 2
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+
+@contextlib.contextmanager
+def record(drive):
+    """Yield a StepTrace filled with every cycle `drive` makes inside the block."""
+    tr = StepTrace()
+    inner = drive.cycle
+    ch = drive.channel
+    t0 = ch.now()
+
+    def cycle():
+        st = inner()
+        tr.add(ch.now() - t0, st)
+        return st
+
+    drive.cycle = cycle
+    try:
+        yield tr
+    finally:
+        try:
+            del drive.cycle            # the class's own method again
+        except AttributeError:
+            drive.cycle = inner
+
+
+def to_plot_trace(tr: StepTrace, title: str):
+    from profidrive_cli.plot import Trace
+    rows = tr.rows
+    fmax = None
+    for _, hz, pct, _ in rows:
+        if hz is not None and pct is not None and abs(pct) > 1.0:
+            fmax = hz * 100.0 / pct
+            break
+    hz_ok = fmax is not None and all(r[1] is not None or r[2] is None for r in rows)
+    out = Trace(title=title, speed_unit="Hz" if hz_ok else "%")
+    for t, hz, pct, ref in rows:
+        if hz_ok:
+            out.add(t, None if ref is None else ref * fmax / 100.0, hz if hz is not None else None)
+        else:
+            out.add(t, ref, pct)
+    return out
+
+
+__all__ = ["record", "to_plot_trace", "StepTrace", "PLOTTED"]

@@ -1,0 +1,288 @@
+"""run --plot (cli/run_plot.py, plot.py) and the checklist's HTML report (checklist/report_html.py,
+checklist/steptrace.py).
+
+Expected values: what the run asked for (30 Hz on a drive whose max frequency is 60 Hz by the
+profile's default F03), the figure geometry from plot.py's documented size (9 in at 110 dpi), the
+number of run/stop steps in the checklist text, and hand arithmetic for the trace conversions."""
+
+from __future__ import annotations
+
+import json
+import struct
+import sys
+import xml.etree.ElementTree as ET
+from html.parser import HTMLParser
+
+import pytest
+from click.testing import CliRunner
+
+from profidrive_cli import UsageError
+from profidrive_cli.cli.main import cli
+
+pytest.importorskip("matplotlib")       # the test extra installs it; CI always has it
+
+SVG_NS = "{http://www.w3.org/2000/svg}"
+
+
+def run(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args], env={"PDRIVE_PORT": ""})
+
+
+def svg_texts(data: bytes) -> set[str]:
+    root = ET.fromstring(data)
+    return {"".join(t.itertext()).strip() for t in root.iter(SVG_NS + "text")}
+
+
+# ---------------------------------------------------------------------------------------------
+# plot.py on its own
+# ---------------------------------------------------------------------------------------------
+
+
+def test_a_trace_renders_labelled_axes_and_one_panel_per_monitor_unit():
+    from profidrive_cli.plot import Trace, render
+    tr = Trace(title="station 3: run 30 Hz")
+    for i in range(50):
+        tr.add(i * 0.1, 30.0, min(30.0, i * 1.0), {"M11 current [A]": 2.0 + i * 0.01, "M12 voltage [V]": 100 + i})
+    texts = svg_texts(render(tr, "svg"))
+    assert {"speed [Hz]", "time [s]", "reference", "actual", "station 3: run 30 Hz"} <= texts
+    assert {"M11 current [A]", "M12 voltage [V]", "A", "V"} <= texts      # two monitor panels, by unit
+
+
+def test_png_has_the_documented_width():
+    from profidrive_cli.plot import Trace, render
+    tr = Trace()
+    tr.add(0.0, 10.0, 0.0)
+    tr.add(1.0, 10.0, 10.0)
+    png = render(tr, "png")
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    width, height = struct.unpack(">II", png[16:24])          # IHDR
+    assert width == 990                                       # 9 in at 110 dpi
+
+
+def test_thinning_keeps_the_first_and_last_point_and_the_limit():
+    from profidrive_cli.plot import MAX_POINTS, _thin
+    idx = _thin(100_001)
+    assert idx[0] == 0 and idx[-1] == 100_000 and len(idx) <= MAX_POINTS
+    assert _thin(10) == list(range(10))
+
+
+def test_a_long_trace_is_halved_not_grown_without_bound(monkeypatch):
+    from profidrive_cli import plot
+    monkeypatch.setattr(plot, "MAX_SAMPLES", 8)
+    tr = plot.Trace()
+    for i in range(100):
+        tr.add(float(i), 1.0, 1.0)
+    assert len(tr) < 8
+    assert tr.t[0] == 0.0 and tr.t == sorted(tr.t)          # still in time order from the start
+
+
+def test_monitor_columns_stay_aligned_with_time_when_a_monitor_appears_late():
+    from profidrive_cli.plot import Trace
+    tr = Trace()
+    tr.add(0.0, 1.0, 0.0)
+    tr.add(0.1, 1.0, 0.5, {"M09 [Hz]": 0.4})
+    tr.add(0.2, 1.0, 1.0)
+    assert tr.monitors["M09 [Hz]"] == [None, 0.4, None]
+
+
+@pytest.mark.parametrize("name", ["run.jpg", "run", "run.pdf"])
+def test_plot_format_follows_the_extension_svg_or_png_only(name):
+    from profidrive_cli.plot import plot_format
+    with pytest.raises(UsageError, match=r"\.svg or \.png"):
+        plot_format(name)
+
+
+# ---------------------------------------------------------------------------------------------
+# run --plot
+# ---------------------------------------------------------------------------------------------
+
+
+def test_run_plot_draws_the_ramp_and_the_stop(tmp_path):
+    out = tmp_path / "run.svg"
+    r = run("run", "3", "--hz", "30", "--duration", "1.5", "--plot", out, "--port", "sim://", "--json")
+    assert r.exit_code == 0, r.output
+    texts = svg_texts(out.read_bytes())
+    assert {"speed [Hz]", "reference", "actual", "running", "stopping"} <= texts
+    assert any("30" in t for t in texts if t.startswith("station 3"))     # the title names the reference
+    # the JSON stream on stdout is untouched by the plot (its note goes to stderr)
+    events = [json.loads(x)["event"] for x in r.stdout.splitlines()]
+    assert events[0] == "start" and events[-1] == "end"
+
+
+def test_run_plot_records_every_sample_the_run_shows(tmp_path, monkeypatch):
+    from profidrive_cli.cli import run_plot
+    seen = {}
+    real = run_plot.RunPlot.write
+
+    def spy(self):
+        seen["trace"] = self.trace
+        return real(self)
+    monkeypatch.setattr(run_plot.RunPlot, "write", spy)
+    r = run("run", "3", "--hz", "30", "--duration", "4", "--plot", tmp_path / "run.png", "--port", "sim://",
+            "--json")
+    assert r.exit_code == 0, r.output
+    tr = seen["trace"]
+    # fuji-g1 on the simulator: F07 = 6 s from 0 to 60 Hz, so 30 Hz after 3 s; then the stop to 0
+    assert max(v for v in tr.actual if v is not None) == pytest.approx(30.0, abs=0.5)
+    assert tr.actual[-1] == pytest.approx(0.0, abs=0.5)
+    assert set(v for v in tr.reference if v is not None) == {30.0}
+    assert [m[1] for m in tr.marks] == ["running", "stopping", "stopped"]
+    assert tr.t == sorted(tr.t)
+
+
+def test_without_matplotlib_run_plot_says_how_to_get_it_and_nothing_moves(tmp_path, monkeypatch, sim):
+    monkeypatch.setitem(sys.modules, "matplotlib", None)        # import matplotlib -> ImportError
+    r = run("run", "3", "--hz", "30", "--duration", "1", "--plot", tmp_path / "run.svg",
+            "--port", "sim://?stations=3:fuji-g1")
+    assert isinstance(r.exception, UsageError)
+    assert "pip install 'profidrive-cli[plot]'" in str(r.exception)
+    assert not (tmp_path / "run.svg").exists()
+    assert not sim                                              # no simulated bus was even opened
+
+
+def test_run_plot_into_a_missing_directory_is_refused_before_the_bus_opens(tmp_path, sim):
+    r = run("run", "3", "--hz", "30", "--duration", "1", "--plot", tmp_path / "nodir" / "run.svg",
+            "--port", "sim://?stations=3:fuji-g1")
+    assert isinstance(r.exception, UsageError) and "--plot" in str(r.exception)
+    assert not sim
+
+
+def test_a_plot_that_cannot_be_written_keeps_the_old_file(tmp_path, monkeypatch):
+    from profidrive_cli import outfile
+    old = tmp_path / "run.svg"
+    old.write_text("old plot")
+
+    def full(*a, **k):
+        raise outfile.OutputWriteError("--plot run.svg: write failed: No space left on device")
+    monkeypatch.setattr(outfile, "write_bytes_atomic", full)
+    r = run("run", "3", "--hz", "10", "--duration", "0.5", "--plot", old, "--port", "sim://")
+    assert isinstance(r.exception, outfile.OutputWriteError)     # exit 1 after a good run
+    assert old.read_text() == "old plot"
+
+
+# ---------------------------------------------------------------------------------------------
+# the checklist's HTML report
+# ---------------------------------------------------------------------------------------------
+
+CHECKLIST = """\
+name: HTML report
+port: sim://
+stations:
+  - address: 3
+    profile: fuji-g1
+steps:
+  - write: {param: F07, value: 1}
+  - write: {param: F08, value: 1}
+  - run: {hz: 20, duration: 0.3}
+  - run: {hz: 10, direction: reverse, within: 15}
+  - stop
+  - faults: none
+"""
+
+
+class _Tags(HTMLParser):
+    def __init__(self):
+        super().__init__()
+        self.tags: list[str] = []
+        self.text: list[str] = []
+
+    def handle_starttag(self, tag, attrs):
+        self.tags.append(tag)
+
+    def handle_data(self, data):
+        self.text.append(data)
+
+
+def _html(tmp_path, text=CHECKLIST):
+    cl = tmp_path / "c.yaml"
+    cl.write_text(text)
+    rep = tmp_path / "r.html"
+    r = run("checklist", "run", cl, "--yes", "--report", rep)
+    return r, rep
+
+
+def test_the_html_report_has_the_verdict_the_steps_and_a_plot_per_moving_step(tmp_path):
+    r, rep = _html(tmp_path)
+    assert r.exit_code == 0, r.output
+    p = _Tags()
+    p.feed(rep.read_text())
+    text = " ".join(p.text)
+    assert "PASSED" in text and "HTML report" in text
+    assert p.tags.count("svg") == 3                  # two run steps and one stop step moved the drive
+    assert p.tags.count("h3") == 3
+    assert "script" not in p.tags and "link" not in p.tags     # self-contained: nothing fetched or run
+    assert text.count("passed") >= 6                 # each of the six steps passed
+
+
+def test_the_html_report_of_a_failing_run_shows_failed(tmp_path):
+    r, rep = _html(tmp_path, CHECKLIST.replace("faults: none", "faults: {expect: OC1}"))
+    assert r.exit_code == 1
+    assert "FAILED" in rep.read_text()
+
+
+def test_without_matplotlib_the_html_report_is_written_and_says_how_to_get_plots(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    r, rep = _html(tmp_path)
+    assert r.exit_code == 0, r.output
+    html = rep.read_text()
+    assert "<svg" not in html and "pip install 'profidrive-cli[plot]'" in html
+
+
+def test_html_escapes_what_the_checklist_says(tmp_path):
+    r, rep = _html(tmp_path, CHECKLIST.replace("name: HTML report", "name: \"<b>bold</b> & co\""))
+    assert r.exit_code == 0, r.output
+    html = rep.read_text()
+    assert "&lt;b&gt;bold&lt;/b&gt; &amp; co" in html and "<b>bold</b>" not in html
+
+
+def test_step_traces_convert_percent_to_hz_from_the_drives_own_pair():
+    from profidrive_cli.checklist.steptrace import StepTrace, to_plot_trace
+
+    class St:
+        def __init__(self, hz, pct, ref):
+            self.speed_hz, self.speed_percent, self.reference_percent = hz, pct, ref
+    tr = StepTrace()
+    tr.add(0.0, St(0.0, 0.0, 50.0))
+    tr.add(1.0, St(15.0, 25.0, 50.0))       # 15 Hz is 25 %: max frequency 60 Hz, so 50 % is 30 Hz
+    pt = to_plot_trace(tr, "t")
+    assert pt.speed_unit == "Hz"
+    assert pt.reference == [pytest.approx(30.0), pytest.approx(30.0)]
+    assert pt.actual == [0.0, 15.0]
+
+
+def test_step_traces_stay_in_percent_when_the_drive_reports_no_hz():
+    from profidrive_cli.checklist.steptrace import StepTrace, to_plot_trace
+
+    class St:
+        speed_hz = None
+
+        def __init__(self, pct, ref):
+            self.speed_percent, self.reference_percent = pct, ref
+    tr = StepTrace()
+    tr.add(0.0, St(10.0, 20.0))
+    pt = to_plot_trace(tr, "t")
+    assert pt.speed_unit == "%" and pt.actual == [10.0] and pt.reference == [20.0]
+
+
+def test_recording_leaves_the_drive_as_it_was():
+    from profidrive_cli.checklist.steptrace import record
+
+    class Ch:
+        def now(self):
+            return 0.0
+
+    class St:
+        speed_hz, speed_percent, reference_percent = 5.0, 10.0, 10.0
+
+    st = St()
+
+    class D:
+        channel = Ch()
+
+        def cycle(self):
+            return st
+    d = D()
+    with record(d) as tr:
+        assert d.cycle() is st and d.cycle() is st
+    assert len(tr) == 2 and tr.rows[0] == (0.0, 5.0, 10.0, 10.0)
+    assert "cycle" not in vars(d) and d.cycle() is st        # the class's own method again
