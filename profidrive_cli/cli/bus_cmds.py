@@ -46,7 +46,8 @@ def _cfg_json(cfg: bytes | None) -> list | None:
 @click.option("--interval", default=1.0, show_default=True, type=click.FloatRange(min=0.05),
               help="--watch: seconds between refreshes.")
 @click.option("--duration", default=None, type=click.FloatRange(min=0, min_open=True),
-              help="--watch: stop after this many seconds (default: until Ctrl-C).")
+              help="--watch: stop after watching this many seconds, counted after the first scan "
+                   "(default: until Ctrl-C).")
 @bus_options
 def scan_cmd(opts, first, last, gsd_dir, watch, interval, duration):
     """Live list: every station on the bus, its type, ident and DP state."""

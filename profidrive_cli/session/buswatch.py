@@ -101,6 +101,7 @@ class BusWatch:
                 self._update_diag(self.stations[e.address], e.diag)
         self._empty = [a for a in range(self.first, self.last + 1)
                        if a not in self.stations and a != self.master.address]
+        self.t0 = self.master.link.now()       # watching starts now: times count from here
         self._snapshot()
 
     def step(self) -> None:
