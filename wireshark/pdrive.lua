@@ -357,7 +357,8 @@ local function dissect_pkw(tvb, tree, f, direction, lay, order, notes)
   local ak = math.floor(pke / 4096)
   local pnu = pke % 2048
   local sub = math.floor(ind / 256)
-  local texts = direction == "request" and AK_REQUEST or AK_RESPONSE
+  local texts = direction == "request" and (lay and lay.ak_request or AK_REQUEST)
+                or (lay and lay.ak_response or AK_RESPONSE)
   local ak_text = texts[ak] or "reserved"
   add_word(t, P.pke, r(0, 2), order)
   add_word(t, P.ak, r(0, 2), order)
