@@ -219,7 +219,7 @@ def test_install_writes_the_dissector_and_a_station_table(tmp_path):
     doc = json.loads(r.output)
     assert doc["stations"] == [{"station": 3, "profile": "fuji-opc-g1-pdp", "layout": "ppo1"},
                                {"station": 6, "profile": "moeller-de6-net-dp", "layout": "ppo1"}]
-    assert doc["extcap"] is None            # with --dir only when --extcap-dir is given
+    assert doc["extcap"] == []              # with --dir only when --extcap-dir is given
     assert sorted(os.listdir(tmp_path)) == ["pdrive.lua", "pdrive_stations.lua"]
     assert (tmp_path / "pdrive.lua").read_text() == LUA.read_text()
     table = (tmp_path / "pdrive_stations.lua").read_text()
@@ -245,27 +245,68 @@ def test_install_into_a_missing_dir_is_refused(pd, tmp_path):
     assert code == 2 and "does not exist" in out
 
 
-def test_install_default_is_the_personal_plugins_and_extcap_folders(tmp_path, monkeypatch):
+def _home(tmp_path, monkeypatch):
     monkeypatch.setenv("HOME", str(tmp_path))
+    monkeypatch.delenv("XDG_CONFIG_HOME", raising=False)
     monkeypatch.setattr(Path, "home", classmethod(lambda cls: tmp_path))
+
+
+def test_install_default_is_the_personal_plugins_and_extcap_folders(tmp_path, monkeypatch):
+    """Plugins: ~/.local/lib/wireshark/plugins; extcap: ~/.local/lib/wireshark/extcap (Wireshark 4.2+)
+    and ~/.config/wireshark/extcap (Wireshark up to 4.0, e.g. Debian 12's)."""
+    _home(tmp_path, monkeypatch)
     r = run("wireshark", "install")
     assert r.exit_code == 0, r.output
     plugins = tmp_path / ".local/lib/wireshark/plugins"
-    extcap = tmp_path / ".local/lib/wireshark/extcap/pdrive-extcap"
     assert (plugins / "pdrive.lua").is_file() and (plugins / "pdrive_stations.lua").is_file()
     assert str(plugins / "pdrive.lua") in r.output
-    assert extcap.is_file() and os.access(extcap, os.X_OK)
-    p = subprocess.run([str(extcap), "--extcap-interfaces"], capture_output=True, text=True, timeout=60,
-                       cwd="/")
-    assert p.returncode == 0, p.stderr
-    assert "interface {value=pdrive}" in p.stdout
+    for extcap in (tmp_path / ".local/lib/wireshark/extcap/pdrive-extcap",
+                   tmp_path / ".config/wireshark/extcap/pdrive-extcap"):
+        assert extcap.is_file() and os.access(extcap, os.X_OK)
+        assert str(extcap) in r.output
+        p = subprocess.run([str(extcap), "--extcap-interfaces"], capture_output=True, text=True,
+                           timeout=60, cwd="/")
+        assert p.returncode == 0, p.stderr
+        assert "interface {value=pdrive}" in p.stdout
+
+
+@pytest.mark.skipif(not shutil.which("socat"), reason="socat not installed")
+def test_tshark_captures_live_through_the_installed_extcap(tshark, tmp_path, monkeypatch, socat_pair):
+    """The real thing: tshark finds the interface 'pdrive' in the personal folders pdrive wrote, runs
+    the launcher with the port as its option, and decodes what arrives on the line with the plugin."""
+    _home(tmp_path, monkeypatch)
+    r = run("wireshark", "install", "--station", "6=moeller")
+    assert r.exit_code == 0, r.output
+    a, b = socat_pair
+    env = {**os.environ, "HOME": str(tmp_path)}
+    env.pop("XDG_CONFIG_HOME", None)
+    p = subprocess.run([tshark, "-D"], capture_output=True, text=True, timeout=120, env=env)
+    assert "pdrive (PROFIBUS (pdrive sniff, listen only))" in p.stdout, p.stdout + p.stderr
+    cap = subprocess.Popen([tshark, "-n", "-i", "pdrive", "-o", f"extcap.pdrive.port:{a}", "-a", "duration:6",
+                            "-T", "fields", "-e", "profibus.service", "-e", "profidrive.reference_hz"],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        # the line repeats its three telegrams until tshark ends (it may start listening late)
+        fd = os.open(b, os.O_WRONLY | os.O_NOCTTY)
+        while cap.poll() is None:
+            os.write(fd, FDL_STATUS + DX_REQ + SC)
+            time.sleep(0.5)
+        os.close(fd)
+        out, err = cap.communicate(timeout=60)
+    finally:
+        if cap.poll() is None:
+            cap.kill()
+    rows = [tuple(ln.split("\t")) for ln in out.splitlines()]
+    expected = {("FDL status", ""), ("Data_Exchange", "25"), ("short acknowledge", "")}
+    assert rows and set(rows) <= expected, out + err
+    assert ("Data_Exchange", "25") in rows, out + err      # HSW 0x2000 of A004 = 50 Hz
 
 
 def test_windows_personal_folders_are_under_appdata():
     from profidrive_cli.session.wireshark import personal_dirs
     plugins, extcap = personal_dirs("win32", {"APPDATA": r"C:\Users\u\AppData\Roaming"})
     assert str(plugins).endswith("Wireshark/plugins") or str(plugins).endswith(r"Wireshark\plugins")
-    assert extcap.name == "extcap" and extcap.parent.name == "Wireshark"
+    assert [(e.name, e.parent.name) for e in extcap] == [("extcap", "Wireshark")]
 
 
 def test_station_fields_follow_the_manuals_ppo_and_vendor_layouts():

@@ -39,7 +39,7 @@ def install_cmd(plugins_dir, stations, extcap_dir, no_extcap, as_json):
     if as_json:
         click.echo(json.dumps({
             "plugins_dir": str(res.plugins_dir), "files": [str(p) for p in res.files],
-            "extcap": str(res.extcap) if res.extcap else None,
+            "extcap": [str(p) for p in res.extcap],
             "stations": [{"station": s.address, "profile": s.profile, "layout": s.layout}
                          for s in res.stations]}))
         return
@@ -47,8 +47,8 @@ def install_cmd(plugins_dir, stations, extcap_dir, no_extcap, as_json):
     st = ", ".join(f"{s.address}={s.profile}:{s.layout}" for s in res.stations) or \
         "no stations (areas decoded as PROFIdrive PPO by length)"
     click.echo(f"station table:   {res.files[1]} ({st})")
-    if res.extcap:
-        click.echo(f"extcap launcher: {res.extcap} (interface 'pdrive' in Wireshark's capture list)")
+    for path in res.extcap:
+        click.echo(f"extcap launcher: {path} (interface 'pdrive' in Wireshark's capture list)")
     click.echo("restart Wireshark or use Analyze > Reload Lua Plugins; with tshark: "
                f"tshark -X lua_script:{res.files[0]} -r FILE.pcap -V")
 
@@ -98,5 +98,5 @@ def extcap_cmd(ctx, extcap_interfaces, extcap_interface, extcap_dlts, extcap_con
     except ValueError as e:
         raise UsageError(str(e)) from None
     link = open_link(port, rate, rs485=rs485, echo=False)
-    n = X.capture(link, fifo, duration)
-    click.echo(f"{n} frame(s)", err=True)
+    # nothing on stderr: Wireshark shows anything an extcap prints there as an error
+    X.capture(link, fifo, duration)

@@ -27,18 +27,23 @@ EXTCAP_NAME = "pdrive-extcap"
 # ---------------------------------------------------------------------------------------------
 # where things go
 
-def personal_dirs(platform: str = sys.platform, env=os.environ, home: Path | None = None) -> tuple[Path, Path]:
-    """(plugins, extcap): Wireshark's personal folders. Windows: %APPDATA%\\Wireshark\\plugins and
-    \\extcap; elsewhere ~/.local/lib/wireshark/plugins and /extcap (Wireshark's "Personal Lua Plugins"
-    and "Personal Extcap path" in Help > About > Folders)."""
+def personal_dirs(platform: str = sys.platform, env=os.environ,
+                  home: Path | None = None) -> tuple[Path, list[Path]]:
+    """(plugins folder, extcap folders): Wireshark's personal folders ("Personal Lua Plugins" and
+    the personal extcap path in Help > About > Folders). Windows: %APPDATA%\\Wireshark\\plugins and
+    \\extcap. Elsewhere ~/.local/lib/wireshark/plugins; extcap in ~/.local/lib/wireshark/extcap
+    (Wireshark 4.2 and later) and in the personal configuration folder's extcap (up to 4.0:
+    $XDG_CONFIG_HOME/wireshark/extcap, by default ~/.config/wireshark/extcap) -- both are written."""
     if platform.startswith("win"):
         appdata = env.get("APPDATA")
         if not appdata:
             raise UsageError("APPDATA is not set: give the plugins folder with --dir")
         base = Path(appdata) / "Wireshark"
-    else:
-        base = (home or Path.home()) / ".local" / "lib" / "wireshark"
-    return base / "plugins", base / "extcap"
+        return base / "plugins", [base / "extcap"]
+    home = home or Path.home()
+    base = home / ".local" / "lib" / "wireshark"
+    config = Path(env["XDG_CONFIG_HOME"]) if env.get("XDG_CONFIG_HOME") else home / ".config"
+    return base / "plugins", [base / "extcap", config / "wireshark" / "extcap"]
 
 
 def dissector_source() -> str:
@@ -171,14 +176,15 @@ def launcher_text(platform: str = sys.platform, python: str = sys.executable) ->
 class Installed:
     plugins_dir: Path
     files: list[Path] = field(default_factory=list)
-    extcap: Path | None = None
+    extcap: list[Path] = field(default_factory=list)
     stations: list[StationSpec] = field(default_factory=list)
 
 
 def install(plugins_dir: str | None = None, stations: list[str] = (), extcap_dir: str | None = None,
             with_extcap: bool = True) -> Installed:
-    """Write pdrive.lua, pdrive_stations.lua and (with_extcap) the extcap launcher. The personal
-    folders are created when missing; a folder given with --dir / --extcap-dir must exist."""
+    """Write pdrive.lua, pdrive_stations.lua and (with_extcap) the extcap launcher into each extcap
+    folder. The personal folders are created when missing; a folder given with --dir / --extcap-dir
+    must exist."""
     specs = [parse_station(s) for s in stations]
     seen: dict[int, str] = {}
     for s in specs:
@@ -187,33 +193,30 @@ def install(plugins_dir: str | None = None, stations: list[str] = (), extcap_dir
         seen[s.address] = s.profile
     personal_plugins, personal_extcap = personal_dirs()
     pdir = Path(plugins_dir) if plugins_dir else personal_plugins
-    if extcap_dir:
-        edir = Path(extcap_dir)
-    elif plugins_dir:
-        edir = pdir / "extcap"
-    else:
-        edir = personal_extcap
+    edirs = [Path(extcap_dir)] if extcap_dir else personal_extcap
     # everything is checked and generated before the first file is written
     if not plugins_dir:
         _mkdir(pdir)
     if with_extcap and not extcap_dir:
-        _mkdir(edir)
+        for d in edirs:
+            _mkdir(d)
     lua = dissector_source()
     table = render_station_table(specs)
     name, launcher = launcher_text()
     targets = [(pdir / DISSECTOR, lua, "dissector"), (pdir / STATION_TABLE, table, "station table")]
     if with_extcap:
-        targets.append((edir / name, launcher, "extcap launcher"))
+        targets += [(d / name, launcher, "extcap launcher") for d in edirs]
     for path, _, what in targets:
         check_output_path(path, what)
     result = Installed(pdir, stations=specs)
     for path, text, what in targets:
         write_text_atomic(path, text, what)
-        result.files.append(path)
-    if with_extcap:
-        result.extcap = edir / name
-        if not sys.platform.startswith("win"):
-            os.chmod(result.extcap, 0o755)
+        if what == "extcap launcher":
+            result.extcap.append(path)
+            if not sys.platform.startswith("win"):
+                os.chmod(path, 0o755)
+        else:
+            result.files.append(path)
     return result
 
 
