@@ -189,6 +189,27 @@ def test_tshark_decodes_set_prm_chk_cfg_and_slave_diag(tshark, tmp_path):
     assert cfg["profibus.cfg.text"] == "4 words in+out, consistent|2 words in+out, consistent"
 
 
+def test_tshark_decodes_global_control_set_slave_add_and_extended_diagnosis(tshark, tmp_path):
+    # Set_Slave_Add 2 -> 126: DSAP 55, new address 5, ident 0xFD06, No_Add_Chg 0
+    #   sum FE+82+5D+37+3E+05+FD+06+00 = 0x35A -> FCS 0x5A
+    ssa = h("68 09 09 68 FE 82 5D 37 3E 05 FD 06 00 5A 16")
+    # Slave_Diag reply with st1 Ext_Diag, an identifier-related block (0x42: type 1, 2 octets; module
+    # 0 set) and a channel-related one (0x80 module 0, 0x41 input channel 1, 0xA5 word, error 5)
+    #   sum 82+86+08+3E+3C+08+0C+00+02+FD+06+42+01+80+41+A5 = 0x44C -> FCS 0x4C
+    diag = h("68 10 10 68 82 86 08 3E 3C 08 0C 00 02 FD 06 42 01 80 41 A5 4C 16")
+    pcap = _pcap(tmp_path / "a.pcap", [GC, ssa, diag])
+    rows = _fields(tshark, pcap, ["profibus.service", "profibus.gc.text", "profibus.gc.group",
+                                  "profibus.ssa.new_address", "profibus.ssa.ident", "profibus.diag.flags",
+                                  "profibus.diag.block"])
+    gc, ssa_row, diag_row = rows
+    assert gc["profibus.gc.text"] == "Clear_Data" and gc["profibus.gc.group"] == "0x00"
+    assert ssa_row["profibus.service"] == "Set_Slave_Add"
+    assert ssa_row["profibus.ssa.new_address"] == "5" and ssa_row["profibus.ssa.ident"] == "0xfd06"
+    assert diag_row["profibus.diag.flags"] == "Ext_Diag, WD_On"
+    assert diag_row["profibus.diag.block"] == ("identifier-related: modules with diagnosis: 0|"
+                                               "channel-related: module 0, channel 1 input, word: overtemperature")
+
+
 def test_tshark_flags_a_bad_fcs(tshark, tmp_path):
     pcap = _pcap(tmp_path / "a.pcap", [DX_BAD_FCS])
     rows = _fields(tshark, pcap, ["profibus.fcs.status", "profibus.fcs", "_ws.expert.message"])
@@ -342,6 +363,27 @@ def test_tshark_decodes_a_station_with_its_vendor_layout(tshark, tmp_path):
                    lua=tmp_path / "pdrive.lua")
     assert float(rows[0]["profidrive.reference_hz"]) == 25.0
     assert float(rows[1]["profidrive.actual_hz"]) == 12.5
+
+
+def test_tshark_names_the_parameter_of_a_pkw_request_by_its_native_code(tshark, tmp_path):
+    """Station 3 = Fuji OPC-G1-PDP: a PKW read of F03 (the profile's PNU/subindex for F03) shows as F03
+    in the request and in the answer (PWE 6000 raw)."""
+    from profidrive_cli.drives.profile import load_profile
+    f03 = load_profile("fuji-g1").param("F03")
+    r = run("wireshark", "install", "--dir", tmp_path, "--station", "3=fuji-g1")
+    assert r.exit_code == 0, r.output
+    pke, ind = 0x1000 | f03.pnu, f03.index << 8                # AK 1 request parameter value
+    body = bytes([3, 2, 0x7D]) + struct.pack(">HHHH", pke, ind, 0, 0) + h("04 7F 20 00")
+    req = bytes([0x68, len(body), len(body), 0x68]) + body + bytes([sum(body) & 0xFF, 0x16])
+    body = bytes([2, 3, 0x08]) + struct.pack(">HHHH", pke, ind, 0, 6000) + h("02 37 20 00")
+    res = bytes([0x68, len(body), len(body), 0x68]) + body + bytes([sum(body) & 0xFF, 0x16])
+    rows = _fields(tshark, _pcap(tmp_path / "a.pcap", [req, res]),
+                   ["profidrive.pkw.param", "profidrive.pkw.ak_text", "profidrive.pkw.pwe"],
+                   lua=tmp_path / "pdrive.lua")
+    assert [r["profidrive.pkw.param"].split(" ", 1)[0] for r in rows] == ["F03", "F03"]
+    assert rows[0]["profidrive.pkw.ak_text"] == "request parameter value"
+    assert rows[1]["profidrive.pkw.ak_text"] == "transfer parameter value (word)"
+    assert int(rows[1]["profidrive.pkw.pwe"], 0) == 6000
 
 
 def test_tshark_station_preference_picks_a_vendor_layout(tshark, tmp_path):
