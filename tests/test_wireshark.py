@@ -330,6 +330,16 @@ def test_windows_personal_folders_are_under_appdata():
     assert [(e.name, e.parent.name) for e in extcap] == [("extcap", "Wireshark")]
 
 
+def test_extcap_launchers_run_pdrive_with_this_python():
+    from profidrive_cli.session.wireshark import launcher_text
+    name, text = launcher_text("win32", r"C:\Python\python.exe")
+    assert name == "pdrive-extcap.bat"
+    assert '"C:\\Python\\python.exe" -m profidrive_cli wireshark extcap %*' in text
+    name, text = launcher_text("linux", "/opt/py/bin/python3")
+    assert name == "pdrive-extcap" and text.startswith("#!/bin/sh\n")
+    assert 'exec /opt/py/bin/python3 -m profidrive_cli wireshark extcap "$@"' in text
+
+
 def test_station_fields_follow_the_manuals_ppo_and_vendor_layouts():
     """PPO1 (PROFIdrive): PKW octets 0-7, PZD1 at 8 (Moeller STW / ZSW), PZD2 at 10 (HSW / HIW, N2 of
     A004 = 50 Hz by default); Yaskawa extended1 (spec §2): parameter access in octets 16-31."""
