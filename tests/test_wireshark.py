@@ -197,11 +197,15 @@ def test_tshark_decodes_global_control_set_slave_add_and_extended_diagnosis(tsha
     # 0 set) and a channel-related one (0x80 module 0, 0x41 input channel 1, 0xA5 word, error 5)
     #   sum 82+86+08+3E+3C+08+0C+00+02+FD+06+42+01+80+41+A5 = 0x44C -> FCS 0x4C
     diag = h("68 10 10 68 82 86 08 3E 3C 08 0C 00 02 FD 06 42 01 80 41 A5 4C 16")
-    pcap = _pcap(tmp_path / "a.pcap", [GC, ssa, diag])
+    # Rd_Inp reply 6 -> 2: DSAP 62 SSAP 56, the station's PPO1 inputs (ZSW 0x0237, HIW 0x1000)
+    #   sum 82+86+08+3E+38+02+37+10 = 0x1CF -> FCS 0xCF
+    rd_inp = h("68 11 11 68 82 86 08 3E 38 00 00 00 00 00 00 00 00 02 37 10 00 CF 16")
+    pcap = _pcap(tmp_path / "a.pcap", [GC, ssa, diag, rd_inp])
     rows = _fields(tshark, pcap, ["profibus.service", "profibus.gc.text", "profibus.gc.group",
                                   "profibus.ssa.new_address", "profibus.ssa.ident", "profibus.diag.flags",
-                                  "profibus.diag.block"])
-    gc, ssa_row, diag_row = rows
+                                  "profibus.diag.block", "profidrive.state"])
+    gc, ssa_row, diag_row, rd = rows
+    assert rd["profibus.service"] == "Rd_Inp reply" and rd["profidrive.state"] == "S4 operation"
     assert gc["profibus.gc.text"] == "Clear_Data" and gc["profibus.gc.group"] == "0x00"
     assert ssa_row["profibus.service"] == "Set_Slave_Add"
     assert ssa_row["profibus.ssa.new_address"] == "5" and ssa_row["profibus.ssa.ident"] == "0xfd06"

@@ -810,8 +810,12 @@ function p_fdl.dissector(tvb, pinfo, tree)
     elseif not is_request and ssap == SAP.SLAVE_DIAG then summary = dissect_diag(tvb, t, du_off, du_len)
     elseif is_request and dsap == SAP.GLOBAL_CONTROL then summary = dissect_gc(tvb, t, du_off, du_len)
     elseif is_request and dsap == SAP.SET_SLAVE_ADD then summary = dissect_ssa(tvb, t, du_off, du_len)
-    elseif not is_request and ssap == SAP.RD_INP and du_len > 0 then t:add(F.inputs, tvb(du_off, du_len))
-    elseif not is_request and ssap == SAP.RD_OUTP and du_len > 0 then t:add(F.outputs, tvb(du_off, du_len))
+    elseif not is_request and ssap == SAP.RD_INP and du_len > 0 then
+      t:add(F.inputs, tvb(du_off, du_len))
+      summary = dissect_area(tvb(du_off, du_len):tvb(), pinfo, tree, sa, "response")
+    elseif not is_request and ssap == SAP.RD_OUTP and du_len > 0 then
+      t:add(F.outputs, tvb(du_off, du_len))
+      summary = dissect_area(tvb(du_off, du_len):tvb(), pinfo, tree, sa, "request")
     elseif service == "Data_Exchange" and du_len > 0 then
       t:add(F.outputs, tvb(du_off, du_len))
       summary = dissect_area(tvb(du_off, du_len):tvb(), pinfo, tree, da, "request")
