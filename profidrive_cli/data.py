@@ -1,7 +1,8 @@
-"""Where the shipped data lives: profiles/*.yaml and gsd/*.gsd.
+"""Where the shipped data lives: profiles/*.yaml, gsd/*.gsd and wireshark/pdrive.lua.
 
-Installed, they are package data (profidrive_cli/profiles, profidrive_cli/gsd_files); in a source
-checkout they are the top-level profiles/ and gsd/ folders.
+Installed, they are package data (profidrive_cli/profiles, profidrive_cli/gsd_files,
+profidrive_cli/wireshark_files); in a source checkout they are the top-level profiles/, gsd/ and
+wireshark/ folders.
 """
 
 from __future__ import annotations
@@ -25,6 +26,10 @@ def profiles_dir() -> Path:
 
 def gsd_dir() -> Path:
     return _first_existing(_PKG / "gsd_files", _PKG.parent / "gsd")
+
+
+def wireshark_dir() -> Path:
+    return _first_existing(_PKG / "wireshark_files", _PKG.parent / "wireshark")
 
 
 def user_gsd_dirs(extra: str | None = None) -> list[Path]:

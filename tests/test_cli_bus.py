@@ -95,7 +95,7 @@ def test_bad_input_one_line(args, msg):
 
 
 def test_sniff_from_file_and_pcap(tmp_path):
-    from profidrive_cli.dp.capture import LINKTYPE_PROFIBUS_DL, read_pcap
+    from profidrive_cli.dp.capture import LINKTYPE_USER0, read_pcap
     raw = bytes.fromhex("10 22 02 49 6D 16 10 02 22 00 24 16 55 "
                         "68 05 05 68 8A 82 6D 3C 3E F3 16 E5")
     f = tmp_path / "cap.raw"
@@ -106,7 +106,7 @@ def test_sniff_from_file_and_pcap(tmp_path):
     assert "FDL status" in r.output and "Slave_Diag" in r.output and "garbage" in r.output
     assert "SC" in r.output
     lt, pkts = read_pcap(pcap.read_bytes())
-    assert lt == LINKTYPE_PROFIBUS_DL and len(pkts) == 4
+    assert lt == LINKTYPE_USER0 and len(pkts) == 4
     assert pkts[0][1] == bytes.fromhex("10 22 02 49 6D 16")
     r = run("sniff", "--from-file", str(f), "--json")
     services = [json.loads(x).get("service") for x in r.output.splitlines()]

@@ -6,7 +6,7 @@ import subprocess
 import sys
 import time
 
-from profidrive_cli.dp.capture import LINKTYPE_PROFIBUS_DL, read_pcap
+from profidrive_cli.dp.capture import LINKTYPE_USER0, read_pcap
 
 
 def _pdrive(*args):
@@ -48,7 +48,7 @@ def test_trace_pcap_records_the_scan_with_wall_clock_times(tmp_path):
     p = _pdrive("scan", "--port", "sim://?stations=3:fuji-g1", "--to", "4", "--trace", str(path))
     assert p.returncode == 0, p.stderr
     linktype, pkts = read_pcap(path.read_bytes())
-    assert linktype == LINKTYPE_PROFIBUS_DL
+    assert linktype == LINKTYPE_USER0       # 147: the link type the shipped Wireshark dissector binds
     raws = [r for _, r in pkts]
     # FDL status to address 0 from master 2: SD1 DA SA FC=0x49 FCS ED (FCS = 0x00+0x02+0x49)
     assert raws[0] == bytes.fromhex("10 00 02 49 4B 16")

@@ -43,6 +43,8 @@ COMMANDS = {
               "Passive capture: one line per frame, pcap output."),
     "status": ("profidrive_cli.cli.drive_cmds", "status_cmd",
                "One read of a drive's status: state, flags, speed, current fault."),
+    "wireshark": ("profidrive_cli.cli.wireshark_cmd", "wireshark_group",
+                  "Wireshark: install pdrive's PROFIBUS dissector and the live-capture (extcap) entry."),
 }
 
 

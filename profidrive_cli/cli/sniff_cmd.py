@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import time
 
 import click
@@ -9,8 +10,9 @@ import click
 from profidrive_cli import UsageError
 from profidrive_cli.cli.common import bus_options, emit_json, out
 from profidrive_cli.datafile import read_input_file
-from profidrive_cli.dp.capture import Capture, PcapWriter, format_line, merge_errors
+from profidrive_cli.dp.capture import LINKTYPES, Capture, PcapWriter, format_line, merge_errors
 from profidrive_cli.outfile import OutputFile, check_output_path
+from profidrive_cli.session.listen import listen
 
 
 # a raw capture file: 16 MiB is ~14 s of a saturated bus at 12 Mbit/s, ~2 h at 19.2 kbit/s
@@ -24,13 +26,17 @@ def _line(c) -> str:
 @click.command("sniff")
 @click.option("--duration", default=10.0, show_default=True, type=float, help="Seconds to listen.")
 @click.option("--pcap", "pcap_file", default=None, metavar="FILE",
-              help="Also write a pcap file (link type 257, PROFIBUS_DL).")
+              help="Also write a pcap file (link type 147 DLT_USER0, which `pdrive wireshark install` "
+                   "lets Wireshark decode; see --linktype).")
+@click.option("--linktype", type=click.Choice(sorted(LINKTYPES)), default="147", show_default=True,
+              help="pcap link type: 147 (DLT_USER0, opened by Wireshark with pdrive's dissector) or "
+                   "257 (PROFIBUS_DL, for tools that know it).")
 @click.option("--raw", "raw_out", default=None, metavar="FILE",
               help="Also write the received octets as they came (decode later with --from-file).")
 @click.option("--from-file", "raw_file", default=None, metavar="FILE",
               help="Decode a raw byte capture (a regular file up to 16 MiB) offline instead of listening.")
 @bus_options
-def sniff_cmd(opts, duration, pcap_file, raw_out, raw_file):
+def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file):
     """Passive capture: one line per frame (time, SD, SA->DA, SAPs, FC in words, service, DU).
 
     --pcap and --raw files are written beside the target and replace it only when the capture
@@ -49,11 +55,14 @@ def sniff_cmd(opts, duration, pcap_file, raw_out, raw_file):
     cap = Capture()
     # read (and check) the input before anything is written
     raw = read_input_file(raw_file, "raw capture", MAX_CAPTURE_BYTES) if raw_file else None
+    # pcap times are wall clock: the capture's start (for --from-file: when the raw file was last
+    # written, the end of its capture) plus the monotonic offset of each frame
+    start_wall = _mtime(raw_file) if raw_file else time.time()
     count = 0
     try:
         for f in files:
             f.open()
-        writer = PcapWriter(files[0]) if pcap_file else None
+        writer = PcapWriter(files[0], LINKTYPES[linktype], start_wall) if pcap_file else None
         raw_fh = files[-1] if raw_out else None
 
         def show(items):
@@ -78,14 +87,14 @@ def sniff_cmd(opts, duration, pcap_file, raw_out, raw_file):
                     from profidrive_cli.cli.common import err
                     err.print("sim:// is silent unless a master talks: nothing to sniff "
                               "(use `pdrive sim --pty` and a master on the other end)")
-                start = time.monotonic()
-                end = start + duration
-                while time.monotonic() < end:
-                    data = link.read(min(end, time.monotonic() + 0.2))
-                    if data:
-                        if raw_fh is not None:
-                            raw_fh.write(data)
-                        show(cap.feed(data, time.monotonic() - start))
+                def on_data(data, t):
+                    if raw_fh is not None:
+                        raw_fh.write(data)
+                    show(cap.feed(data, t))
+
+                if writer is not None:
+                    writer.start = time.time()       # wall clock of t = 0
+                listen(link, duration, on_data)
             except KeyboardInterrupt:
                 pass                                 # Ctrl-C ends a capture: keep what was captured
             finally:
@@ -100,6 +109,13 @@ def sniff_cmd(opts, duration, pcap_file, raw_out, raw_file):
         return
     if not opts.json:
         out.print(f"{count} frame(s)")
+
+
+def _mtime(path) -> float:
+    try:
+        return os.path.getmtime(path)
+    except OSError:
+        return time.time()
 
 
 def _truncated(cap):

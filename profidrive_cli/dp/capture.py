@@ -1,4 +1,5 @@
-"""Passive capture: frames with timestamps from a byte stream; pcap files (LINKTYPE_PROFIBUS_DL = 257).
+"""Passive capture: frames with timestamps from a byte stream; pcap files (DLT_USER0 = 147 by default,
+which the shipped Wireshark dissector binds; LINKTYPE_PROFIBUS_DL = 257 on request).
 
 In dp/ because it names each telegram's DP service (dp/services.py: SAP -> Set_Prm, Slave_Diag, ...);
 it touches fdl.frames and dp.services only and is sans-IO (octets and times in, records out).
@@ -13,6 +14,10 @@ from profidrive_cli.dp.services import service_name
 from profidrive_cli.fdl import frames as F
 
 LINKTYPE_PROFIBUS_DL = 257
+#: DLT_USER0: Wireshark opens it and hands it to a dissector bound to wtap USER0 (wireshark/pdrive.lua);
+#: the packets are the same (SD .. ED) as PROFIBUS_DL, which Wireshark 4.0 refuses to open
+LINKTYPE_USER0 = 147
+LINKTYPES = {"147": LINKTYPE_USER0, "257": LINKTYPE_PROFIBUS_DL}
 
 #: octets that can start a telegram
 _STARTS = frozenset((F.SD1, F.SD2, F.SD3, F.SD4, F.SC))
@@ -132,11 +137,18 @@ def merge_errors(items: list[Captured]) -> list[Captured]:
 
 
 class PcapWriter:
-    def __init__(self, fh):
+    """A classic pcap file (microsecond timestamps, little-endian). `start` is the wall-clock time
+    (time.time()) of t = 0: write(t, raw) stamps start + t, so a capture timed on a monotonic clock
+    from its start carries real dates. The header is written at once (also to a fifo: extcap)."""
+
+    def __init__(self, fh, linktype: int = LINKTYPE_USER0, start: float = 0.0):
         self.fh = fh
-        fh.write(struct.pack("<IHHiIII", 0xA1B2C3D4, 2, 4, 0, 0, 65535, LINKTYPE_PROFIBUS_DL))
+        self.start = start
+        self.linktype = linktype
+        fh.write(struct.pack("<IHHiIII", 0xA1B2C3D4, 2, 4, 0, 0, 65535, linktype))
 
     def write(self, t: float, raw: bytes) -> None:
+        t = self.start + t
         sec = int(t)
         usec = int(round((t - sec) * 1e6))
         if usec >= 1000000:
@@ -158,4 +170,5 @@ def read_pcap(data: bytes) -> tuple[int, list[tuple[float, bytes]]]:
     return linktype, pkts
 
 
-__all__ = ["Capture", "Captured", "PcapWriter", "read_pcap", "merge_errors"]
+__all__ = ["Capture", "Captured", "PcapWriter", "read_pcap", "merge_errors", "LINKTYPE_USER0",
+           "LINKTYPE_PROFIBUS_DL", "LINKTYPES"]

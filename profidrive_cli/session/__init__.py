@@ -14,6 +14,9 @@ cli/drive_cmds.py and the checklist runner build on it.
     params.py        parameter codes, parsing, checked read/write, save
     backup.py        dump and compare (ParamRow);  dumpfile.py: the dump file format and loading
     restore.py       restore: validate every row, then write and read back
+    listen.py        the passive reading loop of sniff and the extcap capture (never transmits)
+    wireshark.py     wireshark install: dissector, station table from the profiles, extcap launcher
+    extcap.py        the Wireshark extcap protocol answers and the capture into its fifo
 
 Public API (stable; everything else is internal)
 ------------------------------------------------

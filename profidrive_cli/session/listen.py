@@ -1,0 +1,27 @@
+"""Passive listening: the reading loop of `pdrive sniff` and of the Wireshark extcap capture.
+
+Reads a Link until a duration has passed (or forever, until the caller is interrupted) and hands every
+chunk of octets to a callback with its time since the start (monotonic clock). Never transmits.
+Decoding (dp/capture.py) and output (pcap, text, JSON) stay with the caller.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Callable
+
+#: a read returns at least this often, so that a duration ends on time on a silent bus
+POLL_S = 0.2
+
+
+def listen(link, duration: float | None, on_data: Callable[[bytes, float], None],
+           clock: Callable[[], float] = time.monotonic) -> None:
+    """Read `link` for `duration` seconds (None: until an exception, e.g. KeyboardInterrupt or a
+    closed pcap pipe, ends it); on_data(octets, seconds since the start) for every chunk read."""
+    start = clock()
+    end = None if duration is None else start + duration
+    while end is None or clock() < end:
+        now = clock()
+        data = link.read(now + POLL_S if end is None else min(end, now + POLL_S))
+        if data:
+            on_data(data, clock() - start)

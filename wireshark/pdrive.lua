@@ -1,0 +1,837 @@
+-- pdrive.lua: PROFIBUS FDL / DP-V0 / PROFIdrive dissector for Wireshark, shipped with pdrive
+-- (profidrive-cli). Install with `pdrive wireshark install`; read a capture with
+--   tshark -X lua_script:pdrive.lua -r capture.pcap -V
+--
+-- Packets: one FDL telegram each (SD .. ED), link type DLT_USER0 (147) as `pdrive sniff --pcap` and
+-- `--trace FILE.pcap` write them. Names are those of pdrive (dp/capture.py, dp/services.py):
+-- services Set_Prm, Chk_Cfg, Slave_Diag, Get_Cfg, Global_Control, Data_Exchange, Rd_Inp, Rd_Outp,
+-- Set_Slave_Add; replies "<service> reply"; "FDL status", "token", "short acknowledge".
+--
+-- Data_Exchange areas are decoded as PROFIdrive PPO (PKW + STW/ZSW + HSW/HIW) by their length, or by
+-- a station's layout when the station table `pdrive_stations.lua` (written by
+-- `pdrive wireshark install --station 3=fuji-g1 ...`, derived from pdrive's profiles) lies next to this
+-- file, or when the preference "profidrive.stations" names it ("3=fuji-g1:ppo1,6=moeller").
+-- Reference: PROFIBUS-DP (EN 50170 / IEC 61158), PROFIdrive profile V2/V3.
+
+local p_fdl = Proto("profibus", "PROFIBUS FDL / DP-V0 (pdrive)")
+local p_pd = Proto("profidrive", "PROFIdrive cyclic data (pdrive)")
+
+-- ------------------------------------------------------------------------------------------------
+-- constants (fdl/frames.py, dp/services.py)
+
+local SD1, SD2, SD3, SD4, SC, ED = 0x10, 0x68, 0xA2, 0xDC, 0xE5, 0x16
+local SD_NAMES = { [SD1] = "SD1", [SD2] = "SD2", [SD3] = "SD3", [SD4] = "SD4", [SC] = "SC" }
+local REQUEST_NAMES = {
+  [0] = "time event", [3] = "SDA low", [4] = "SDN low", [5] = "SDA high", [6] = "SDN high", [7] = "MSRD",
+  [9] = "FDL status request", [12] = "SRD low", [13] = "SRD high", [14] = "ident request",
+  [15] = "LSAP status request",
+}
+local RESPONSE_NAMES = {
+  [0] = "OK", [1] = "UE user error", [2] = "RR no resources", [3] = "RS SAP not enabled",
+  [8] = "DL data low", [9] = "NR no response data", [10] = "DH data high (diagnosis pending)",
+  [12] = "RDL data not received, low", [13] = "RDH data not received, high",
+}
+local STATION_TYPES = { [0] = "slave", [1] = "master not ready", [2] = "master ready", [3] = "master in ring" }
+local SAP = { SET_SLAVE_ADD = 55, RD_INP = 56, RD_OUTP = 57, GLOBAL_CONTROL = 58, GET_CFG = 59,
+              SLAVE_DIAG = 60, SET_PRM = 61, CHK_CFG = 62 }
+local SERVICE_NAMES = { [55] = "Set_Slave_Add", [56] = "Rd_Inp", [57] = "Rd_Outp", [58] = "Global_Control",
+                        [59] = "Get_Cfg", [60] = "Slave_Diag", [61] = "Set_Prm", [62] = "Chk_Cfg" }
+local ST1_BITS = { "Station_Non_Existent", "Station_Not_Ready", "Cfg_Fault", "Ext_Diag", "Not_Supported",
+                   "Invalid_Slave_Response", "Prm_Fault", "Master_Lock" }
+local ST2_BITS = { "Prm_Req", "Stat_Diag", "always 1", "WD_On", "Freeze_Mode", "Sync_Mode", "reserved",
+                   "Deactivated" }
+local GC_NAMES = { { 0x02, "Clear_Data" }, { 0x04, "Unfreeze" }, { 0x08, "Freeze" }, { 0x10, "Unsync" },
+                   { 0x20, "Sync" } }
+local CHANNEL_WIDTH = { [1] = "bit", [2] = "2 bits", [3] = "4 bits", [4] = "byte", [5] = "word", [6] = "2 words" }
+local CHANNEL_ERROR = { [1] = "short circuit", [2] = "undervoltage", [3] = "overvoltage", [4] = "overload",
+                        [5] = "overtemperature", [6] = "line break", [7] = "upper limit exceeded",
+                        [8] = "lower limit undershot", [9] = "error" }
+local CHANNEL_DIR = { [1] = "input", [2] = "output", [3] = "input/output" }
+
+-- PROFIdrive (drives/profidrive/words.py, pkw.py)
+local CTW_NAMES = { [0] = "ON", [1] = "no OFF2", [2] = "no OFF3", [3] = "enable operation",
+                    [4] = "enable ramp generator", [5] = "unfreeze ramp generator", [6] = "enable setpoint",
+                    [7] = "fault acknowledge", [8] = "jog 1", [9] = "jog 2", [10] = "control by PLC" }
+local STW_NAMES = { [0] = "ready to switch on", [1] = "ready to operate", [2] = "operation enabled",
+                    [3] = "fault", [4] = "no OFF2", [5] = "no OFF3", [6] = "switching on inhibited",
+                    [7] = "warning", [8] = "at setpoint", [9] = "control requested", [10] = "f reached" }
+local AK_REQUEST = { [0] = "no task", [1] = "request parameter value", [2] = "change parameter value (word)",
+  [3] = "change parameter value (long word)", [4] = "request description element",
+  [5] = "change description element", [6] = "request parameter value (array)",
+  [7] = "change parameter value (array word)", [8] = "change parameter value (array long word)",
+  [9] = "request number of array elements", [11] = "change array long word and store",
+  [12] = "change array word and store", [13] = "change long word and store",
+  [14] = "change word and store", [15] = "read or change text" }
+local AK_RESPONSE = { [0] = "no response", [1] = "transfer parameter value (word)",
+  [2] = "transfer parameter value (long word)", [3] = "transfer description element",
+  [4] = "transfer parameter value (array word)", [5] = "transfer parameter value (array long word)",
+  [6] = "transfer number of array elements", [7] = "task cannot be executed",
+  [8] = "no parameter change rights", [9] = "parameter change report (word)",
+  [10] = "parameter change report (long word)", [15] = "transfer text" }
+
+-- ------------------------------------------------------------------------------------------------
+-- fields
+
+local function vs(t) local o = {} for k, v in pairs(t) do o[k] = v end return o end
+
+local F = {
+  sd = ProtoField.uint8("profibus.sd", "Start delimiter", base.HEX, vs(SD_NAMES)),
+  le = ProtoField.uint8("profibus.le", "LE"),
+  ler = ProtoField.uint8("profibus.ler", "LEr"),
+  da = ProtoField.uint8("profibus.da", "DA (destination)", base.DEC, nil, 0x7F),
+  sa = ProtoField.uint8("profibus.sa", "SA (source)", base.DEC, nil, 0x7F),
+  da_ext = ProtoField.bool("profibus.da_ext", "DSAP follows", 8, nil, 0x80),
+  sa_ext = ProtoField.bool("profibus.sa_ext", "SSAP follows", 8, nil, 0x80),
+  fc = ProtoField.uint8("profibus.fc", "FC", base.HEX),
+  fc_text = ProtoField.string("profibus.fc_text", "FC in words"),
+  fc_req = ProtoField.bool("profibus.fc.request", "Request", 8, nil, 0x40),
+  fc_fcb = ProtoField.bool("profibus.fc.fcb", "FCB", 8, nil, 0x20),
+  fc_fcv = ProtoField.bool("profibus.fc.fcv", "FCV", 8, nil, 0x10),
+  fc_fn = ProtoField.uint8("profibus.fc.function", "Function", base.DEC, vs(REQUEST_NAMES), 0x0F),
+  fc_st = ProtoField.uint8("profibus.fc.status", "Status", base.DEC, vs(RESPONSE_NAMES), 0x0F),
+  fc_type = ProtoField.uint8("profibus.fc.station_type", "Station type", base.DEC, vs(STATION_TYPES), 0x30),
+  dsap = ProtoField.uint8("profibus.dsap", "DSAP"),
+  ssap = ProtoField.uint8("profibus.ssap", "SSAP"),
+  du = ProtoField.bytes("profibus.du", "DU", base.SPACE),
+  fcs = ProtoField.uint8("profibus.fcs", "FCS", base.HEX),
+  fcs_status = ProtoField.string("profibus.fcs.status", "FCS status"),
+  ed = ProtoField.uint8("profibus.ed", "End delimiter", base.HEX),
+  service = ProtoField.string("profibus.service", "Service"),
+  -- Set_Prm
+  prm_status = ProtoField.uint8("profibus.prm.station_status", "Station status", base.HEX),
+  prm_lock = ProtoField.bool("profibus.prm.lock_req", "Lock_Req", 8, nil, 0x80),
+  prm_unlock = ProtoField.bool("profibus.prm.unlock_req", "Unlock_Req", 8, nil, 0x40),
+  prm_sync = ProtoField.bool("profibus.prm.sync_req", "Sync_Req", 8, nil, 0x20),
+  prm_freeze = ProtoField.bool("profibus.prm.freeze_req", "Freeze_Req", 8, nil, 0x10),
+  prm_wd_on = ProtoField.bool("profibus.prm.wd_on", "WD_On", 8, nil, 0x08),
+  prm_wd1 = ProtoField.uint8("profibus.prm.wd_fact_1", "WD_Fact_1"),
+  prm_wd2 = ProtoField.uint8("profibus.prm.wd_fact_2", "WD_Fact_2"),
+  prm_wd_ms = ProtoField.uint32("profibus.prm.watchdog_ms", "Watchdog (ms)"),
+  prm_tsdr = ProtoField.uint8("profibus.prm.min_tsdr", "min TSDR (bit times)"),
+  prm_ident = ProtoField.uint16("profibus.prm.ident", "Ident number", base.HEX),
+  prm_group = ProtoField.uint8("profibus.prm.group", "Group_Ident", base.HEX),
+  prm_user = ProtoField.bytes("profibus.prm.user_prm", "User_Prm_Data", base.SPACE),
+  -- Chk_Cfg / Get_Cfg
+  cfg_id = ProtoField.uint8("profibus.cfg.identifier", "Identifier", base.HEX),
+  cfg_text = ProtoField.string("profibus.cfg.text", "Module"),
+  -- Slave_Diag
+  diag_st1 = ProtoField.uint8("profibus.diag.st1", "Station status 1", base.HEX),
+  diag_st2 = ProtoField.uint8("profibus.diag.st2", "Station status 2", base.HEX),
+  diag_st3 = ProtoField.uint8("profibus.diag.st3", "Station status 3", base.HEX),
+  diag_master = ProtoField.uint8("profibus.diag.master", "Master address"),
+  diag_ident = ProtoField.uint16("profibus.diag.ident", "Ident number", base.HEX),
+  diag_flags = ProtoField.string("profibus.diag.flags", "Flags set"),
+  diag_ext = ProtoField.bytes("profibus.diag.ext", "Extended diagnosis", base.SPACE),
+  diag_block = ProtoField.string("profibus.diag.block", "Diagnosis block"),
+  -- Global_Control / Set_Slave_Add
+  gc_cmd = ProtoField.uint8("profibus.gc.control", "Control command", base.HEX),
+  gc_text = ProtoField.string("profibus.gc.text", "Command"),
+  gc_group = ProtoField.uint8("profibus.gc.group", "Group select", base.HEX),
+  ssa_addr = ProtoField.uint8("profibus.ssa.new_address", "New station address"),
+  ssa_ident = ProtoField.uint16("profibus.ssa.ident", "Ident number", base.HEX),
+  ssa_nochg = ProtoField.bool("profibus.ssa.no_add_chg", "No_Add_Chg"),
+  ssa_extra = ProtoField.bytes("profibus.ssa.rem_slave_data", "Rem_Slave_Data", base.SPACE),
+  outputs = ProtoField.bytes("profibus.outputs", "Outputs", base.SPACE),
+  inputs = ProtoField.bytes("profibus.inputs", "Inputs", base.SPACE),
+}
+local bits_fields = {}
+for i, n in ipairs(ST1_BITS) do
+  local k = "st1_" .. i
+  F[k] = ProtoField.bool("profibus.diag." .. n:lower(), n, 8, nil, 2 ^ (i - 1))
+  bits_fields[#bits_fields + 1] = { 1, k }
+end
+for i, n in ipairs(ST2_BITS) do
+  if n ~= "always 1" and n ~= "reserved" then
+    local k = "st2_" .. i
+    F[k] = ProtoField.bool("profibus.diag." .. n:lower(), n, 8, nil, 2 ^ (i - 1))
+    bits_fields[#bits_fields + 1] = { 2, k }
+  end
+end
+F.st3_8 = ProtoField.bool("profibus.diag.ext_diag_overflow", "Ext_Diag_Overflow", 8, nil, 0x80)
+bits_fields[#bits_fields + 1] = { 3, "st3_8" }
+
+local fl = {}
+for _, v in pairs(F) do fl[#fl + 1] = v end
+p_fdl.fields = fl
+
+local E = {
+  fcs = ProtoExpert.new("profibus.fcs.bad", "FCS mismatch", expert.group.CHECKSUM, expert.severity.ERROR),
+  malformed = ProtoExpert.new("profibus.malformed", "Malformed telegram", expert.group.MALFORMED,
+                              expert.severity.ERROR),
+  diag = ProtoExpert.new("profibus.diag.problem", "Station reports a problem", expert.group.RESPONSE_CODE,
+                         expert.severity.WARN),
+}
+p_fdl.experts = { E.fcs, E.malformed, E.diag }
+
+local P = {
+  station = ProtoField.uint8("profidrive.station", "Station"),
+  layout = ProtoField.string("profidrive.layout", "Layout"),
+  direction = ProtoField.string("profidrive.direction", "Direction"),
+  pkw = ProtoField.bytes("profidrive.pkw", "PKW", base.SPACE),
+  pke = ProtoField.uint16("profidrive.pkw.pke", "PKE", base.HEX),
+  ak = ProtoField.uint16("profidrive.pkw.ak", "AK", base.DEC, nil, 0xF000),
+  spm = ProtoField.uint16("profidrive.pkw.spm", "SPM", base.DEC, nil, 0x0800),
+  pnu = ProtoField.uint16("profidrive.pkw.pnu", "PNU", base.DEC, nil, 0x07FF),
+  ak_text = ProtoField.string("profidrive.pkw.ak_text", "AK in words"),
+  ind = ProtoField.uint16("profidrive.pkw.ind", "IND", base.HEX),
+  subindex = ProtoField.uint8("profidrive.pkw.subindex", "Subindex"),
+  pwe = ProtoField.uint32("profidrive.pkw.pwe", "PWE", base.HEX_DEC),
+  param = ProtoField.string("profidrive.pkw.param", "Parameter"),
+  control = ProtoField.uint16("profidrive.control", "Control word", base.HEX),
+  control_set = ProtoField.string("profidrive.control.set", "Control bits set"),
+  status = ProtoField.uint16("profidrive.status", "Status word", base.HEX),
+  status_set = ProtoField.string("profidrive.status.set", "Status bits set"),
+  state = ProtoField.string("profidrive.state", "State"),
+  reference = ProtoField.uint16("profidrive.reference", "Reference", base.HEX),
+  reference_pct = ProtoField.double("profidrive.reference_percent", "Reference (%)"),
+  reference_hz = ProtoField.double("profidrive.reference_hz", "Reference (Hz)"),
+  actual = ProtoField.uint16("profidrive.actual", "Actual value", base.HEX),
+  actual_pct = ProtoField.double("profidrive.actual_percent", "Actual value (%)"),
+  actual_hz = ProtoField.double("profidrive.actual_hz", "Actual value (Hz)"),
+  word = ProtoField.uint16("profidrive.word", "Word", base.HEX),
+  field = ProtoField.string("profidrive.field", "Field"),
+  value = ProtoField.double("profidrive.value", "Value"),
+  bytes = ProtoField.bytes("profidrive.bytes", "Octets", base.SPACE),
+}
+local pl = {}
+for _, v in pairs(P) do pl[#pl + 1] = v end
+p_pd.fields = pl
+local E_len = ProtoExpert.new("profidrive.length", "Area length does not match the station's layout",
+                              expert.group.PROTOCOL, expert.severity.WARN)
+p_pd.experts = { E_len }
+
+p_pd.prefs.stations = Pref.string("Stations", "",
+  "station=profile[:layout], comma separated (e.g. 3=fuji-g1:ppo1,6=moeller); profiles from "
+  .. "pdrive_stations.lua (pdrive wireshark install); overrides that file's stations")
+p_pd.prefs.generic = Pref.bool("Decode unknown stations as PPO", true,
+  "Decode the Data_Exchange areas of stations without a layout as PROFIdrive PPO by their length")
+
+-- ------------------------------------------------------------------------------------------------
+-- the station table written by `pdrive wireshark install` (pdrive_stations.lua next to this file)
+
+local function script_dir()
+  local src = debug.getinfo(1, "S").source or ""
+  if src:sub(1, 1) == "@" then src = src:sub(2) end
+  return src:match("^(.*[/\\])") or ""
+end
+
+local TABLE = nil
+local function station_table()
+  if TABLE ~= nil then return TABLE end
+  if PDRIVE_STATIONS == nil then
+    -- Wireshark's loadfile raises when the file is missing: no table is fine
+    local ok, f = pcall(loadfile, script_dir() .. "pdrive_stations.lua")
+    if ok and f then pcall(f) end
+  end
+  TABLE = PDRIVE_STATIONS or { stations = {}, layouts = {}, aliases = {}, defaults = {} }
+  return TABLE
+end
+
+local pref_cache_text, pref_cache = nil, {}
+local function pref_stations()
+  local text = p_pd.prefs.stations or ""
+  if text == pref_cache_text then return pref_cache end
+  pref_cache_text, pref_cache = text, {}
+  local t = station_table()
+  for item in text:gmatch("[^,%s]+") do
+    local addr, prof, lay = item:match("^(%d+)=([^:]+):?(.*)$")
+    if addr then
+      prof = (t.aliases and t.aliases[prof]) or prof
+      if lay == "" then lay = t.defaults and t.defaults[prof] or "" end
+      pref_cache[tonumber(addr)] = prof .. ":" .. lay
+    end
+  end
+  return pref_cache
+end
+
+local function station_layout(addr)
+  local t = station_table()
+  local key = pref_stations()[addr] or (t.stations and t.stations[addr])
+  if key == nil then return nil end
+  return t.layouts and t.layouts[key], key
+end
+
+-- ------------------------------------------------------------------------------------------------
+-- helpers
+
+local function hexs(range)
+  if range:len() == 0 then return "" end
+  local b = range:bytes()
+  local o = {}
+  for i = 0, b:len() - 1 do o[#o + 1] = string.format("%02x", b:get_index(i)) end
+  return table.concat(o, " ")
+end
+
+local function s16(w) if w >= 0x8000 then return w - 0x10000 end return w end
+
+-- bit operations in plain arithmetic: Wireshark links Lua 5.2 (no & or >>) or 5.3/5.4 (no bit32)
+local function shr(x, n) return math.floor(x / 2 ^ n) end
+local function band(x, m)
+  local r, b = 0, 1
+  while x > 0 and m > 0 do
+    if x % 2 == 1 and m % 2 == 1 then r = r + b end
+    x, m, b = math.floor(x / 2), math.floor(m / 2), b * 2
+  end
+  return r
+end
+
+local function fmt_num(v)
+  local s = string.format("%.4f", v):gsub("0+$", ""):gsub("%.$", "")
+  return s
+end
+
+local function bit_list(word, names, width)
+  local out = {}
+  for b = 0, (width or 16) - 1 do
+    if math.floor(word / 2 ^ b) % 2 == 1 then out[#out + 1] = names[b] or ("bit " .. b) end
+  end
+  return out
+end
+
+local function state_from_status(w)
+  if math.floor(w / 8) % 2 == 1 then return "fault" end
+  if math.floor(w / 64) % 2 == 1 then return "S1 switching on inhibited" end
+  local low = w % 8
+  if low == 7 then return "S4 operation" end
+  if low == 3 then return "S3 switched on" end
+  if low == 1 then return "S2 ready for switching on" end
+  if low == 0 then return "S1 switching on inhibited" end
+  if low >= 4 then return "S4 operation" end
+  if low >= 2 then return "S3 switched on" end
+  return "S1 switching on inhibited"
+end
+
+local function word_at(range, order)
+  if order == "little" then return range:le_uint() end
+  return range:uint()
+end
+
+local function add_word(tree, field, range, order, ...)
+  if order == "little" then return tree:add_le(field, range, ...) end
+  return tree:add(field, range, ...)
+end
+
+-- ------------------------------------------------------------------------------------------------
+-- PROFIdrive / vendor areas
+
+local function generic_layout(len, direction)
+  -- PPO by length: 4 = PPO3, 12 = PPO1 (PPO4 has the same length: taken as PPO1), 20 = PPO2, 28 = PPO5
+  local ppo = ({ [4] = 3, [12] = 1, [20] = 2, [28] = 5 })[len]
+  if ppo == nil then return nil end
+  local pkw = ppo ~= 3
+  local fields, off = {}, 0
+  if pkw then fields[#fields + 1] = { kind = "pkw", name = "PKW", offset = 0, size = 8 }; off = 8 end
+  if direction == "request" then
+    fields[#fields + 1] = { kind = "bits", role = "control", name = "STW", what = "control word", offset = off,
+                            size = 2, bits = CTW_NAMES }
+    fields[#fields + 1] = { kind = "n2", role = "reference", name = "HSW", what = "main setpoint",
+                            offset = off + 2, size = 2 }
+  else
+    fields[#fields + 1] = { kind = "bits", role = "status", name = "ZSW", what = "status word", offset = off,
+                            size = 2, bits = STW_NAMES }
+    fields[#fields + 1] = { kind = "n2", role = "actual", name = "HIW", what = "main actual value",
+                            offset = off + 2, size = 2 }
+  end
+  local n = 3
+  for o = off + 4, len - 2, 2 do
+    fields[#fields + 1] = { kind = "word", name = "PZD" .. n, offset = o, size = 2 }
+    n = n + 1
+  end
+  return { name = "PPO" .. ppo .. " (by length)", word_order = "big", length = len, fields = fields,
+           generic = true }
+end
+
+local function param_label(lay, pnu, sub)
+  local params = lay and lay.params
+  if params == nil then return nil end
+  return params[pnu * 256 + sub] or params[pnu * 256 + 255]
+end
+
+local function dissect_pkw(tvb, tree, f, direction, lay, order, notes)
+  local r = tvb(f.offset, 8)
+  local t = tree:add(P.pkw, r)
+  t:set_text("PKW (parameter channel): " .. hexs(r))
+  local pke = word_at(r(0, 2), order)
+  local ind = word_at(r(2, 2), order)
+  local pwe = word_at(r(4, 2), order) * 65536 + word_at(r(6, 2), order)
+  local ak = math.floor(pke / 4096)
+  local pnu = pke % 2048
+  local sub = math.floor(ind / 256)
+  local texts = direction == "request" and (lay and lay.ak_request or AK_REQUEST)
+                or (lay and lay.ak_response or AK_RESPONSE)
+  local ak_text = texts[ak] or "reserved"
+  add_word(t, P.pke, r(0, 2), order)
+  add_word(t, P.ak, r(0, 2), order)
+  add_word(t, P.spm, r(0, 2), order)
+  add_word(t, P.pnu, r(0, 2), order)
+  t:add(P.ak_text, r(0, 2), ak_text)
+  add_word(t, P.ind, r(2, 2), order)
+  t:add(P.subindex, r(2, 2), sub)
+  t:add(P.pwe, r(4, 4), pwe)
+  local label = param_label(lay, pnu, sub)
+  if label and ak ~= 0 then t:add(P.param, r(0, 4), label) end
+  local where = "PNU " .. pnu .. (sub ~= 0 and ("[" .. sub .. "]") or "")
+  if ak == 0 then
+    notes[#notes + 1] = "PKW " .. ak_text
+  else
+    local s = "PKW AK " .. ak .. " " .. ak_text .. ", " .. where .. (label and (" = " .. label) or "")
+    if (direction == "response" and (ak == 7 or ak == 8)) then
+      s = s .. ": error " .. (pwe % 65536)
+    elseif not (direction == "request" and (ak == 1 or ak == 4 or ak == 6 or ak == 9)) then
+      s = s .. ", PWE " .. pwe
+    end
+    notes[#notes + 1] = s
+  end
+  t:append_text(" -> " .. notes[#notes])
+end
+
+local function dissect_field(tvb, tree, f, direction, lay, order, notes)
+  if f.offset + f.size > tvb:len() then return end
+  local r = tvb(f.offset, f.size)
+  if f.kind == "pkw" then return dissect_pkw(tvb, tree, f, direction, lay, order, notes) end
+  if f.kind == "bytes" then
+    local t = tree:add(P.bytes, r)
+    t:set_text(f.name .. ": " .. hexs(r))
+    return
+  end
+  local w = word_at(r, order)
+  local label = f.name .. (f.what and (" (" .. f.what .. ")") or "")
+  if f.kind == "bits" then
+    local names = f.bits or {}
+    local set = bit_list(w, names, 16)
+    local field = f.role == "control" and P.control or f.role == "status" and P.status or P.word
+    local t = add_word(tree, field, r, order)
+    local text = string.format("%s 0x%04X: %s", label, w, #set > 0 and table.concat(set, ", ") or "no bits set")
+    local note = string.format("%s 0x%04X", f.name, w)
+    if f.role == "status" and f.state ~= false then
+      local st = state_from_status(w)
+      text = text .. " -> " .. st
+      tree:add(P.state, r, st)
+      note = note .. " " .. st
+    end
+    t:set_text(text)
+    if f.role == "control" then tree:add(P.control_set, r, table.concat(set, ", ")) end
+    if f.role == "status" then tree:add(P.status_set, r, table.concat(set, ", ")) end
+    if f.role ~= "control" and f.role ~= "status" then tree:add(P.field, r, f.name) end
+    for b = 0, 15 do
+      local on = math.floor(w / 2 ^ b) % 2 == 1
+      if names[b] or on then
+        t:add(r, string.format("bit %2d %s: %s", b, names[b] or ("bit " .. b), on and "1" or "0"))
+      end
+    end
+    notes[#notes + 1] = note
+    return
+  end
+  if f.kind == "n2" or f.kind == "scaled" then
+    local v = f.signed == false and w or s16(w)
+    local field = f.role == "reference" and P.reference or f.role == "actual" and P.actual or P.word
+    local t = add_word(tree, field, r, order)
+    local text, hz
+    if f.kind == "n2" then
+      local pct = v * 100.0 / 16384
+      text = string.format("%s 0x%04X: %s %%", label, w, fmt_num(pct))
+      if f.role then tree:add(f.role == "reference" and P.reference_pct or P.actual_pct, r, pct) end
+      if f.max_hz then
+        hz = pct * f.max_hz / 100.0
+        text = text .. string.format(" = %.2f Hz (100 %% = %s Hz)", hz, fmt_num(f.max_hz))
+      end
+    else
+      local val = v * (f.scale or 1)
+      text = string.format("%s 0x%04X = %s%s", label, w, fmt_num(val), f.unit and f.unit ~= "" and (" " .. f.unit) or "")
+      if f.unit == "Hz" then hz = val end
+      if field == P.word then tree:add(P.value, r, val) end
+    end
+    if hz and f.role then tree:add(f.role == "reference" and P.reference_hz or P.actual_hz, r, hz) end
+    if field == P.word then tree:add(P.field, r, f.name) end
+    t:set_text(text)
+    notes[#notes + 1] = hz and string.format("%s %.2f Hz", f.name, hz) or string.format("%s 0x%04X", f.name, w)
+    return
+  end
+  -- plain word
+  local t = add_word(tree, P.word, r, order)
+  t:set_text(string.format("%s 0x%04X = %d", label, w, w))
+  tree:add(P.field, r, f.name)
+end
+
+local function dissect_area(tvb, pinfo, tree, station, direction)
+  local lay, key = station_layout(station)
+  local t = tree:add(p_pd, tvb())
+  t:add(P.station, station):set_generated()
+  t:add(P.direction, direction == "request" and "request (master -> drive outputs)"
+        or "response (drive -> master inputs)"):set_generated()
+  if lay and lay[direction] and lay[direction].length ~= tvb:len() then
+    t:add_proto_expert_info(E_len, string.format("station %d %s %s is %d octets, the telegram has %d",
+      station, key, direction, lay[direction].length, tvb:len()))
+    lay = nil
+  end
+  local area, name
+  if lay then
+    area = lay[direction]
+    name = lay.profile .. " " .. lay.layout
+  elseif p_pd.prefs.generic then
+    area = generic_layout(tvb:len(), direction)
+    name = area and ("generic PROFIdrive " .. area.name)
+  end
+  if area == nil then
+    t:set_text("PROFIdrive: no layout for station " .. station .. " (" .. tvb:len() .. " octets)")
+    return nil
+  end
+  t:add(P.layout, name):set_generated()
+  local order = (lay and lay.word_order) or area.word_order or "big"
+  local notes = {}
+  for _, f in ipairs(area.fields) do
+    dissect_field(tvb, t, f, direction, lay, order, notes)
+  end
+  local summary = table.concat(notes, "; ")
+  t:set_text("PROFIdrive " .. name .. ", station " .. station .. ": " .. summary)
+  return summary
+end
+
+-- ------------------------------------------------------------------------------------------------
+-- DP-V0 services
+
+local function cfg_module(data, i)
+  -- one identifier at index i (0-based) of the byte array: returns text, used octets
+  local b = data:get_index(i)
+  local function amount(n, words) local unit = words and "word" or "byte"
+    local k = words and math.floor(n / 2) or n
+    return k .. " " .. unit .. (k ~= 1 and "s" or "") end
+  if band(b, 0x30) ~= 0 then
+    local words = band(b, 0x40) ~= 0
+    local n = band(b, 0x0F) + 1
+    local octets = words and n * 2 or n
+    local dir = band(shr(b, 4), 3)
+    local parts = {}
+    if dir == 3 then parts[1] = amount(octets, words) .. " in+out"
+    elseif dir == 2 then parts[1] = amount(octets, words) .. " out"
+    else parts[1] = amount(octets, words) .. " in" end
+    if band(b, 0x80) ~= 0 then parts[#parts + 1] = "consistent" end
+    return table.concat(parts, ", "), 1
+  end
+  local nman = band(b, 0x0F)
+  local kind = band(shr(b, 6), 3)
+  local j = i + 1
+  local parts, consistent = {}, false
+  local function len_octet(x) local w = band(x, 0x40) ~= 0 local n = band(x, 0x3F) + 1
+    if band(x, 0x80) ~= 0 then consistent = true end
+    return w and n * 2 or n, w end
+  if b == 0 then return "empty slot", 1 end
+  if kind == 2 or kind == 3 then
+    if j >= data:len() then return "output length octet missing", data:len() - i end
+    local n, w = len_octet(data:get_index(j)); j = j + 1
+    parts[#parts + 1] = amount(n, w) .. " out"
+  end
+  if kind == 1 or kind == 3 then
+    if j >= data:len() then return "input length octet missing", data:len() - i end
+    local n, w = len_octet(data:get_index(j)); j = j + 1
+    parts[#parts + 1] = amount(n, w) .. " in"
+  end
+  if consistent then parts[#parts + 1] = "consistent" end
+  if nman > 0 then
+    if j + nman > data:len() then return "manufacturer octets missing", data:len() - i end
+    local m = {}
+    for k = j, j + nman - 1 do m[#m + 1] = string.format("%02x", data:get_index(k)) end
+    parts[#parts + 1] = "manufacturer data " .. table.concat(m, " ")
+    j = j + nman
+  end
+  return table.concat(parts, ", "), j - i
+end
+
+local function dissect_cfg(tvb, tree, off, len)
+  local out = {}
+  if len <= 0 then return "" end
+  local data = tvb(off, len):bytes()
+  local i = 0
+  while i < len do
+    local text, used = cfg_module(data, i)
+    local ti = tree:add(F.cfg_id, tvb(off + i, 1))
+    ti:append_text(" (" .. hexs(tvb(off + i, used)) .. "): " .. text)
+    tree:add(F.cfg_text, tvb(off + i, used), text)
+    out[#out + 1] = text
+    i = i + used
+  end
+  return table.concat(out, "; ")
+end
+
+local function dissect_set_prm(tvb, tree, off, len)
+  if len < 7 then tree:add_proto_expert_info(E.malformed, "Set_Prm needs 7 octets, got " .. len) return "" end
+  local st = tvb(off, 1):uint()
+  local t = tree:add(F.prm_status, tvb(off, 1))
+  for _, k in ipairs({ "prm_lock", "prm_unlock", "prm_sync", "prm_freeze", "prm_wd_on" }) do
+    t:add(F[k], tvb(off, 1))
+  end
+  local f1, f2 = tvb(off + 1, 1):uint(), tvb(off + 2, 1):uint()
+  tree:add(F.prm_wd1, tvb(off + 1, 1))
+  tree:add(F.prm_wd2, tvb(off + 2, 1))
+  local wd_on = band(st, 0x08) ~= 0
+  local wd = f1 * f2 * 10
+  if wd_on then
+    tree:add(F.prm_wd_ms, tvb(off + 1, 2), wd):append_text(string.format(" (%d x %d x 10 ms)", f1, f2))
+  end
+  tree:add(F.prm_tsdr, tvb(off + 3, 1))
+  tree:add(F.prm_ident, tvb(off + 4, 2))
+  tree:add(F.prm_group, tvb(off + 6, 1))
+  if len > 7 then tree:add(F.prm_user, tvb(off + 7, len - 7)) end
+  local lock = (band(st, 0xC0) == 0x80) and "lock" or (band(st, 0x40) ~= 0) and "unlock" or "no lock change"
+  return string.format("ident 0x%04X, %s, %s, min TSDR %d", tvb(off + 4, 2):uint(), lock,
+    wd_on and ("watchdog " .. wd .. " ms") or "watchdog off", tvb(off + 3, 1):uint())
+end
+
+local function ext_blocks(tvb, tree, off, len)
+  local i = 0
+  local texts = {}
+  while i < len do
+    local h = tvb(off + i, 1):uint()
+    local typ = shr(h, 6)
+    local text, used
+    if typ == 2 then
+      if i + 3 > len then text, used = "reserved block " .. hexs(tvb(off + i, len - i)), len - i
+      else
+        local o2, o3 = tvb(off + i + 1, 1):uint(), tvb(off + i + 2, 1):uint()
+        local et = band(o3, 0x1F)
+        local err = CHANNEL_ERROR[et] or (et >= 16 and ("manufacturer-specific error " .. et) or ("reserved error " .. et))
+        text = string.format("channel-related: module %d, channel %d %s, %s: %s", band(h, 0x3F), band(o2, 0x3F),
+          CHANNEL_DIR[shr(o2, 6)] or "?", CHANNEL_WIDTH[shr(o3, 5)] or "invalid width", err)
+        used = 3
+      end
+    elseif typ == 3 then
+      text, used = "reserved block " .. hexs(tvb(off + i, len - i)), len - i
+    else
+      local ln = band(h, 0x3F)
+      if ln < 1 or i + ln > len then
+        text, used = "reserved block " .. hexs(tvb(off + i, len - i)), len - i
+      elseif typ == 1 then
+        local mods = {}
+        for bi = 1, ln - 1 do
+          local o = tvb(off + i + bi, 1):uint()
+          for b = 0, 7 do if band(shr(o, b), 1) == 1 then mods[#mods + 1] = tostring((bi - 1) * 8 + b) end end
+        end
+        text = "identifier-related: modules with diagnosis: " .. (#mods > 0 and table.concat(mods, ", ") or "none")
+        used = ln
+      else
+        text = "device-related: " .. (ln > 1 and hexs(tvb(off + i + 1, ln - 1)) or "(empty)")
+        used = ln
+      end
+    end
+    tree:add(F.diag_block, tvb(off + i, used), text)
+    texts[#texts + 1] = text
+    i = i + used
+  end
+  return texts
+end
+
+local function dissect_diag(tvb, tree, off, len)
+  if len < 6 then tree:add_proto_expert_info(E.malformed, "Slave_Diag reply needs 6 octets, got " .. len) return "" end
+  local st = { tvb(off, 1):uint(), tvb(off + 1, 1):uint(), tvb(off + 2, 1):uint() }
+  local ts = { tree:add(F.diag_st1, tvb(off, 1)), tree:add(F.diag_st2, tvb(off + 1, 1)),
+               tree:add(F.diag_st3, tvb(off + 2, 1)) }
+  for _, bf in ipairs(bits_fields) do ts[bf[1]]:add(F[bf[2]], tvb(off + bf[1] - 1, 1)) end
+  local flags = {}
+  for i, n in ipairs(ST1_BITS) do if band(shr(st[1], i - 1), 1) == 1 then flags[#flags + 1] = n end end
+  for i, n in ipairs(ST2_BITS) do
+    if band(shr(st[2], i - 1), 1) == 1 and n ~= "always 1" and n ~= "reserved" then flags[#flags + 1] = n end
+  end
+  if band(st[3], 0x80) ~= 0 then flags[#flags + 1] = "Ext_Diag_Overflow" end
+  tree:add(F.diag_flags, tvb(off, 3), table.concat(flags, ", "))
+  local master = tvb(off + 3, 1):uint()
+  tree:add(F.diag_master, tvb(off + 3, 1)):append_text(master == 255 and " (not parameterised)" or "")
+  tree:add(F.diag_ident, tvb(off + 4, 2))
+  if band(st[1], 0x47) ~= 0 then
+    tree:add_proto_expert_info(E.diag, "Slave_Diag: " .. table.concat(flags, ", "))
+  end
+  if len > 6 then
+    local et = tree:add(F.diag_ext, tvb(off + 6, len - 6))
+    ext_blocks(tvb, et, off + 6, len - 6)
+  end
+  return string.format("ident 0x%04X, master %s, %s", tvb(off + 4, 2):uint(),
+    master == 255 and "none" or tostring(master), #flags > 0 and table.concat(flags, ", ") or "no flags")
+end
+
+local function dissect_gc(tvb, tree, off, len)
+  if len ~= 2 then tree:add_proto_expert_info(E.malformed, "Global_Control needs 2 octets, got " .. len) return "" end
+  local c, g = tvb(off, 1):uint(), tvb(off + 1, 1):uint()
+  tree:add(F.gc_cmd, tvb(off, 1))
+  local cmds = {}
+  for _, e in ipairs(GC_NAMES) do if band(c, e[1]) ~= 0 then cmds[#cmds + 1] = e[2] end end
+  if #cmds == 0 then cmds[1] = "operate (no command)" end
+  tree:add(F.gc_text, tvb(off, 1), table.concat(cmds, " + "))
+  tree:add(F.gc_group, tvb(off + 1, 1))
+  local grp = "all groups"
+  if g ~= 0 then
+    local gs = {}
+    for i = 0, 7 do if band(shr(g, i), 1) == 1 then gs[#gs + 1] = tostring(i + 1) end end
+    grp = "groups " .. table.concat(gs, ",")
+  end
+  return table.concat(cmds, " + ") .. ", " .. grp
+end
+
+local function dissect_ssa(tvb, tree, off, len)
+  if len < 4 then tree:add_proto_expert_info(E.malformed, "Set_Slave_Add needs 4 octets, got " .. len) return "" end
+  tree:add(F.ssa_addr, tvb(off, 1))
+  tree:add(F.ssa_ident, tvb(off + 1, 2))
+  tree:add(F.ssa_nochg, tvb(off + 3, 1), tvb(off + 3, 1):uint() ~= 0)
+  if len > 4 then tree:add(F.ssa_extra, tvb(off + 4, len - 4)) end
+  return string.format("new address %d, ident 0x%04X", tvb(off, 1):uint(), tvb(off + 1, 2):uint())
+end
+
+-- ------------------------------------------------------------------------------------------------
+-- FDL telegram
+
+local function fc_words(fc)
+  if band(fc, 0x40) ~= 0 then
+    local fn = band(fc, 0x0F)
+    local name = REQUEST_NAMES[fn] or ("reserved function " .. fn)
+    if band(fc, 0x80) ~= 0 and fn == 0 then name = "CV clock value" end
+    return string.format("%s, FCB=%d FCV=%d", name, band(shr(fc, 5), 1), band(shr(fc, 4), 1))
+  end
+  local st = band(fc, 0x0F)
+  return string.format("%s (%s)", RESPONSE_NAMES[st] or ("reserved status " .. st), STATION_TYPES[band(shr(fc, 4), 3)])
+end
+
+function p_fdl.dissector(tvb, pinfo, tree)
+  local len = tvb:len()
+  if len < 1 then return 0 end
+  pinfo.cols.protocol:set("PROFIBUS")
+  local sd = tvb(0, 1):uint()
+  local t = tree:add(p_fdl, tvb())
+  t:add(F.sd, tvb(0, 1))
+  if sd == SC then
+    t:add(F.service, "short acknowledge"):set_generated()
+    pinfo.cols.info:set("SC  short acknowledge")
+    t:set_text("PROFIBUS SC: short acknowledge")
+    return len
+  end
+  if sd == SD4 then
+    if len < 3 then t:add_proto_expert_info(E.malformed, "token telegram is 3 octets") return len end
+    t:add(F.da, tvb(1, 1))
+    t:add(F.sa, tvb(2, 1))
+    t:add(F.service, "token"):set_generated()
+    local da, sa = band(tvb(1, 1):uint(), 0x7F), band(tvb(2, 1):uint(), 0x7F)
+    pinfo.cols.src:set(tostring(sa))
+    pinfo.cols.dst:set(tostring(da))
+    pinfo.cols.info:set(string.format("SD4  token %d -> %d", sa, da))
+    t:set_text(string.format("PROFIBUS SD4: token %d -> %d", sa, da))
+    return len
+  end
+  local body_off, body_len
+  if sd == SD1 then body_off, body_len = 1, 3
+  elseif sd == SD3 then body_off, body_len = 1, 11
+  elseif sd == SD2 then
+    if len < 4 then t:add_proto_expert_info(E.malformed, "SD2 header truncated") return len end
+    t:add(F.le, tvb(1, 1))
+    t:add(F.ler, tvb(2, 1))
+    body_off, body_len = 4, tvb(1, 1):uint()
+    if tvb(2, 1):uint() ~= body_len or tvb(3, 1):uint() ~= SD2 or body_len < 3 then
+      t:add_proto_expert_info(E.malformed, "LE/LEr/SD2 header inconsistent")
+      return len
+    end
+  else
+    t:add_proto_expert_info(E.malformed, string.format("0x%02X is no start delimiter", sd))
+    pinfo.cols.info:set("garbage " .. hexs(tvb()))
+    return len
+  end
+  if len < body_off + body_len + 2 then
+    t:add_proto_expert_info(E.malformed, "telegram truncated")
+    return len
+  end
+  local sum = 0
+  for i = body_off, body_off + body_len - 1 do sum = (sum + tvb(i, 1):uint()) % 256 end
+  local da_raw, sa_raw, fc = tvb(body_off, 1):uint(), tvb(body_off + 1, 1):uint(), tvb(body_off + 2, 1):uint()
+  local da, sa = band(da_raw, 0x7F), band(sa_raw, 0x7F)
+  local dt = t:add(F.da, tvb(body_off, 1))
+  dt:add(F.da_ext, tvb(body_off, 1))
+  local st = t:add(F.sa, tvb(body_off + 1, 1))
+  st:add(F.sa_ext, tvb(body_off + 1, 1))
+  local is_request = band(fc, 0x40) ~= 0
+  local fct = t:add(F.fc, tvb(body_off + 2, 1))
+  fct:append_text(": " .. fc_words(fc))
+  fct:add(F.fc_req, tvb(body_off + 2, 1))
+  if is_request then
+    fct:add(F.fc_fcb, tvb(body_off + 2, 1))
+    fct:add(F.fc_fcv, tvb(body_off + 2, 1))
+    fct:add(F.fc_fn, tvb(body_off + 2, 1))
+  else
+    fct:add(F.fc_type, tvb(body_off + 2, 1))
+    fct:add(F.fc_st, tvb(body_off + 2, 1))
+  end
+  t:add(F.fc_text, tvb(body_off + 2, 1), fc_words(fc))
+  local du_off, du_len = body_off + 3, body_len - 3
+  local dsap, ssap
+  if band(da_raw, 0x80) ~= 0 and du_len >= 1 then
+    dsap = band(tvb(du_off, 1):uint(), 0x3F)
+    t:add(F.dsap, tvb(du_off, 1), dsap)
+    du_off, du_len = du_off + 1, du_len - 1
+  end
+  if band(sa_raw, 0x80) ~= 0 and du_len >= 1 then
+    ssap = band(tvb(du_off, 1):uint(), 0x3F)
+    t:add(F.ssap, tvb(du_off, 1), ssap)
+    du_off, du_len = du_off + 1, du_len - 1
+  end
+  if du_len > 0 then t:add(F.du, tvb(du_off, du_len)) end
+  local fcs_at = body_off + body_len
+  local fcs = tvb(fcs_at, 1):uint()
+  local ft = t:add(F.fcs, tvb(fcs_at, 1))
+  if fcs == sum then
+    ft:append_text(" [correct]")
+    t:add(F.fcs_status, tvb(fcs_at, 1), "good"):set_generated()
+  else
+    ft:append_text(string.format(" [incorrect, should be 0x%02X]", sum))
+    t:add(F.fcs_status, tvb(fcs_at, 1), "bad"):set_generated()
+    ft:add_proto_expert_info(E.fcs, string.format("FCS 0x%02X, the octets sum to 0x%02X", fcs, sum))
+  end
+  local et = t:add(F.ed, tvb(fcs_at + 1, 1))
+  if tvb(fcs_at + 1, 1):uint() ~= ED then et:add_proto_expert_info(E.malformed, "end delimiter is not 0x16") end
+
+  -- the DP service (the same rules as dp/capture.py Captured.describe)
+  local service
+  if is_request and band(fc, 0x0F) == 9 then
+    service = "FDL status"
+  elseif not is_request and dsap == nil and ssap == nil and band(fc, 0x0F) == 0 and du_len == 0 then
+    service = "FDL status reply"
+  else
+    local sap = is_request and dsap or ssap
+    local name
+    if not is_request and dsap == nil and ssap == nil then name = "Data_Exchange"
+    elseif sap == nil then name = "Data_Exchange"
+    else name = SERVICE_NAMES[sap] or ("SAP " .. sap) end
+    service = name .. (is_request and "" or " reply")
+  end
+  t:add(F.service, service):set_generated()
+
+  local sapnote = dsap and string.format(" [%d->%d]", ssap or 0, dsap) or ""
+  pinfo.cols.src:set(tostring(sa))
+  pinfo.cols.dst:set(tostring(da))
+  local summary = nil
+  local sap = is_request and dsap or ssap
+  if du_len >= 0 then
+    if is_request and dsap == SAP.SET_PRM then summary = dissect_set_prm(tvb, t, du_off, du_len)
+    elseif is_request and dsap == SAP.CHK_CFG then summary = dissect_cfg(tvb, t, du_off, du_len)
+    elseif not is_request and ssap == SAP.GET_CFG then summary = dissect_cfg(tvb, t, du_off, du_len)
+    elseif not is_request and ssap == SAP.SLAVE_DIAG then summary = dissect_diag(tvb, t, du_off, du_len)
+    elseif is_request and dsap == SAP.GLOBAL_CONTROL then summary = dissect_gc(tvb, t, du_off, du_len)
+    elseif is_request and dsap == SAP.SET_SLAVE_ADD then summary = dissect_ssa(tvb, t, du_off, du_len)
+    elseif not is_request and ssap == SAP.RD_INP and du_len > 0 then
+      t:add(F.inputs, tvb(du_off, du_len))
+      summary = dissect_area(tvb(du_off, du_len):tvb(), pinfo, tree, sa, "response")
+    elseif not is_request and ssap == SAP.RD_OUTP and du_len > 0 then
+      t:add(F.outputs, tvb(du_off, du_len))
+      summary = dissect_area(tvb(du_off, du_len):tvb(), pinfo, tree, sa, "request")
+    elseif service == "Data_Exchange" and du_len > 0 then
+      t:add(F.outputs, tvb(du_off, du_len))
+      summary = dissect_area(tvb(du_off, du_len):tvb(), pinfo, tree, da, "request")
+    elseif service == "Data_Exchange reply" and du_len > 0 then
+      t:add(F.inputs, tvb(du_off, du_len))
+      summary = dissect_area(tvb(du_off, du_len):tvb(), pinfo, tree, sa, "response")
+    end
+  end
+  local info = string.format("%s  %d -> %d%s  %s  %s", SD_NAMES[sd], sa, da, sapnote, service, fc_words(fc))
+  if summary and summary ~= "" then info = info .. "  " .. summary end
+  if fcs ~= sum then info = info .. "  [FCS bad]" end
+  pinfo.cols.info:set(info)
+  t:set_text(string.format("PROFIBUS %s %d -> %d: %s", SD_NAMES[sd], sa, da, service))
+  return len
+end
+
+-- DLT_USER0 (link type 147), as pdrive writes pcap files (wtap_encaps in Wireshark >= 3.x; wtap before)
+local encaps = wtap_encaps or wtap
+DissectorTable.get("wtap_encap"):add(encaps.USER0, p_fdl)
