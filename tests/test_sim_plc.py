@@ -1,0 +1,153 @@
+"""`pdrive sim --plc`: a built-in PLC runs the plant and the whole bus goes to the endpoint as a tap
+hears it; `pdrive sniff --port <pty> --station ...` then shows the PLC's commands to every drive in
+words. Expected words from the specs' bit tables, speeds from the PLC's script (session/plc.py:
+50 % of the max frequency first) and the profiles' max frequencies (F03 = 60 Hz Fuji, A-00 = 60 Hz
+Toyo, A004 = 50 Hz Moeller, E1-04 = 60 Hz Yaskawa)."""
+
+import json
+import os
+import subprocess
+import time
+
+import pytest
+
+from conftest import pdrive_cmd, start_pty_sim, stop_pty_sim
+
+STATIONS = ["3=fuji-g1", "4=fuji-pdp3", "5=toyo", "6=moeller:ppo1", "7=yaskawa"]
+STATION_ARGS = [a for s in STATIONS for a in ("--station", s)]
+
+
+def sniff(port, seconds, *extra):
+    r = subprocess.run(pdrive_cmd() + ["sniff", "--port", port, "--duration", str(seconds), *extra],
+                       capture_output=True, text=True, timeout=seconds + 30)
+    assert r.returncode == 0, r.stderr
+    return r.stdout
+
+
+@pytest.fixture(scope="module")
+def plc_pty():
+    p, port = start_pty_sim("--plc")
+    try:
+        yield port
+    finally:
+        stop_pty_sim(p)
+
+
+def test_sniff_shows_the_plcs_commands_to_each_drive_in_words(plc_pty):
+    out = sniff(plc_pty, 6, *STATION_ARGS, "--json")
+    objs = [json.loads(line) for line in out.splitlines()]
+    assert objs and all(o["event"] == "frame" for o in objs)
+    drives = [o["drive"] for o in objs if "drive" in o and "error" not in o["drive"]]
+    by = {(d["station"], d["direction"]): [] for d in drives}
+    for d in drives:
+        by[(d["station"], d["direction"])].append(d)
+    assert {s for s, _ in by} == {3, 4, 5, 6, 7}
+    # the PROFIdrive cards: CTW bit 3 "enable operation" (fuji-opc-g1-pdp.md bit table; Moeller
+    # STW bit 3 "Operation enabled"), the state S4, reference 50 % of the max frequency
+    for st, hz in ((3, 30.0), (4, 30.0), (6, 25.0)):
+        reqs = by[(st, "request")]
+        assert any("enable operation" in d["control"] and d["reference_hz"] == hz for d in reqs), st
+        assert any(d["state"].startswith("S4") for d in by[(st, "response")]), st
+    # Toyo: STW 0x047F is "RUN" (toyo-vf66-pbus66z.md D8), 10000 counts = 50 % of 60 Hz
+    assert any(d["command"] == "RUN" and d["reference_hz"] == 30.0 for d in by[(5, "request")])
+    assert any(d["state"].startswith("S4") for d in by[(5, "response")])
+    # Yaskawa: command bit 0 Forward Run, 3000 x 0.01 Hz; status bit 0 Running
+    assert any(d["command"] == "forward run" and d["reference_hz"] == 30.0 for d in by[(7, "request")])
+    assert any(d["state"] == "running" for d in by[(7, "response")])
+    # the drives turn: some answer shows an actual frequency above 1 Hz
+    for st in (3, 4, 5, 6, 7):
+        assert any((d.get("actual_hz") or 0) > 1.0 for d in by[(st, "response")]), st
+    # parameter reads now and then, and their answers in the card's codes
+    texts = {d["param"]["text"] for d in drives if d.get("param")}
+    assert "read F03" in texts and "F03 = 60.0 Hz" in texts
+    assert "read A004" in texts and "A004 = 50 Hz" in texts
+    assert "read E1-04" in texts and "E1-04 = 60 Hz" in texts
+
+
+def test_sniff_text_lines_and_live_list(plc_pty):
+    out = sniff(plc_pty, 2.5, *STATION_ARGS)
+    lines = out.splitlines()
+    assert lines[-1].endswith("frame(s)")
+    for st in (3, 4, 5, 6, 7):
+        assert any(f"-> drive {st} (" in x for x in lines), st
+        assert any(f"<- drive {st} (" in x for x in lines), st
+    out = sniff(plc_pty, 2.0, "--live", "--json")
+    objs = [json.loads(line) for line in out.splitlines()]
+    assert objs and all(o["event"] == "live" for o in objs)
+    final = objs[-1]
+    assert final["masters"] == [2]
+    assert {s["station"]: s["state"] for s in final["stations"]} == {a: "data exchange"
+                                                                    for a in (3, 4, 5, 6, 7)}
+    c = final["cycle_s"]
+    assert 0 < c["min"] <= c["mean"] <= c["max"] < 2.0
+    assert all(s["counters"]["retries"] == 0 for s in final["stations"])
+
+
+def test_plc_endpoint_is_listen_only_and_a_slow_listener_does_not_stall_it(plc_pty):
+    # a client that writes garbage and then reads nothing for a while: the PLC keeps its bus
+    # running (the tap drops what the pty cannot take) and the stations stay in data exchange
+    fd = os.open(plc_pty, os.O_RDWR | os.O_NOCTTY)
+    try:
+        os.write(fd, b"\x10\x03\x02\x49\x4e\x16" * 50)
+    finally:
+        os.close(fd)
+    time.sleep(3.0)
+    out = sniff(plc_pty, 1.5, "--live", "--json")
+    final = json.loads(out.splitlines()[-1])
+    assert {s["state"] for s in final["stations"]} == {"data exchange"}
+
+
+def test_plc_refuses_a_real_serial_device():
+    from click.testing import CliRunner
+
+    from profidrive_cli import UsageError
+    from profidrive_cli.cli.main import cli
+    r = CliRunner().invoke(cli, ["sim", "--plc", "--port", "/dev/null"])
+    assert isinstance(r.exception, UsageError)          # exit 2 (test_exit_codes.py)
+    assert "not a pty" in str(r.exception)
+
+
+def test_plc_in_process_brings_up_every_station_and_releases_them():
+    from profidrive_cli.dp.capture import Capture
+    from profidrive_cli.session.plc import WATCHDOG_MS, Plc
+    from profidrive_cli.sim.plant import build_bus
+    bus = build_bus("sim://?timing=wire&baud=187500", now=time.monotonic())
+    cap = Capture()
+    seen = []
+    t0 = time.monotonic()
+
+    def tap(data):
+        seen.extend(cap.feed(data, time.monotonic() - t0))
+    plc = Plc(bus, tap)
+    end = time.monotonic() + 1.5
+    plc.run(lambda: time.monotonic() > end)
+    frames = [c.frame for c in seen if c.frame is not None]
+    assert len(frames) == len(seen)                      # the tap carries whole, valid telegrams
+    prm = [f for f in frames if f.is_request and f.dsap == 61]
+    # Set_Prm with Lock_Req and WD_On (station status 0x88) to every station, watchdog factors
+    # 200 x 1 x 10 ms = WATCHDOG_MS; at the end Set_Prm with Unlock_Req (0x48) releases each
+    starts = {f.da: f.data for f in prm if f.data[0] == 0x88}
+    assert set(starts) == {3, 4, 5, 6, 7}
+    assert all(d[1] * d[2] * 10 == WATCHDOG_MS for d in starts.values())
+    assert {f.da for f in prm if f.data[0] == 0x48} == {3, 4, 5, 6, 7}
+    chk = {f.da for f in frames if f.is_request and f.dsap == 62}
+    assert chk == {3, 4, 5, 6, 7}
+    dx = [f for f in frames if f.is_request and f.dsap is None and f.da in (3, 4, 5, 6, 7)]
+    assert len(dx) >= 5 * 10
+    assert plc.cycles >= 10
+    assert all(not p.thread.is_alive() for p in plc.plans.values())
+
+
+def test_tap_never_blocks_without_a_listener():
+    from profidrive_cli.sim.server import PtyEndpoint
+    from profidrive_cli.sim.tap import Tap
+    ep = PtyEndpoint()
+    tap = Tap(ep)
+    try:
+        t = time.monotonic()
+        for _ in range(200):
+            tap.write(bytes(1000))
+        assert time.monotonic() - t < 5.0
+        assert tap.dropped > 0 and tap.written + tap.dropped == 200 * 1000
+    finally:
+        tap.close()
