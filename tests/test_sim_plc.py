@@ -151,3 +151,38 @@ def test_tap_never_blocks_without_a_listener():
         assert tap.dropped > 0 and tap.written + tap.dropped == 200 * 1000
     finally:
         tap.close()
+
+
+def test_a_script_that_fails_unexpectedly_stops_its_drive(monkeypatch):
+    # a codec bug in the middle of a run (here: read_param raising) must not leave the drive
+    # turning: the PLC stops it and keeps its station in data exchange with idle cycles
+    from profidrive_cli.dp.capture import Capture
+    from profidrive_cli.session import plc as plc_mod
+    from profidrive_cli.session.passive import PassiveDecoder, watch_list
+    from profidrive_cli.sim.plant import build_bus
+    import profidrive_cli.drives as drives
+
+    real = drives.make_drive
+
+    def broken(channel, profile, layout=None):
+        d = real(channel, profile, layout)
+        ok = d.read_param
+
+        def boom(code):
+            if code == "F07":              # the script's second read, after the start
+                raise RuntimeError("codec bug")
+            return ok(code)
+        d.read_param = boom
+        return d
+    monkeypatch.setattr(drives, "make_drive", broken)
+    bus = build_bus("sim://?stations=3:fuji-g1&timing=wire&baud=187500", now=time.monotonic())
+    cap, seen = Capture(), []
+    plc = plc_mod.Plc(bus, lambda data: seen.extend(cap.feed(data, time.monotonic())))
+    end = time.monotonic() + 2.0
+    plc.run(lambda: time.monotonic() > end)
+    assert any("codec bug" in e for e in plc.plans[3].errors)
+    dec = PassiveDecoder(watch_list(["3=fuji-g1"]))
+    reqs = [d for d in (dec.decode(c) for c in seen) if d and d["direction"] == "request"]
+    assert any("ON (run command)" in d["control"] for d in reqs)          # it had started
+    # the last commands: ON (CTW bit 0) off = OFF1, a ramp stop (fuji-opc-g1-pdp.md T8)
+    assert all("ON (run command)" not in d["control"] for d in reqs[-3:])

@@ -15,7 +15,7 @@ the profile's max-frequency parameter goes by on the wire; from then on that val
 from __future__ import annotations
 
 import inspect
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from profidrive_cli import UsageError
 from profidrive_cli.dp import services as S
@@ -30,7 +30,6 @@ class Watched:
     layout: str | None = None        # as given; None: inferred
     seen_cfg: bytes | None = None    # the last Chk_Cfg the master sent it
     fmax: float | None = None        # learnt from a PKW answer of the max-frequency parameter
-    last: dict = field(default_factory=dict)   # the last decoded request / response
 
     @property
     def name(self) -> str:
@@ -130,7 +129,6 @@ class PassiveDecoder:
         d = {**base, **d}
         if d.get("param") and direction == "response":
             _learn_fmax(st, d["param"])
-        st.last[direction] = d
         return d
 
 

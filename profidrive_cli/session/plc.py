@@ -209,8 +209,12 @@ class Plc:
                                                    user_prm=_user_prm(plan.profile.ident),
                                                    wd_ms=WATCHDOG_MS))
             self.images[a] = _Image(bytes(lay.output_len))
-        for a in self.plans:
-            self.master.bring_up(a, timeout=3.0)
+        for a in list(self.plans):
+            try:
+                self.master.bring_up(a, timeout=3.0)
+            except BusError as e:              # the others run on; this one stays out
+                self.log(f"plc: {e}")
+                del self.plans[a]
 
     # -- the cycle -------------------------------------------------------------------------------
     def cycle(self) -> None:
@@ -281,6 +285,20 @@ class Plc:
                         pass
                 i += 1
         except PlcStopped:
+            pass
+        except Exception as e:                 # a codec bug must not leave the drive turning
+            self.log(f"plc: station {plan.address}: script ended: {type(e).__name__}: {e}")
+            plan.errors.append(str(e))
+            self._stop_quietly(plan)
+
+    def _stop_quietly(self, plan: StationPlan) -> None:
+        """After an unexpected error: a normal stop, then idle cycles until the PLC ends."""
+        try:
+            if plan.drive is not None:
+                plan.drive.stop(mode="normal", wait=False)
+                while not self.stopping:
+                    plan.drive.status()
+        except (PlcStopped, Exception):
             pass
 
     def _one_run(self, drive, plan: StationPlan, pct: float) -> None:
