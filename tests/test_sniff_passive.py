@@ -141,7 +141,7 @@ def test_bad_station_options_are_refused(text):
 def test_unknown_profile_or_layout_is_refused():
     with pytest.raises(UsageError):
         watch_list(["3=fuji-g1:ppo9"])
-    with pytest.raises(Exception) as e:
+    with pytest.raises(UsageError) as e:
         watch_list(["3=no-such-drive"])
     assert "no-such-drive" in str(e.value)
 
