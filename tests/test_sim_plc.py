@@ -186,3 +186,41 @@ def test_a_script_that_fails_unexpectedly_stops_its_drive(monkeypatch):
     assert any("ON (run command)" in d["control"] for d in reqs)          # it had started
     # the last commands: ON (CTW bit 0) off = OFF1, a ramp stop (fuji-opc-g1-pdp.md T8)
     assert all("ON (run command)" not in d["control"] for d in reqs[-3:])
+
+
+def test_plc_on_one_end_of_a_socat_pair_keeps_running_without_a_listener(socat_pair):
+    # `pdrive sim --plc --port A`: nobody reads B for a while (socat stops taking octets once B's
+    # buffer is full); the tap drops instead of blocking, so the PLC's bus keeps running and a
+    # listener that comes later sees every station in data exchange
+    a, b = socat_pair
+    p = subprocess.Popen(pdrive_cmd() + ["sim", "--plc", "--port", a, "--baud", "187500", "--json"], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)
+    try:
+        assert json.loads(p.stdout.readline())["plc"] is True
+        time.sleep(3.0)
+        out = sniff(b, 1.5, "--live", "--json")
+        final = json.loads(out.splitlines()[-1])
+        assert {s["station"]: s["state"] for s in final["stations"]} == {
+            a: "data exchange" for a in (3, 4, 5, 6, 7)}
+        assert all(s["counters"]["reparams"] == 0 for s in final["stations"])
+    finally:
+        stop_pty_sim(p)
+
+
+def test_tap_on_a_serial_device_drops_instead_of_blocking(socat_pair):
+    # nobody reads the other end: the pair's buffers fill and a blocking write would stall the PLC
+    # (and, after the write timeout, drop the device); the tap drops octets instead
+    from profidrive_cli.sim.server import SerialEndpoint
+    from profidrive_cli.sim.tap import Tap
+    a, _ = socat_pair
+    ep = SerialEndpoint(a, 19200)
+    tap = Tap(ep)
+    try:
+        t = time.monotonic()
+        for _ in range(300):
+            tap.write(bytes(1000))
+        assert time.monotonic() - t < 5.0
+        assert tap.dropped > 0 and tap.written + tap.dropped == 300 * 1000
+        assert ep.reopened == 0 and ep.ser is not None        # the device was never given up
+    finally:
+        tap.close()

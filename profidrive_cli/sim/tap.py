@@ -25,6 +25,7 @@ class Tap:
         self._drained = float("-inf")
         fd = getattr(endpoint, "master_fd", None)
         self._fd = fd
+        self._serial_fd: int | None = None
         if fd is not None:
             os.set_blocking(fd, False)
 
@@ -44,16 +45,36 @@ class Tap:
         if self.clock() - self._drained >= self.DRAIN_S:
             self.drain()
         if self._fd is not None:
-            self._write_fd(data)
+            self._write_fd(self._fd, data)
         elif getattr(self.ep, "srv", None) is not None:
             self._write_tcp(data)
+        elif hasattr(self.ep, "ser"):
+            self._write_serial(data)
         else:
-            self.ep.write(data)          # a serial device drains at its own baud rate
+            self.ep.write(data)
             self.written += len(data)
 
-    def _write_fd(self, data: bytes) -> None:
+    def _write_serial(self, data: bytes) -> None:
+        """A serial device (a pty of a socat pair): its fd non-blocking too (the pair stops taking
+        octets when nobody reads the other end); the device may be reopened, with a new fd."""
+        from profidrive_cli.link.serial_link import posix_fd
+        ser = self.ep.ser
+        fd = posix_fd(ser) if ser is not None else None
+        if fd is None:
+            if ser is None:
+                self.dropped += len(data)          # gone for now; SerialEndpoint reopens it
+            else:
+                self.ep.write(data)
+                self.written += len(data)
+            return
+        if fd != self._serial_fd:
+            os.set_blocking(fd, False)
+            self._serial_fd = fd
+        self._write_fd(fd, data)
+
+    def _write_fd(self, fd: int, data: bytes) -> None:
         try:
-            n = os.write(self._fd, data)
+            n = os.write(fd, data)
         except BlockingIOError:
             n = 0
         except OSError:
