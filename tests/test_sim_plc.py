@@ -224,3 +224,14 @@ def test_tap_on_a_serial_device_drops_instead_of_blocking(socat_pair):
         assert ep.reopened == 0 and ep.ser is not None        # the device was never given up
     finally:
         tap.close()
+
+
+def test_the_plc_takes_only_an_in_process_simulated_bus():
+    from profidrive_cli.link.serial_link import SerialLink
+    from profidrive_cli.session.plc import Plc
+    link = SerialLink("sim://")
+    try:
+        with pytest.raises(TypeError):
+            Plc(link)                          # a port (even the simulator's) is not a plant
+    finally:
+        link.close()

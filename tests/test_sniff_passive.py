@@ -239,7 +239,6 @@ def test_sniff_never_writes_to_the_port(monkeypatch):
     from profidrive_cli.link import serial_link
     written = []
     monkeypatch.setattr(serial_link.SerialLink, "write", lambda self, data: written.append(data))
-    monkeypatch.setattr(serial_link.SerialLink, "flush_input", lambda self: None)
     for extra in ([], ["--station", "3=fuji-g1"], ["--live"], ["--live", "--json"]):
         r = CliRunner().invoke(cli, ["sniff", "--port", "sim://", "--duration", "0.3", *extra])
         assert r.exit_code == 0, r.output
@@ -251,3 +250,30 @@ def test_sniff_on_sim_points_to_the_plc():
     r = CliRunner().invoke(cli, ["sniff", "--port", "sim://", "--duration", "0.2"])
     assert r.exit_code == 0
     assert "pdrive sim --plc --pty" in r.output
+
+
+def test_sniff_sends_nothing_down_a_real_byte_path(socat_pair):
+    # sniff listens on one end of a pty pair; not one octet may come out of the other end
+    import os
+    import select
+    import subprocess
+    import time
+
+    from conftest import pdrive_cmd
+    a, b = socat_pair
+    fd = os.open(b, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+    try:
+        p = subprocess.Popen(pdrive_cmd() + ["sniff", "--port", a, "--duration", "1.5", "--live",
+                                             "--station", "3=fuji-g1"],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        got = b""
+        end = time.monotonic() + 20
+        while p.poll() is None and time.monotonic() < end:
+            r, _, _ = select.select([fd], [], [], 0.1)
+            if r:
+                got += os.read(fd, 4096)
+        p.wait(timeout=10)
+        assert p.returncode == 0, p.stderr.read()
+        assert got == b""
+    finally:
+        os.close(fd)

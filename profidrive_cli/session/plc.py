@@ -181,6 +181,9 @@ class Plc:
                  scripts: dict[int, MotionScript] | None = None):
         from profidrive_cli.dp.poller import Master
         from profidrive_cli.fdl.timing import BusParams
+        from profidrive_cli.sim.bus import SimBus
+        if not isinstance(bus, SimBus):
+            raise TypeError("the built-in PLC runs only on an in-process simulated bus (SimBus)")
         self.bus = bus
         self.link = PlantLink(bus, tap)
         self.master = Master(self.link, BusParams.for_baud(bus.params.baud, retries=1,
@@ -333,11 +336,9 @@ class Plc:
 
 
 def _user_prm(ident: int) -> bytes:
-    """The device's default User_Prm_Data from its GSD in the library, else none."""
-    try:
-        from profidrive_cli.gsd.interp import device_user_prm
-        from profidrive_cli.gsd.library import find_by_ident
-        g = find_by_ident(ident)
-        return device_user_prm(g) if g is not None else b""
-    except Exception:
-        return b""
+    """The device's default User_Prm_Data from its GSD (session/bringup.py, as a drive session
+    sends it), else none."""
+    from types import SimpleNamespace
+
+    from profidrive_cli.session.bringup import user_prm
+    return user_prm(SimpleNamespace(ident=ident))
