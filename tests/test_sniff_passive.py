@@ -86,6 +86,20 @@ def test_toyo_mode0_ppo1_run_frame():
     assert "param" not in r                  # PKW idle (task ID 0)
 
 
+def test_toyo_mode1_status_flag_gives_the_state():
+    # toyo-vf66-pbus66z.md §3.4/3.5: mode 1 inputs (little-endian words after the PKW): status flag
+    # bit 1 "running normally" (Table 3.9), motor speed 10000 of 20000 counts = 30 Hz at A-00 60 Hz
+    lay_len = 8 + 2 * 14
+    area = bytearray(lay_len)
+    area[8:10] = (0x0002).to_bytes(2, "little")
+    area[16:18] = (10000).to_bytes(2, "little")
+    (a,) = decode_all(["5=toyo:toyo"], rep(5, area))
+    assert a["state"] == "running" and a["actual_hz"] == 30.0
+    area[10:12] = (0x0001).to_bytes(2, "little")        # fault flag 1 bit 0: overcurrent
+    (a,) = decode_all(["5=toyo:toyo"], rep(5, area))
+    assert a["state"].startswith("fault") and "overcurrent" in a["state"]
+
+
 def test_yaskawa_forward_run_and_running():
     # yaskawa-profibus-dp.md: command bit 0 Forward Run (D1: 0x0001), reference 1 count = 0.01 Hz
     # (3000 -> 30.00 Hz); status bit 0 Running; output frequency 0.1 Hz per count (300 -> 30.0 Hz)

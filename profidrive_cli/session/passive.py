@@ -182,6 +182,8 @@ def _ppo(direction: str, area: dict) -> dict:
             d["state"] = sw.get("state")
             d["status"] = list(sw.get("set", []))
             d["status_word"] = sw.get("hex") or f"0x{sw.get('word', sw.get('raw', 0)):04X}"
+        elif area.get("fields"):
+            _toyo_mode1_state(area["fields"], d)
         act = area.get("actual")
         if act:
             d["actual_hz"] = _round(act.get("hz"))
@@ -190,6 +192,22 @@ def _ppo(direction: str, area: dict) -> dict:
     if pk and pk.get("ak"):
         d["param"] = _pkw(direction, pk)
     return d
+
+
+def _toyo_mode1_state(fields: list, d: dict) -> None:
+    """Toyo mode 1 has no status word: the status flag (toyo-vf66-pbus66z.md Table 3.9, bit 1
+    "running normally", bit 2 "jog running") and the fault flags say what the drive does."""
+    by = {f.get("field"): f for f in fields}
+    sf = by.get("status_flag")
+    if sf is None:
+        return
+    names = list(sf.get("set", []))
+    faults = [n for k in ("fault_flag1", "fault_flag2") for n in by.get(k, {}).get("set", [])]
+    d["state"] = ("fault: " + ", ".join(faults) if faults else
+                  "jog running" if "jog running" in names else
+                  "running" if "running" in names else "stopped")
+    d["status"] = names
+    d["status_word"] = sf.get("hex")
 
 
 def _pkw(direction: str, pk: dict) -> dict:
