@@ -33,6 +33,16 @@ def plc_pty():
         stop_pty_sim(p)
 
 
+#: the PLC script runs each drive at 50 %, then 25 % of its max frequency (in Hz per station)
+SPEEDS = {3: {30.0, 15.0}, 4: {30.0, 15.0}, 5: {30.0, 15.0}, 6: {25.0, 12.5}, 7: {30.0, 15.0}}
+#: what the PLC reads on the parameter channel (the Yaskawa codec also reads o1-03, the frequency
+#: unit, with E1-04), and the values the profiles give for some of them (the max frequency
+#: parameters and Fuji's F07 factory setting 6.0 s)
+READS = {3: ("F03", "F07", "W90"), 6: ("A004", "F002", "PNU340"),
+         7: ("E1-04", "o1-03", "C1-01", "PWR")}
+KNOWN = {"F03": "60.0 Hz", "F07": "6.0 s", "A004": "50 Hz", "E1-04": "60 Hz"}
+
+
 def test_sniff_shows_the_plcs_commands_to_each_drive_in_words(plc_pty):
     out = sniff(plc_pty, 6, *STATION_ARGS, "--json")
     objs = [json.loads(line) for line in out.splitlines()]
@@ -43,25 +53,33 @@ def test_sniff_shows_the_plcs_commands_to_each_drive_in_words(plc_pty):
         by[(d["station"], d["direction"])].append(d)
     assert {s for s, _ in by} == {3, 4, 5, 6, 7}
     # the PROFIdrive cards: CTW bit 3 "enable operation" (fuji-opc-g1-pdp.md bit table; Moeller
-    # STW bit 3 "Operation enabled"), the state S4, reference 50 % of the max frequency
-    for st, hz in ((3, 30.0), (4, 30.0), (6, 25.0)):
+    # STW bit 3 "Operation enabled"), the state S4, reference from the script
+    for st in (3, 4, 6):
         reqs = by[(st, "request")]
-        assert any("enable operation" in d["control"] and d["reference_hz"] == hz for d in reqs), st
+        assert any("enable operation" in d["control"] and d["reference_hz"] in SPEEDS[st]
+                   for d in reqs), st
         assert any(d["state"].startswith("S4") for d in by[(st, "response")]), st
     # Toyo: STW 0x047F is "RUN" (toyo-vf66-pbus66z.md D8), 10000 counts = 50 % of 60 Hz
-    assert any(d["command"] == "RUN" and d["reference_hz"] == 30.0 for d in by[(5, "request")])
+    assert any(d["command"] == "RUN" and d["reference_hz"] in SPEEDS[5] for d in by[(5, "request")])
     assert any(d["state"].startswith("S4") for d in by[(5, "response")])
-    # Yaskawa: command bit 0 Forward Run, 3000 x 0.01 Hz; status bit 0 Running
-    assert any(d["command"] == "forward run" and d["reference_hz"] == 30.0 for d in by[(7, "request")])
+    # Yaskawa: command bit 0 Forward Run, 0.01 Hz per count; status bit 0 Running
+    assert any(d["command"] == "forward run" and d["reference_hz"] in SPEEDS[7]
+               for d in by[(7, "request")])
     assert any(d["state"] == "running" for d in by[(7, "response")])
     # the drives turn: some answer shows an actual frequency above 1 Hz
     for st in (3, 4, 5, 6, 7):
         assert any((d.get("actual_hz") or 0) > 1.0 for d in by[(st, "response")]), st
-    # parameter reads now and then, and their answers in the card's codes
-    texts = {d["param"]["text"] for d in drives if d.get("param")}
-    assert "read F03" in texts and "F03 = 60.0 Hz" in texts
-    assert "read A004" in texts and "A004 = 50 Hz" in texts
-    assert "read E1-04" in texts and "E1-04 = 60 Hz" in texts
+    # parameter reads now and then, and the answers in the card's own codes
+    for st, codes in READS.items():
+        asked = {d["param"]["code"] for d in by[(st, "request")]
+                 if d.get("param", {}).get("request") == "read"}
+        answered = {d["param"]["code"]: d["param"]["text"] for d in by[(st, "response")]
+                    if d.get("param") and "error" not in d["param"]}
+        assert asked and asked <= set(codes), (st, asked)
+        assert asked & set(answered), (st, asked, answered)
+        for code, text in answered.items():
+            if code in KNOWN:
+                assert text == f"{code} = {KNOWN[code]}"
 
 
 def test_sniff_text_lines_and_live_list(plc_pty):
