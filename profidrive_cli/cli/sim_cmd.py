@@ -29,8 +29,15 @@ def _host_port(listen: str) -> tuple[str, int]:
               help="Which stations: a sim:// URL, e.g. sim://?stations=3:fuji-g1,9:yaskawa")
 @click.option("--baud", default="19200", show_default=True)
 @click.option("--json", "as_json", is_flag=True, help="Print the endpoint as JSON.")
-def sim_cmd(use_pty, listen, serial_port, plant, baud, as_json):
-    """Serve a simulated PROFIBUS segment for another master (Ctrl-C ends it)."""
+@click.option("--plc", is_flag=True,
+              help="Also run a built-in cyclic master (a PLC) on the stations and send the whole bus "
+                   "traffic to the endpoint as a tap hears it (listen-only: for `pdrive sniff`).")
+def sim_cmd(use_pty, listen, serial_port, plant, baud, as_json, plc):
+    """Serve a simulated PROFIBUS segment for another master (Ctrl-C ends it).
+
+    With --plc the segment has its own master: a PLC brings every station up and runs a scripted
+    motion on each drive; the endpoint only listens to that bus (what a client writes is ignored).
+    """
     from profidrive_cli.fdl.timing import parse_baud
     from profidrive_cli.sim import server
     from profidrive_cli.sim.plant import build_bus
@@ -42,6 +49,9 @@ def sim_cmd(use_pty, listen, serial_port, plant, baud, as_json):
         b = parse_baud(baud)
     except ValueError as e:
         raise UsageError(str(e)) from None
+    if plc:
+        _check_plc_port(serial_port)
+        plant = _wire_timed(plant)
     bus = build_bus(plant, default_baud=b)     # PNU 963 of the simulated cards follows --baud
     if use_pty:
         ep = server.PtyEndpoint()
@@ -58,19 +68,50 @@ def sim_cmd(use_pty, listen, serial_port, plant, baud, as_json):
         where = serial_port
     stations = {a: s.model.family for a, s in sorted(bus.slaves.items())}
     if as_json:
-        emit_json({"port": where, "stations": stations})
+        emit_json({"port": where, "stations": stations, **({"plc": True} if plc else {})})
     else:
         out.print(where)
         err.print("simulated stations: " + ", ".join(f"{a} {f}" for a, f in stations.items())
-                  + " — Ctrl-C ends")
+                  + (" with a built-in PLC (listen-only endpoint: `pdrive sniff --port "
+                     f"{where}`)" if plc else "") + " — Ctrl-C ends")
     sys.stdout.flush()
     stopping = []
     signal.signal(signal.SIGTERM, lambda *a: stopping.append(1))
     signal.signal(signal.SIGINT, lambda *a: stopping.append(1))
     try:
-        server.serve(bus, ep, stop=lambda: bool(stopping))
+        if plc:
+            _run_plc(bus, ep, stop=lambda: bool(stopping))
+        else:
+            server.serve(bus, ep, stop=lambda: bool(stopping))
     except KeyboardInterrupt:
         pass
     finally:
         ep.close()
     err.print("simulator stopped")
+
+
+def _check_plc_port(serial_port) -> None:
+    """--plc sends a master's telegrams to the endpoint: on a real line they would reach real
+    drives, so --port takes a pty only (e.g. one end of a socat pair)."""
+    if serial_port is None:
+        return
+    from profidrive_cli.link.serial_link import _is_pty
+    if not _is_pty(serial_port):
+        raise UsageError(f"--plc --port {serial_port}: not a pty; the PLC's telegrams would go out on "
+                         f"a real line and could start real drives (use --pty, --listen, or one "
+                         f"end of a socat pty pair)")
+
+
+def _wire_timed(plant: str) -> str:
+    """The plant at wire timing (the tap then hears the bus at its own pace), unless asked otherwise."""
+    from urllib.parse import parse_qs, urlsplit
+    if "timing" in parse_qs(urlsplit(plant).query):
+        return plant
+    return plant + ("&" if "?" in plant else "?") + "timing=wire"
+
+
+def _run_plc(bus, ep, stop) -> None:
+    from profidrive_cli.session.plc import Plc
+    from profidrive_cli.sim.tap import Tap
+    tap = Tap(ep)
+    Plc(bus, tap.write, log=lambda line: err.print(line, markup=False)).run(stop)

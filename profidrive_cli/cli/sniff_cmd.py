@@ -8,7 +8,7 @@ import time
 import click
 
 from profidrive_cli import UsageError
-from profidrive_cli.cli.common import bus_options, emit_json, out
+from profidrive_cli.cli.common import bus_options, out
 from profidrive_cli.datafile import read_input_file
 from profidrive_cli.dp.capture import LINKTYPES, Capture, PcapWriter, format_line, merge_errors
 from profidrive_cli.outfile import OutputFile, check_output_path
@@ -35,8 +35,14 @@ def _line(c) -> str:
               help="Also write the received octets as they came (decode later with --from-file).")
 @click.option("--from-file", "raw_file", default=None, metavar="FILE",
               help="Decode a raw byte capture (a regular file up to 16 MiB) offline instead of listening.")
+@click.option("--station", "stations", multiple=True, metavar="ADDR=PROFILE[:LAYOUT]",
+              help="Decode this station's Data_Exchange as its drive sees it (command, state, Hz, "
+                   "parameter requests), e.g. 3=fuji-g1 or 6=moeller:ppo1. Repeatable.")
+@click.option("--live", is_flag=True,
+              help="A passive live list (stations, DP state, master cycle time, retries, errors) "
+                   "refreshed in place instead of one line per frame.")
 @bus_options
-def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file):
+def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, live):
     """Passive capture: one line per frame (time, SD, SA->DA, SAPs, FC in words, service, DU).
 
     --pcap and --raw files are written beside the target and replace it only when the capture
@@ -53,6 +59,7 @@ def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file):
     for f in files:
         check_output_path(f.path, f.what)
     cap = Capture()
+    view = _view(stations, live, opts.json)
     # read (and check) the input before anything is written
     raw = read_input_file(raw_file, "raw capture", MAX_CAPTURE_BYTES) if raw_file else None
     # pcap times are wall clock: the capture's start (for --from-file: when the raw file was last
@@ -71,22 +78,19 @@ def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file):
                 count += 1
                 if writer and c.frame is not None:
                     writer.write(c.t, c.raw)
-                if opts.json:
-                    emit_json(c.describe())
-                else:
-                    out.print(_line(c), markup=False)
+                view.frame(c)
 
         if raw is not None:
             show(cap.feed(raw, 0.0))
             if len(cap.rx):
                 show([_truncated(cap)])
+            view.finish(cap._t)
         else:
             link = opts.open_link()
+            start = time.monotonic()
             try:
-                if link.is_simulator:
-                    from profidrive_cli.cli.common import err
-                    err.print("sim:// is silent unless a master talks: nothing to sniff "
-                              "(use `pdrive sim --pty` and a master on the other end)")
+                _listen_start(link)
+
                 def on_data(data, t):
                     if raw_fh is not None:
                         raw_fh.write(data)
@@ -94,11 +98,12 @@ def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file):
 
                 if writer is not None:
                     writer.start = time.time()       # wall clock of t = 0
-                listen(link, duration, on_data)
+                listen(link, duration, on_data, on_tick=view.tick)
             except KeyboardInterrupt:
                 pass                                 # Ctrl-C ends a capture: keep what was captured
             finally:
                 link.close()
+                view.finish(time.monotonic() - start)
         for f in files:
             f.commit()
     finally:
@@ -107,7 +112,7 @@ def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file):
                 f.discard()
     if raw_file:
         return
-    if not opts.json:
+    if not opts.json and not live:
         out.print(f"{count} frame(s)")
 
 
@@ -123,3 +128,22 @@ def _truncated(cap):
     raw = bytes(cap.rx.buf)
     cap.rx.reset()
     return Captured(cap._t, raw, None, "truncated frame at end of input")
+
+
+def _view(stations, live, as_json):
+    """How each frame is shown: one line / JSON object (with --station the drives' words), or the
+    --live list."""
+    from profidrive_cli.cli.sniff_view import SniffView
+    return SniffView(stations, live, as_json)
+
+
+def _listen_start(link) -> None:
+    """Before listening: sim:// has no master of its own (point to one that has); octets a port
+    buffered before the capture started are dropped (they would carry the wrong times). Sniff
+    never writes to the port."""
+    if link.is_simulator:
+        from profidrive_cli.cli.common import err
+        err.print("sim:// is silent unless a master talks: nothing to sniff here. For a running "
+                  "bus to listen to, start `pdrive sim --plc --pty` and sniff the pty it prints "
+                  "(`pdrive sniff --port /dev/pts/N --station 3=fuji-g1 ...`)")
+    link.flush_input()

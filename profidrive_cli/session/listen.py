@@ -15,9 +15,11 @@ POLL_S = 0.2
 
 
 def listen(link, duration: float | None, on_data: Callable[[bytes, float], None],
-           clock: Callable[[], float] = time.monotonic) -> None:
+           clock: Callable[[], float] = time.monotonic,
+           on_tick: Callable[[float], None] | None = None) -> None:
     """Read `link` for `duration` seconds (None: until an exception, e.g. KeyboardInterrupt or a
-    closed pcap pipe, ends it); on_data(octets, seconds since the start) for every chunk read."""
+    closed pcap pipe, ends it); on_data(octets, seconds since the start) for every chunk read, and
+    on_tick(seconds since the start) after every read, data or not (a live view refreshes there)."""
     start = clock()
     end = None if duration is None else start + duration
     while end is None or clock() < end:
@@ -25,3 +27,5 @@ def listen(link, duration: float | None, on_data: Callable[[bytes, float], None]
         data = link.read(now + POLL_S if end is None else min(end, now + POLL_S))
         if data:
             on_data(data, clock() - start)
+        if on_tick is not None:
+            on_tick(clock() - start)

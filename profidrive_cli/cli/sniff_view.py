@@ -1,0 +1,145 @@
+"""What `pdrive sniff` prints for each captured frame: one line (or one JSON object) per frame,
+with --station the watched drives' outputs and inputs in words; with --live the passive live list
+instead (rich Live on a terminal, a plain table at the end otherwise, JSON Lines with --json).
+
+Rendering only: the decoding is session/passive.py, the live list session/passive_live.py.
+"""
+
+from __future__ import annotations
+
+from profidrive_cli.cli.common import emit_json, out
+from profidrive_cli.dp.capture import format_line
+
+REFRESH_S = 0.5
+
+
+class SniffView:
+    def __init__(self, station_specs=(), live: bool = False, as_json: bool = False,
+                 refresh_s: float = REFRESH_S):
+        self.decoder = None
+        if station_specs:
+            from profidrive_cli.session.passive import PassiveDecoder, watch_list
+            self.decoder = PassiveDecoder(watch_list(station_specs))
+        self.live = None
+        if live:
+            from profidrive_cli.session.passive_live import LiveList
+            self.live = LiveList()
+        self.as_json = as_json
+        self.refresh_s = refresh_s
+        self._shown_at: float | None = None
+        self._rich_live = None
+
+    # -- one frame -------------------------------------------------------------------------------
+    def frame(self, c) -> None:
+        d = self.decoder.decode(c) if self.decoder is not None else None
+        if self.live is not None:
+            self.live.feed(c)
+            if d is not None and "error" not in d:
+                st = self.live.station(d["station"])
+                st.drive["profile"] = d["profile"]
+                st.drive[d["direction"]] = {k: v for k, v in d.items()
+                                            if k not in ("station", "profile", "direction")}
+            return
+        if self.as_json:
+            obj = {"event": "frame", **c.describe()}
+            if d is not None:
+                obj["drive"] = d
+            emit_json(obj)
+        else:
+            line = format_line(c)
+            if d is not None:
+                from profidrive_cli.session.passive import frame_suffix
+                line += frame_suffix(d)
+            out.print(line, markup=False)
+
+    # -- the live list ---------------------------------------------------------------------------
+    def tick(self, t: float) -> None:
+        """Refresh the live list every refresh_s seconds (t: seconds since the capture started)."""
+        if self.live is None:
+            return
+        if self._shown_at is not None and t - self._shown_at < self.refresh_s:
+            return
+        self._shown_at = t
+        if self.as_json:
+            emit_json({"event": "live", **self.live.snapshot(t)})
+        elif out.is_terminal:
+            from rich.live import Live
+            table = live_table(self.live.snapshot(t))
+            if self._rich_live is None:
+                self._rich_live = Live(table, console=out, auto_refresh=False, transient=False)
+                self._rich_live.start()
+            self._rich_live.update(table, refresh=True)
+
+    def finish(self, t: float) -> None:
+        """The end of the capture: the live list's last state."""
+        if self.live is None:
+            return
+        snap = self.live.snapshot(t)
+        if self.as_json:
+            emit_json({"event": "live", "final": True, **snap})
+        elif self._rich_live is not None:
+            self._rich_live.update(live_table(snap), refresh=True)
+            self._rich_live.stop()
+        elif out.is_terminal:
+            out.print(live_table(snap))
+        else:
+            for line in plain_table(snap):
+                out.print(line, markup=False)
+
+
+def _ms(c: dict | None, key: str) -> str:
+    return "-" if not c else f"{c[key] * 1000:.1f}"
+
+
+def _drive_text(drive: dict) -> str:
+    req, rep = drive.get("request", {}), drive.get("response", {})
+    parts = []
+    if req:
+        parts.append(" ".join(x for x in (str(req.get("command", "")),
+                     "" if req.get("reference_hz") is None else f"{req['reference_hz']:.2f} Hz") if x))
+    if rep:
+        parts.append(" ".join(x for x in (str(rep.get("state", "")),
+                     "" if rep.get("actual_hz") is None else f"{rep['actual_hz']:.2f} Hz") if x))
+    return " / ".join(parts)
+
+
+COLUMNS = ("station", "ident", "state", "exchanges", "cycle ms min/mean/max", "retries",
+           "no answer", "illegal", "reparams", "drive (command / state)")
+
+
+def _rows(snap: dict) -> list[tuple[str, ...]]:
+    rows = []
+    for s in snap["stations"]:
+        c = s["cycle_s"]
+        k = s["counters"]
+        rows.append((str(s["station"]), s["ident_hex"] or "-", s["state"], str(s["exchanges"]),
+                     f"{_ms(c, 'min')}/{_ms(c, 'mean')}/{_ms(c, 'max')}", str(k["retries"]),
+                     str(k["no_answer"]), str(k["illegal"]), str(k["reparams"]),
+                     _drive_text(s.get("drive", {})) or "-"))
+    return rows
+
+
+def _caption(snap: dict) -> str:
+    c = snap["cycle_s"]
+    errs = ", ".join(f"{k} {v}" for k, v in snap["errors"].items()) or "none"
+    masters = ", ".join(map(str, snap["masters"])) or "none seen"
+    return (f"{snap['frames']} frames in {snap['t_s']:.1f} s; master(s) {masters}; master cycle "
+            f"min/mean/max {_ms(c, 'min')}/{_ms(c, 'mean')}/{_ms(c, 'max')} ms; framing errors: {errs}")
+
+
+def live_table(snap: dict):
+    from rich.table import Table
+    t = Table(title="passive live list (listening only)", caption=_caption(snap))
+    for col in COLUMNS:
+        t.add_column(col, justify="right" if col in ("station", "exchanges", "retries", "no answer",
+                                                     "illegal", "reparams") else "left")
+    for r in _rows(snap):
+        t.add_row(*r)
+    return t
+
+
+def plain_table(snap: dict) -> list[str]:
+    rows = [COLUMNS] + _rows(snap)
+    widths = [max(len(r[i]) for r in rows) for i in range(len(COLUMNS))]
+    lines = ["  ".join(v.ljust(w) for v, w in zip(r, widths)).rstrip() for r in rows]
+    return lines + [_caption(snap)]

@@ -1,0 +1,342 @@
+"""The passive PROFIdrive view of a running bus (`pdrive sniff --station 3=fuji-g1`): each given
+station's Data_Exchange outputs and inputs as the drive sees them, from captured telegrams alone.
+
+Built on the families' offline decoders (drives.decode_area, as `pdrive decode` uses them): command
+and state in the codec's words, reference and actual in Hz, the parameter channel (PKW, Yaskawa's
+MEMOBUS area) as requests and answers with the card's native codes ("read F07", "F07 = 5.0 s").
+Never transmits; sans-IO (dp.capture.Captured in, plain dicts and one-line texts out).
+
+The layout comes from `--station ADDR=PROFILE:LAYOUT`, else from the Chk_Cfg the master sent (when
+the capture saw it), else the profile's default layout (or the one layout whose lengths fit).
+The max frequency that turns N2 words into Hz is the profile's default until an answer to a read of
+the profile's max-frequency parameter goes by on the wire; from then on that value.
+"""
+
+from __future__ import annotations
+
+import inspect
+from dataclasses import dataclass
+
+from profidrive_cli import UsageError
+from profidrive_cli.dp import services as S
+from profidrive_cli.fdl import frames as F
+
+
+@dataclass
+class Watched:
+    """One station given with --station."""
+    address: int
+    profile: object
+    layout: str | None = None        # as given; None: inferred
+    seen_cfg: bytes | None = None    # the last Chk_Cfg the master sent it
+    fmax: float | None = None        # learnt from a PKW answer of the max-frequency parameter
+
+    @property
+    def name(self) -> str:
+        return self.profile.name
+
+    def layout_for(self, direction: str, n: int) -> str | None:
+        """The layout to decode an area of n octets with (None: none fits)."""
+        lays = self.profile.layouts
+        if self.layout is not None:
+            return self.layout
+        if self.seen_cfg is not None:
+            for name, lay in lays.items():
+                if lay.cfg == self.seen_cfg:
+                    return name
+        d = self.profile.default_layout
+
+        def fits(name):
+            lay = lays[name]
+            return (lay.output_len if direction == "request" else lay.input_len) == n
+        if fits(d):
+            return d
+        fitting = [name for name in lays if fits(name)]
+        return fitting[0] if len(fitting) == 1 else None
+
+
+def parse_station(text: str) -> tuple[int, str, str | None]:
+    """'3=fuji-g1' or '6=moeller:ppo1' -> (3, 'fuji-g1', None) / (6, 'moeller', 'ppo1')."""
+    addr, eq, rest = text.partition("=")
+    name, _, layout = rest.partition(":")
+    addr, name, layout = addr.strip(), name.strip(), layout.strip()
+    if not eq or not name or not (addr.isascii() and addr.isdigit()) or not 0 <= int(addr) <= 125:
+        raise UsageError(f"--station {text[:60]!r}: give ADDRESS=PROFILE[:LAYOUT] with address "
+                         f"0..125, e.g. 3=fuji-g1 or 6=moeller:ppo1")
+    return int(addr), name, layout or None
+
+
+def watch_list(specs) -> dict[int, Watched]:
+    """--station values -> {address: Watched}; unknown profiles and layouts refused (exit 2)."""
+    from profidrive_cli.drives.profile import load_profile
+    out: dict[int, Watched] = {}
+    for text in specs:
+        addr, name, layout = parse_station(text)
+        if addr in out:
+            raise UsageError(f"--station {text}: station {addr} given twice")
+        prof = load_profile(name)
+        if layout is not None and layout not in prof.layouts:
+            raise UsageError(f"--station {text}: {prof.name} has no layout '{layout}' "
+                             f"(known: {', '.join(prof.layouts)})")
+        out[addr] = Watched(addr, prof, layout)
+    return out
+
+
+def is_data_exchange(f: F.Frame) -> bool:
+    """A Data_Exchange request or its data reply (no SAPs, user data)."""
+    if f.sd in (F.SC, F.SD4) or f.dsap is not None or f.ssap is not None:
+        return False
+    if f.is_request:
+        return f.function in (F.SRD_LOW, F.SRD_HIGH)
+    return bool(f.data)
+
+
+class PassiveDecoder:
+    """Feed captured frames; decode() gives the `drive` object of a watched station's frame."""
+
+    def __init__(self, watched: dict[int, Watched]):
+        self.watched = watched
+
+    def decode(self, c) -> dict | None:
+        f = c.frame
+        if f is None or f.sd in (F.SC, F.SD4):
+            return None
+        if f.is_request and f.da in self.watched and f.dsap == S.SAP_CHK_CFG:
+            self.watched[f.da].seen_cfg = bytes(f.data)
+            return None
+        if not is_data_exchange(f):
+            return None
+        direction = "request" if f.is_request else "response"
+        st = self.watched.get(f.da if f.is_request else f.sa)
+        if st is None:
+            return None
+        return self._decode_area(st, direction, bytes(f.data))
+
+    def _decode_area(self, st: Watched, direction: str, data: bytes) -> dict:
+        base = {"station": st.address, "profile": st.name, "direction": direction}
+        layout = st.layout_for(direction, len(data))
+        if layout is None:
+            base["error"] = (f"{len(data)} octets fit no layout of {st.name} "
+                             f"({', '.join(st.profile.layouts)})")
+            return base
+        base["layout"] = layout
+        try:
+            area = _decode(st, layout, direction, data)
+        except (UsageError, ValueError) as e:
+            base["error"] = str(e)
+            return base
+        d = normalise(st.profile, direction, area)
+        d = {**base, **d}
+        if d.get("param") and direction == "response":
+            _learn_fmax(st, d["param"])
+        return d
+
+
+def _decode(st: Watched, layout: str, direction: str, data: bytes) -> dict:
+    from profidrive_cli.drives import codec_module
+    fn = codec_module(st.profile).decode_area
+    if st.fmax is not None and "max_hz" in inspect.signature(fn).parameters:
+        return fn(st.profile, layout, direction, data, max_hz=st.fmax)
+    return fn(st.profile, layout, direction, data)
+
+
+def _learn_fmax(st: Watched, param: dict) -> None:
+    if param.get("code") and param.get("code") == getattr(st.profile, "max_frequency_param", None) \
+            and isinstance(param.get("value"), (int, float)) and param["value"] > 0:
+        st.fmax = float(param["value"])
+
+
+# -- one family's decoded area -> the common `drive` object -------------------------------------
+
+def normalise(profile, direction: str, area: dict) -> dict:
+    """The common fields of a decoded area: command / control (request), state / status
+    (response), reference_hz / actual_hz, param (the parameter channel), text (one line)."""
+    if profile.family == "yaskawa":
+        d = _yaskawa(profile, direction, area)
+    else:
+        d = _ppo(direction, area)
+    d["text"] = drive_text(d)
+    return d
+
+
+def _round(x):
+    return None if x is None else round(float(x), 3)
+
+
+def _ppo(direction: str, area: dict) -> dict:
+    """PROFIdrive cards (Fuji, Moeller) and Toyo: CTW/STW words, N2 or Toyo speed words, PKW."""
+    d: dict = {}
+    if direction == "request":
+        cw = area.get("control_word") or area.get("run_command")
+        if cw:
+            d["command"] = cw.get("command")
+            d["control"] = list(cw.get("set", []))
+            d["control_word"] = cw.get("hex") or f"0x{cw.get('word', cw.get('raw', 0)):04X}"
+        ref = area.get("reference")
+        if ref:
+            d["reference_hz"] = _round(ref.get("hz"))
+            d["reference_percent"] = _round(ref.get("percent"))
+    else:
+        sw = area.get("status_word")
+        if sw:
+            d["state"] = sw.get("state")
+            d["status"] = list(sw.get("set", []))
+            d["status_word"] = sw.get("hex") or f"0x{sw.get('word', sw.get('raw', 0)):04X}"
+        elif area.get("fields"):
+            _toyo_mode1_state(area["fields"], d)
+        act = area.get("actual")
+        if act:
+            d["actual_hz"] = _round(act.get("hz"))
+            d["actual_percent"] = _round(act.get("percent"))
+    pk = area.get("pkw")
+    if pk and pk.get("ak"):
+        d["param"] = _pkw(direction, pk)
+    return d
+
+
+def _toyo_mode1_state(fields: list, d: dict) -> None:
+    """Toyo mode 1 has no status word: the status flag (toyo-vf66-pbus66z.md Table 3.9, bit 1
+    "running normally", bit 2 "jog running") and the fault flags say what the drive does."""
+    by = {f.get("field"): f for f in fields}
+    sf = by.get("status_flag")
+    if sf is None:
+        return
+    names = list(sf.get("set", []))
+    faults = [n for k in ("fault_flag1", "fault_flag2") for n in by.get(k, {}).get("set", [])]
+    d["state"] = ("fault: " + ", ".join(faults) if faults else
+                  "jog running" if "jog running" in names else
+                  "running" if "running" in names else "stopped")
+    d["status"] = names
+    d["status_word"] = sf.get("hex")
+
+
+def _pkw(direction: str, pk: dict) -> dict:
+    code = pk.get("code") or f"PNU{pk.get('pnu')}"
+    if code.upper().startswith("PNU") and pk.get("subindex") and "[" not in code:
+        code += f"[{pk['subindex']}]"              # an array element (Fuji's subindex is the code)
+    p = {"ak": pk["ak"], "code": code, "ak_text": pk.get("ak_text")}
+    vt = pk.get("value_text")
+    if "value" in pk:
+        p["value"] = pk["value"]
+        p["unit"] = pk.get("unit", "")
+    if direction == "request":
+        if vt is not None:
+            p["request"], p["text"] = "write", f"write {code} = {vt}"
+        elif "read" in (pk.get("ak_text") or "").lower() or "request" in (pk.get("ak_text") or "").lower():
+            p["request"], p["text"] = "read", f"read {code}"
+        else:
+            p["request"], p["text"] = "other", f"{pk.get('ak_text')} {code}"
+    else:
+        if "error" in pk and pk.get("error") is not None and pk.get("error") is not False:
+            p["error"] = pk["error"]
+            p["text"] = f"{code}: error {pk['error']} ({pk.get('error_text', '')})"
+        elif vt is not None:
+            p["text"] = f"{code} = {vt}"
+        else:
+            p["text"] = f"{code}: {pk.get('ak_text')}"
+    return p
+
+
+#: Yaskawa run-command and status flags in the manual's words (drives/yaskawa/codec.py names)
+def _yaskawa(profile, direction: str, area: dict) -> dict:
+    from profidrive_cli.drives.yaskawa.codec import COMMAND_TEXT, STATUS_TEXT
+    d: dict = {}
+    if direction == "request":
+        cmd = area.get("command")
+        if cmd:
+            fl = cmd["flags"]
+            d["command"] = ("forward and reverse (the drive stops with an alarm)"
+                            if fl.get("forward_run") and fl.get("reverse_run") else
+                            "forward run" if fl.get("forward_run") else
+                            "reverse run" if fl.get("reverse_run") else "stop")
+            d["control"] = [COMMAND_TEXT.get(k, k) for k, v in fl.items() if v]
+            d["control_word"] = f"0x{cmd['raw']:04X}"
+        ref = area.get("frequency_reference")
+        if ref:
+            d["reference_hz"] = _round(ref.get("hz"))
+    else:
+        stw = area.get("status")
+        if stw:
+            fl = stw["flags"]
+            d["state"] = ("fault" if fl.get("fault") else "alarm" if fl.get("alarm") else
+                          ("running reverse" if fl.get("reverse") else "running")
+                          if fl.get("running") else "ready" if fl.get("ready") else "not ready")
+            d["status"] = [STATUS_TEXT.get(k, k) for k, v in fl.items() if v]
+            d["status_word"] = f"0x{stw['raw']:04X}"
+        act = area.get("output_frequency") or area.get("speed_feedback")
+        if act:
+            d["actual_hz"] = _round(act.get("hz"))
+    pa = area.get("parameter_access")
+    if pa and pa.get("function"):
+        p = _memobus(profile, direction, pa)
+        if p is not None:
+            d["param"] = p
+    return d
+
+
+def _memobus(profile, direction: str, pa: dict) -> dict | None:
+    from profidrive_cli.drives.yaskawa.paramaccess import FC_READ, FC_WRITE
+    reg = pa.get("start_register", 0)
+    prm = next((p for p in profile.parameters.values() if p.register == reg), None)
+    code = prm.code if prm is not None else f"register 0x{reg:04X}"
+    fn = pa["function"]
+    p: dict = {"function": fn, "code": code}
+    if direction == "request":
+        if fn == FC_READ:
+            p["request"], p["text"] = "read", f"read {code}"
+        elif fn == FC_WRITE:
+            vals = pa.get("data") or [0]
+            p["request"] = "write"
+            p["text"] = f"write {code} = {_reg_value(prm, vals[0])}"
+        else:
+            p["request"], p["text"] = "other", f"function 0x{fn:02X} {code}"
+        return p
+    hs = pa.get("handshake") or {}
+    if not hs.get("complete"):
+        return None            # the handshake is still running: the area holds no answer yet
+    if pa.get("error"):
+        p["error"] = pa.get("error_code")
+        p["text"] = f"{code}: error {pa.get('error_name')} ({pa.get('error_meaning')})"
+    elif fn == FC_READ and pa.get("values"):
+        raw = pa["values"][0]
+        if prm is not None:
+            p["value"] = prm.from_raw(raw)
+            p["unit"] = prm.unit or ""
+        p["text"] = f"{code} = {_reg_value(prm, raw)}"
+    else:
+        p["text"] = f"{code}: {pa.get('function_name')} accepted"
+    return p
+
+
+def _reg_value(prm, raw: int) -> str:
+    if prm is None:
+        return f"0x{raw:04X}"
+    from profidrive_cli.drives.base import value_text
+    return value_text(prm.from_raw(raw), prm.unit or "")
+
+
+def drive_text(d: dict) -> str:
+    """The decoded part of a sniff line: 'operate, reference 30.00 Hz; read F07'."""
+    parts = []
+    if "command" in d:
+        parts.append(str(d["command"]))
+    if d.get("reference_hz") is not None:
+        parts.append(f"reference {d['reference_hz']:.2f} Hz")
+    if "state" in d:
+        parts.append(str(d["state"]))
+    if d.get("actual_hz") is not None:
+        parts.append(f"actual {d['actual_hz']:.2f} Hz")
+    text = ", ".join(parts)
+    if d.get("param"):
+        text += ("; " if text else "") + d["param"]["text"]
+    return text
+
+
+def frame_suffix(d: dict) -> str:
+    """What `pdrive sniff --station` appends to a frame's line."""
+    arrow = "->" if d["direction"] == "request" else "<-"
+    who = f"drive {d['station']} ({d['profile']}"
+    who += f" {d['layout']})" if d.get("layout") else ")"
+    if "error" in d:
+        return f"  | {arrow} {who}: {d['error']}"
+    return f"  | {arrow} {who}: {d['text']}"
