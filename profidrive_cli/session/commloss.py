@@ -45,7 +45,7 @@ HOLD_EXTRA_S = 0.05
 TOL_S = 0.25
 TOL_WD_FACTOR = 0.5
 #: how far to ramp before "at speed": within this fraction of the reference (at least AT_SPEED_HZ)
-AT_SPEED_FRAC = 0.02
+AT_SPEED_FRAC = 0.01
 AT_SPEED_HZ = 0.2
 START_TIMEOUT_S = 120.0
 
@@ -358,6 +358,6 @@ def run_commloss(sess, hz: float, mode: str = "silence", timeout: float | None =
     if ack and sess.final_status is not None and sess.final_status.fault:
         s3 = sess.clear_fault()
         res.acknowledged = not s3.status.fault
-        res.final_state = s3.status.state
+        res.final_state, res.fault_code = s3.status.state, s3.status.fault_code
     emit(res.to_dict())
     return res
