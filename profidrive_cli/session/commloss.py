@@ -124,6 +124,9 @@ def read_reaction(sess) -> Reaction:
     from the card manuals; see the profiles' decisions)."""
     fam = sess.profile.family
     d = sess.drive
+    if fam != "toyo" and not d.has_param_channel:
+        raise UsageError(f"station {sess.address}: layout {sess.layout} has no parameter channel, so "
+                         f"the comm-loss setting cannot be read (choose a layout with one, e.g. --ppo 1)")
     try:
         if fam == "fuji":
             return _fuji_reaction(sess)
@@ -359,5 +362,7 @@ def run_commloss(sess, hz: float, mode: str = "silence", timeout: float | None =
         s3 = sess.clear_fault()
         res.acknowledged = not s3.status.fault
         res.final_state, res.fault_code = s3.status.state, s3.status.fault_code
+        if sess.stop_report is not None:
+            sess.stop_report.status = s3.status     # what the drive is left in: acknowledged
     emit(res.to_dict())
     return res

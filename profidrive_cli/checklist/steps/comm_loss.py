@@ -33,7 +33,7 @@ class CommLoss(StepType):
         ack = d.get("ack", False)
         if not isinstance(ack, bool):
             check.fail(d.line_of("ack"), f"{w}: 'ack' must be true or false, got {ack!r}")
-        if mode == "silence":
+        if mode == "silence" and st.profile.family != "toyo":     # Toyo's reaction is fixed
             check.need_param_channel(st, rs)
         state["running"] = False          # the step leaves the drive stopped
         return ({"hz": hz, "mode": mode, "timeout": timeout, "ack": ack},
