@@ -168,7 +168,8 @@ def test_checklist_step_validation(tmp_path):
                  "  - comm_loss: {hz: 20, mode: loud}\n")
     r = run("checklist", "validate", p)
     assert r.exit_code == 2
-    assert "c.yaml:5" in r.output + (r.stderr if r.stderr_bytes is not None else "")
+    text = r.output + (r.stderr if r.stderr_bytes is not None else "")
+    assert "c.yaml:5" in text and "mode must be silence or clear, got 'loud'" in text
 
 
 def test_over_a_pty_simulator():
@@ -181,3 +182,76 @@ def test_over_a_pty_simulator():
     last = json.loads(p.stdout.splitlines()[-1])
     assert last["passed"] is True and last["fault_code"] == "Er5"
     assert 0.2 <= last["measured_s"] <= last["expected_s"] + 2.0
+
+
+@pytest.mark.parametrize("sig", ["SIGTERM", "SIGINT"])
+def test_a_signal_while_the_master_is_silent_still_stops_the_drive(sig):
+    """o27 = 2 with o28 = 30 s: during the silence the drive is still running (it forgives a link that
+    returns within o28). A signal then must bring the station back and stop the drive."""
+    import signal
+    import subprocess
+    with pty_sim_process("--plant", "sim://?set=3:o27=2,o28=30") as port:
+        p = subprocess.Popen(pdrive_cmd() + ["commloss-test", "3", "--port", port, "--watchdog", "200",
+                                             "--yes", "--json"], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True)
+        try:
+            for line in p.stdout:
+                if json.loads(line)["event"] == "silence":
+                    break
+            p.send_signal(getattr(signal, sig))
+            out, err = p.communicate(timeout=30)
+        finally:
+            if p.poll() is None:
+                p.kill()
+        assert p.returncode == (143 if sig == "SIGTERM" else 130), err
+        assert "Traceback" not in err
+        st = subprocess.run(pdrive_cmd() + ["status", "3", "--port", port, "--json"],
+                            capture_output=True, text=True, timeout=30)
+        doc = json.loads(st.stdout)
+        assert doc["stopped"] and not doc["running"], doc
+
+
+def test_late_watchdog_tick_times_the_reaction_from_the_expiry():
+    """The simulated station's watchdog expires at last telegram + watchdog, also when its clock is
+    ticked only later (a silent master on the virtual clock): the drive model hears of it then."""
+    from profidrive_cli.sim.model import SlaveModel
+    from profidrive_cli.sim.slave import DATA_EXCH, WAIT_PRM, SimSlave
+
+    class Spy(SlaveModel):
+        left = None
+
+        def on_leave_data_exchange(self, now, reason):
+            self.left = (now, reason)
+    m = Spy(0x1234)
+    s = SimSlave(3, m)
+    s.state, s.wd_s, s.last_seen = DATA_EXCH, 0.2, 1.0
+    s.tick(3.0)
+    assert m.left == (pytest.approx(1.2), "watchdog")
+    assert s.state == WAIT_PRM
+
+
+def test_fuji_o27_1_trips_after_o28_although_the_master_is_back():
+    """o27 = 1: coast and Er5 when o28 has elapsed, even if the link returns (table 9.1). The master
+    comes back after 1.25 x 0.2 + 0.05 s and keeps sending the run command; the trip comes at
+    0.2 + 1.0 s. Bound 0.2 + 1.0 + 0.35."""
+    res, _ = commloss(URL + "&set=3:o27=1,o28=1", 3)
+    assert res.back_s < 1.2 and res.expected_s == pytest.approx(1.55)
+    assert res.passed and res.fault_code == "Er5"
+    assert 1.2 - 1e-6 <= res.measured_s <= 1.55
+
+
+def test_yaskawa_fast_stop_uses_c1_09():
+    """F6-01 = 2: fast stop with C1-09 = 1.5 s (from E1-04 = 60 Hz: 0.5 s from 20 Hz), then BUS.
+    Bound 0.2 + 0.5 + 0.35; not before 0.7."""
+    res, _ = commloss(URL + "&set=7:F6-01=2,C1-09=1.5", 7)
+    assert res.expected_s == pytest.approx(1.05)
+    assert res.passed and res.fault_code == "BUS"
+    assert 0.7 - 1e-6 <= res.measured_s <= 1.05
+
+
+def test_a_layout_without_parameter_channel_is_refused():
+    import subprocess
+    p = subprocess.run(pdrive_cmd() + ["commloss-test", "3", "--port", URL, "--ppo", "4"],
+                       capture_output=True, text=True, timeout=60)
+    assert p.returncode == 2
+    assert "layout ppo4 has no parameter channel" in p.stderr and "Traceback" not in p.stderr
