@@ -175,9 +175,12 @@ def test_checklist_step_validation(tmp_path):
 def test_over_a_pty_simulator():
     import subprocess
     with pty_sim_process() as port:
+        q = subprocess.run(pdrive_cmd() + ["commloss-test", "3", "--port", port, "--watchdog", "200"],
+                           capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
         p = subprocess.run(pdrive_cmd() + ["commloss-test", "3", "--port", port, "--watchdog", "200",
                                            "--yes", "--json"],
                            capture_output=True, text=True, timeout=60)
+    assert q.returncode == 2 and "add --yes" in q.stderr       # a real port asks; nothing was sent
     assert p.returncode == 0, p.stderr
     last = json.loads(p.stdout.splitlines()[-1])
     assert last["passed"] is True and last["fault_code"] == "Er5"

@@ -92,11 +92,12 @@ class CommLossResult:
     acknowledged: bool = False
     watchdog_expired: bool | None = None   # the station had left data exchange when the master came back
     back_s: float | None = None            # last telegram -> the first cycle after the master came back
-    stop: dict | None = None               # the safe stop's report when pdrive had to stop it
+    stop: dict | None = None               # the stop pdrive sent afterwards (needed: it was running)
+    counters: dict = field(default_factory=dict)   # the station's bus counters at the end
 
     def to_dict(self) -> dict:
         r = self.reaction
-        return {"event": "result", "station": self.address, "mode": self.mode, "hz": self.hz,
+        return {"event": "result", "station": self.address, "mode": self.mode, "reference_hz": self.hz,
                 "watchdog_ms": self.watchdog_ms,
                 "reaction": {"words": r.words, "stop": r.stop, "delay_s": r.delay_s,
                              "recover": r.recover, "alarm": r.alarm, "decel_s": r.decel_s,
@@ -107,7 +108,7 @@ class CommLossResult:
                 "passed": self.passed, "verdict": self.verdict, "final_state": self.final_state,
                 "fault_code": self.fault_code, "acknowledged": self.acknowledged,
                 "watchdog_expired": self.watchdog_expired, "back_s": _r(self.back_s),
-                "stop": self.stop}
+                "stop": self.stop, "counters": self.counters}
 
 
 def _r(v: float | None) -> float | None:
@@ -323,7 +324,8 @@ def run_commloss(sess, hz: float, mode: str = "silence", timeout: float | None =
     if reaction.stop == "none":
         res.passed = False
         res.verdict = ("FAIL: the drive is set to keep running without a master (" + reaction.words +
-                       ")" + ("" if res.reacted else
+                       ")" + (f"; it reported {'tripped' if st.fault else 'stopped'} anyway after "
+                              f"{res.measured_s:.2f} s" if res.reacted else
                               f"; it was still running at {sample.actual_hz} Hz "
                               f"{now - t_last:.2f} s after the last telegram"))
     elif not res.reacted:
@@ -364,5 +366,6 @@ def run_commloss(sess, hz: float, mode: str = "silence", timeout: float | None =
         res.final_state, res.fault_code = s3.status.state, s3.status.fault_code
         if sess.stop_report is not None:
             sess.stop_report.status = s3.status     # what the drive is left in: acknowledged
+    res.counters = dict(sess.counters)
     emit(res.to_dict())
     return res
