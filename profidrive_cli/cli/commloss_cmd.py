@@ -80,12 +80,20 @@ def _f(v) -> str:
     return "-" if v is None else f"{v:.3f} s"
 
 
+def _measured(res) -> str:
+    if not res.reacted:
+        return "no stop or trip seen (still running)"
+    if res.measured_s == res.back_s:
+        return (f"{res.measured_s:.3f} s at the latest (seen at the master's first cycle back; the "
+                f"watchdog expired at {res.watchdog_ms / 1000.0:.3f} s)")
+    return _f(res.measured_s)
+
+
 def _text_result(res) -> None:
     rows = [("watchdog", f"{res.watchdog_ms:g} ms"),
             ("configured reaction", res.reaction.words),
             ("expected within", _f(res.expected_s)),
-            ("measured", _f(res.measured_s) + ("" if res.not_before_s is None else
-                                               f" (not before {res.not_before_s:.3f} s)")),
+            ("measured", _measured(res)),
             ("final state", (res.final_state or "-") + (f" ({res.fault_code})" if res.fault_code else "")),
             ("acknowledged", "yes" if res.acknowledged else "no")]
     if res.stop and res.stop.get("needed"):
