@@ -17,6 +17,8 @@ from profidrive_cli import BusError, PdriveError, UsageError, __version__
 COMMANDS = {
     "checklist": ("profidrive_cli.cli.checklist_cmd", "checklist_group",
                   "Scripted commissioning checklists: validate, rehearse, run, report."),
+    "commloss-test": ("profidrive_cli.cli.commloss_cmd", "commloss_cmd",
+                      "Comm-loss acceptance test: break the link, measure the drive's reaction."),
     "decode": ("profidrive_cli.cli.decode_cmd", "decode_cmd",
                "Decode a captured area of PROFILE's layout into named fields."),
     "diag": ("profidrive_cli.cli.bus_cmds", "diag_cmd",

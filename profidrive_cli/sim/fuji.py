@@ -273,6 +273,18 @@ class FujiModel(ProfidriveModel):
         return self._save_until is not None and self._now < self._save_until
 
     def tick(self, now: float) -> None:
+        due = self._loss_due()
+        if due is not None and due < now:
+            self._tick_to(due)          # a delayed reaction starts when o28 ends, not at the next tick
+        self._tick_to(now)
+
+    def _loss_due(self) -> float | None:
+        act = self._loss_action
+        if act is None or not act.delayed or self.comm_lost_at is None or self._forced_stop:
+            return None
+        return self.comm_lost_at + float(self.param_value(self.fc.comm_loss_timer))
+
+    def _tick_to(self, now: float) -> None:
         self._now = now
         if self._save_until is not None and now >= self._save_until and self.fc.storage is not None:
             self.values[self.fc.storage["param"]] = self.fc.storage["saved_reads"]

@@ -78,8 +78,13 @@ class SimSlave:
         """Watchdog: no telegram from our master within the watchdog time -> Wait_Prm."""
         if (self.wd_s is not None and self.state in (WAIT_CFG, DATA_EXCH)
                 and now - self.last_seen > self.wd_s):
+            # the moment it expired, also when the clock is ticked late (a silent master on the
+            # virtual clock): the drive's comm-loss reaction is timed from there
+            expired = self.last_seen + self.wd_s
             self.stats["watchdog_expired"] += 1
-            self._leave(now, "watchdog")
+            if self.state == DATA_EXCH:
+                self.model.tick(expired)
+            self._leave(expired, "watchdog")
             self.master = None
             self.wd_s = None
         self.model.tick(now)

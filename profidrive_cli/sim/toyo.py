@@ -25,7 +25,8 @@
     677-698 computed from the drive, traceback 700-715 (four recordings of 100 samples, taken at trips),
     fault history 720 (six entries: protection code | inverter mode << 8 | block << 12)
   * multi-function input 2 bits 3-10 (external faults) trip EXT1-4 on a rising edge (C-00 = 1)
-  * communication loss (DP watchdog) while in operation: protection 18 (COMM), run bits forced off
+  * communication loss (DP watchdog) while in operation: protection 18 (COMM), run bits forced off;
+    comm_loss="ignore" (sim only, the manual names no setting) keeps it running
   * fan failure (26) is a warning: ZSW bit 7, fault flag 2 bit 9, multi-function output bit 15
   * Slave_Diag device block after the first trip: 09 + status flag, fault flags 1/2, multi-function
     output, high byte first
@@ -57,6 +58,9 @@ class ToyoModel(ProfidriveModel):
     alarm_noun = "protection"
     alarm_hint = ", or 1..32"
     family = "toyo"
+    #: "trip" (the manual: protection 18) or "ignore" (a sim-only stand-in for an inverter set up
+    #: to ride through a lost master: the manual names no setting; make_model(comm_loss="ignore"))
+    comm_loss = "trip"
 
     def __init__(self, profile, *, mode: int | None = None, bus_control: bool = True,
                  voltage_class: int | None = None, accel_s: float = 5.0, decel_s: float = 5.0,
@@ -477,7 +481,7 @@ class ToyoModel(ProfidriveModel):
 
     def on_leave_data_exchange(self, now: float, reason: str) -> None:
         self._pkw_req, self._pkw_resp, self._pkw_wait = None, pd.IDLE, 0
-        if reason != "watchdog" or not self.had_exchange:
+        if reason != "watchdog" or not self.had_exchange or self.comm_loss == "ignore":
             return
         self.comm_error = True
         self.run_cmd &= ~0xF                          # run, jog, reverse, initial excitation forced off
@@ -493,12 +497,18 @@ class ToyoModel(ProfidriveModel):
 
 
 def make_model(profile, **options) -> ToyoModel:
+    comm_loss = options.pop("comm_loss", None)
     for k in ("mode", "voltage_class", "inverter_mode", "pkw_latency"):
         if k in options and options[k] is not None:
             options[k] = int(options[k])
     if "address" in options:
         options["node_address"] = int(options.pop("address"))
-    return ToyoModel(profile, **options)
+    m = ToyoModel(profile, **options)
+    if comm_loss is not None:
+        if comm_loss not in ("trip", "ignore"):
+            raise ValueError(f"toyo sim: comm_loss must be trip or ignore, got {comm_loss!r}")
+        m.comm_loss = comm_loss
+    return m
 
 
 __all__ = ["ToyoModel", "make_model", "FLAG_OF_CODE"]

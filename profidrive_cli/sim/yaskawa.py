@@ -17,7 +17,9 @@ What it does:
   21 out of range, 22 read-only / running (for stop-only parameters) / ENTER while running / while
   storing;
 - BUS fault when the master stops talking (on_leave_data_exchange, or no Data_Exchange for
-  comm_timeout s) while b1-01 or b1-02 = 3; by default only if the motor was running at that moment
+  comm_timeout s) while b1-01 or b1-02 = 3, stopping per F6-01 (0 ramp with C1-02 and BUS at 0 Hz,
+  1 coast and BUS (factory), 2 fast stop with C1-09 and BUS at 0 Hz, 3 alarm only: keeps running on
+  the last command; run commands are ignored during the ramp); by default only if the motor was running at that moment
   (bus_fault="running"), so that one pdrive command per process does not leave a fault behind;
   bus_fault="always" is closer to a real drive, "never" disables it; EF0 from command bit 8, trip(code), seed_faults(codes), fault reset on the rising
   edge of bit 9 (with the run bits off and the cause gone), clear error log on the rising edge of bit 14.
@@ -125,6 +127,7 @@ class YaskawaModel(SlaveModel):
         self._prev_cmd = 0
         self._run_latched = False       # running incl. the ramp down after the run bit went off
         self._coasting = False
+        self._loss_stop: str | None = None     # F6-01 = 0 / 2: the ramp time of the comm-loss stop
         self._last_tick: float | None = None
         self._comm = False              # in data exchange with a master
         self._last_rx = 0.0
@@ -198,17 +201,29 @@ class YaskawaModel(SlaveModel):
         return ok
 
     def on_leave_data_exchange(self, now: float, reason: str) -> None:
-        # communication loss: BUS fault when the bus is the run or reference source (drive side
-        # reaction in F6-01; coasting is the F7 default)
+        # communication loss: BUS fault when the bus is the run or reference source; how the drive
+        # stops is F6-01 (0 ramp C1-02, 1 coast (factory), 2 fast stop C1-09, 3 alarm only)
         was = self._comm
         running = self._run_latched or self.out_hz != 0.0
         self._comm = False
+        bus_source = int(self._get("b1-01", 0)) == 3 or int(self._get("b1-02", 0)) == 3
+        react = was and bus_source and (self.bus_fault == "always" or
+                                        (self.bus_fault == "running" and running))
+        f601 = self._f601()
+        if react and f601 == 3:
+            return                      # alarm only: the drive keeps running on the last command
         self._cmd = 0
         self._ref_raw = 0
-        bus_source = int(self._get("b1-01", 0)) == 3 or int(self._get("b1-02", 0)) == 3
-        if was and bus_source and (self.bus_fault == "always" or
-                                   (self.bus_fault == "running" and running)):
+        if not react:
+            return
+        if f601 in (0, 2) and self.out_hz != 0.0:
+            self._loss_stop = "C1-09" if f601 == 2 else "C1-02"    # ramp, BUS once at 0 Hz
+        else:
             self.trip("BUS", now)
+
+    def _f601(self) -> int:
+        p = self.profile.param("F6-01")
+        return int(self._get("F6-01", 1)) if p is not None and p.register is not None else 1
 
     # -- dynamics -----------------------------------------------------------------------------
     def tick(self, now: float) -> None:
@@ -219,6 +234,9 @@ class YaskawaModel(SlaveModel):
         if self._comm and self.comm_timeout > 0 and now - self._last_rx > self.comm_timeout:
             self.on_leave_data_exchange(now, "timeout")
         self._step(dt)
+        if self._loss_stop is not None and self.out_hz == 0.0:
+            self._loss_stop = None
+            self.trip("BUS", now)
 
     def _bus_run(self) -> bool:
         return int(self._get("b1-02", 0)) == 3
@@ -236,7 +254,8 @@ class YaskawaModel(SlaveModel):
         fwd, rev = self._cmd >> FWD & 1, self._cmd >> REV & 1
         self.alarm = bool(fwd and rev)
         run = self._bus_run() and (fwd ^ rev) and not self.fault and not self.ope \
-            and not self._cmd >> BASE_BLOCK & 1 and not self._fast_stop_active()
+            and not self._cmd >> BASE_BLOCK & 1 and not self._fast_stop_active() \
+            and self._loss_stop is None
         ref = self._reference_hz()
         return ((-ref if rev else ref) if run else 0.0), bool(run)
 
@@ -260,7 +279,8 @@ class YaskawaModel(SlaveModel):
         target, run = self._target()
         self.torque_out = None
         cut = self.fault is not None or self._cmd >> BASE_BLOCK & 1 or self.ope is not None
-        if not run and not cut and self._run_latched and int(self._get("b1-03", 0)) == 1:
+        if not run and not cut and self._run_latched and int(self._get("b1-03", 0)) == 1 \
+                and self._loss_stop is None:
             cut = True                  # b1-03 = 1: coast to stop
         if cut:
             self.out_hz = 0.0
@@ -282,7 +302,8 @@ class YaskawaModel(SlaveModel):
         if lim is not None and abs(target) > lim:
             target = lim if target > 0 else -lim
         t_acc = max(self._time("C1-01"), 1e-3)
-        t_dec = max(self._time("C1-09" if self._fast_stop_active() else "C1-02"), 1e-3)
+        t_dec = max(self._time(self._loss_stop or ("C1-09" if self._fast_stop_active() else "C1-02")),
+                    1e-3)
         f = self.out_hz
         if f * target < 0 or abs(target) < abs(f):        # slowing down (or through zero)
             goal = 0.0 if f * target < 0 else target
@@ -487,6 +508,7 @@ class YaskawaModel(SlaveModel):
             del self.history[4:]
         self.out_hz = 0.0
         self._run_latched = False
+        self._loss_stop = None
 
     def seed_faults(self, alarms: list[str]) -> None:
         nums = []

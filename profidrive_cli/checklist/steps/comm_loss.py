@@ -1,0 +1,59 @@
+"""Step type `comm_loss`: the comm-loss acceptance test (session/commloss.py) on the station.
+
+    - comm_loss: {hz: 20, mode: silence, timeout: 5, ack: false}
+    - comm_loss: 20                      # shorthand: hz
+
+Runs the drive at hz, breaks the link (silence: the master goes quiet; clear: Global_Control
+Clear_Data), measures the reaction and passes when the drive stops or trips within the bound from the
+watchdog and its configured reaction; a drive set to keep running without a master fails. The drive is
+left stopped; the fault is acknowledged only with ack: true. Needs the station's parameter channel
+(the configured reaction is read from the drive).
+"""
+
+from __future__ import annotations
+
+from profidrive_cli import PdriveError
+from profidrive_cli.checklist.fields import fmt
+from profidrive_cli.checklist.steps.base import StepFailed, StepType
+
+MODES = ("silence", "clear")
+
+
+class CommLoss(StepType):
+    name = "comm_loss"
+
+    def validate(self, check, st, rs, body, state):
+        d = check.fields(rs, body, ("hz", "mode", "timeout", "ack"), "hz")
+        w = f"step {rs.index} (comm_loss)"
+        hz = check.num(rs, d, "hz", default=20.0, positive=True)
+        mode = d.get("mode", "silence")
+        if mode not in MODES:
+            check.fail(d.line_of("mode"), f"{w}: mode must be silence or clear, got {mode!r}")
+        timeout = check.num(rs, d, "timeout", positive=True)
+        ack = d.get("ack", False)
+        if not isinstance(ack, bool):
+            check.fail(d.line_of("ack"), f"{w}: 'ack' must be true or false, got {ack!r}")
+        if mode == "silence" and st.profile.family != "toyo":     # Toyo's reaction is fixed
+            check.need_param_channel(st, rs)
+        state["running"] = False          # the step leaves the drive stopped
+        return ({"hz": hz, "mode": mode, "timeout": timeout, "ack": ack},
+                f"comm-loss test at {fmt(hz)} Hz ({mode})" + (", acknowledge the fault" if ack else ""))
+
+    def execute(self, run, sr, r, d, h):
+        from profidrive_cli.session.commloss import run_commloss
+        a = r.step.args
+        if h is None or h.session is None:
+            raise PdriveError("comm_loss needs a drive session")
+        run.progress(sr, r, f"running at {fmt(a['hz'])} Hz, then breaking the link ({a['mode']})")
+        res = run_commloss(h.session, float(a["hz"]), a["mode"], timeout=a["timeout"], ack=a["ack"])
+        doc = res.to_dict()
+        doc.pop("event", None)
+        r.expected = {"within_s": doc["expected_s"], "reaction": res.reaction.words,
+                      "watchdog_ms": res.watchdog_ms}
+        r.measured = doc
+        if not res.passed:
+            raise StepFailed(res.verdict)
+        return res.verdict
+
+
+STEP = CommLoss()

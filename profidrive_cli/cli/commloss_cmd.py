@@ -1,0 +1,103 @@
+"""pdrive commloss-test: the comm-loss acceptance test (session/commloss.py does the work; this
+module parses the options, asks before a real port and renders: text, or --json as JSON Lines)."""
+
+from __future__ import annotations
+
+import math
+import sys
+
+import click
+from rich.markup import escape
+
+from profidrive_cli import UsageError
+from profidrive_cli.cli.common import bus_options, emit_json, out
+from profidrive_cli.cli.drive_cmds import _confirmer, _session, _terminations, drive_options
+
+
+@click.command("commloss-test")
+@click.argument("address", required=False, type=int)
+@click.option("--hz", type=float, default=20.0, show_default=True, help="Speed to run at before the break.")
+@click.option("--mode", type=click.Choice(["silence", "clear"]), default="silence", show_default=True,
+              help="silence: the master stops talking to the station; clear: Global_Control "
+                   "Clear_Data, then all-zero outputs.")
+@click.option("--timeout", type=float, default=None, metavar="S",
+              help="How long past the expected bound to keep watching for a late reaction "
+                   "(default: half the bound, at least 2 s).")
+@click.option("--ack", is_flag=True, help="Acknowledge the comm-loss fault afterwards.")
+@click.option("--cycle-hz", type=float, default=None, metavar="RATE",
+              help="Data_Exchange rate (default: the fastest the bus allows).")
+@click.option("--yes", is_flag=True, help="Do not ask before running a drive on a real port.")
+@drive_options
+@bus_options
+@_terminations
+def commloss_cmd(opts, address, hz, mode, timeout, ack, cycle_hz, yes, profile_name, ppo, fmt,
+                 watchdog_ms):
+    """Comm-loss acceptance test: run at --hz, break the link, measure the drive's reaction.
+
+    Compares the measured time with the DP watchdog and the drive's configured reaction (read from
+    the drive) and reports PASS/FAIL (exit 1 on FAIL). A drive set to keep running without a master
+    is a FAIL. The drive is left stopped; its fault is acknowledged only with --ack.
+    """
+    for name, v in (("--hz", hz), ("--timeout", timeout), ("--cycle-hz", cycle_hz)):
+        if v is not None and not math.isfinite(v):
+            raise UsageError(f"{name} must be a number")
+    from profidrive_cli.session.commloss import run_commloss
+    session = _session(opts, address, profile_name, ppo, fmt, watchdog_ms, cycle_hz=cycle_hz,
+                       before=_confirmer(opts, yes, f"comm-loss test: run at {hz:g} Hz, then break "
+                                                    f"the link ({mode})"))
+    events = emit_json if opts.json else _text_event
+    with session as s:
+        if not opts.json:
+            out.print(escape(f"station {s.address} ({s.profile.name}): comm-loss test, mode {mode}, "
+                             f"{hz:g} Hz, watchdog {s.watchdog_ms:g} ms"))
+        else:
+            emit_json({"event": "start", "station": s.address, "ident": s.ident,
+                       "ident_hex": f"0x{s.ident:04X}", "profile": s.profile.name, "mode": mode,
+                       "reference_hz": hz, "watchdog_ms": s.watchdog_ms})
+        res = run_commloss(s, hz, mode, timeout=timeout, ack=ack, on_event=events)
+    if not opts.json:
+        _text_result(res)
+    if not res.passed:
+        sys.exit(1)
+
+
+def _text_event(ev: dict) -> None:
+    kind = ev.get("event")
+    if kind == "reaction":
+        out.print(escape(f"  configured reaction: {ev['words']}"))
+    elif kind == "at_speed":
+        out.print(f"  at speed: {ev['actual_hz']} Hz")
+    elif kind == "silence":
+        out.print(f"  master silent for {ev['hold_s']:.2f} s")
+    elif kind == "clear":
+        out.print("  Global_Control Clear_Data sent; outputs zero")
+    elif kind == "back":
+        out.print(f"  master back after {ev['after_s']:.2f} s"
+                  + ("" if ev["watchdog_expired"] else " (the station had not left data exchange)"))
+
+
+def _f(v) -> str:
+    return "-" if v is None else f"{v:.3f} s"
+
+
+def _measured(res) -> str:
+    if not res.reacted:
+        return "no stop or trip seen (still running)"
+    if res.measured_s == res.back_s:
+        return (f"{res.measured_s:.3f} s at the latest (seen at the master's first cycle back; the "
+                f"watchdog expired at {res.watchdog_ms / 1000.0:.3f} s)")
+    return _f(res.measured_s)
+
+
+def _text_result(res) -> None:
+    rows = [("watchdog", f"{res.watchdog_ms:g} ms"),
+            ("configured reaction", res.reaction.words),
+            ("expected within", _f(res.expected_s)),
+            ("measured", _measured(res)),
+            ("final state", (res.final_state or "-") + (f" ({res.fault_code})" if res.fault_code else "")),
+            ("acknowledged", "yes" if res.acknowledged else "no")]
+    if res.stop and res.stop.get("needed"):
+        rows.append(("stopped by pdrive", f"{res.stop['how']} stop, {res.stop['seconds']:.2f} s"))
+    for k, v in rows:
+        out.print(escape(f"  {k:<20} {v}"))
+    out.print(escape(res.verdict))
