@@ -89,6 +89,8 @@ class MultiView:
             out.print(escape(self._line(address, t_s, sample, phase)))
 
     def finish(self, end: dict) -> None:
+        if not self.header:                      # refused before anything started: the error says it
+            return
         for a in sorted(self._pending):          # each drive's last sample is always shown
             self._emit(a)
         if self._live is not None:

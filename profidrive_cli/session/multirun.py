@@ -54,10 +54,10 @@ def sync_modes(sessions, gsd_for=None) -> tuple[bool, bool]:
         who = f"station {s.address} ({s.profile.name}, ident 0x{s.ident:04X})"
         if g is None:
             raise UsageError(f"--sync: {who} has no GSD file in the library or --gsd-dir / "
-                             f"PDRIVE_GSD_DIR, so whether it supports Sync is unknown; nothing was sent")
+                             f"PDRIVE_GSD_DIR, so whether it supports Sync is unknown; nothing was written")
         if not g.sync_mode_supp:
             raise UsageError(f"--sync: {who}: its GSD {name} does not claim Sync_Mode_supp; "
-                             f"nothing was sent")
+                             f"nothing was written")
         freeze = freeze and bool(g.freeze_mode_supp)
     return True, freeze
 

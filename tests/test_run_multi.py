@@ -1,0 +1,249 @@
+"""pdrive run 3,4,5: several drives on one bus cycle, the stop of every drive on every way out, --sync
+(Global_Control Sync/Freeze where every station's GSD claims it), and the simulated slave's Sync and
+Freeze as reference 3.5 describes them (outputs applied only on Sync, inputs latched on Freeze)."""
+
+import json
+import signal
+import subprocess
+
+import pytest
+
+from conftest import pdrive_cmd, pty_sim_process, read_until_turning
+from profidrive_cli.dp import services as S
+from profidrive_cli.sim.model import SlaveModel
+from profidrive_cli.sim.slave import SimSlave
+
+from test_sim_slave import CFG, IDENT, Link
+
+ALL = [3, 4, 5, 6, 7]
+# short ramps keep the tests quick (Toyo's are fixed: 5 s to 60 Hz)
+RAMPS = {3: ("F07", "F08"), 4: ("F07", "F08"), 6: ("F002", "F003"), 7: ("C1-01", "C1-02")}
+SIM_FAST = "sim://?" + "&".join(f"set={a}:{c1}=0.3,{c2}=0.3" for a, (c1, c2) in RAMPS.items())
+
+
+def pdrive(*args, timeout=120):
+    return subprocess.run(pdrive_cmd() + [str(a) for a in args], capture_output=True, text=True,
+                          timeout=timeout, stdin=subprocess.DEVNULL)
+
+
+def events(text):
+    return [json.loads(line) for line in text.strip().splitlines()]
+
+
+# -- the simulated slave: Sync and Freeze ---------------------------------------------------------
+
+class Recorder(SlaveModel):
+    """Inputs = the outputs the application uses, followed by the time of the call (whole seconds)."""
+
+    def __init__(self):
+        super().__init__(IDENT, {"ppo1": CFG})
+        self.sync_supported = self.freeze_supported = True
+        self.applied = []
+
+    def data_exchange(self, outputs, now):
+        self.applied.append((bytes(outputs), now))
+        return bytes(outputs[:11]) + bytes([int(now)])
+
+
+def _gc(slave, command, now, sa=2):
+    from profidrive_cli.fdl import frames as F
+    f = F.Frame(F.SD2, 127, sa, F.request_fc(F.SDN_HIGH), S.GlobalControl(command, 0).encode(),
+                S.SAP_GLOBAL_CONTROL, S.SAP_MASTER)
+    assert slave.handle(F.parse(F.encode(f))[0], now) is None
+
+
+def _started(sync=False, freeze=False):
+    slave = SimSlave(3, Recorder())
+    m = Link(slave)
+    m.diag()
+    prm = S.SetPrm(IDENT, 10000, sync=sync, freeze=freeze)
+    m.req(S.SAP_SET_PRM, prm.encode())
+    m.req(S.SAP_CHK_CFG, CFG)
+    return slave, m
+
+
+def out(n):
+    return bytes([n]) * 12
+
+
+def test_sync_applies_the_outputs_only_on_the_next_sync():
+    slave, m = _started(sync=True)
+    assert m.diag().st2 & S.ST2["Sync_Mode"]
+    assert m.req(None, out(1), now=1.0).data[:11] == out(1)[:11]     # no Sync yet: applied at once
+    _gc(slave, S.GC_SYNC, 2.0)                                        # Sync: out(1) held from now
+    assert m.req(None, out(2), now=3.0).data[:11] == out(1)[:11]     # received, not applied
+    assert m.req(None, out(3), now=4.0).data[:11] == out(1)[:11]
+    _gc(slave, S.GC_SYNC, 5.0)                                        # the last received takes effect
+    assert slave.model.applied[-1] == (out(3), 5.0)
+    assert m.req(None, out(4), now=6.0).data[:11] == out(3)[:11]
+    _gc(slave, S.GC_UNSYNC, 7.0)                                      # Unsync: out(4) takes effect now
+    assert slave.model.applied[-1] == (out(4), 7.0)
+    assert m.req(None, out(5), now=8.0).data[:11] == out(5)[:11]     # and each exchange again
+
+
+def test_freeze_latches_the_inputs_until_the_next_freeze():
+    slave, m = _started(freeze=True)
+    assert m.req(None, out(1), now=1.0).data[11] == 1                 # live inputs
+    _gc(slave, S.GC_FREEZE, 2.0)
+    assert m.req(None, out(1), now=3.0).data[11] == 2                 # sampled at the Freeze
+    assert m.req(None, out(1), now=4.0).data[11] == 2
+    _gc(slave, S.GC_FREEZE, 5.0)
+    assert m.req(None, out(1), now=6.0).data[11] == 5
+    _gc(slave, S.GC_UNFREEZE, 7.0)
+    assert m.req(None, out(1), now=8.0).data[11] == 8                 # live again
+
+
+def test_sync_without_sync_req_is_ignored_and_a_new_set_prm_ends_it():
+    slave, m = _started(sync=False)
+    m.req(None, out(1), now=1.0)
+    _gc(slave, S.GC_SYNC, 2.0)
+    assert m.req(None, out(2), now=3.0).data[:11] == out(2)[:11]     # not parameterised for Sync
+    slave, m = _started(sync=True)
+    m.req(None, out(1), now=1.0)
+    _gc(slave, S.GC_SYNC, 2.0)
+    m.req(S.SAP_SET_PRM, S.SetPrm(IDENT, 10000, sync=True).encode(), now=3.0)   # leaves data exchange
+    m.req(S.SAP_CHK_CFG, CFG, now=3.0)
+    assert m.req(None, out(2), now=4.0).data[:11] == out(2)[:11]     # no Sync in force any more
+
+
+def test_the_plant_offers_sync_and_freeze_where_the_gsd_claims_them():
+    from profidrive_cli.sim.plant import build_bus
+    bus = build_bus("sim://")
+    # gsd/*.GSD: only YASK00CA.GSD has Sync_Mode_supp = 1 and Freeze_Mode_supp = 1
+    modes = {a: (s.model.sync_supported, s.model.freeze_supported) for a, s in bus.slaves.items()}
+    assert modes == {3: (False, False), 4: (False, False), 5: (False, False), 6: (False, False),
+                     7: (True, True)}
+    slave = bus.slaves[3]
+    m = Link(slave, master=2)
+    m.diag()
+    m.req(S.SAP_SET_PRM, S.SetPrm(0xFD01, 500, sync=True).encode())
+    d = m.diag()
+    assert d.st1 & S.ST1["Prm_Fault"] and d.st1 & S.ST1["Not_Supported"]
+
+
+# -- several drives on sim:// ---------------------------------------------------------------------
+
+def test_five_drives_reach_20_hz_and_end_stopped_on_sim():
+    r = pdrive("run", "3,4,5,6,7", "--hz", "20", "--duration", "2", "--yes", "--json", "--port", SIM_FAST)
+    assert r.returncode == 0, r.stderr
+    ev = events(r.stdout)
+    assert ev[0]["event"] == "start" and [s["station"] for s in ev[0]["stations"]] == ALL
+    assert all(s["reference_hz"] == 20.0 for s in ev[0]["stations"])
+    for a in ALL:
+        ups = [e for e in ev if e["event"] == "update" and e["station"] == a]
+        running = [e["actual_hz"] for e in ups if e["phase"] == "running"]
+        assert running and abs(running[-1] - 20.0) <= 0.2, (a, running[-3:])
+        assert ups[-1]["phase"] == "stopping" and ups[-1]["stopped"] and not ups[-1]["fault"]
+        assert ups[-1]["actual_hz"] == 0.0
+    end = ev[-1]
+    assert end["event"] == "end" and end["stopped"] and not end["failed"]
+    for s in end["stations"]:
+        assert s["reached_after_s"] is not None and s["stop"]["how"] == "normal" and s["stopped"]
+
+
+def test_one_speed_each():
+    r = pdrive("run", "3,6", "--hz", "20,10", "--duration", "1.5", "--yes", "--json", "--port", SIM_FAST)
+    assert r.returncode == 0, r.stderr
+    ev = events(r.stdout)
+    last = {e["station"]: e for e in ev if e["event"] == "update" and e["phase"] == "running"}
+    assert abs(last[3]["actual_hz"] - 20.0) <= 0.2 and abs(last[6]["actual_hz"] - 10.0) <= 0.2
+
+
+@pytest.mark.parametrize("args, words", [
+    (["3,4", "--hz", "20,10,5"], "3 values for 2 stations"),
+    (["3", "--hz", "20,10"], "2 values for one station"),
+    (["3,4", "--hz", "20", "--torque", "10"], "--torque: one station only"),
+    (["3,3", "--hz", "20"], "station 3 given twice"),
+    (["3", "--hz", "20", "--sync"], "--sync: give several stations"),
+])
+def test_bad_lists_are_refused_before_anything_is_sent(args, words):
+    r = pdrive("run", *args, "--yes", "--port", "sim://")
+    assert r.returncode == 2 and words in r.stderr and "Traceback" not in r.stderr, r.stderr
+    assert r.stdout == ""
+
+
+def test_sync_is_refused_where_a_gsd_does_not_claim_it():
+    r = pdrive("run", "3,7", "--hz", "20", "--sync", "--yes", "--json", "--port", "sim://")
+    assert r.returncode == 2
+    assert r.stderr.strip().splitlines()[-1].endswith(
+        "--sync: station 3 (fuji-opc-g1-pdp, ident 0xFD01): its GSD FUJIFD01.GSD does not claim "
+        "Sync_Mode_supp; nothing was written")
+    assert r.stdout == ""
+
+
+def test_sync_on_stations_whose_gsd_claims_it(sim):
+    """Two Yaskawa stations (YASK00CA.GSD: Sync_Mode_supp = 1, Freeze_Mode_supp = 1): Set_Prm asks
+    for both modes, every round ends with Sync+Freeze, the drives reach their speeds and stop."""
+    from profidrive_cli.cli.common import BusOptions
+    from profidrive_cli.session.multirun import MultiRun
+    url = "sim://?stations=7:yaskawa,8:yaskawa&set=7:C1-01=0.3,C1-02=0.3&set=8:C1-01=0.3,C1-02=0.3"
+    master = BusOptions(url, "19200", 2, None, None, False, False, 0, False).open_master()
+    seen = []
+
+    def on_sample(address, t, sample, phase):
+        bus = next(iter(sim.values()))
+        s = bus.slaves[address]
+        seen.append((s.sync, s.freeze, s.synced_outputs is not None, s.frozen_inputs is not None))
+    run = MultiRun(master, [7, 8], [("hz", 20.0), ("hz", 10.0)], duration=1.0, sync=True,
+                   on_sample=on_sample)
+    assert run.run() == 0
+    assert run.sync and run.freeze
+    assert (True, True, True, True) in seen          # both modes in force on the stations
+    end = run.end_dict()
+    assert end["global_controls"] == end["rounds"] + 1      # one per round, then Unsync+Unfreeze
+    assert [s["stopped"] for s in end["stations"]] == [True, True]
+    bus = next(iter(sim.values()))
+    assert bus.slaves[7].synced_outputs is None and bus.slaves[8].frozen_inputs is None
+
+
+# -- signals over a real byte path (pdrive sim --pty) ---------------------------------------------
+
+@pytest.fixture(scope="module")
+def pty_sim(tmp_path_factory):
+    with pty_sim_process() as port:
+        for addr, codes in RAMPS.items():
+            f = tmp_path_factory.mktemp("ramps") / f"{addr}.yaml"
+            f.write_text("parameters:\n" + "".join(f"  {c}: 0.3\n" for c in codes))
+            r = pdrive("param", "restore", str(addr), str(f), "--port", port, "--yes")
+            assert r.returncode == 0 and "2 applied" in r.stdout, r.stdout + r.stderr
+        yield port
+
+
+def _status(port, address):
+    r = pdrive("status", str(address), "--port", port, "--json")
+    assert r.returncode == 0, r.stderr
+    return json.loads(r.stdout)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+def test_signal_leaves_every_drive_stopped(pty_sim, sig):
+    p = subprocess.Popen(pdrive_cmd() + ["run", "3,4,5,6,7", "--hz", "20", "--port", pty_sim, "--yes",
+                                         "--json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         stdin=subprocess.DEVNULL, text=True)
+    try:
+        read_until_turning(p, deadline_s=60)
+        p.send_signal(sig)
+        outs, err = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == (143 if sig == signal.SIGTERM else 130), err
+    end = json.loads(outs.strip().splitlines()[-1])
+    assert end["event"] == "end" and end["reason"] == ("SIGTERM" if sig == signal.SIGTERM else "Ctrl-C")
+    assert "Traceback" not in err
+    for s in end["stations"]:
+        if s["started"]:
+            assert s["stop"]["how"] == "normal" and s["stopped"], s
+    for a in ALL:
+        st = _status(pty_sim, a)
+        assert st["stopped"] and not st["running"] and not st["fault"], (a, st)
+
+
+def test_five_drives_over_a_pty_reach_20_hz_and_end_stopped(pty_sim):
+    r = pdrive("run", "3,4,5,6,7", "--hz", "20", "--duration", "2", "--yes", "--json", "--port", pty_sim)
+    assert r.returncode == 0, r.stderr
+    for a in ALL:
+        st = _status(pty_sim, a)
+        assert st["stopped"] and not st["running"] and not st["fault"], (a, st)
+    last = {e["station"]: e for e in events(r.stdout) if e["event"] == "update" and e["phase"] == "running"}
+    assert all(abs(last[a]["actual_hz"] - 20.0) <= 0.2 for a in ALL), last
