@@ -247,3 +247,21 @@ def test_five_drives_over_a_pty_reach_20_hz_and_end_stopped(pty_sim):
         assert st["stopped"] and not st["running"] and not st["fault"], (a, st)
     last = {e["station"]: e for e in events(r.stdout) if e["event"] == "update" and e["phase"] == "running"}
     assert all(abs(last[a]["actual_hz"] - 20.0) <= 0.2 for a in ALL), last
+
+
+@pytest.mark.parametrize("fault, station", [("powercycle", 5), ("drivetrip", 6)])
+def test_a_station_dropping_out_or_tripping_stops_every_drive(fault, station):
+    """sim fault injection on one station: the run ends with exit 1 naming it, and every other
+    drive that was started is stopped by its normal stop."""
+    r = pdrive("run", "3,4,5,6,7", "--hz", "20", "--duration", "4", "--yes", "--json", "--port",
+               f"{SIM_FAST}&{fault}=0.03&only={station}&seed=3")
+    assert r.returncode == 1, r.stderr
+    assert f"station {station}" in r.stderr.strip().splitlines()[-1] and "Traceback" not in r.stderr
+    end = events(r.stdout)[-1]
+    assert end["event"] == "end" and end["failed"] and f"station {station}" in end["reason"]
+    by = {s["station"]: s for s in end["stations"]}
+    assert by[station]["problem"]
+    for a in ALL:
+        if a != station and by[a]["started"]:
+            assert by[a]["stop"]["how"] == "normal" and by[a]["stopped"], by[a]
+    assert end["stopped"]

@@ -141,7 +141,8 @@ def run_several(opts, addresses: tuple, *, hz, percent, reverse, duration, fmax,
         if keys:
             keys[0].__exit__(None, None, None)
     if code:
-        bad = [f"station {r.address}: {r.problem}" for r in run.runs if r.problem]
+        bad = [f"station {r.address}: {r.problem}" for r in run.runs
+               if r.problem and f"station {r.address}" not in run.reason]
         raise DriveError(f"{run.reason or 'run of several drives'}" + (f" ({'; '.join(bad)})" if bad else "")
                          + ("; every drive is stopped" if run.end_dict()["stopped"] else
                             "; NOT every drive is confirmed stopped"))
