@@ -190,10 +190,8 @@ class MultiRun:
         if self.sync:
             _, self.freeze = sync_modes(sessions)
         # one round = one Data_Exchange per station: the wire limit of the round is the sum
-        self.wire_hz = 1.0 / sum(1.0 / s.wire_hz for s in sessions)
-        if self.cycle_hz is None:
-            self.cycle_rate = default_cycle_hz(self.master.link, self.wire_hz)
-        else:
+        self.cycle_rate, self.wire_hz = group_rate(self.master, sessions)
+        if self.cycle_hz is not None:
             self.cycle_rate = float(self.cycle_hz)
             if self.cycle_rate > self.wire_hz * 1.0001:
                 self.warnings.append(f"--cycle-hz {self.cycle_rate:g} is more than the bus allows for "
@@ -208,7 +206,7 @@ class MultiRun:
             s.cycle_hz = self.cycle_rate
             s.dp_sync, s.dp_freeze = self.sync, self.sync and self.freeze
             s.open()                        # Set_Prm (+ Sync_Req / Freeze_Req), Chk_Cfg, the Drive
-            s.channel.inner = self.group.channel(r.address)
+            attach(self.group, s)
         self.t0 = self.master.link.now()
         stations = []
         for r in self.runs:
@@ -306,84 +304,19 @@ class MultiRun:
             self._phase("stopped")
 
     def _stop_together(self, runs: list[StationRun]) -> None:
-        group = self.group
-        t0 = self.master.link.now()
-        pending: dict[int, list] = {}       # address -> [mode, deadline, limit, why]
-        by_addr = {r.address: r for r in runs}
-        for r in runs:
-            s = r.session
-            limit = s.stop_timeout(r.percent)
-            pending[r.address] = ["normal", t0 + limit, limit, ""]
-            try:
-                s.drive.stop("normal", wait=False)
-            except StationOut:
-                pass                        # the command is set; it goes when the station is back
-            except DriveError as e:
-                pending[r.address] = ["normal", t0, limit, f"normal stop failed: {e}"]
-        group.end_round()
-        while pending:
-            for a in list(pending):
-                r = by_addr[a]
-                s = r.session
-                try:
-                    st = s.drive.cycle()
-                except StationOut:
-                    continue
-                self._sample(r, make_sample(s, st), "stopping")
-                if st.fault or st.stopped:
-                    if st.fault and st.fault_code is None:
-                        try:
-                            st = s.drive.status()
-                        except (DriveError, StationOut):
-                            pass
-                    mode = pending.pop(a)[0]
-                    msg = (f"the drive is in fault{f' ({st.fault_code})' if st.fault_code else ''}: its "
-                           f"output is off" if st.fault else "stopped")
-                    why = ""
-                    if mode == "coast":
-                        why = "coasted"
-                    s._may_run = False
-                    s.final_status = st
-                    s.stop_report = StopReport(mode, True, self.master.link.now() - t0,
-                                               f"{msg}{'; ' + why if why else ''}", st)
-            group.end_round()
-            now = self.master.link.now()
-            hurry = self.guard.hurry
-            for a in list(pending):
-                mode, deadline, limit, why = pending[a]
-                r, s = by_addr[a], by_addr[a].session
-                if mode == "normal" and (hurry or now > deadline):
-                    why = why or ("stop hurried by a second signal" if hurry else
-                                  f"not stopped after {limit:g} s")
-                    s._warn(f"station {a}: {why}: coasting")
-                    pending[a] = ["coast", now + COAST_TIMEOUT_S, COAST_TIMEOUT_S, why]
-                    try:
-                        s.drive.stop("coast", wait=False)
-                    except StationOut:
-                        pass
-                    except DriveError as e:
-                        pending.pop(a)
-                        s.stop_report = StopReport("failed", False, now - t0,
-                                                   f"{why}; coast stop not possible: {e}",
-                                                   s.final_status)
-                elif mode == "coast" and now > deadline:
-                    pending.pop(a)
-                    out = group.out.get(a)
-                    if out is not None:
-                        text = (f"station {a} out of data exchange ({out}): pdrive could not send the "
-                                f"stop; its DP watchdog ({s.watchdog_ms:g} ms) ends data exchange and "
-                                f"the drive stops by {s.comm_loss_text or 'its communication-loss setting'}")
-                    else:
-                        text = f"{why}; the drive does not report stopped after a coast stop either"
-                    s.stop_report = StopReport("failed", False, now - t0, text, s.final_status)
-                    r.problem = r.problem or "not confirmed stopped"
-                    self.failed = True
-            if hurry:
-                self.guard.hurry = False
+        def on_sample(address, sample):
+            r = next(x for x in runs if x.address == address)
+            self._sample(r, sample, "stopping")
+
+        def hurry() -> bool:
+            h, self.guard.hurry = self.guard.hurry, False
+            return h
+        stop_together([(r.address, r.session, r.percent) for r in runs], self.group, hurry, on_sample)
         for r in runs:
             rep = r.session.stop_report
             if rep is None or not rep.stopped:
                 self.failed = True
+                r.problem = r.problem or "not confirmed stopped"
             elif rep.how == "coast":
                 self._say(f"station {r.address}: stopped by a coast stop after {rep.seconds:.1f} s "
                           f"({rep.message})")
@@ -420,3 +353,98 @@ class MultiRun:
                 "global_controls": self.group.global_controls if self.group is not None else 0,
                 "warnings": self.warnings + [w for r in self.runs for w in r.session.warnings
                                              if w not in self.warnings]}
+
+
+def stop_together(items, group: GroupCycle, hurry: Callable[[], bool] = lambda: False,
+                  on_sample: Callable | None = None) -> None:
+    """The stop of several drives at once. items: (address, DriveSession, percent) of the drives that
+    may be running, all on `group`. The normal stop command of every drive goes in one round; then
+    rounds until each reports stopped (or in fault); a drive not stopped within its own stop time
+    (safestop.stop_timeout), or every one when hurry() says so (a second signal), gets a coast stop;
+    one still not stopped after that is reported failed. A station out of data exchange keeps its
+    stop command for when it is back. Each session's stop_report (and final_status) is set and
+    may_run cleared for each drive confirmed stopped. on_sample(address, Sample) sees every cycle."""
+    t0 = group.master.link.now()
+    pending: dict[int, list] = {}           # address -> [mode, deadline, limit, why]
+    by_addr = {a: s for a, s, _ in items}
+    for a, s, pct in items:
+        limit = s.stop_timeout(pct)
+        pending[a] = ["normal", t0 + limit, limit, ""]
+        try:
+            s.drive.stop("normal", wait=False)
+        except StationOut:
+            pass                            # the command is set; it goes when the station is back
+        except DriveError as e:
+            pending[a] = ["normal", t0, limit, f"normal stop failed: {e}"]
+    group.end_round()
+    while pending:
+        for a in list(pending):
+            s = by_addr[a]
+            try:
+                st = s.drive.cycle()
+            except StationOut:
+                continue
+            if on_sample is not None:
+                on_sample(a, make_sample(s, st))
+            if not (st.fault or st.stopped):
+                continue
+            if st.fault and st.fault_code is None:
+                try:
+                    st = s.drive.status()
+                except (DriveError, StationOut):
+                    pass
+            mode, _, _, why = pending.pop(a)
+            msg = (f"the drive is in fault{f' ({st.fault_code})' if st.fault_code else ''}: its output "
+                   f"is off" if st.fault else "stopped")
+            s._may_run = False
+            s.final_status = st
+            s.stop_report = StopReport(mode, True, group.master.link.now() - t0,
+                                       msg + (f"; {why}; coasted" if mode == "coast" else ""), st)
+        group.end_round()
+        now = group.master.link.now()
+        hurried = hurry() if pending else False
+        for a in list(pending):
+            mode, deadline, limit, why = pending[a]
+            s = by_addr[a]
+            if mode == "normal" and (hurried or now > deadline):
+                why = why or ("stop hurried by a second signal" if hurried else
+                              f"not stopped after {limit:g} s")
+                s._warn(f"station {a}: {why}: coasting")
+                pending[a] = ["coast", now + COAST_TIMEOUT_S, COAST_TIMEOUT_S, why]
+                try:
+                    s.drive.stop("coast", wait=False)
+                except StationOut:
+                    pass
+                except DriveError as e:
+                    pending.pop(a)
+                    s.stop_report = StopReport("failed", False, now - t0,
+                                               f"{why}; coast stop not possible: {e}", s.final_status)
+            elif mode == "coast" and now > deadline:
+                pending.pop(a)
+                out = group.out.get(a)
+                if out is not None:
+                    text = (f"station {a} out of data exchange ({out}): pdrive could not send the stop; "
+                            f"its DP watchdog ({s.watchdog_ms:g} ms) ends data exchange and the drive "
+                            f"stops by {s.comm_loss_text or 'its communication-loss setting'}")
+                else:
+                    text = f"{why}; the drive does not report stopped after a coast stop either"
+                s.stop_report = StopReport("failed", False, now - t0, text, s.final_status)
+
+
+def attach(group: GroupCycle, session) -> Callable[[], None]:
+    """Put a connected session's cyclic channel on `group`; returns the function that takes it off."""
+    metered = session.channel
+    old = metered.inner
+    metered.inner = group.channel(session.address)
+
+    def detach() -> None:
+        metered.inner = old
+        if session.address in group.addresses:
+            group.addresses.remove(session.address)
+    return detach
+
+
+def group_rate(master, sessions) -> tuple[float, float]:
+    """(default rounds per second, the wire limit of a round): one Data_Exchange per station."""
+    wire = 1.0 / sum(1.0 / s.wire_hz for s in sessions)
+    return default_cycle_hz(master.link, wire), wire
