@@ -265,3 +265,53 @@ def test_a_station_dropping_out_or_tripping_stops_every_drive(fault, station):
         if a != station and by[a]["started"]:
             assert by[a]["stop"]["how"] == "normal" and by[a]["stopped"], by[a]
     assert end["stopped"]
+
+
+# -- checklists: run with together: true ----------------------------------------------------------
+
+LINE = """name: line
+stations:
+  - {name: conveyor-1, address: 3, profile: fuji-g1}
+  - {name: conveyor-2, address: 6, profile: moeller}
+  - {name: hoist, address: 7, profile: yaskawa}
+steps:
+  - run: {hz: 20, duration: 1, together: true}
+    stations: [conveyor-1, hoist]
+  - expect_status: {stopped: true, fault: false}
+"""
+
+
+def test_checklist_run_together_runs_the_stations_at_once_and_stops_them(sim):
+    from profidrive_cli.checklist.runner import PASSED, Observer, Runner, session_opener
+    from profidrive_cli.checklist.spec import load_checklist_text
+    from profidrive_cli.cli.common import BusOptions
+    url = ("sim://?stations=3:fuji-g1,6:moeller,7:yaskawa&set=3:F07=0.3,F08=0.3&set=6:F002=0.3,F003=0.3"
+           "&set=7:C1-01=0.3,C1-02=0.3")
+    master = BusOptions(url, "19200", 2, None, None, False, False, 0, False).open_master()
+    seen = []
+
+    class Watch(Observer):
+        def step_progress(self, station, result, text):
+            bus = next(iter(sim.values()))
+            # which stations' motors turn at this moment (the simulated drives' own speed)
+            seen.append({a for a, s in bus.slaves.items() if abs(_turning(s)) > 0.5})
+
+    res = Runner(load_checklist_text(LINE, "line.yaml"), session_opener(master), yes=True,
+                 observer=Watch()).run()
+    master.link.close()
+    by = {s.spec.name: s for s in res.stations}
+    assert [s.status for s in res.stations] == [PASSED, PASSED, PASSED], \
+        [(s.spec.name, [(r.status, r.message) for r in s.steps]) for s in res.stations]
+    for name in ("conveyor-1", "hoist"):
+        run = by[name].steps[0]
+        assert abs(run.measured["actual_hz"] - 20.0) <= 0.5 and run.measured["stopped"] is True
+        assert run.expected["together_with"] == ("hoist" if name == "conveyor-1" else "conveyor-1")
+    assert [r.step.type for r in by["conveyor-2"].steps] == ["expect_status"]   # not in the step's list
+    assert {3, 7} in seen                   # both motors turned at the same time
+    assert not any(6 in s for s in seen)    # the station not in the list never moved
+
+
+def _turning(slave) -> float:
+    """The simulated drive's output frequency (PROFIdrive models: freq, Yaskawa: out_hz)."""
+    m = slave.model
+    return getattr(m, "out_hz", None) if hasattr(m, "out_hz") else m.freq

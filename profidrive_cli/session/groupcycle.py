@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from profidrive_cli import BusError
 from profidrive_cli.dp import services as S
+from profidrive_cli.dp.station import RELEASED
 
 
 class StationOut(BusError):
@@ -78,7 +79,8 @@ class GroupCycle:
             return
         try:
             for a in self.addresses:
-                if a not in self._done and a in self.outputs:
+                if a not in self._done and a in self.outputs and \
+                        self.master.stations[a].state != RELEASED:
                     self._done.add(a)
                     try:
                         self._one(a)
@@ -120,6 +122,8 @@ class GroupCycle:
         """One Data_Exchange; a station not in data exchange gets one start-up request instead."""
         m = self.master
         st = m.stations[address]
+        if st.state == RELEASED:           # let go of on purpose: never parameterised again here
+            raise StationOut(address, "released")
         st.set_outputs(self.outputs[address])
         if not st.in_data_exchange:
             m.step(st)                     # one request of its start-up, never a wait
