@@ -62,7 +62,7 @@ class Run(StepType):
         a = r.step.args
         if a.get("together"):
             from profidrive_cli.checklist.steps import together
-            return together.execute(run, sr, r, d, h, a)
+            return together.execute(run, sr, r, d, h, a, run_measured)
         sign = -1.0 if a["direction"] == "reverse" else 1.0
         target = sign * float(a["speed"])
         tol = float(a["tolerance"])

@@ -97,8 +97,7 @@ class _Drive:
                 self.failed = (f"actual left the band: {fmt(rnd(v))}{self.u} while holding "
                                f"{fmt(self.target)}{self.u} ± {fmt(self.tol)}")
 
-    def result(self, a, others: str) -> tuple:
-        from profidrive_cli.checklist.steps.run import run_measured
+    def result(self, a, others: str, run_measured) -> tuple:
         st = self.st
         v = self.actual(st) if st is not None else None
         expected = {"speed": self.target, "unit": "Hz" if self.unit == "hz" else "%",
@@ -118,7 +117,8 @@ class _Drive:
         return True, msg, expected, measured
 
 
-def execute(run, sr, r, d, h, a) -> str:
+def execute(run, sr, r, d, h, a, run_measured) -> str:
+    """run_measured: run.py's measured dict (passed in: run.py imports this module)."""
     names = a.get("together_stations") or [s.name for s in run.cl.stations]
     specs = [s for s in run.cl.stations if s.name in names]
     done = _DONE.setdefault(run, {})
@@ -126,7 +126,7 @@ def execute(run, sr, r, d, h, a) -> str:
     if index not in done:
         if specs[0].name != sr.spec.name:
             raise StepFailed(f"not run: it runs on the turn of {specs[0].name}, which did not run it")
-        done[index] = _run_all(run, sr, r, d, h, a, specs)
+        done[index] = _run_all(run, sr, r, d, h, a, specs, run_measured)
     res = done[index].get(sr.spec.name)
     if res is None:
         raise StepFailed("not run: this station was not part of the run together")
@@ -136,7 +136,7 @@ def execute(run, sr, r, d, h, a) -> str:
     return msg
 
 
-def _run_all(run, sr, r, d, h, a, specs) -> dict:
+def _run_all(run, sr, r, d, h, a, specs, run_measured) -> dict:
     from profidrive_cli.session.multirun import attach, group_rate
     drives = [_Drive(sr.spec.name, d, h.session, a)]
     results: dict = {}
@@ -160,7 +160,7 @@ def _run_all(run, sr, r, d, h, a, specs) -> dict:
             _stop_all(drives, group)
         for x in drives:
             others = ", ".join(y.name for y in drives if y is not x)
-            results[x.name] = x.result(a, others)
+            results[x.name] = x.result(a, others, run_measured)
     return results
 
 
