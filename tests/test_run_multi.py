@@ -315,3 +315,28 @@ def _turning(slave) -> float:
     """The simulated drive's output frequency (PROFIdrive models: freq, Yaskawa: out_hz)."""
     m = slave.model
     return getattr(m, "out_hz", None) if hasattr(m, "out_hz") else m.freq
+
+
+def test_link_loss_names_each_stations_watchdog():
+    from conftest import start_pty_sim
+    sim, port = start_pty_sim()
+    p = subprocess.Popen(pdrive_cmd() + ["run", "3,4,5,6,7", "--hz", "20", "--port", port, "--yes", "--json"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True)
+    try:
+        read_until_turning(p, deadline_s=60)
+        sim.kill()
+        sim.wait()
+        outs, err = p.communicate(timeout=60)
+    finally:
+        for proc in (p, sim):
+            if proc.poll() is None:
+                proc.kill()
+    assert p.returncode == 1 and "Traceback" not in err
+    end = json.loads(outs.strip().splitlines()[-1])
+    assert end["reason"].startswith("error: link lost")
+    started = [s for s in end["stations"] if s["started"]]
+    assert started
+    for s in started:
+        assert s["stop"]["how"] == "not sent (link lost)" and not s["stopped"]
+        assert "DP watchdog (500 ms)" in s["stop"]["message"]
+    assert err.count("pdrive cannot send a stop") == len(started)
