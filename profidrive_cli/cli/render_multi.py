@@ -11,7 +11,8 @@ from rich.table import Table
 from rich.text import Text
 
 from profidrive_cli.cli.common import emit_json, err, out
-from profidrive_cli.cli.render_drive import counter_words, fmt_num
+from profidrive_cli.cli.render_drive import fmt_num
+from profidrive_cli.fdl.master import format_counters
 
 
 def sample_dict(address: int, t_s: float, sample, phase: str) -> dict:
@@ -156,5 +157,5 @@ class MultiView:
             if st.fault and st.fault_code:
                 state.append(f" {st.fault_code}", style="red")
             t.add_row(str(a), s["profile"], phase, state, fmt_num(smp.reference_hz, 2, "Hz"),
-                      fmt_num(smp.actual_hz, 2, "Hz"), counter_words(smp.counters))
+                      fmt_num(smp.actual_hz, 2, "Hz"), format_counters(smp.counters))
         return t

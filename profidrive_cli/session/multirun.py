@@ -276,7 +276,7 @@ class MultiRun:
                 break
             if self.should_quit is not None and self.should_quit():
                 self.reason = "q pressed"
-                break
+                return                      # the user ended it: no drive is judged on its speed
         for r in self.runs:
             if r.reached_after is None:
                 r.problem = "did not reach its reference"
