@@ -340,3 +340,29 @@ def test_link_loss_names_each_stations_watchdog():
         assert s["stop"]["how"] == "not sent (link lost)" and not s["stopped"]
         assert "DP watchdog (500 ms)" in s["stop"]["message"]
     assert err.count("pdrive cannot send a stop") == len(started)
+
+
+@pytest.mark.parametrize("sync", [True, False])
+def test_with_sync_the_references_take_effect_in_the_same_instant(sim, sync):
+    """Two Yaskawa stations: the instant each simulated drive first applies a non-zero reference.
+    With --sync both come from the one Sync broadcast (the same time); without it, from two
+    Data_Exchanges one after the other (different times)."""
+    from profidrive_cli.cli.common import BusOptions
+    from profidrive_cli.session.multirun import MultiRun
+    url = "sim://?stations=7:yaskawa,8:yaskawa&set=7:C1-01=0.3,C1-02=0.3&set=8:C1-01=0.3,C1-02=0.3"
+    master = BusOptions(url, "19200", 2, None, None, False, False, 0, False).open_master()
+    bus = next(iter(sim.values()))
+    first = {}
+    for a, slave in bus.slaves.items():
+        model = slave.model
+
+        def wrapped(outputs, now, _orig=model.data_exchange, _m=model, _a=a):
+            res = _orig(outputs, now)
+            if _m._ref_raw and _a not in first:
+                first[_a] = now
+            return res
+        model.data_exchange = wrapped
+    run = MultiRun(master, [7, 8], [("hz", 20.0), ("hz", 10.0)], duration=0.5, sync=sync)
+    assert run.run() == 0
+    assert set(first) == {7, 8}
+    assert (first[7] == first[8]) is sync, first

@@ -71,6 +71,10 @@ class GroupCycle:
         self._done.add(address)
         return self._one(address)
 
+    def exchanged(self, address: int) -> bool:
+        """Whether the station was exchanged in the open round."""
+        return address in self._done
+
     def end_round(self) -> None:
         """Exchange the stations not yet exchanged in this round (with their last outputs), then the
         Sync/Freeze broadcast. Nothing when no round is open. A station out of data exchange does not

@@ -3,8 +3,9 @@ bus cycle (groupcycle.py), each drive at its own speed; the stop of every drive 
 
 Order: identify every station (nothing written), check --sync against every station's GSD, ask once
 (confirm), bring every station to data exchange (with Sync_Req / Freeze_Req under --sync), read the
-max frequencies, start the drives one after the other (each start is the drive's own handshake; the
-others keep their cycle meanwhile), then cycle them all until --duration, q, a fault or a station
+max frequencies, start the drives one after the other at speed 0 (each start is the drive's own
+handshake; the others keep their cycle meanwhile), send every reference in one round (with --sync
+they take effect in the same instant), then cycle them all until --duration, q, a fault or a station
 dropping out. Then the stop: the stop command of every drive in one cycle (with --sync: taking effect
 in the same instant), a bounded wait for all of them together, a coast stop for each drive that does
 not stop in its time (or at once on a second signal), then Unsync/Unfreeze, release, close.
@@ -70,7 +71,7 @@ class StationRun:
     ref: tuple[str, float]               # ("hz" | "percent", value)
     percent: float = 0.0
     started: bool = False
-    t_start: float = 0.0                 # when its start command went (the run's clock)
+    t_start: float = 0.0                 # when its reference went (the run's clock)
     reached_after: float | None = None
     last: object = None                  # the last Sample
     problem: str = ""                    # why this drive failed (trip, dropped out, not reached ...)
@@ -229,11 +230,12 @@ class MultiRun:
                            "freeze": self.sync and self.freeze, "warnings": self.warnings})
 
     def _start_all(self) -> None:
+        """Each drive started at 0 (its own handshake, one after the other: nothing turns yet), then the
+        references of all in one round: with --sync they take effect in the same instant."""
         for r in self.runs:
             self._phase("starting", r.address)
-            r.t_start = self.now()
             try:
-                sample = r.session.start(r.percent)
+                sample = r.session.start(0.0)
             except StationOut:
                 raise
             except DriveError as e:
@@ -242,6 +244,15 @@ class MultiRun:
                 raise DriveError(f"station {r.address}: {e}") from None
             r.started = True
             self._sample(r, sample, "starting")
+        self.group.end_round()
+        t = self.now()
+        for r in self.runs:
+            r.session.set_reference(r.percent)
+            r.t_start = t
+        for r in self.runs:                 # a codec that sets its words without an exchange
+            if not self.group.exchanged(r.address):
+                self._sample(r, r.session.poll(), "running")
+        self.group.end_round()              # (Sync: every new reference takes effect now)
         self._phase("running")
 
     def _cycle(self) -> None:
