@@ -68,9 +68,10 @@ def out(n):
 
 def test_sync_applies_the_outputs_only_on_the_next_sync():
     slave, m = _started(sync=True)
-    assert m.diag().st2 & S.ST2["Sync_Mode"]
+    assert not m.diag().st2 & S.ST2["Sync_Mode"]                     # asked for, not yet in force
     assert m.req(None, out(1), now=1.0).data[:11] == out(1)[:11]     # no Sync yet: applied at once
     _gc(slave, S.GC_SYNC, 2.0)                                        # Sync: out(1) held from now
+    assert m.diag().st2 & S.ST2["Sync_Mode"]
     assert m.req(None, out(2), now=3.0).data[:11] == out(1)[:11]     # received, not applied
     assert m.req(None, out(3), now=4.0).data[:11] == out(1)[:11]
     _gc(slave, S.GC_SYNC, 5.0)                                        # the last received takes effect
@@ -78,6 +79,7 @@ def test_sync_applies_the_outputs_only_on_the_next_sync():
     assert m.req(None, out(4), now=6.0).data[:11] == out(3)[:11]
     _gc(slave, S.GC_UNSYNC, 7.0)                                      # Unsync: out(4) takes effect now
     assert slave.model.applied[-1] == (out(4), 7.0)
+    assert not m.diag().st2 & S.ST2["Sync_Mode"]
     assert m.req(None, out(5), now=8.0).data[:11] == out(5)[:11]     # and each exchange again
 
 
@@ -85,6 +87,7 @@ def test_freeze_latches_the_inputs_until_the_next_freeze():
     slave, m = _started(freeze=True)
     assert m.req(None, out(1), now=1.0).data[11] == 1                 # live inputs
     _gc(slave, S.GC_FREEZE, 2.0)
+    assert m.diag().st2 & S.ST2["Freeze_Mode"]
     assert m.req(None, out(1), now=3.0).data[11] == 2                 # sampled at the Freeze
     assert m.req(None, out(1), now=4.0).data[11] == 2
     _gc(slave, S.GC_FREEZE, 5.0)

@@ -112,9 +112,11 @@ class SimSlave:
             st2 |= S.ST2["Prm_Req"]
         if self.wd_s is not None:
             st2 |= S.ST2["WD_On"]
-        if self.sync:
+        # Sync_Mode / Freeze_Mode: a Sync / Freeze command is in force (set when the station
+        # obeyed one, cleared by Unsync / Unfreeze and on leaving data exchange)
+        if self.synced_outputs is not None:
             st2 |= S.ST2["Sync_Mode"]
-        if self.freeze:
+        if self.frozen_inputs is not None:
             st2 |= S.ST2["Freeze_Mode"]
         room = max(0, self.model.max_diag_len - 6)
         st3 = S.ST3_OVERFLOW if len(ext) > room else 0
