@@ -369,3 +369,14 @@ def test_with_sync_the_references_take_effect_in_the_same_instant(sim, sync):
     assert run.run() == 0
     assert set(first) == {7, 8}
     assert (first[7] == first[8]) is sync, first
+
+
+def test_a_real_port_asks_once_for_all_stations(pty_sim):
+    r = pdrive("run", "3,7", "--hz", "20", "--port", pty_sim)       # no --yes, no terminal to ask
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    line = r.stderr.strip().splitlines()[-1]
+    assert "run 2 drives — stations 3 (fuji-opc-g1-pdp), 7 (yaskawa-si-p1) at 20 Hz, 20 Hz" in line
+    assert "add --yes" in line and r.stdout == ""
+    for a in (3, 7):
+        st = _status(pty_sim, a)
+        assert st["stopped"] and not st["running"], st
