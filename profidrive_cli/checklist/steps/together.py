@@ -72,7 +72,8 @@ class _Drive:
             return True
         if self.through_zero and v is not None:
             self.min_abs = min(self.min_abs, abs(v))
-            if abs(v) <= self.tol or (self.min_abs < abs(self.v0) - self.tol and abs(v) > self.min_abs + self.tol):
+            fell = self.min_abs < abs(self.v0) - self.tol
+            if abs(v) <= self.tol or (fell and abs(v) > self.min_abs + self.tol):
                 self.through_zero = False
         if v is not None and abs(v - self.target) <= self.tol and not self.through_zero:
             self.reached = now - self.t_start
@@ -112,7 +113,8 @@ class _Drive:
         msg = (f"within ± {fmt(self.tol)}{self.u} of {fmt(self.target)}{self.u} after {self.reached:.2f} s"
                + (f", held {fmt(a['duration'])} s at {fmt(rnd(self.lo))}..{fmt(rnd(self.hi))}{self.u}"
                   if a["duration"] else "") + f"; run together with {others}, all stopped after")
-        if self.session is not None and (self.session.stop_report is None or not self.session.stop_report.stopped):
+        rep = self.session.stop_report if self.session is not None else None
+        if self.session is not None and (rep is None or not rep.stopped):
             return False, msg.replace("all stopped after", "NOT confirmed stopped after"), expected, measured
         return True, msg, expected, measured
 
