@@ -380,3 +380,35 @@ def test_a_real_port_asks_once_for_all_stations(pty_sim):
     for a in (3, 7):
         st = _status(pty_sim, a)
         assert st["stopped"] and not st["running"], st
+
+
+@pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)], ids=["SIGINT", "SIGTERM"])
+def test_checklist_run_together_interrupted_leaves_every_drive_stopped(pty_sim, tmp_path, sig, code):
+    import os
+    import time
+    f = tmp_path / "line.yaml"
+    f.write_text(LINE.replace("duration: 1, together: true", "duration: 60, together: true, within: 30")
+                 .replace("    stations: [conveyor-1, hoist]\n", "")
+                 .replace("steps:\n", "steps:\n  - note: go\n    stations: conveyor-1\n"))
+    p = subprocess.Popen(pdrive_cmd() + ["checklist", "run", str(f), "--port", pty_sim, "--yes"],
+                         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                         env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    seen = []
+    try:
+        for line in p.stdout:
+            seen.append(line)
+            if "go" in line and "PASS" in line:
+                break
+        time.sleep(4)               # the three stations are opened and started (or starting)
+        p.send_signal(sig)
+        outs, _ = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == code, "".join(seen) + outs
+    assert "Traceback" not in outs
+    run_line = next(x for x in outs.splitlines() if "together with every station" in x)
+    assert "ERROR" in run_line and "interrupted by" in run_line, outs
+    for a in (3, 6, 7):
+        st = _status(pty_sim, a)
+        assert st["stopped"] and not st["running"] and not st["fault"], (a, st)
