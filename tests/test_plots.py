@@ -286,3 +286,10 @@ def test_recording_leaves_the_drive_as_it_was():
         assert d.cycle() is st and d.cycle() is st
     assert len(tr) == 2 and tr.rows[0] == (0.0, 5.0, 10.0, 10.0)
     assert "cycle" not in vars(d) and d.cycle() is st        # the class's own method again
+
+
+def test_run_plot_with_several_stations_is_refused_before_anything_moves(tmp_path, sim):
+    r = run("run", "3,4", "--hz", "20", "--duration", "1", "--plot", tmp_path / "m.svg",
+            "--port", "sim://?stations=3:fuji-g1,4:fuji-pdp3")
+    assert isinstance(r.exception, UsageError) and "--plot: one station only" in str(r.exception)
+    assert not sim and not (tmp_path / "m.svg").exists()

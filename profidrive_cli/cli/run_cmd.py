@@ -11,7 +11,7 @@ import click
 
 from profidrive_cli import UsageError
 from profidrive_cli.cli import render_drive as R
-from profidrive_cli.cli import run_plot, run_torque
+from profidrive_cli.cli import run_multi, run_plot, run_torque
 from profidrive_cli.cli.common import bus_options
 from profidrive_cli.cli.drive_cmds import (_confirmer, _session, _terminations, drive_options,
                                           run_ending)
@@ -21,10 +21,13 @@ from profidrive_cli.outfile import check_output_path
 
 
 @click.command("run")
-@click.argument("address", required=False, type=int)
+@click.argument("address", required=False, type=run_multi.STATIONS, metavar="[ADDRESS[,ADDRESS...]]")
 @drive_options
-@click.option("--hz", type=float, default=None, help="Speed reference in Hz (negative = reverse).")
-@click.option("--percent", type=float, default=None, help="Speed reference in % of the max frequency.")
+@click.option("--hz", type=run_multi.SPEEDS, default=None,
+              help="Speed reference in Hz (negative = reverse); with several stations one for all or "
+                   "one each (30,20,25).")
+@click.option("--percent", type=run_multi.SPEEDS, default=None,
+              help="Speed reference in % of the max frequency (one for all or one each).")
 @click.option("--reverse", is_flag=True, help="Run in reverse.")
 @click.option("--torque", "torque", type=float, default=None, metavar="PERCENT",
               help="Torque control with this reference in % of rated torque (negative or --reverse = "
@@ -49,15 +52,27 @@ from profidrive_cli.outfile import check_output_path
 @click.option("--monitor", "monitor_spec", default=None, metavar="CODE[,CODE...]|default",
               help="Monitor values to read while running (the card's codes, e.g. d002,d013; 'default': "
                    "the profile's set), shown live, in --json and in the --log CSV.")
+@click.option("--sync", is_flag=True,
+              help="Several stations: Global_Control Sync (and Freeze) so each cycle's outputs take "
+                   "effect in the same instant; only where every station's GSD allows it.")
 @bus_options
 @_terminations
 def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, reverse, torque, torque_limit,
-            duration, fmax, cycle_hz, yes, log_path, reconnect_s, monitor_spec, plot_path):
+            duration, fmax, cycle_hz, yes, log_path, reconnect_s, monitor_spec, sync, plot_path):
     """Run a drive at a speed (or a torque) and show it live; stops it safely on every exit.
+    Several stations (3,4,5) run together on one bus cycle, each stopped on every exit.
 
     Keys (on a terminal): up/down change the speed (the torque with --torque), r reverses, space
     stops/starts, q quits.
     """
+    if isinstance(address, tuple):
+        return run_multi.run_several(
+            opts, address, hz=hz, percent=percent, reverse=reverse, duration=duration, fmax=fmax,
+            cycle_hz=cycle_hz, yes=yes, watchdog_ms=watchdog_ms, sync=sync,
+            refused={"--torque": torque, "--torque-limit": torque_limit, "--log": log_path,
+                     "--reconnect": reconnect_s, "--monitor": monitor_spec,
+                     "--profile": profile_name, "--ppo": ppo, "--format": fmt, "--plot": plot_path})
+    run_multi.single_checks(hz, percent, sync)
     for name, v in (("--hz", hz), ("--percent", percent), ("--fmax", fmax), ("--duration", duration),
                     ("--cycle-hz", cycle_hz), ("--torque", torque), ("--torque-limit", torque_limit)):
         if v is not None and not math.isfinite(v):

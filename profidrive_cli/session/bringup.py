@@ -19,7 +19,8 @@ def connect(sess):
     assert sess.profile is not None and sess.layout is not None
     lay = sess.profile.layouts[sess.layout]
     sc = SlaveConfig(ident=sess.ident, cfg=lay.cfg, user_prm=user_prm(sess),
-                     wd_ms=sess.watchdog_ms)
+                     wd_ms=sess.watchdog_ms, sync=getattr(sess, "dp_sync", False),
+                     freeze=getattr(sess, "dp_freeze", False))   # Sync_Req / Freeze_Req (multirun.py)
     sess.master.add_station(sess.address, sc)
     try:
         sess.master.bring_up(sess.address, timeout=3.0, fail_fast=True)

@@ -51,7 +51,21 @@ def make_model(profile: Profile, **options) -> SlaveModel:
         m.family = profile.name
     if getattr(m, "default_layout", None) is None:
         m.default_layout = profile.default_layout
+    _gsd_modes(profile, m)
     return m
+
+
+def _gsd_modes(profile: Profile, m: SlaveModel) -> None:
+    """The station offers Sync / Freeze (sim/slave.py) exactly where its own GSD file, the library file
+    the profile names (`gsd:`), claims them (Sync_Mode_supp / Freeze_Mode_supp)."""
+    if not getattr(profile, "gsd", None):
+        return
+    from profidrive_cli.data import gsd_dir
+    from profidrive_cli.gsd.library import parse_cached
+    path = gsd_dir() / profile.gsd
+    if path.is_file():
+        g = parse_cached(path)
+        m.sync_supported, m.freeze_supported = bool(g.sync_mode_supp), bool(g.freeze_mode_supp)
 
 
 def _station_list(text: str) -> list[tuple[int, str]]:

@@ -49,6 +49,7 @@ class SimSlave:
         self.not_supported = False
         self.diag_pending = False
         self.sync = self.freeze = False
+        self._sync_mode_off()
         self.group = 0
         self.outputs = b""
         self.inputs = b""
@@ -73,6 +74,14 @@ class SimSlave:
         if self.state == DATA_EXCH:
             self.model.on_leave_data_exchange(now, reason)
         self.state = to
+        self._sync_mode_off()
+
+    def _sync_mode_off(self) -> None:
+        """No Sync / Freeze command in force (power on, leaving data exchange)."""
+        #: outputs the application uses while a Sync is in force (None: no Sync: the received ones)
+        self.synced_outputs: bytes | None = None
+        #: inputs sampled by the last Freeze (None: no Freeze in force: live inputs)
+        self.frozen_inputs: bytes | None = None
 
     def tick(self, now: float) -> None:
         """Watchdog: no telegram from our master within the watchdog time -> Wait_Prm."""
@@ -108,9 +117,11 @@ class SimSlave:
             st2 |= S.ST2["Prm_Req"]
         if self.wd_s is not None:
             st2 |= S.ST2["WD_On"]
-        if self.sync:
+        # Sync_Mode / Freeze_Mode: a Sync / Freeze command is in force (set when the station
+        # obeyed one, cleared by Unsync / Unfreeze and on leaving data exchange)
+        if self.synced_outputs is not None:
             st2 |= S.ST2["Sync_Mode"]
-        if self.freeze:
+        if self.frozen_inputs is not None:
             st2 |= S.ST2["Freeze_Mode"]
         room = max(0, self.model.max_diag_len - 6)
         st3 = S.ST3_OVERFLOW if len(ext) > room else 0
@@ -161,6 +172,32 @@ class SimSlave:
             self.last_seen = now
             if gc.command & S.GC_CLEAR and self.state == DATA_EXCH:
                 self.model.clear_outputs(now)
+            if self.state == DATA_EXCH:
+                self._sync_freeze(gc.command, now)
+
+    def _sync_freeze(self, command: int, now: float) -> None:
+        """Sync / Unsync / Freeze / Unfreeze (reference 3.5), obeyed only when Set_Prm asked for the
+        mode (Sync_Req / Freeze_Req; a station without the mode refused that Set_Prm). Sync: the
+        outputs received last take effect now and stay until the next Sync (outputs of Data_Exchange
+        in between are kept, not applied); Unsync: back to applying each Data_Exchange's outputs
+        (the ones received last take effect now). Freeze: the inputs are sampled now and every
+        Data_Exchange answers them until the next Freeze; Unfreeze: live inputs again. Sync and
+        Freeze in one command: the outputs take effect, then the inputs are sampled."""
+        applied = None
+        if self.sync and command & (S.GC_SYNC | S.GC_UNSYNC):
+            self.synced_outputs = self.outputs if command & S.GC_SYNC and not \
+                command & S.GC_UNSYNC else None
+            applied = self.outputs
+        if self.freeze and command & S.GC_UNFREEZE:
+            self.frozen_inputs = None
+        if applied is not None or (self.freeze and command & S.GC_FREEZE
+                                   and not command & S.GC_UNFREEZE):
+            live = self.model.data_exchange(self._applied_outputs(), now)
+            if self.freeze and command & S.GC_FREEZE and not command & S.GC_UNFREEZE:
+                self.frozen_inputs = live
+
+    def _applied_outputs(self) -> bytes:
+        return self.synced_outputs if self.synced_outputs is not None else self.outputs
 
     def _service(self, req: F.Frame, now: float) -> bytes:
         if self._from_own_master(req):
@@ -270,7 +307,8 @@ class SimSlave:
             return self._reply(req, F.RS, saps=False)
         self.stats["data_exchange"] += 1
         self.outputs = req.data
-        self.inputs = self.model.data_exchange(req.data, now)
+        live = self.model.data_exchange(self._applied_outputs(), now)
+        self.inputs = live if self.frozen_inputs is None else self.frozen_inputs
         status = F.DH if self.diag_pending else F.DL
         if not self.inputs and status == F.DL:
             return F.encode(F.Frame(F.SC))

@@ -19,7 +19,8 @@ class Run(StepType):
     name = "run"
 
     def validate(self, check, st, rs, body, state):
-        d = check.fields(rs, body, ("hz", "percent", "direction", "duration", "tolerance", "within"))
+        d = check.fields(rs, body, ("hz", "percent", "direction", "duration", "tolerance", "within",
+                                    "together"))
         w = f"step {rs.index} (run)"
         if ("hz" in d) == ("percent" in d):
             check.fail(rs.body_line, f"{w}: give the speed as either hz or percent")
@@ -40,15 +41,28 @@ class Run(StepType):
         tol = check.num(rs, d, "tolerance", default=DEFAULT_TOL_HZ if unit == "hz" else DEFAULT_TOL_PERCENT,
                         positive=True)
         within = check.num(rs, d, "within", default=DEFAULT_RUN_WITHIN_S, positive=True)
-        state["running"] = True
+        together = d.get("together", False)
+        if not isinstance(together, bool):
+            check.fail(d.line_of("together"), f"{w}: together must be true or false, got {together!r}")
+        # together: every station of the step at once, all stopped at its end (together.py)
+        state["running"] = not together
         u = " Hz" if unit == "hz" else " %"
+        names = [n for n, _ in rs.stations] if rs.stations else None
         title = (f"run {direction} at {fmt(speed)}{u} (± {fmt(tol)}{u} within {fmt(within)} s)"
-                 + (f", hold {fmt(duration)} s" if duration else ""))
-        return {"unit": unit, "speed": speed, "direction": direction, "duration": duration, "tolerance": tol,
-                "within": within}, title
+                 + (f", hold {fmt(duration)} s" if duration else "")
+                 + ((", together with " + (", ".join(names) if names else "every station") + ", then stop")
+                    if together else ""))
+        args = {"unit": unit, "speed": speed, "direction": direction, "duration": duration, "tolerance": tol,
+                "within": within}
+        if together:
+            args.update(together=True, together_stations=names)
+        return args, title
 
     def execute(self, run, sr, r, d, h):
         a = r.step.args
+        if a.get("together"):
+            from profidrive_cli.checklist.steps import together
+            return together.execute(run, sr, r, d, h, a, run_measured)
         sign = -1.0 if a["direction"] == "reverse" else 1.0
         target = sign * float(a["speed"])
         tol = float(a["tolerance"])

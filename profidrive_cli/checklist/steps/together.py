@@ -1,0 +1,208 @@
+"""`run` with `together: true`: the stations of the step (its `stations:` list, else every station of
+the checklist) run at once, with the same checks per drive as `run` (reach the band within `within`,
+hold it for `duration`), and all of them are stopped together at the end of the step.
+
+Stations run one after the other in a checklist, so the step runs on the turn of the first station of
+its list: it opens the others' sessions beside that one (run.open_station, the same master), puts every
+session on one bus cycle (session/groupcycle.py) and, on the later stations' turns, reports what it
+measured for them. A trip or a station dropping out ends the run for all (every drive stopped). Not a
+step type of its own: checklist/steps/run.py hands over to it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import weakref
+
+from profidrive_cli import PdriveError
+from profidrive_cli.checklist.fields import fmt
+from profidrive_cli.checklist.steps.base import StepFailed, rnd
+
+#: Runner -> {step index: {station name: (passed, message, expected, measured)}}
+_DONE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+class _Drive:
+    """One drive of the run and its checks (the rules of `run`)."""
+
+    def __init__(self, name, drive, session, a):
+        self.name, self.d, self.session = name, drive, session
+        sign = -1.0 if a["direction"] == "reverse" else 1.0
+        self.target = sign * float(a["speed"])
+        self.tol, self.unit = float(a["tolerance"]), a["unit"]
+        self.u = " Hz" if self.unit == "hz" else " %"
+        self.reached = None              # seconds to the band
+        self.lo = self.hi = None
+        self.failed = ""
+        self.st = None
+
+    def actual(self, s):
+        if self.unit == "hz":
+            if s.speed_hz is not None:
+                return s.speed_hz
+            if s.speed_percent is not None:
+                return s.speed_percent * self.d.max_frequency() / 100.0
+            return None
+        return s.speed_percent
+
+    def begin(self, within: float) -> None:
+        ch = self.d.channel
+        st0 = self.d.status()
+        self.v0 = self.actual(st0)
+        self.through_zero = bool(st0.running and self.v0 is not None and self.v0 * self.target < 0
+                                 and abs(self.v0) > self.tol)
+        self.min_abs = abs(self.v0) if self.v0 is not None else 0.0
+        self.t_start = ch.now()
+        if self.unit == "hz":
+            self.d.set_speed_hz(self.target)
+        else:
+            self.d.set_speed(self.target)
+        st = self.d.status()
+        if not st.running:
+            st = self.d.start(timeout=within)
+        self.deadline = self.t_start + within
+        self.st = st
+
+    def feed_reach(self, st, now) -> bool:
+        """True once this drive is done with the reach phase (in the band, failed or tripped)."""
+        self.st = st
+        v = self.actual(st)
+        if st.fault:
+            self.failed = f"the drive tripped while accelerating ({st.fault_code or st.state})"
+            return True
+        if self.through_zero and v is not None:
+            self.min_abs = min(self.min_abs, abs(v))
+            fell = self.min_abs < abs(self.v0) - self.tol
+            if abs(v) <= self.tol or (fell and abs(v) > self.min_abs + self.tol):
+                self.through_zero = False
+        if v is not None and abs(v - self.target) <= self.tol and not self.through_zero:
+            self.reached = now - self.t_start
+            self.lo = self.hi = v
+            return True
+        if now > self.deadline:
+            self.failed = (f"actual {fmt(rnd(v))}{self.u} after {fmt(now - self.t_start)} s, expected "
+                           f"{fmt(self.target)}{self.u} ± {fmt(self.tol)}")
+            return True
+        return False
+
+    def feed_hold(self, st) -> None:
+        self.st = st
+        v = self.actual(st)
+        if self.failed:
+            return
+        if st.fault:
+            self.failed = f"the drive tripped while running ({st.fault_code or st.state})"
+        elif v is not None:
+            self.lo, self.hi = min(self.lo, v), max(self.hi, v)
+            if abs(v - self.target) > self.tol:
+                self.failed = (f"actual left the band: {fmt(rnd(v))}{self.u} while holding "
+                               f"{fmt(self.target)}{self.u} ± {fmt(self.tol)}")
+
+    def result(self, a, others: str, run_measured) -> tuple:
+        st = self.st
+        v = self.actual(st) if st is not None else None
+        expected = {"speed": self.target, "unit": "Hz" if self.unit == "hz" else "%",
+                    "tolerance": self.tol, "within_s": a["within"], "hold_s": a["duration"],
+                    "together_with": others}
+        measured = run_measured(st, v, self.reached, self.lo, self.hi, self.unit) if st is not None else {}
+        if self.session is not None and self.session.stop_report is not None:
+            measured["stop"] = self.session.stop_report.how
+            measured["stopped"] = self.session.stop_report.stopped
+        if self.failed:
+            return False, self.failed, expected, measured
+        msg = (f"within ± {fmt(self.tol)}{self.u} of {fmt(self.target)}{self.u} after {self.reached:.2f} s"
+               + (f", held {fmt(a['duration'])} s at {fmt(rnd(self.lo))}..{fmt(rnd(self.hi))}{self.u}"
+                  if a["duration"] else "") + f"; run together with {others}, all stopped after")
+        rep = self.session.stop_report if self.session is not None else None
+        if self.session is not None and (rep is None or not rep.stopped):
+            return False, msg.replace("all stopped after", "NOT confirmed stopped after"), expected, measured
+        return True, msg, expected, measured
+
+
+def execute(run, sr, r, d, h, a, run_measured) -> str:
+    """run_measured: run.py's measured dict (passed in: run.py imports this module)."""
+    names = a.get("together_stations") or [s.name for s in run.cl.stations]
+    specs = [s for s in run.cl.stations if s.name in names]
+    done = _DONE.setdefault(run, {})
+    index = r.step.index
+    if index not in done:
+        if specs[0].name != sr.spec.name:
+            raise StepFailed(f"not run: it runs on the turn of {specs[0].name}, which did not run it")
+        done[index] = _run_all(run, sr, r, d, h, a, specs, run_measured)
+    res = done[index].get(sr.spec.name)
+    if res is None:
+        raise StepFailed("not run: this station was not part of the run together")
+    ok, msg, r.expected, r.measured = res
+    if not ok:
+        raise StepFailed(msg)
+    return msg
+
+
+def _run_all(run, sr, r, d, h, a, specs, run_measured) -> dict:
+    from profidrive_cli.session.multirun import attach, group_rate
+    drives = [_Drive(sr.spec.name, d, h.session, a)]
+    results: dict = {}
+    with contextlib.ExitStack() as stack:
+        group = None
+        if h.session is not None:
+            from profidrive_cli.session.groupcycle import GroupCycle
+            group = GroupCycle(h.session.master)
+            stack.callback(attach(group, h.session))
+        for spec in specs[1:]:
+            hh = stack.enter_context(run.open_station(spec))
+            if group is not None and hh.session is not None:
+                attach(group, hh.session)    # stays on the group until its session is closed
+            drives.append(_Drive(spec.name, hh.drive, hh.session, a))
+        if group is not None:
+            rate, _ = group_rate(group.master, [x.session for x in drives])
+            group.period = 1.0 / rate if rate else 0.0
+        try:
+            _reach_and_hold(run, sr, r, a, drives, group)
+        finally:
+            _stop_all(drives, group)
+        for x in drives:
+            others = ", ".join(y.name for y in drives if y is not x)
+            results[x.name] = x.result(a, others, run_measured)
+    return results
+
+
+def _reach_and_hold(run, sr, r, a, drives, group) -> None:
+    def end_round():
+        if group is not None:
+            group.end_round()
+    for x in drives:
+        x.begin(float(a["within"]))
+    ch = drives[0].d.channel
+    pending = list(drives)
+    while pending:
+        for x in list(pending):
+            if x.feed_reach(x.d.cycle(), ch.now()):
+                pending.remove(x)
+        end_round()
+        if any(x.st is not None and x.st.fault for x in drives):
+            return                          # a trip ends the run for all
+        run.progress(sr, r, "accelerating: " + ", ".join(
+            f"{x.name} {fmt(rnd(x.actual(x.st)))}{x.u}" for x in drives if x.st is not None))
+    if any(x.failed for x in drives):
+        return
+    hold_end = ch.now() + float(a["duration"])
+    while ch.now() < hold_end:
+        for x in drives:
+            x.feed_hold(x.d.cycle())
+        end_round()
+        if any(x.st.fault for x in drives):
+            return
+        run.progress(sr, r, f"holding ({max(0.0, hold_end - ch.now()):.1f} s left)")
+
+
+def _stop_all(drives, group) -> None:
+    """Every drive stopped together (the sessions' stop_together), or one by one without sessions."""
+    if group is not None and all(x.session is not None for x in drives):
+        from profidrive_cli.session.multirun import stop_together
+        stop_together([(x.session.address, x.session, None) for x in drives], group)
+        return
+    for x in drives:
+        try:
+            x.d.stop("normal", wait=True, timeout=30.0)
+        except PdriveError:
+            x.d.stop("coast", wait=True, timeout=30.0)

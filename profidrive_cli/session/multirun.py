@@ -1,0 +1,461 @@
+"""Several drives in one run (pdrive run 3,4,5): one DriveSession per station on one master, all on one
+bus cycle (groupcycle.py), each drive at its own speed; the stop of every drive on every way out.
+
+Order: identify every station (nothing written), check --sync against every station's GSD, ask once
+(confirm), bring every station to data exchange (with Sync_Req / Freeze_Req under --sync), read the
+max frequencies, start the drives one after the other at speed 0 (each start is the drive's own
+handshake; the others keep their cycle meanwhile), send every reference in one round (with --sync
+they take effect in the same instant), then cycle them all until --duration, q, a fault or a station
+dropping out. Then the stop: the stop command of every drive in one cycle (with --sync: taking effect
+in the same instant), a bounded wait for all of them together, a coast stop for each drive that does
+not stop in its time (or at once on a second signal), then Unsync/Unfreeze, release, close.
+
+Decided: a drive that trips, or a station that drops out of data exchange, ends the run for all: every
+other drive is stopped too (a line of drives runs together or not at all) and the exit code is 1.
+No click and no rich here: the cli renders through the callbacks.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+from profidrive_cli import BusError, UsageError
+from profidrive_cli.drives.base import DriveError
+from profidrive_cli.link.base import LinkLost
+from profidrive_cli.session.cycle import default_cycle_hz, make_sample
+from profidrive_cli.session.drivesession import DriveSession
+from profidrive_cli.session.groupcycle import GroupCycle, StationOut
+from profidrive_cli.session.safestop import COAST_TIMEOUT_S, StopReport
+from profidrive_cli.session.signals import SessionTerminated, SignalGuard
+
+DEFAULT_WATCHDOG_MS = 500
+
+
+def at_reference(sample) -> bool:
+    """Actual within 1 % of the reference (at least 0.05 % of the max frequency): `run`'s rule."""
+    ref, act = sample.reference_percent, sample.actual_percent
+    if ref is None or act is None:
+        return False
+    return abs(act - ref) <= max(0.01 * abs(ref), 0.05)
+
+
+def sync_modes(sessions, gsd_for=None) -> tuple[bool, bool]:
+    """--sync: (Sync, Freeze) when every station's GSD claims Sync_Mode_supp (Freeze too when every
+    one claims Freeze_Mode_supp); UsageError naming the first station that does not."""
+    if gsd_for is None:
+        from profidrive_cli.gsd.library import find_by_ident, find_path_by_ident
+
+        def gsd_for(ident):
+            g = find_by_ident(ident)
+            return g, (find_path_by_ident(ident).name if g is not None else None)
+    freeze = True
+    for s in sessions:
+        g, name = gsd_for(s.ident)
+        who = f"station {s.address} ({s.profile.name}, ident 0x{s.ident:04X})"
+        if g is None:
+            raise UsageError(f"--sync: {who} has no GSD file in the library or --gsd-dir / "
+                             f"PDRIVE_GSD_DIR, so whether it supports Sync is unknown; nothing was written")
+        if not g.sync_mode_supp:
+            raise UsageError(f"--sync: {who}: its GSD {name} does not claim Sync_Mode_supp; "
+                             f"nothing was written")
+        freeze = freeze and bool(g.freeze_mode_supp)
+    return True, freeze
+
+
+@dataclass
+class StationRun:
+    """One drive of the run: its session, reference and what happened to it."""
+    session: DriveSession
+    address: int
+    ref: tuple[str, float]               # ("hz" | "percent", value)
+    percent: float = 0.0
+    started: bool = False
+    t_start: float = 0.0                 # when its reference went (the run's clock)
+    reached_after: float | None = None
+    last: object = None                  # the last Sample
+    problem: str = ""                    # why this drive failed (trip, dropped out, not reached ...)
+
+    def to_dict(self) -> dict:
+        s = self.session
+        rep = s.stop_report
+        fs = s.final_status
+        return {"station": self.address, "profile": s.profile.name if s.profile else None,
+                "started": self.started, "reached_after_s": self.reached_after,
+                "stop": rep.to_dict() if rep is not None else None,
+                "stopped": bool(rep.stopped) if rep is not None else not self.started,
+                "state": fs.state if fs is not None else None,
+                "fault": fs.fault if fs is not None else None,
+                "fault_code": fs.fault_code if fs is not None else None,
+                "problem": self.problem or None, "counters": s.counters}
+
+
+@dataclass
+class MultiRun:
+    """The run; callbacks (all optional): on_start(header), on_phase(phase, address or None),
+    on_sample(address, t_s, sample, phase), on_end(end), confirm(sessions), should_quit() -> bool,
+    on_message(text)."""
+    master: object
+    addresses: list[int]
+    refs: list[tuple[str, float]]        # one per station
+    reverse: bool = False
+    fmax: float | None = None
+    duration: float | None = None
+    watchdog_ms: float = DEFAULT_WATCHDOG_MS
+    cycle_hz: float | None = None
+    sync: bool = False
+    confirm: Callable | None = None
+    should_quit: Callable[[], bool] | None = None
+    on_start: Callable | None = None
+    on_phase: Callable | None = None
+    on_sample: Callable | None = None
+    on_end: Callable | None = None
+    on_message: Callable[[str], None] | None = None
+    runs: list[StationRun] = field(default_factory=list)
+    reason: str = ""
+    failed: bool = False
+
+    def __post_init__(self):
+        if len(self.refs) != len(self.addresses):
+            raise UsageError("one speed for all stations or one per station")
+        self.group: GroupCycle | None = None
+        self.freeze = False
+        self.t0 = 0.0
+        self.cycle_rate = 0.0
+        self.wire_hz = 0.0
+        self.warnings: list[str] = []
+        self.guard = SignalGuard(True)
+        self.link_lost = False
+
+    # -- helpers -------------------------------------------------------------------------------
+    def _say(self, text: str) -> None:
+        if self.on_message:
+            self.on_message(text)
+
+    def _phase(self, phase: str, address: int | None = None) -> None:
+        if self.on_phase:
+            self.on_phase(phase, address)
+
+    def now(self) -> float:
+        return self.master.link.now() - self.t0
+
+    def _sample(self, r: StationRun, sample, phase: str) -> None:
+        r.last = sample
+        if self.on_sample:
+            self.on_sample(r.address, self.now(), sample, phase)
+
+    # -- the run -------------------------------------------------------------------------------
+    def run(self) -> int:
+        """Run to the end; 0 when every drive reached its speed and stopped, else 1. Raises what ended
+        it early (SessionTerminated, KeyboardInterrupt, BusError, DriveError, UsageError) after the
+        stop of every drive."""
+        self.guard.install()
+        exc: BaseException | None = None
+        try:
+            self._open()
+            self._start_all()
+            self._cycle()
+        except SessionTerminated as e:
+            self.reason, exc = "SIGTERM", e
+            raise
+        except KeyboardInterrupt as e:
+            self.reason, exc = "Ctrl-C", e
+            raise
+        except LinkLost as e:
+            self.reason, exc, self.link_lost = f"error: {e}", e, True
+            raise
+        except BaseException as e:
+            self.reason, exc = self.reason or f"error: {e}", e
+            raise
+        finally:
+            self.guard.guard()             # from here a signal hurries the stop (coast)
+            try:
+                self._stop_all(exc)
+            finally:
+                self._close_all(exc)
+                self.guard.restore()
+                if self.on_end:
+                    self.on_end(self.end_dict())
+        return 1 if self.failed else 0
+
+    def _open(self) -> None:
+        for a, ref in zip(self.addresses, self.refs):
+            s = DriveSession(self.master, a, watchdog_ms=self.watchdog_ms, close_link=False,
+                             handle_signals=False, on_message=self.on_message,
+                             cycle_hz=self.cycle_hz)
+            self.runs.append(StationRun(s, a, ref))
+            s.identify()                    # Slave_Diag only: nothing written yet
+        sessions = [r.session for r in self.runs]
+        for s in sessions:
+            self.warnings.extend(s.warnings)
+        if self.sync:
+            _, self.freeze = sync_modes(sessions)
+        # one round = one Data_Exchange per station: the wire limit of the round is the sum
+        self.cycle_rate, self.wire_hz = group_rate(self.master, sessions)
+        if self.cycle_hz is not None:
+            self.cycle_rate = float(self.cycle_hz)
+            if self.cycle_rate > self.wire_hz * 1.0001:
+                self.warnings.append(f"--cycle-hz {self.cycle_rate:g} is more than the bus allows for "
+                                     f"{len(sessions)} stations ({self.wire_hz:.1f} rounds/s); on a "
+                                     f"real bus the wire sets the pace")
+        if self.confirm:
+            self.confirm(sessions)
+        self.group = GroupCycle(self.master, 1.0 / self.cycle_rate if self.cycle_rate else 0.0,
+                                sync=self.sync, freeze=self.sync and self.freeze)
+        for r in self.runs:
+            s = r.session
+            s.cycle_hz = self.cycle_rate
+            s.dp_sync, s.dp_freeze = self.sync, self.sync and self.freeze
+            s.open()                        # Set_Prm (+ Sync_Req / Freeze_Req), Chk_Cfg, the Drive
+            attach(self.group, s)
+        self.t0 = self.master.link.now()
+        stations = []
+        for r in self.runs:
+            s = r.session
+            top, src = s.fmax(self.fmax)
+            kind, value = r.ref
+            pct = value if kind == "percent" else s.percent_for_hz(value, self.fmax)
+            if not -100.0 <= pct <= 100.0:
+                raise UsageError(f"station {r.address}: {pct:g} % is outside -100..100")
+            r.percent = -abs(pct) if self.reverse else pct
+            stations.append({"station": r.address, "ident": s.ident, "ident_hex": f"0x{s.ident:04X}",
+                             "profile": s.profile.name, "family": s.profile.family,
+                             "title": s.profile.title, "layout": s.layout, "fmax_hz": top,
+                             "fmax_source": src, "reference_percent": round(r.percent, 4),
+                             "reference_hz": round(r.percent * top / 100.0, 3)})
+        if self.on_start:
+            self.on_start({"stations": stations, "cycle_hz_target": round(self.cycle_rate, 3),
+                           "wire_hz": round(self.wire_hz, 3), "watchdog_ms": self.watchdog_ms,
+                           "duration_s": self.duration, "sync": self.sync,
+                           "freeze": self.sync and self.freeze, "warnings": self.warnings})
+
+    def _start_all(self) -> None:
+        """Each drive started at 0 (its own handshake, one after the other: nothing turns yet), then the
+        references of all in one round: with --sync they take effect in the same instant."""
+        for r in self.runs:
+            self._phase("starting", r.address)
+            try:
+                sample = r.session.start(0.0)
+            except StationOut:
+                raise
+            except DriveError as e:
+                r.problem = f"did not start: {e}"
+                self.failed = True
+                raise DriveError(f"station {r.address}: {e}") from None
+            r.started = True
+            self._sample(r, sample, "starting")
+        self.group.end_round()
+        t = self.now()
+        for r in self.runs:
+            r.session.set_reference(r.percent)
+            r.t_start = t
+        for r in self.runs:                 # a codec that sets its words without an exchange
+            if not self.group.exchanged(r.address):
+                self._sample(r, r.session.poll(), "running")
+        self.group.end_round()              # (Sync: every new reference takes effect now)
+        self._phase("running")
+
+    def _cycle(self) -> None:
+        t_start = self.now()
+        while True:
+            for r in self.runs:
+                try:
+                    sample = r.session.poll()
+                except StationOut as e:
+                    r.problem = f"dropped out of data exchange ({e.why})"
+                    self._end(f"station {r.address} dropped out of data exchange ({e.why})")
+                    return
+                self._sample(r, sample, "running")
+                if r.reached_after is None and at_reference(sample):
+                    r.reached_after = round(self.now() - r.t_start, 3)
+                st = sample.status
+                if st.fault:
+                    r.problem = "tripped" + (f" ({st.fault_code})" if st.fault_code else "")
+                    self._end(f"station {r.address} tripped" + (f" ({st.fault_code})" if st.fault_code
+                                                                 else ""))
+                    return
+            self.group.end_round()
+            if self.group.dropped:
+                a, why = next(iter(self.group.dropped.items()))
+                for r in self.runs:
+                    if r.address == a:
+                        r.problem = f"dropped out of data exchange ({why})"
+                self._end(f"station {a} dropped out of data exchange ({why})")
+                return
+            if self.duration is not None and self.now() - t_start >= self.duration:
+                self.reason = f"duration {self.duration:g} s reached"
+                break
+            if self.should_quit is not None and self.should_quit():
+                self.reason = "q pressed"
+                return                      # the user ended it: no drive is judged on its speed
+        for r in self.runs:
+            if r.reached_after is None:
+                r.problem = "did not reach its reference"
+                self.failed = True
+
+    def _end(self, reason: str) -> None:
+        self.reason = reason
+        self.failed = True
+
+    # -- the stop of every drive ---------------------------------------------------------------
+    def _stop_all(self, exc: BaseException | None) -> None:
+        if self.group is None or self.link_lost:
+            return                          # nothing connected, or nothing can be sent: _close_all
+        runs = [r for r in self.runs if r.session.drive is not None and r.session.may_run]
+        if not runs:
+            return
+        self._phase("stopping")
+        try:
+            self._stop_together(runs)
+        except LinkLost:
+            self.link_lost = True          # each session's close says what the watchdog will do
+        except BusError as e:
+            self._say(f"stop: {e}; each drive not yet stopped gets its own stop")
+        if all(r.session.stop_report is not None and r.session.stop_report.stopped for r in runs):
+            self._phase("stopped")
+
+    def _stop_together(self, runs: list[StationRun]) -> None:
+        def on_sample(address, sample):
+            r = next(x for x in runs if x.address == address)
+            self._sample(r, sample, "stopping")
+
+        def hurry() -> bool:
+            h, self.guard.hurry = self.guard.hurry, False
+            return h
+        stop_together([(r.address, r.session, r.percent) for r in runs], self.group, hurry, on_sample)
+        for r in runs:
+            rep = r.session.stop_report
+            if rep is None or not rep.stopped:
+                self.failed = True
+                r.problem = r.problem or "not confirmed stopped"
+            elif rep.how == "coast":
+                self._say(f"station {r.address}: stopped by a coast stop after {rep.seconds:.1f} s "
+                          f"({rep.message})")
+
+    def _close_all(self, exc: BaseException | None) -> None:
+        if self.group is not None and not self.link_lost:
+            try:
+                self.group.finish()          # Unsync / Unfreeze before the release
+            except (BusError, LinkLost):
+                pass
+        first: BaseException | None = None
+        for r in reversed(self.runs):
+            try:
+                # a drive still marked as possibly running gets the session's own safe stop here
+                r.session.close(exc)
+            except BaseException as e:      # noqa: BLE001  (the others still need their close)
+                first = first or e
+            rep = r.session.stop_report
+            if r.started and (rep is None or not rep.stopped):
+                self.failed = True
+        try:
+            self.master.link.close()
+        except Exception:                   # noqa: BLE001
+            pass
+        if first is not None and exc is None:
+            raise first
+
+    def end_dict(self) -> dict:
+        return {"reason": self.reason, "failed": self.failed,
+                "stopped": all((r.session.stop_report.stopped if r.session.stop_report is not None
+                                else not r.started) for r in self.runs),
+                "stations": [r.to_dict() for r in self.runs],
+                "rounds": self.group.rounds if self.group is not None else 0,
+                "global_controls": self.group.global_controls if self.group is not None else 0,
+                "warnings": self.warnings + [w for r in self.runs for w in r.session.warnings
+                                             if w not in self.warnings]}
+
+
+def stop_together(items, group: GroupCycle, hurry: Callable[[], bool] = lambda: False,
+                  on_sample: Callable | None = None) -> None:
+    """The stop of several drives at once. items: (address, DriveSession, percent) of the drives that
+    may be running, all on `group`. The normal stop command of every drive goes in one round; then
+    rounds until each reports stopped (or in fault); a drive not stopped within its own stop time
+    (safestop.stop_timeout), or every one when hurry() says so (a second signal), gets a coast stop;
+    one still not stopped after that is reported failed. A station out of data exchange keeps its
+    stop command for when it is back. Each session's stop_report (and final_status) is set and
+    may_run cleared for each drive confirmed stopped. on_sample(address, Sample) sees every cycle."""
+    t0 = group.master.link.now()
+    pending: dict[int, list] = {}           # address -> [mode, deadline, limit, why]
+    by_addr = {a: s for a, s, _ in items}
+    for a, s, pct in items:
+        limit = s.stop_timeout(pct)
+        pending[a] = ["normal", t0 + limit, limit, ""]
+        try:
+            s.drive.stop("normal", wait=False)
+        except StationOut:
+            pass                            # the command is set; it goes when the station is back
+        except DriveError as e:
+            pending[a] = ["normal", t0, limit, f"normal stop failed: {e}"]
+    group.end_round()
+    while pending:
+        for a in list(pending):
+            s = by_addr[a]
+            try:
+                st = s.drive.cycle()
+            except StationOut:
+                continue
+            if on_sample is not None:
+                on_sample(a, make_sample(s, st))
+            if not (st.fault or st.stopped):
+                continue
+            if st.fault and st.fault_code is None:
+                try:
+                    st = s.drive.status()
+                except (DriveError, StationOut):
+                    pass
+            mode, _, _, why = pending.pop(a)
+            msg = (f"the drive is in fault{f' ({st.fault_code})' if st.fault_code else ''}: its output "
+                   f"is off" if st.fault else "stopped")
+            s._may_run = False
+            s.final_status = st
+            s.stop_report = StopReport(mode, True, group.master.link.now() - t0,
+                                       msg + (f"; {why}; coasted" if mode == "coast" else ""), st)
+        group.end_round()
+        now = group.master.link.now()
+        hurried = hurry() if pending else False
+        for a in list(pending):
+            mode, deadline, limit, why = pending[a]
+            s = by_addr[a]
+            if mode == "normal" and (hurried or now > deadline):
+                why = why or ("stop hurried by a second signal" if hurried else
+                              f"not stopped after {limit:g} s")
+                s._warn(f"station {a}: {why}: coasting")
+                pending[a] = ["coast", now + COAST_TIMEOUT_S, COAST_TIMEOUT_S, why]
+                try:
+                    s.drive.stop("coast", wait=False)
+                except StationOut:
+                    pass
+                except DriveError as e:
+                    pending.pop(a)
+                    s.stop_report = StopReport("failed", False, now - t0,
+                                               f"{why}; coast stop not possible: {e}", s.final_status)
+            elif mode == "coast" and now > deadline:
+                pending.pop(a)
+                out = group.out.get(a)
+                if out is not None:
+                    text = (f"station {a} out of data exchange ({out}): pdrive could not send the stop; "
+                            f"its DP watchdog ({s.watchdog_ms:g} ms) ends data exchange and the drive "
+                            f"stops by {s.comm_loss_text or 'its communication-loss setting'}")
+                else:
+                    text = f"{why}; the drive does not report stopped after a coast stop either"
+                s.stop_report = StopReport("failed", False, now - t0, text, s.final_status)
+
+
+def attach(group: GroupCycle, session) -> Callable[[], None]:
+    """Put a connected session's cyclic channel on `group`; returns the function that takes it off."""
+    metered = session.channel
+    old = metered.inner
+    metered.inner = group.channel(session.address)
+
+    def detach() -> None:
+        metered.inner = old
+        if session.address in group.addresses:
+            group.addresses.remove(session.address)
+    return detach
+
+
+def group_rate(master, sessions) -> tuple[float, float]:
+    """(default rounds per second, the wire limit of a round): one Data_Exchange per station."""
+    wire = 1.0 / sum(1.0 / s.wire_hz for s in sessions)
+    return default_cycle_hz(master.link, wire), wire
