@@ -59,9 +59,13 @@ def _session(opts, address, profile_name, ppo, fmt, watchdog_ms, *, cycle_hz=0.0
              log=None) -> DriveSession:
     if address is not None:
         station_address(address)
+    # the config file's defaults for this station on this port (config.py), below the options
+    defaults = opts.station_defaults(address)
+    profile_name = profile_name or defaults.get("profile")
+    layout = defaults.get("layout") if ppo is None and fmt is None else None
     master = opts.open_master(address=address)
     try:
-        return DriveSession(master, address, profile=profile_name, ppo=ppo, fmt=fmt,
+        return DriveSession(master, address, profile=profile_name, layout=layout, ppo=ppo, fmt=fmt,
                             watchdog_ms=watchdog_ms, cycle_hz=cycle_hz, before_connect=before,
                             on_message=_message, log_csv=log)
     except BaseException:

@@ -17,6 +17,8 @@ from profidrive_cli import BusError, PdriveError, UsageError, __version__
 COMMANDS = {
     "checklist": ("profidrive_cli.cli.checklist_cmd", "checklist_group",
                   "Scripted commissioning checklists: validate, rehearse, run, report."),
+    "config": ("profidrive_cli.cli.config_cmd", "config_group",
+               "Config file: the effective settings and where each came from; the files that apply."),
     "decode": ("profidrive_cli.cli.decode_cmd", "decode_cmd",
                "Decode a captured area of PROFILE's layout into named fields."),
     "diag": ("profidrive_cli.cli.bus_cmds", "diag_cmd",
