@@ -17,7 +17,7 @@ def config_group():
 
 
 @config_group.command("show")
-@click.option("--port", default=None, metavar="PORT", help="As a bus command's --port (a name or a device).")
+@click.option("--port", default=None, metavar="PORT", help="As a bus command's --port: a device or a port name from the config file.")
 @click.option("--baud", default=None, metavar="RATE", help="As a bus command's --baud.")
 @click.option("--master-address", default=None, type=click.IntRange(0, 125))
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")

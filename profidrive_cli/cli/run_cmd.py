@@ -95,8 +95,9 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
                      extra=lambda: _run_extra(view, mons)):
         with session as s:
             s.check_torque(torque, torque_limit)          # the card's reason before anything shows
-            fmax_hz, src = s.fmax(fmax if fmax is not None else
-                                  opts.station_defaults(s.address).get("fmax"))
+            if fmax is None:                    # the config file's default for this station
+                fmax = opts.station_defaults(s.address).get("fmax")
+            fmax_hz, src = s.fmax(fmax)
             if mons:
                 mons[0].map_cyclic()            # before the start; restored after the stop
             pct = percent if percent is not None else s.percent_for_hz(hz, fmax)
