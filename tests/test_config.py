@@ -245,3 +245,18 @@ def test_text_output_to_a_pipe_is_not_wrapped(tmp_path):
     assert p.returncode == 0, p.stderr
     want = str(deep / "pdrive" / "config.yaml")
     assert any(want in line for line in p.stdout.splitlines()), p.stdout
+
+
+def test_shell_completion_works_and_completes_port_names(env, tmp_path):
+    # click's completion, as the README's `eval "$(_PDRIVE_COMPLETE=bash_source pdrive)"` uses it
+    extra = {"XDG_CONFIG_HOME": env["XDG_CONFIG_HOME"]}
+    cwd = Path.cwd()
+    p = _pdrive([], cwd, {**extra, "_PDRIVE_COMPLETE": "bash_source"})
+    assert p.returncode == 0 and "_pdrive_completion()" in p.stdout
+    p = _pdrive([], cwd, {**extra, "_PDRIVE_COMPLETE": "bash_complete",
+                          "COMP_WORDS": "pdrive con", "COMP_CWORD": "1"})
+    assert p.stdout.split() == ["plain,config"]
+    p = _pdrive([], cwd, {**extra, "_PDRIVE_COMPLETE": "bash_complete",
+                          "COMP_WORDS": "pdrive status --port ", "COMP_CWORD": "3"})
+    # the project's line1 (it wins over the user's) and the user's rig, then sim://
+    assert sorted(p.stdout.split()) == ["plain,line1", "plain,rig", "plain,sim://"]

@@ -201,9 +201,19 @@ def _open_trace(path: str):
     return writer
 
 
+def complete_port(ctx, param, incomplete: str):
+    """Shell completion of --port: the port names from the config files, and sim://."""
+    try:
+        from profidrive_cli.config import load
+        names = list(load().ports)
+    except Exception:           # noqa: BLE001  (a broken config file must not break the shell)
+        names = []
+    return [n for n in [*names, "sim://"] if n.startswith(incomplete)]
+
+
 def bus_options(f):
     """--port, --baud, --master-address, --slot-time, --retries, --rs485, --echo, -v, --trace, --json."""
-    @click.option("--port", default=None, metavar="PORT",
+    @click.option("--port", default=None, metavar="PORT", shell_complete=complete_port,
                   help="Serial device, pyserial URL, sim://, or a port name from the config file "
                        "(env PDRIVE_PORT; `pdrive config show`).")
     @click.option("--baud", default=None, metavar="RATE",
