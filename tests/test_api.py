@@ -271,3 +271,64 @@ def test_bad_arguments_are_usage_errors():
             d.run(hz=float("nan"))
         with pytest.raises(UsageError, match="not a value"):
             d.set_param("F07", None)                 # type: ignore[arg-type]
+
+
+def test_sigterm_inside_the_with_stops_the_drive(tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    from pathlib import Path
+    root = Path(__file__).resolve().parent.parent
+    script = tmp_path / "rig.py"
+    script.write_text(
+        "import time\n"
+        "import profidrive_cli as pdrive\n"
+        "try:\n"
+        "    with pdrive.open_bus('sim://') as bus:\n"
+        "        sim = bus.master.link.bus\n"
+        "        d = bus.drive(3)\n"
+        "        d.set_param('F07', 0.5)\n"
+        "        d.set_param('F08', 0.5)\n"
+        "        d.run(hz=20, wait=True, timeout=20)\n"
+        "        print('RUNNING', flush=True)\n"
+        "        time.sleep(30)\n"
+        "finally:\n"
+        "    r = d.session.stop_report\n"
+        "    print('STOP', r.how, r.stopped, sim.slave(3).model.freq, flush=True)\n")
+    p = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True, cwd=tmp_path, env={**os.environ, "PYTHONPATH": str(root)})
+    try:
+        assert p.stdout.readline().strip() == "RUNNING"
+        p.send_signal(signal.SIGTERM)
+        out, err = p.communicate(timeout=30)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert "STOP normal True 0.0" in out, out + err
+    assert "SessionTerminated" in err and p.returncode != 0
+
+
+def test_the_api_loads_no_cli_and_prints_nothing():
+    import subprocess
+    import sys
+    from pathlib import Path
+    code = ("import sys, profidrive_cli as pdrive\n"
+            "with pdrive.open_bus('sim://?timing=virtual') as bus:\n"
+            "    d = bus.drive(4, layout='ppo3')\n"
+            "    d.run(hz=10, wait=True, timeout=30)\n"
+            "print('LOADED', sorted(m for m in ('rich', 'click', 'profidrive_cli.cli.common')"
+            " if m in sys.modules))\n")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                       cwd=Path(__file__).resolve().parent.parent)
+    assert p.stdout == "LOADED []\n", p.stdout + p.stderr
+    assert p.stderr == ""
+
+
+def test_py_typed_is_shipped():
+    import tomllib
+    from pathlib import Path
+    root = Path(__file__).resolve().parent.parent
+    assert (root / "profidrive_cli" / "py.typed").is_file()
+    conf = tomllib.loads((root / "pyproject.toml").read_text())
+    assert "py.typed" in conf["tool"]["setuptools"]["package-data"]["profidrive_cli"]
