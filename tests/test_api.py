@@ -332,3 +332,14 @@ def test_py_typed_is_shipped():
     assert (root / "profidrive_cli" / "py.typed").is_file()
     conf = tomllib.loads((root / "pyproject.toml").read_text())
     assert "py.typed" in conf["tool"]["setuptools"]["package-data"]["profidrive_cli"]
+
+
+def test_fmax_for_a_layout_without_a_parameter_channel():
+    # Fuji PPO3 carries no PKW: F03 cannot be read; fmax=50 makes 100 % = 50 Hz
+    with pdrive.open_bus(SIM) as bus:
+        d = bus.drive(4, layout="ppo3", fmax=50)
+        assert d.fmax_hz == 50.0
+        st = d.run(hz=25, wait=True, timeout=30)
+        assert st.reference_percent == pytest.approx(50.0, abs=0.01)
+        assert st.fmax_hz == 50.0 and st.actual_hz == pytest.approx(25.0, abs=0.25)
+        assert "Bus sim://" in repr(bus) and "[4]" in repr(bus)

@@ -257,14 +257,28 @@ class Bus:
         self._keep_others(address)
 
     def _keep_others(self, busy: int | None) -> None:
+        """A Data_Exchange (with its last outputs) for every opened station other than `busy` whose
+        last one is KEEP_S old. A station that cannot be kept is left to its own next call (which
+        then reports it); a lost link is raised."""
+        from profidrive_cli.link.base import LinkLost
         keep = self._keep_s()
         for a in list(self._drives):
             if a == busy:
                 continue
             now = self.master.link.now()
             if now - self._last.get(a, now) >= keep:
-                self.master.exchange(a, None)
+                self._last[a] = now
+                try:
+                    self.master.exchange(a, None)
+                except LinkLost:
+                    raise
+                except BusError:
+                    pass
                 self._last[a] = self.master.link.now()
+
+    def __repr__(self) -> str:
+        return (f"<Bus {self.port} at {self.baud} bit/s, drives {sorted(self._drives)}"
+                f"{' (closed)' if self._closed else ''}>")
 
     def _start_keepalive(self) -> None:
         if self._thread is not None:

@@ -97,7 +97,6 @@ class Drive:
         """One read of the status (the current fault named where the card can say it)."""
         with self._bus._lock:
             self._check()
-            self.session.fmax(self._fmax_override) if self.session.drive.has_param_channel else None
             return self._status(self.session.status())
 
     # -- motion -------------------------------------------------------------------------------------
