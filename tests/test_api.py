@@ -32,6 +32,7 @@ def _no_user_config(monkeypatch, tmp_path):
     monkeypatch.setenv("PDRIVE_CONFIG", str(tmp_path / "empty.yaml"))
     monkeypatch.delenv("PDRIVE_PORT", raising=False)
     monkeypatch.delenv("PDRIVE_BAUD", raising=False)
+    monkeypatch.delenv("PDRIVE_STATION", raising=False)
 
 
 def _model(bus, address):

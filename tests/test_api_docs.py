@@ -47,6 +47,7 @@ def _no_config(monkeypatch, tmp_path):
     monkeypatch.setenv("PDRIVE_CONFIG", str(tmp_path / "empty.yaml"))
     monkeypatch.delenv("PDRIVE_PORT", raising=False)
     monkeypatch.delenv("PDRIVE_BAUD", raising=False)
+    monkeypatch.delenv("PDRIVE_STATION", raising=False)
 
 
 @pytest.mark.parametrize("line,code", BLOCKS, ids=[f"api.md:{n}" for n, _ in BLOCKS])

@@ -10,7 +10,8 @@ seconds (a hook on each drive's channel); while nobody calls, the keep-alive thr
 from __future__ import annotations
 
 import threading
-from typing import TYPE_CHECKING, Any, Mapping
+import os
+from typing import TYPE_CHECKING, Any, Callable, Mapping
 
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.api.results import Station
@@ -27,13 +28,17 @@ def open_bus(port: str | None = None, *, baud: str | int | None = None,
              master_address: int | None = None, retries: int | None = None,
              slot_time: int | None = None, rs485: bool = False, echo: bool = False,
              allow_real_port_writes: bool = False, handle_signals: bool = True,
+             on_message: Callable[[str], None] | None = None,
              env: Mapping[str, str] | None = None) -> "Bus":
     """Open a bus: a device (/dev/ttyUSB0, COM3), a pyserial URL, sim://, or a port name from the
     config file (config.py). None: PDRIVE_PORT, else the config file's default port. baud and
     master_address as the CLI's --baud / --master-address (default: PDRIVE_BAUD, the config file,
     19200 and 2). The API never asks: on a real port, anything that moves a drive or writes a
     setting needs allow_real_port_writes=True (sim:// is always allowed). Use it as a context
-    manager (or call close()): every drive it started is stopped on the way out."""
+    manager (or call close()): every drive it started is stopped on the way out. on_message(text):
+    warnings and what the safe stop did, one line each (also kept in Drive.warnings). env: the
+    environment read for PDRIVE_PORT, PDRIVE_BAUD, PDRIVE_CONFIG and PDRIVE_STATION (default
+    os.environ)."""
     from profidrive_cli.config import resolve
     eff = resolve(port, baud, master_address, env=env)
     if not eff.port.value:
@@ -42,7 +47,7 @@ def open_bus(port: str | None = None, *, baud: str | int | None = None,
     return Bus(_open_master(str(eff.port.value), str(eff.baud.value), eff.baud.source,
                             int(eff.master_address.value), retries, slot_time, rs485, echo),
                allow_real_port_writes=allow_real_port_writes, handle_signals=handle_signals,
-               settings=eff)
+               settings=eff, on_message=on_message, env=env)
 
 
 def _open_master(port: str, baud: str, baud_source: str, address: int, retries: int | None,
@@ -103,12 +108,15 @@ class Bus:
     """An open bus. Made by open_bus(); see there and docs/api.md."""
 
     def __init__(self, master, *, allow_real_port_writes: bool = False, handle_signals: bool = True,
-                 settings: Any = None):
+                 settings: Any = None, on_message: Callable[[str], None] | None = None,
+                 env: Mapping[str, str] | None = None):
         from profidrive_cli.session.signals import SignalGuard
         self.master = master
         self.port: str = getattr(master.link, "name", "") or ""
         self.allow_real_port_writes = allow_real_port_writes
         self.settings = settings
+        self.on_message = on_message
+        self.env = os.environ if env is None else env
         self._lock = threading.RLock()
         self._drives: dict[int, "Drive"] = {}
         self._last: dict[int, float] = {}
@@ -203,15 +211,16 @@ class Bus:
             return out
 
     def drive(self, station: int | None = None, *, profile: str | None = None,
-              layout: str | None = None, fmax: float | None = None, watchdog_ms: float = 500,
+              layout: str | None = None, ppo: int | None = None, fmax: float | None = None,
+              watchdog_ms: float = 500,
               cycle_hz: float | None = None, stop_timeout: float | None = None) -> "Drive":
-        """The drive at `station` (None: the only drive station on the bus), brought to data
-        exchange and kept there until the bus is closed. profile: a profile name or alias (default:
-        the config file's for this station, else from the station's ident); layout: a layout name
-        (e.g. "ppo3"; default: the config file's, else the profile's); fmax: the frequency 100 %
-        stands for when the drive's own value cannot be read. The same station twice: the same
-        Drive."""
-        from profidrive_cli.api.drive import Drive
+        """The drive at `station` (None: PDRIVE_STATION, else the only drive station on the bus),
+        brought to data exchange and kept there until the bus is closed. profile: a profile name or
+        alias (default: the config file's for this station, else from the station's ident);
+        layout: a layout name (e.g. "ppo3", "toyo") or ppo=N (default: the config file's, else the
+        profile's); fmax: the frequency 100 % stands for when the drive's own value cannot be read.
+        The same station twice: the same Drive."""
+        from profidrive_cli.api.drive import Drive, fmax_readable
         from profidrive_cli.session import DriveSession
         with self._lock:
             self._check_open()
@@ -223,17 +232,20 @@ class Bus:
             defaults = {}
             if self.settings is not None:
                 defaults = {k: s.value for k, s in self.settings.station_defaults(station).items()}
+            if layout is None and ppo is None:
+                layout = defaults.get("layout")
             sess = DriveSession(self.master, station, profile=profile or defaults.get("profile"),
-                                layout=layout or defaults.get("layout"), watchdog_ms=watchdog_ms,
+                                layout=layout, ppo=ppo, watchdog_ms=watchdog_ms,
                                 cycle_hz=cycle_hz, stop_timeout=stop_timeout, close_link=False,
-                                handle_signals=False, env={})
+                                handle_signals=False, on_message=self.on_message, env=self.env)
             sess.signals = _SharedSignals(self._signals)
             try:
                 sess.open()
             except BaseException as e:
                 sess.close(e)
                 raise
-            fmax = fmax if fmax is not None else defaults.get("fmax")
+            if fmax is None and not fmax_readable(sess):
+                fmax = defaults.get("fmax")          # the config's, where the drive's is not readable
             drive = Drive(self, sess, fmax)
             self._drives[sess.address] = drive
             self._last[sess.address] = self.master.link.now()

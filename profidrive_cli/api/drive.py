@@ -27,6 +27,17 @@ def at_reference(ref: float | None, act: float | None) -> bool:
     return abs(act - ref) <= max(0.01 * abs(ref), 0.05)
 
 
+def fmax_readable(session) -> bool:
+    """The drive's own maximum frequency can be read (a parameter channel and a parameter number
+    for the profile's max-frequency parameter): an fmax default from the config file then stays
+    unused (an fmax given explicitly is checked against the drive's, with a warning)."""
+    prof = session.profile
+    code = prof.max_frequency_param
+    pdef = prof.param(code) if code else None
+    return bool(session.drive.has_param_channel and pdef is not None
+                and (getattr(pdef, "pnu", None) is not None or getattr(pdef, "register", None) is not None))
+
+
 class Drive:
     """A drive station opened with Bus.drive(); see docs/api.md."""
 

@@ -147,7 +147,14 @@ def _split_address(args: tuple[str, ...], min_rest: int) -> tuple[int | None, li
 @_terminations
 def status_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms):
     """One read of a drive's status: state, flags, speed, current fault."""
-    with _session(opts, address, profile_name, ppo, fmt, watchdog_ms) as s:
+    # built on the Python API (api/): the bus, the drive and their ending; rendered from its session
+    from profidrive_cli.api import Bus
+    if address is not None:
+        station_address(address)
+    with Bus(opts.open_master(address=address), on_message=_message, settings=opts.settings) as bus:
+        drive = bus.drive(address, profile=profile_name, layout=fmt, ppo=ppo,
+                          watchdog_ms=watchdog_ms, cycle_hz=0.0)
+        s = drive.session
         sample = s.status()
         d = R.status_dict(s, sample)
     if opts.json:
