@@ -299,12 +299,14 @@ class Bus:
         self._thread.start()
 
     def _keepalive(self) -> None:
-        while not self._stop_keepalive.wait(self._keep_s() / 2):
+        period = KEEP_S / 2
+        while not self._stop_keepalive.wait(period):
             if not self._lock.acquire(timeout=0.05):
                 continue                     # a call is talking to the bus (and keeps the others)
             try:
                 if self._closed:
                     return
+                period = self._keep_s() / 2
                 self._keep_others(None)
             except BaseException as e:      # noqa: BLE001  (reported at the next call)
                 self._keepalive_error = e
