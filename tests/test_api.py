@@ -344,3 +344,20 @@ def test_fmax_for_a_layout_without_a_parameter_channel():
         assert st.reference_percent == pytest.approx(50.0, abs=0.01)
         assert st.fmax_hz == 50.0 and st.actual_hz == pytest.approx(25.0, abs=0.25)
         assert "Bus sim://" in repr(bus) and "[4]" in repr(bus)
+
+
+def test_a_link_lost_while_idle_is_reported_at_the_next_call():
+    # the keep-alive thread meets the unplugged port; the next call says so (BusError), and the
+    # way out of the with block says that no stop could be sent (the watchdog stops the drive)
+    with pytest.raises(pdrive.BusError, match="keeping the drives in data exchange failed"):
+        with pdrive.open_bus("sim://") as bus:
+            d = bus.drive(3)
+            d.set_param("F07", 0.5)
+            d.run(hz=10, wait=True, timeout=30)
+            bus.master.link.ser.unplug()
+            deadline = time.monotonic() + 5
+            while bus._keepalive_error is None and time.monotonic() < deadline:
+                time.sleep(0.05)
+            d.status()
+    assert d.session.stop_report.how == "not sent (link lost)"
+    assert "watchdog" in d.session.stop_report.message
