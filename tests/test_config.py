@@ -260,3 +260,31 @@ def test_shell_completion_works_and_completes_port_names(env, tmp_path):
                           "COMP_WORDS": "pdrive status --port ", "COMP_CWORD": "3"})
     # the project's line1 (it wins over the user's) and the user's rig, then sim://
     assert sorted(p.stdout.split()) == ["plain,line1", "plain,rig", "plain,sim://"]
+
+
+CHECKLIST = """\
+name: config precedence
+port: {port}
+stations:
+  - name: g1
+    address: 3
+    profile: fuji-g1
+steps:
+  - expect_identity
+"""
+
+
+@pytest.mark.parametrize("cl_port", ["'sim://?timing=virtual'", "rig"])
+def test_a_checklists_own_port_beats_the_configs_default_port(tmp_path, cl_port):
+    # the config's default port is nowhere; the checklist names its own (a device or a config name)
+    (tmp_path / "pdrive.yaml").write_text("port: /dev/pdrive-no-such-port\n"
+                                          "ports:\n  rig: 'sim://?timing=virtual'\n")
+    (tmp_path / "cl.yaml").write_text(CHECKLIST.format(port=cl_port))
+    p = _pdrive(["checklist", "run", "cl.yaml", "--yes"], tmp_path,
+                {"XDG_CONFIG_HOME": str(tmp_path / "none")})
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert "PASSED config precedence" in p.stdout
+    # --port still beats the checklist's
+    p = _pdrive(["checklist", "run", "cl.yaml", "--yes", "--port", "/dev/pdrive-no-such-port"],
+                tmp_path, {"XDG_CONFIG_HOME": str(tmp_path / "none")})
+    assert p.returncode != 0 and "/dev/pdrive-no-such-port" in p.stderr

@@ -65,6 +65,17 @@ class BusOptions:
         s = getattr(self.settings, name, None)
         return getattr(s, "source", "option")
 
+    def port_or(self, fallback: str | None) -> str | None:
+        """The port for a command whose input file names one (a checklist's `port:`): --port or
+        PDRIVE_PORT when given, else `fallback` (a config port name in it resolved), else the config
+        file's default port."""
+        src = self.source_of("port")
+        if not fallback or (self.port and src.startswith(("option", "env"))):
+            return self.port
+        from profidrive_cli.config import load
+        named = load().ports.get(fallback)
+        return named.port.value if named is not None else fallback
+
     def station_defaults(self, address: int | None) -> dict:
         """{"profile" | "layout" | "fmax": value} the config file gives this station on this port."""
         if self.settings is None:
