@@ -1,9 +1,12 @@
-"""pdrive: a PROFIBUS-DP master and drive-commissioning CLI.
+"""pdrive: a PROFIBUS-DP master and drive-commissioning CLI, and a Python API.
 
 Layers (each knows only the one below it):
-    link  -> fdl -> dp -> drives -> cli
+    link  -> fdl -> dp -> drives -> session -> checklist -> api -> cli
 plus sim/ (the simulated slave side, built on the same fdl/dp code), gsd/ (GSD parser)
 and data (profiles/*.yaml, gsd/*.gsd carried inside the package).
+
+The Python API (docs/api.md) is exported here lazily (PEP 562): `import profidrive_cli as pdrive`
+loads nothing more; `pdrive.open_bus(...)` imports profidrive_cli.api on first use.
 """
 
 __version__ = "0.1.0"
@@ -19,3 +22,21 @@ class UsageError(PdriveError):
 
 class BusError(PdriveError):
     """The bus or a station misbehaved: exit code 1."""
+
+
+#: names exported from profidrive_cli.api on first use (the only import of a layer from here)
+_API_NAMES = frozenset({"open_bus", "Bus", "Drive", "DriveError", "Fault", "Faults", "Param",
+                        "SessionTerminated", "Station", "Status", "StopResult"})
+
+
+def __getattr__(name: str):
+    if name in _API_NAMES:
+        import profidrive_cli.api as api
+        value = getattr(api, name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | _API_NAMES)

@@ -2,7 +2,7 @@
 over 600 lines. Every import counts, also those inside functions (a lazy import is still a dependency).
 
 Layers, lowest first, and what each may import (besides the standard library, its own layer and the
-top-level modules profidrive_cli/__init__, datafile, outfile, data):
+top-level modules profidrive_cli/__init__, datafile, outfile, data, config):
 
     link       nothing of pdrive: bytes in and out of a port (the sim:// handler is named, not imported)
     fdl        link at most; today nothing. Sans-IO frames and bus timing: bytes and times in, bytes and
@@ -14,8 +14,12 @@ top-level modules profidrive_cli/__init__, datafile, outfile, data):
     sim        drives and below (the drive models reuse the codecs); sim:// is registered from here
     session    sim and below (profidrive_cli/session/)
     checklist  session and below
-    cli        everything (checklist included); profidrive_cli/__main__ counts as cli
-    top-level  (__init__, datafile, outfile, data, plot) nothing of any layer
+    api        checklist and below (profidrive_cli/api/: the Python API, built on session/)
+    cli        everything (api included); profidrive_cli/__main__ counts as cli
+    top-level  (__init__, datafile, outfile, data, config, plot) nothing of any layer -- with one
+               exception: profidrive_cli/__init__ may import profidrive_cli.api inside its PEP 562
+               module __getattr__ (the lazy `pdrive.open_bus`), and nowhere else; `import
+               profidrive_cli` alone then loads no layer (pdrive --version stays light)
 
 Each failure names file:line and the import.
 """
@@ -31,10 +35,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 PKG = ROOT / "profidrive_cli"
 
-ORDER = ("link", "fdl", "dp", "gsd", "drives", "sim", "session", "checklist", "cli")
+ORDER = ("link", "fdl", "dp", "gsd", "drives", "sim", "session", "checklist", "api", "cli")
 TOP = "top"
 TOP_MODULES = {"profidrive_cli", "profidrive_cli.datafile", "profidrive_cli.outfile", "profidrive_cli.data",
-               "profidrive_cli.plot"}
+               "profidrive_cli.config", "profidrive_cli.plot"}
 
 #: layer -> the layers it may import (its own and the top-level modules always)
 ALLOWED = {layer: set(ORDER[:i + 1]) | {TOP} for i, layer in enumerate(ORDER)}
@@ -105,7 +109,27 @@ def imports_of(module: str, path: Path) -> list[tuple[int, str, str]]:
     return result
 
 
-GRAPH = {m: imports_of(m, p) for m, p in MODULES.items()}
+def lazy_api_lines(path: Path) -> set[int]:
+    """Lines of the imports inside the module-level `def __getattr__` of a file (PEP 562)."""
+    lines: set[int] = set()
+    for node in ast.parse(path.read_text(encoding="utf-8"), str(path)).body:
+        if isinstance(node, ast.FunctionDef) and node.name == "__getattr__":
+            lines |= {n.lineno for n in ast.walk(node) if isinstance(n, (ast.Import, ast.ImportFrom))}
+    return lines
+
+
+#: the one allowed way up: profidrive_cli/__init__ imports the api layer in its module __getattr__
+LAZY_LINES = lazy_api_lines(PKG / "__init__.py")
+
+
+def _is_lazy_api_edge(module: str, line: int, target: str) -> bool:
+    return module == "profidrive_cli" and line in LAZY_LINES and layer_of(target) == "api"
+
+
+ALL_EDGES = {m: imports_of(m, p) for m, p in MODULES.items()}
+#: the import graph the rules are checked on: every import but the lazy api export (which runs
+#: only when pdrive.open_bus & co. are first used, long after the package is loaded)
+GRAPH = {m: [e for e in edges if not _is_lazy_api_edge(m, e[0], e[1])] for m, edges in ALL_EDGES.items()}
 
 
 def _where(path: Path, line: int) -> str:
@@ -203,6 +227,29 @@ def test_no_module_over_600_lines():
         if n > MAX_LINES:
             big.append(f"{p.relative_to(ROOT)}: {n} lines (at most {MAX_LINES}: split it by concern)")
     assert not big, "\n".join(big)
+
+
+def test_the_package_imports_the_api_only_lazily():
+    # the exception for __init__ is exactly the api layer, exactly in __getattr__: every other
+    # import of __init__ (there is none today) follows the top-level rule
+    lazy = [e for e in ALL_EDGES["profidrive_cli"] if _is_lazy_api_edge("profidrive_cli", e[0], e[1])]
+    assert lazy, "profidrive_cli/__init__.py: the lazy api export (__getattr__) is gone"
+    code = ("import sys, profidrive_cli\n"
+            "print('LOADED', sorted(m for m in sys.modules if m.startswith('profidrive_cli.')))\n"
+            "f = profidrive_cli.open_bus\n"
+            "print('API', 'profidrive_cli.api' in sys.modules, f.__module__)\n")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=ROOT)
+    assert "LOADED []" in p.stdout, p.stdout + p.stderr
+    assert "API True profidrive_cli.api.bus" in p.stdout, p.stdout + p.stderr
+
+
+def test_a_lazy_import_elsewhere_is_not_excused(tmp_path):
+    # the exception is tied to __init__'s __getattr__: the same import at module level is not
+    f = tmp_path / "x.py"
+    f.write_text("import os\nfrom profidrive_cli.api import open_bus\n"
+                 "def __getattr__(name):\n    from profidrive_cli.api import Bus\n    return Bus\n")
+    assert lazy_api_lines(f) == {4}
+    assert not _is_lazy_api_edge("profidrive_cli.datafile", 4, "profidrive_cli.api")
 
 
 def test_importing_link_loads_nothing_of_sim_and_sim_urls_still_open():

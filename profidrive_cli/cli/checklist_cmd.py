@@ -121,7 +121,7 @@ def run_cmd(ctx, opts: BusOptions, file, reports, dry_run, yes, variables, cycle
         if opts.port:
             click.echo(f"pdrive: --dry-run rehearses on {port}; --port {opts.port} is not used", err=True)
     else:
-        port = opts.port or cl.port
+        port = opts.port_or(cl.port)        # --port / PDRIVE_PORT, the checklist's, the config's
         if not port:
             _usage(ctx, f"no port: give --port (or PDRIVE_PORT), or put `port:` in {cl.path}")
     if not dry_run and not is_sim_port(port):

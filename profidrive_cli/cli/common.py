@@ -16,10 +16,29 @@ from profidrive_cli import UsageError
 from profidrive_cli.fdl.timing import BusParams, parse_baud
 
 NO_PORT_HELP = ("no port given: use --port DEVICE (e.g. /dev/ttyUSB0, COM3, socket://host:port) "
-                "or set PDRIVE_PORT; --port sim:// runs the built-in simulated bus")
+                "or a port name from the config file, or set PDRIVE_PORT; --port sim:// runs the "
+                "built-in simulated bus")
 
-out = Console(soft_wrap=True, highlight=False)
-err = Console(stderr=True, soft_wrap=True, highlight=False)
+#: the width text output gets when it does not go to a terminal (a pipe, a file): wide enough that
+#: rich never wraps a line (a table cell with a long file path stays on one line)
+PIPE_WIDTH = 4096
+
+
+def make_console(stderr: bool = False, **kw) -> Console:
+    """A rich console for command output: no soft wrapping, and not wrapped at 80 columns when the
+    stream is not a terminal (a pipe or a file gets whole lines; $COLUMNS still wins)."""
+    stream = sys.stderr if stderr else sys.stdout
+    try:
+        tty = stream.isatty()
+    except (AttributeError, ValueError):
+        tty = False
+    if not tty and not os.environ.get("COLUMNS") and "width" not in kw:
+        kw["width"] = PIPE_WIDTH
+    return Console(stderr=stderr, soft_wrap=True, highlight=False, **kw)
+
+
+out = make_console()
+err = make_console(stderr=True)
 
 
 @dataclass
@@ -38,6 +57,30 @@ class BusOptions:
     #: the rate --baud auto found (set by the first open_master/open_link)
     found_baud: int | None = None
     _recorder: object = None
+    #: config.Effective: the settings with their sources (config file, env, option, default)
+    settings: object = None
+
+    def source_of(self, name: str) -> str:
+        """Where the port / baud / master_address came from ("option --baud", "FILE:LINE", ...)."""
+        s = getattr(self.settings, name, None)
+        return getattr(s, "source", "option")
+
+    def port_or(self, fallback: str | None) -> str | None:
+        """The port for a command whose input file names one (a checklist's `port:`): --port or
+        PDRIVE_PORT when given, else `fallback` (a config port name in it resolved), else the config
+        file's default port."""
+        src = self.source_of("port")
+        if not fallback or (self.port and src.startswith(("option", "env"))):
+            return self.port
+        from profidrive_cli.config import load
+        named = load().ports.get(fallback)
+        return named.port.value if named is not None else fallback
+
+    def station_defaults(self, address: int | None) -> dict:
+        """{"profile" | "layout" | "fmax": value} the config file gives this station on this port."""
+        if self.settings is None:
+            return {}
+        return {k: s.value for k, s in self.settings.station_defaults(address).items()}
 
     def require_port(self) -> str:
         if not self.port:
@@ -56,7 +99,8 @@ class BusOptions:
         try:
             return parse_baud(self.baud)
         except ValueError as e:
-            raise UsageError(str(e)) from None
+            src = self.source_of("baud")
+            raise UsageError(str(e) if src.startswith("option") else f"{src}: baud {e}") from None
 
     def params(self, baud: int | None = None, link=None) -> BusParams:
         b = baud or self.baud_rate()
@@ -168,13 +212,25 @@ def _open_trace(path: str):
     return writer
 
 
+def complete_port(ctx, param, incomplete: str):
+    """Shell completion of --port: the port names from the config files, and sim://."""
+    try:
+        from profidrive_cli.config import load
+        names = list(load().ports)
+    except Exception:           # noqa: BLE001  (a broken config file must not break the shell)
+        names = []
+    return [n for n in [*names, "sim://"] if n.startswith(incomplete)]
+
+
 def bus_options(f):
     """--port, --baud, --master-address, --slot-time, --retries, --rs485, --echo, -v, --trace, --json."""
-    @click.option("--port", envvar="PDRIVE_PORT", default=None, metavar="PORT",
-                  help="Serial device, pyserial URL or sim:// (env PDRIVE_PORT).")
-    @click.option("--baud", default="19200", show_default=True, metavar="RATE",
-                  help="Bus baud rate (9.6k … 12M).")
-    @click.option("--master-address", default=2, show_default=True, type=click.IntRange(0, 125))
+    @click.option("--port", default=None, metavar="PORT", shell_complete=complete_port,
+                  help="Serial device, pyserial URL, sim://, or a port name from the config file "
+                       "(env PDRIVE_PORT; `pdrive config show`).")
+    @click.option("--baud", default=None, metavar="RATE",
+                  help="Bus baud rate (9.6k … 12M; env PDRIVE_BAUD, else the config file's, else 19200).")
+    @click.option("--master-address", default=None, type=click.IntRange(0, 125),
+                  help="Our bus address (default: the config file's, else 2).")
     @click.option("--slot-time", default=None, type=int, metavar="BITS",
                   help="Reply timeout in bit times (default: the standard TSL for the baud rate).")
     @click.option("--retries", default=None, type=click.IntRange(0, 15),
@@ -194,8 +250,10 @@ def bus_options(f):
         if trace:
             from profidrive_cli.outfile import check_output_path
             check_output_path(trace, "trace file")
-        opts = BusOptions(port, baud, master_address, slot_time, retries, rs485, echo, verbose,
-                          as_json, trace)
+        from profidrive_cli.config import resolve
+        eff = resolve(port, baud, master_address)
+        opts = BusOptions(eff.port.value, str(eff.baud.value), eff.master_address.value, slot_time,
+                          retries, rs485, echo, verbose, as_json, trace, settings=eff)
         return f(opts, **kw)
     return wrapper
 

@@ -59,9 +59,13 @@ def _session(opts, address, profile_name, ppo, fmt, watchdog_ms, *, cycle_hz=0.0
              log=None) -> DriveSession:
     if address is not None:
         station_address(address)
+    # the config file's defaults for this station on this port (config.py), below the options
+    defaults = opts.station_defaults(address)
+    profile_name = profile_name or defaults.get("profile")
+    layout = defaults.get("layout") if ppo is None and fmt is None else None
     master = opts.open_master(address=address)
     try:
-        return DriveSession(master, address, profile=profile_name, ppo=ppo, fmt=fmt,
+        return DriveSession(master, address, profile=profile_name, layout=layout, ppo=ppo, fmt=fmt,
                             watchdog_ms=watchdog_ms, cycle_hz=cycle_hz, before_connect=before,
                             on_message=_message, log_csv=log)
     except BaseException:
@@ -143,7 +147,14 @@ def _split_address(args: tuple[str, ...], min_rest: int) -> tuple[int | None, li
 @_terminations
 def status_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms):
     """One read of a drive's status: state, flags, speed, current fault."""
-    with _session(opts, address, profile_name, ppo, fmt, watchdog_ms) as s:
+    # built on the Python API (api/): the bus, the drive and their ending; rendered from its session
+    from profidrive_cli.api import Bus
+    if address is not None:
+        station_address(address)
+    with Bus(opts.open_master(address=address), on_message=_message, settings=opts.settings) as bus:
+        drive = bus.drive(address, profile=profile_name, layout=fmt, ppo=ppo,
+                          watchdog_ms=watchdog_ms, cycle_hz=0.0)
+        s = drive.session
         sample = s.status()
         d = R.status_dict(s, sample)
     if opts.json:

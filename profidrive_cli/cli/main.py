@@ -19,6 +19,8 @@ COMMANDS = {
                   "Scripted commissioning checklists: validate, rehearse, run, report."),
     "commloss-test": ("profidrive_cli.cli.commloss_cmd", "commloss_cmd",
                       "Comm-loss acceptance test: break the link, measure the drive's reaction."),
+    "config": ("profidrive_cli.cli.config_cmd", "config_group",
+               "Config file: the effective settings and where each came from; the files that apply."),
     "decode": ("profidrive_cli.cli.decode_cmd", "decode_cmd",
                "Decode a captured area of PROFILE's layout into named fields."),
     "diag": ("profidrive_cli.cli.bus_cmds", "diag_cmd",

@@ -12,6 +12,7 @@ import click
 from profidrive_cli import UsageError
 from profidrive_cli.cli import render_drive as R
 from profidrive_cli.cli import run_multi, run_plot, run_torque
+from profidrive_cli.api.drive import fmax_readable
 from profidrive_cli.cli.common import bus_options
 from profidrive_cli.cli.drive_cmds import (_confirmer, _session, _terminations, drive_options,
                                           run_ending)
@@ -116,6 +117,8 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
                      extra=lambda: _run_extra(view, mons)), run_plot.written_at_the_end(plotter, session):
         with session as s:
             s.check_torque(torque, torque_limit)          # the card's reason before anything shows
+            if fmax is None and not fmax_readable(s):    # the config file's default, where the
+                fmax = opts.station_defaults(s.address).get("fmax")   # drive's own is not readable
             fmax_hz, src = s.fmax(fmax)
             if mons:
                 mons[0].map_cyclic()            # before the start; restored after the stop

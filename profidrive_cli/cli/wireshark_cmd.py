@@ -62,8 +62,10 @@ def install_cmd(plugins_dir, stations, extcap_dir, no_extcap, as_json):
 @click.option("--extcap-version", default=None, metavar="VERSION", help="Wireshark's version (ignored).")
 @click.option("--capture", is_flag=True, help="Capture into --fifo until Wireshark stops it.")
 @click.option("--fifo", default=None, metavar="PATH", help="Where Wireshark reads the pcap stream.")
-@click.option("--port", default=None, metavar="PORT", help="Serial device, pyserial URL or pty.")
-@click.option("--baud", default="19200", show_default=True, metavar="RATE", help="Bus baud rate.")
+@click.option("--port", default=None, metavar="PORT",
+              help="Serial device, pyserial URL, pty, or a port name from the config file.")
+@click.option("--baud", default=None, metavar="RATE",
+              help="Bus baud rate (default: the config file's for the port, else 19200).")
 @click.option("--rs485", is_flag=True, help="Kernel RS-485 mode.")
 @click.option("--duration", default=None, type=float, metavar="S",
               help="Stop after S seconds (default: when Wireshark stops the capture).")
@@ -89,6 +91,9 @@ def extcap_cmd(ctx, extcap_interfaces, extcap_interface, extcap_dlts, extcap_con
         raise UsageError("--capture needs --fifo PATH")
     if not port:
         raise UsageError("--capture needs --port PORT (set it in the interface's options)")
+    from profidrive_cli.config import resolve
+    eff = resolve(port, baud)                  # a port name from the config file, its baud rate
+    port, baud = eff.port.value, eff.baud.value
     if duration is not None and duration <= 0:
         raise UsageError("--duration must be positive")
     from profidrive_cli.fdl.timing import parse_baud

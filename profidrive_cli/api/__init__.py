@@ -1,0 +1,29 @@
+"""The Python API of pdrive (stable; documented in docs/api.md):
+
+    import profidrive_cli as pdrive
+
+    with pdrive.open_bus("sim://") as bus:          # a device, a URL, sim:// or a config port name
+        bus.scan()                                   # -> [Station]
+        drive = bus.drive(3)                         # profile from the ident (or profile="fuji-g1")
+        drive.status()                               # -> Status
+        drive.run(hz=30, wait=True, timeout=20)      # -> Status
+        drive.param("F07")                           # -> Param
+        drive.set_param("F07", 5.0)                  # exact value or UsageError; -> Param read back
+        drive.faults()                               # -> Faults
+        drive.stop()                                 # -> StopResult
+    # leaving the block (also by an exception): every drive this bus started is stopped safely
+
+The api layer sits between checklist and cli (tests/test_layering.py): built on session/
+(DriveSession), it never prompts and never prints. Errors are the CLI's: UsageError (bad input,
+refused writes), BusError / DriveError (the bus or the drive).
+"""
+
+from profidrive_cli import BusError, PdriveError, UsageError
+from profidrive_cli.api.bus import Bus, open_bus
+from profidrive_cli.api.drive import Drive
+from profidrive_cli.api.results import Fault, Faults, Param, Station, Status, StopResult
+from profidrive_cli.drives.base import DriveError
+from profidrive_cli.session.signals import SessionTerminated
+
+__all__ = ["Bus", "BusError", "Drive", "DriveError", "Fault", "Faults", "Param", "PdriveError",
+           "SessionTerminated", "Station", "Status", "StopResult", "UsageError", "open_bus"]

@@ -1,0 +1,315 @@
+"""open_bus and Bus: one port, its DP master, the drives opened on it, the keep-alive that holds
+every opened drive in data exchange between calls, and the safe stop of every drive on close.
+
+Thread model: every public call holds the bus lock for its whole duration; the keep-alive thread
+takes the same lock, so the master is only ever used by one thread at a time. While a call talks
+to one station, every other opened station still gets a Data_Exchange at least every KEEP_S
+seconds (a hook on each drive's channel); while nobody calls, the keep-alive thread sends them.
+"""
+
+from __future__ import annotations
+
+import threading
+import os
+from typing import TYPE_CHECKING, Any, Callable, Mapping
+
+from profidrive_cli import BusError, UsageError
+from profidrive_cli.api.results import Station
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.api.drive import Drive
+
+#: at most this long between two Data_Exchanges of an opened station (well inside the 500 ms
+#: default DP watchdog; a shorter watchdog shortens it to a fifth of the watchdog)
+KEEP_S = 0.1
+
+
+def open_bus(port: str | None = None, *, baud: str | int | None = None,
+             master_address: int | None = None, retries: int | None = None,
+             slot_time: int | None = None, rs485: bool = False, echo: bool = False,
+             allow_real_port_writes: bool = False, handle_signals: bool = True,
+             on_message: Callable[[str], None] | None = None,
+             env: Mapping[str, str] | None = None) -> "Bus":
+    """Open a bus: a device (/dev/ttyUSB0, COM3), a pyserial URL, sim://, or a port name from the
+    config file (config.py). None: PDRIVE_PORT, else the config file's default port. baud and
+    master_address as the CLI's --baud / --master-address (default: PDRIVE_BAUD, the config file,
+    19200 and 2). The API never asks: on a real port, anything that moves a drive or writes a
+    setting needs allow_real_port_writes=True (sim:// is always allowed). Use it as a context
+    manager (or call close()): every drive it started is stopped on the way out. on_message(text):
+    warnings and what the safe stop did, one line each (also kept in Drive.warnings). env: the
+    environment read for PDRIVE_PORT, PDRIVE_BAUD, PDRIVE_CONFIG and PDRIVE_STATION (default
+    os.environ)."""
+    from profidrive_cli.config import resolve
+    eff = resolve(port, baud, master_address, env=env)
+    if not eff.port.value:
+        raise UsageError("open_bus: no port given (a device, sim://, or a port name from the config "
+                         "file; or set PDRIVE_PORT)")
+    return Bus(_open_master(str(eff.port.value), str(eff.baud.value), eff.baud.source,
+                            int(eff.master_address.value), retries, slot_time, rs485, echo),
+               allow_real_port_writes=allow_real_port_writes, handle_signals=handle_signals,
+               settings=eff, on_message=on_message, env=env)
+
+
+def _open_master(port: str, baud: str, baud_source: str, address: int, retries: int | None,
+                 slot_time: int | None, rs485: bool, echo: bool):
+    from profidrive_cli.dp.poller import Master
+    from profidrive_cli.fdl.timing import BusParams, parse_baud
+    from profidrive_cli.link import open_link
+    if not 0 <= address <= 125:
+        raise UsageError(f"master address {address} outside 0..125")
+    if str(baud).strip().lower() == "auto":
+        raise UsageError("open_bus: baud 'auto' is not supported by the API; give the rate")
+    try:
+        rate = parse_baud(baud)
+    except ValueError as e:
+        where = "" if baud_source.startswith(("option", "default")) else f"{baud_source}: "
+        raise UsageError(f"{where}baud {e}") from None
+    link = open_link(port, rate, rs485=rs485, echo=echo)
+    try:
+        params = BusParams.for_baud(
+            rate, slot_time=slot_time,
+            retries=retries if retries is not None else (1 if link.is_simulator else 2),
+            link_latency=0.0 if link.instant else 0.02)
+        return Master(link, params, address)
+    except ValueError as e:
+        link.close()
+        raise UsageError(str(e)) from None
+    except BaseException:
+        link.close()
+        raise
+
+
+class _SharedSignals:
+    """A drive session's signal guard that only shares the bus's `hurry` (the bus installs and
+    restores the handlers once for all its drives)."""
+
+    def __init__(self, guard):
+        self._guard = guard
+
+    @property
+    def hurry(self) -> bool:
+        return self._guard.hurry
+
+    @hurry.setter
+    def hurry(self, value: bool) -> None:
+        self._guard.hurry = value
+
+    def install(self) -> None:
+        pass
+
+    def guard(self) -> None:
+        pass
+
+    def restore(self) -> None:
+        pass
+
+
+class Bus:
+    """An open bus. Made by open_bus(); see there and docs/api.md."""
+
+    def __init__(self, master, *, allow_real_port_writes: bool = False, handle_signals: bool = True,
+                 settings: Any = None, on_message: Callable[[str], None] | None = None,
+                 env: Mapping[str, str] | None = None):
+        from profidrive_cli.session.signals import SignalGuard
+        self.master = master
+        self.port: str = getattr(master.link, "name", "") or ""
+        self.allow_real_port_writes = allow_real_port_writes
+        self.settings = settings
+        self.on_message = on_message
+        self.env = os.environ if env is None else env
+        self._lock = threading.RLock()
+        self._drives: dict[int, "Drive"] = {}
+        self._last: dict[int, float] = {}
+        self._closed = False
+        self._signals = SignalGuard(handle_signals)
+        self._signals.install()
+        self._stop_keepalive = threading.Event()
+        self._keepalive_error: BaseException | None = None
+        self._thread: threading.Thread | None = None
+
+    # -- context manager ------------------------------------------------------------------------
+    def __enter__(self) -> "Bus":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        self.close(exc)
+        return False
+
+    @property
+    def is_simulator(self) -> bool:
+        return self.port.startswith("sim://")
+
+    @property
+    def baud(self) -> int:
+        return self.master.params.baud
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def close(self, exc: BaseException | None = None) -> None:
+        """Stop every drive this bus started (normal stop, coast if it does not stop; bounded),
+        release every station, close the port. Idempotent. `exc`: the exception that ends the
+        work, if any (the line is flushed first)."""
+        if self._closed:
+            return
+        self._closed = True
+        self._stop_keepalive.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=5.0)
+        self._signals.guard()
+        try:
+            with self._lock:
+                while self._drives:
+                    # out of the keep-alive before its stop and release (the others stay kept)
+                    _, drive = self._drives.popitem()
+                    drive._close(exc)
+        finally:
+            try:
+                self.master.link.close()
+            except Exception:
+                pass
+            self._signals.restore()
+
+    # -- checks ------------------------------------------------------------------------------------
+    def _check_open(self) -> None:
+        if self._closed:
+            raise UsageError(f"the bus on {self.port} is closed")
+        if self._keepalive_error is not None:
+            e, self._keepalive_error = self._keepalive_error, None
+            raise BusError(f"{self.port}: keeping the drives in data exchange failed: {e}") from e
+
+    def _check_write(self, what: str) -> None:
+        if self.is_simulator or self.allow_real_port_writes:
+            return
+        raise UsageError(f"{what}: this writes to a real port ({self.port}); open the bus with "
+                         f"open_bus(..., allow_real_port_writes=True)")
+
+    # -- stations ----------------------------------------------------------------------------------
+    def scan(self, first: int = 0, last: int = 126) -> list[Station]:
+        """Every station that answers FDL status in first..last: its kind, ident, the matching
+        pdrive profile and its DP state. Stations opened with drive() keep exchanging data."""
+        from profidrive_cli.dp.scan import scan
+        from profidrive_cli.drives.profile import profile_for_ident
+        if not 0 <= first <= last <= 126:
+            raise UsageError(f"scan: range {first}..{last} is not within 0..126")
+        with self._lock:
+            self._check_open()
+            out = []
+            opened = set(self._drives)
+            for a in range(first, last + 1):
+                if a in opened:
+                    d = self._drives[a]
+                    out.append(Station(a, "slave", d.ident, d.profile, "data exchange"))
+                    continue
+                for e in scan(self.master, a, a):
+                    prof = profile_for_ident(e.ident) if e.ident is not None else None
+                    out.append(Station(e.address, e.station_type, e.ident,
+                                       prof.name if prof is not None else None,
+                                       e.diag.state_words(self.master.address) if e.diag else e.error))
+                self._keep_others(None)
+            return out
+
+    def drive(self, station: int | None = None, *, profile: str | None = None,
+              layout: str | None = None, ppo: int | None = None, fmax: float | None = None,
+              watchdog_ms: float = 500,
+              cycle_hz: float | None = None, stop_timeout: float | None = None) -> "Drive":
+        """The drive at `station` (None: PDRIVE_STATION, else the only drive station on the bus),
+        brought to data exchange and kept there until the bus is closed. profile: a profile name or
+        alias (default: the config file's for this station, else from the station's ident);
+        layout: a layout name (e.g. "ppo3", "toyo") or ppo=N (default: the config file's, else the
+        profile's); fmax: the frequency 100 % stands for when the drive's own value cannot be read.
+        The same station twice: the same Drive."""
+        from profidrive_cli.api.drive import Drive, fmax_readable
+        from profidrive_cli.session import DriveSession
+        with self._lock:
+            self._check_open()
+            if station is not None and (isinstance(station, bool) or not isinstance(station, int)
+                                        or not 0 <= station <= 125):
+                raise UsageError(f"station {station!r} is not a bus address 0..125")
+            if station in self._drives:
+                return self._drives[station]
+            defaults = {}
+            if self.settings is not None:
+                defaults = {k: s.value for k, s in self.settings.station_defaults(station).items()}
+            if layout is None and ppo is None:
+                layout = defaults.get("layout")
+            sess = DriveSession(self.master, station, profile=profile or defaults.get("profile"),
+                                layout=layout, ppo=ppo, watchdog_ms=watchdog_ms,
+                                cycle_hz=cycle_hz, stop_timeout=stop_timeout, close_link=False,
+                                handle_signals=False, on_message=self.on_message, env=self.env)
+            sess.signals = _SharedSignals(self._signals)
+            try:
+                sess.open()
+            except BaseException as e:
+                sess.close(e)
+                raise
+            if fmax is None and not fmax_readable(sess):
+                fmax = defaults.get("fmax")          # the config's, where the drive's is not readable
+            drive = Drive(self, sess, fmax)
+            self._drives[sess.address] = drive
+            self._last[sess.address] = self.master.link.now()
+            sess.channel.hooks.append(lambda t, o, i, a=sess.address: self._exchanged(a, t))
+            self._start_keepalive()
+            return drive
+
+    @property
+    def drives(self) -> list["Drive"]:
+        """The drives opened on this bus (in data exchange until closed)."""
+        return list(self._drives.values())
+
+    # -- keep-alive --------------------------------------------------------------------------------
+    def _keep_s(self) -> float:
+        wd = min((d.session.watchdog_ms for d in self._drives.values()), default=500.0)
+        return min(KEEP_S, wd / 5000.0)
+
+    def _exchanged(self, address: int, t: float) -> None:
+        """After a Data_Exchange with `address`: the other opened stations that are due get one."""
+        self._last[address] = t
+        self._keep_others(address)
+
+    def _keep_others(self, busy: int | None) -> None:
+        """A Data_Exchange (with its last outputs) for every opened station other than `busy` whose
+        last one is KEEP_S old. A station that cannot be kept is left to its own next call (which
+        then reports it); a lost link is raised."""
+        from profidrive_cli.link.base import LinkLost
+        keep = self._keep_s()
+        for a in list(self._drives):
+            if a == busy:
+                continue
+            now = self.master.link.now()
+            if now - self._last.get(a, now) >= keep:
+                self._last[a] = now
+                try:
+                    self.master.exchange(a, None)
+                except LinkLost:
+                    raise
+                except BusError:
+                    pass
+                self._last[a] = self.master.link.now()
+
+    def __repr__(self) -> str:
+        return (f"<Bus {self.port} at {self.baud} bit/s, drives {sorted(self._drives)}"
+                f"{' (closed)' if self._closed else ''}>")
+
+    def _start_keepalive(self) -> None:
+        if self._thread is not None:
+            return
+        self._thread = threading.Thread(target=self._keepalive, name="pdrive-keepalive", daemon=True)
+        self._thread.start()
+
+    def _keepalive(self) -> None:
+        period = KEEP_S / 2
+        while not self._stop_keepalive.wait(period):
+            if not self._lock.acquire(timeout=0.05):
+                continue                     # a call is talking to the bus (and keeps the others)
+            try:
+                if self._closed:
+                    return
+                period = self._keep_s() / 2
+                self._keep_others(None)
+            except BaseException as e:      # noqa: BLE001  (reported at the next call)
+                self._keepalive_error = e
+                return
+            finally:
+                self._lock.release()

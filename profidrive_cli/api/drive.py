@@ -1,0 +1,231 @@
+"""Drive: one drive station in data exchange on a Bus (a session.DriveSession underneath): status,
+run / stop, parameters, faults. Every call holds the bus lock; writes on a real port need the bus
+opened with allow_real_port_writes=True. The safe stop of a drive this API started happens on
+Bus.close() (also on an exception leaving the `with`), or on Drive.close()."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any
+
+from profidrive_cli import UsageError
+from profidrive_cli.api.results import Fault, Faults, Param, Status, StopResult
+from profidrive_cli.drives.base import DriveError
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.session import DriveSession, Sample
+
+#: run(wait=True) without a timeout waits at most this long for the reference
+DEFAULT_RUN_TIMEOUT_S = 60.0
+
+
+def at_reference(ref: float | None, act: float | None) -> bool:
+    """The actual speed is at the reference: within 1 % of it, or 0.05 % of fmax near zero (as
+    `pdrive run` decides 'reached')."""
+    if ref is None or act is None:
+        return False
+    return abs(act - ref) <= max(0.01 * abs(ref), 0.05)
+
+
+def fmax_readable(session) -> bool:
+    """The drive's own maximum frequency can be read (a parameter channel and a parameter number
+    for the profile's max-frequency parameter): an fmax default from the config file then stays
+    unused (an fmax given explicitly is checked against the drive's, with a warning)."""
+    prof = session.profile
+    code = prof.max_frequency_param
+    pdef = prof.param(code) if code else None
+    return bool(session.drive.has_param_channel and pdef is not None
+                and (getattr(pdef, "pnu", None) is not None or getattr(pdef, "register", None) is not None))
+
+
+class Drive:
+    """A drive station opened with Bus.drive(); see docs/api.md."""
+
+    def __init__(self, bus: Any, session: "DriveSession", fmax: float | None = None):
+        self._bus = bus
+        #: the session underneath (internal: not part of the stable API)
+        self.session = session
+        self._fmax_override = fmax
+        self._closed = False
+        if fmax is not None:
+            session.fmax(fmax)
+
+    # -- identity ---------------------------------------------------------------------------------
+    @property
+    def station(self) -> int:
+        return int(self.session.address)
+
+    @property
+    def ident(self) -> int | None:
+        return self.session.ident
+
+    @property
+    def ident_hex(self) -> str | None:
+        return None if self.ident is None else "0x%04X" % self.ident
+
+    @property
+    def profile(self) -> str:
+        return self.session.profile.name
+
+    @property
+    def family(self) -> str:
+        return self.session.profile.family
+
+    @property
+    def layout(self) -> str:
+        return str(self.session.layout)
+
+    @property
+    def fmax_hz(self) -> float:
+        """The frequency 100 % stands for (read from the drive where it can be)."""
+        with self._bus._lock:
+            self._check()
+            return self.session.fmax(self._fmax_override)[0]
+
+    @property
+    def warnings(self) -> list[str]:
+        return list(self.session.warnings)
+
+    def __repr__(self) -> str:
+        return f"<Drive station {self.station} {self.profile} on {self._bus.port}>"
+
+    # -- checks -------------------------------------------------------------------------------------
+    def _check(self) -> None:
+        if self._closed:
+            raise UsageError(f"station {self.station}: this drive was closed")
+        self._bus._check_open()
+
+    def _status(self, sample: "Sample") -> Status:
+        st = sample.status
+        return Status(self.station, self.profile, st.state, bool(st.running), bool(st.stopped),
+                      bool(st.fault), st.fault_code, tuple(k for k, v in st.flags.items() if v),
+                      sample.actual_hz, sample.actual_percent, sample.reference_hz,
+                      sample.reference_percent, float(sample.fmax_hz), round(sample.t, 3),
+                      dict(sample.counters))
+
+    # -- status -------------------------------------------------------------------------------------
+    def status(self) -> Status:
+        """One read of the status (the current fault named where the card can say it)."""
+        with self._bus._lock:
+            self._check()
+            return self._status(self.session.status())
+
+    # -- motion -------------------------------------------------------------------------------------
+    def run(self, hz: float | None = None, *, percent: float | None = None, wait: bool = False,
+            timeout: float | None = None) -> Status:
+        """Run at `hz` (or `percent` of fmax; negative = reverse): start the drive, or change the
+        reference when it already runs. wait=True: until the actual speed is at the reference
+        (DriveError after `timeout` s, default 60, or when the drive trips). A speed above fmax is
+        refused (UsageError), never clipped."""
+        if (hz is None) == (percent is None):
+            raise UsageError("run: give hz or percent (one of them)")
+        v = hz if hz is not None else percent
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise UsageError(f"run: {v!r} is not a speed")
+        if timeout is not None and not timeout > 0:
+            raise UsageError(f"run: timeout {timeout!r} must be above 0 s")
+        with self._bus._lock:
+            self._check()
+            s = self.session
+            pct = float(percent) if percent is not None else s.percent_for_hz(float(hz),
+                                                                               self._fmax_override)
+            self._bus._check_write(f"run station {self.station} at "
+                                   f"{f'{hz:g} Hz' if hz is not None else f'{percent:g} %'}")
+            if s.may_run:
+                s.set_reference(pct)
+                sample = s.poll()
+            else:
+                sample = s.start(pct)
+            if wait:
+                limit = DEFAULT_RUN_TIMEOUT_S if timeout is None else float(timeout)
+                end = sample.t + limit
+                while not at_reference(pct, sample.actual_percent):
+                    if sample.status.fault:
+                        raise DriveError(f"station {self.station}: the drive tripped"
+                                         + (f" ({sample.status.fault_code})"
+                                            if sample.status.fault_code else "")
+                                         + " while accelerating")
+                    if sample.t > end:
+                        act = sample.actual_hz
+                        raise DriveError(f"station {self.station}: reference "
+                                         f"{sample.reference_hz if sample.reference_hz is not None else pct:g}"
+                                         f"{' Hz' if sample.reference_hz is not None else ' %'} not "
+                                         f"reached within {limit:g} s (actual "
+                                         f"{'-' if act is None else f'{act:g} Hz'})")
+                    sample = s.poll()
+            return self._status(sample)
+
+    def stop(self, *, timeout: float | None = None) -> StopResult:
+        """The family's normal stop, waiting (bounded: `timeout`, default from the drive's
+        deceleration time) until the drive reports stopped; a coast stop when it does not."""
+        with self._bus._lock:
+            self._check()
+            r = self.session.stop(timeout=timeout)
+            return StopResult(r.how, bool(r.stopped), round(r.seconds, 3), r.message)
+
+    # -- parameters --------------------------------------------------------------------------------
+    def param(self, code: str) -> Param:
+        """Read one parameter by its native code ("F07", "A004", "C1-01", "PNU23[1]", ...)."""
+        with self._bus._lock:
+            self._check()
+            self.session.param_info(code)
+            return _param(self.session.read_param(code))
+
+    def set_param(self, code: str, value: float | int | str, *, allow_dangerous: bool = False
+                  ) -> Param:
+        """Write one parameter and return the value read back. A value the parameter cannot hold
+        exactly is refused (UsageError), never rounded; a parameter the profile marks dangerous
+        needs allow_dangerous=True; one that may only change at standstill is refused while the
+        drive runs (DriveError)."""
+        if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+            raise UsageError(f"set_param {code}: {value!r} is not a value")
+        with self._bus._lock:
+            self._check()
+            s = self.session
+            info = s.param_info(code)
+            v = s.parse_value(code, value, info)
+            s._check_write(info, v, allow_dangerous)
+            self._bus._check_write(f"write {code} = {value} on station {self.station}")
+            return _param(s.write_param(code, v, allow_dangerous=allow_dangerous))
+
+    # -- faults ---------------------------------------------------------------------------------------
+    def faults(self) -> Faults:
+        """The current fault and the fault history (alarm names; every candidate where one number
+        means several)."""
+        with self._bus._lock:
+            self._check()
+            cur = self.session.status().status
+            hist = self.session.fault_history()
+            return Faults(self.station, bool(cur.fault), cur.fault_code, cur.state,
+                          tuple(Fault(str(r.position), int(r.raw), tuple(r.codes), tuple(r.meanings))
+                                for r in hist))
+
+    def clear_fault(self) -> Status:
+        """Acknowledge the current fault (its cause must be gone); the history stays."""
+        with self._bus._lock:
+            self._check()
+            self._bus._check_write(f"acknowledge the fault of station {self.station}")
+            return self._status(self.session.clear_fault())
+
+    # -- end ------------------------------------------------------------------------------------------
+    def close(self) -> StopResult | None:
+        """Stop the drive if this API started it, release the station (it leaves data exchange);
+        the bus stays open. Bus.close() does this for every drive still open."""
+        with self._bus._lock:
+            if self._closed:
+                return None
+            self._bus._drives.pop(self.station, None)
+            self._close(None)
+            r = self.session.stop_report
+            return None if r is None else StopResult(r.how, bool(r.stopped), round(r.seconds, 3),
+                                                     r.message)
+
+    def _close(self, exc: BaseException | None) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        self.session.close(exc)
+
+
+def _param(pv) -> Param:
+    return Param(pv.code, pv.name, pv.value, pv.unit or "", int(pv.raw), getattr(pv, "text", None))
