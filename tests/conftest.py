@@ -158,3 +158,13 @@ def read_until_turning(p, phase: str = "running", deadline_s: float = 20.0, min_
             return events
     p.kill()
     pytest.fail(f"the motor never turned ({phase}): {events[-3:]} {p.stderr.read()}")
+
+
+@pytest.fixture(autouse=True)
+def _no_user_config(tmp_path_factory, monkeypatch):
+    """A developer's own ~/.config/pdrive/config.yaml must not change what the tests see: the user
+    config folder is an empty one for every test (tests of the config file set their own)."""
+    home = tmp_path_factory.getbasetemp() / "xdg-config-home"
+    home.mkdir(exist_ok=True)
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(home))
+    monkeypatch.delenv("PDRIVE_CONFIG", raising=False)
