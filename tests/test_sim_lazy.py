@@ -115,3 +115,18 @@ def test_the_tick_replay_is_bounded():
     assert calls == [float(i) for i in range(50, lazy.REPLAY_TICKS + 50)]
     p.tick(999.0)
     assert calls[-1] == 999.0
+
+
+def test_a_served_plant_builds_every_station_before_the_first_request():
+    """pdrive sim --pty / --listen: a master on the other end must not wait for a model to be built."""
+    from profidrive_cli.sim import server
+    bus = build_bus("sim://?stations=3:fuji-g1,5:toyo")
+
+    class NoEndpoint:
+        def read(self, timeout):
+            return b""
+
+        def write(self, data):
+            raise AssertionError("nothing was asked")
+    server.serve(bus, NoEndpoint(), stop=iter([False, True]).__next__)
+    assert not any(isinstance(s.model, LazyModel) for s in bus.slaves.values())
