@@ -10,7 +10,8 @@ else - no reply, a corrupt or foreign one, noise, DH/RDH, RS, an SC, another len
 flagged - goes to the general engine unchanged (FdlMaster.feed/expire in Master._await,
 StationMachine.on_outcome), so retries, illegal frames, no-answer, the FCB restart after a failure
 and the per-attempt cap are counted exactly as before. Waiting is the poller's (Master._await):
-the same reads, sleeps and deadlines. Master.fast_dx = False sends every request the general way
+the same reads, sleeps and deadlines; on a link without µs timing the wait for the reply is one
+sleep to its wire end plus the lag the link's replies have had (Master.reply_lag, learned here). Master.fast_dx = False sends every request the general way
 (the tests compare the two).
 """
 
