@@ -1,6 +1,9 @@
 """Start-up time of pdrive commands against `python -c "import click"`, measured in the same run.
 
-    python benchmarks/bench_startup.py [--rounds N]
+    python benchmarks/bench_startup.py [--rounds N] [--against DIR]
+
+--against DIR  also run the pdrive commands from another checkout (e.g. `git worktree add` or
+               `git archive` of an older commit), in the same rounds: before/after in one run
 
 Each round runs every command once, in turn (interleaved, so machine load hits all alike); the
 figure per command is the median wall time over the rounds, and its ratio to the median of
@@ -39,18 +42,25 @@ CASES = [
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--rounds", type=int, default=15)
+    ap.add_argument("--against", metavar="DIR", help="another checkout, run in the same rounds")
     a = ap.parse_args()
     env = dict(os.environ)
-    env["PYTHONPATH"] = HERE + os.pathsep + env.get("PYTHONPATH", "")
     env.pop("PYTHONDONTWRITEBYTECODE", None)
-    times: dict[str, list[float]] = {name: [] for name, _ in CASES}
-    cpu: dict[str, list[float]] = {name: [] for name, _ in CASES}
+    base = env.get("PYTHONPATH", "")
+    trees = [("", HERE)] + ([(" [" + os.path.basename(os.path.abspath(a.against)) + "]",
+                              os.path.abspath(a.against))] if a.against else [])
+    cases = [(name, cmd, HERE) for name, cmd in CASES[:1]]
+    for tag, root in trees:
+        cases += [(name + tag, cmd, root) for name, cmd in CASES[1:]]
+    times: dict[str, list[float]] = {name: [] for name, _, _ in cases}
+    cpu: dict[str, list[float]] = {name: [] for name, _, _ in cases}
     for r in range(a.rounds + 1):
-        for name, cmd in CASES:
+        for name, cmd, root in cases:
+            env["PYTHONPATH"] = root + os.pathsep + base
             t = time.perf_counter()
             before = resource.getrusage(resource.RUSAGE_CHILDREN)
             subprocess.run(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                           stdin=subprocess.DEVNULL, check=True, cwd=HERE)
+                           stdin=subprocess.DEVNULL, check=True, cwd=root)
             wall = time.perf_counter() - t
             after = resource.getrusage(resource.RUSAGE_CHILDREN)
             if r:                   # round 0 writes the .pyc files
@@ -60,10 +70,10 @@ def main() -> None:
     cref = statistics.median(cpu["import click"])
     print(f"python {sys.version.split()[0]}, {os.cpu_count()} CPUs, {a.rounds} interleaved rounds"
           f" (load average {os.getloadavg()[0]:.1f})")
-    print(f"{'':<48} {'wall':>9}  {'ratio':>6}   {'CPU':>9}  {'ratio':>6}")
-    for name, _ in CASES:
+    print(f"{'':<60} {'wall':>9}  {'ratio':>6}   {'CPU':>9}  {'ratio':>6}")
+    for name, _, _ in cases:
         med, cmed = statistics.median(times[name]), statistics.median(cpu[name])
-        print(f"{name:<48} {med * 1000:6.1f} ms  {med / ref:5.2f}x   {cmed * 1000:6.1f} ms  {cmed / cref:5.2f}x")
+        print(f"{name:<60} {med * 1000:6.1f} ms  {med / ref:5.2f}x   {cmed * 1000:6.1f} ms  {cmed / cref:5.2f}x")
 
 
 if __name__ == "__main__":

@@ -238,3 +238,38 @@ def test_env_folder_missing_is_an_error_like_gsd_dir(tmp_path, monkeypatch):
         library.load_gsd("0x00CA")
     assert library.station_name(0xFD06) == "Moeller DE6-NET-DP (DF6/DV6)"      # naming only warns
     assert seen == [f"PDRIVE_GSD_DIR {tmp_path / 'nope'}: no such folder (ignored)"]
+
+
+def test_library_names_from_the_header_lines_are_the_parsed_titles():
+    """station_name reads only Vendor_Name / Model_Name of pdrive's own files: for every library file
+    that is the title the full parse gives (and every library file parses)."""
+    library.clear_cache()
+    files = library.gsd_files(gsd_dir())
+    assert len(files) == 5
+    for p in files:
+        g = library.parse_cached(p)
+        assert library._head(p) == (g.ident_number, g.title), p.name
+        assert library.station_name(g.ident_number) == g.title
+    library.clear_cache()
+
+
+def test_a_user_file_names_its_station_over_the_library_header(tmp_path, monkeypatch):
+    monkeypatch.delenv("PDRIVE_GSD_DIR", raising=False)
+    library.clear_cache()
+    (tmp_path / "fuji_real.gsd").write_bytes(
+        b'#Profibus_DP\r\nVendor_Name = "Fuji Electric"\r\nModel_Name = "vendor file"\r\n'
+        b'Ident_Number = 0xFD01\r\nProtocol_Ident = 0\r\nStation_Type = 0\r\n12M_supp = 1\r\n'
+        b'Module = "PPO1" 0xF3, 0xF1\r\nEndModule\r\n')
+    assert library.station_name(0xFD01, tmp_path) == "Fuji Electric vendor file"
+    assert library.station_name(0xFD01) == "Fuji Electric OPC-G1-PDP (FRENIC-MEGA)"
+    library.clear_cache()
+
+
+def test_a_name_line_the_header_reader_cannot_take_is_left_to_the_parser(tmp_path):
+    p = tmp_path / "x.gsd"
+    p.write_bytes(b'#Profibus_DP\r\nVendor_Name = Fuji\r\nModel_Name = "a" "b"\r\nIdent_Number = 0x1234\r\n')
+    library.clear_cache()
+    assert library._head(p) == (0x1234, None)
+    p.write_bytes(b'#Profibus_DP\r\nvendor_name="ACME" ; the maker\r\nIdent_Number = 4660\r\n')
+    assert library._head(p) == (0x1234, "ACME")
+    library.clear_cache()

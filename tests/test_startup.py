@@ -26,7 +26,9 @@ try:
     main(sys.argv[1:])
 except SystemExit:
     pass
-print("MODULES", sorted(m for m in ("rich.progress", "profidrive_cli.sim.plant", "profidrive_cli.gsd.parser")
+print("MODULES", sorted(m for m in ("rich.progress", "profidrive_cli.sim.plant", "profidrive_cli.gsd.parser",
+                                    "profidrive_cli.sim.fuji", "profidrive_cli.sim.toyo",
+                                    "profidrive_cli.sim.moeller", "profidrive_cli.sim.yaskawa")
                         if m in sys.modules))
 """
 
@@ -46,14 +48,34 @@ def test_decode_loads_only_its_profile_and_no_sim_gsd_or_progress():
 
 
 def test_a_one_station_sim_scan_does_not_load_the_other_profiles():
-    """sim://?stations=3:fuji-g1 needs one profile; rich.progress only on a terminal (not here)."""
+    """sim://?stations=3:fuji-g1: a scan asks the station for FDL status and Slave_Diag only, which
+    an untouched drive answers without its model (sim/lazy.py): no profile loaded in full, no drive
+    model imported; rich.progress only on a terminal (not here)."""
     out, full = _probe("scan", "--port", "sim://?stations=3:fuji-g1")
     assert "1 station(s)" in out and "0xFD01" in out, out
-    assert full == ["fuji-opc-g1-pdp.yaml"]
-    assert "'rich.progress'" not in out and "'profidrive_cli.sim.plant'" in out
+    assert full == []
+    assert "MODULES ['profidrive_cli.sim.plant']" in out
 
 
-def test_naming_a_station_parses_only_the_gsd_file_with_its_ident(monkeypatch):
+def test_a_default_plant_scan_loads_no_profile_no_model_and_no_gsd_parser():
+    out, full = _probe("scan", "--port", "sim://")
+    # the five stations of the default plant, idents and names as the GSD library has them
+    for ident, name in (("0xFD01", "Fuji Electric"), ("0xFD02", "OPC-PDP3"), ("0x0BE7", "Toyo Denki"),
+                        ("0xFD06", "Moeller"), ("0x00CA", "YASKAWA ELECTRIC")):
+        assert ident in out and name in out, out
+    assert "5 station(s)" in out
+    assert full == []
+    assert "MODULES ['profidrive_cli.sim.plant']" in out
+
+
+def test_parameterising_a_station_builds_its_model_and_loads_only_its_profile():
+    out, full = _probe("io", "--port", "sim://?stations=3:fuji-g1,5:toyo", "3", "--cfg", "F3F1",
+                       "--count", "1")
+    assert full == ["fuji-opc-g1-pdp.yaml"], out
+    assert "'profidrive_cli.sim.fuji'" in out and "'profidrive_cli.sim.toyo'" not in out
+
+
+def test_naming_a_station_from_the_library_parses_no_gsd_file(monkeypatch):
     monkeypatch.delenv("PDRIVE_GSD_DIR", raising=False)
     library.clear_cache()
     parsed: list[str] = []
@@ -65,8 +87,8 @@ def test_naming_a_station_parses_only_the_gsd_file_with_its_ident(monkeypatch):
     monkeypatch.setattr(library, "parse_gsd", counting)
     assert len(library.gsd_files(gsd_dir())) == 5
     name = library.station_name(0x00CA)
-    assert name and "SI-P1" in name
-    assert parsed == ["YASK00CA.GSD"]
-    assert library.station_name(0x00CA) == name and parsed == ["YASK00CA.GSD"]       # cached
-    assert library.station_name(0x4242) is None and parsed == ["YASK00CA.GSD"]
+    # YASK00CA.GSD lines 20-21: Vendor_Name = "YASKAWA ELECTRIC", Model_Name = "PROFIBUS-DP INTERFACE CARD SI-P1"
+    assert name == "YASKAWA ELECTRIC PROFIBUS-DP INTERFACE CARD SI-P1"
+    assert parsed == []
+    assert library.station_name(0x4242) is None and parsed == []
     library.clear_cache()

@@ -44,6 +44,10 @@ class Master:
         #: engine for every request (same octets, counters and FCB states, only slower)
         self.fast_dx = True
         self._rr = 0
+        #: seconds the link's replies have arrived after their wire time, learned by the fast path
+        #: on links without µs timing (dp/dx_fast.py): its wait for a reply includes it
+        self.reply_lag = 0.0
+        self._await_reads = 0        # reads the last _await took until its outcome
         #: how often the port went away, and how often reconnect() brought it back
         self.link_losses = 0
         self.reconnects = 0
@@ -111,9 +115,11 @@ class Master:
         (then the input octets are returned), anything else by the general engine."""
         waited_for = 0       # length of the telegram whose rest was already waited for
         fdl = self.fdl
+        reads = 0
         while True:
             chunk = self.link.read(fdl.deadline)
             now = self.link.now()
+            reads += 1
             if chunk:
                 res = fdl.dx_feed(chunk, now) if dx else None
                 if res is None:
@@ -123,6 +129,7 @@ class Master:
                 if res is not None:
                     if not self.link.instant:        # (the instant simulator keeps no idle times)
                         self._line_free_at = now + fdl.params.tid1_seconds
+                    self._await_reads = reads
                     return res
                 rest = self.fdl.missing()
                 if rest > 1 and not self.link.instant:
@@ -351,10 +358,15 @@ class StationChannel:
     def exchange(self, outputs: bytes) -> bytes:
         if self.period:
             now = self.now()
+            # one sleep for the period and the line's idle time after the last reply (TID1),
+            # not a second wake-up in the master for the rest of the idle time
+            free = 0.0 if self.master.link.instant else self.master._line_free_at
             if self._next is None:
-                self._next = now             # the first exchange goes at once, the next a period later
-            if now < self._next:
-                self.master.link.sleep(self._next - now)
+                # the first exchange goes as soon as the line is free, the next a period later
+                self._next = max(now, free)
+            until = max(self._next, free)
+            if now < until:
+                self.master.link.sleep(until - now)
             self._next = max(self._next + self.period, self.now())
         self.cycles += 1
         return self.master.exchange(self.address, outputs)

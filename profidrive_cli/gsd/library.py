@@ -4,7 +4,10 @@ lookup by ident searches the user folders first.
 
 Parsed files are cached per path, keyed by (mtime, size), so naming every station of a bus scan parses each
 file once per process. A lookup by ident first reads only the `Ident_Number` line of each candidate file
-(also cached), then parses the one that matches.
+(also cached), then parses the one that matches. Naming a station from pdrive's own library reads only
+the `Vendor_Name` / `Model_Name` lines of that file (the tests parse every library file and check the
+name is the parsed one); a user's file is parsed in full, so one that does not parse never names one.
+The parser is imported on the first parse.
 
 A file that does not parse (or is incomplete) never shadows another: lookups skip it with one warning on
 stderr that names it. A user folder that does not exist is an error, whether it comes from --gsd-dir or
@@ -21,16 +24,22 @@ from pathlib import Path
 
 from profidrive_cli import UsageError
 from profidrive_cli.data import gsd_dir, user_gsd_dirs
+from typing import TYPE_CHECKING
+
 from profidrive_cli.datafile import DataFileError, read_input_file, short
-from profidrive_cli.gsd.model import Gsd
 from profidrive_cli.gsd.lexer import MAX_GSD_BYTES, MAX_NUMBER_CHARS, decode
-from profidrive_cli.gsd.parser import parse_gsd
+
+if TYPE_CHECKING:
+    from profidrive_cli.gsd.model import Gsd
 
 # .gsd is the default language; .gse English, .gsg German, .gsf French, .gsi Italian, .gsp Portuguese,
 # .gss Spanish. In one folder, for one file stem, the first in this order is used.
 GSD_SUFFIXES = (".gsd", ".gse", ".gsg", ".gsf", ".gsi", ".gsp", ".gss")
 
 _IDENT = re.compile(r"^[ \t]*Ident_Number[ \t]*=[ \t]*(0[xX][0-9a-fA-F]+|[0-9]+)", re.I | re.M)
+#: a one-line quoted name; anything else (continued lines, no quotes) leaves naming to the parser
+_NAME = {k: re.compile(rf'^[ \t]*{k}[ \t]*=[ \t]*"([^"\r\n]*)"[ \t]*(?:;[^\r\n]*)?\r?$', re.I | re.M)
+         for k in ("Vendor_Name", "Model_Name")}
 
 _warned: set[str] = set()
 
@@ -48,7 +57,14 @@ def _warn(message: str) -> None:
         warn_hook(message)
 
 _parsed: dict[str, tuple[tuple[int, int], Gsd]] = {}
-_idents: dict[str, tuple[tuple[int, int], int | None]] = {}
+#: path -> (stamp, (ident, title from the header lines or None))
+_heads: dict[str, tuple[tuple[int, int], tuple[int | None, str | None]]] = {}
+
+
+def parse_gsd(path):
+    """gsd.parser.parse_gsd, imported on first use (naming stations needs no parser)."""
+    from profidrive_cli.gsd.parser import parse_gsd as parse
+    return parse(path)
 
 
 def _stamp(p: Path) -> tuple[int, int]:
@@ -58,7 +74,7 @@ def _stamp(p: Path) -> tuple[int, int]:
 
 def clear_cache() -> None:
     _parsed.clear()
-    _idents.clear()
+    _heads.clear()
     _warned.clear()
 
 
@@ -80,28 +96,40 @@ def parse_cached(path: str | Path) -> Gsd:
     return g
 
 
-def quick_ident(path: str | Path) -> int | None:
-    """The Ident_Number of a GSD file from its first `Ident_Number =` line (no full parse); None if absent."""
+def _head(path: str | Path) -> tuple[int | None, str | None]:
+    """(Ident_Number, "Vendor Model") of a GSD file from its header lines, without parsing it;
+    cached per path like parsed files. The title is None when the name lines are not plain one-line
+    strings (or both are empty)."""
     p = Path(path)
     try:
         stamp = _stamp(p)
     except OSError:
-        return None
+        return None, None
     key = str(p.resolve())
-    hit = _idents.get(key)
+    hit = _heads.get(key)
     if hit and hit[0] == stamp:
         return hit[1]
     try:
         text, _ = decode(read_input_file(p, "GSD file", MAX_GSD_BYTES))
     except DataFileError:
-        return None
+        return None, None
     m = _IDENT.search(text)
     ident = None
     if m and len(m.group(1)) <= MAX_NUMBER_CHARS:
         t = m.group(1)
         ident = int(t[2:], 16) if t[:2].lower() == "0x" else int(t)
-    _idents[key] = (stamp, ident)
-    return ident
+    parts = []
+    for rx in _NAME.values():
+        n = rx.search(text)
+        if n and n.group(1).strip():
+            parts.append(n.group(1).strip())
+    _heads[key] = (stamp, (ident, " ".join(parts) or None))
+    return _heads[key][1]
+
+
+def quick_ident(path: str | Path) -> int | None:
+    """The Ident_Number of a GSD file from its first `Ident_Number =` line (no full parse); None if absent."""
+    return _head(path)[0]
 
 
 def _user_dirs(extra_dir: str | Path | None, strict: bool = True) -> list[Path]:
@@ -224,6 +252,15 @@ def find_by_ident(ident: int, extra_dir: str | Path | None = None) -> Gsd | None
 def station_name(ident: int, extra_dir: str | Path | None = None) -> str | None:
     """"Vendor Model" for an ident, for naming stations in a bus scan; None when unknown. Missing user
     folders and broken files are reported as warnings, not errors: a name is only a label."""
+    dirs = search_dirs(extra_dir, strict=False)
+    if not any(quick_ident(p) == ident for folder, source in dirs if source == "user"
+               for p in gsd_files(folder)):
+        # no user file can win: pdrive's own file (they all parse, the tests check) names it by
+        # its header lines, without importing the parser
+        for folder, _ in dirs:
+            hit = next((h for h in map(_head, gsd_files(folder)) if h[0] == ident), None)
+            if hit is not None and hit[1] is not None:
+                return hit[1]
     hit = _find(ident, extra_dir, strict=False)
     return None if hit is None else hit[1].title
 

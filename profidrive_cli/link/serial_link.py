@@ -218,7 +218,16 @@ def write_fd(fd: int, data: bytes, timeout: float) -> None:
     kernel took everything at once (about a quarter of the CPU of an exchange over a pty). Here
     select() is called only when the kernel's buffer is full, to wait at most `timeout` s in all for
     room; serial.SerialTimeoutException when none comes (the adapter stopped sending)."""
-    view = memoryview(data)
+    try:
+        n = os.write(fd, data)
+    except BlockingIOError:
+        n = 0
+    if n == len(data):
+        return                                  # the usual case: the kernel took it all at once
+    _write_rest(fd, memoryview(data)[n:], timeout)
+
+
+def _write_rest(fd: int, view: memoryview, timeout: float) -> None:
     deadline = None
     while view:
         try:
@@ -270,6 +279,10 @@ class SerialLink(Link):
         self._clock = getattr(self.ser, "clock", time.monotonic) if self.bus is not None \
             else time.monotonic
         self.now = self._clock           # (hot path: the clock itself, no method call around it)
+        # a POSIX device or pty read with os.read (read_available's _read_fd): its own read,
+        # without the dispatch on the kind of port for every read
+        self._fd_read = (FD_IO and type(self.ser) is serial.Serial and os.name == "posix"
+                         and not isinstance(self.ser, _SocketSerial))
 
     def now(self) -> float:
         return self._clock()
@@ -319,7 +332,10 @@ class SerialLink(Link):
 
     def read(self, deadline: float) -> bytes:
         try:
-            data = read_available(self.ser, deadline - self.now())
+            if self._fd_read:
+                data = _read_fd(self.ser, deadline - self._clock())
+            else:
+                data = read_available(self.ser, deadline - self.now())
         except (serial.SerialException, OSError) as e:
             raise LinkLost(f"{self.name}: port lost while reading: {e}{self._last_words()}",
                            self.name) from None

@@ -16,18 +16,23 @@
     sim://?wd=0                              (debug) ignore the watchdog... not offered: the sim always enforces it
 
 Each station runs the family's drive model (sim/<family>.py, make_model(profile, **options)); a family
-without a model yet runs a plain DP-V0 slave with the profile's ident and configurations.
+without a model yet runs a plain DP-V0 slave with the profile's ident and configurations. A station
+named by a profile the index knows, without set=, is built on first use (sim/lazy.py): until a master
+parameterises it (or a trip, a fault history or a look at the model needs it) it answers FDL status
+and Slave_Diag from the index's ident, so a bus scan loads no profile and no drive model.
 """
 
 from __future__ import annotations
 
+import functools
 import importlib
 from urllib.parse import parse_qs, urlsplit
 
 from profidrive_cli import UsageError
-from profidrive_cli.drives.profile import Profile, load_profile
+from profidrive_cli.drives.profile import Profile, load_profile, profile_index
 from profidrive_cli.fdl.timing import parse_baud
 from profidrive_cli.sim.bus import SimBus
+from profidrive_cli.sim.lazy import LazyModel
 from profidrive_cli.sim.model import SlaveModel
 from profidrive_cli.sim.slave import SimSlave
 
@@ -66,6 +71,25 @@ def _gsd_modes(profile: Profile, m: SlaveModel) -> None:
     if path.is_file():
         g = parse_cached(path)
         m.sync_supported, m.freeze_supported = bool(g.sync_mode_supp), bool(g.freeze_mode_supp)
+
+
+def _index_entry(name: str):
+    """The profile index entry a station name (profile name or alias) stands for; None for a path
+    or a name the index does not know (then the full load says what is wrong, at once)."""
+    if name.endswith((".yaml", ".yml")) or "/" in name:
+        return None
+    key = name.lower()
+    return next((e for e in profile_index() if e.answers_to(key)), None)
+
+
+def _build_model(name: str, addr: int, baud: int, preset: dict | None = None) -> SlaveModel:
+    prof = load_profile(name)
+    try:
+        model = make_model(prof, **_preset_options(prof, preset or {}))
+    except ValueError as e:
+        raise UsageError(f"sim URL: set= for station {addr}: {e}") from None
+    model.on_bus(addr, baud)
+    return model
 
 
 def _station_list(text: str) -> list[tuple[int, str]]:
@@ -150,13 +174,18 @@ def build_bus(url: str, now: float = 0.0, default_baud: int = 19200) -> SimBus:
     slaves = []
     presets = _presets(q.get("set", []))
     for addr, name in stations:
-        prof = load_profile(name)
-        try:
-            model = make_model(prof, **_preset_options(prof, presets.pop(addr, {})))
-        except ValueError as e:
-            raise UsageError(f"sim URL: set= for station {addr}: {e}") from None
-        model.on_bus(addr, baud)
-        slaves.append(SimSlave(addr, model))
+        preset = presets.pop(addr, {})
+        entry = None if preset else _index_entry(name)
+        if entry is not None:
+            # built on first use (sim/lazy.py): a scan loads no profile, no model, no codec
+            model = LazyModel(functools.partial(_build_model, name, addr, baud), entry.ident,
+                              entry.family, f"{addr} ({name})")
+        else:
+            model = _build_model(name, addr, baud, preset)
+        slave = SimSlave(addr, model)
+        if entry is not None:
+            model.attach(slave)
+        slaves.append(slave)
     if presets:
         raise UsageError(f"sim URL: set= for station(s) {', '.join(map(str, sorted(presets)))}, "
                          f"which are not on the bus")

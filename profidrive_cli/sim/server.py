@@ -220,7 +220,14 @@ def serve(bus: SimBus, endpoint, stop=lambda: False, poll: float = 0.005, clock=
 
     Every station's timers run every `tick_s` (and a station a request addresses runs its own
     first, sim/slave.py handle), not on every pass of the loop: with several stations, ticking
-    them all for each chunk of octets read cost more than answering the master."""
+    them all for each chunk of octets read cost more than answering the master.
+
+    Stations built on first use (sim/lazy.py) are built here, before the first request: building
+    one (its profile, its model) takes milliseconds, which a master waiting for a reply must not see."""
+    for s in getattr(bus, "slaves", {}).values():
+        build = getattr(s.model, "materialize", None)
+        if build is not None:
+            build()
     next_tick = clock()
     while not stop():
         now = clock()

@@ -1,0 +1,104 @@
+"""A station's drive model built on its first real use (sim:// start-up: only what is used is loaded).
+
+Building a drive model means loading its profile (YAML) and importing the family's model and codecs:
+for the default five-station plant that is most of what `pdrive scan --port sim://` costs. Until a
+master asks more of a station than an untouched drive can answer, LazyModel answers for it:
+
+  * `ident` (from the profile index, pdrive's cheap read of each profile's first keys),
+  * `ext_diag()` = b"" (an untouched drive has no trip to report) and `max_diag_len`,
+  * `tick(now)`: remembered; the model, once built, runs the last REPLAY_TICKS of them in order, so
+    what it records at standstill (the Toyo card's traceback samples) is what an eagerly built
+    model would hold.
+
+Anything else (Set_Prm, Chk_Cfg, Get_Cfg, a trip, reading or setting an attribute) builds the model
+and hands over: the owning SimSlave's `model` is replaced by the built one, and this object forwards
+everything to it from then on (for whoever kept a reference).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+from profidrive_cli import PdriveError
+
+#: tick times kept until the model is built (more than any model's standstill history: Toyo keeps 100)
+REPLAY_TICKS = 256
+
+#: Slave_Diag length the families' cards allow (sim/<family>.py); 6 = no room for extended diagnosis.
+#: tests/test_sim_lazy.py checks these against the built models of every shipped profile.
+MAX_DIAG_LEN = {"toyo": 15}
+
+
+class LazyModel:
+    """Stands for the model `build()` returns (a SlaveModel whose ident is `ident`) until first use."""
+
+    def __init__(self, build, ident: int, family: str, label: str = ""):
+        d = self.__dict__
+        d["_build"] = build
+        d["_real"] = None
+        d["_ident"] = ident
+        d["_diag_len"] = MAX_DIAG_LEN.get(family, 6)
+        d["_ticks"] = deque(maxlen=REPLAY_TICKS)
+        d["_owner"] = None
+        d["_label"] = label
+
+    def attach(self, slave) -> None:
+        """The SimSlave that holds this model: it gets the built model in its place."""
+        self.__dict__["_owner"] = slave
+
+    @property
+    def built(self) -> bool:
+        return self._real is not None
+
+    def materialize(self):
+        """The built model (built now if it was not yet)."""
+        real = self._real
+        if real is not None:
+            return real
+        real = self._build()
+        if real.ident != self._ident:
+            raise PdriveError(f"simulated station {self._label}: the profile index says ident "
+                              f"0x{self._ident:04X}, the profile 0x{real.ident:04X}")
+        for t in self._ticks:
+            real.tick(t)
+        self.__dict__["_real"] = real
+        self._ticks.clear()
+        owner = self._owner
+        if owner is not None and owner.model is self:
+            owner.model = real
+        return real
+
+    # -- what an untouched drive answers without being built -----------------------------------
+    @property
+    def ident(self) -> int:
+        real = self._real
+        return self._ident if real is None else real.ident
+
+    @property
+    def max_diag_len(self) -> int:
+        real = self._real
+        return self._diag_len if real is None else real.max_diag_len
+
+    def ext_diag(self) -> bytes:
+        real = self._real
+        return b"" if real is None else real.ext_diag()
+
+    def tick(self, now: float) -> None:
+        real = self._real
+        if real is None:
+            self._ticks.append(now)
+        else:
+            real.tick(now)
+
+    # -- everything else builds it --------------------------------------------------------------
+    def __getattr__(self, name: str):
+        if name.startswith("__"):
+            raise AttributeError(name)
+        return getattr(self.materialize(), name)
+
+    def __setattr__(self, name: str, value) -> None:
+        setattr(self.materialize(), name, value)
+
+    def __repr__(self) -> str:
+        real = self._real
+        return f"<LazyModel {self._label} {'built: ' + repr(real) if real is not None else 'not built'}>"
