@@ -51,7 +51,43 @@ def write_report(result: RunResult, path: str | Path) -> Path:
 
 
 def to_json(result: RunResult) -> str:
-    return json.dumps(result.to_dict(), indent=2, ensure_ascii=False, default=_default) + "\n"
+    """The whole run in the shape of docs/json.md ("checklist run"): stations by `station`, idents
+    as `ident` (int) + `ident_hex`, status flags as the list of names set, speeds `actual_hz`."""
+    d = result.to_dict()
+    d["stations"] = [_station_json(s) for s in d["stations"]]
+    return json.dumps(d, indent=2, ensure_ascii=False, default=_default) + "\n"
+
+
+def _identity_json(d: dict | None) -> dict | None:
+    if not d:
+        return d
+    out: dict = {}
+    for k, v in d.items():
+        if k == "address":
+            out["station"] = v
+        elif k == "ident":
+            ident = v if v is None or isinstance(v, int) else int(str(v), 16)
+            out["ident"] = ident
+            out["ident_hex"] = None if ident is None else f"0x{ident:04X}"
+        elif k != "ident_hex":
+            out[k] = v
+    return out
+
+
+_FINAL_NAMES = {"speed_hz": "actual_hz", "speed_percent": "actual_percent"}
+
+
+def _station_json(s: dict) -> dict:
+    out = {("station" if k == "address" else k): v for k, v in s.items()}
+    out["expected_identity"] = _identity_json(s.get("expected_identity"))
+    out["identity"] = _identity_json(s.get("identity"))
+    fs = s.get("final_status")
+    if fs:
+        fs = {_FINAL_NAMES.get(k, k): v for k, v in fs.items()}
+        if isinstance(fs.get("flags"), dict):
+            fs["flags"] = [k for k, v in fs["flags"].items() if v]
+        out["final_status"] = fs
+    return out
 
 
 def _default(o):

@@ -63,7 +63,7 @@ def sniff_cmd(opts, duration, pcap_file, raw_out, raw_file):
                 if writer and c.frame is not None:
                     writer.write(c.t, c.raw)
                 if opts.json:
-                    emit_json(c.describe())
+                    emit_json(frame_json(c.describe()))
                 else:
                     out.print(_line(c), markup=False)
 
@@ -100,6 +100,13 @@ def sniff_cmd(opts, duration, pcap_file, raw_out, raw_file):
         return
     if not opts.json:
         out.print(f"{count} frame(s)")
+
+
+def frame_json(d: dict) -> dict:
+    """A frame in the contract's shape (docs/json.md): "event" frame (or bad_frame), t_s."""
+    out = {"event": "bad_frame" if "error" in d else "frame"}
+    out.update(("t_s" if k == "t" else k, v) for k, v in d.items())
+    return out
 
 
 def _truncated(cap):
