@@ -69,7 +69,7 @@ def _yn(v: bool) -> str:
 def _identity(g: Gsd) -> dict:
     return {
         "file": g.path, "encoding": g.encoding, "vendor": g.vendor_name, "model": g.model_name,
-        "revision": g.revision, "ident": g.ident_number, "ident_hex": _ident(g.ident_number),
+        "revision": g.revision, **ident_fields(g.ident_number),
         "gsd_revision": g.gsd_revision, "protocol_ident": g.protocol_ident, "station_type": g.station_type,
         "slave_family": g.slave_family_text, "hardware_release": g.hardware_release,
         "software_release": g.software_release,
