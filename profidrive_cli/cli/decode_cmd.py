@@ -72,7 +72,8 @@ def decode_cmd(profile, hex_octets, ppo, layout_name, direction, as_json):
 _REF = {"hz": "reference_hz", "percent": "reference_percent", "max_hz": "fmax_hz"}
 _ACT = {"hz": "actual_hz", "percent": "actual_percent", "max_hz": "fmax_hz"}
 _SPEED_NAMES = {"reference": _REF, "frequency_reference": _REF,
-                "actual": _ACT, "speed_feedback": _ACT, "output_frequency": _ACT}
+                "actual": _ACT, "speed_feedback": _ACT, "output_frequency": _ACT,
+                "motor_speed": _ACT}
 
 
 def _result_json(result: dict) -> dict:
@@ -82,14 +83,20 @@ def _result_json(result: dict) -> dict:
     d = dict(result)
     if "octets" in d:
         d["octets"] = octets(d["octets"])
-    for key, value in d.items():
+    def word(key, value):
         if not isinstance(value, dict):
-            continue
+            return value
         if key in _SPEED_NAMES:
             value = renamed(value, _SPEED_NAMES[key])
         if isinstance(value.get("set"), list):
             value = renamed(value, {"set": "flags"})
         if isinstance(value.get("flags"), dict):
             value = {**value, "flags": flag_list(value["flags"])}
-        d[key] = value
+        return value
+
+    for key, value in d.items():
+        if isinstance(value, list) and key in ("fields", "pzd"):
+            d[key] = [word(v.get("field") if isinstance(v, dict) else None, v) for v in value]
+        else:
+            d[key] = word(key, value)
     return d
