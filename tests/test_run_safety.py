@@ -130,8 +130,11 @@ def test_link_loss_during_run_names_the_watchdog():
     assert p.returncode == 1, err
     assert "pdrive cannot send a stop" in err and "watchdog (400 ms)" in err
     assert "Traceback" not in err
-    end = json.loads(out.strip().splitlines()[-1])
+    events = [json.loads(x) for x in out.strip().splitlines()]
+    end = next(e for e in reversed(events) if e["event"] == "end")
     assert end["stop"]["how"] == "not sent (link lost)" and not end["stopped"]
+    # the stream's last line: the error object (docs/json.md), with the exit code
+    assert events[-1]["event"] == "error" and events[-1]["exit_code"] == 1
 
 
 # =============================================================================================
