@@ -17,7 +17,9 @@ from conftest import pdrive_cmd, pty_sim_process
 
 ROOT = Path(__file__).resolve().parent.parent
 DOC = ROOT / "docs" / "json.md"
-TYPES = {"int", "number", "string", "bool", "null", "object", "list", "any", "open"}
+TYPES = {"int", "number", "string", "bool", "null", "object", "list", "any", "open", "octets", "hex16"}
+OCTETS = re.compile(r"([0-9a-f]{2}( [0-9a-f]{2})*)?")       # lower-case hex, single spaces
+HEX16 = re.compile(r"0x[0-9A-F]{4}")                          # "0x%04X"
 
 
 # =============================================================================================
@@ -67,7 +69,8 @@ def _type_ok(value, types: set[str]) -> bool:
     if isinstance(value, float):
         return "number" in types
     if isinstance(value, str):
-        return "string" in types
+        return ("string" in types or ("octets" in types and OCTETS.fullmatch(value) is not None)
+                or ("hex16" in types and HEX16.fullmatch(value) is not None))
     if isinstance(value, list):
         return "list" in types
     if isinstance(value, dict):
@@ -156,6 +159,17 @@ def test_checker_finds_a_missing_key():
 def test_checker_finds_a_wrong_type():
     bad = problems({"port": "x", "stations": [], "baud": "19200", "line_noise": 0}, "scan")
     assert len(bad) == 1 and bad[0].startswith("baud: str")
+
+
+def test_checker_checks_the_octet_and_ident_formats():
+    frame = {"event": "bad_frame", "t_s": 0.0, "error": "bad FCS", "raw": "68 05"}
+    assert problems(frame, "sniff event=bad_frame") == []
+    for bad in ("68 0A", "68  05", "6805", "68 05 "):
+        assert len(problems({**frame, "raw": bad}, "sniff event=bad_frame")) == 1, bad
+    assert problems({**frame, "raw": ""}, "sniff event=bad_frame") == []
+    d = {"station": 3, "ident": 64769, "ident_hex": "0xFD01"}
+    assert problems(d, "diag")[:0] == [] and not [b for b in problems(d, "diag") if "ident_hex" in b]
+    assert [b for b in problems({**d, "ident_hex": "0xfd01"}, "diag") if b.startswith("ident_hex")]
 
 
 def test_checker_finds_old_names_inside_lists():
