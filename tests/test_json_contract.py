@@ -103,12 +103,14 @@ def problems(doc, contract: str) -> list[str]:
         if isinstance(value, dict):
             for k, v in value.items():
                 child = f"{path}.{k}" if path else k
-                entry = spec.get(child) or spec.get(f"{path}.*" if path else "*")
-                if entry is None:
-                    if "open" not in types:
-                        found.append(f"{child}: not in docs/json.md")
-                    continue
-                check(v, child, entry[0])
+                if child not in spec:                  # a data key: its documented form is `*`
+                    star = f"{path}.*" if path else "*"
+                    if star not in spec:
+                        if "open" not in types:
+                            found.append(f"{child}: not in docs/json.md")
+                        continue
+                    child = star
+                check(v, child, spec[child][0])
             for p, (_, optional) in spec.items():
                 pk = _split(p)
                 if pk and pk[0] == path and pk[1] != "*" and not optional and pk[1] not in value:
@@ -311,6 +313,17 @@ def test_run_stream():
     assert (start["station"], start["ident"], start["ident_hex"]) == (3, 0xFD01, "0xFD01")
     assert start["watchdog_s"] == 0.5                   # --watchdog default 500 ms
     assert lines[-1]["stop"]["how"] == "normal"
+
+
+@pytest.mark.parametrize("args", [("6", "--hz", "10", "--monitor", "default"), ("5", "--ppo", "5", "--torque", "20")])
+def test_run_stream_with_monitors_and_torque(args):
+    lines = lines_of(pdrive("run", *args, "--duration", "0.3", *SIM, "--json"))
+    events = assert_stream(lines, "run")
+    assert events[0] == "start" and events[-1] == "end"
+    if "--monitor" in args:
+        assert lines[-1]["monitors"] and all("t_s" in m for m in lines[-1]["monitors"].values())
+    else:
+        assert lines[0]["torque_ref_percent"] == 20
 
 
 def test_jog_stream():
