@@ -560,6 +560,29 @@ def test_error_is_json_with_the_text_exit_code(args, code):
         assert len(out) == 1                           # one document on stdout
 
 
+@pytest.mark.parametrize("as_json", [False, True])
+def test_os_error_last_defence_is_json_too(monkeypatch, capsys, as_json):
+    """An OSError no place turned into its own message: one line, exit 1, and the error object."""
+    import errno
+    from profidrive_cli.cli.main import main
+    from profidrive_cli.dp import scan as scan_mod
+
+    def broken(*a, **kw):
+        raise OSError(errno.EIO, "Input/output error", "/dev/ttyUSB9")
+    monkeypatch.setattr(scan_mod, "scan", broken)
+    with pytest.raises(SystemExit) as e:
+        main(["scan", "--port", "sim://"] + (["--json"] if as_json else []))
+    assert e.value.code == 1
+    out, err = capsys.readouterr()
+    assert err.strip() == "pdrive: /dev/ttyUSB9: Input/output error"
+    if as_json:
+        d = json.loads(out)
+        assert_contract(d, "error")
+        assert d == {"error": "/dev/ttyUSB9: Input/output error", "exit_code": 1}
+    else:
+        assert out == ""
+
+
 def test_bad_checklist_error_lists_the_problems(tmp_path):
     f = tmp_path / "c.yaml"
     f.write_text(CHECKLIST.replace("read: {param: F03, expect: 60}", "read: {param: NOPE}"))
