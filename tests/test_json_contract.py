@@ -254,7 +254,7 @@ def test_io_stream():
     assert re.fullmatch(r"[0-9a-f]{2}( [0-9a-f]{2}){11}", lines[0]["inputs"])
 
 
-@pytest.mark.parametrize("station", ["3", "5", "7"])
+@pytest.mark.parametrize("station", ["3", "4", "5", "6", "7"])
 def test_status(station):
     d = one_doc(pdrive("status", station, *SIM, "--json"))
     assert_contract(d, "status")
@@ -357,6 +357,25 @@ def test_doctor_on_a_pty(socat_pair):
 def test_decode(args):
     d = one_doc(pdrive("decode", *args, "--json"))
     assert_contract(d, "decode")
+
+
+def test_decode_every_layout_of_every_profile():
+    """The decode document of each layout and direction of the five cards (in process: the same
+    function the command prints through)."""
+    from profidrive_cli.cli.decode_cmd import _result_json
+    from profidrive_cli.drives import decode_area
+    from profidrive_cli.drives.profile import load_profile
+    seen = 0
+    for name in ("fuji-g1", "fuji-pdp3", "toyo", "moeller", "yaskawa"):
+        prof = load_profile(name)
+        for layout, lay in prof.layouts.items():
+            for direction, n in (("request", lay.output_len), ("response", lay.input_len)):
+                d = _result_json(decode_area(prof, layout, direction, bytes(range(1, n + 1))))
+                json.dumps(d)
+                bad = problems(d, "decode")
+                assert not bad, f"{prof.name} {layout} {direction}: {bad}"
+                seen += 1
+    assert seen >= 40
 
 
 def test_decode_names():
