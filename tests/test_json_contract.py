@@ -299,7 +299,7 @@ def test_param_restore_refused_is_one_error_object(tmp_path):
     assert r.stdout.count("\n") == 1                      # one document on stdout
 
 
-@pytest.mark.parametrize("args", [("3",), ("6", "--clear")])
+@pytest.mark.parametrize("args", [("3",), ("4",), ("5",), ("6", "--clear"), ("7",)])
 def test_faults(args):
     d = one_doc(pdrive("faults", *args, *SIM, "--json"))
     assert_contract(d, "faults")
