@@ -499,6 +499,8 @@ def test_checklist_validate_and_run(tmp_path):
     assert r.returncode == (0 if d["passed"] else 1)
     fs = d["stations"][0]["final_status"]
     assert isinstance(fs["flags"], list) and "actual_hz" in fs
+    stop = next(s for s in d["stations"][0]["steps"] if s["type"] == "stop")["measured"]
+    assert isinstance(stop["flags"], list) and "actual_hz" in stop and "speed_hz" not in stop
 
 
 def test_checklist_report_file_is_the_same_contract(tmp_path):

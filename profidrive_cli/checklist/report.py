@@ -77,8 +77,23 @@ def _identity_json(d: dict | None) -> dict | None:
 _FINAL_NAMES = {"speed_hz": "actual_hz", "speed_percent": "actual_percent"}
 
 
+def _measured_json(v):
+    """A step's measured values with the status in the contract's names: speed_hz / speed_percent ->
+    actual_hz / actual_percent, a status's `flags` (the bits set) as a list; the rest as measured."""
+    if isinstance(v, list):
+        return [_measured_json(x) for x in v]
+    if not isinstance(v, dict):
+        return v
+    out = {_FINAL_NAMES.get(k, k): _measured_json(x) for k, x in v.items()}
+    fl = out.get("flags")
+    if isinstance(fl, dict) and all(x is True for x in fl.values()):
+        out["flags"] = list(fl)
+    return out
+
+
 def _station_json(s: dict) -> dict:
     out = {("station" if k == "address" else k): v for k, v in s.items()}
+    out["steps"] = [{**st, "measured": _measured_json(st.get("measured"))} for st in s.get("steps", [])]
     out["expected_identity"] = _identity_json(s.get("expected_identity"))
     out["identity"] = _identity_json(s.get("identity"))
     fs = s.get("final_status")
