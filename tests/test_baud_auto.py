@@ -28,14 +28,14 @@ def test_sim_with_baud_answers_only_at_that_rate():
     assert code == 1 or json.loads(out)["stations"] == []
     code, out, _ = _run("scan", "--json", "--port", "sim://?baud=187500", "--baud", "187.5k")
     assert code == 0
-    assert [s["address"] for s in json.loads(out)["stations"]] == [3, 4, 5, 6, 7]
+    assert [s["station"] for s in json.loads(out)["stations"]] == [3, 4, 5, 6, 7]
 
 
 def test_plain_sim_answers_at_any_rate():
     for rate in ("9600", "1.5M"):
         code, out, _ = _run("scan", "--json", "--port", "sim://?stations=3:fuji-g1", "--baud", rate)
         assert code == 0
-        assert [s["address"] for s in json.loads(out)["stations"]] == [3]
+        assert [s["station"] for s in json.loads(out)["stations"]] == [3]
 
 
 # -- --baud auto -----------------------------------------------------------------------------------
@@ -46,7 +46,7 @@ def test_scan_baud_auto_finds_187k5_on_a_wire_timed_bus():
     assert code == 0, err
     doc = json.loads(out)
     assert doc["baud"] == 187500
-    assert [s["address"] for s in doc["stations"]] == [3]
+    assert [s["station"] for s in doc["stations"]] == [3]
     assert "187.5k" in err and "station 3 answered" in err
 
 
@@ -55,7 +55,7 @@ def test_status_baud_auto_uses_the_rate_found():
                           "sim://?baud=500000&stations=3:fuji-g1")
     assert code == 0, err
     assert "baud rate 500k (station 3 answered)" in err
-    assert json.loads(out)["address"] == 3
+    assert json.loads(out)["station"] == 3
 
 
 def test_baud_auto_nobody_answers_is_one_line_exit_1():

@@ -64,7 +64,7 @@ def test_example_passes_on_sim_and_writes_three_reports(stem, tmp_path):
     assert len(cases) == len(steps) and root.get("failures") == "0" and root.get("errors") == "0"
     assert not root.findall(".//failure") and not root.findall(".//error")
     props = {p.get("name"): p.get("value") for p in root.findall("./testsuite/properties/property")}
-    assert props["identity.ident"] == st["identity"]["ident"]
+    assert props["identity.ident"] == st["identity"]["ident_hex"]
     # Markdown mentions every step
     text = md.read_text()
     assert "**PASSED**" in text
@@ -168,7 +168,7 @@ def test_wrong_expectation_fails_at_that_step_and_the_drive_is_left_stopped(pty_
     assert "| 4 | wrong expectation" in md.read_text() and "value: 0.5" in md.read_text()
     # a separate pdrive process-level look at the drive: stopped, not turning
     st = status_of(pty_sim)
-    assert st["running"] is False and st["stopped"] is True and st["speed_hz"] == 0.0
+    assert st["running"] is False and st["stopped"] is True and st["actual_hz"] == 0.0
 
 
 def test_broken_checklist_gives_file_line_exit_2_and_writes_nothing(pty_sim, tmp_path):
@@ -216,7 +216,7 @@ def test_signal_during_a_run_stops_the_drive_and_still_reports(pty_sim, tmp_path
     assert run_step["status"] == "error" and "interrupted" in run_step["message"]
     assert doc["stations"][0]["final_status"]["stopped"] is True
     st = status_of(pty_sim)
-    assert st["running"] is False and st["speed_hz"] == 0.0
+    assert st["running"] is False and st["actual_hz"] == 0.0
 
 
 

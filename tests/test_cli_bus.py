@@ -19,7 +19,7 @@ def test_scan_lists_the_default_plant_as_json():
     r = run("scan", "--port", "sim://", "--json")
     assert r.exit_code == 0, r.output
     data = json.loads(r.output)
-    got = {s["address"]: s["ident"] for s in data["stations"]}
+    got = {s["station"]: s["ident_hex"] for s in data["stations"]}
     assert got == DEFAULT_IDENTS
     assert all(s["state"] == "waiting for parameters" for s in data["stations"])
     assert all(s["device"] for s in data["stations"])        # named from the library
@@ -41,7 +41,7 @@ def test_scan_range_and_empty_result():
 def test_port_from_environment():
     r = run("scan", "--json", "--to", "4", env={"PDRIVE_PORT": "sim://"})
     assert r.exit_code == 0
-    assert [s["address"] for s in json.loads(r.output)["stations"]] == [3, 4]
+    assert [s["station"] for s in json.loads(r.output)["stations"]] == [3, 4]
 
 
 def test_no_port_says_how():
@@ -147,7 +147,7 @@ def test_io_on_sim_needs_no_yes_and_ends_with_the_drive_stopped_not_tripped(sim)
     assert last[8] & 0x02 and last[9] & 0x04 and int.from_bytes(last[10:12], "big") > 0
     assert "Global_Control Clear" in r.stderr and "released" in r.stderr
     st = json.loads(run("status", "6", "--port", port, "--json").output)
-    assert st["stopped"] and not st["running"] and not st["fault"] and st["speed_hz"] == 0.0, st
+    assert st["stopped"] and not st["running"] and not st["fault"] and st["actual_hz"] == 0.0, st
 
 
 def test_io_stopped_by_an_exception_mid_run_still_ends_with_the_drive_stopped(sim, monkeypatch):
@@ -166,7 +166,7 @@ def test_io_stopped_by_an_exception_mid_run_still_ends_with_the_drive_stopped(si
     last = bytes.fromhex(seen[-1]["inputs"].replace(" ", ""))
     assert int.from_bytes(last[10:12], "big") > 0            # it was turning when the exception came
     st = json.loads(run("status", "6", "--port", port, "--json").output)
-    assert st["stopped"] and not st["running"] and not st["fault"] and st["speed_hz"] == 0.0, st
+    assert st["stopped"] and not st["running"] and not st["fault"] and st["actual_hz"] == 0.0, st
 
 
 def test_io_text_rows_are_plain_lines(monkeypatch):

@@ -82,13 +82,13 @@ def test_tv3_json():
     d = json.loads(out)
     assert (d["pkw"]["ak"], d["pkw"]["pnu"], d["pkw"]["subindex"], d["pkw"]["pwe"]) == (7, 915, 1, 62)
     assert d["pkw"]["maps"]["code"] == "A004"
-    assert d["control_word"]["word"] == 0x047F and d["reference"]["percent"] == 50.0
+    assert d["control_word"]["word"] == 0x047F and d["reference"]["reference_percent"] == 50.0
     assert d["pzd"][0]["raw"] == 75
     out = ok("moeller", "--ppo", "2", "--response", "--json",
              "43 93 01 00 00 00 00 3E 03 37 20 00 01 F4 00 00 00 00 00 00")
     d = json.loads(out)
     assert d["pkw"]["ak"] == 4 and d["status_word"]["state"] == "S4 operation"
-    assert d["actual"]["hz"] == 25.0 and d["pzd"][0]["raw"] == 500
+    assert d["actual"]["actual_hz"] == 25.0 and d["pzd"][0]["raw"] == 500
 
 
 def test_json_done_when():
@@ -96,7 +96,7 @@ def test_json_done_when():
     assert d["pkw"]["code"] == "F002" and d["pkw"]["value"] == 4.0 and d["pkw"]["unit"] == "s"
     assert d["control_word"]["command"] == "operate"
     assert d["control_word"]["bus_controls"] == "frequency and commands"
-    assert d["reference"]["percent"] == 50.0 and d["reference"]["hz"] == 25.0
+    assert d["reference"]["reference_percent"] == 50.0 and d["reference"]["reference_hz"] == 25.0
 
 
 def test_error_response_and_fault_memory():

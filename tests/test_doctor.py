@@ -42,7 +42,8 @@ def test_sim_report_comes_from_the_opened_port_stations_faults_and_bad_urls():
     r = run("--port", "sim://?stations=3:fuji-g1,7:yaskawa&drop=0.1", "--json")
     assert r.exit_code == 0, r.output
     c = checks(json.loads(r.output))
-    assert c["simulator"]["stations"] == {"3": "fuji-opc-g1-pdp", "7": "yaskawa"}
+    assert c["simulator"]["stations"] == [{"station": 3, "profile": "fuji-opc-g1-pdp"},
+                                          {"station": 7, "profile": "yaskawa"}]
     assert c["simulator"]["timing"] == "instant" and c["simulator"]["baud"] == 19200
     assert "stations 3 fuji-opc-g1-pdp, 7 yaskawa; 19.2k" in c["simulator"]["detail"]
     assert c["simulator"]["detail"].endswith("; fault injection on")

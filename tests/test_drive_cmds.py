@@ -66,14 +66,14 @@ def test_run_reaches_30_hz_and_ends_stopped(sim, pdrive, status, address):
     r = ok(pdrive("run", str(address), "--hz", "30", "--duration", duration, "--json"))
     ev = lines(r)
     start, end = ev[0], ev[-1]
-    assert start["event"] == "start" and start["address"] == address
+    assert start["event"] == "start" and start["station"] == address
     assert start["reference_hz"] == pytest.approx(30.0, abs=0.01)
     actual = [e["actual_hz"] for e in ev if e["event"] == "update" and e["phase"] == "running"]
     assert any(abs(a - 30.0) <= 0.3 for a in actual), actual[-5:]
     assert end["event"] == "end" and end["stopped"] and end["stop"]["how"] == "normal"
     assert end["reached_after_s"] is not None
     st = status(address)
-    assert st["stopped"] and not st["running"] and st["speed_hz"] == 0
+    assert st["stopped"] and not st["running"] and st["actual_hz"] == 0
 
 
 def test_run_in_reverse_with_percent_and_a_csv_log(sim, pdrive, tmp_path):
@@ -114,7 +114,7 @@ def test_run_warns_about_a_cycle_rate_above_the_baud_rate(pdrive):
 def test_status_without_address_on_a_one_drive_bus(pdrive):
     r = ok(pdrive("status", "--json", port="sim://?stations=5:toyo"))
     d = json.loads(r.stdout)
-    assert d["address"] == 5 and d["family"] == "toyo" and d["state"].startswith("S1")
+    assert d["station"] == 5 and d["family"] == "toyo" and d["state"].startswith("S1")
     r = pdrive("status")
     assert r.exit_code == 2 and "5 drive stations" in r.output
 

@@ -279,7 +279,7 @@ def test_scan_and_diag_show_the_injected_faults_in_their_counters():
     url = "sim://?stations=3:fuji-g1,4:fuji-pdp3&noise=1&only=3"
     r = CliRunner().invoke(cli, ["scan", "--port", url, "--json"])
     assert r.exit_code == 0, r.output
-    st = {s["address"]: s["counters"] for s in json.loads(r.output)["stations"]}
+    st = {s["station"]: s["counters"] for s in json.loads(r.output)["stations"]}
     # noise before each of station 3's two replies (FDL status, Slave_Diag)
     assert (st[3]["requests"], st[3]["illegal"], st[3]["retries"]) == (2, 2, 0)
     assert (st[4]["requests"], st[4]["illegal"], st[4]["retries"]) == (2, 0, 0)

@@ -60,7 +60,7 @@ def test_show_json_abb_fpba01():
     d = json.loads(res.output)
     assert d["identity"]["ident"] == 0x0959
     mods = {m["name"]: m for m in d["modules"]}
-    assert mods["PPO-02, 4 PKW + 6 PZD"]["cfg"] == "F3 F5"
+    assert mods["PPO-02, 4 PKW + 6 PZD"]["cfg"] == "f3 f5"
     assert mods["PPO-02, 4 PKW + 6 PZD"]["identifiers"][1]["description"] == "6 words in+out, consistent"
     assert {r["baud"]: r["max_tsdr"] for r in d["baud_rates"]}["12M"] == 400
     p = next(p for p in d["user_params"] if p["name"] == "PZD1 Failsafe value")
@@ -100,8 +100,8 @@ def test_prm_table_and_json():
     assert "Chk_Cfg (1 octet): F1" in res.output
     res = run("prm", str(abb880()), "-m", "PPO3", "--set", "Fail Safe mode=2", "--json")
     d = json.loads(res.output)
-    assert d["user_prm"].startswith("00 00 08 1A 81 00 00 02 00 1E 04 7E")
-    assert d["chk_cfg"] == "F1" and d["inputs"] == 4 and d["user_prm_len"] == 30
+    assert d["user_prm"].startswith("00 00 08 1a 81 00 00 02 00 1e 04 7e")
+    assert d["chk_cfg"] == "f1" and d["inputs"] == 4 and d["user_prm_len"] == 30
     row = next(r for r in d["user_prm_fields"] if r["name"] == "Fail Safe mode")
     assert (row["offset"], row["set_prm_octet"], row["bits"], row["value"], row["text"], row["overridden"]) == \
         (7, 14, "bits 0-1", 2, "Use fail-safe values", True)
@@ -110,7 +110,7 @@ def test_prm_table_and_json():
 def test_prm_library_drive_by_ppo_number():
     res = run("prm", "TOYO0BE7", "-m", "PPO5", "--json")
     d = json.loads(res.output)
-    assert (d["chk_cfg"], d["user_prm"], d["inputs"], d["outputs"]) == ("F3 F9", "", 28, 28)
+    assert (d["chk_cfg"], d["user_prm"], d["inputs"], d["outputs"]) == ("f3 f9", "", 28, 28)
     res = run("prm", "0x0BE7", "-m", "Toyo mode PLCH on")
     assert res.exit_code == 0 and "EF DF D6" in res.output and "46 octets in, 32 out" in res.output
 

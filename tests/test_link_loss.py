@@ -325,8 +325,10 @@ def test_run_reconnect_resumes_and_leaves_the_drive_stopped():
         phases = [e.get("phase", "") for e in events if e.get("event") == "phase"]
         assert any(p.startswith("link lost") for p in phases), phases
         assert any(p.startswith("link restored") for p in phases), phases
-        end = events[-1]
+        end = events[-2]
         assert end["event"] == "end" and end["stopped"] and "link lost and restored" in end["reason"]
+        # then the error object of the stream (docs/json.md), with the exit code
+        assert events[-1]["event"] == "error" and events[-1]["exit_code"] == 1
         assert run.returncode == 1
         st = subprocess.run(pdrive_cmd() + ["status", "3", "--port", url, "--json"],
                             capture_output=True, text=True, timeout=60)

@@ -36,13 +36,13 @@ def test_scan_through_socat_pty_pair(socat_pair):
     try:
         # the default plant (sim/plant.py); the sim names a station by its profile or an alias
         from profidrive_cli.drives.profile import load_profile
-        assert {a: load_profile(n).name for a, n in info["stations"].items()} == {
-            "3": "fuji-opc-g1-pdp", "4": "fuji-opc-pdp3", "5": "toyo-pbus66z",
-            "6": "moeller-de6-net-dp", "7": "yaskawa-si-p1"}
+        assert {s["station"]: load_profile(s["family"]).name for s in info["stations"]} == {
+            3: "fuji-opc-g1-pdp", 4: "fuji-opc-pdp3", 5: "toyo-pbus66z",
+            6: "moeller-de6-net-dp", 7: "yaskawa-si-p1"}
         r = subprocess.run(pdrive_cmd() + ["scan", "--port", b, "--json"], capture_output=True,
                            text=True, timeout=120)
         assert r.returncode == 0, r.stderr
-        got = {s["address"]: s["ident"] for s in json.loads(r.stdout)["stations"]}
+        got = {s["station"]: s["ident_hex"] for s in json.loads(r.stdout)["stations"]}
         assert got == {3: "0xFD01", 4: "0xFD02", 5: "0x0BE7", 6: "0xFD06", 7: "0x00CA"}
         r = subprocess.run(pdrive_cmd() + ["io", "7", "--port", b, "--cfg", "5F 6F", "--count", "2",
                                            "--json"], capture_output=True, text=True, timeout=60)
@@ -120,6 +120,6 @@ def test_sim_listen_tcp():
         r = subprocess.run(pdrive_cmd() + ["scan", "--port", info["port"], "--to", "5", "--json"],
                            capture_output=True, text=True, timeout=60)
         assert r.returncode == 0, r.stderr
-        assert [s["address"] for s in json.loads(r.stdout)["stations"]] == [3, 4, 5]
+        assert [s["station"] for s in json.loads(r.stdout)["stations"]] == [3, 4, 5]
     finally:
         assert _stop(sim) == 0

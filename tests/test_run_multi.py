@@ -171,7 +171,9 @@ def test_sync_is_refused_where_a_gsd_does_not_claim_it():
     assert r.stderr.strip().splitlines()[-1].endswith(
         "--sync: station 3 (fuji-opc-g1-pdp, ident 0xFD01): its GSD FUJIFD01.GSD does not claim "
         "Sync_Mode_supp; nothing was written")
-    assert r.stdout == ""
+    # under --json the same line is the one object on stdout (docs/json.md: errors)
+    assert [json.loads(x) for x in r.stdout.splitlines()] == [{
+        "event": "error", "exit_code": 2, "error": r.stderr.strip().splitlines()[-1].removeprefix("pdrive: ")}]
 
 
 def test_sync_on_stations_whose_gsd_claims_it(sim):
@@ -260,7 +262,8 @@ def test_a_station_dropping_out_or_tripping_stops_every_drive(fault, station):
                f"{SIM_FAST}&{fault}=0.03&only={station}&seed=3")
     assert r.returncode == 1, r.stderr
     assert f"station {station}" in r.stderr.strip().splitlines()[-1] and "Traceback" not in r.stderr
-    end = events(r.stdout)[-1]
+    *_, end, error = events(r.stdout)
+    assert error["event"] == "error" and error["exit_code"] == 1       # the error object follows "end"
     assert end["event"] == "end" and end["failed"] and f"station {station}" in end["reason"]
     by = {s["station"]: s for s in end["stations"]}
     assert by[station]["problem"]
@@ -335,8 +338,9 @@ def test_link_loss_names_each_stations_watchdog():
             if proc.poll() is None:
                 proc.kill()
     assert p.returncode == 1 and "Traceback" not in err
-    end = json.loads(outs.strip().splitlines()[-1])
-    assert end["reason"].startswith("error: link lost")
+    *_, end, error = [json.loads(x) for x in outs.strip().splitlines()]
+    assert error["event"] == "error" and error["exit_code"] == 1       # the error object follows "end"
+    assert end["event"] == "end" and end["reason"].startswith("error: link lost")
     started = [s for s in end["stations"] if s["started"]]
     assert started
     for s in started:

@@ -130,8 +130,11 @@ def test_link_loss_during_run_names_the_watchdog():
     assert p.returncode == 1, err
     assert "pdrive cannot send a stop" in err and "watchdog (400 ms)" in err
     assert "Traceback" not in err
-    end = json.loads(out.strip().splitlines()[-1])
+    events = [json.loads(x) for x in out.strip().splitlines()]
+    end = next(e for e in reversed(events) if e["event"] == "end")
     assert end["stop"]["how"] == "not sent (link lost)" and not end["stopped"]
+    # the stream's last line: the error object (docs/json.md), with the exit code
+    assert events[-1]["event"] == "error" and events[-1]["exit_code"] == 1
 
 
 # =============================================================================================
@@ -163,7 +166,7 @@ def test_io_outputs_without_a_terminal_and_without_yes_move_nothing(pty_sim):
     assert r.returncode == 2, r.stdout + r.stderr
     assert "add --yes" in r.stderr and r.stdout == ""
     st = _status(pty_sim, 6)
-    assert st["stopped"] and not st["running"] and not st["fault"] and st["speed_hz"] == 0.0, st
+    assert st["stopped"] and not st["running"] and not st["fault"] and st["actual_hz"] == 0.0, st
     assert st["state"].startswith("S2")                  # not started, not tripped
 
 
@@ -174,7 +177,7 @@ def test_io_with_yes_ends_with_the_drive_stopped_and_no_fault(pty_sim):
     assert r.returncode == 0, r.stderr
     assert max(_actual_word(x) for x in r.stdout.splitlines()) > 0      # the motor did turn
     st = _status(pty_sim, 6)
-    assert st["stopped"] and not st["running"] and not st["fault"] and st["speed_hz"] == 0.0, st
+    assert st["stopped"] and not st["running"] and not st["fault"] and st["actual_hz"] == 0.0, st
     f = pdrive("faults", "6", "--port", pty_sim, "--json")
     assert f.returncode == 0 and json.loads(f.stdout)["current"]["fault"] is False, f.stdout
 
@@ -203,7 +206,7 @@ def test_signal_during_io_leaves_the_drive_stopped_without_a_trip(pty_sim, sig):
     assert p.returncode == (143 if sig == signal.SIGTERM else 130), err
     assert "Traceback" not in err and "Global_Control Clear" in err
     st = _status(pty_sim, 6)
-    assert st["stopped"] and not st["running"] and not st["fault"] and st["speed_hz"] == 0.0, st
+    assert st["stopped"] and not st["running"] and not st["fault"] and st["actual_hz"] == 0.0, st
 
 
 def test_the_question_needs_a_terminal_on_stderr_too(pty_sim):
@@ -222,4 +225,4 @@ def test_the_question_needs_a_terminal_on_stderr_too(pty_sim):
         os.close(sfd)
         os.close(mfd)
     assert p.returncode == 2 and "add --yes" in err, err
-    assert _status(pty_sim, 3)["speed_hz"] == 0.0
+    assert _status(pty_sim, 3)["actual_hz"] == 0.0

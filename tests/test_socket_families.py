@@ -40,7 +40,7 @@ def test_status_over_socket(listen_port, address, profile):
                        capture_output=True, text=True, stdin=subprocess.DEVNULL, timeout=60)
     assert p.returncode == 0, p.stderr
     doc = json.loads(p.stdout)
-    assert doc["address"] == address and doc["profile"] == profile
+    assert doc["station"] == address and doc["profile"] == profile
 
 
 @pytest.mark.parametrize("address,code,text", [(7, "E1-04", "60 Hz"), (6, "F002", "5 s")])

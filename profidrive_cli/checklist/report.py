@@ -58,7 +58,58 @@ def write_report(result: RunResult, path: str | Path) -> Path:
 
 
 def to_json(result: RunResult) -> str:
-    return json.dumps(result.to_dict(), indent=2, ensure_ascii=False, default=_default) + "\n"
+    """The whole run in the shape of docs/json.md ("checklist run"): stations by `station`, idents
+    as `ident` (int) + `ident_hex`, status flags as the list of names set, speeds `actual_hz`."""
+    d = result.to_dict()
+    d["stations"] = [_station_json(s) for s in d["stations"]]
+    return json.dumps(d, indent=2, ensure_ascii=False, default=_default) + "\n"
+
+
+def _identity_json(d: dict | None) -> dict | None:
+    if not d:
+        return d
+    out: dict = {}
+    for k, v in d.items():
+        if k == "address":
+            out["station"] = v
+        elif k == "ident":
+            ident = v if v is None or isinstance(v, int) else int(str(v), 16)
+            out["ident"] = ident
+            out["ident_hex"] = None if ident is None else f"0x{ident:04X}"
+        elif k != "ident_hex":
+            out[k] = v
+    return out
+
+
+_FINAL_NAMES = {"speed_hz": "actual_hz", "speed_percent": "actual_percent"}
+
+
+def _measured_json(v):
+    """A step's measured values with the status in the contract's names: speed_hz / speed_percent ->
+    actual_hz / actual_percent, a status's `flags` (the bits set) as a list; the rest as measured."""
+    if isinstance(v, list):
+        return [_measured_json(x) for x in v]
+    if not isinstance(v, dict):
+        return v
+    out = {_FINAL_NAMES.get(k, k): _measured_json(x) for k, x in v.items()}
+    fl = out.get("flags")
+    if isinstance(fl, dict) and all(x is True for x in fl.values()):
+        out["flags"] = list(fl)
+    return out
+
+
+def _station_json(s: dict) -> dict:
+    out = {("station" if k == "address" else k): v for k, v in s.items()}
+    out["steps"] = [{**st, "measured": _measured_json(st.get("measured"))} for st in s.get("steps", [])]
+    out["expected_identity"] = _identity_json(s.get("expected_identity"))
+    out["identity"] = _identity_json(s.get("identity"))
+    fs = s.get("final_status")
+    if fs:
+        fs = {_FINAL_NAMES.get(k, k): v for k, v in fs.items()}
+        if isinstance(fs.get("flags"), dict):
+            fs["flags"] = [k for k, v in fs["flags"].items() if v]
+        out["final_status"] = fs
+    return out
 
 
 def _default(o):

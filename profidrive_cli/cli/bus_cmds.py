@@ -13,6 +13,7 @@ from rich.table import Table
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.cli.common import (bus_options, confirm_real_port, emit_json, err, hex_option, out,
                                        station_address)
+from profidrive_cli.cli.jsonout import ident_fields
 from profidrive_cli.cli.names import device_name
 from profidrive_cli.dp.cfg import CfgError, decode_cfg
 from profidrive_cli.fdl.timing import BAUD_NAMES
@@ -23,7 +24,7 @@ def _diag_json(d) -> dict | None:
     if d is None:
         return None
     return {"st1": d.st1, "st2": d.st2, "st3": d.st3, "master": None if d.master == 0xFF else d.master,
-            "ident": f"0x{d.ident:04X}", "flags": d.flags(), "ready": d.ready,
+            **ident_fields(d.ident), "flags": d.flags(), "ready": d.ready,
             "ext": d.ext.hex(" "), "ext_blocks": [b.describe() for b in d.ext_blocks()]}
 
 
@@ -76,8 +77,7 @@ def scan_cmd(opts, first, last, gsd_dir, watch, interval, duration):
         master.link.close()
     if opts.json:
         emit_json({"port": opts.port, "baud": used_baud, "line_noise": noise, "stations": [
-            {"address": e.address, "type": e.station_type,
-             "ident": f"0x{e.ident:04X}" if e.ident is not None else None,
+            {"station": e.address, "type": e.station_type, **ident_fields(e.ident),
              "state": e.diag.state_words(opts.master_address) if e.diag else e.error,
              "device": device_name(e.ident, gsd_dir) if e.ident is not None else "",
              "diag": _diag_json(e.diag), "counters": e.counters} for e in result]})
@@ -122,7 +122,7 @@ def diag_cmd(opts, address, gsd_dir):
         master.link.close()
     unit = _unit_diag_texts(d, gsd_dir)
     if opts.json:
-        emit_json({"address": address, "state": d.state_words(opts.master_address),
+        emit_json({"station": address, **ident_fields(d.ident), "state": d.state_words(opts.master_address),
                    "device": device_name(d.ident, gsd_dir), "diag": _diag_json(d),
                    "explain": d.explain(), "unit_diag": unit, "cfg": _cfg_json(cfg),
                    "counters": counters})
@@ -229,7 +229,8 @@ def io_cmd(opts, address, cfg_hex, ident_hex, prm_hex, out_hex, count, wd_ms, gs
                 for i in range(count):
                     inputs = master.exchange(address, outputs)
                     if opts.json:
-                        emit_json({"address": address, "cycle": i, "inputs": inputs.hex(" ")})
+                        emit_json({"event": "cycle", "station": address, "cycle": i,
+                                   "inputs": inputs.hex(" ")})
                     else:
                         _row(f"{i:>5}  in: {inputs.hex(' ') or '(none)'}")
             except LinkLost:

@@ -21,10 +21,21 @@ _PLAIN = {"passed": "PASS", "failed": "FAIL", "error": "ERROR", "not run": "not 
           "interrupted": "INTERRUPTED"}
 
 
-def _usage(ctx, message: str):
-    """A usage error as one line and exit code 2 (also under click's test runner)."""
+def _usage(ctx, message: str, problems: list[str] | None = None):
+    """A usage error as one line and exit code 2 (also under click's test runner); under --json also
+    the error object on stdout (docs/json.md)."""
     click.echo(f"pdrive: {message}", err=True)
+    _json_error(ctx, message, problems)
     ctx.exit(2)
+
+
+def _json_error(ctx, message: str, problems: list[str] | None = None) -> None:
+    if ctx.params.get("as_json"):
+        from profidrive_cli.cli.jsonout import error_object
+        obj = error_object(message, 2, stream=False)
+        if problems is not None:
+            obj["problems"] = problems
+        emit_json(obj)
 
 
 def _load(ctx, path: str, variables: tuple[str, ...]):
@@ -35,8 +46,9 @@ def _load(ctx, path: str, variables: tuple[str, ...]):
         for line in e.lines():
             click.echo(f"pdrive: {line}", err=True)
         n = len(e.errors)
-        click.echo(f"pdrive: {path}: {n} problem{'s' if n != 1 else ''}; nothing was sent to any drive",
-                   err=True)
+        summary = f"{path}: {n} problem{'s' if n != 1 else ''}; nothing was sent to any drive"
+        click.echo(f"pdrive: {summary}", err=True)
+        _json_error(ctx, summary, list(e.lines()))
         ctx.exit(2)
     except UsageError as e:
         _usage(ctx, str(e))
@@ -60,8 +72,9 @@ def validate_cmd(ctx, file, variables, as_json):
     """Check FILE.yaml without touching a bus: every problem with file:line (exit code 2)."""
     cl = _load(ctx, file, variables)
     if as_json:
+        from profidrive_cli.cli.jsonout import station_identity
         emit_json({"checklist": cl.name, "file": str(cl.path), "valid": True, "variables": cl.variables,
-                   "stations": [{**s.identity(), "steps": [st.to_dict() for st in s.steps],
+                   "stations": [{**station_identity(s.identity()), "steps": [st.to_dict() for st in s.steps],
                                  "snapshot": [t.label for t in s.snapshot]} for s in cl.stations]})
         return
     con = Console(highlight=False, soft_wrap=True)
@@ -111,10 +124,8 @@ def run_cmd(ctx, opts: BusOptions, file, reports, dry_run, yes, variables, cycle
     interactive = sys.stdin.isatty() and sys.stdout.isatty()
     if cl.has_prompts and not (yes or dry_run or interactive):
         line = cl.first_prompt_line()
-        click.echo(f"pdrive: {cl.path}:{line}: the checklist has prompt steps and there is no terminal to "
-                   f"answer them: give --yes to take them as confirmed (nothing was sent to any drive)",
-                   err=True)
-        ctx.exit(2)
+        _usage(ctx, f"{cl.path}:{line}: the checklist has prompt steps and there is no terminal to "
+                    f"answer them: give --yes to take them as confirmed (nothing was sent to any drive)")
     # port: --port / PDRIVE_PORT, else the checklist's; --dry-run: a simulated bus of the same stations
     if dry_run:
         port = dry_run_port(cl)

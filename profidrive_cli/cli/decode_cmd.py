@@ -61,7 +61,42 @@ def decode_cmd(profile, hex_octets, ppo, layout_name, direction, as_json):
     except ValueError as e:
         raise UsageError(str(e)) from None
     if as_json:
-        click.echo(json.dumps(result, indent=2, ensure_ascii=False, default=str))
+        click.echo(json.dumps(_result_json(result), indent=2, ensure_ascii=False, default=str))
     else:
         for line in result.get("text", []):
             click.echo(line)
+
+
+#: the speed words' keys: reference_* for what the master sends, actual_* for what the drive
+#: reports (docs/json.md: the same names as status and run)
+_REF = {"hz": "reference_hz", "percent": "reference_percent", "max_hz": "fmax_hz"}
+_ACT = {"hz": "actual_hz", "percent": "actual_percent", "max_hz": "fmax_hz"}
+_SPEED_NAMES = {"reference": _REF, "frequency_reference": _REF,
+                "actual": _ACT, "speed_feedback": _ACT, "output_frequency": _ACT,
+                "motor_speed": _ACT}
+
+
+def _result_json(result: dict) -> dict:
+    """decode_area's dict in the contract's shape: octets in lower-case hex, each word's bits that
+    are set as `flags` (a list of names), reference_hz / actual_hz."""
+    from profidrive_cli.cli.jsonout import flag_list, octets, renamed
+    d = dict(result)
+    if "octets" in d:
+        d["octets"] = octets(d["octets"])
+    def word(key, value):
+        if not isinstance(value, dict):
+            return value
+        if key in _SPEED_NAMES:
+            value = renamed(value, _SPEED_NAMES[key])
+        if isinstance(value.get("set"), list):
+            value = renamed(value, {"set": "flags"})
+        if isinstance(value.get("flags"), dict):
+            value = {**value, "flags": flag_list(value["flags"])}
+        return value
+
+    for key, value in d.items():
+        if isinstance(value, list) and key in ("fields", "pzd"):
+            d[key] = [word(v.get("field") if isinstance(v, dict) else None, v) for v in value]
+        else:
+            d[key] = word(key, value)
+    return d

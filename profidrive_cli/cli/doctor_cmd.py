@@ -35,7 +35,7 @@ def doctor_cmd(opts, probe_address, station, listen_s):
     rep = diagnose(opts.port, opts.baud_rate(), opts.master_address, probe_address, opts.rs485,
                    listen_s, station=station)
     if opts.json:
-        emit_json(rep.as_dict())
+        emit_json(_report_json(rep.as_dict()))
     else:
         t = Table(title=f"pdrive doctor: {rep.port} ({rep.kind})", show_lines=False)
         t.add_column("check")
@@ -65,3 +65,31 @@ def _list_ports(opts) -> None:
     for r in rows:
         out.print(f"{r['port']}  {r['description']}  {r['hwid']}", markup=False)
     out.print("pdrive doctor --port PORT checks one of them")
+
+
+def _ms_to_s(v):
+    if isinstance(v, list):
+        return [_ms_to_s(x) for x in v]
+    return None if v is None else round(v / 1000.0, 6)
+
+
+def _report_json(d: dict) -> dict:
+    """The report in the contract's shape (docs/json.md): the simulator's stations as a list of
+    {station, profile}, times in seconds (`*_ms` -> `*_s`, the latency timer's `ms` -> `latency_timer_s`),
+    the kernel's RS-485 flag word as `ioctl_flags` (`flags` is a list of names everywhere else)."""
+    checks = []
+    for c in d["checks"]:
+        out = {}
+        for k, v in c.items():
+            if k == "stations" and isinstance(v, dict):
+                out[k] = [{"station": int(a), "profile": name} for a, name in v.items()]
+            elif k == "ms":
+                out["latency_timer_s"] = _ms_to_s(v)
+            elif k.endswith("_ms"):
+                out[k[:-3] + "_s"] = _ms_to_s(v)
+            elif k == "flags":
+                out["ioctl_flags"] = v
+            else:
+                out[k] = v
+        checks.append(out)
+    return {**d, "checks": checks}

@@ -158,7 +158,7 @@ def status_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms):
         sample = s.status()
         d = R.status_dict(s, sample)
     if opts.json:
-        emit_json(d)
+        emit_json(R.status_json(d))
     else:
         R.print_status(d)
 
@@ -189,7 +189,7 @@ def param_get(opts, args, profile_name, ppo, fmt, watchdog_ms):
             s.param_info(c)             # every code checked before the first read
         values = [s.read_param(c) for c in codes]
     if opts.json:
-        emit_json({"address": s.address, "profile": s.profile.name,
+        emit_json({"station": s.address, "profile": s.profile.name,
                    "parameters": [R.param_json(v) for v in values]})
     else:
         out.print(R.param_table(values))
@@ -243,7 +243,7 @@ def param_set(opts, args, save, yes, allow_dangerous, profile_name, ppo, fmt, wa
         saved = s.save() if save else None
         notes = s.notes()
     if opts.json:
-        emit_json({"address": s.address, "profile": s.profile.name, "code": new.code,
+        emit_json({"station": s.address, "profile": s.profile.name, "code": new.code,
                    "old": R.param_json(old) if old else None, "new": R.param_json(new),
                    "saved": saved, "notes": notes})
         return
@@ -275,7 +275,7 @@ def param_dump(opts, address, output, profile_name, ppo, fmt, watchdog_ms):
         f.write(yaml.safe_dump(doc, sort_keys=False, allow_unicode=True, width=120))
     n_set, n_ro, n_bad = len(doc["parameters"]), len(doc["readonly"]), len(doc.get("unreadable", {}))
     if opts.json:
-        emit_json({"file": output, "address": s.address, "profile": s.profile.name, "settings": n_set,
+        emit_json({"file": output, "station": s.address, "profile": s.profile.name, "settings": n_set,
                    "readonly": n_ro, "unreadable": n_bad})
     else:
         out.print(f"station {s.address} ({escape(s.profile.name)}): {n_set} settings and {n_ro} read-only "
@@ -312,12 +312,13 @@ def param_restore(opts, args, dry_run, yes, allow_dangerous, profile_name, ppo, 
                 doc, dry_run=dry_run, progress=prog, allow_dangerous=allow_dangerous))
             notes = s.notes()
     except RestoreRefused as e:
-        if opts.json:
-            emit_json({"file": path, "written": 0, "problems": e.problems})
-        else:
+        if not opts.json:
             for line in e.problems:
                 err.print(escape(line))
-        raise UsageError(f"{path}: {len(e.problems)} problem(s); nothing was written") from None
+        refused = UsageError(f"{path}: {len(e.problems)} problem(s); nothing was written")
+        # under --json the error object carries them (one document on stdout)
+        refused.json_details = {"file": path, "written": 0, "problems": e.problems}
+        raise refused from None
     except RestoreInterrupted as e:
         _print_rows(opts, s, e.rows, "restore", False, interrupted=str(e))
         raise
@@ -348,7 +349,7 @@ def _print_rows(opts, s, rows, what: str, dry_run: bool, interrupted: str | None
     for r in rows:
         counts[r.result] = counts.get(r.result, 0) + 1
     if opts.json:
-        d = {"address": s.address, "profile": s.profile.name, "dry_run": dry_run,
+        d = {"station": s.address, "profile": s.profile.name, "dry_run": dry_run,
              "counts": counts, "rows": [r.to_dict() for r in rows]}
         if interrupted is not None:
             d["interrupted"] = interrupted
@@ -414,7 +415,7 @@ def faults_cmd(opts, address, clear, yes, profile_name, ppo, fmt, watchdog_ms):
                 cleared = {"was": None, "state": cur.status.state, "fault": False}
     st = cur.status
     if opts.json:
-        emit_json({"address": s.address, "profile": s.profile.name,
+        emit_json({"station": s.address, "profile": s.profile.name,
                    "current": {"fault": st.fault, "code": st.fault_code, "state": st.state},
                    "history": [R.fault_json(r) for r in history], "trip_records": trips.to_dict(),
                    "cleared": cleared})

@@ -11,6 +11,7 @@ from rich.table import Table
 from rich.text import Text
 
 from profidrive_cli import UsageError
+from profidrive_cli.cli.jsonout import ident_fields, octets
 from profidrive_cli.gsd import build_prm, user_params
 from profidrive_cli.gsd.interp import device_user_prm
 from profidrive_cli.gsd.library import list_library, load_gsd, search_dirs
@@ -68,7 +69,7 @@ def _yn(v: bool) -> str:
 def _identity(g: Gsd) -> dict:
     return {
         "file": g.path, "encoding": g.encoding, "vendor": g.vendor_name, "model": g.model_name,
-        "revision": g.revision, "ident": g.ident_number, "ident_hex": _ident(g.ident_number),
+        "revision": g.revision, **ident_fields(g.ident_number),
         "gsd_revision": g.gsd_revision, "protocol_ident": g.protocol_ident, "station_type": g.station_type,
         "slave_family": g.slave_family_text, "hardware_release": g.hardware_release,
         "software_release": g.software_release,
@@ -94,6 +95,29 @@ def _modules(g: Gsd) -> list[dict]:
     return out
 
 
+def _module_json(m: dict) -> dict:
+    """A module row in the contract's shape: octets in lower-case hex ("" for none)."""
+    return {**m, "cfg": octets(m["cfg"]),
+            "identifiers": [{**c, "octets": octets(c["octets"])} for c in m["identifiers"]]}
+
+
+def _prm_json(d: dict) -> dict:
+    """build_prm's dict in the contract's shape: ident + ident_hex, octets in lower-case hex."""
+    out: dict = {}
+    for k, v in d.items():
+        if k == "ident":
+            out.update(ident_fields(v))
+        elif k in ("user_prm", "chk_cfg"):
+            out[k] = octets(v)
+        elif k == "modules":
+            out[k] = [{**m, "cfg": octets(m["cfg"])} for m in v]
+        elif k in ("user_prm_fields", "chk_cfg_fields"):
+            out[k] = [{**r, "octets": octets(r["octets"])} for r in v]
+        else:
+            out[k] = v
+    return out
+
+
 @click.group("gsd")
 def gsd_group():
     """GSD device description files: show one, list the library, build Set_Prm / Chk_Cfg octets."""
@@ -115,7 +139,7 @@ def show_cmd(source: str, gsd_dir: str | None, module_params: bool, as_json: boo
         _echo_json({
             "identity": _identity(g),
             "baud_rates": g.max_tsdr_table(),
-            "modules": _modules(g),
+            "modules": [_module_json(m) for m in _modules(g)],
             "user_params": params,
             "unit_diag_bits": {str(k): v for k, v in sorted(g.unit_diag_bits.items())},
             "unit_diag_areas": [{"bits": f"{a.first_bit}-{a.last_bit}", "values": len(a.values)}
@@ -232,7 +256,7 @@ def prm_cmd(source: str, modules: tuple[str, ...], sets: tuple[str, ...], gsd_di
     g = load_gsd(source, gsd_dir)
     res = build_prm(g, list(modules), list(sets))
     if as_json:
-        _echo_json(res.to_dict())
+        _echo_json(_prm_json(res.to_dict()))
         return
     con = _console()
     con.print(Text.assemble((g.title, "bold"), f"  ident {_ident(g.ident_number)}  ({g.path})"))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+import json
 import sys
 
 import click
@@ -96,6 +97,37 @@ def _os_error_text(e: OSError) -> str:
     return _line(f"{' -> '.join(paths)}: {why}" if paths else why)
 
 
+#: commands whose --json output is a stream (JSON Lines with an "event" key): their error object
+#: carries "event": "error" too
+STREAM_COMMANDS = frozenset({"io", "jog", "run", "sniff"})
+
+
+def _json_mode(argv) -> tuple[bool, bool]:
+    """(--json given, the command streams), read from the command line itself: known also when the
+    error comes before the command body runs (a bad option, a bad --port)."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    if "--" in args:
+        args = args[:args.index("--")]
+    return "--json" in args, bool(args) and args[0] in STREAM_COMMANDS
+
+
+def _fail(argv, message: str, code: int, details: dict | None = None):
+    """The one line on stderr and, under --json, the error object on stdout (docs/json.md); exit."""
+    click.echo(f"pdrive: {message}", err=True)
+    as_json, stream = _json_mode(argv)
+    if as_json:
+        from profidrive_cli.cli.jsonout import error_object
+        obj = error_object(message, code, stream)
+        for k, v in (details or {}).items():
+            obj.setdefault(k, v)
+        try:
+            sys.stdout.write(json.dumps(obj, ensure_ascii=False) + "\n")
+            sys.stdout.flush()
+        except (BrokenPipeError, OSError):
+            pass
+    sys.exit(code)
+
+
 def main(argv=None):
     try:
         rc = cli.main(args=argv, prog_name="pdrive", standalone_mode=False)
@@ -108,17 +140,13 @@ def main(argv=None):
     except click.exceptions.UsageError as e:
         # bad option / argument: one line (click's own form is four), with where to look
         cmd = e.ctx.command_path if e.ctx is not None else "pdrive"
-        click.echo(f"pdrive: {_line(e.format_message())} (see '{cmd} --help')", err=True)
-        sys.exit(2)
+        _fail(argv, f"{_line(e.format_message())} (see '{cmd} --help')", 2)
     except click.ClickException as e:
-        click.echo(f"pdrive: {_line(e.format_message())}", err=True)
-        sys.exit(2)
+        _fail(argv, _line(e.format_message()), 2)
     except UsageError as e:
-        click.echo(f"pdrive: {_line(e)}", err=True)
-        sys.exit(2)
+        _fail(argv, _line(e), 2, getattr(e, "json_details", None))
     except (BusError, PdriveError) as e:
-        click.echo(f"pdrive: {_line(e)}", err=True)
-        sys.exit(1)
+        _fail(argv, _line(e), 1, getattr(e, "json_details", None))
     except KeyboardInterrupt:
         click.echo("interrupted", err=True)
         sys.exit(130)
@@ -126,6 +154,5 @@ def main(argv=None):
         sys.exit(1)
     except OSError as e:
         # the last line of defence: each known cause has its own message at the place it happens
-        click.echo(f"pdrive: {_os_error_text(e)}", err=True)
-        sys.exit(1)
+        _fail(argv, _os_error_text(e), 1)
     sys.exit(rc if isinstance(rc, int) else 0)

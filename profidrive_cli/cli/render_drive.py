@@ -16,6 +16,7 @@ from rich.panel import Panel
 from rich.table import Table
 from rich.text import Text
 
+from profidrive_cli.cli import jsonout as J
 from profidrive_cli.cli.common import emit_json, err, out
 from profidrive_cli.drives.base import value_text  # noqa: F401  (also used as R.value_text)
 
@@ -100,7 +101,7 @@ class RunView:
     def start(self, header: dict) -> None:
         self.header = header
         if self.mode == "json":
-            emit_json({"event": "start", **header})
+            emit_json({"event": "start", **start_json(header)})
         elif self.mode == "text":
             out.print(escape(self._header_line()))
         else:
@@ -119,7 +120,7 @@ class RunView:
         if self.mode == "json":
             d = {"event": "phase", "phase": phase}
             if sample is not None:
-                d["t"] = round(sample.t, 3)
+                d["t_s"] = round(sample.t, 3)
             emit_json(d)
         elif self.mode == "text":
             out.print(f"-- {phase}")
@@ -135,10 +136,10 @@ class RunView:
         if self.mode == "json":
             if force or now - self._last_emit >= self.json_period:
                 self._last_emit = now
-                d = {"event": "update", "phase": self.phase, **sample.to_dict(),
+                d = {"event": "update", "phase": self.phase, **sample_json(sample.to_dict()),
                      **torque_fields(sample.status)}
                 if self.monitors is not None:
-                    d["monitors"] = self.monitors.to_dict()
+                    d["monitors"] = monitors_json(self.monitors.to_dict())
                 emit_json(d)
         elif self.mode == "text":
             if force or now - self._last_text >= 1.0:
@@ -160,7 +161,7 @@ class RunView:
             self._live.stop()
             self._live = None
         if self.mode == "json":
-            emit_json({"event": "end", **end})
+            emit_json({"event": "end", **end_json(end)})
         else:
             msg = end.get("message") or ""
             stop = end.get("stop") or {}
@@ -206,6 +207,48 @@ class RunView:
         if self.hint:
             parts.append(Text(self.hint, style="dim"))
         return Panel(Group(*parts), title=title)
+
+
+# =============================================================================================
+# run / jog: the JSON stream's objects in the contract's shape (docs/json.md); the text view
+# keeps reading the dicts as the commands build them
+# =============================================================================================
+
+
+def start_json(header: dict) -> dict:
+    """station, ident + ident_hex, watchdog_s (the header says watchdog_ms)."""
+    d = J.station_identity(header)
+    if "watchdog_ms" in d:
+        d = J.renamed(d, {"watchdog_ms": "watchdog_s"})
+        d["watchdog_s"] = None if d["watchdog_s"] is None else d["watchdog_s"] / 1000.0
+    return d
+
+
+def sample_json(d: dict) -> dict:
+    """A sample's dict: t -> t_s, flags as the list of names set."""
+    d = J.renamed(d, {"t": "t_s"})
+    if "flags" in d:
+        d["flags"] = J.flag_list(d["flags"])
+    return d
+
+
+def monitors_json(d: dict) -> dict:
+    """{code: {value, unit, raw, t, via}} -> the same with t_s."""
+    return {c: J.renamed(v, {"t": "t_s"}) for c, v in d.items()}
+
+
+def stop_json(d: dict | None) -> dict | None:
+    """The stop report: seconds -> duration_s."""
+    return None if d is None else J.renamed(d, {"seconds": "duration_s"})
+
+
+def end_json(end: dict) -> dict:
+    d = dict(end)
+    if "stop" in d:
+        d["stop"] = stop_json(d["stop"])
+    if isinstance(d.get("monitors"), dict):
+        d["monitors"] = monitors_json(d["monitors"])
+    return d
 
 
 def monitor_header(mons) -> list[dict]:
@@ -295,8 +338,17 @@ def status_dict(session, sample) -> dict:
             "state": st.state, "running": st.running, "stopped": st.stopped, "fault": st.fault,
             "fault_code": st.fault_code, "flags": dict(st.flags),
             "speed_hz": sample.actual_hz, "speed_percent": sample.actual_percent,
-            "reference_percent": sample.reference_percent, "fmax_hz": fmax, "fmax_source": src,
+            "reference_percent": sample.reference_percent, "reference_hz": sample.reference_hz,
+            "fmax_hz": fmax, "fmax_source": src,
             "raw": dict(st.raw), "counters": sample.counters, **torque_fields(st)}
+
+
+def status_json(d: dict) -> dict:
+    """status_dict in the contract's shape: station, ident + ident_hex, flags as the list of names
+    set, actual_hz / actual_percent."""
+    d = J.renamed(J.station_identity(d), {"speed_hz": "actual_hz", "speed_percent": "actual_percent"})
+    d["flags"] = J.flag_list(d["flags"])
+    return d
 
 
 def print_status(d: dict) -> None:

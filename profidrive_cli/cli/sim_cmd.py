@@ -68,7 +68,8 @@ def sim_cmd(use_pty, listen, serial_port, plant, baud, as_json, plc):
         where = serial_port
     stations = {a: s.model.family for a, s in sorted(bus.slaves.items())}
     if as_json:
-        emit_json({"port": where, "stations": stations, **({"plc": True} if plc else {})})
+        emit_json({"port": where, "stations": [{"station": a, "family": f} for a, f in stations.items()],
+                   **({"plc": True} if plc else {})})
     else:
         out.print(where)
         err.print("simulated stations: " + ", ".join(f"{a} {f}" for a, f in stations.items())

@@ -41,7 +41,7 @@ class SniffView:
                                             if k not in ("station", "profile", "direction")}
             return
         if self.as_json:
-            obj = {"event": "frame", **c.describe()}
+            obj = frame_json(c.describe())
             if d is not None:
                 obj["drive"] = d
             emit_json(obj)
@@ -85,6 +85,13 @@ class SniffView:
         else:
             for line in plain_table(snap):
                 out.print(line, markup=False)
+
+
+def frame_json(d: dict) -> dict:
+    """A frame in the contract's shape (docs/json.md): "event" frame (or bad_frame), t_s."""
+    out = {"event": "bad_frame" if "error" in d else "frame"}
+    out.update(("t_s" if k == "t" else k, v) for k, v in d.items())
+    return out
 
 
 def _ms(c: dict | None, key: str) -> str:
