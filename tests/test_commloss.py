@@ -147,8 +147,9 @@ def test_cli_pass_text_and_fail_json_exit_codes():
     assert all("event" in e for e in events)
     assert events[0]["event"] == "start" and events[0]["ident_hex"] == "0xFD06"
     last = events[-1]
-    assert last["event"] == "result" and last["passed"] is False and last["watchdog_ms"] == WD_MS
-    assert last["stop"]["stopped"] is True
+    assert last["event"] == "result" and last["passed"] is False and last["watchdog_s"] == WD_MS / 1000.0
+    assert last["stop"]["stopped"] is True and "duration_s" in last["stop"] and "seconds" not in last["stop"]
+    assert events[0]["watchdog_s"] == WD_MS / 1000.0 and "watchdog_ms" not in events[0]
 
 
 def test_checklist_step_comm_loss_passes_and_fails():
