@@ -15,6 +15,7 @@ from click.testing import CliRunner
 from profidrive_cli.cli.main import cli
 from profidrive_cli.dp.services import SlaveDiag
 from profidrive_cli.session.buswatch import BusWatch, categorize, health_figures
+from test_json_contract import assert_stream
 
 ST2_FIXED = 0x04        # st2 bit 2 is always 1 in a slave's reply
 
@@ -164,7 +165,9 @@ def test_watch_on_a_lossy_line_shows_rising_retries():
     r = run("scan", "--port", "sim://?drop=0.05&stations=3:fuji-g1", "--watch", "--duration", "2",
             "--interval", "1", "--json")
     assert r.exit_code == 0, r.output
-    end = json.loads(r.output.splitlines()[-1])
+    lines = [json.loads(x) for x in r.output.splitlines()]
+    assert_stream(lines, "scan watch")                    # docs/json.md
+    end = lines[-1]
     (s,) = end["stations"]
     assert s["counters"]["retries"] > 0 and s["rates_per_s"]["retries"] > 0
 

@@ -18,6 +18,7 @@ from profidrive_cli.cli.common import BusOptions
 from profidrive_cli.cli.main import cli
 from profidrive_cli.session import DriveSession
 from profidrive_cli.session.commloss import run_commloss
+from test_json_contract import assert_stream
 
 URL = "sim://?timing=virtual"
 WD_MS = 200
@@ -145,10 +146,12 @@ def test_cli_pass_text_and_fail_json_exit_codes():
     assert r.exit_code == 1
     events = [json.loads(line) for line in r.output.splitlines()]
     assert all("event" in e for e in events)
+    assert_stream(events, "commloss-test")                # docs/json.md
     assert events[0]["event"] == "start" and events[0]["ident_hex"] == "0xFD06"
     last = events[-1]
-    assert last["event"] == "result" and last["passed"] is False and last["watchdog_ms"] == WD_MS
-    assert last["stop"]["stopped"] is True
+    assert last["event"] == "result" and last["passed"] is False and last["watchdog_s"] == WD_MS / 1000.0
+    assert last["stop"]["stopped"] is True and "duration_s" in last["stop"] and "seconds" not in last["stop"]
+    assert events[0]["watchdog_s"] == WD_MS / 1000.0 and "watchdog_ms" not in events[0]
 
 
 def test_checklist_step_comm_loss_passes_and_fails():

@@ -196,7 +196,14 @@ def test_every_documented_table_is_used():
     used = {"error", "scan", "diag", "io event=cycle", "status", "param get", "param set", "param dump",
             "param rows", "faults", "run event=start", "run event=phase", "run event=update",
             "run event=end", "sniff event=frame", "sniff event=bad_frame", "doctor", "doctor ports",
-            "decode", "gsd show", "gsd list", "gsd prm", "sim", "checklist validate", "checklist run"}
+            "decode", "gsd show", "gsd list", "gsd prm", "sim", "checklist validate", "checklist run",
+            "scan watch event=watch", "scan watch event=end",
+            "run multi event=start", "run multi event=phase", "run multi event=update", "run multi event=end",
+            "commloss-test event=start", "commloss-test event=reaction", "commloss-test event=started",
+            "commloss-test event=at_speed", "commloss-test event=silence", "commloss-test event=clear",
+            "commloss-test event=back", "commloss-test event=result",
+            "sniff drive", "sniff event=live", "config show", "config path", "wireshark install",
+            "checklist measured bus_health"}
     assert set(CONTRACTS) == used
 
 
@@ -526,6 +533,188 @@ def test_sniff_stream_from_a_file(tmp_path):
     assert lines[0]["raw"] == _raw_frames()[:6].hex(" ")
 
 
+# ---------------------------------------------------------------------------------------------
+# the commands merged with their own JSON: scan --watch, commloss-test, run 3,4,5, sniff --station /
+# --live, sim --plc, config show / path, wireshark install, the bus_health and comm_loss steps
+# ---------------------------------------------------------------------------------------------
+
+VIRTUAL = ("--port", "sim://?timing=virtual")
+
+
+def test_scan_watch_stream():
+    lines = lines_of(pdrive("scan", *SIM, "--to", "8", "--watch", "--duration", "0.3", "--interval",
+                            "0.1", "--json"))
+    events = assert_stream(lines, "scan watch")
+    assert events[0] == "watch" and events[-1] == "end" and set(events[:-1]) == {"watch"}
+    s3 = lines[-1]["stations"][0]
+    # the OPC-G1-PDP's ident (FUJIFD01.GSD); never parameterised: Prm_Req -> "waiting"
+    assert (s3["station"], s3["ident"], s3["ident_hex"], s3["category"]) == (3, 0xFD01, "0xFD01", "waiting")
+    assert lines[-1]["t_s"] >= 0.3
+
+
+def test_commloss_stream_silence():
+    lines = lines_of(pdrive("commloss-test", "3", "--hz", "5", *VIRTUAL, "--json"))
+    events = assert_stream(lines, "commloss-test")
+    assert events == ["start", "reaction", "started", "at_speed", "silence", "back", "result"]
+    start, res = lines[0], lines[-1]
+    assert (start["station"], start["ident"], start["ident_hex"]) == (3, 0xFD01, "0xFD01")
+    assert start["watchdog_s"] == 0.5                   # --watchdog default 500 ms
+    # o27 = 0 (the factory setting, fuji-opc-g1-pdp.md): coast to a stop at once and trip Er5
+    assert res["reaction"]["stop"] == "trip" and res["reaction"]["alarm"] == "Er5"
+    assert res["watchdog_s"] == 0.5 and res["passed"] is True
+    assert "duration_s" in res["stop"]
+
+
+def test_commloss_stream_clear():
+    lines = lines_of(pdrive("commloss-test", "7", "--hz", "5", "--mode", "clear", *VIRTUAL, "--json"))
+    events = assert_stream(lines, "commloss-test")
+    assert events == ["start", "reaction", "started", "at_speed", "clear", "result"]
+    assert lines[-1]["watchdog_expired"] is None and lines[-1]["hold_s"] == 0.0
+
+
+def test_run_several_stations_stream():
+    lines = lines_of(pdrive("run", "3,6", "--hz", "5", "--duration", "3", *VIRTUAL, "--json"))
+    events = assert_stream(lines, "run multi")
+    assert events[0] == "start" and events[-1] == "end"
+    assert {d["station"] for d in lines if d["event"] == "update"} == {3, 6}
+    start, end = lines[0], lines[-1]
+    assert [(s["station"], s["ident_hex"]) for s in start["stations"]] == [(3, "0xFD01"), (6, "0xFD06")]
+    assert start["watchdog_s"] == 0.5
+    # 5 Hz of F03 = 60 Hz (Fuji) and of A004 = 50 Hz (Moeller)
+    assert [s["reference_percent"] for s in start["stations"]] == [pytest.approx(8.3333), 10.0]
+    assert all(s["stop"]["how"] == "normal" and s["stop"]["duration_s"] >= 0 for s in end["stations"])
+    assert end["failed"] is False
+
+
+def _moeller_capture(tmp_path) -> Path:
+    from profidrive_cli.fdl import frames as F
+
+    def req(data, fcb=True, fcv=True, dsap=None, ssap=None):
+        return F.encode(F.Frame(F.SD2, 6, 2, F.request_fc(F.SRD_HIGH, fcb, fcv), bytes(data), dsap, ssap))
+    prm = bytes([0x88, 1, 1, 11, 0xFD, 0x06, 0])
+    raw = (req(prm, fcv=False, dsap=61, ssap=62) + F.encode(F.Frame(F.SC))
+           + req(b"\xF3\xF1", fcb=False, dsap=62, ssap=62) + F.encode(F.Frame(F.SC))
+           # moeller-de6-net-dp.md example 1: write F002 = 4.00 s, STW 0x047F, HSW 0x2000 (50 %)
+           + req(bytes.fromhex("30 17 00 00 00 00 01 90 04 7F 20 00"))
+           + F.encode(F.Frame(F.SD2, 2, 6, F.DL, bytes.fromhex("20 17 00 00 00 00 01 90 03 37 20 00"))))
+    f = tmp_path / "cap.raw"
+    f.write_bytes(raw)
+    return f
+
+
+def test_sniff_station_drive_object(tmp_path):
+    f = _moeller_capture(tmp_path)
+    lines = lines_of(pdrive("sniff", "--from-file", str(f), "--station", "6=moeller", "--json"))
+    assert assert_stream(lines, "sniff") == ["frame"] * 6
+    req, rep = lines[4]["drive"], lines[5]["drive"]
+    assert_contract(req, "sniff drive")
+    assert_contract(rep, "sniff drive")
+    # STW 0x047F: bits 0-6 and 10 set (8 names); ZSW 0x0337: S4 operation
+    assert req["control_word"] == "0x047F" and len(req["flags"]) == 8 and req["flags"][0] == "ON"
+    assert (rep["status_word"], rep["state"]) == ("0x0337", "S4 operation")
+    assert "operation enabled" in rep["flags"]
+    # HSW 0x2000 = 50 % of A004 = 50 Hz
+    assert (req["reference_hz"], rep["actual_hz"]) == (25.0, 25.0)
+
+
+def test_sniff_live_events(tmp_path):
+    f = _moeller_capture(tmp_path)
+    lines = lines_of(pdrive("sniff", "--from-file", str(f), "--station", "6=moeller", "--live", "--json"))
+    assert assert_stream(lines, "sniff") == ["live"]
+    (live,) = lines
+    assert live["final"] is True and live["masters"] == [2]
+    (s6,) = live["stations"]
+    assert (s6["station"], s6["ident_hex"], s6["state"]) == (6, "0xFD06", "data exchange")
+    assert s6["drive"]["request"]["flags"][0] == "ON"
+    # one Data_Exchange heard: no cycle measured yet
+    assert (s6["cycle_min_s"], s6["cycles_measured"]) == (None, 0)
+
+
+def test_sniff_live_refresh_events_on_a_port():
+    lines = lines_of(pdrive("sniff", *SIM, "--live", "--duration", "0.7", "--json"))
+    assert_stream(lines, "sniff")
+    assert [d["final"] for d in lines][-1] is True and False in [d["final"] for d in lines]
+
+
+def test_sim_plc_endpoint_on_a_pty():
+    p = subprocess.Popen(pdrive_cmd() + ["sim", "--plc", "--pty", "--json"], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, cwd=ROOT,
+                         env={**os.environ, "PYTHONPATH": str(ROOT)})
+    try:
+        d = json.loads(p.stdout.readline())
+    finally:
+        p.terminate()
+        p.wait(timeout=10)
+    assert_contract(d, "sim")
+    assert d["plc"] is True
+
+
+CONFIG = """\
+baud: 93750
+ports:
+  rig: 'sim://?timing=virtual'
+  line1:
+    port: 'sim://?timing=virtual'
+    baud: 187500
+    master_address: 1
+    stations:
+      3: {layout: ppo3, fmax: 50}
+"""
+
+
+def test_config_show_and_path(tmp_path):
+    f = tmp_path / "pdrive.yaml"
+    f.write_text(CONFIG)
+    env = {"PDRIVE_CONFIG": str(f)}
+    d = _with_env(env, "config", "show", "--port", "line1", "--json")
+    assert_contract(d, "config show")
+    assert d["port"]["name"] == "line1" and [p["name"] for p in d["ports"]] == ["rig", "line1"]
+    assert d["stations"][0]["station"] == 3 and d["stations"][0]["layout"]["value"] == "ppo3"
+    assert_contract(_with_env(env, "config", "path", "--json"), "config path")
+
+
+def _with_env(extra: dict, *args):
+    env = {**os.environ, "PYTHONPATH": str(ROOT), **extra}
+    env.pop("PDRIVE_PORT", None)
+    r = subprocess.run(pdrive_cmd() + list(args), capture_output=True, text=True, timeout=60, cwd=ROOT,
+                       env=env)
+    return one_doc(r)
+
+
+def test_wireshark_install(tmp_path):
+    d = one_doc(pdrive("wireshark", "install", "--dir", str(tmp_path), "--station",
+                       "6=moeller:ppo1", "--json"))
+    assert_contract(d, "wireshark install")
+    assert d["stations"] == [{"station": 6, "profile": "moeller-de6-net-dp", "layout": "ppo1"}]
+    assert [Path(x).name for x in d["files"]] == ["pdrive.lua", "pdrive_stations.lua"]
+
+
+CHECKLIST_STEPS = """\
+name: measured
+port: 'sim://?timing=virtual'
+stations:
+  - name: conveyor
+    address: 3
+    profile: fuji-g1
+    layout: ppo1
+steps:
+  - bus_health: {seconds: 0.5}
+  - comm_loss: {hz: 5}
+"""
+
+
+def test_checklist_measured_of_bus_health_and_comm_loss(tmp_path):
+    f = tmp_path / "c.yaml"
+    f.write_text(CHECKLIST_STEPS)
+    d = one_doc(pdrive("checklist", "run", str(f), "--json", "--yes"))
+    assert_contract(d, "checklist run")
+    bh, cl = d["stations"][0]["steps"]
+    assert_contract(bh["measured"], "checklist measured bus_health")
+    assert bh["measured"]["duration_s"] == 0.5 and "seconds" not in bh["measured"]
+    assert_contract({"event": "result", **cl["measured"]}, "commloss-test event=result")
+    assert cl["expected"]["watchdog_s"] == 0.5 and "watchdog_ms" not in cl["expected"]
+
+
 # =============================================================================================
 # errors: a JSON object under --json, the same exit code as the text
 # =============================================================================================
@@ -561,6 +750,15 @@ ERRORS = [
     (("sniff", "--port", "/dev/pdrive-no-such-port", "--duration", "0.1"), 1),
     (("checklist", "validate", "/nonexistent/c.yaml"), 2),
     (("checklist", "run", "/nonexistent/c.yaml", *SIM), 2),
+    (("scan", "--watch", "--interval", "0", *SIM), 2),
+    (("scan", "--watch", "--duration", "0.2", "--port", "/dev/pdrive-no-such-port"), 1),
+    (("commloss-test", "3", "--hz", "nan", *SIM), 2),
+    (("commloss-test", "50", "--hz", "5", *SIM), 1),
+    (("run", "3,6", *SIM), 2),
+    (("run", "3,50", "--hz", "5", *SIM), 1),
+    (("sniff", "--live", "--station", "6=nosuchprofile", *SIM), 2),
+    (("config", "show", "--master-address", "200"), 2),
+    (("wireshark", "install", "--station", "6=nosuchprofile"), 2),
 ]
 
 
@@ -575,7 +773,7 @@ def test_error_is_json_with_the_text_exit_code(args, code):
     assert err["exit_code"] == code
     # the same one line on stderr as without --json
     assert js.stderr.strip().splitlines()[-1] == text.stderr.strip().splitlines()[-1] == f"pdrive: {err['error']}"
-    stream = args[0] in ("io", "run", "jog", "sniff")
+    stream = args[0] in ("io", "run", "jog", "sniff", "commloss-test") or args[:2] == ("scan", "--watch")
     assert (err.get("event") == "error") == stream
     if not stream:
         assert len(out) == 1                           # one document on stdout

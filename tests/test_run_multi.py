@@ -9,6 +9,7 @@ import subprocess
 import pytest
 
 from conftest import pdrive_cmd, pty_sim_process, read_until_turning
+from test_json_contract import assert_stream
 from profidrive_cli.dp import services as S
 from profidrive_cli.sim.model import SlaveModel
 from profidrive_cli.sim.slave import SimSlave
@@ -27,7 +28,10 @@ def pdrive(*args, timeout=120):
 
 
 def events(text):
-    return [json.loads(line) for line in text.strip().splitlines()]
+    """The JSON Lines of `run 3,4,5 --json`, each checked against docs/json.md ("run multi")."""
+    lines = [json.loads(line) for line in text.strip().splitlines()]
+    assert_stream(lines, "run multi")
+    return lines
 
 
 # -- the simulated slave: Sync and Freeze ---------------------------------------------------------
@@ -338,7 +342,7 @@ def test_link_loss_names_each_stations_watchdog():
             if proc.poll() is None:
                 proc.kill()
     assert p.returncode == 1 and "Traceback" not in err
-    *_, end, error = [json.loads(x) for x in outs.strip().splitlines()]
+    *_, end, error = events(outs)
     assert error["event"] == "error" and error["exit_code"] == 1       # the error object follows "end"
     assert end["event"] == "end" and end["reason"].startswith("error: link lost")
     started = [s for s in end["stations"] if s["started"]]

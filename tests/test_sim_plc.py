@@ -12,6 +12,7 @@ import time
 import pytest
 
 from conftest import pdrive_cmd, start_pty_sim, stop_pty_sim
+from test_json_contract import assert_contract
 
 STATIONS = ["3=fuji-g1", "4=fuji-pdp3", "5=toyo", "6=moeller:ppo1", "7=yaskawa"]
 STATION_ARGS = [a for s in STATIONS for a in ("--station", s)]
@@ -47,6 +48,10 @@ def test_sniff_shows_the_plcs_commands_to_each_drive_in_words(plc_pty):
     out = sniff(plc_pty, 6, *STATION_ARGS, "--json")
     objs = [json.loads(line) for line in out.splitlines()]
     assert objs and all(o["event"] == "frame" for o in objs)
+    for o in objs:                         # the JSON contract (docs/json.md), every family's drive object
+        assert_contract(o, "sniff event=frame")
+        if "drive" in o:
+            assert_contract(o["drive"], "sniff drive")
     drives = [o["drive"] for o in objs if "drive" in o and "error" not in o["drive"]]
     by = {(d["station"], d["direction"]): [] for d in drives}
     for d in drives:
@@ -56,7 +61,7 @@ def test_sniff_shows_the_plcs_commands_to_each_drive_in_words(plc_pty):
     # STW bit 3 "Operation enabled"), the state S4, reference from the script
     for st in (3, 4, 6):
         reqs = by[(st, "request")]
-        assert any("enable operation" in d["control"] and d["reference_hz"] in SPEEDS[st]
+        assert any("enable operation" in d["flags"] and d["reference_hz"] in SPEEDS[st]
                    for d in reqs), st
         assert any(d["state"].startswith("S4") for d in by[(st, "response")]), st
     # Toyo: STW 0x047F is "RUN" (toyo-vf66-pbus66z.md D8), 10000 counts = 50 % of 60 Hz
@@ -92,12 +97,15 @@ def test_sniff_text_lines_and_live_list(plc_pty):
     out = sniff(plc_pty, 2.0, "--live", "--json")
     objs = [json.loads(line) for line in out.splitlines()]
     assert objs and all(o["event"] == "live" for o in objs)
+    for o in objs:
+        assert_contract(o, "sniff event=live")
     final = objs[-1]
     assert final["masters"] == [2]
     assert {s["station"]: s["state"] for s in final["stations"]} == {a: "data exchange"
                                                                     for a in (3, 4, 5, 6, 7)}
-    c = final["cycle_s"]
-    assert 0 < c["min"] <= c["mean"] <= c["max"] < 2.0
+    assert 0 < final["cycle_min_s"] <= final["cycle_mean_s"] <= final["cycle_max_s"] < 2.0
+    assert all(s["cycles_measured"] > 0 for s in final["stations"]) and final["final"] is True
+    assert all(o["final"] is False for o in objs[:-1])
     assert all(s["counters"]["retries"] == 0 for s in final["stations"])
 
 

@@ -53,7 +53,7 @@ def commloss_cmd(opts, address, hz, mode, timeout, ack, cycle_hz, yes, profile_n
         else:
             emit_json({"event": "start", "station": s.address, "ident": s.ident,
                        "ident_hex": f"0x{s.ident:04X}", "profile": s.profile.name, "mode": mode,
-                       "reference_hz": hz, "watchdog_ms": s.watchdog_ms})
+                       "reference_hz": hz, "watchdog_s": s.watchdog_ms / 1000.0})
         res = run_commloss(s, hz, mode, timeout=timeout, ack=ack, on_event=events)
     if not opts.json:
         _text_result(res)

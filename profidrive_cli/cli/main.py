@@ -99,7 +99,9 @@ def _os_error_text(e: OSError) -> str:
 
 #: commands whose --json output is a stream (JSON Lines with an "event" key): their error object
 #: carries "event": "error" too
-STREAM_COMMANDS = frozenset({"io", "jog", "run", "sniff"})
+STREAM_COMMANDS = frozenset({"commloss-test", "io", "jog", "run", "sniff"})
+#: commands whose --json output is a stream only with one of these options (scan: a document)
+STREAM_WITH = {"scan": frozenset({"--watch"})}
 
 
 def _json_mode(argv) -> tuple[bool, bool]:
@@ -108,7 +110,9 @@ def _json_mode(argv) -> tuple[bool, bool]:
     args = list(sys.argv[1:] if argv is None else argv)
     if "--" in args:
         args = args[:args.index("--")]
-    return "--json" in args, bool(args) and args[0] in STREAM_COMMANDS
+    stream = bool(args) and (args[0] in STREAM_COMMANDS
+                             or bool(STREAM_WITH.get(args[0], frozenset()) & set(args[1:])))
+    return "--json" in args, stream
 
 
 def _fail(argv, message: str, code: int, details: dict | None = None):

@@ -11,7 +11,7 @@ from rich.table import Table
 from rich.text import Text
 
 from profidrive_cli.cli.common import emit_json, err, out
-from profidrive_cli.cli.render_drive import fmt_num
+from profidrive_cli.cli.render_drive import fmt_num, stop_json
 from profidrive_cli.fdl.master import format_counters
 
 
@@ -23,6 +23,26 @@ def sample_dict(address: int, t_s: float, sample, phase: str) -> dict:
             "reference_hz": sample.reference_hz, "actual_hz": sample.actual_hz,
             "reference_percent": sample.reference_percent, "actual_percent": sample.actual_percent,
             "cycles": sample.cycles, "counters": sample.counters}
+
+
+def start_json(header: dict) -> dict:
+    """The start event in the contract's names (docs/json.md): the watchdog as `watchdog_s`."""
+    d = {"event": "start"}
+    for k, v in header.items():
+        if k == "watchdog_ms":
+            d["watchdog_s"] = None if v is None else v / 1000.0
+        else:
+            d[k] = v
+    return d
+
+
+def end_json(end: dict) -> dict:
+    """The end event in the contract's names: each station's stop time as `stop.duration_s`."""
+    d = {"event": "end", **end}
+    if "stations" in end:
+        d["stations"] = [{**s, "stop": stop_json(s.get("stop"))} if "stop" in s else s
+                         for s in end["stations"]]
+    return d
 
 
 class MultiView:
@@ -46,7 +66,7 @@ class MultiView:
     def start(self, header: dict) -> None:
         self.header = header
         if self.mode == "json":
-            emit_json({"event": "start", **header})
+            emit_json(start_json(header))
             return
         if self.mode == "text":
             for line in self._header_lines():
@@ -99,7 +119,7 @@ class MultiView:
             self._live.stop()
             self._live = None
         if self.mode == "json":
-            emit_json({"event": "end", **end})
+            emit_json(end_json(end))
             return
         err.print(escape(f"end: {end.get('reason', '')}"))
         for s in end.get("stations", []):

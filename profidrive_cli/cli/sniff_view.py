@@ -43,7 +43,7 @@ class SniffView:
         if self.as_json:
             obj = frame_json(c.describe())
             if d is not None:
-                obj["drive"] = d
+                obj["drive"] = drive_json(d)
             emit_json(obj)
         else:
             line = format_line(c)
@@ -61,7 +61,7 @@ class SniffView:
             return
         self._shown_at = t
         if self.as_json:
-            emit_json({"event": "live", **self.live.snapshot(t)})
+            emit_json(live_json(self.live.snapshot(t), final=False))
         elif out.is_terminal:
             from rich.live import Live
             table = live_table(self.live.snapshot(t))
@@ -76,7 +76,7 @@ class SniffView:
             return
         snap = self.live.snapshot(t)
         if self.as_json:
-            emit_json({"event": "live", "final": True, **snap})
+            emit_json(live_json(snap, final=True))
         elif self._rich_live is not None:
             self._rich_live.update(live_table(snap), refresh=True)
             self._rich_live.stop()
@@ -91,6 +91,47 @@ def frame_json(d: dict) -> dict:
     """A frame in the contract's shape (docs/json.md): "event" frame (or bad_frame), t_s."""
     out = {"event": "bad_frame" if "error" in d else "frame"}
     out.update(("t_s" if k == "t" else k, v) for k, v in d.items())
+    return out
+
+
+def drive_json(d: dict) -> dict:
+    """A decoded area in the contract's names (docs/json.md): the control / status bits set as
+    `flags`."""
+    return {("flags" if k in ("control", "status") else k): v for k, v in d.items()}
+
+
+def _cycle_json(c: dict | None, counted: bool = False) -> dict:
+    """{min, mean, max[, n]} in seconds -> cycle_min_s, cycle_mean_s, cycle_max_s[, cycles_measured]."""
+    c = c or {}
+    d = {"cycle_min_s": c.get("min"), "cycle_mean_s": c.get("mean"), "cycle_max_s": c.get("max")}
+    if counted:
+        d["cycles_measured"] = c.get("n", 0)
+    return d
+
+
+def live_json(snap: dict, final: bool) -> dict:
+    """A live-list snapshot as a `live` event: the cycle times as `*_s` keys (as in
+    `scan --watch`), the decoded drive areas as in the frame events."""
+    out = {"event": "live", "final": final}
+    for k, v in snap.items():
+        if k == "cycle_s":
+            out.update(_cycle_json(v))
+        elif k == "stations":
+            out[k] = [_station_json(st) for st in v]
+        else:
+            out[k] = v
+    return out
+
+
+def _station_json(st: dict) -> dict:
+    out: dict = {}
+    for k, v in st.items():
+        if k == "cycle_s":
+            out.update(_cycle_json(v, counted=True))
+        elif k == "drive":
+            out[k] = {dk: (drive_json(dv) if isinstance(dv, dict) else dv) for dk, dv in v.items()}
+        else:
+            out[k] = v
     return out
 
 

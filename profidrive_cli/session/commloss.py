@@ -98,7 +98,7 @@ class CommLossResult:
     def to_dict(self) -> dict:
         r = self.reaction
         return {"event": "result", "station": self.address, "mode": self.mode, "reference_hz": self.hz,
-                "watchdog_ms": self.watchdog_ms,
+                "watchdog_s": self.watchdog_ms / 1000.0,
                 "reaction": {"words": r.words, "stop": r.stop, "delay_s": r.delay_s,
                              "recover": r.recover, "alarm": r.alarm, "decel_s": r.decel_s,
                              "settings": r.settings},
@@ -108,7 +108,14 @@ class CommLossResult:
                 "passed": self.passed, "verdict": self.verdict, "final_state": self.final_state,
                 "fault_code": self.fault_code, "acknowledged": self.acknowledged,
                 "watchdog_expired": self.watchdog_expired, "back_s": _r(self.back_s),
-                "stop": self.stop, "counters": self.counters}
+                "stop": _stop_json(self.stop), "counters": self.counters}
+
+
+def _stop_json(stop: dict | None) -> dict | None:
+    """The stop pdrive sent, with its time as `duration_s` (docs/json.md)."""
+    if stop is None:
+        return None
+    return {("duration_s" if k == "seconds" else k): v for k, v in stop.items()}
 
 
 def _r(v: float | None) -> float | None:

@@ -55,7 +55,7 @@ class BusHealth(StepType):
         before = dict(sess.counters)
         run.cycle_for(sr, r, d, float(a["seconds"]), "watching the bus counters")
         fig = health_figures(before, dict(sess.counters))
-        r.measured = {"seconds": a["seconds"], **{k: (round(v, 2) if isinstance(v, float) else v)
+        r.measured = {"duration_s": a["seconds"], **{k: (round(v, 2) if isinstance(v, float) else v)
                                                   for k, v in fig.items()}}
         if not fig["requests"]:
             raise StepFailed("no request reached the station in the measuring time")

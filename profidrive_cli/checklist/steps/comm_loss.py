@@ -49,7 +49,7 @@ class CommLoss(StepType):
         doc = res.to_dict()
         doc.pop("event", None)
         r.expected = {"within_s": doc["expected_s"], "reaction": res.reaction.words,
-                      "watchdog_ms": res.watchdog_ms}
+                      "watchdog_s": res.watchdog_ms / 1000.0}
         r.measured = doc
         if not res.passed:
             raise StepFailed(res.verdict)
