@@ -288,3 +288,17 @@ def test_a_checklists_own_port_beats_the_configs_default_port(tmp_path, cl_port)
     p = _pdrive(["checklist", "run", "cl.yaml", "--yes", "--port", "/dev/pdrive-no-such-port"],
                 tmp_path, {"XDG_CONFIG_HOME": str(tmp_path / "none")})
     assert p.returncode != 0 and "/dev/pdrive-no-such-port" in p.stderr
+
+
+def test_config_show_refuses_a_baud_rate_no_bus_command_takes(monkeypatch):
+    from click.testing import CliRunner
+
+    from profidrive_cli import UsageError
+    from profidrive_cli.cli.main import cli
+    r = CliRunner().invoke(cli, ["config", "show", "--baud", "bogus"])
+    assert isinstance(r.exception, UsageError) and "'bogus' (option --baud)" in str(r.exception)
+    monkeypatch.setenv("PDRIVE_BAUD", "12345")
+    r = CliRunner().invoke(cli, ["config", "show"])
+    assert isinstance(r.exception, UsageError) and "env PDRIVE_BAUD" in str(r.exception)
+    r = CliRunner().invoke(cli, ["config", "show", "--baud", "187500"])
+    assert r.exit_code == 0 and "187500" in r.output
