@@ -72,7 +72,8 @@ MODULES: dict[str, list[str]] = {
     "drives/yaskawa/config.py": ["tests/test_yaskawa_codec.py", "tests/test_yaskawa_drive.py"],
     "drives/yaskawa/describe.py": ["tests/test_yaskawa_codec.py", "tests/test_yaskawa_drive.py"],
     "drives/yaskawa/drive.py": ["tests/test_yaskawa_codec.py", "tests/test_yaskawa_drive.py"],
-    "session/safestop.py": ["tests/test_escalation.py", "tests/test_session.py", "tests/test_run_safety.py"],
+    "session/safestop.py": ["tests/test_safestop_mutants.py", "tests/test_escalation.py", "tests/test_session.py"],
+    "session/restore.py": ["tests/test_restore_mutants.py", "tests/test_exact_values.py", "tests/test_session.py"],
     "checklist/runner.py": ["tests/test_checklist_bands.py", "tests/test_checklist.py"],
 }
 
