@@ -1,0 +1,471 @@
+"""The checklist step checks (checklist/fields.py, steps/run.py, read.py, write.py, expect_status.py):
+what each field accepts and refuses (file:line), the titles, and what execution measures, passes and
+fails, on the simulated Fuji FRENIC (station 3, PPO1) over DirectChannel (simulated clock).
+
+Expected values are the profile's (profiles/fuji-opc-g1-pdp.yaml, from the Fuji manuals: F03
+maximum frequency 25..500 Hz in 0.1 Hz steps, default 60 Hz; F07/F08 0..6000 s in 0.1 s steps;
+W90 read-only; P04 auto-tuning dangerous) and docs/checklists.md (run: tolerance 0.5 Hz / 1 % and
+within 10 s by default; read: exact to half a step without tolerance). Written for mutation testing
+(tools/mutation/run.py checklist/...).
+"""
+
+import contextlib
+import re
+
+import pytest
+
+from profidrive_cli.checklist.fields import (FieldChecker, ParamTarget, fmt, is_num, line_at,
+                                             param_layouts, range_problem, tname)
+from profidrive_cli.checklist.runner import FAILED, PASSED, Runner, StationHandle
+from profidrive_cli.checklist.spec import ChecklistError, load_checklist_text
+from profidrive_cli.datafile import LineDict, LineList
+from profidrive_cli.drives import make_drive
+from profidrive_cli.drives.profile import load_profile
+from profidrive_cli.sim.direct import DirectChannel
+from profidrive_cli.sim.plant import make_model
+
+HEAD = """\
+name: t
+stations:
+  - {name: c1, address: 3, profile: fuji-g1}
+steps:
+"""
+FIRST = 5          # the line of the first step after HEAD
+
+
+def errors_of(steps):
+    with pytest.raises(ChecklistError) as ei:
+        load_checklist_text(HEAD + steps, "t.yaml")
+    return [str(e) for e in ei.value.errors]
+
+
+def steps_of(steps):
+    return load_checklist_text(HEAD + steps, "t.yaml").stations[0].steps
+
+
+def run_text(steps, disturb=None, trip=None):
+    cl = load_checklist_text(HEAD + steps, "t.yaml")
+
+    @contextlib.contextmanager
+    def open_station(spec):
+        model = make_model(spec.profile)
+        ch = DirectChannel(model, spec.profile.layouts[spec.layout].cfg)
+        if trip:
+            model.trip(trip, ch.now())
+        if disturb is not None:
+            disturb(model)
+        d = make_drive(ch, spec.profile, spec.layout)
+        yield StationHandle(d, {"address": spec.address, "ident": model.ident,
+                                "profile": spec.profile.name, "layout": spec.layout, "gsd": None})
+    return Runner(cl, open_station).run().stations[0].steps
+
+
+RAMPS = "  - write: {param: F07, value: 1.0}\n  - write: {param: F08, value: 1.0}\n"   # 1 s to 60 Hz
+
+
+# -- fields.py: the toolkit ------------------------------------------------------------------------
+
+def test_tname_is_num_fmt():
+    assert [tname(v) for v in (True, 3, 2.5, "x", [1], {"a": 1}, None, b"x")] == [
+        "true/false", "a number", "a number", "text", "a list", "a mapping", "nothing", "bytes"]
+    assert is_num(3) and is_num(-2.5) and not is_num(True) and not is_num("3")
+    assert not is_num(float("nan")) and not is_num(float("inf"))
+    assert fmt(2.50) == "2.5" and fmt(3) == "3" and fmt(1e-7) == "1e-07" and fmt("a") == "a"
+
+
+def test_line_at():
+    d = LineDict({"a": 1})
+    d.line, d.key_lines = 4, {"a": 6}
+    assert line_at(d, "a") == 6 and line_at(d) == 4
+    lst = LineList([1, 2])
+    lst.line, lst.item_lines = 9, [10, 11]
+    assert line_at(lst, 1) == 11 and line_at(lst) == 9
+    assert line_at(object(), default=7) == 7 and line_at(object()) == 0
+
+
+def test_step_tolerance_is_half_a_wire_step():
+    f08 = load_profile("fuji-opc-g1-pdp").param("F08")          # 0.1 s steps
+    assert ParamTarget("F08", "F08", f08).step_tolerance == pytest.approx(0.05, abs=1e-8)
+    assert ParamTarget("F08", "F08", f08).step_tolerance > 0.05
+    assert ParamTarget("REG0x0100", "REG0x0100").step_tolerance == pytest.approx(1e-9)
+
+
+def test_field_checker_records_each_problem_once():
+    c = FieldChecker("t.yaml")
+    c.err(3, "x")
+    c.err(3, "x")
+    c.err(4, "x")
+    assert [str(e) for e in c.errors] == ["t.yaml:3: x", "t.yaml:4: x"]
+
+
+def test_unknown_key_suggests_or_lists():
+    c = FieldChecker("t.yaml")
+    assert c.unknown_key("tolerence", ("hz", "tolerance"), "field") == \
+        "unknown field 'tolerence' (did you mean tolerance?)"
+    assert c.unknown_key("zz", ("hz", "tolerance"), "field") == "unknown field 'zz' (known: hz, tolerance)"
+
+
+def test_range_problem_min_max_and_moeller_ranges():
+    fuji = load_profile("fuji-opc-g1-pdp")
+    f03 = fuji.param("F03")
+    assert range_problem(f03, 25.0) is None and range_problem(f03, 500.0) is None
+    assert range_problem(f03, 24.9) == "F03 (Maximum frequency 1 (100 % of MRV/MAV)): 24.9 Hz is outside 25..500 Hz"
+    assert range_problem(f03, 500.1) is not None
+    moeller = load_profile("moeller-de6-net-dp")
+    b096 = moeller.param("b096")                   # two ranges: 330..380 V and 660..760 V
+    assert range_problem(b096, 330) is None and range_problem(b096, 380) is None
+    assert range_problem(b096, 700) is None
+    assert range_problem(b096, 500) == "b096 (On level of BRD): 500 V is outside 330..380, 660..760 V"
+    b031 = moeller.param("b031")                   # [0, 3] and the single value 10
+    assert range_problem(b031, 5) == ("b031 (Selection of method of software lock): 5 is outside "
+                                      "0..3, 10")
+
+
+def test_param_layouts_lists_those_with_a_channel():
+    fuji = load_profile("fuji-opc-g1-pdp")
+    names = param_layouts(fuji).split(", ")
+    assert names and all(fuji.layouts[n].pkw for n in names)
+    assert set(names) == {n for n, lay in fuji.layouts.items() if lay.pkw}
+
+
+# -- step fields (spec validation through each step type) ------------------------------------------
+
+BAD = [
+    ("  - run: {hz: 10, percent: 20}\n", f"t.yaml:{FIRST}: step 1 (run): give the speed as either hz or percent"),
+    ("  - run: {direction: forward}\n", f"t.yaml:{FIRST}: step 1 (run): give the speed as either hz or percent"),
+    ("  - run: {hz: 0}\n", f"t.yaml:{FIRST}: step 1 (run): 'hz' must be above 0, got 0"),
+    ("  - run: {hz: 10, direction: up}\n", f"t.yaml:{FIRST}: step 1 (run): direction must be forward or reverse, got 'up'"),
+    ("  - run: {percent: 100.5}\n", f"t.yaml:{FIRST}: step 1 (run): percent 100.5 is above 100 (the max frequency)"),
+    ("  - run: {hz: 500.5}\n", f"t.yaml:{FIRST}: step 1 (run): 500.5 Hz is above what fuji-opc-g1-pdp can run (F03 max 500 Hz)"),
+    ("  - run: {hz: 10, duration: -1}\n", f"t.yaml:{FIRST}: step 1 (run): 'duration' must be at least 0, got -1"),
+    ("  - run: {hz: 10, tolerance: 0}\n", f"t.yaml:{FIRST}: step 1 (run): 'tolerance' must be above 0, got 0"),
+    ("  - run: {hz: 10, within: 0}\n", f"t.yaml:{FIRST}: step 1 (run): 'within' must be above 0, got 0"),
+    ("  - run: {hz: 10, speed: 3}\n", f"t.yaml:{FIRST}: step 1 (run): unknown field 'speed' (known: hz, percent, direction, duration, tolerance, within)"),
+    ("  - run: [10]\n", f"t.yaml:{FIRST}: step 1 (run): expected a mapping with hz, percent, direction, duration, tolerance, within, got a list"),
+    ("  - read: {param: F07, range: [2, 1]}\n", f"t.yaml:{FIRST}: step 1 (read): 'range' must be [low, high] with low <= high, got [2, 1]"),
+    ("  - read: {param: F07, range: [1, 2, 3]}\n", f"t.yaml:{FIRST}: step 1 (read): 'range' must be [low, high] with low <= high, got [1, 2, 3]"),
+    ("  - read: {param: F07, range: [1, x]}\n", f"t.yaml:{FIRST}: step 1 (read): 'range' must be [low, high] with low <= high, got [1, 'x']"),
+    ("  - read: {param: F07, range: 3}\n", f"t.yaml:{FIRST}: step 1 (read): 'range' must be [low, high] with low <= high, got 3"),
+    ("  - read: {param: F07, range: [1, 2], min: 0}\n", f"t.yaml:{FIRST}: step 1 (read): give either range or min/max, not both"),
+    ("  - read: {param: F07, range: [1, 2], max: 3}\n", f"t.yaml:{FIRST}: step 1 (read): give either range or min/max, not both"),
+    ("  - read: {param: F07, expect: 1, min: 0}\n", f"t.yaml:{FIRST}: step 1 (read): give either expect (with tolerance) or a range, not both"),
+    ("  - read: {param: F07, expect: 1, max: 3}\n", f"t.yaml:{FIRST}: step 1 (read): give either expect (with tolerance) or a range, not both"),
+    ("  - read: {param: F07, tolerance: 1}\n", f"t.yaml:{FIRST}: step 1 (read): tolerance needs expect"),
+    ("  - read: {param: F07, expect: 1, tolerance: -0.1}\n", f"t.yaml:{FIRST}: step 1 (read): 'tolerance' must be at least 0, got -0.1"),
+    ("  - read: {param: F07, min: 3, max: 2}\n", f"t.yaml:{FIRST}: step 1 (read): min 3 is above max 2"),
+    ("  - read: {param: F03, expect: 600}\n", f"t.yaml:{FIRST}: step 1 (read): expected value can never be read: F03 (Maximum frequency 1 (100 % of MRV/MAV)): 600 Hz is outside 25..500 Hz"),
+    ("  - read: {param: true}\n", f"t.yaml:{FIRST}: step 1 (read): 'param' must be a parameter code, got true/false"),
+    ("  - read: {expect: 3}\n", f"t.yaml:{FIRST}: step 1 (read): missing field 'param'"),
+    ("  - write: {param: W90, value: 1}\n", f"t.yaml:{FIRST}: step 1 (write): W90 (PROFIBUS card software version (V1.23 reads 123)) is read-only"),
+    ("  - write: {param: F07, value: 1, allow_dangerous: 1}\n", f"t.yaml:{FIRST}: step 1 (write): 'allow_dangerous' must be true or false, got 1"),
+    ("  - write: {param: F07}\n", f"t.yaml:{FIRST}: step 1 (write): missing field 'value'"),
+    ("  - write: {param: F07, value: x}\n", f"t.yaml:{FIRST}: step 1 (write): 'value' must be a number, got text 'x'"),
+    ("  - run: {hz: 10}\n  - write: {param: F03, value: 50}\n", f"t.yaml:{FIRST + 1}: step 2 (write): F03 can only be changed while the motor is stopped, and an earlier run step leaves it running; put a stop step before it"),
+    ("  - expect_status: {}\n", f"t.yaml:{FIRST}: step 1 (expect_status): expected a mapping of status flags to true/false, e.g. {{running: false, fault: false}}"),
+    ("  - expect_status: running\n", f"t.yaml:{FIRST}: step 1 (expect_status): expected a mapping of status flags to true/false, e.g. {{running: false, fault: false}}"),
+    ("  - expect_status: {state: 3}\n", f"t.yaml:{FIRST}: step 1 (expect_status): 'state' must be text (part of the state name), got a number"),
+    ("  - expect_status: {running: true, within: -1}\n", f"t.yaml:{FIRST}: step 1 (expect_status): 'within' must be a number of seconds >= 0, got -1"),
+    ("  - expect_status: {running: true, within: x}\n", f"t.yaml:{FIRST}: step 1 (expect_status): 'within' must be a number of seconds >= 0, got 'x'"),
+    ("  - expect_status: {running: 1}\n", f"t.yaml:{FIRST}: step 1 (expect_status): flag 'running' must be true or false, got a number 1"),
+    ("  - expect_status: {within: 2}\n", f"t.yaml:{FIRST}: step 1 (expect_status): nothing to check (name flags, or state)"),
+    ("  - expect_status: {runing: true}\n", f"t.yaml:{FIRST}: step 1 (expect_status): fuji-opc-g1-pdp has no status flag 'runing' (did you mean 'running'?)"),
+]
+
+
+@pytest.mark.parametrize("steps,error", BAD, ids=[b[1][12:60] for b in BAD])
+def test_step_field_errors(steps, error):
+    assert error in errors_of(steps)
+
+
+def test_an_unknown_flag_far_from_every_name_lists_them():
+    errs = errors_of("  - expect_status: {qqqqqqqq: true}\n")
+    assert len(errs) == 1
+    assert errs[0].startswith(f"t.yaml:{FIRST}: step 1 (expect_status): fuji-opc-g1-pdp has no status "
+                              f"flag 'qqqqqqqq' (flags: running, fault, stopped, ")
+
+
+def test_every_bad_flag_is_reported_not_only_the_first():
+    errs = errors_of("  - expect_status: {running: 1, fault: 2}\n")
+    assert len(errs) == 2
+
+
+def test_a_fault_alarm_name_is_accepted_as_a_flag():
+    s = steps_of("  - expect_status: {'fault: OC1': false}\n")[0]
+    assert s.args["flags"] == {"fault: OC1": False}
+
+
+def test_run_args_and_titles():
+    s = steps_of("  - run: {hz: 10}\n"
+                 "  - run: {percent: 20, direction: reverse, duration: 3, tolerance: 2, within: 15}\n"
+                 "  - run: {percent: 100}\n"
+                 "  - run: {hz: 500}\n")
+    assert s[0].args == {"unit": "hz", "speed": 10, "direction": "forward", "duration": 0.0,
+                         "tolerance": 0.5, "within": 10.0}
+    assert s[0].title == "run forward at 10 Hz (± 0.5 Hz within 10 s)"
+    assert s[1].args == {"unit": "percent", "speed": 20, "direction": "reverse", "duration": 3,
+                         "tolerance": 2, "within": 15}
+    assert s[1].title == "run reverse at 20 % (± 2 % within 15 s), hold 3 s"
+    assert s[2].args["tolerance"] == 1.0 and s[2].title == "run forward at 100 % (± 1 % within 10 s)"
+    assert s[3].args["speed"] == 500
+
+
+def test_read_args_and_titles():
+    s = steps_of("  - read: F07\n"
+                 "  - read: {param: F07, expect: 3}\n"
+                 "  - read: {param: F07, expect: 3, tolerance: 0.5}\n"
+                 "  - read: {param: F07, range: [1, 2]}\n"
+                 "  - read: {param: F07, min: 1}\n"
+                 "  - read: {param: F07, max: 2}\n"
+                 "  - read: {param: F07, min: 2, max: 2}\n"
+                 "  - read: {param: PNU918}\n"
+                 "  - read: {param: F03, expect: 500}\n")
+    assert [x.title for x in s] == ["read F07", "read F07, expect 3 s", "read F07, expect 3 s ± 0.5",
+                                    "read F07, expect 1..2 s", "read F07, expect >= 1 s",
+                                    "read F07, expect <= 2 s", "read F07, expect 2..2 s",
+                                    "read PNU918", "read F03, expect 500 Hz"]
+    a = s[3].args
+    assert (a["expect"], a["tolerance"], a["min"], a["max"]) == (None, None, 1, 2)
+    a = s[2].args
+    assert (a["expect"], a["tolerance"], a["min"], a["max"]) == (3, 0.5, None, None)
+    assert s[0].args["param"].label == "F07" and s[0].args["param"].unit == "s"
+
+
+def test_write_args_and_titles():
+    s = steps_of("  - write: {param: F07, value: 2.5}\n"
+                 "  - write: {param: P04, value: 2, allow_dangerous: true}\n"
+                 "  - write: {param: F08, value: 1, allow_dangerous: true}\n")
+    assert s[0].title == "write F07 = 2.5 s" and s[0].args["allow_dangerous"] is False
+    assert s[1].title == "write P04 = 2 (dangerous, allowed)" and s[1].args["allow_dangerous"] is True
+    assert s[2].title == "write F08 = 1 s"
+
+
+def test_a_dangerous_write_without_permission_is_refused_with_the_reason():
+    errs = errors_of("  - write: {param: P04, value: 2}\n")
+    assert len(errs) == 1
+    assert errs[0].startswith(f"t.yaml:{FIRST}: step 1 (write): P04 (Motor 1 auto-tuning (runs the motor "
+                              f"whatever the PROFIdrive state)) is dangerous: writing it ")
+    assert errs[0].endswith("; add 'allow_dangerous: true' to the step to write it")
+
+
+def test_stop_only_write_before_any_run_is_fine():
+    assert steps_of("  - write: {param: F03, value: 50}\n")[0].title == "write F03 = 50 Hz"
+
+
+def test_expect_status_args_and_title():
+    s = steps_of("  - expect_status: {running: false, FAULT: false, state: S2, within: 2}\n"
+                 "  - expect_status: {state: S4}\n")
+    assert s[0].args == {"flags": {"running": False, "fault": False}, "state": "S2", "within": 2.0}
+    assert s[0].title == "status: state ~ 'S2', running = no, fault = no"
+    assert s[1].args == {"flags": {}, "state": "S4", "within": 0.0}
+    assert s[1].title == "status: state ~ 'S4'"
+
+
+# -- execution: run --------------------------------------------------------------------------------
+
+def test_run_passes_and_measures_in_hz():
+    steps = run_text(RAMPS + "  - run: {hz: 12, duration: 2}\n  - stop\n")
+    r = steps[2]
+    assert r.status == PASSED, r.message
+    assert r.expected == {"speed": 12.0, "unit": "Hz", "tolerance": 0.5, "within_s": 10.0, "hold_s": 2}
+    m = r.measured
+    assert set(m) == {"actual_hz", "reached_after_s", "state", "speed_hz", "speed_percent",
+                      "hold_min", "hold_max"}
+    assert m["actual_hz"] == pytest.approx(12, abs=0.05)
+    assert m["speed_percent"] == pytest.approx(20, abs=0.1)          # 12 of 60 Hz
+    assert 11.5 <= m["hold_min"] <= m["hold_max"] <= 12.5
+    # 1 s to 60 Hz: 11.5 Hz (the band's edge) is reached after 11.5 / 60 s = 0.19 s
+    assert 0.15 <= m["reached_after_s"] <= 0.5
+    assert re.fullmatch(r"within ± 0\.5 Hz of 12 Hz after \d\.\d\d s, held 2 s at 1[12](\.\d+)?\.\.1[12](\.\d+)? Hz; "
+                        r"1[12](\.\d+)? Hz at the end", r.message), r.message
+
+
+def test_run_in_percent_reverse():
+    steps = run_text(RAMPS + "  - run: {percent: 25, direction: reverse}\n  - stop\n")
+    r = steps[2]
+    assert r.status == PASSED, r.message
+    assert r.expected == {"speed": -25.0, "unit": "%", "tolerance": 1.0, "within_s": 10.0, "hold_s": 0.0}
+    assert set(r.measured) == {"actual_percent", "reached_after_s", "state", "speed_hz", "speed_percent",
+                               "hold_min", "hold_max"}
+    assert r.measured["hold_min"] == r.measured["hold_max"] == r.measured["actual_percent"]   # no hold
+    assert r.measured["actual_percent"] == pytest.approx(-25, abs=1.0)
+    assert r.measured["speed_hz"] == pytest.approx(-15, abs=0.6)     # 25 % of 60 Hz, reverse
+    assert r.message.startswith("within ± 1 % of -25 % after ") and ", held" not in r.message
+
+
+def test_run_not_reached_in_time_fails_with_the_actual():
+    # default F07 6 s to 60 Hz: after 0.5 s the drive is near 5 Hz, far from 30 Hz
+    steps = run_text("  - run: {hz: 30, within: 0.5}\n")
+    r = steps[0]
+    assert r.status == FAILED
+    assert re.fullmatch(r"actual \d(\.\d+)? Hz after 0\.5 s, expected 30 Hz ± 0\.5", r.message), r.message
+    assert r.measured["reached_after_s"] is None and r.measured["actual_hz"] < 10
+    assert "hold_min" not in r.measured
+
+
+def test_run_on_a_tripped_drive_fails_with_the_fault():
+    steps = run_text("  - run: {hz: 10}\n", trip="OC1")
+    r = steps[0]
+    assert r.status in (FAILED, "error")
+    assert "OC1" in r.message or "fault" in r.message.lower()
+
+
+def trips_after(seconds, alarm="OC2"):
+    def disturb(model):
+        real_tick = model.tick
+        t0 = {}
+
+        def tick(now):
+            real_tick(now)
+            t0.setdefault("t", now)
+            if now - t0["t"] >= seconds and not getattr(model, "_tripped_here", False):
+                model._tripped_here = True
+                model.trip(alarm, now)
+        model.tick = tick
+    return disturb
+
+
+def test_run_tripping_while_holding_fails_and_records_the_code():
+    steps = run_text(RAMPS + "  - run: {hz: 10, duration: 30}\n", disturb=trips_after(5.0))
+    r = steps[2]
+    assert r.status == FAILED
+    assert r.message.startswith("the drive tripped while running (")
+    assert "fault_code" in r.measured and "hold_min" in r.measured
+    assert r.measured["reached_after_s"] is not None
+
+
+def test_run_tripping_while_accelerating_fails():
+    steps = run_text("  - run: {hz: 50, within: 20}\n", disturb=trips_after(1.0))
+    r = steps[0]
+    assert r.status == FAILED
+    assert r.message.startswith("the drive tripped while accelerating (")
+    assert "fault_code" in r.measured and r.measured["reached_after_s"] is None
+    assert "hold_min" not in r.measured
+
+
+def test_a_reversal_counts_only_after_standstill():
+    steps = run_text(RAMPS + "  - run: {hz: 30}\n  - run: {hz: 30, direction: reverse}\n  - stop\n")
+    fwd, rev = steps[2], steps[3]
+    assert fwd.status == PASSED and rev.status == PASSED, rev.message
+    # 1 s ramps over 60 Hz: from +30 through 0 to -29.5 Hz takes (30 + 29.5) / 60 = 0.99 s
+    assert rev.measured["reached_after_s"] >= 0.9
+    assert rev.measured["actual_hz"] == pytest.approx(-30, abs=0.5)
+
+
+def test_a_reversal_within_the_band_of_zero_is_no_reversal():
+    # from +0.3 Hz to -0.3 Hz with a 0.5 Hz band: already within the band, no crossing needed
+    steps = run_text(RAMPS + "  - run: {hz: 0.3, tolerance: 0.5}\n"
+                     "  - run: {hz: 0.3, direction: reverse, tolerance: 0.5}\n  - stop\n")
+    assert steps[2].status == PASSED and steps[3].status == PASSED
+    assert steps[3].measured["reached_after_s"] < 0.1
+
+
+# -- execution: read -------------------------------------------------------------------------------
+
+def read_after_write(value, read):
+    return run_text(f"  - write: {{param: F07, value: {value}}}\n  - read: {read}\n")[1]
+
+
+def test_read_records_the_value_and_raw():
+    r = read_after_write(3.0, "F07")
+    assert r.status == PASSED and r.message == "F07 = 3 s"
+    assert r.measured == {"param": "F07", "value": 3.0, "unit": "s", "raw": 30}   # 0.1 s steps
+    assert r.expected == {}
+
+
+def test_read_expect_without_tolerance_is_half_a_step():
+    r = read_after_write(3.0, "{param: F07, expect: 3.04}")
+    assert r.status == PASSED
+    assert r.expected == {"value": 3.04, "tolerance": 0, "unit": "s"}
+    r = read_after_write(3.0, "{param: F07, expect: 3.06}")
+    assert r.status == FAILED and r.message == "F07 = 3 s, expected 3.06 s"
+    r = read_after_write(3.0, "{param: F07, expect: 2.94}")
+    assert r.status == FAILED
+
+
+def test_read_expect_with_tolerance():
+    r = read_after_write(3.0, "{param: F07, expect: 3.5, tolerance: 0.4}")
+    assert r.status == FAILED and r.message == "F07 = 3 s, expected 3.5 s ± 0.4"
+    assert r.expected == {"value": 3.5, "tolerance": 0.4, "unit": "s"}
+    r = read_after_write(3.0, "{param: F07, expect: 2.6, tolerance: 0.4}")
+    assert r.status == PASSED
+
+
+def test_read_tolerance_zero_means_half_a_step_too():
+    # tolerance: 0 is allowed (at least 0) and is not "no tolerance": the check is then exact
+    r = read_after_write(3.0, "{param: F07, expect: 3.04, tolerance: 0}")
+    assert r.status == FAILED and r.message == "F07 = 3 s, expected 3.04 s"
+
+
+@pytest.mark.parametrize("read,status,message", [
+    ("{param: F07, range: [3, 4]}", PASSED, "F07 = 3 s"),             # the low edge is inside
+    ("{param: F07, range: [2, 3]}", PASSED, "F07 = 3 s"),             # the high edge is inside
+    ("{param: F07, range: [3.1, 4]}", FAILED, "F07 = 3 s, expected 3.1..4 s"),
+    ("{param: F07, range: [1, 2.9]}", FAILED, "F07 = 3 s, expected 1..2.9 s"),
+    ("{param: F07, min: 3.1}", FAILED, "F07 = 3 s, expected 3.1..inf s"),
+    ("{param: F07, max: 2.9}", FAILED, "F07 = 3 s, expected -inf..2.9 s"),
+    ("{param: F07, min: 3}", PASSED, "F07 = 3 s"),
+    ("{param: F07, max: 3}", PASSED, "F07 = 3 s"),
+])
+def test_read_range(read, status, message):
+    r = read_after_write(3.0, read)
+    assert (r.status, r.message) == (status, message)
+    lo = re.search(r"min: ([\d.]+)", read)
+    if "range" in read or lo or "max" in read:
+        assert r.expected["unit"] == "s" and set(r.expected) == {"min", "max", "unit"}
+
+
+# -- execution: write ------------------------------------------------------------------------------
+
+def test_write_measures_before_written_and_read_back():
+    steps = run_text("  - write: {param: F07, value: 2.5}\n  - write: {param: F07, value: 2.5}\n")
+    r = steps[0]
+    assert r.status == PASSED
+    assert r.expected == {"value": 2.5, "unit": "s"}
+    assert r.measured == {"param": "F07", "before": 6.0, "written": 2.5, "read_back": 2.5, "unit": "s",
+                          "raw": 25}                                  # the default 6 s; 0.1 s steps
+    assert r.message == "F07 = 2.5 s (read back; was 6 s)"
+    assert steps[1].message == "F07 = 2.5 s (read back; unchanged)"
+
+
+# -- execution: expect_status ----------------------------------------------------------------------
+
+def test_expect_status_stopped_drive():
+    r = run_text("  - expect_status: {stopped: true, running: false, fault: false}\n")[0]
+    assert r.status == PASSED
+    assert r.expected == {"stopped": True, "running": False, "fault": False}
+    assert r.measured["stopped"] is True and r.measured["running"] is False
+    assert r.measured["fault"] is False and r.measured["fault_code"] is None
+    assert r.message == f"state {r.measured['state']}"
+
+
+def test_expect_status_mismatch_says_each_flag():
+    r = run_text("  - expect_status: {running: true, fault: true, stopped: true}\n")[0]
+    assert r.status == FAILED
+    assert r.message == "running is no, expected yes; fault is no, expected yes"
+
+
+def test_expect_status_state_mismatch():
+    r = run_text("  - expect_status: {state: S4, running: true}\n")[0]
+    assert r.status == FAILED
+    st = r.measured["state"]
+    assert r.message == f"state {st!r}, expected 'S4'; running is no, expected yes"
+    assert r.expected == {"running": True, "state": "S4"}
+
+
+def test_expect_status_state_is_matched_case_blind():
+    r = run_text("  - expect_status: {state: s1 SWITCHING}\n")[0]      # "S1 switching on inhibited"
+    assert r.status == PASSED, r.message
+
+
+def test_expect_status_within_waits_for_the_flags():
+    # 1 s ramp to 60 Hz: running at 30 Hz is reached after about 0.5 s; without `within` the
+    # first read after the start command can still show the ramp, with 5 s it must pass
+    steps = run_text(RAMPS + "  - run: {hz: 30}\n  - expect_status: {running: true, stopped: false, within: 5}\n"
+                     "  - stop\n  - expect_status: {running: false, stopped: true, within: 5}\n")
+    assert [s.status for s in steps] == [PASSED] * 6, [s.message for s in steps]
+
+
+def test_expect_status_family_flag_and_fault():
+    steps = run_text("  - expect_status: {fault: true, running: false}\n", trip="OC1")
+    assert steps[0].status == PASSED, steps[0].message
+    assert steps[0].measured["fault_code"] == "OC1"
