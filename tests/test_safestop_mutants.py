@@ -207,6 +207,15 @@ def test_read_decel_prefers_the_profiles_ramp_code():
     assert ss.read_decel(s) == 2.0 and s.drive.reads == ["X9"]
 
 
+def test_read_decel_drive_without_cfg_or_with_odd_ramps_uses_the_family_code():
+    clock = Clock()
+    d = Drive(clock, decel=4)
+    del d.cfg
+    assert ss.read_decel(Session(d, clock, family="fuji")) == 4.0 and d.reads == ["F08"]
+    d = Drive(clock, decel=4, ramps=["X9"])                          # not a mapping: ignored
+    assert ss.read_decel(Session(d, clock, family="fuji")) == 4.0 and d.reads == ["F08"]
+
+
 def test_read_decel_ramps_without_decel_falls_back_to_the_family_code():
     clock = Clock()
     s = Session(Drive(clock, decel=3, ramps={"accel": "F07"}), clock, family="fuji")
@@ -299,6 +308,18 @@ def test_stop_samples_go_to_on_sample():
     r = ss.stop(s, got.append, None)
     assert r.how == "normal" and [smp.status for smp in got] == [RUNNING, RUNNING, STOPPED]
     assert got[-1].t == pytest.approx(3 * DT)
+
+
+def test_coast_samples_go_to_on_sample_too():
+    clock = Clock()
+    d = Drive(clock, coast_after=2)
+    s = Session(d, clock, decel_s=10.0)
+    s._fmax, s._t0, s.achieved_hz, s.cycles, s.counters = (50.0,), clock.t, 4.0, 0, {}
+    got = []
+    r = ss.stop(s, got.append, 1.0)
+    assert r.how == "coast"
+    # normal: 5 cycles (the first past 1 s); coast: 2 running cycles and the stopped one
+    assert len(got) == 5 + 3 and got[-1].status is STOPPED
 
 
 def test_fault_during_stop_reads_the_fault_code():
@@ -411,6 +432,7 @@ def test_coast_not_possible():
     r = ss.stop(s, None, None)
     assert (r.how, r.stopped) == ("failed", False)
     assert r.message == "normal stop failed: a; coast stop not possible: b"
+    assert r.seconds == 0.0                              # both refused at once: no cycle passed
     assert r.status is RUNNING and s._may_run is True
 
 
@@ -461,7 +483,8 @@ def test_shutdown_after_a_lost_link_sends_nothing():
     assert s.link_lost is True and s.stop_calls == 0 and s.master.released == []
     assert s.stop_report.how == "not sent (link lost)" and s.stop_report.stopped is False
     assert s.stop_report.seconds == 0.0
-    assert s.messages == [s.stop_report.message] and "cannot send a stop" in s.messages[0]
+    assert s.messages == [s.stop_report.message]
+    assert s.messages[0].startswith("link lost (unplugged): pdrive cannot send a stop.")
     assert hooks == [False]
 
 
@@ -505,6 +528,7 @@ def test_shutdown_coast_and_failed_words():
 def test_shutdown_link_lost_during_the_stop():
     s, hooks = shut(result=LinkLost("unplugged"))
     assert s.link_lost is True and s.stop_report.how == "not sent (link lost)"
+    assert s.stop_report.message.startswith("link lost (unplugged): pdrive cannot send a stop.")
     assert s.stop_report.stopped is False and s.stop_report.seconds == 0.0
     assert s.messages == [s.stop_report.message] and hooks == [False] and s.master.released == []
 
@@ -519,9 +543,15 @@ def test_shutdown_stop_failed_still_releases():
 
 
 def test_shutdown_not_started_is_not_needed():
-    s, hooks = shut(may_run=False)
+    clock = Clock()
+    s = Session(Drive(clock), clock, may_run=False)
+    s.final_status = STOPPED
+    hooks = []
+    s.after_stop = [hooks.append]
+    ss.shutdown(s, None)
     assert s.stop_calls == 0
     r = s.stop_report
+    assert r.status is STOPPED
     assert (r.how, r.stopped, r.seconds, r.message) == ("not needed", True, 0.0,
                                                         "not started by this session")
     assert hooks == [True] and s.master.released == [3]
@@ -573,6 +603,14 @@ def test_shutdown_flush_error_does_not_stop_the_stop(monkeypatch):
     s.master.link.flush_input = boom
     ss.shutdown(s, RuntimeError("x"))
     assert s.stop_calls == 1 and s.master.released == [3]
+
+
+def test_a_session_without_after_stop_hooks():
+    clock = Clock()
+    s = Session(Drive(clock), clock, may_run=False)
+    del s.after_stop
+    ss.shutdown(s, None)
+    assert s.master.released == [3] and s.messages == []
 
 
 def test_after_stop_hook_errors_are_said_and_the_others_run():
