@@ -108,6 +108,8 @@ def doc(station=None, **kw):
 def test_refused_message_names_the_first_and_counts_the_rest():
     e = rs.RestoreRefused(["a: one"])
     assert str(e) == "nothing was written: a: one" and e.problems == ["a: one"]
+    e = rs.RestoreRefused(["a", "b"])
+    assert str(e) == "nothing was written: a (and 1 more problem(s))"
     e = rs.RestoreRefused(["a", "b", "c"])
     assert str(e) == "nothing was written: a (and 2 more problem(s))"
     assert isinstance(e, UsageError)
@@ -257,6 +259,18 @@ def test_warnings_and_the_compare_call(checked):
     assert s.compared == [(prog, True, False)]     # identity: restore_problems refuses, not warns
     rs.restore(s, doc())
     assert s.compared[-1] == (None, False, False)
+
+
+def test_allow_dangerous_reaches_the_checks_and_writes_the_row(checked):
+    d = Drive()
+    rows = [row("H03", "differs", 1.0)]
+    out = rs.restore(Session(rows, drive=d, dangers={"H03": "resets the function codes"}), doc(),
+                     allow_dangerous=True)
+    assert out[0].result == "applied" and d.log == [("write", "H03", 1.0), ("read", "H03")]
+    d = Drive()
+    rows = [row("H03", "differs", 1.0)]
+    out = rs.restore(Session(rows, drive=d, dangers={"H03": "resets the function codes"}), doc())
+    assert out[0].result == "skipped" and d.log == []
 
 
 def test_dry_run_writes_nothing(checked):
