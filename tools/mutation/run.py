@@ -88,7 +88,7 @@ MODULES: dict[str, list[str]] = {
     "checklist/steps/expect_status.py": _CHECKLIST_TESTS,
 }
 
-COPY = ("profidrive_cli", "tests", "profiles", "gsd", "tools", "examples", "pyproject.toml")
+COPY = ("profidrive_cli", "tests", "profiles", "gsd", "tools", "examples", "docs", "pyproject.toml")
 
 
 def scratch_copy(module: str, tests: list[str], workdir: Path) -> Path:
@@ -113,7 +113,7 @@ def scratch_copy(module: str, tests: list[str], workdir: Path) -> Path:
         "", "[tool.mutmut]",
         f'source_paths = ["{PKG}"]',
         f'only_mutate = ["*{PKG}/{module}"]',
-        'also_copy = ["profiles/", "gsd/", "tools/", "examples/"]',   # tests run tools/gen_moeller_profile.py; the checklist tests read examples/
+        'also_copy = ["profiles/", "gsd/", "tools/", "examples/", "docs/"]',   # tests run tools/gen_moeller_profile.py; the checklist tests read examples/ and docs/
         "pytest_add_cli_args_test_selection = [" + ", ".join(f'"{t}"' for t in tests) + "]",
         'pytest_add_cli_args = ["-p", "no:cacheprovider", "-x", "-q"]',
         "use_git_change_detection = false",
