@@ -300,3 +300,40 @@ def test_storage_pdp3_y97():
     assert d.read_param("y97").raw == 1                    # y97 reads 1 after a save
     d.set_storage("eeprom")
     assert d.read_param("y97").raw == 0
+
+
+# -- a user profile: a two-letter group, layouts not named after their PPO number -------------------
+
+@pytest.fixture(scope="module")
+def user_profile(tmp_path_factory):
+    """The G1 profile with a group `Ab` (code 0x30) and the PPO2 / PPO4 layouts renamed ppo7 / pcd4
+    (config.py allows one letter plus one character per group, and any layout name)."""
+    import re
+    from pathlib import Path
+
+    from profidrive_cli.drives.profile import load_profile_file
+    src = (Path(__file__).resolve().parents[1] / "profiles" / "fuji-opc-g1-pdp.yaml").read_text()
+    t = src.replace("    d: {code: 0x14, name: Application functions 2}",
+                    "    d: {code: 0x14, name: Application functions 2}\n"
+                    "    Ab: {code: 0x30, name: Two-letter test group}", 1)
+    t = re.sub(r"^profile: fuji-opc-g1-pdp", "profile: fuji-user", t, flags=re.M)
+    t = t.replace("aliases: [fuji-g1]", "aliases: []")
+    t = re.sub(r"^  ppo2:", "  ppo7:", t, flags=re.M)
+    t = re.sub(r"^  ppo4:", "  pcd4:", t, flags=re.M).replace("[ppo2, ppo4]", "[ppo7, pcd4]")
+    p = tmp_path_factory.mktemp("prof") / "fuji-user.yaml"
+    p.write_text(t)
+    return load_profile_file(p)
+
+
+def test_two_letter_group(user_profile):
+    assert codes.parse_function_code(user_profile, "Ab3") == ("Ab03", 0x30, 0x130, 3)
+    assert codes.parse_function_code(user_profile, "aB12") == ("Ab12", 0x30, 0x130, 12)
+    assert codes.parse_function_code(user_profile, "Ac3") is None
+    assert codes.parse_function_code(user_profile, "Ab256") is None
+    assert codes.function_code_name(user_profile, 0x130, 5) == "Ab05"
+
+
+def test_o30_for_layouts_not_named_after_their_ppo(user_profile):
+    assert codes.o30_for_layout(user_profile, "ppo7") == 2      # o30 [2, 5]: 7 is not one of them
+    assert codes.o30_for_layout(user_profile, "pcd4") == 4      # o30 [4]
+    assert codes.ppo_for_o30(user_profile, 5) == "ppo7"
