@@ -337,3 +337,120 @@ def test_o30_for_layouts_not_named_after_their_ppo(user_profile):
     assert codes.o30_for_layout(user_profile, "ppo7") == 2      # o30 [2, 5]: 7 is not one of them
     assert codes.o30_for_layout(user_profile, "pcd4") == 4      # o30 [4]
     assert codes.ppo_for_o30(user_profile, 5) == "ppo7"
+
+
+# -- the drive, continued: faults in detail, the busy retry, the save, the addressing records -------
+
+def test_current_alarm_reads_pnu947_index_1_as_an_array():
+    d, model = drive()
+    model.trip("OC1", d.channel.now())
+    sent = []
+    real = d.request
+
+    def spy(frame, timeout=None):
+        sent.append((frame.ak, frame.pnu, frame.subindex))
+        return real(frame, timeout)
+    d.request = spy
+    rec = d.current_alarm()
+    assert (rec.position, rec.raw, rec.codes, rec.meanings) == \
+        ("latest", 0x2301, ["OC1"], ["Overcurrent while accelerating"])
+    assert sent[0] == (6, 947, 1)             # §6: PNU947, the latest fault at index 1, AK 6 (array)
+
+
+def test_current_alarm_without_a_parameter_channel_is_none():
+    d, model = drive(layout="ppo3")
+    model.trip("OC1", d.channel.now())
+    assert d.current_alarm() is None
+    st = d.status()
+    assert st.fault and st.fault_code is None
+
+
+def test_fault_records_keep_position_raw_and_every_meaning():
+    d, _ = drive()
+    r = d.fault_record("2nd last", 0x2212, None)
+    assert (r.position, r.raw, r.codes, r.meanings) == (
+        "2nd last", 0x2212, ["OL2", "OL3", "OL4"],
+        ["Motor 2 overloaded", "Motor 3 overloaded", "Motor 4 overloaded"])
+    r = d.fault_record("last", 0x1234, None)
+    assert (r.position, r.raw) == ("last", 0x1234)
+
+
+def test_status_without_m16_lists_every_candidate():
+    d, model = drive()
+    model.trip("OL3", d.channel.now())
+    d._mcode = lambda param: None             # M16 not readable: PNU947 0x2212 alone
+    st = d.status()
+    assert st.fault_code == "OL2/OL3/OL4"
+
+
+def test_fault_history_error_names_the_index_and_number():
+    d, _ = drive()
+    real = d.request
+
+    def refuse(frame, timeout=None):
+        if frame.pnu == 947:
+            return pd.PkwResult(frame, pd.PkwFrame(7, 947, frame.subindex, 3), error=3,
+                                error_text="invalid subindex")
+        return real(frame, timeout)
+    d.request = refuse
+    with pytest.raises(Exception) as e:
+        d.fault_history()
+    assert str(e.value) == "fault memory PNU 947[1]: error 3 (invalid subindex)"
+    assert e.value.number == 3
+
+
+def test_resolve_param_records():
+    d, _ = drive()
+    p = G1.param("F07")
+    assert d.resolve_param("F07") == pd.ParamRef("F07", p.name, 0x104, 7, False, p.size, p)
+    assert d.resolve_param("F99") == pd.ParamRef("F99", "", 0x104, 99, False, 16, None)
+
+
+def test_busy_card_is_asked_again_until_it_takes_the_write():
+    d, model = drive()
+    model.busy_next = 3                        # error 104 three times, then the write is done
+    d.write_param("F07", 2.5)
+    assert d.read_param("F07").value == 2.5
+
+
+def test_a_card_that_stays_busy_is_given_up_after_6_s():
+    d, model = drive()
+    model.busy_next = 10 ** 6
+    t0 = d.channel.now()
+    with pytest.raises(Exception) as e:
+        d.write_param("F07", 2.5)
+    took = d.channel.now() - t0
+    assert str(e.value) == "F07 (Acceleration time 1): the card stayed busy (error 104); try again"
+    # max(PKW timeout 2 s, 6 s): the busy retry lasts 6 s (a few cycles of slack)
+    assert 6.0 < took < 6.5
+
+
+def test_a_longer_timeout_keeps_asking_longer():
+    d, model = drive()
+    model.busy_next = 10 ** 6
+    t0 = d.channel.now()
+    res = d.request(pd.write_request(0x104, 25, 7), timeout=9.0)
+    assert res.error == 104 and 9.0 < d.channel.now() - t0 < 9.5
+
+
+def test_save_that_never_completes_times_out_after_the_save_time():
+    d, model = drive(PDP3)
+    from profidrive_cli.drives.base import ParamValue
+    d.read_param = lambda code: ParamValue(code, code, 2, 2)          # y97 never back to 1
+    t0 = d.channel.now()
+    with pytest.raises(DriveError) as e:
+        d.save(timeout=3.0)
+    took = d.channel.now() - t0
+    assert str(e.value) == "y97 did not return to 1 within 3 s: save not confirmed (do not switch off yet)"
+    assert 6.0 < took < 6.5                   # max(3 s, save time 5 s + 1 s)
+    t0 = d.channel.now()
+    with pytest.raises(DriveError):
+        d.save()
+    assert 15.0 < d.channel.now() - t0 < 15.5  # the default: 15 s
+
+
+def test_storage_mode_names_an_unknown_y97_value():
+    d, _ = drive(PDP3)
+    from profidrive_cli.drives.base import ParamValue
+    d.read_param = lambda code: ParamValue(code, code, 2, 2)
+    assert d.storage_mode() == "y97 = 2"
