@@ -43,7 +43,9 @@ def steps_of(steps):
     return load_checklist_text(HEAD + steps, "t.yaml").stations[0].steps
 
 
-def run_text(steps, disturb=None, trip=None):
+def run_text(steps, disturb=None, trip=None, transform=None, observer=None):
+    """Run on the simulated drive; `transform(status)` may rewrite every status the drive reports
+    (a family that reports differently), `observer` gets the runner's progress."""
     cl = load_checklist_text(HEAD + steps, "t.yaml")
 
     @contextlib.contextmanager
@@ -55,9 +57,14 @@ def run_text(steps, disturb=None, trip=None):
         if disturb is not None:
             disturb(model)
         d = make_drive(ch, spec.profile, spec.layout)
+        if transform is not None:
+            for name in ("cycle", "status"):
+                real = getattr(d, name)
+                setattr(d, name, lambda real=real: transform(real()))
         yield StationHandle(d, {"address": spec.address, "ident": model.ident,
                                 "profile": spec.profile.name, "layout": spec.layout, "gsd": None})
-    return Runner(cl, open_station).run().stations[0].steps
+    kw = {"observer": observer, "progress_interval": 0.0} if observer is not None else {}
+    return Runner(cl, open_station, **kw).run().stations[0].steps
 
 
 RAMPS = "  - write: {param: F07, value: 1.0}\n  - write: {param: F08, value: 1.0}\n"   # 1 s to 60 Hz
@@ -275,6 +282,7 @@ def test_run_passes_and_measures_in_hz():
     assert 11.5 <= m["hold_min"] <= m["hold_max"] <= 12.5
     # 1 s to 60 Hz: 11.5 Hz (the band's edge) is reached after 11.5 / 60 s = 0.19 s
     assert 0.15 <= m["reached_after_s"] <= 0.5
+    assert m["reached_after_s"] == round(m["reached_after_s"], 3)       # ms in the report
     assert re.fullmatch(r"within ± 0\.5 Hz of 12 Hz after \d\.\d\d s, held 2 s at 1[12](\.\d+)?\.\.1[12](\.\d+)? Hz; "
                         r"1[12](\.\d+)? Hz at the end", r.message), r.message
 
@@ -289,7 +297,7 @@ def test_run_in_percent_reverse():
     assert r.measured["hold_min"] == r.measured["hold_max"] == r.measured["actual_percent"]   # no hold
     assert r.measured["actual_percent"] == pytest.approx(-25, abs=1.0)
     assert r.measured["speed_hz"] == pytest.approx(-15, abs=0.6)     # 25 % of 60 Hz, reverse
-    assert r.message.startswith("within ± 1 % of -25 % after ") and ", held" not in r.message
+    assert re.fullmatch(r"within ± 1 % of -25 % after \d\.\d\d s; -2[456](\.\d+)? % at the end", r.message), r.message
 
 
 def test_run_not_reached_in_time_fails_with_the_actual():
@@ -469,3 +477,166 @@ def test_expect_status_family_flag_and_fault():
     steps = run_text("  - expect_status: {fault: true, running: false}\n", trip="OC1")
     assert steps[0].status == PASSED, steps[0].message
     assert steps[0].measured["fault_code"] == "OC1"
+
+
+# -- run: more of what the reports and the checks rest on ---------------------------------------------
+
+def block(step_lines):
+    return "".join(f"  {x}\n" for x in step_lines)
+
+
+@pytest.mark.parametrize("lines,bad_line,words", [
+    (["- run:", "    hz: 10", "    direction: up"], FIRST + 2, "direction must be forward or reverse"),
+    (["- run:", "    tolerance: 1", "    percent: 101"], FIRST + 2, "percent 101 is above 100"),
+    (["- run:", "    within: 5", "    hz: 600"], FIRST + 2, "600 Hz is above what fuji-opc-g1-pdp can run"),
+])
+def test_run_errors_point_at_the_key_in_block_style(lines, bad_line, words):
+    errs = errors_of(block(lines))
+    assert any(e.startswith(f"t.yaml:{bad_line}: ") and words in e for e in errs), errs
+
+
+def unsigned(st):
+    """A drive that reports the commanded direction with the speed's magnitude."""
+    if st.reference_percent and st.speed_hz is not None:
+        sign = 1.0 if st.reference_percent > 0 else -1.0
+        st.speed_hz = sign * abs(st.speed_hz)
+        st.speed_percent = sign * abs(st.speed_percent)
+    return st
+
+
+def test_a_reversal_on_a_drive_reporting_the_commanded_sign_waits_for_standstill():
+    steps = run_text(RAMPS + "  - run: {hz: 30}\n  - run: {hz: 30, direction: reverse}\n  - stop\n",
+                     transform=unsigned)
+    rev = steps[3]
+    assert rev.status == PASSED, rev.message
+    # it reports -30 Hz at once, but 1 s ramps from +30 through 0 to -29.5 Hz take 0.99 s
+    assert rev.measured["reached_after_s"] >= 0.9
+
+
+@pytest.mark.parametrize("first,second", [(10, 20), (20, 10), (0.8, 1.2)])
+def test_a_speed_change_in_the_same_direction_needs_no_standstill(first, second):
+    steps = run_text(RAMPS + f"  - run: {{hz: {first}}}\n  - run: {{hz: {second}, within: 3}}\n  - stop\n")
+    assert steps[3].status == PASSED, steps[3].message
+    # 1 s to 60 Hz: the change takes |second - first| / 60 s (well under 1 s), no stop on the way
+    assert steps[3].measured["reached_after_s"] < 0.5
+
+
+def no_hz(st):
+    """A drive that reports only % of the max frequency."""
+    st.speed_hz = None
+    return st
+
+
+def test_run_in_hz_on_a_drive_that_reports_percent_only():
+    steps = run_text(RAMPS + "  - run: {hz: 12}\n  - stop\n", transform=no_hz)
+    r = steps[2]
+    assert r.status == PASSED, r.message
+    assert r.measured["actual_hz"] == pytest.approx(12, abs=0.5)       # 20 % of F03 = 60 Hz
+
+
+def clamp_at(hz):
+    """The motor cannot go faster than `hz` (a load that holds it)."""
+    def disturb(model):
+        real_tick = model.tick
+
+        def tick(now):
+            real_tick(now)
+            model.freq = min(model.freq, hz)
+        model.tick = tick
+    return disturb
+
+
+def test_the_band_edge_counts_as_reached():
+    # 15 Hz is 4096 counts of 16384 = 60 Hz exactly; 0.9375 Hz is 256 counts: a speed held at exactly
+    # 14.0625 Hz is on the edge of 15 ± 0.9375, inside
+    steps = run_text(RAMPS + "  - run: {hz: 15, tolerance: 0.9375, within: 3}\n  - stop\n",
+                     disturb=clamp_at(14.0625))
+    assert steps[2].status == PASSED, steps[2].message
+    assert steps[2].measured["actual_hz"] == 14.062                   # reported to 3 decimals
+
+
+def drift_to(target, offset, after_s=0.5, for_s=2.0):
+    def disturb(model):
+        real_tick = model.tick
+        seen = {}
+
+        def tick(now):
+            real_tick(now)
+            if "at" not in seen and abs(model.freq - target) < 0.05:
+                seen["at"] = now
+            if "at" in seen and after_s <= now - seen["at"] < after_s + for_s:
+                model.freq = target + offset
+        model.tick = tick
+    return disturb
+
+
+def test_the_band_edge_while_holding_is_inside():
+    steps = run_text(RAMPS + "  - run: {hz: 15, tolerance: 0.9375, duration: 3}\n  - stop\n",
+                     disturb=drift_to(15, -0.9375))
+    r = steps[2]
+    assert r.status == PASSED, r.message
+    assert r.measured["hold_min"] == 14.062
+
+
+def test_leaving_the_band_while_holding_reports_what_and_where():
+    steps = run_text(RAMPS + "  - run: {hz: 20, tolerance: 0.5, duration: 3}\n  - stop\n",
+                     disturb=drift_to(20, -1.0))
+    r = steps[2]
+    assert r.status == FAILED
+    # 19 Hz on the wire: round(19 / 60 * 16384) = 5188 counts = 18.999 Hz
+    assert r.message == "actual left the band: 18.999 Hz while holding 20 Hz ± 0.5"
+    m = r.measured
+    assert m["actual_hz"] == pytest.approx(19, abs=0.01) and m["hold_min"] == pytest.approx(19, abs=0.01)
+    assert m["hold_max"] == pytest.approx(20, abs=0.05) and m["reached_after_s"] is not None
+
+
+def named_fault(st):
+    """A family whose cyclic status names the fault."""
+    if st.fault:
+        st.fault_code = "OC2"
+    return st
+
+
+def test_a_trip_while_holding_names_the_fault_and_keeps_the_measurements():
+    steps = run_text(RAMPS + "  - run: {hz: 10, duration: 30}\n", disturb=trips_after(5.0),
+                     transform=named_fault)
+    r = steps[2]
+    assert r.status == FAILED and r.message == "the drive tripped while running (OC2)"
+    m = r.measured
+    assert m["fault_code"] == "OC2" and m["actual_hz"] is not None
+    assert m["hold_min"] is not None and m["hold_max"] is not None and m["reached_after_s"] is not None
+
+
+def test_a_trip_without_a_code_names_the_state():
+    steps = run_text(RAMPS + "  - run: {hz: 10, duration: 30}\n", disturb=trips_after(5.0))
+    r = steps[2]
+    assert r.message == f"the drive tripped while running ({r.measured['state']})"
+    steps = run_text("  - run: {hz: 50, within: 20}\n", disturb=trips_after(1.0))
+    r = steps[0]
+    assert r.message == f"the drive tripped while accelerating ({r.measured['state']})"
+    assert "actual_hz" in r.measured and r.measured["actual_hz"] is not None
+
+
+class Progress:
+    def __init__(self):
+        self.seen = []
+
+    def __getattr__(self, name):
+        return lambda *a: None
+
+    def step_progress(self, station, result, text):
+        self.seen.append((station, result, text))
+
+
+def test_run_progress_says_accelerating_then_holding():
+    obs = Progress()
+    steps = run_text(RAMPS + "  - run: {hz: 12, duration: 2}\n  - stop\n", observer=obs)
+    texts = [t for _, r, t in obs.seen if r is steps[2]]
+    assert all(sr is not None and r is not None for sr, r, _ in obs.seen)
+    acc = [t for t in texts if t.startswith("accelerating")]
+    hold = [t for t in texts if t.startswith("holding")]
+    assert acc and all(re.fullmatch(r"accelerating: -?\d+(\.\d+)? Hz -> 12 Hz", t) for t in acc), acc
+    assert acc[0] == "accelerating: 0 Hz -> 12 Hz"
+    assert hold and all(re.fullmatch(r"holding 1[12](\.\d+)? Hz \(\d\.\d s left\)", t) for t in hold), hold
+    assert hold[-1].endswith("(0.0 s left)") and hold[0].endswith("(2.0 s left)") or \
+        hold[0].endswith("(1.9 s left)")
