@@ -640,3 +640,36 @@ def test_run_progress_says_accelerating_then_holding():
     assert hold and all(re.fullmatch(r"holding 1[12](\.\d+)? Hz \(\d\.\d s left\)", t) for t in hold), hold
     assert hold[-1].endswith("(0.0 s left)") and hold[0].endswith("(2.0 s left)") or \
         hold[0].endswith("(1.9 s left)")
+
+
+# -- read: block-style lines, a one-value range, unitless parameters -----------------------------------
+
+@pytest.mark.parametrize("lines,bad_line,words", [
+    (["- read:", "    param: F07", "    range: [2, 1]"], FIRST + 2, "'range' must be [low, high]"),
+    (["- read:", "    param: F07", "    min: 0", "    range: [1, 2]"], FIRST + 3, "give either range or min/max"),
+    (["- read:", "    param: F07", "    range: [1, 2]", "    expect: 1"], FIRST + 3, "give either expect"),
+    (["- read:", "    param: F07", "    expect: 1", "    tolerance: 0.5", "    min: 0"], FIRST + 2, "give either expect"),
+    (["- read:", "    param: F07", "    tolerance: 1"], FIRST + 2, "tolerance needs expect"),
+    (["- read:", "    param: F07", "    max: 2", "    min: 3"], FIRST + 3, "min 3 is above max 2"),
+    (["- read:", "    param: F03", "    expect: 600"], FIRST + 2, "expected value can never be read"),
+])
+def test_read_errors_point_at_the_key_in_block_style(lines, bad_line, words):
+    errs = errors_of(block(lines))
+    assert any(e.startswith(f"t.yaml:{bad_line}: ") and words in e for e in errs), errs
+
+
+def test_read_a_one_value_range():
+    s = steps_of("  - read: {param: F07, range: [3, 3]}\n")[0]
+    assert s.title == "read F07, expect 3..3 s"
+    r = read_after_write(3.0, "{param: F07, range: [3, 3]}")
+    assert r.status == PASSED
+
+
+def test_read_a_parameter_without_a_unit():
+    s = steps_of("  - read: {param: PNU918, expect: 3}\n")[0]
+    assert s.title == "read PNU918, expect 3"                 # the station address in use
+    # the model behind DirectChannel is on no bus: its address in use reads 0
+    r = run_text("  - read: {param: PNU918, expect: 0}\n")[0]
+    assert r.status == PASSED and r.message == "PNU918 = 0"
+    r = run_text("  - read: {param: PNU918, expect: 4}\n")[0]
+    assert r.status == FAILED and r.message == "PNU918 = 0, expected 4"
