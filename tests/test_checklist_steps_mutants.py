@@ -673,3 +673,97 @@ def test_read_a_parameter_without_a_unit():
     assert r.status == PASSED and r.message == "PNU918 = 0"
     r = run_text("  - read: {param: PNU918, expect: 4}\n")[0]
     assert r.status == FAILED and r.message == "PNU918 = 0, expected 4"
+
+
+# -- expect_status: true flags, family flags, waiting, words ------------------------------------------
+
+RL = "R/L (PROFIBUS commands active)"
+
+
+def test_expect_status_true_flags_and_their_words():
+    s = steps_of(f"  - expect_status: {{running: true, fault: false, '{RL}': true}}\n")[0]
+    assert s.title == f"status: running = yes, fault = no, {RL} = yes"
+    r = run_text(f"  - expect_status: {{'{RL}': false, stopped: false}}\n")[0]   # R/L on, stopped
+    assert r.status == FAILED
+    assert r.message == f"{RL} is yes, expected no; stopped is yes, expected no"
+    assert r.measured[RL] is True and r.measured["stopped"] is True
+    assert r.measured["speed_hz"] == 0.0 and r.measured["speed_percent"] == 0.0
+
+
+def test_expect_status_family_flag_true_passes():
+    r = run_text(f"  - expect_status: {{'{RL}': true}}\n")[0]
+    assert r.status == PASSED, r.message
+
+
+def test_expect_status_running_measures_the_speed():
+    steps = run_text(RAMPS + "  - run: {hz: 12}\n  - expect_status: {running: true}\n  - stop\n")
+    m = steps[3].measured
+    assert steps[3].status == PASSED
+    assert m["speed_hz"] == pytest.approx(12, abs=0.5) and m["speed_percent"] == pytest.approx(20, abs=1)
+
+
+def test_a_flag_named_in_another_case_by_the_drive():
+    def lower_flags(st):
+        st.flags = {k.lower(): v for k, v in st.flags.items()}
+        return st
+    r = run_text(f"  - expect_status: {{'{RL}': true}}\n", transform=lower_flags)[0]
+    assert r.status == PASSED, r.message
+    r = run_text(f"  - expect_status: {{'{RL}': false}}\n", transform=lower_flags)[0]
+    assert r.status == FAILED
+
+
+def test_running_is_the_status_itself_not_a_flag_of_that_name():
+    def no_flags(st):
+        st.flags = {}
+        return st
+    steps = run_text(RAMPS + "  - run: {hz: 12}\n  - expect_status: {running: true, stopped: false}\n  - stop\n",
+                     transform=no_flags)
+    assert steps[3].status == PASSED, steps[3].message
+
+
+def test_a_fault_alarm_flag_the_drive_does_not_report_is_false():
+    r = run_text("  - expect_status: {'fault: OC1': false}\n")[0]
+    assert r.status == PASSED, r.message
+
+
+def test_expect_status_waits_within_and_says_what_for():
+    obs = Progress()
+    # the drive trips 1 s after the start; the step waits up to 3 s for the fault
+    steps = run_text("  - expect_status: {fault: true, within: 3}\n", disturb=trips_after(1.0), observer=obs)
+    assert steps[0].status == PASSED, steps[0].message
+    texts = [t for sr, r, t in obs.seen if r is steps[0] and sr is not None]
+    assert texts and set(texts) == {"waiting for fault"}
+    obs = Progress()
+    steps = run_text("  - expect_status: {state: fault, within: 3}\n", disturb=trips_after(1.0), observer=obs)
+    assert steps[0].status == PASSED, steps[0].message
+    assert {t for _, _, t in obs.seen} == {"waiting for state"}
+    steps = run_text("  - expect_status: {fault: true}\n", disturb=trips_after(1.0))
+    assert steps[0].status == FAILED                      # one read: not tripped yet
+    assert steps[0].message == "fault is no, expected yes"
+
+
+@pytest.mark.parametrize("within", [0, 0.5])
+def test_expect_status_within_zero_and_below_one_are_allowed(within):
+    assert steps_of(f"  - expect_status: {{running: false, within: {within}}}\n")[0].args["within"] == within
+
+
+def test_expect_status_keys_after_state_and_after_a_bad_flag_are_checked():
+    s = steps_of("  - expect_status: {state: S4, running: true}\n")[0]
+    assert s.args["flags"] == {"running": True}
+    errs = errors_of("  - expect_status: {runing: true, fualt: true}\n")
+    assert len(errs) == 2
+
+
+def test_expect_status_suggestions():
+    errs = errors_of("  - expect_status: {ready: true}\n")
+    assert errs == [f"t.yaml:{FIRST}: step 1 (expect_status): fuji-opc-g1-pdp has no status flag 'ready' "
+                    f"(did you mean 'ready to run'?)"]
+    errs = errors_of("  - expect_status: {'ready (frequency run)': true}\n")
+    assert errs == [f"t.yaml:{FIRST}: step 1 (expect_status): fuji-opc-g1-pdp has no status flag "
+                    f"'ready (frequency run)' (did you mean 'ready for run-ON', 'FAR (frequency arrival)', "
+                    f"'ready to run'?)"]
+
+
+def test_expect_status_error_points_at_the_key_in_block_style():
+    errs = errors_of(block(["- expect_status:", "    running: false", "    fualt: true"]))
+    assert errs[0].startswith(f"t.yaml:{FIRST + 2}: step 1 (expect_status): fuji-opc-g1-pdp has no status flag")
