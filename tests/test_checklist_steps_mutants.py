@@ -43,7 +43,7 @@ def steps_of(steps):
     return load_checklist_text(HEAD + steps, "t.yaml").stations[0].steps
 
 
-def run_text(steps, disturb=None, trip=None, transform=None, observer=None):
+def run_text(steps, disturb=None, trip=None, transform=None, observer=None, prepare=None, session=None):
     """Run on the simulated drive; `transform(status)` may rewrite every status the drive reports
     (a family that reports differently), `observer` gets the runner's progress."""
     cl = load_checklist_text(HEAD + steps, "t.yaml")
@@ -61,8 +61,11 @@ def run_text(steps, disturb=None, trip=None, transform=None, observer=None):
             for name in ("cycle", "status"):
                 real = getattr(d, name)
                 setattr(d, name, lambda real=real: transform(real()))
+        if prepare is not None:
+            prepare(d)
         yield StationHandle(d, {"address": spec.address, "ident": model.ident,
-                                "profile": spec.profile.name, "layout": spec.layout, "gsd": None})
+                                "profile": spec.profile.name, "layout": spec.layout, "gsd": None},
+                            session(d) if session is not None else None)
     kw = {"observer": observer, "progress_interval": 0.0} if observer is not None else {}
     return Runner(cl, open_station, **kw).run().stations[0].steps
 
@@ -767,3 +770,113 @@ def test_expect_status_suggestions():
 def test_expect_status_error_points_at_the_key_in_block_style():
     errs = errors_of(block(["- expect_status:", "    running: false", "    fualt: true"]))
     assert errs[0].startswith(f"t.yaml:{FIRST + 2}: step 1 (expect_status): fuji-opc-g1-pdp has no status flag")
+
+
+
+# -- write: what it reports and how it writes --------------------------------------------------------
+
+@pytest.mark.parametrize("lines,bad_line,words", [
+    (["- write:", "    value: 1", "    param: W90"], FIRST + 2, "is read-only"),
+    (["- write:", "    param: F07", "    value: 99999"], FIRST + 2, "99999 s is outside 0..6000 s"),
+    (["- write:", "    param: F07", "    value: 1", "    allow_dangerous: 1"], FIRST + 3, "'allow_dangerous' must be true"),
+    (["- write:", "    value: 2", "    param: P04"], FIRST + 2, "is dangerous: writing it"),
+])
+def test_write_errors_point_at_the_key_in_block_style(lines, bad_line, words):
+    errs = errors_of(block(lines))
+    assert any(e.startswith(f"t.yaml:{bad_line}: ") and words in e for e in errs), errs
+
+
+def test_write_needs_a_mapping_and_a_parameter_channel():
+    assert errors_of("  - write: F07\n") == [
+        f"t.yaml:{FIRST}: step 1 (write): expected a mapping with param, value, allow_dangerous, got text"]
+    text = ("name: t\nstations:\n  - {name: c1, address: 3, profile: fuji-g1, layout: ppo3}\nsteps:\n"
+            "  - write: {param: F07, value: 1}\n")
+    with pytest.raises(ChecklistError) as e:
+        load_checklist_text(text, "t.yaml")
+    msgs = [str(x) for x in e.value.errors]
+    assert len(msgs) == 1 and msgs[0].startswith(f"t.yaml:{FIRST}: step 1 (write): station 'c1' uses layout "
+                                                 f"ppo3, which has no parameter channel")
+
+
+def test_write_a_parameter_without_a_unit_and_its_notes():
+    r = run_text("  - write: {param: o27, value: 2}\n")[0]
+    assert r.status == PASSED and r.message == "o27 = 2 (read back; was 0)"
+    r = run_text("  - write: {param: o30, value: 3}\n")[0]
+    assert r.status == PASSED
+    assert r.message == "o30 = 3 (read back; was 0); o30 takes effect after the inverter is switched off and on"
+
+
+def keeps(value_of):
+    """Every read of a parameter answers value_of(code, value) instead of the value."""
+    def prepare(d):
+        real = d.read_param
+
+        def read(code):
+            pv = real(code)
+            pv.value = value_of(code, pv.value)
+            return pv
+        d.read_param = read
+    return prepare
+
+
+def test_write_read_back_within_half_a_step_is_the_value():
+    # F07 in 0.1 s steps: 2.54 s read back is the 2.5 s written
+    r = run_text("  - write: {param: F07, value: 2.5}\n", prepare=keeps(lambda c, v: v + 0.04))[0]
+    assert r.status == PASSED and r.message == "F07 = 2.54 s (read back; was 6.04 s)"
+    assert r.measured["read_back"] == pytest.approx(2.54)
+
+
+def test_write_unchanged_within_half_a_step():
+    # the drive holds 2.54 s; writing 2.5 s changes nothing (within half a 0.1 s step)
+    def prepare(d):
+        d.write_param("F07", 2.5)
+        keeps(lambda c, v: 2.54 if c == "F07" else v)(d)
+    r = run_text("  - write: {param: F07, value: 2.5}\n", prepare=prepare)[0]
+    assert r.status == PASSED and r.message == "F07 = 2.54 s (read back; unchanged)"
+
+
+def test_write_read_back_that_differs_fails():
+    r = run_text("  - write: {param: F07, value: 2.5}\n",
+                 prepare=keeps(lambda c, v: 3.0 if v == 2.5 else v))[0]
+    assert r.status == FAILED and r.message == "F07: wrote 2.5 s, read back 3 s"
+
+
+def test_write_when_the_value_before_cannot_be_read():
+    def prepare(d):
+        real = d.read_param
+        calls = []
+
+        def read(code):
+            calls.append(code)
+            if calls.count("F07") == 2 and code == "F07":     # (the first: the runner's snapshot)
+                from profidrive_cli import PdriveError
+                raise PdriveError("write-only")
+            return real(code)
+        d.read_param = read
+    r = run_text("  - write: {param: F07, value: 2.5}\n", prepare=prepare)[0]
+    assert r.status == PASSED and r.message == "F07 = 2.5 s (read back)"
+    assert r.measured["before"] is None
+
+
+class Session:
+    """The session's checked write_param, recorded (runner.StationHandle.session)."""
+
+    def __init__(self, d):
+        self.d = d
+        self.calls = []
+
+    def write_param(self, code, value, allow_dangerous=False):
+        self.calls.append((code, value, allow_dangerous))
+        return self.d.write_param(code, value)
+
+
+def test_write_goes_through_the_session_when_there_is_one():
+    made = []
+
+    def session(d):
+        made.append(Session(d))
+        return made[-1]
+    steps = run_text("  - write: {param: F07, value: 2.5}\n"
+                     "  - write: {param: P04, value: 0, allow_dangerous: true}\n", session=session)
+    assert [s.status for s in steps] == [PASSED, PASSED], [s.message for s in steps]
+    assert made[0].calls == [("F07", 2.5, False), ("P04", 0, True)]
