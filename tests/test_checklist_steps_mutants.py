@@ -880,3 +880,109 @@ def test_write_goes_through_the_session_when_there_is_one():
                      "  - write: {param: P04, value: 0, allow_dangerous: true}\n", session=session)
     assert [s.status for s in steps] == [PASSED, PASSED], [s.message for s in steps]
     assert made[0].calls == [("F07", 2.5, False), ("P04", 0, True)]
+
+
+# -- fields.py: resolve_param for a family without its own resolver (Yaskawa), lines, odd profiles ----
+
+from types import SimpleNamespace  # noqa: E402
+
+from profidrive_cli import UsageError  # noqa: E402
+from profidrive_cli.checklist.fields import resolve_param  # noqa: E402
+
+YASK = load_profile("yaskawa-si-p1")
+FUJI = load_profile("fuji-opc-g1-pdp")
+
+
+def test_resolve_param_profile_codes_and_registers():
+    label, p = resolve_param(YASK, "C1-01")
+    assert label == "C1-01" and p is YASK.param("C1-01")
+    assert resolve_param(YASK, "REG0x0180") == ("REG0x0180", None)
+    assert resolve_param(YASK, "REG384") == ("REG0x0180", None)          # 384 = 0x0180
+    assert resolve_param(YASK, "REG0") == ("REG0x0000", None)
+    assert resolve_param(YASK, "REG0xFFFF") == ("REG0xFFFF", None)
+    assert resolve_param(YASK, " C1-01 ")[0] == "C1-01"
+
+
+def test_resolve_param_a_function_code_the_fuji_profile_does_not_list():
+    assert resolve_param(FUJI, "F99") == ("F99", None)                    # PNU 0x104, subindex 99
+
+
+def test_resolve_param_unknown_words():
+    with pytest.raises(UsageError) as e:
+        resolve_param(YASK, "REG0x10000")
+    assert str(e.value).startswith("unknown parameter 'REG0x10000' for yaskawa-si-p1")
+    with pytest.raises(UsageError) as e:
+        resolve_param(YASK, "C1-0")
+    assert str(e.value) == "unknown parameter 'C1-0' for yaskawa-si-p1; closest yaskawa codes: C1-10, C1-09, C1-02"
+    with pytest.raises(UsageError) as e:
+        resolve_param(YASK, "PNU918")
+    assert str(e.value).startswith("unknown parameter 'PNU918' for yaskawa-si-p1 (PNU918 is a fuji/moeller "
+                                   "code; this station is family yaskawa)")
+
+
+def test_read_of_a_raw_register_has_no_unit():
+    text = ("name: t\nstations:\n  - {name: y1, address: 7, profile: yaskawa-si-p1}\nsteps:\n"
+            "  - read: REG0x0180\n")
+    s = load_checklist_text(text, "t.yaml").stations[0].steps[0]
+    assert s.title == "read REG0x0180" and s.args["param"].unit == ""
+
+
+def test_unknown_parameter_message_names_the_step():
+    errs = errors_of("  - read: {param: Q9}\n")
+    assert errs[0].startswith(f"t.yaml:{FIRST}: step 1 (read): unknown parameter 'Q9' for fuji-opc-g1-pdp")
+
+
+@pytest.mark.parametrize("lines,bad_line,words", [
+    (["- read:", "    expect: 1", "    param: true"], FIRST + 2, "'param' must be a parameter code"),
+    (["- read:", "    expect: 1", "    param: Q9"], FIRST + 2, "unknown parameter 'Q9'"),
+    (["- run:", "    hz: 10", "    speed: 3"], FIRST + 2, "unknown field 'speed'"),
+    (["- run:", "    within: 5", "    hz: ten"], FIRST + 2, "'hz' must be a number"),
+    (["- run:", "    hz: 10", "    duration: -1"], FIRST + 2, "'duration' must be at least 0"),
+    (["- run:", "    hz: 10", "    within: 0"], FIRST + 2, "'within' must be above 0"),
+])
+def test_field_errors_point_at_the_key_in_block_style(lines, bad_line, words):
+    errs = errors_of(block(lines))
+    assert any(e.startswith(f"t.yaml:{bad_line}: ") and words in e for e in errs), errs
+
+
+def test_an_unknown_field_stops_the_other_checks_of_that_step():
+    assert len(errors_of("  - run: {hz: ten, speed: 3}\n")) == 1
+
+
+def test_a_step_without_fields_given_a_list():
+    assert errors_of("  - save: [1]\n") == [f"t.yaml:{FIRST}: step 1 (save): expected a mapping with no "
+                                            f"fields, got a list"]
+
+
+def test_a_required_number_missing_in_block_style():
+    text = ("name: t\nstations:\n  - {name: m1, address: 6, profile: moeller-de6-net-dp}\nsteps:\n"
+            "  - jog:\n      direction: reverse\n")
+    with pytest.raises(ChecklistError) as e:
+        load_checklist_text(text, "t.yaml")
+    assert [str(x) for x in e.value.errors] == [f"t.yaml:{FIRST}: step 1 (jog): missing field 'duration'"]
+
+
+def test_line_at_other_nodes():
+    lst = LineList([1])
+    lst.line, lst.item_lines = 9, [10]
+    assert line_at(lst, "a") == 9                      # a text key on a list: the list's own line
+    assert line_at(SimpleNamespace(line=4), "k") == 4
+    assert line_at(SimpleNamespace(line=4), 3) == 4
+    assert line_at(object(), 3, 7) == 7
+
+
+def test_param_layouts_none():
+    prof = SimpleNamespace(layouts={"a": SimpleNamespace(pkw=False)})
+    assert param_layouts(prof) == "none"
+
+
+def test_range_problem_slack_is_tiny_and_open_ends():
+    moeller = load_profile("moeller-de6-net-dp")
+    b096 = moeller.param("b096")
+    assert range_problem(b096, 329.5) is not None and range_problem(b096, 380.5) is not None
+    p = SimpleNamespace(code="X1", name="test", unit="Hz", min=None, max=3.0, extra={})
+    assert range_problem(p, -1e9) is None
+    assert range_problem(p, 4) == "X1 (test): 4 Hz is outside -inf..3 Hz"
+    p = SimpleNamespace(code="X1", name="test", unit="", min=1.0, max=None, extra={})
+    assert range_problem(p, 1e9) is None
+    assert range_problem(p, 0.5) == "X1 (test): 0.5 is outside 1..inf"
