@@ -419,9 +419,157 @@ def test_dx_feed_after_a_retry_counts_it():
 
 def test_dx_templates_follow_new_params():
     fm = master()
-    fm.dx_request(8, b"\x01", 0.0, 1)
-    fm.dx_feed(dl_reply(2, 8, b"\x03"), 0.0)
-    d0 = fm.deadline
+    for i in range(3):                                  # FC 0x6D, 0x5D, 0x7D: three templates
+        fm.dx_request(8, b"\x01", 0.0, 1)
+        assert fm.dx_feed(dl_reply(2, 8, b"\x03"), 0.0) == b"\x03"
     fm.params = BusParams.for_baud(9600)
-    fm.dx_request(8, b"\x01", 0.0, 1)
-    assert fm.deadline == pytest.approx((10 * 11 + 100) / 9600) and fm.deadline != d0
+    fm.dx_request(8, b"\x01", 0.0, 1)                  # FC 0x5D again: its template is re-timed
+    assert fm.deadline == pytest.approx((10 * 11 + 100) / 9600)
+
+
+
+# -- counters add up over requests; each kind of bad telegram in one attempt counts ------------------
+
+def test_counters_add_up_over_requests():
+    fm = master()
+    for i in range(2):
+        fm.request(8, F.SRD_HIGH, now=float(i))
+        fm.feed(b"\x00", i + 0.001)                                    # noise: 1 illegal
+        fm.expire(i + 0.1)                                             # 1 retry
+        fm.feed(sd1_reply(2, 8, F.OK), i + 0.11)
+    for status in (F.RS, F.RR, F.UE, F.DH, F.RS, F.RR, F.UE, F.RDH):
+        fm.request(8, F.SRD_HIGH, now=5.0)
+        fm.feed(sd1_reply(2, 8, status), 5.0)
+    c = fm.counters_for(8)
+    assert (c.requests, c.retries, c.illegal, c.rs, c.rr, c.ue, c.dh) == (10, 2, 2, 2, 2, 2, 2)
+    for i in range(2):
+        fm.request(8, F.SRD_HIGH, now=10.0 + i)
+        fm.feed(b"\x00", 10.0 + i)
+        assert fm.expire(10.1 + i)[0]
+        assert fm.expire(10.2 + i) == Outcome(NO_ANSWER, None, 1, 1)   # the noise is in the outcome
+    assert (c.retries, c.illegal, c.no_answer) == (4, 4, 2)
+    for i in range(2):
+        fm.dx_request(8, b"\x01", 20.0 + i, 1)
+        fm.feed(b"\x00", 20.0 + i)
+        assert fm.dx_feed(dl_reply(2, 8, b"\x03"), 20.0 + i) == b"\x03"
+    assert c.illegal == 6
+
+
+def test_every_bad_telegram_of_one_attempt_counts():
+    fm = master()
+    fm.request(8, F.SRD_HIGH, now=0.0)
+    fm.feed(b"\x00", 0.0)                                              # noise          1
+    fm.feed(sd1_reply(2, 9, F.OK), 0.0)                                # foreign reply  2
+    fm.feed(b"\x00", 0.0)                                              # noise again    3
+    res = fm.feed(sd1_reply(2, 8, F.OK), 0.0)
+    assert res.illegal == 3
+    fm.request(8, F.SRD_HIGH, now=1.0)
+    fm.feed(sd1_reply(2, 9, F.OK), 1.0)                                # foreign        1
+    bad = bytearray(sd1_reply(2, 8, F.OK))
+    bad[4] ^= 0xFF
+    fm.feed(bytes(bad), 1.0)                                           # broken         2
+    fm.expire(1.1)
+    assert fm.feed(sd1_reply(2, 8, F.OK), 1.11).illegal == 2
+    fm.request(8, F.SRD_HIGH, now=2.0)
+    fm.feed(sd1_reply(2, 9, F.OK), 2.0)                                # foreign        1
+    fm.feed(LineOctets(b"\x10", (0,)), 2.0)                            # flagged        2
+    fm.expire(2.1)
+    assert fm.feed(sd1_reply(2, 8, F.OK), 2.11).illegal == 2
+
+
+def test_a_token_to_us_is_not_a_reply():
+    fm = master()
+    fm.request(8, F.SRD_HIGH, now=0.0)
+    assert fm.feed(F.encode(F.token(2, 8)), 0.0) is None               # SD4 from station 8 to us
+    res = fm.feed(sd1_reply(2, 8, F.OK), 0.0)
+    assert res.illegal == 1
+
+
+def test_a_foreign_and_the_right_reply_in_one_read():
+    fm = master()
+    fm.request(8, F.SRD_HIGH, now=0.0)
+    res = fm.feed(sd1_reply(2, 9, F.OK) + sd1_reply(2, 8, F.OK), 0.0)
+    assert res is not None and res.kind == REPLY and res.illegal == 1
+
+
+def test_after_a_reply_nothing_is_missing():
+    fm = master()
+    fm.request(8, F.SRD_HIGH, now=0.0)
+    res = fm.feed(sd1_reply(2, 8, F.OK) + b"\x68\x05", 0.0)
+    assert res.kind == REPLY and not fm.busy
+    assert fm.missing() == 0 and fm.telegram_octets() == 0
+
+
+# -- the times of the idle waits and extensions ---------------------------------------------------------
+
+LAT = 0.001
+IDLE = (33 + 11) * BIT + LAT                   # TSYN + one character + latency
+
+
+def late_master():
+    fm = master(latency=LAT)
+    fm.request(8, F.SRD_HIGH, now=0.0, expect_octets=12)
+    return fm
+
+
+def broken():
+    bad = bytearray(sd1_reply(2, 8, F.OK))
+    bad[4] ^= 0xFF
+    return bytes(bad)
+
+
+def test_idle_wait_after_a_broken_telegram():
+    # a broken reply at 9 ms: the line must be quiet TSYN + 1 char (+ latency) after it
+    fm = late_master()
+    fm.feed(broken(), 0.009)
+    assert fm.deadline == pytest.approx(0.009 + IDLE)
+    fm.feed(b"\x55", 0.012)                                            # more octets: again
+    assert fm.deadline == pytest.approx(0.012 + IDLE)
+
+
+def test_idle_wait_after_a_flagged_octet():
+    fm = late_master()
+    fm.feed(LineOctets(b"\x68\x05", (0,)), 0.009)
+    assert fm.deadline == pytest.approx(0.009 + IDLE)
+    fm.feed(LineOctets(b"\x00", (0,)), 0.012)                          # spoilt already
+    assert fm.deadline == pytest.approx(0.012 + IDLE)
+
+
+def test_a_started_reply_waits_for_the_rest_plus_latency():
+    fm = late_master()
+    rep = dl_reply(2, 8, bytes(12))
+    fm.feed(rep[:3], 0.009)
+    assert fm.deadline == pytest.approx(0.009 + 21 * 11 * BIT + LAT)  # expect 12 + 9 octets
+    fm = master(latency=LAT)
+    fm.dx_request(8, bytes(12), 0.0, 12)
+    assert fm.dx_feed(rep[:3], 0.009) == MORE
+    assert fm.deadline == pytest.approx(0.009 + 30 * 11 * BIT + LAT)  # expect 12 + 9, + 9 octets
+
+
+def test_a_retry_gets_its_own_attempt_cap():
+    fm = late_master()
+    cap = fm.attempt_cap(6, 12)
+    fm.expire(1.0)
+    fm.feed(dl_reply(2, 8, bytes(12))[:3], 1.001)
+    assert fm.deadline == pytest.approx(min(1.001 + 21 * 11 * BIT + LAT, 1.0 + cap))
+    assert fm.deadline > 1.0
+
+
+# -- defaults, the fast path's state ----------------------------------------------------------------------
+
+def test_request_default_time_and_no_reply_without_data():
+    fm = master()
+    _, deadline = fm.request(8, F.SRD_HIGH)
+    assert deadline == pytest.approx((6 * 11 + 100) * BIT)            # from t = 0
+    # SDN without data is an SD1 telegram: 10 7F 01 46, FCS 7F + 01 + 46 = C6, 16
+    assert FdlMaster(BusParams(), 1).send_no_reply(127, F.SDN_HIGH) == bytes.fromhex("10 7F 01 46 C6 16")
+
+
+def test_dx_feed_is_only_for_dx_requests_and_plain_line_octets():
+    fm = master()
+    fm.request(8, F.SRD_HIGH, b"\x01", now=0.0)
+    assert fm.dx_feed(dl_reply(2, 8, b"\x03"), 0.0) is None           # a general request
+    assert fm.feed(dl_reply(2, 8, b"\x03"), 0.0).kind == REPLY
+    fm.dx_request(8, b"\x01", 1.0, 1)
+    assert fm.dx_feed(LineOctets(dl_reply(2, 8, b"\x03"), ()), 1.0) == b"\x03"   # nothing flagged
+    assert not fm.busy
