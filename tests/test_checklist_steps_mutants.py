@@ -988,3 +988,35 @@ def test_range_problem_slack_is_tiny_and_open_ends():
     p = SimpleNamespace(code="X1", name="test", unit="", min=1.0, max=None, extra={})
     assert range_problem(p, 1e9) is None
     assert range_problem(p, 0.5) == "X1 (test): 0.5 is outside 1..inf"
+
+
+def test_write_on_a_drive_without_notes_and_with_earlier_notes():
+    def no_notes(d):
+        del d.notes                                   # a family that keeps no remarks
+    r = run_text("  - write: {param: F07, value: 2.5}\n", prepare=no_notes)[0]
+    assert r.status == PASSED and r.message == "F07 = 2.5 s (read back; was 6 s)"
+
+    def earlier(d):
+        d.notes.append("an earlier remark")
+    r = run_text("  - write: {param: o30, value: 3}\n", prepare=earlier)[0]
+    assert r.message == ("o30 = 3 (read back; was 0); an earlier remark; o30 takes effect after the "
+                         "inverter is switched off and on")
+
+
+def test_expect_status_without_within_reads_once():
+    obs = Progress()
+    steps = run_text("  - expect_status: {running: true}\n", observer=obs)
+    assert steps[0].status == FAILED and obs.seen == []
+
+
+def test_expect_status_waits_for_several_flags():
+    obs = Progress()
+    steps = run_text("  - expect_status: {fault: true, 'alarm (tripped)': true, within: 3}\n",
+                     disturb=trips_after(1.0), observer=obs)
+    assert steps[0].status == PASSED, steps[0].message
+    assert {t for _, _, t in obs.seen} == {"waiting for fault, alarm (tripped)"}
+
+
+def test_expect_status_within_first_then_flags():
+    s = steps_of("  - expect_status: {within: 2, running: false}\n")[0]
+    assert s.args == {"flags": {"running": False}, "state": None, "within": 2.0}
