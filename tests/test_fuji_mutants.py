@@ -454,3 +454,20 @@ def test_storage_mode_names_an_unknown_y97_value():
     from profidrive_cli.drives.base import ParamValue
     d.read_param = lambda code: ParamValue(code, code, 2, 2)
     assert d.storage_mode() == "y97 = 2"
+
+
+def test_a_refused_storage_write_says_why_with_the_error_number():
+    from profidrive_cli.drives.base import ParamError
+    d, model = drive(PDP3)
+    model.busy_next = 10 ** 6
+    with pytest.raises(ParamError) as e:
+        d.set_storage("ram")
+    assert str(e.value).endswith(": the card stayed busy (error 104); try again")
+    assert str(e.value).startswith("y97") and e.value.number == 104
+
+
+def test_other_refusals_use_the_profidrive_words():
+    d, _ = drive()
+    res = pd.PkwResult(None, None, error=2, error_text="value outside the setting range")
+    assert d.write_refused_message(ref(), 5, res) == \
+        "F26: the drive refused the value 5: error 2 (value outside the setting range)"
