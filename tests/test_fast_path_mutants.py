@@ -78,3 +78,17 @@ def test_one_sleep_for_the_whole_reply_on_a_link_without_us_timing(slot_time, re
     # past the reply deadline (request + TSL after the write)
     assert len(slept) >= 2
     assert abs(slept[0] * BAUD - 37) < 1e-6 and abs(slept[1] * BAUD - reply_sleep) < 1e-6
+
+
+def test_a_link_lost_during_a_fast_exchange_names_the_cause_and_the_port():
+    from profidrive_cli.link.base import LinkLost
+    m = bus(True)
+
+    def gone(data):
+        raise LinkLost("the adapter was unplugged", port="/dev/ttyUSB7")
+    m.link.write = gone
+    with pytest.raises(LinkLost) as e:
+        m.poll()
+    assert str(e.value).startswith("link lost: the adapter was unplugged (counters: station 3: ")
+    assert e.value.port == "/dev/ttyUSB7" and 3 in e.value.counters
+    assert not m.fdl.busy
