@@ -1020,3 +1020,28 @@ def test_expect_status_waits_for_several_flags():
 def test_expect_status_within_first_then_flags():
     s = steps_of("  - expect_status: {within: 2, running: false}\n")[0]
     assert s.args == {"flags": {"running": False}, "state": None, "within": 2.0}
+
+
+def test_resolve_param_register_bounds_in_decimal():
+    assert resolve_param(YASK, "REG65535") == ("REG0xFFFF", None)
+    with pytest.raises(UsageError):
+        resolve_param(YASK, "REG65536")                       # 16-bit register numbers only
+
+
+def test_the_validation_channel_refuses_traffic():
+    from profidrive_cli.checklist.fields import _NoChannel
+    with pytest.raises(UsageError) as e:
+        _NoChannel().exchange(b"\x00")
+    assert str(e.value) == "internal: validation tried to talk to a drive"
+    assert _NoChannel().now() == 0.0
+
+
+def test_a_stop_mode_the_card_cannot_make_is_refused_at_the_mode():
+    text = ("name: t\nstations:\n  - {name: y1, address: 7, profile: yaskawa-si-p1}\nsteps:\n"
+            "  - stop:\n      within: 5\n      mode: quick\n")
+    with pytest.raises(ChecklistError) as e:
+        load_checklist_text(text, "t.yaml")
+    msgs = [str(x) for x in e.value.errors]
+    assert len(msgs) == 1 and msgs[0].startswith(f"t.yaml:{FIRST + 2}: step 1 (stop): station 'y1': ")
+    s = steps_of("  - stop: {mode: quick}\n")[0]                 # the Fuji card can (CTW bit 2)
+    assert s.type == "stop"
