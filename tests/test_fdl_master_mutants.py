@@ -573,3 +573,13 @@ def test_dx_feed_is_only_for_dx_requests_and_plain_line_octets():
     fm.dx_request(8, b"\x01", 1.0, 1)
     assert fm.dx_feed(LineOctets(dl_reply(2, 8, b"\x03"), ()), 1.0) == b"\x03"   # nothing flagged
     assert not fm.busy
+
+
+def test_noise_in_each_attempt_counts():
+    fm = master()
+    fm.request(8, F.SRD_HIGH, now=0.0)
+    fm.feed(b"\x00", 0.001)                          # attempt 1: noise
+    fm.expire(0.1)
+    fm.feed(b"\x00", 0.101)                          # the retry: noise again, a new run
+    res = fm.feed(sd1_reply(2, 8, F.OK), 0.102)
+    assert (res.retries, res.illegal) == (1, 2)
