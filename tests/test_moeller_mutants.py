@@ -377,3 +377,37 @@ def test_two_unknown_parameter_keys_are_listed_sorted(tmp_path):
     with pytest.raises(DataFileError) as e:
         mo.moeller_config(prof)
     assert e.value.message.startswith("A001: unknown key(s) alpha, zeta (Moeller keys:")
+
+
+# -- jog and stop on the wire: CTW bit 8 = inching 1, bit 11 = REV (spec: CTW table; moeller.py
+#    MoellerDrive.jog). Operation is bits 0-6 and 10 (0x047F); a normal stop drops bit 0 (OFF1).
+
+def test_jog_control_words_forward_reverse_and_off(prof):
+    _, d = rig(prof)
+    d.status()
+    d.jog(True, reverse=True)
+    d.cycle()
+    assert d.last_ctw == 0x0D7F                    # 0x047F | bit 8 | bit 11
+    d.jog(False)
+    d.cycle()
+    assert d.last_ctw == 0x047F and d.extra_bits == 0
+    d.jog(True, reverse=False)
+    d.cycle()
+    assert d.last_ctw == 0x057F                    # forward: bit 8 only
+    d.jog(True, reverse=True)
+    d.cycle()
+    assert d.last_ctw == 0x0D7F
+    d.jog(True, reverse=False)                     # reverse -> forward: bit 11 cleared
+    d.cycle()
+    assert d.last_ctw == 0x057F
+
+
+def test_a_stop_ends_the_jog_and_its_direction(prof):
+    _, d = rig(prof)
+    d.status()
+    d.jog(True, reverse=True)
+    d.cycle()
+    st = d.stop("normal", wait=False)
+    d.cycle()
+    assert d.last_ctw == 0x047E and d.extra_bits == 0           # OFF1, no bit 8, no bit 11
+    assert st.running                                            # wait=False: returns at once
