@@ -411,3 +411,75 @@ def test_a_stop_ends_the_jog_and_its_direction(prof):
     d.cycle()
     assert d.last_ctw == 0x047E and d.extra_bits == 0           # OFF1, no bit 8, no bit 11
     assert st.running                                            # wait=False: returns at once
+
+
+# -- the moeller section: whole-key errors and the defaults when keys are left out ----------------------
+# Defaults from the spec / profile comments: A001 = 2 (operator) gives the reference, A002 = 1
+# (terminal) the commands; STW/CTW bits 12, 13 (commands / reference invalid) and 11 (REV);
+# comm loss P002 (slot 2) with its slot-1 twin P001, alarm E70; PNU 964 0x812C (DF, model 300).
+
+CS = "  control_source:\n    frequency: {param: A001, bus_value: 2}     # 2 = operator\n" \
+     "    commands: {param: A002, bus_value: 1}      # 1 = terminal\n"
+
+
+@pytest.mark.parametrize("old, new, msg, marker", [
+    (CS, "  control_source: 5\n", "control_source must be a mapping", "control_source"),
+    ("  sim_defaults: {A001: 2,", "  sim_defaults: 5\n  xsim: {A001: 2,", None, None),
+    ("comm_loss: {param: P002, other_param: P001, alarm: E70}",
+     "comm_loss: {param: P002, other_param: P001, alarm: E99}",
+     "comm_loss.alarm 'E99' is not in alarms", "comm_loss"),
+    ("comm_loss: {param: P002, other_param: P001, alarm: E70}",
+     "comm_loss: {param: P002, other_param: P001, alarm: 70}",
+     "comm_loss.alarm 70 is not in alarms", "comm_loss"),
+    ("comm_loss: {param: P002, other_param: P001, alarm: E70}",
+     "comm_loss: {param: Q002, other_param: P001, alarm: E70}",
+     "moeller.comm_loss.param: Q002 is not a parameter of this profile", "comm_loss"),
+    ("ctw_commands_invalid_bit: 12", "ctw_commands_invalid_bit: 16",
+     "'ctw_commands_invalid_bit' must be an integer 11..15, got 16", "ctw_commands_invalid_bit"),
+    ("ctw_reference_invalid_bit: 13", "ctw_reference_invalid_bit: 10",
+     "'ctw_reference_invalid_bit' must be an integer 11..15, got 10", "ctw_reference_invalid_bit"),
+    ("ctw_reference_invalid_bit: 13", "ctw_reference_invalid_bit: 16",
+     "'ctw_reference_invalid_bit' must be an integer 11..15, got 16", "ctw_reference_invalid_bit"),
+])
+def test_moeller_section_errors(tmp_path, old, new, msg, marker):
+    if msg is None:                               # sim_defaults given as a number
+        text = SRC.read_text(encoding="utf-8")
+        i = text.index("  sim_defaults: {")
+        j = text.index("\n\n", i)
+        dst = tmp_path / "moeller-test.yaml"
+        dst.write_text(text[:i] + "  sim_defaults: 5" + text[j:], encoding="utf-8")
+        path, prof = dst, load_profile_file(dst)
+        msg, marker = "sim_defaults must be a mapping code: value", "sim_defaults"
+    else:
+        path, prof = _load(tmp_path, old, new)
+    with pytest.raises(DataFileError) as e:
+        mo.moeller_config(prof)
+    assert e.value.message == msg
+    line = path.read_text(encoding="utf-8").splitlines()[e.value.line - 1]
+    assert marker in line
+    assert str(e.value).startswith(f"{path}:{e.value.line}:")
+
+
+def test_moeller_section_defaults(tmp_path):
+    text = SRC.read_text(encoding="utf-8")
+    for line in ("  ctw_commands_invalid_bit: 12\n", "  ctw_reference_invalid_bit: 13\n",
+                 "  ctw_reverse_bit: 11\n", "  comm_loss: {param: P002, other_param: P001, alarm: E70}\n",
+                 "  df6_device_id: 0x812C\n", CS):
+        assert line in text
+        text = text.replace(line, "", 1)
+    dst = tmp_path / "moeller-defaults.yaml"
+    dst.write_text(text, encoding="utf-8")
+    mc = mo.moeller_config(load_profile_file(dst))
+    assert (mc.frequency_param, mc.frequency_bus_value, mc.commands_param, mc.commands_bus_value) == \
+        ("A001", 2, "A002", 1)
+    assert (mc.commands_invalid_bit, mc.reference_invalid_bit, mc.reverse_bit) == (12, 13, 11)
+    assert (mc.comm_loss_param, mc.comm_loss_other_param, mc.comm_loss_alarm) == ("P002", "P001", "E70")
+    assert mc.df6_device_id == 0x812C
+    assert mc.sim_defaults["A004"] == 50 and mc.sim_defaults["PNU928"] == 1
+
+
+def test_comm_loss_with_defaults_inside(tmp_path):
+    _, prof = _load(tmp_path, "comm_loss: {param: P002, other_param: P001, alarm: E70}",
+                    "comm_loss: {other_param: P001}")
+    mc = mo.moeller_config(prof)
+    assert (mc.comm_loss_param, mc.comm_loss_other_param, mc.comm_loss_alarm) == ("P002", "P001", "E70")
