@@ -1045,3 +1045,12 @@ def test_a_stop_mode_the_card_cannot_make_is_refused_at_the_mode():
     assert len(msgs) == 1 and msgs[0].startswith(f"t.yaml:{FIRST + 2}: step 1 (stop): station 'y1': ")
     s = steps_of("  - stop: {mode: quick}\n")[0]                 # the Fuji card can (CTW bit 2)
     assert s.type == "stop"
+
+
+def test_a_stop_mode_refused_on_one_layout_only():
+    # docs/checklists.md "stop": a coast stop in Toyo mode 1 (layout toyo) is refused; PPO1 can
+    head = "name: t\nstations:\n  - {name: t1, address: 5, profile: toyo-pbus66z%s}\nsteps:\n  - stop: {mode: coast}\n"
+    with pytest.raises(ChecklistError) as e:
+        load_checklist_text(head % ", layout: toyo", "t.yaml")
+    assert [str(x) for x in e.value.errors][0].startswith(f"t.yaml:{FIRST}: step 1 (stop): station 't1': ")
+    assert load_checklist_text(head % ", layout: ppo1", "t.yaml").stations[0].steps[0].type == "stop"
