@@ -483,3 +483,45 @@ def test_comm_loss_with_defaults_inside(tmp_path):
                     "comm_loss: {other_param: P001}")
     mc = mo.moeller_config(prof)
     assert (mc.comm_loss_param, mc.comm_loss_other_param, mc.comm_loss_alarm) == ("P002", "P001", "E70")
+
+
+def _block(tmp_path, old, new):
+    text = SRC.read_text(encoding="utf-8")
+    if old == "SIM":
+        i = text.index("  sim_defaults: {")
+        j = text.index("\n\n", i)
+        text = text[:i] + new + text[j:]
+    else:
+        assert old in text
+        text = text.replace(old, new, 1)
+    dst = tmp_path / "moeller-block.yaml"
+    dst.write_text(text, encoding="utf-8")
+    return dst, load_profile_file(dst)
+
+
+@pytest.mark.parametrize("old, new, msg, marker", [
+    (CS, "  control_source:\n    - 1\n", "control_source must be a mapping", "control_source:"),
+    (CS, "  control_source:\n    commands: {param: A002, bus_value: 1}\n    frequency: 7\n",
+     "control_source.frequency must be {param, bus_value}", "frequency: 7"),
+    ("  comm_loss: {param: P002, other_param: P001, alarm: E70}\n",
+     "  comm_loss:\n    param: P002\n    alarm: E99\n", "comm_loss.alarm 'E99' is not in alarms", "alarm: E99"),
+    ("SIM", "  sim_defaults:\n    A001: 2\n    Z999: 1", "sim_defaults: Z999 is not a parameter of this profile",
+     "Z999: 1"),
+    ("SIM", "  sim_defaults:\n    A001: 2\n    A002: x", "sim_defaults: A002 must be a number", "A002: x"),
+])
+def test_block_style_section_errors_point_at_the_key(tmp_path, old, new, msg, marker):
+    path, prof = _block(tmp_path, old, new)
+    with pytest.raises(DataFileError) as e:
+        mo.moeller_config(prof)
+    assert e.value.message == msg
+    assert marker in path.read_text(encoding="utf-8").splitlines()[e.value.line - 1]
+
+
+def test_control_source_with_one_role_and_no_sim_defaults(tmp_path):
+    _, prof = _block(tmp_path, CS, "  control_source:\n    commands: {param: A001, bus_value: 3}\n")
+    mc = mo.moeller_config(prof)
+    assert (mc.commands_param, mc.commands_bus_value) == ("A001", 3)
+    assert (mc.frequency_param, mc.frequency_bus_value) == ("A001", 2)       # the default
+    (tmp_path / "b").mkdir()
+    _, prof = _block(tmp_path / "b", "SIM", "")                          # no sim_defaults at all
+    assert mo.moeller_config(prof).sim_defaults == {}
