@@ -525,3 +525,22 @@ def test_control_source_with_one_role_and_no_sim_defaults(tmp_path):
     (tmp_path / "b").mkdir()
     _, prof = _block(tmp_path / "b", "SIM", "")                          # no sim_defaults at all
     assert mo.moeller_config(prof).sim_defaults == {}
+
+
+def test_stop_keeps_the_callers_time_bound(prof):
+    # F003 = 3600 s: the ramp down from 50 % takes far longer than the 2 s the caller allows
+    # (a checklist `stop: {within: 2}`); the stop must give up after 2 s, not after its 30 s default
+    from profidrive_cli.drives.base import DriveError
+    _, d = rig(prof)
+    d.status()
+    d.write_param("F002", 0.5)
+    d.write_param("F003", 3600.0)
+    d.set_speed(50)
+    d.start(timeout=5)
+    for _ in range(200):
+        d.cycle()
+    t0 = d.channel.now()
+    with pytest.raises(DriveError) as e:
+        d.stop("normal", wait=True, timeout=2.0)
+    assert "timed out after 2 s" in str(e.value)
+    assert 2.0 <= d.channel.now() - t0 < 2.5
