@@ -544,3 +544,15 @@ def test_stop_keeps_the_callers_time_bound(prof):
         d.stop("normal", wait=True, timeout=2.0)
     assert "timed out after 2 s" in str(e.value)
     assert 2.0 <= d.channel.now() - t0 < 2.5
+
+
+def test_control_source_not_a_mapping_points_at_its_key_not_the_section(tmp_path):
+    # control_source moved after the CTW bits, so its line is not the section's first line
+    text = SRC.read_text(encoding="utf-8").replace(CS, "", 1)
+    text = text.replace("  ctw_reverse_bit: 11\n", "  ctw_reverse_bit: 11\n  control_source:\n    - 1\n", 1)
+    dst = tmp_path / "moeller-cs.yaml"
+    dst.write_text(text, encoding="utf-8")
+    with pytest.raises(DataFileError) as e:
+        mo.moeller_config(load_profile_file(dst))
+    assert e.value.message == "control_source must be a mapping"
+    assert dst.read_text(encoding="utf-8").splitlines()[e.value.line - 1] == "  control_source:"
