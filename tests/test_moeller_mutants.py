@@ -377,3 +377,182 @@ def test_two_unknown_parameter_keys_are_listed_sorted(tmp_path):
     with pytest.raises(DataFileError) as e:
         mo.moeller_config(prof)
     assert e.value.message.startswith("A001: unknown key(s) alpha, zeta (Moeller keys:")
+
+
+# -- jog and stop on the wire: CTW bit 8 = inching 1, bit 11 = REV (spec: CTW table; moeller.py
+#    MoellerDrive.jog). Operation is bits 0-6 and 10 (0x047F); a normal stop drops bit 0 (OFF1).
+
+def test_jog_control_words_forward_reverse_and_off(prof):
+    _, d = rig(prof)
+    d.status()
+    d.jog(True, reverse=True)
+    d.cycle()
+    assert d.last_ctw == 0x0D7F                    # 0x047F | bit 8 | bit 11
+    d.jog(False)
+    d.cycle()
+    assert d.last_ctw == 0x047F and d.extra_bits == 0
+    d.jog(True, reverse=False)
+    d.cycle()
+    assert d.last_ctw == 0x057F                    # forward: bit 8 only
+    d.jog(True, reverse=True)
+    d.cycle()
+    assert d.last_ctw == 0x0D7F
+    d.jog(True, reverse=False)                     # reverse -> forward: bit 11 cleared
+    d.cycle()
+    assert d.last_ctw == 0x057F
+
+
+def test_a_stop_ends_the_jog_and_its_direction(prof):
+    _, d = rig(prof)
+    d.status()
+    d.jog(True, reverse=True)
+    d.cycle()
+    st = d.stop("normal", wait=False)
+    d.cycle()
+    assert d.last_ctw == 0x047E and d.extra_bits == 0           # OFF1, no bit 8, no bit 11
+    assert st.running                                            # wait=False: returns at once
+
+
+# -- the moeller section: whole-key errors and the defaults when keys are left out ----------------------
+# Defaults from the spec / profile comments: A001 = 2 (operator) gives the reference, A002 = 1
+# (terminal) the commands; STW/CTW bits 12, 13 (commands / reference invalid) and 11 (REV);
+# comm loss P002 (slot 2) with its slot-1 twin P001, alarm E70; PNU 964 0x812C (DF, model 300).
+
+CS = "  control_source:\n    frequency: {param: A001, bus_value: 2}     # 2 = operator\n" \
+     "    commands: {param: A002, bus_value: 1}      # 1 = terminal\n"
+
+
+@pytest.mark.parametrize("old, new, msg, marker", [
+    (CS, "  control_source: 5\n", "control_source must be a mapping", "control_source"),
+    ("  sim_defaults: {A001: 2,", "  sim_defaults: 5\n  xsim: {A001: 2,", None, None),
+    ("comm_loss: {param: P002, other_param: P001, alarm: E70}",
+     "comm_loss: {param: P002, other_param: P001, alarm: E99}",
+     "comm_loss.alarm 'E99' is not in alarms", "comm_loss"),
+    ("comm_loss: {param: P002, other_param: P001, alarm: E70}",
+     "comm_loss: {param: P002, other_param: P001, alarm: 70}",
+     "comm_loss.alarm 70 is not in alarms", "comm_loss"),
+    ("comm_loss: {param: P002, other_param: P001, alarm: E70}",
+     "comm_loss: {param: Q002, other_param: P001, alarm: E70}",
+     "moeller.comm_loss.param: Q002 is not a parameter of this profile", "comm_loss"),
+    ("ctw_commands_invalid_bit: 12", "ctw_commands_invalid_bit: 16",
+     "'ctw_commands_invalid_bit' must be an integer 11..15, got 16", "ctw_commands_invalid_bit"),
+    ("ctw_reference_invalid_bit: 13", "ctw_reference_invalid_bit: 10",
+     "'ctw_reference_invalid_bit' must be an integer 11..15, got 10", "ctw_reference_invalid_bit"),
+    ("ctw_reference_invalid_bit: 13", "ctw_reference_invalid_bit: 16",
+     "'ctw_reference_invalid_bit' must be an integer 11..15, got 16", "ctw_reference_invalid_bit"),
+])
+def test_moeller_section_errors(tmp_path, old, new, msg, marker):
+    if msg is None:                               # sim_defaults given as a number
+        text = SRC.read_text(encoding="utf-8")
+        i = text.index("  sim_defaults: {")
+        j = text.index("\n\n", i)
+        dst = tmp_path / "moeller-test.yaml"
+        dst.write_text(text[:i] + "  sim_defaults: 5" + text[j:], encoding="utf-8")
+        path, prof = dst, load_profile_file(dst)
+        msg, marker = "sim_defaults must be a mapping code: value", "sim_defaults"
+    else:
+        path, prof = _load(tmp_path, old, new)
+    with pytest.raises(DataFileError) as e:
+        mo.moeller_config(prof)
+    assert e.value.message == msg
+    line = path.read_text(encoding="utf-8").splitlines()[e.value.line - 1]
+    assert marker in line
+    assert str(e.value).startswith(f"{path}:{e.value.line}:")
+
+
+def test_moeller_section_defaults(tmp_path):
+    text = SRC.read_text(encoding="utf-8")
+    for line in ("  ctw_commands_invalid_bit: 12\n", "  ctw_reference_invalid_bit: 13\n",
+                 "  ctw_reverse_bit: 11\n", "  comm_loss: {param: P002, other_param: P001, alarm: E70}\n",
+                 "  df6_device_id: 0x812C\n", CS):
+        assert line in text
+        text = text.replace(line, "", 1)
+    dst = tmp_path / "moeller-defaults.yaml"
+    dst.write_text(text, encoding="utf-8")
+    mc = mo.moeller_config(load_profile_file(dst))
+    assert (mc.frequency_param, mc.frequency_bus_value, mc.commands_param, mc.commands_bus_value) == \
+        ("A001", 2, "A002", 1)
+    assert (mc.commands_invalid_bit, mc.reference_invalid_bit, mc.reverse_bit) == (12, 13, 11)
+    assert (mc.comm_loss_param, mc.comm_loss_other_param, mc.comm_loss_alarm) == ("P002", "P001", "E70")
+    assert mc.df6_device_id == 0x812C
+    assert mc.sim_defaults["A004"] == 50 and mc.sim_defaults["PNU928"] == 1
+
+
+def test_comm_loss_with_defaults_inside(tmp_path):
+    _, prof = _load(tmp_path, "comm_loss: {param: P002, other_param: P001, alarm: E70}",
+                    "comm_loss: {other_param: P001}")
+    mc = mo.moeller_config(prof)
+    assert (mc.comm_loss_param, mc.comm_loss_other_param, mc.comm_loss_alarm) == ("P002", "P001", "E70")
+
+
+def _block(tmp_path, old, new):
+    text = SRC.read_text(encoding="utf-8")
+    if old == "SIM":
+        i = text.index("  sim_defaults: {")
+        j = text.index("\n\n", i)
+        text = text[:i] + new + text[j:]
+    else:
+        assert old in text
+        text = text.replace(old, new, 1)
+    dst = tmp_path / "moeller-block.yaml"
+    dst.write_text(text, encoding="utf-8")
+    return dst, load_profile_file(dst)
+
+
+@pytest.mark.parametrize("old, new, msg, marker", [
+    (CS, "  control_source:\n    - 1\n", "control_source must be a mapping", "control_source:"),
+    (CS, "  control_source:\n    commands: {param: A002, bus_value: 1}\n    frequency: 7\n",
+     "control_source.frequency must be {param, bus_value}", "frequency: 7"),
+    ("  comm_loss: {param: P002, other_param: P001, alarm: E70}\n",
+     "  comm_loss:\n    param: P002\n    alarm: E99\n", "comm_loss.alarm 'E99' is not in alarms", "alarm: E99"),
+    ("SIM", "  sim_defaults:\n    A001: 2\n    Z999: 1", "sim_defaults: Z999 is not a parameter of this profile",
+     "Z999: 1"),
+    ("SIM", "  sim_defaults:\n    A001: 2\n    A002: x", "sim_defaults: A002 must be a number", "A002: x"),
+])
+def test_block_style_section_errors_point_at_the_key(tmp_path, old, new, msg, marker):
+    path, prof = _block(tmp_path, old, new)
+    with pytest.raises(DataFileError) as e:
+        mo.moeller_config(prof)
+    assert e.value.message == msg
+    assert marker in path.read_text(encoding="utf-8").splitlines()[e.value.line - 1]
+
+
+def test_control_source_with_one_role_and_no_sim_defaults(tmp_path):
+    _, prof = _block(tmp_path, CS, "  control_source:\n    commands: {param: A001, bus_value: 3}\n")
+    mc = mo.moeller_config(prof)
+    assert (mc.commands_param, mc.commands_bus_value) == ("A001", 3)
+    assert (mc.frequency_param, mc.frequency_bus_value) == ("A001", 2)       # the default
+    (tmp_path / "b").mkdir()
+    _, prof = _block(tmp_path / "b", "SIM", "")                          # no sim_defaults at all
+    assert mo.moeller_config(prof).sim_defaults == {}
+
+
+def test_stop_keeps_the_callers_time_bound(prof):
+    # F003 = 3600 s: the ramp down from 50 % takes far longer than the 2 s the caller allows
+    # (a checklist `stop: {within: 2}`); the stop must give up after 2 s, not after its 30 s default
+    from profidrive_cli.drives.base import DriveError
+    _, d = rig(prof)
+    d.status()
+    d.write_param("F002", 0.5)
+    d.write_param("F003", 3600.0)
+    d.set_speed(50)
+    d.start(timeout=5)
+    for _ in range(200):
+        d.cycle()
+    t0 = d.channel.now()
+    with pytest.raises(DriveError) as e:
+        d.stop("normal", wait=True, timeout=2.0)
+    assert "timed out after 2 s" in str(e.value)
+    assert 2.0 <= d.channel.now() - t0 < 2.5
+
+
+def test_control_source_not_a_mapping_points_at_its_key_not_the_section(tmp_path):
+    # control_source moved after the CTW bits, so its line is not the section's first line
+    text = SRC.read_text(encoding="utf-8").replace(CS, "", 1)
+    text = text.replace("  ctw_reverse_bit: 11\n", "  ctw_reverse_bit: 11\n  control_source:\n    - 1\n", 1)
+    dst = tmp_path / "moeller-cs.yaml"
+    dst.write_text(text, encoding="utf-8")
+    with pytest.raises(DataFileError) as e:
+        mo.moeller_config(load_profile_file(dst))
+    assert e.value.message == "control_source must be a mapping"
+    assert dst.read_text(encoding="utf-8").splitlines()[e.value.line - 1] == "  control_source:"

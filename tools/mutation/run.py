@@ -36,17 +36,22 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 PKG = "profidrive_cli"
 
+_CHECKLIST_TESTS = ["tests/test_checklist_steps_mutants.py", "tests/test_checklist_bands.py", "tests/test_checklist.py",
+                 "tests/test_checklist_steps.py"]
+
 #: module (under profidrive_cli/) -> the tests that are about it
 MODULES: dict[str, list[str]] = {
     "fdl/frames.py": ["tests/test_fdl_frames.py", "tests/test_frames_edges.py"],
     "fdl/fcb.py": ["tests/test_fcb.py", "tests/test_fcb_slave.py", "tests/test_lost_reply.py"],
-    "fdl/master.py": ["tests/test_master_sim.py", "tests/test_fcb.py", "tests/test_lost_reply.py",
+    "fdl/master.py": ["tests/test_fdl_master_mutants.py", "tests/test_master_sim.py", "tests/test_fcb.py", "tests/test_lost_reply.py",
                       "tests/test_babble.py", "tests/test_parity.py"],
     "dp/services.py": ["tests/test_dp_services.py", "tests/test_watchdog_factors.py",
                        "tests/test_dp_services_edges.py"],
     "dp/cfg.py": ["tests/test_dp_services.py", "tests/test_cfg_identifiers.py"],
     "dp/station.py": ["tests/test_station_mutants.py", "tests/test_master_sim.py", "tests/test_sim_slave.py", "tests/test_lost_reply.py"],
-    "fdl/timing.py": ["tests/test_bus_timing_reference.py", "tests/test_timed_sim.py"],
+    "fdl/timing.py": ["tests/test_fdl_timing_mutants.py", "tests/test_bus_timing_reference.py", "tests/test_timed_sim.py"],
+    "fdl/fast.py": ["tests/test_fast_path_mutants.py", "tests/test_fdl_master_mutants.py", "tests/test_dx_fast.py", "tests/test_master_sim.py"],
+    "dp/dx_fast.py": ["tests/test_fast_path_mutants.py", "tests/test_dx_fast.py", "tests/test_master_sim.py"],
     "drives/profidrive/ppo.py": ["tests/test_profidrive_core.py", "tests/test_profidrive_sim.py"],
     "drives/profidrive/words.py": ["tests/test_words_mutants.py", "tests/test_profidrive_core.py", "tests/test_profidrive_sim.py"],
     "drives/profidrive/scaling.py": ["tests/test_scaling_mutants.py", "tests/test_profidrive_core.py", "tests/test_profidrive_sim.py"],
@@ -57,9 +62,10 @@ MODULES: dict[str, list[str]] = {
     "drives/profidrive/drive.py": ["tests/test_profidrive_core.py", "tests/test_profidrive_sim.py"],
     "drives/profidrive/describe.py": ["tests/test_profidrive_core.py", "tests/test_profidrive_sim.py"],
     "drives/fuji/config.py": ["tests/test_fuji_vectors.py", "tests/test_fuji_sim.py"],
-    "drives/fuji/codes.py": ["tests/test_fuji_vectors.py", "tests/test_fuji_sim.py"],
-    "drives/fuji/drive.py": ["tests/test_fuji_vectors.py", "tests/test_fuji_sim.py"],
+    "drives/fuji/codes.py": ["tests/test_fuji_mutants.py", "tests/test_fuji_vectors.py", "tests/test_fuji_sim.py"],
+    "drives/fuji/drive.py": ["tests/test_fuji_mutants.py", "tests/test_fuji_vectors.py", "tests/test_fuji_sim.py"],
     "drives/fuji/describe.py": ["tests/test_fuji_vectors.py", "tests/test_fuji_sim.py"],
+    "drives/fuji/formats.py": ["tests/test_fuji_mutants.py", "tests/test_fuji_vectors.py", "tests/test_fuji_sim.py"],
     "drives/values.py": ["tests/test_values_mutants.py", "tests/test_exact_values.py"],
     "drives/moeller.py": ["tests/test_moeller_mutants.py", "tests/test_moeller_codec.py", "tests/test_moeller_sim.py"],
     "drives/toyo/config.py": ["tests/test_toyo_vectors.py", "tests/test_toyo_sim.py"],
@@ -72,11 +78,24 @@ MODULES: dict[str, list[str]] = {
     "drives/yaskawa/config.py": ["tests/test_yaskawa_codec.py", "tests/test_yaskawa_drive.py"],
     "drives/yaskawa/describe.py": ["tests/test_yaskawa_codec.py", "tests/test_yaskawa_drive.py"],
     "drives/yaskawa/drive.py": ["tests/test_yaskawa_codec.py", "tests/test_yaskawa_drive.py"],
-    "session/safestop.py": ["tests/test_escalation.py", "tests/test_session.py", "tests/test_run_safety.py"],
+    "session/safestop.py": ["tests/test_safestop_mutants.py", "tests/test_escalation.py", "tests/test_session.py"],
+    "session/restore.py": ["tests/test_restore_mutants.py", "tests/test_exact_values.py", "tests/test_session.py"],
     "checklist/runner.py": ["tests/test_checklist_bands.py", "tests/test_checklist.py"],
+    "checklist/fields.py": _CHECKLIST_TESTS,
+    "checklist/steps/run.py": _CHECKLIST_TESTS,
+    "checklist/steps/read.py": _CHECKLIST_TESTS,
+    "checklist/steps/write.py": _CHECKLIST_TESTS,
+    "checklist/steps/expect_status.py": _CHECKLIST_TESTS,
 }
 
-COPY = ("profidrive_cli", "tests", "profiles", "gsd", "tools", "pyproject.toml")
+#: tests no mutant run can use: they measure the mutated source itself (mutmut's copy of a module
+#: holds every mutant, far past 600 lines), or depend on wall-clock timing over a pty, which the
+#: loaded machine of a mutation run upsets (a retry counted where none is expected)
+DESELECT = ["tests/test_checklist_steps.py::test_every_checklist_module_stays_under_600_lines",
+            "tests/test_dx_fast.py::test_fast_path_over_a_pty",
+            "tests/test_lost_reply.py::test_lost_replies_over_a_real_pty_never_reparameterise"]
+
+COPY = ("profidrive_cli", "tests", "profiles", "gsd", "tools", "examples", "docs", "pyproject.toml")
 
 
 def scratch_copy(module: str, tests: list[str], workdir: Path) -> Path:
@@ -101,9 +120,10 @@ def scratch_copy(module: str, tests: list[str], workdir: Path) -> Path:
         "", "[tool.mutmut]",
         f'source_paths = ["{PKG}"]',
         f'only_mutate = ["*{PKG}/{module}"]',
-        'also_copy = ["profiles/", "gsd/", "tools/"]',   # tests run tools/gen_moeller_profile.py
+        'also_copy = ["profiles/", "gsd/", "tools/", "examples/", "docs/"]',   # tests run tools/gen_moeller_profile.py; the checklist tests read examples/ and docs/
         "pytest_add_cli_args_test_selection = [" + ", ".join(f'"{t}"' for t in tests) + "]",
-        'pytest_add_cli_args = ["-p", "no:cacheprovider", "-x", "-q"]',
+        'pytest_add_cli_args = ["-p", "no:cacheprovider", "-x", "-q"'
+        + "".join(f', "--deselect", "{t}"' for t in DESELECT) + "]",
         "use_git_change_detection = false",
         "",
     ])
