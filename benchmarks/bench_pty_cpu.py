@@ -13,6 +13,10 @@ per exchange, while the exchange rate shows the waiting did not get slower.
                   per read; write: a select() after every write) instead of os.read / os.write
 --old             both: what pdrive did before
 --compare         alternate runs as now and as --old
+--floor           also measure the floor, in the same run: a bare loop of the same system calls on
+                  the same pty (write the request octets pdrive sent, one sleep until the reply is
+                  due, read it, one sleep for the idle time), no protocol code. What pdrive adds is
+                  its CPU minus the floor; the ratio is printed with both.
 --plant five      the simulated plant holds five drives (the exchanges still go to station 3);
 --timing instant  the simulated stations answer at once (what limits the rate is then the
                   master, the pty and the sim server's loop). One JSON line per run.
@@ -75,6 +79,57 @@ def run(baud: int, seconds: float, spin: bool, pyserial_io: bool, plant: str = P
             "cpu_us_per_exchange": round(cpu / n * 1e6, 1), "retries": c.retries}
 
 
+def floor(baud: int, seconds: float) -> dict:
+    """The same exchanges as run() as a bare loop: the octets pdrive's master sent for two
+    consecutive requests (FCB 0 and 1), written with os.write; one sleep until the reply is due on
+    the wire (request + min TSDR + reply, plus the lag the link showed); os.read until the reply's
+    octets are in (a select() only when they are not); one sleep for TID1. The least any Python
+    master pays per exchange on this pty for the same pace."""
+    import select
+    sim = subprocess.Popen([sys.executable, "-m", "profidrive_cli", "sim", "--json", "--baud", str(baud),
+                            "--plant", PLANT.format(baud=baud), "--pty"],
+                           stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+                           cwd=os.path.dirname(HERE))
+    try:
+        port = json.loads(sim.stdout.readline())["port"]
+        link = open_link(port, baud)
+        m = Master(link, BusParams.for_baud(baud, retries=2, link_latency=0.02))
+        m.add_station(3, SlaveConfig(ident=0xFD01, cfg=bytes.fromhex("F3F1")))
+        m.bring_up(3)
+        sent = []
+        real_write = link.write
+        link.write = lambda data: (sent.append(bytes(data)), real_write(data))[1]
+        for _ in range(4):
+            m.exchange(3, bytes(12))
+        link.write = real_write
+        reqs = sent[-2:]
+        p = m.fdl.params
+        reply_len = 9 + 12 + 2                 # SD2 frame with 12 data octets
+        due = p.chars(len(reqs[0]) + reply_len) + p.min_tsdr / p.baud + m.reply_lag
+        tid1 = p.tid1_seconds
+        fd = link.ser.fd
+        n = 0
+        cpu0, t0 = time.process_time(), time.monotonic()
+        while time.monotonic() - t0 < seconds:
+            os.write(fd, reqs[n & 1])
+            time.sleep(due)
+            got = b""
+            while len(got) < reply_len:
+                chunk = os.read(fd, 512)
+                got += chunk
+                if len(got) < reply_len:
+                    select.select([fd], [], [], 0.05)
+            time.sleep(tid1)
+            n += 1
+        took, cpu = time.monotonic() - t0, time.process_time() - cpu0
+        link.close()
+    finally:
+        sim.terminate()
+        sim.wait(10)
+    return {"baud": baud, "floor": True, "exchanges": n, "seconds": round(took, 3),
+            "rate_hz": round(n / took, 1), "cpu_us_per_exchange": round(cpu / n * 1e6, 1)}
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seconds", type=float, default=5.0)
@@ -86,10 +141,18 @@ def main(argv=None) -> None:
     ap.add_argument("--compare", action="store_true", help="alternate new and --old runs")
     ap.add_argument("--plant", choices=("one", "five"), default="one")
     ap.add_argument("--timing", choices=("wire", "instant"), default="wire")
+    ap.add_argument("--floor", action="store_true", help="alternate with the bare loop's floor")
     a = ap.parse_args(argv)
     plant = FIVE if a.plant == "five" else PLANT
     for _ in range(a.repeat):
-        if a.compare:
+        if a.floor:
+            ours = run(a.baud, a.seconds, False, False, plant, a.timing)
+            base = floor(a.baud, a.seconds)
+            ours["floor_cpu_us"] = base["cpu_us_per_exchange"]
+            ours["floor_rate_hz"] = base["rate_hz"]
+            ours["vs_floor"] = round(ours["cpu_us_per_exchange"] / base["cpu_us_per_exchange"], 2)
+            print(json.dumps(ours), flush=True)
+        elif a.compare:
             print(json.dumps(run(a.baud, a.seconds, False, False, plant, a.timing)), flush=True)
             print(json.dumps(run(a.baud, a.seconds, True, True, plant, a.timing)), flush=True)
         else:
