@@ -36,7 +36,7 @@ sys.path.insert(0, os.path.dirname(HERE))
 
 from profidrive_cli.dp.poller import Master  # noqa: E402
 from profidrive_cli.dp.station import SlaveConfig  # noqa: E402
-from profidrive_cli.fdl.timing import BusParams, wire_time_data_exchange  # noqa: E402
+from profidrive_cli.fdl.timing import BusParams, frame_octets, wire_time_data_exchange  # noqa: E402
 from profidrive_cli.link import open_link, serial_link  # noqa: E402
 
 PLANT = "sim://?stations=3:fuji-g1&timing=wire&baud={baud}"
@@ -104,7 +104,7 @@ def floor(baud: int, seconds: float) -> dict:
         link.write = real_write
         reqs = sent[-2:]
         p = m.fdl.params
-        reply_len = 9 + 12 + 2                 # SD2 frame with 12 data octets
+        reply_len = frame_octets(12)           # SD2 frame with 12 data octets: 21
         due = p.chars(len(reqs[0]) + reply_len) + p.min_tsdr / p.baud + m.reply_lag
         tid1 = p.tid1_seconds
         fd = link.ser.fd
