@@ -27,19 +27,15 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
-from profidrive_cli.dp.poller import Master  # noqa: E402
-from profidrive_cli.dp.station import SlaveConfig  # noqa: E402
-from profidrive_cli.fdl.timing import BusParams, frame_octets, wire_time_data_exchange  # noqa: E402
-from profidrive_cli.link import open_link, serial_link  # noqa: E402
-
-PLANT = "sim://?stations=3:fuji-g1&timing=wire&baud={baud}"
+from profidrive_cli.fdl.timing import frame_octets, wire_time_data_exchange  # noqa: E402
+from profidrive_cli.link import serial_link  # noqa: E402
+from simbench import PLANT, master_on_sim  # noqa: E402
 #: --plant five: the default plant's five drives, station 3 the one exchanged with
 FIVE = "sim://?stations=3:fuji-g1,4:fuji-pdp3,5:toyo,6:moeller,7:yaskawa&timing={timing}&baud={baud}"
 
@@ -47,18 +43,12 @@ FIVE = "sim://?stations=3:fuji-g1,4:fuji-pdp3,5:toyo,6:moeller,7:yaskawa&timing=
 def run(baud: int, seconds: float, spin: bool, pyserial_io: bool, plant: str = PLANT,
         timing: str = "wire") -> dict:
     url = plant.format(baud=baud, timing=timing).replace("timing=wire", f"timing={timing}")
-    sim = subprocess.Popen([sys.executable, "-m", "profidrive_cli", "sim", "--json", "--baud", str(baud),
-                            "--plant", url, "--pty"],
-                           stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-                           cwd=os.path.dirname(HERE))
-    try:
-        port = json.loads(sim.stdout.readline())["port"]
+
+    def switches():
         serial_link.FD_IO = not pyserial_io
-        link = open_link(port, baud)
-        link.us_timing = spin                   # (SerialLink.sleep spins only with us_timing)
-        m = Master(link, BusParams.for_baud(baud, retries=2, link_latency=0.02))
-        m.add_station(3, SlaveConfig(ident=0xFD01, cfg=bytes.fromhex("F3F1")))
-        m.bring_up(3)
+
+    with master_on_sim(baud, url, before_open=switches) as (m, _):
+        m.link.us_timing = spin                 # (SerialLink.sleep spins only with us_timing)
         for _ in range(5):
             m.exchange(3, bytes(12))
         c = m.fdl.counters[3]
@@ -69,10 +59,6 @@ def run(baud: int, seconds: float, spin: bool, pyserial_io: bool, plant: str = P
         took, cpu = time.monotonic() - t0, time.process_time() - cpu0
         n = c.data_exchanges - before
         m.release(3)
-        link.close()
-    finally:
-        sim.terminate()
-        sim.wait(10)
     return {"baud": baud, "plant": url, "spin": spin, "pyserial_io": pyserial_io, "exchanges": n,
             "seconds": round(took, 3), "rate_hz": round(n / took, 1),
             "wire_limit_hz": round(1 / wire_time_data_exchange(baud, 12, 12), 1),
@@ -86,16 +72,8 @@ def floor(baud: int, seconds: float) -> dict:
     octets are in (a select() only when they are not); one sleep for TID1. The least any Python
     master pays per exchange on this pty for the same pace."""
     import select
-    sim = subprocess.Popen([sys.executable, "-m", "profidrive_cli", "sim", "--json", "--baud", str(baud),
-                            "--plant", PLANT.format(baud=baud), "--pty"],
-                           stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-                           cwd=os.path.dirname(HERE))
-    try:
-        port = json.loads(sim.stdout.readline())["port"]
-        link = open_link(port, baud)
-        m = Master(link, BusParams.for_baud(baud, retries=2, link_latency=0.02))
-        m.add_station(3, SlaveConfig(ident=0xFD01, cfg=bytes.fromhex("F3F1")))
-        m.bring_up(3)
+    with master_on_sim(baud, PLANT.format(baud=baud)) as (m, _):
+        link = m.link
         sent = []
         real_write = link.write
         link.write = lambda data: (sent.append(bytes(data)), real_write(data))[1]
@@ -122,10 +100,6 @@ def floor(baud: int, seconds: float) -> dict:
             time.sleep(tid1)
             n += 1
         took, cpu = time.monotonic() - t0, time.process_time() - cpu0
-        link.close()
-    finally:
-        sim.terminate()
-        sim.wait(10)
     return {"baud": baud, "floor": True, "exchanges": n, "seconds": round(took, 3),
             "rate_hz": round(n / took, 1), "cpu_us_per_exchange": round(cpu / n * 1e6, 1)}
 

@@ -14,33 +14,19 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
-from profidrive_cli.dp.poller import Master  # noqa: E402
-from profidrive_cli.dp.station import SlaveConfig  # noqa: E402
-from profidrive_cli.fdl.timing import BusParams, wire_time_data_exchange  # noqa: E402
-from profidrive_cli.link import open_link  # noqa: E402
-
-PLANT = "sim://?stations=3:fuji-g1&timing=wire&baud={baud}"
+from profidrive_cli.fdl.timing import wire_time_data_exchange  # noqa: E402
+from simbench import PLANT, master_on_sim  # noqa: E402
 
 
 def run(kind: str, baud: int, seconds: float) -> dict:
     where = ["--pty"] if kind == "pty" else ["--listen", "127.0.0.1:0"]
-    sim = subprocess.Popen([sys.executable, "-m", "profidrive_cli", "sim", "--json", "--baud", str(baud),
-                            "--plant", PLANT.format(baud=baud)] + where,
-                           stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-                           cwd=os.path.dirname(HERE))
-    try:
-        port = json.loads(sim.stdout.readline())["port"]
-        link = open_link(port, baud)
-        m = Master(link, BusParams.for_baud(baud, retries=2, link_latency=0.02))
-        m.add_station(3, SlaveConfig(ident=0xFD01, cfg=bytes.fromhex("F3F1")))
-        m.bring_up(3)
+    with master_on_sim(baud, PLANT.format(baud=baud), where) as (m, port):
         for _ in range(5):
             m.exchange(3, bytes(12))
         c = m.fdl.counters[3]
@@ -51,10 +37,6 @@ def run(kind: str, baud: int, seconds: float) -> dict:
         took = time.monotonic() - t0
         n = c.data_exchanges - before
         m.release(3)
-        link.close()
-    finally:
-        sim.terminate()
-        sim.wait(10)
     return {"transport": kind, "port": port, "exchanges": n, "seconds": round(took, 3),
             "rate_hz": round(n / took, 1), "retries": c.retries, "illegal": c.illegal,
             "wire_limit_hz": round(1 / wire_time_data_exchange(baud, 12, 12), 1)}
