@@ -168,3 +168,35 @@ def _no_user_config(tmp_path_factory, monkeypatch):
     home.mkdir(exist_ok=True)
     monkeypatch.setenv("XDG_CONFIG_HOME", str(home))
     monkeypatch.delenv("PDRIVE_CONFIG", raising=False)
+
+
+#: the ramp parameters of the default plant's stations that `short_ramps_pty_sim` sets to 0.3 s (Toyo's
+#: ramps are fixed: 5 s to 60 Hz)
+SHORT_RAMPS = {3: ("F07", "F08"), 4: ("F07", "F08"), 6: ("F002", "F003"), 7: ("C1-01", "C1-02")}
+
+
+def run_pdrive(*args, timeout=60):
+    """pdrive as a separate process without a terminal (stdin from /dev/null)."""
+    return subprocess.run(pdrive_cmd() + [str(a) for a in args], capture_output=True, text=True,
+                          timeout=timeout, stdin=subprocess.DEVNULL)
+
+
+@contextlib.contextmanager
+def short_ramps_pty_sim(tmp_path_factory):
+    """`pdrive sim --pty` with the default plant, every station's ramps set to 0.3 s by one
+    `param restore` each (quick tests of runs and stops over a real byte path); yields the pty."""
+    with pty_sim_process() as port:
+        for addr, codes in SHORT_RAMPS.items():
+            f = tmp_path_factory.mktemp("ramps") / f"{addr}.yaml"
+            f.write_text("parameters:\n" + "".join(f"  {c}: 0.3\n" for c in codes))
+            r = run_pdrive("param", "restore", addr, f, "--port", port, "--yes")
+            assert r.returncode == 0 and "2 applied" in r.stdout, r.stdout + r.stderr
+        yield port
+
+
+def status_of(port, address) -> dict:
+    """`pdrive status ADDRESS --json` over `port`, parsed."""
+    import json
+    r = run_pdrive("status", address, "--port", port, "--json")
+    assert r.returncode == 0, r.stderr
+    return json.loads(r.stdout)

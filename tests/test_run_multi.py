@@ -8,7 +8,7 @@ import subprocess
 
 import pytest
 
-from conftest import pdrive_cmd, pty_sim_process, read_until_turning
+from conftest import SHORT_RAMPS, pdrive_cmd, read_until_turning, short_ramps_pty_sim, status_of
 from test_json_contract import assert_stream
 from profidrive_cli.dp import services as S
 from profidrive_cli.sim.model import SlaveModel
@@ -18,7 +18,7 @@ from test_sim_slave import CFG, IDENT, Link
 
 ALL = [3, 4, 5, 6, 7]
 # short ramps keep the tests quick (Toyo's are fixed: 5 s to 60 Hz)
-RAMPS = {3: ("F07", "F08"), 4: ("F07", "F08"), 6: ("F002", "F003"), 7: ("C1-01", "C1-02")}
+RAMPS = SHORT_RAMPS
 SIM_FAST = "sim://?" + "&".join(f"set={a}:{c1}=0.3,{c2}=0.3" for a, (c1, c2) in RAMPS.items())
 
 
@@ -209,19 +209,11 @@ def test_sync_on_stations_whose_gsd_claims_it(sim):
 
 @pytest.fixture(scope="module")
 def pty_sim(tmp_path_factory):
-    with pty_sim_process() as port:
-        for addr, codes in RAMPS.items():
-            f = tmp_path_factory.mktemp("ramps") / f"{addr}.yaml"
-            f.write_text("parameters:\n" + "".join(f"  {c}: 0.3\n" for c in codes))
-            r = pdrive("param", "restore", str(addr), str(f), "--port", port, "--yes")
-            assert r.returncode == 0 and "2 applied" in r.stdout, r.stdout + r.stderr
+    with short_ramps_pty_sim(tmp_path_factory) as port:
         yield port
 
 
-def _status(port, address):
-    r = pdrive("status", str(address), "--port", port, "--json")
-    assert r.returncode == 0, r.stderr
-    return json.loads(r.stdout)
+_status = status_of
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])

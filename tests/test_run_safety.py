@@ -11,9 +11,10 @@ import time
 
 import pytest
 
-from conftest import pdrive_cmd, pty_sim_process, read_until_turning, start_pty_sim
+from conftest import (SHORT_RAMPS, pdrive_cmd, read_until_turning, short_ramps_pty_sim,
+                      start_pty_sim, status_of)
 
-RAMPS = {3: ("F07", "F08"), 4: ("F07", "F08"), 6: ("F002", "F003"), 7: ("C1-01", "C1-02")}
+RAMPS = SHORT_RAMPS
 
 
 def pdrive(*args, timeout=60):
@@ -23,20 +24,11 @@ def pdrive(*args, timeout=60):
 
 @pytest.fixture(scope="module")
 def pty_sim(tmp_path_factory):
-    with pty_sim_process() as port:
-        # short ramps keep the tests quick (Toyo's are fixed: 5 s to 60 Hz); one restore per station
-        for addr, codes in RAMPS.items():
-            f = tmp_path_factory.mktemp("ramps") / f"{addr}.yaml"
-            f.write_text("parameters:\n" + "".join(f"  {c}: 0.3\n" for c in codes))
-            r = pdrive("param", "restore", str(addr), str(f), "--port", port, "--yes")
-            assert r.returncode == 0 and "2 applied" in r.stdout, r.stdout + r.stderr
+    with short_ramps_pty_sim(tmp_path_factory) as port:
         yield port
 
 
-def _status(port, address):
-    r = pdrive("status", str(address), "--port", port, "--json")
-    assert r.returncode == 0, r.stderr
-    return json.loads(r.stdout)
+_status = status_of
 
 
 @pytest.mark.parametrize("address", [3, 4, 5, 6, 7])
