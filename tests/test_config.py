@@ -247,6 +247,19 @@ def test_text_output_to_a_pipe_is_not_wrapped(tmp_path):
     assert any(want in line for line in p.stdout.splitlines()), p.stdout
 
 
+def test_gsd_show_through_a_pipe_keeps_a_long_path_whole(tmp_path):
+    # gsd_cmd makes its own console (markup off): the same rule as common.make_console; before, a
+    # piped table was cut to 80 columns and the path ended in "…"
+    import shutil
+    deep = tmp_path / ("z" * 150)
+    deep.mkdir()
+    f = deep / "FUJIFD01.GSD"
+    shutil.copy(Path(__file__).resolve().parent.parent / "gsd" / "FUJIFD01.GSD", f)
+    p = _pdrive(["gsd", "show", str(f)], tmp_path, {})
+    assert p.returncode == 0, p.stderr
+    assert str(f) in p.stdout, p.stdout
+
+
 def test_shell_completion_works_and_completes_port_names(env, tmp_path):
     # click's completion, as the README's `eval "$(_PDRIVE_COMPLETE=bash_source pdrive)"` uses it
     extra = {"XDG_CONFIG_HOME": env["XDG_CONFIG_HOME"]}

@@ -12,7 +12,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn
 from profidrive_cli import PdriveError, UsageError
 from profidrive_cli.checklist.spec import ChecklistError, load_checklist, parse_var_assignments
 from profidrive_cli.cli.common import (BusOptions, bus_options, can_ask, confirm_real_port, emit_json,
-                                       is_sim_port, is_tty)
+                                       is_sim_port, is_tty, make_console)
 from profidrive_cli.outfile import check_output_path
 
 _MARK = {"passed": "[green]✔[/]", "failed": "[red]✘[/]", "error": "[red]✘[/]", "not run": "[dim]–[/]",
@@ -77,7 +77,7 @@ def validate_cmd(ctx, file, variables, as_json):
                    "stations": [{**station_identity(s.identity()), "steps": [st.to_dict() for st in s.steps],
                                  "snapshot": [t.label for t in s.snapshot]} for s in cl.stations]})
         return
-    con = Console(highlight=False, soft_wrap=True)
+    con = make_console()
     con.print(f"{escape(str(cl.path))}: [bold]{escape(cl.name)}[/] is valid "
               f"({cl.step_count} steps, {len(cl.stations)} station{'s' if len(cl.stations) != 1 else ''})")
     for s in cl.stations:
@@ -157,7 +157,7 @@ def run_cmd(ctx, opts: BusOptions, file, reports, dry_run, yes, variables, cycle
                      opts.verbose, opts.json)
 
     live = is_tty() and not opts.json
-    con = Console(highlight=False, soft_wrap=True, stderr=opts.json)
+    con = make_console(stderr=opts.json)
     view = _LiveView(con, live) if not opts.json else _Quiet()
     ask = view.ask if interactive and not opts.json else None
     options = {"yes": yes, "cycle_hz": cycle_hz, "watchdog_ms": watchdog_ms, "baud": str(baud),

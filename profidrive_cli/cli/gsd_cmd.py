@@ -11,6 +11,7 @@ from rich.table import Table
 from rich.text import Text
 
 from profidrive_cli import UsageError
+from profidrive_cli.cli.common import make_console
 from profidrive_cli.cli.jsonout import ident_fields, octets
 from profidrive_cli.gsd import build_prm, user_params
 from profidrive_cli.gsd.interp import device_user_prm
@@ -24,8 +25,9 @@ _json_option = click.option("--json", "as_json", is_flag=True, help="Print JSON 
 
 
 def _console() -> Console:
-    # markup off: GSD texts contain brackets ("[SlotNumber]") that rich would otherwise eat as tags
-    return Console(highlight=False, soft_wrap=False, markup=False)
+    # markup off: GSD texts contain brackets ("[SlotNumber]") that rich would otherwise eat as tags;
+    # not wrapped at 80 columns in a pipe (common.make_console)
+    return make_console(markup=False)
 
 
 def _echo_json(obj) -> None:
