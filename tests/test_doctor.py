@@ -146,7 +146,13 @@ def test_station_behind_the_pty_answers_the_probe(socat_pair):
         c = checks(json.loads(r.output))
         assert c["echo"]["status"] == "ok" and "station 5 answered (slave)" in c["echo"]["detail"]
         r = run("--port", b, "--listen", "0.1")
-        assert r.exit_code == 0 and "recommended: --baud 19.2k --slot-time 100 --retries 1" in r.output
+        # a pty: the standard slot time (100 bit at 19.2k) and 1 retry — unless the round trip
+        # measured on this (loaded) machine needs more, which doctor then says with the figure
+        import re
+        m = re.search(r"recommended: --baud 19\.2k --slot-time (\d+) --retries 1\b", r.output)
+        assert r.exit_code == 0 and m, r.output
+        slot = int(m.group(1))
+        assert slot == 100 or (slot > 100 and f"slot time raised to {slot} bit" in r.output), r.output
     finally:
         p.terminate()
         p.wait(10)
