@@ -106,7 +106,7 @@ def test_the_watch_sees_retries_rise_on_a_lossy_line():
 
 def test_a_station_in_data_exchange_is_shown_so(sim):
     from profidrive_cli.drives.profile import load_profile
-    from tests.conftest import drive_on_bus
+    from conftest import drive_on_bus
     m = _master("sim://?stations=3:fuji-g1,4:fuji-pdp3")
     try:
         drive_on_bus(m, 3, load_profile("fuji-g1"), "ppo1", wd_ms=5000)
