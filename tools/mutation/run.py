@@ -37,7 +37,8 @@ ROOT = Path(__file__).resolve().parents[2]
 PKG = "profidrive_cli"
 
 _CHECKLIST_TESTS = ["tests/test_checklist_steps_mutants.py", "tests/test_checklist_bands.py", "tests/test_checklist.py",
-                 "tests/test_checklist_steps.py", "tests/test_run_step_standstill.py"]
+                 "tests/test_checklist_steps.py", "tests/test_run_step_standstill.py",
+                 "tests/test_run_step_together.py"]
 
 #: module (under profidrive_cli/) -> the tests that are about it
 MODULES: dict[str, list[str]] = {
