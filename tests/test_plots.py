@@ -293,3 +293,27 @@ def test_run_plot_with_several_stations_is_refused_before_anything_moves(tmp_pat
             "--port", "sim://?stations=3:fuji-g1,4:fuji-pdp3")
     assert isinstance(r.exception, UsageError) and "--plot: one station only" in str(r.exception)
     assert not sim and not (tmp_path / "m.svg").exists()
+
+
+@pytest.mark.parametrize("trace", [False, True])
+def test_steps_are_traced_only_when_a_report_will_plot_them(trace):
+    import contextlib
+
+    from profidrive_cli.checklist.runner import Runner, StationHandle
+    from profidrive_cli.checklist.spec import load_checklist_text
+    from profidrive_cli.drives import make_drive
+    from profidrive_cli.sim.direct import DirectChannel
+    from profidrive_cli.sim.plant import make_model
+    cl = load_checklist_text(CHECKLIST, "c.yaml")
+
+    @contextlib.contextmanager
+    def open_station(spec):
+        model = make_model(spec.profile)
+        d = make_drive(DirectChannel(model, spec.profile.layouts[spec.layout].cfg), spec.profile, spec.layout)
+        yield StationHandle(d, {"address": spec.address, "ident": model.ident, "profile": spec.profile.name,
+                                "layout": spec.layout, "gsd": None})
+    steps = Runner(cl, open_station, trace_steps=trace).run().stations[0].steps
+    moved = [r for r in steps if r.step.type in ("run", "stop")]
+    assert len(moved) == 3 and all(r.status == "passed" for r in moved)
+    assert all((r.trace is not None and len(r.trace) > 1) == trace for r in moved)
+    assert all(r.trace is None for r in steps if r.step.type not in ("run", "stop"))

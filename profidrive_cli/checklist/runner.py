@@ -231,8 +231,11 @@ class Runner:
 
     def __init__(self, checklist: Checklist, open_station, *, port: str = "", yes: bool = False,
                  ask: Callable[[str], bool] | None = None, dry_run: bool = False,
-                 observer: Observer | None = None, progress_interval: float = 0.25, options: dict | None = None):
+                 observer: Observer | None = None, progress_interval: float = 0.25, options: dict | None = None,
+                 trace_steps: bool = False):
         self.cl = checklist
+        #: record the drive cycle by cycle during the steps that move it (an HTML report plots them)
+        self.trace_steps = trace_steps
         self.open_station = open_station
         self.yes = yes
         self.ask = ask
@@ -415,7 +418,7 @@ class Runner:
     @contextlib.contextmanager
     def _traced(self, r: StepResult, drive):
         """Record the drive's cycles during a step that moves it (for the HTML report's plots)."""
-        if r.step.type not in steptrace.PLOTTED or not hasattr(drive, "channel"):
+        if not self.trace_steps or r.step.type not in steptrace.PLOTTED or not hasattr(drive, "channel"):
             yield
             return
         with steptrace.record(drive) as tr:

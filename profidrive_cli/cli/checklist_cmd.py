@@ -170,7 +170,8 @@ def run_cmd(ctx, opts: BusOptions, file, reports, dry_run, yes, variables, cycle
         try:
             runner = Runner(cl, session_opener(master, cycle_hz=cycle_hz, watchdog_ms=watchdog_ms,
                                                on_message=view.message),
-                            port=port, yes=yes, ask=ask, dry_run=dry_run, observer=view, options=options)
+                            port=port, yes=yes, ask=ask, dry_run=dry_run, observer=view, options=options,
+                            trace_steps=any(report_format(r) == "html" for r in reports))
             try:
                 view.begin(cl, port, dry_run)
                 result = runner.run()
