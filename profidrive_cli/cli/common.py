@@ -15,6 +15,15 @@ from rich.console import Console
 from profidrive_cli import UsageError
 from profidrive_cli.fdl.timing import BusParams, parse_baud
 
+def baud_from(text, source: str) -> int:
+    """A baud rate a bus command takes, from where it came (`source`: "option --baud", "env
+    PDRIVE_BAUD", "FILE:LINE"); UsageError naming that source unless it is the option itself."""
+    try:
+        return parse_baud(text)
+    except ValueError as e:
+        raise UsageError(str(e) if source.startswith("option") else f"{source}: baud {e}") from None
+
+
 NO_PORT_HELP = ("no port given: use --port DEVICE (e.g. /dev/ttyUSB0, COM3, socket://host:port) "
                 "or a port name from the config file, or set PDRIVE_PORT; --port sim:// runs the "
                 "built-in simulated bus")
@@ -96,11 +105,7 @@ class BusOptions:
             return self.found_baud
         if self.baud in (None, "", "auto"):
             return default
-        try:
-            return parse_baud(self.baud)
-        except ValueError as e:
-            src = self.source_of("baud")
-            raise UsageError(str(e) if src.startswith("option") else f"{src}: baud {e}") from None
+        return baud_from(self.baud, self.source_of("baud"))
 
     def params(self, baud: int | None = None, link=None) -> BusParams:
         b = baud or self.baud_rate()

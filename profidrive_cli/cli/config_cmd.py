@@ -8,7 +8,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from profidrive_cli import config as C
-from profidrive_cli.cli.common import emit_json, out
+from profidrive_cli.cli.common import baud_from, emit_json, out
 
 
 @click.group("config")
@@ -26,7 +26,8 @@ def config_show(port, baud, master_address, as_json):
     with where it came from: option, env, FILE:LINE or default; and the named ports."""
     cfg = C.load()
     eff = C.resolve(port, baud, master_address, config=cfg)
-    _check_baud(eff.baud)
+    if str(eff.baud.value) != "auto":           # what a bus command would refuse, refused here too
+        baud_from(str(eff.baud.value), eff.baud.source)
     if as_json:
         d = eff.to_dict()
         d["ports"] = [_port_dict(p) for p in cfg.ports.values()]
@@ -55,20 +56,6 @@ def config_show(port, baud, master_address, as_json):
                        escape(", ".join(str(a) for a in sorted(p.stations)) or "-"), escape(p.source))
         out.print(pt)
     _print_files(eff.files)
-
-
-def _check_baud(setting) -> None:
-    """The effective baud rate must be one a bus command takes (a rate or auto): UsageError naming
-    where it came from (an option or PDRIVE_BAUD; the config file's own values are checked on load)."""
-    text = str(setting.value)
-    if text == "auto":
-        return
-    from profidrive_cli import UsageError
-    from profidrive_cli.fdl.timing import parse_baud
-    try:
-        parse_baud(text)
-    except ValueError as e:
-        raise UsageError(f"baud rate {text!r} ({setting.source}): {e}") from None
 
 
 def _value(v) -> str:
