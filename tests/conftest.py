@@ -170,6 +170,17 @@ def _no_user_config(tmp_path_factory, monkeypatch):
     monkeypatch.delenv("PDRIVE_CONFIG", raising=False)
 
 
+@pytest.fixture
+def no_config_at_all(monkeypatch, tmp_path):
+    """No config file and no PDRIVE_* setting at all: an empty PDRIVE_CONFIG file (so no pdrive.yaml
+    above the checkout counts either) and the environment variables cleared."""
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "xdg"))
+    (tmp_path / "empty.yaml").write_text("")
+    monkeypatch.setenv("PDRIVE_CONFIG", str(tmp_path / "empty.yaml"))
+    for name in ("PDRIVE_PORT", "PDRIVE_BAUD", "PDRIVE_STATION"):
+        monkeypatch.delenv(name, raising=False)
+
+
 #: the ramp parameters of the default plant's stations that `short_ramps_pty_sim` sets to 0.3 s (Toyo's
 #: ramps are fixed: 5 s to 60 Hz)
 SHORT_RAMPS = {3: ("F07", "F08"), 4: ("F07", "F08"), 6: ("F002", "F003"), 7: ("C1-01", "C1-02")}

@@ -24,15 +24,8 @@ from conftest import pty_sim_process
 SIM = "sim://?timing=virtual"
 
 
-@pytest.fixture(autouse=True)
-def _no_user_config(monkeypatch, tmp_path):
-    # the tests must not see the developer's own config files: no user file, an empty project file
-    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "xdg"))
-    (tmp_path / "empty.yaml").write_text("")
-    monkeypatch.setenv("PDRIVE_CONFIG", str(tmp_path / "empty.yaml"))
-    monkeypatch.delenv("PDRIVE_PORT", raising=False)
-    monkeypatch.delenv("PDRIVE_BAUD", raising=False)
-    monkeypatch.delenv("PDRIVE_STATION", raising=False)
+#: the tests must not see the developer's own config files or PDRIVE_* settings
+pytestmark = pytest.mark.usefixtures("no_config_at_all")
 
 
 def _model(bus, address):

@@ -40,14 +40,8 @@ def test_the_doc_has_examples_of_every_call():
         assert call in code, call
 
 
-@pytest.fixture(autouse=True)
-def _no_config(monkeypatch, tmp_path):
-    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "xdg"))
-    (tmp_path / "empty.yaml").write_text("")
-    monkeypatch.setenv("PDRIVE_CONFIG", str(tmp_path / "empty.yaml"))
-    monkeypatch.delenv("PDRIVE_PORT", raising=False)
-    monkeypatch.delenv("PDRIVE_BAUD", raising=False)
-    monkeypatch.delenv("PDRIVE_STATION", raising=False)
+#: the tests must not see the developer's own config files or PDRIVE_* settings
+pytestmark = pytest.mark.usefixtures("no_config_at_all")
 
 
 @pytest.mark.parametrize("line,code", BLOCKS, ids=[f"api.md:{n}" for n, _ in BLOCKS])
