@@ -77,16 +77,30 @@ def test_the_text_view_labels_the_fmax_with_the_files_line(tmp_path):
     assert f"max frequency 1 Hz from {f}:8" in p.stdout, p.stdout
 
 
-def test_a_readable_drive_max_frequency_wins_and_the_files_fmax_is_not_named(tmp_path):
+def test_a_readable_drive_max_frequency_wins_and_the_files_fmax_is_checked_against_it(tmp_path):
     # --ppo 1 has a parameter channel: F03 is read from the drive (the simulator's 60 Hz, the
-    # FRENIC-MEGA factory value) and the file's fmax is not used -- so not named as used either
+    # FRENIC-MEGA factory value) and used, so the speed shown is the drive's own scale; the file's
+    # fmax 1 Hz is not used (not named as used) but its disagreement is a warning with both figures
     f, cwd, env = _project(tmp_path)
     p = _pdrive(["run", "3", "--hz", "1", "--duration", "0.3", "--ppo", "1", "--json"], cwd, **env)
     assert p.returncode == 0, p.stderr
     start = json.loads(p.stdout.splitlines()[0])
     assert start["fmax_source"] == "read from the drive (F03)" and start["fmax_hz"] == 60.0
-    assert "fmax" not in p.stderr and "layout" not in p.stderr      # --ppo 1 beat the file's layout
+    warning = f"fmax 1 Hz from {f}:8 ignored: the drive says F03 = 60 Hz"
+    assert start["warnings"] == [warning]
+    assert "using station 3 fmax" not in p.stderr and "layout" not in p.stderr  # --ppo 1 beat it
     assert f"using port {SIM} (port name rig) from {f}:1 -> {f}:4" in p.stderr
+
+
+def test_the_api_checks_a_config_fmax_against_the_drives_own_too(tmp_path, monkeypatch):
+    import profidrive_cli as pdrive
+    f = tmp_path / "cfg.yaml"
+    f.write_text(f"ports:\n  rig:\n    port: '{SIM}'\n    stations:\n      3: {{layout: ppo1, fmax: 50}}\n")
+    monkeypatch.setenv("PDRIVE_CONFIG", str(f))
+    with pdrive.open_bus("rig") as bus:
+        d = bus.drive(3)
+        assert d.fmax_hz == 60.0                                 # F03 read from the drive
+        assert f"fmax 50 Hz from {f}:5 ignored: the drive says F03 = 60 Hz" in d.session.warnings
 
 
 def test_an_option_given_is_not_announced(tmp_path):

@@ -97,9 +97,8 @@ class BusOptions:
         """{"profile" | "layout" | "fmax": value} the config file gives this station on this port.
         Reading a value from it is using it: one from a project file is named on stderr then. The
         values keep their FILE:LINE (config.FileText / FileHz) for the labels and errors."""
-        if self.settings is None:
-            return {}
-        return _UsedDefaults(self, address, self.settings.station_defaults(address))
+        return _UsedDefaults(self, address, {} if self.settings is None else
+                             self.settings.station_defaults(address))
 
     def _announce(self, *names: str) -> None:
         """Name on stderr, once per setting, each of `names` ("port", "baud", "master_address")
@@ -257,6 +256,10 @@ class _UsedDefaults(dict):
         if key in self:
             self._used(key)
         return super().get(key, default)
+
+    def peek(self, key):
+        """The value without using it (an fmax only checked against the drive's own): not named."""
+        return super().get(key)
 
 
 class _StderrHandler(logging.Handler):
