@@ -205,3 +205,25 @@ def test_a_master_address_equal_to_the_station_is_refused_naming_where_it_came_f
     err = _one_error(_pdrive(["run", "3,4", "--hz", "5", "--duration", "0.2", "--master-address", "4",
                               "--port", SIM], tmp_path, XDG_CONFIG_HOME=str(tmp_path / "none")))
     assert "station 4 is the master's own address (--master-address = 4)" in err
+
+
+def test_a_name_given_on_the_command_line_but_redefined_by_a_project_file_is_named(tmp_path):
+    # the user's file says line1 is a device; a project file above the working folder redefines
+    # line1 (a name defined in both files is taken whole from the project file): --port line1 now
+    # goes elsewhere -- said on stderr with the project file's line
+    xdg = tmp_path / "xdg"
+    (xdg / "pdrive").mkdir(parents=True)
+    (xdg / "pdrive" / "config.yaml").write_text("ports:\n  line1: /dev/pdrive-no-such-port\n")
+    f, cwd, _ = _project(tmp_path, f"ports:\n  line1: '{SIM}'\n")
+    p = _pdrive(["scan", "--port", "line1"], cwd, XDG_CONFIG_HOME=str(xdg))
+    assert p.returncode == 0, p.stderr
+    assert p.stderr == f"pdrive: using port {SIM} (port name line1) from option --port -> {f}:2 (project file)\n"
+
+
+def test_a_checklists_port_name_defined_by_a_project_file_is_named(tmp_path):
+    f, cwd, env = _project(tmp_path, f"ports:\n  rig: '{SIM}'\n")
+    (cwd / "cl.yaml").write_text("name: provenance\nport: rig\nstations:\n  - name: g1\n    address: 3\n"
+                                 "    profile: fuji-g1\nsteps:\n  - expect_identity\n")
+    p = _pdrive(["checklist", "run", "cl.yaml", "--yes"], cwd, **env)
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert f"pdrive: using port {SIM} (port name rig) from {f}:2 (project file)" in p.stderr

@@ -91,6 +91,9 @@ class BusOptions:
             return self.port
         from profidrive_cli.config import load
         named = load().ports.get(fallback)
+        if named is not None and named.port.project:      # the checklist's name, a project's device
+            self._notice(f"port {named.port.value} (port name {named.name})", named.port.source)
+            self._notices_now()
         return named.port.value if named is not None else fallback
 
     def station_defaults(self, address: int | None) -> dict:
