@@ -46,15 +46,43 @@ _PORT_KEYS = ("port", "baud", "master_address", "stations")
 _STATION_KEYS = ("profile", "layout", "fmax")
 
 
+class FileText(str):
+    """A text from a config file that keeps where it was set (`source`: "FILE:LINE"): wherever
+    it is used (a station's profile or layout), a mistake in it is blamed on that line."""
+    source: str
+
+    def __new__(cls, value: str, source: str):
+        obj = super().__new__(cls, value)
+        obj.source = source
+        return obj
+
+
+class FileHz(float):
+    """A frequency from a config file (a station's fmax) that keeps where it was set: the fmax
+    source label says "from FILE:LINE", not "from --fmax" (session/motion.py)."""
+    source: str
+
+    def __new__(cls, value: float, source: str):
+        obj = super().__new__(cls, value)
+        obj.source = source
+        return obj
+
+
 @dataclass(frozen=True)
 class Setting:
     """One effective value and where it came from: "option --port", "env PDRIVE_PORT",
-    "FILE:LINE" or "default"."""
+    "FILE:LINE" or "default". `project`: a project file (a pdrive.yaml found in the working folder
+    or above) set it -- or, for a port chosen by name, chose it or defined it (cli/common.py names
+    the file on stderr when the value is used)."""
     value: Any
     source: str
+    project: bool = field(default=False, compare=False, repr=False)
 
     def to_dict(self) -> dict:
         return {"value": self.value, "source": self.source}
+
+
+_Setting = Setting
 
 
 @dataclass(frozen=True)
@@ -158,12 +186,15 @@ def load(env: Mapping[str, str] | None = None, cwd: str | Path | None = None) ->
                 from profidrive_cli.datafile import DataFileError
                 raise DataFileError(f.path, None, "file not found (named by PDRIVE_CONFIG)")
             continue
-        _apply(cfg, f.path)
+        _apply(cfg, f.path, f.kind == "project")
     return cfg
 
 
-def _apply(cfg: Config, path: Path) -> None:
+def _apply(cfg: Config, path: Path, project: bool = False) -> None:
     from profidrive_cli.datafile import DataFileError, load_yaml
+
+    def Setting(value, source):             # every value of this file: its kind travels with it
+        return _Setting(value, source, project)
     doc = load_yaml(path, "config file")
     if doc is None:
         return
@@ -209,11 +240,11 @@ def _apply(cfg: Config, path: Path) -> None:
             if "baud" in entry else None,
             Setting(_address(entry, "master_address", path, f"ports.{name}.master_address"),
                     where(entry, "master_address")) if "master_address" in entry else None,
-            _stations(entry, path, name), f"{path}:{line}")
+            _stations(entry, path, name, project), f"{path}:{line}")
         cfg.ports[name] = np
 
 
-def _stations(entry, path: Path, name: str) -> dict[int, dict[str, Setting]]:
+def _stations(entry, path: Path, name: str, project: bool = False) -> dict[int, dict[str, Setting]]:
     from profidrive_cli.datafile import DataFileError
     st = entry.get("stations")
     if st is None:
@@ -234,13 +265,15 @@ def _stations(entry, path: Path, name: str) -> dict[int, dict[str, Setting]]:
         vals: dict[str, Setting] = {}
         for key in ("profile", "layout"):
             if key in d:
-                vals[key] = Setting(_text(d, key, path, f"{what}.{key}"), f"{path}:{d.line_of(key)}")
+                src = f"{path}:{d.line_of(key)}"
+                vals[key] = Setting(FileText(_text(d, key, path, f"{what}.{key}"), src), src, project)
         if "fmax" in d:
             v = d["fmax"]
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v <= 10000:
                 raise DataFileError(path, d.line_of("fmax"), f"{what}.fmax: {v!r} is not a frequency "
                                     f"in Hz above 0 (at most 10000)")
-            vals["fmax"] = Setting(float(v), f"{path}:{d.line_of('fmax')}")
+            src = f"{path}:{d.line_of('fmax')}"
+            vals["fmax"] = Setting(FileHz(v, src), src, project)
         out[addr] = vals
     return out
 
@@ -280,6 +313,24 @@ def _address(d, key: str, path: Path, what: str) -> int:
 
 # -------------------------------------------------------------------------------------- resolve
 
+#: a Windows serial device: the one kind of device that looks like a port name
+_COM_RE = re.compile(r"^COM[0-9]+$", re.IGNORECASE)
+
+
+def _not_a_lost_name(port: Setting, cfg: Config) -> None:
+    """A port from a file or PDRIVE_PORT that has the form of a port name (never of a device path
+    or URL) but names no port of the config files: a mistake in that file:line (or env), refused
+    here (exit 2) -- not later as "no such port" (exit 1) of a device nobody meant."""
+    v = port.value
+    if not isinstance(v, str) or port.source.startswith(("option", "default")):
+        return
+    if NAME_RE.match(v) and not _COM_RE.match(v):
+        from profidrive_cli import UsageError
+        names = ", ".join(cfg.ports) or "none"
+        raise UsageError(f"{port.source}: port {v!r} is not a port name of the config files "
+                         f"(names: {names}) and not a device or URL")
+
+
 
 def resolve(port: str | None = None, baud: str | int | None = None,
             master_address: int | None = None, *, env: Mapping[str, str] | None = None,
@@ -296,9 +347,11 @@ def resolve(port: str | None = None, baud: str | int | None = None,
         chosen = cfg.port
     named = cfg.ports.get(chosen.value) if chosen is not None else None
     if named is not None:
-        dev = Setting(named.port.value, f"{chosen.source} -> {named.port.source}")
+        dev = Setting(named.port.value, f"{chosen.source} -> {named.port.source}",
+                      chosen.project or named.port.project)
     else:
         dev = chosen if chosen is not None else Setting(None, "default")
+        _not_a_lost_name(dev, cfg)
 
     def pick(given, given_src, env_name, per_port, top, default):
         if given is not None:

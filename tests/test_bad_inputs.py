@@ -66,6 +66,15 @@ def d(tmp_path_factory) -> Path:
     (d / "p_float.yaml").write_text("station: {profile: fuji-opc-g1-pdp}\nparameters:\n  F07: !!float x\n")
     (d / "p_bigint.yaml").write_text("station: {profile: fuji-opc-g1-pdp}\nparameters:\n  F07: "
                                      + "7" * 5000 + "\n")
+    # config files (named by PDRIVE_CONFIG): mistakes found late still name their file:line
+    (d / "cfg_baud_inf.yaml").write_text("port: sim://\nbaud: 'inf'\n")
+    (d / "cfg_baud_1e999.yaml").write_text("port: sim://\nbaud: 1e999\n")
+    (d / "cfg_lost_port.yaml").write_text("port: line9\nports:\n  rig: sim://\n")
+    (d / "cfg_profile.yaml").write_text("port: rig\nports:\n  rig:\n    port: sim://\n"
+                                        "    stations:\n      3: {profile: moeller}\n")
+    (d / "cfg_layout.yaml").write_text("port: rig\nports:\n  rig:\n    port: sim://\n"
+                                       "    stations:\n      3: {layout: ppo9}\n")
+    (d / "cfg_master.yaml").write_text("port: sim://\nmaster_address: 3\n")
     assert len((d / "bomb.yaml").read_bytes()) < 700 and len((d / "p_bomb.yaml").read_bytes()) < 700
     gdir = d / "gsd_user"
     gdir.mkdir()
@@ -147,6 +156,22 @@ CASES = [
     ("run-hz-text", ["run", "3", "--hz", "abc", *SIM], 2, 1, ()),
     ("run-hz-inf", ["run", "3", "--hz", "1e999", "--duration", "0.1", *SIM], 2, 1, ()),
     ("param-set-inf", ["param", "set", "3", "F07", "1e999", *SIM], 2, 1, ()),
+    ("scan-baud-inf", ["scan", "--baud", "inf", *SIM], 2, 1, ()),
+    ("scan-baud-1e999", ["scan", "--baud", "1e999", *SIM], 2, 1, ()),
+    ("scan-env-baud-minus-inf", ["scan", "ENV:PDRIVE_BAUD=-inf", *SIM], 2, 1, ()),
+    ("status-master-is-the-station", ["status", "3", "--master-address", "3", *SIM], 2, 1, ()),
+    ("run-master-is-the-station", ["run", "3", "--hz", "5", "--duration", "0.1", "--master-address", "3",
+                                   *SIM], 2, 1, ()),
+    ("run-several-master-is-one", ["run", "3,4", "--hz", "5", "--duration", "0.1", "--master-address",
+                                   "4", *SIM], 2, 1, ()),
+    # ---- config files
+    ("config-baud-inf", ["scan", "ENV:PDRIVE_CONFIG={d}/cfg_baud_inf.yaml"], 2, 1, ()),
+    ("config-baud-1e999", ["scan", "ENV:PDRIVE_CONFIG={d}/cfg_baud_1e999.yaml"], 2, 1, ()),
+    ("config-undefined-port-name", ["scan", "ENV:PDRIVE_CONFIG={d}/cfg_lost_port.yaml"], 2, 1, ()),
+    ("config-wrong-station-profile", ["status", "3", "ENV:PDRIVE_CONFIG={d}/cfg_profile.yaml"], 2, 1, ()),
+    ("config-unknown-station-layout", ["run", "3", "--hz", "5", "--duration", "0.1",
+                                       "ENV:PDRIVE_CONFIG={d}/cfg_layout.yaml"], 2, 1, ()),
+    ("config-master-is-the-station", ["diag", "3", "ENV:PDRIVE_CONFIG={d}/cfg_master.yaml"], 2, 1, ()),
     ("unknown-command", ["frobnicate"], 2, 1, ()),
     ("scan-missing-port", ["scan", "--port", "{d}/no-tty"], 1, 1, ()),
 ]

@@ -201,19 +201,22 @@ def test_a_named_port_works_in_bus_commands(env, args, expect, monkeypatch):
     assert expect in r.output
 
 
-def test_run_takes_fmax_from_the_station_defaults(env):
+def test_run_takes_fmax_from_the_station_defaults(env, tmp_path):
     # layout ppo3 has no parameter channel: F03 cannot be read, the config's fmax 50 Hz applies
     r = CliRunner().invoke(cli, ["run", "3", "--hz", "10", "--duration", "0.2", "--json"])
     assert r.exit_code == 0, r.output
-    start = json.loads(r.output.splitlines()[0])
+    # stdout only: the project file's settings in use are named on stderr (docs/config.md)
+    start = json.loads(r.stdout.splitlines()[0])
     assert start["event"] == "start" and start["layout"] == "ppo3"
     assert start["fmax_hz"] == 50.0 and start["reference_percent"] == pytest.approx(20.0)
+    proj = (tmp_path / "proj" / "pdrive.yaml").resolve()
+    assert start["fmax_source"] == f"from {proj}:7"           # PROJECT line 7, not "from --fmax"
 
 
 def test_an_option_beats_the_station_default(env):
     r = CliRunner().invoke(cli, ["status", "3", "--ppo", "1", "--json"])
     assert r.exit_code == 0, r.output
-    assert json.loads(r.output)["layout"] == "ppo1"
+    assert json.loads(r.stdout)["layout"] == "ppo1"         # stderr names the project file's port
 
 
 def test_config_show_json_says_where_each_setting_came_from(env, tmp_path):

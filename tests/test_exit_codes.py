@@ -25,6 +25,12 @@ ERRORS = [
     (["io", "7", "--port", "sim://", "--cfg", "ZZ"], 2, "--cfg: not hex"),
     (["scan", "--port", "sim://", "--baud", "1234"], 2, "not a PROFIBUS-DP baud rate"),
     (["scan", "--port", "sim://?stations=3:nosuch"], 2, "unknown profile 'nosuch'"),
+    # parse_baud: a number with no integer (inf, 1e999) is a bad rate like any other, not a crash
+    (["scan", "--port", "sim://", "--baud", "inf"], 2, "'inf' is not a PROFIBUS-DP baud rate"),
+    (["scan", "--port", "sim://", "--baud", "1e999"], 2, "'1e999' is not a PROFIBUS-DP baud rate"),
+    # a station at the master's own address: refused before the port is opened
+    (["status", "3", "--port", "sim://", "--master-address", "3"], 2,
+     "station 3 is the master's own address (--master-address = 3)"),
     (["diag", "9", "--port", "sim://"], 1, "station 9 does not answer"),
     (["io", "7", "--port", "sim://", "--cfg", "F1"], 1, "configuration fault"),
     (["scan", "--port", "/dev/does-not-exist"], 1, "no such port"),

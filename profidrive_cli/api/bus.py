@@ -220,7 +220,7 @@ class Bus:
         layout: a layout name (e.g. "ppo3", "toyo") or ppo=N (default: the config file's, else the
         profile's); fmax: the frequency 100 % stands for when the drive's own value cannot be read.
         The same station twice: the same Drive."""
-        from profidrive_cli.api.drive import Drive, fmax_readable
+        from profidrive_cli.api.drive import Drive
         from profidrive_cli.session import DriveSession
         with self._lock:
             self._check_open()
@@ -244,8 +244,8 @@ class Bus:
             except BaseException as e:
                 sess.close(e)
                 raise
-            if fmax is None and not fmax_readable(sess):
-                fmax = defaults.get("fmax")          # the config's, where the drive's is not readable
+            if fmax is None:                         # the config's: used where the drive's own is
+                fmax = defaults.get("fmax")          # not readable, else checked against it (warning)
             drive = Drive(self, sess, fmax)
             self._drives[sess.address] = drive
             self._last[sess.address] = self.master.link.now()

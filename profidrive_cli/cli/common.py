@@ -7,7 +7,7 @@ import json
 import logging
 import os
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import click
 from rich.console import Console
@@ -68,6 +68,11 @@ class BusOptions:
     _recorder: object = None
     #: config.Effective: the settings with their sources (config file, env, option, default)
     settings: object = None
+    #: the settings of a project file named (or to be named) on stderr (BusOptions._announce)
+    _announced: set = field(default_factory=set)
+    #: those lines before the port is opened: printed then (_notices_now), after the checks of
+    #: the options, so that bad input stays one line
+    _pending: list | None = field(default_factory=list)
 
     def source_of(self, name: str) -> str:
         """Where the port / baud / master_address came from ("option --baud", "FILE:LINE", ...)."""
@@ -80,20 +85,65 @@ class BusOptions:
         file's default port."""
         src = self.source_of("port")
         if not fallback or (self.port and src.startswith(("option", "env"))):
+            if self.port:
+                self._announce("port")
+                self._notices_now()
             return self.port
         from profidrive_cli.config import load
         named = load().ports.get(fallback)
+        if named is not None and named.port.project:      # the checklist's name, a project's device
+            self._notice(f"port {named.port.value} (port name {named.name})", named.port.source)
+            self._notices_now()
         return named.port.value if named is not None else fallback
 
     def station_defaults(self, address: int | None) -> dict:
-        """{"profile" | "layout" | "fmax": value} the config file gives this station on this port."""
-        if self.settings is None:
-            return {}
-        return {k: s.value for k, s in self.settings.station_defaults(address).items()}
+        """{"profile" | "layout" | "fmax": value} the config file gives this station on this port.
+        Reading a value from it is using it: one from a project file is named on stderr then. The
+        values keep their FILE:LINE (config.FileText / FileHz) for the labels and errors."""
+        return _UsedDefaults(self, address, {} if self.settings is None else
+                             self.settings.station_defaults(address))
+
+    def _announce(self, *names: str) -> None:
+        """Name on stderr, once per setting, each of `names` ("port", "baud", "master_address")
+        that a project file set: a pdrive.yaml in the working folder or above changes where and
+        how a command drives the bus only visibly (docs/config.md)."""
+        for name in names:
+            s = getattr(self.settings, name, None)
+            if s is not None and s.project and name not in self._announced:
+                self._announced.add(name)
+                what = {"port": "port", "baud": "baud rate", "master_address": "master address"}[name]
+                named = getattr(self.settings, "port_name", None) if name == "port" else None
+                value = f"{s.value}" + (f" (port name {named})" if named else "")
+                self._notice(f"{what} {value}", s.source)
+
+    def _notice(self, what: str, source: str) -> None:
+        line = f"pdrive: using {what} from {source} (project file)"
+        if self._pending is None:
+            click.echo(line, err=True)
+        else:
+            self._pending.append(line)
+
+    def _notices_now(self) -> None:
+        """The port is about to be opened: the project file's settings in use are named now."""
+        for line in self._pending or ():
+            click.echo(line, err=True)
+        self._pending = None
+
+    def check_station(self, address: int) -> int:
+        """A station address a command names: 0..125 and not our own master address (a master that
+        polls its own address talks to itself, or to a station it must not share the address with)."""
+        station_address(address)
+        if address == self.master_address:
+            src = self.source_of("master_address")
+            where = "--master-address" if src.startswith(("option", "default")) else src
+            raise UsageError(f"station {address} is the master's own address ({where} = "
+                             f"{self.master_address}): give another --master-address")
+        return address
 
     def require_port(self) -> str:
         if not self.port:
             raise UsageError(NO_PORT_HELP)
+        self._announce("port", "baud", "master_address")
         return self.port
 
     @property
@@ -103,9 +153,11 @@ class BusOptions:
     def baud_rate(self, default: int = 19200) -> int:
         if self.found_baud is not None:
             return self.found_baud
-        if self.baud in (None, "", "auto"):
-            return default
-        return baud_from(self.baud, self.source_of("baud"))
+        rate = default if self.baud in (None, "", "auto") else baud_from(self.baud,
+                                                                         self.source_of("baud"))
+        self._announce("port", "baud", "master_address")
+        self._notices_now()
+        return rate
 
     def params(self, baud: int | None = None, link=None) -> BusParams:
         b = baud or self.baud_rate()
@@ -130,7 +182,9 @@ class BusOptions:
 
     def _raw_link(self, baud: int):
         from profidrive_cli.link import open_link
-        return open_link(self.require_port(), baud, rs485=self.rs485, echo=self.echo)
+        port = self.require_port()
+        self._notices_now()
+        return open_link(port, baud, rs485=self.rs485, echo=self.echo)
 
     def _traced(self, link):
         if self.verbose < 2 and not self.trace:
@@ -151,6 +205,8 @@ class BusOptions:
     def open_master(self, baud: int | None = None, address: int | None = None):
         """A Master at `baud`, the given rate, or (--baud auto) the rate found by listening and
         then probing `address` (every address when None)."""
+        if address is not None:
+            self.check_station(address)
         if baud is None and self.auto_baud:
             found, master = self._detect(addresses=None if address is None else [address],
                                          probe=True)
@@ -165,6 +221,7 @@ class BusOptions:
         from profidrive_cli.dp.baud import detect_baud
         from profidrive_cli.link import open_link
         port = self.require_port()
+        self._notices_now()
         found, obj = detect_baud(
             lambda b: open_link(port, b, rs485=self.rs485, echo=self.echo),
             self._make_master_traced, addresses, probe=probe)
@@ -176,6 +233,36 @@ class BusOptions:
         self.found_baud = found.baud
         err.print(f"{found.describe()}")
         return found, obj
+
+
+class _UsedDefaults(dict):
+    """A station's config defaults {key: value}; reading a key that a project file set names that
+    file:line on stderr (once per key): only the defaults a command really uses are named."""
+
+    def __init__(self, opts: BusOptions, address, settings: dict):
+        super().__init__({k: s.value for k, s in settings.items()})
+        self._opts, self._address, self._settings = opts, address, settings
+
+    def _used(self, key):
+        s = self._settings.get(key)
+        tag = ("station", self._address, key)
+        if s is not None and s.project and tag not in self._opts._announced:
+            self._opts._announced.add(tag)
+            value = f"{s.value:g} Hz" if key == "fmax" else f"{s.value}"
+            self._opts._notice(f"station {self._address} {key} {value}", s.source)
+
+    def __getitem__(self, key):
+        self._used(key)
+        return super().__getitem__(key)
+
+    def get(self, key, default=None):
+        if key in self:
+            self._used(key)
+        return super().get(key, default)
+
+    def peek(self, key):
+        """The value without using it (an fmax only checked against the drive's own): not named."""
+        return super().get(key)
 
 
 class _StderrHandler(logging.Handler):

@@ -2,13 +2,102 @@
 
 from __future__ import annotations
 
-import importlib
+# Signals first, before anything slow is imported: SIGINT / SIGTERM at any moment of pdrive's
+# start-up end it with one line on stderr, exit code 130 / 143 and, under --json, the error object
+# (docs/json.md) -- not a traceback of an import, nor a death by the signal.
 import json
+import os
+import signal
 import sys
 
-import click
+#: commands whose --json output is a stream (JSON Lines with an "event" key): their error object
+#: carries "event": "error" too
+STREAM_COMMANDS = frozenset({"commloss-test", "io", "jog", "run", "sniff"})
+#: commands whose --json output is a stream only with one of these options (scan: a document)
+STREAM_WITH = {"scan": frozenset({"--watch"})}
 
-from profidrive_cli import BusError, PdriveError, UsageError, __version__
+
+def _json_mode(argv) -> tuple[bool, bool]:
+    """(--json given, the command streams), read from the command line itself: known also when the
+    error comes before the command body runs (a bad option, a bad --port)."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    if "--" in args:
+        args = args[:args.index("--")]
+    stream = bool(args) and (args[0] in STREAM_COMMANDS
+                             or bool(STREAM_WITH.get(args[0], frozenset()) & set(args[1:])))
+    return "--json" in args, stream
+
+
+def _signal_words(signum: int) -> str:
+    """The one line for a signal, as the commands that handle signals themselves say it."""
+    return "interrupted" if signum == signal.SIGINT else f"terminated (signal {signum})"
+
+
+def _error_json(argv, message: str, code: int, details: dict | None = None) -> None:
+    """Under --json, the error object on stdout (docs/json.md; jsonout.error_object)."""
+    as_json, stream = _json_mode(argv)
+    if as_json:
+        from profidrive_cli.cli.jsonout import error_object
+        obj = error_object(message, code, stream)
+        for k, v in (details or {}).items():
+            obj.setdefault(k, v)
+        try:
+            sys.stdout.write(json.dumps(obj, ensure_ascii=False) + "\n")
+            sys.stdout.flush()
+        except (BrokenPipeError, OSError, ValueError):
+            pass
+
+
+def _signal_at_start(signum, frame):
+    """SIGINT / SIGTERM before a command has been loaded: the line, the error object, 128 + N."""
+    _set_signals(signal.SIG_IGN)                         # a second signal: no second message
+    try:
+        sys.stderr.write(f"pdrive: {_signal_words(signum)}\n")
+        sys.stderr.flush()
+    except (OSError, ValueError):
+        pass
+    _error_json(None, _signal_words(signum), 128 + signum)
+    raise SystemExit(128 + signum)
+
+
+class _Terminated(BaseException):
+    """SIGTERM while a command runs that has no handling of its own (like KeyboardInterrupt)."""
+
+    def __init__(self, signum: int):
+        super().__init__(f"terminated by signal {signum}")
+        self.signum = signum
+
+
+def _raise_terminated(signum, frame):
+    raise _Terminated(signum)
+
+
+def _set_signals(handler, term=None) -> bool:
+    """SIGINT to `handler`, SIGTERM to `term` (default: `handler`); False off the main thread."""
+    try:
+        signal.signal(signal.SIGINT, handler)
+        signal.signal(signal.SIGTERM, term if term is not None else handler)
+        return True
+    except (ValueError, OSError):
+        return False
+
+
+def _is_pdrive_process() -> bool:
+    """This process is pdrive itself (the console script or `python -m profidrive_cli`), not a
+    program that imports the CLI: only then are its signals pdrive's to handle from the start."""
+    arg0 = sys.argv[0] if sys.argv else ""
+    return (os.path.basename(arg0) in ("pdrive", "pdrive.exe", "pdrive-script.py")
+            or arg0.endswith(os.path.join("profidrive_cli", "__main__.py")))
+
+
+#: True while the start-up handlers are pdrive's (until the command's module is loaded)
+_STARTING = _is_pdrive_process() and _set_signals(_signal_at_start)
+
+import importlib  # noqa: E402  (after the signal handlers: see above)
+
+import click  # noqa: E402
+
+from profidrive_cli import BusError, PdriveError, UsageError, __version__  # noqa: E402
 
 
 #: name -> (module, click object, one-line help). A command's module is imported only when that
@@ -64,7 +153,9 @@ class LazyGroup(click.Group):
         if entry is None:
             return None
         module, attr, _ = entry
-        return getattr(importlib.import_module(module), attr)
+        cmd = getattr(importlib.import_module(module), attr)
+        _command_loaded()
+        return cmd
 
     def format_commands(self, ctx, formatter):
         rows = [(name, COMMANDS[name][2]) for name in self.list_commands(ctx)]
@@ -97,42 +188,39 @@ def _os_error_text(e: OSError) -> str:
     return _line(f"{' -> '.join(paths)}: {why}" if paths else why)
 
 
-#: commands whose --json output is a stream (JSON Lines with an "event" key): their error object
-#: carries "event": "error" too
-STREAM_COMMANDS = frozenset({"commloss-test", "io", "jog", "run", "sniff"})
-#: commands whose --json output is a stream only with one of these options (scan: a document)
-STREAM_WITH = {"scan": frozenset({"--watch"})}
-
-
-def _json_mode(argv) -> tuple[bool, bool]:
-    """(--json given, the command streams), read from the command line itself: known also when the
-    error comes before the command body runs (a bad option, a bad --port)."""
-    args = list(sys.argv[1:] if argv is None else argv)
-    if "--" in args:
-        args = args[:args.index("--")]
-    stream = bool(args) and (args[0] in STREAM_COMMANDS
-                             or bool(STREAM_WITH.get(args[0], frozenset()) & set(args[1:])))
-    return "--json" in args, stream
-
-
 def _fail(argv, message: str, code: int, details: dict | None = None):
     """The one line on stderr and, under --json, the error object on stdout (docs/json.md); exit."""
     click.echo(f"pdrive: {message}", err=True)
-    as_json, stream = _json_mode(argv)
-    if as_json:
-        from profidrive_cli.cli.jsonout import error_object
-        obj = error_object(message, code, stream)
-        for k, v in (details or {}).items():
-            obj.setdefault(k, v)
-        try:
-            sys.stdout.write(json.dumps(obj, ensure_ascii=False) + "\n")
-            sys.stdout.flush()
-        except (BrokenPipeError, OSError):
-            pass
+    _error_json(argv, message, code, details)
     sys.exit(code)
 
 
+def _command_loaded() -> None:
+    """The command's module is loaded (the slow part of start-up is over): from here Ctrl-C is
+    KeyboardInterrupt again (each command stops what it started), and SIGTERM raises _Terminated
+    where the command installs no handling of its own (sessions, checklists, sim do)."""
+    global _STARTING
+    if _STARTING:
+        _STARTING = False
+        _set_signals(signal.default_int_handler, _raise_terminated)
+
+
 def main(argv=None):
+    """`pdrive` (argv None: the process is pdrive and its signals are handled from the start; a
+    list: called from a program, whose signal handlers are left alone)."""
+    global _STARTING
+    owner = argv is None
+    if owner and not _STARTING:
+        _STARTING = _set_signals(_signal_at_start)
+    try:
+        _main(argv)
+    finally:
+        if owner:
+            _STARTING = False
+            _set_signals(signal.SIG_IGN)       # the command has ended: a late signal changes nothing
+
+
+def _main(argv):
     try:
         rc = cli.main(args=argv, prog_name="pdrive", standalone_mode=False)
     except click.exceptions.Abort:
@@ -154,6 +242,8 @@ def main(argv=None):
     except KeyboardInterrupt:
         click.echo("interrupted", err=True)
         sys.exit(130)
+    except _Terminated as e:
+        _fail(argv, _signal_words(e.signum), 128 + e.signum)
     except BrokenPipeError:
         sys.exit(1)
     except OSError as e:

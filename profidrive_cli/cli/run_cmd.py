@@ -117,8 +117,9 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
                      extra=lambda: _run_extra(view, mons)), run_plot.written_at_the_end(plotter, session):
         with session as s:
             s.check_torque(torque, torque_limit)          # the card's reason before anything shows
-            if fmax is None and not fmax_readable(s):    # the config file's default, where the
-                fmax = opts.station_defaults(s.address).get("fmax")   # drive's own is not readable
+            if fmax is None:      # the config file's: used where the drive's own is not readable,
+                cfg = opts.station_defaults(s.address)     # else only checked against it (warning)
+                fmax = cfg.get("fmax") if not fmax_readable(s) else cfg.peek("fmax")
             fmax_hz, src = s.fmax(fmax)
             if mons:
                 mons[0].map_cyclic()            # before the start; restored after the stop

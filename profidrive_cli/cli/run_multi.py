@@ -10,7 +10,7 @@ import sys
 import click
 
 from profidrive_cli import UsageError
-from profidrive_cli.cli.common import confirm_real_port, station_address
+from profidrive_cli.cli.common import confirm_real_port
 from profidrive_cli.drives.base import DriveError
 
 
@@ -104,7 +104,7 @@ def run_several(opts, addresses: tuple, *, hz, percent, reverse, duration, fmax,
     if cycle_hz is not None and cycle_hz > 10000:
         raise UsageError(f"--cycle-hz {cycle_hz:g} must be in 0..10000 (exclusive of 0)")
     for a in addresses:
-        station_address(a)
+        opts.check_station(a)               # 0..125 and not the master's own address
     interactive = not opts.json and sys.stdin.isatty() and sys.stdout.isatty()
     view = MultiView("json" if opts.json else ("live" if sys.stdout.isatty() else "text"))
     keys = []

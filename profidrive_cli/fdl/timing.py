@@ -36,7 +36,7 @@ def parse_baud(text: str | int) -> int:
             mult, t = 1000000, t[:-1]
         try:
             b = round(float(t) * mult)
-        except ValueError:
+        except (ValueError, OverflowError):     # 'x', 'nan'; 'inf', '1e999' (no integer)
             b = -1
     if b not in _TABLE:
         raise ValueError(f"{text!r} is not a PROFIBUS-DP baud rate "

@@ -69,12 +69,19 @@ def choose_profile(ident: int | None, name: str | None = None, address: int | No
     where = f"station {address}" if address is not None else "the station"
     own = profile_for_ident(ident) if ident is not None else None
     if name:
-        prof = load_profile(name)
+        src = getattr(name, "source", None)          # a config file's FILE:LINE (config.FileText)
+        try:
+            prof = load_profile(name)
+        except UsageError as e:
+            raise UsageError(f"{src}: profile: {e}") if src else e from None
         if ident is None or prof.ident == ident:
             return prof, []
         if own is not None:
-            raise UsageError(f"{where} is {family_words(own)}, not {prof.name} (family {prof.family}); "
-                             f"leave out --profile or use --profile {own.aliases[0] if own.aliases else own.name}")
+            use = own.aliases[0] if own.aliases else own.name
+            fix = f"correct that line or give --profile {use}" if src else \
+                f"leave out --profile or use --profile {use}"
+            raise UsageError(f"{src + ': profile: ' if src else ''}{where} is {family_words(own)}, "
+                             f"not {prof.name} (family {prof.family}); {fix}")
         return prof, [f"{where} reports ident 0x{ident:04X}, profile {prof.name} expects "
                       f"0x{prof.ident:04X}: using {prof.name} as asked (a vendor GSD with the real "
                       f"ident may replace the placeholder)"]
@@ -108,7 +115,9 @@ def resolve_layout(profile: Profile, layout: str | None = None, ppo: int | None 
         low = {n.lower(): n for n in profile.layouts}
         if name.lower() in low:
             return low[name.lower()]
-        raise UsageError(f"--format {name}: {profile.name} has the layouts {names}")
+        given = f"{layout.source}: layout {name}" if fmt is None and hasattr(layout, "source") \
+            else f"--format {name}"               # a config file's layout names its FILE:LINE
+        raise UsageError(f"{given}: {profile.name} has the layouts {names}")
     return name
 
 

@@ -23,16 +23,20 @@ def fmax(sess, override: float | None = None) -> tuple[float, str]:
     code = sess.profile.max_frequency_param
     pdef = sess.profile.param(code) if code else None
     readable = pdef is not None and (pdef.pnu is not None or pdef.register is not None)
+    # an fmax from a config file keeps its FILE:LINE (config.FileHz): the label names that line
+    given = f"fmax {override:g} Hz from {override.source}" if hasattr(override, "source") else \
+        f"--fmax {override:g}" if override is not None else ""
     if d.has_param_channel and readable:
         hz = float(d.max_frequency())
         src = f"read from the drive ({code})"
         if override is not None and not math.isclose(override, hz, rel_tol=1e-3):
-            sess._warn(f"--fmax {override:g} Hz ignored: the drive says {code} = {hz:g} Hz")
+            sess._warn(f"{given}{'' if hasattr(override, 'source') else ' Hz'} ignored: the drive "
+                       f"says {code} = {hz:g} Hz")
     elif override is not None:
         if override <= 0:
-            raise UsageError(f"--fmax {override:g}: must be above 0 Hz")
+            raise UsageError(f"{given}: must be above 0 Hz")
         hz = float(override)
-        src = "from --fmax"
+        src = f"from {getattr(override, 'source', '--fmax')}"
         set_drive_fmax(sess, hz)
     else:
         hz = float(sess.profile.max_frequency_default)
