@@ -247,8 +247,10 @@ def param_set(opts, args, save, yes, allow_dangerous, profile_name, ppo, fmt, wa
                    "old": R.param_json(old) if old else None, "new": R.param_json(new),
                    "saved": saved, "notes": notes})
         return
-    was = f" (was {R.value_text(old.value, old.unit)})" if old is not None else ""
-    out.print(f"{escape(new.code)} ({escape(new.name)}) = {escape(R.value_text(new.value, new.unit))}{escape(was)}")
+    # the same value text as `param get` (the card's notation where the profile has a `format:`)
+    was = f" (was {old.text or R.value_text(old.value, old.unit)})" if old is not None else ""
+    out.print(f"{escape(new.code)} ({escape(new.name)}) = {escape(new.text or R.value_text(new.value, new.unit))}"
+              f"{escape(was)}")
     if saved:
         out.print(escape(saved))
     for n in notes:

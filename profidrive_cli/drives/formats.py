@@ -52,6 +52,20 @@ def formatter_for(profile, fmt: str):
     return fam.get(fmt) or GENERIC.get(fmt)
 
 
+def value_from_text(profile, param, text: str) -> int | None:
+    """A value typed as the card's tables write it (the family's PARSERS by `format:`, e.g. Fuji o40
+    "041A" or "F26") -> the raw word; None when the format has no such notation (parse as a number).
+    Raises UsageError (with the accepted forms) for text the notation refuses."""
+    if param is None or not isinstance(text, str):
+        return None
+    fmt = param.extra.get("format")
+    if fmt is None:
+        return None
+    from profidrive_cli.drives import codec_module
+    fn = getattr(codec_module(profile), "PARSERS", {}).get(fmt)
+    return fn(profile, param, text) if fn is not None else None
+
+
 def display_text(profile, param, raw: int | None, value) -> str | None:
     """The value as text for a parameter with a `format:`; None when it is shown as a plain number."""
     if param is None or raw is None or isinstance(raw, bool) or not isinstance(raw, int):

@@ -8,6 +8,9 @@ parameter, or a family address form such as Toyo's TB03[0,99]).
       default: [d002, d013, d012]        # codes, in display order
       words:                             # cyclic input words shown as monitors (Yaskawa fast I/O)
         output-current: {word: current, name: Output current, unit: "%", scale: 0.01220703125}
+      cyclic:                            # parameters some layouts also carry in an input word (the
+        dc-voltage: dc_voltage           # same value and scaling): read from that word there, through
+                                         # the parameter channel elsewhere (Toyo PPO2/4/5, mode 1)
     trip_records:
       latest: PNU354                     # optional: which record is the newest (1-based)
       empty: zero                        # zero: a record whose first field reads 0 is empty;
@@ -37,6 +40,8 @@ class MonitorWord:
 class MonitorConfig:
     default: list[str] = field(default_factory=list)
     words: dict[str, MonitorWord] = field(default_factory=dict)
+    #: parameter code -> the family's input word that carries the same value (where a layout has it)
+    cyclic: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass
@@ -72,7 +77,7 @@ def monitor_config(profile) -> MonitorConfig:
     if not isinstance(doc, dict):
         raise DataFileError(profile.path, _line(profile.raw, "monitors"), "'monitors' must be a mapping")
     for k in doc:
-        if k not in ("default", "words"):
+        if k not in ("default", "words", "cyclic"):
             raise DataFileError(profile.path, _line(doc, k), f"monitors: unknown key '{k}'")
     words = {}
     for code, w in (doc.get("words") or {}).items():
@@ -82,8 +87,36 @@ def monitor_config(profile) -> MonitorConfig:
                                 f"monitors.words.{code}: {{word: NAME, name: TEXT, unit: U, scale: NUMBER}}")
         words[str(code)] = MonitorWord(str(code), w["word"], str(w.get("name", code)), str(w.get("unit", "")),
                                        float(w.get("scale", 1.0)), bool(w.get("signed", False)))
+    cyclic = {}
+    cy = doc.get("cyclic") or {}
+    if not isinstance(cy, dict):
+        raise DataFileError(profile.path, _line(doc, "cyclic"), "monitors.cyclic: {CODE: INPUT_WORD, ...}")
+    for code, word in cy.items():
+        p = profile.param(str(code))
+        if p is None or not isinstance(word, str):
+            raise DataFileError(profile.path, _line(cy, code),
+                                f"monitors.cyclic.{code}: a parameter code of the profile and the name of "
+                                f"the input word carrying it")
+        cyclic[p.code] = word
     default = _codes(profile, doc, "default", doc.get("default"))
-    return MonitorConfig(default, words)
+    return MonitorConfig(default, words, cyclic)
+
+
+def cyclic_monitors(profile, layout: str) -> dict[str, str]:
+    """The `monitors.cyclic` parameters that `layout` carries in its input words: code -> word. The
+    family module says which words a layout's input has (`input_words(profile, layout)`); none
+    without it. No bus."""
+    cyc = monitor_config(profile).cyclic
+    if not cyc:
+        return {}
+    from profidrive_cli import UsageError
+    from profidrive_cli.drives import codec_module
+    try:
+        fn = getattr(codec_module(profile), "input_words", None)
+    except UsageError:
+        return {}
+    have = set(fn(profile, layout)) if fn is not None and layout in profile.layouts else set()
+    return {c: w for c, w in cyc.items() if w in have}
 
 
 def trip_record_config(profile) -> TripRecordConfig | None:

@@ -34,6 +34,16 @@ def no_torque_reason(family: str) -> str:
     return NO_TORQUE.get(family, f"{family}: this card has no torque word in its cyclic data")
 
 
+def capability_refusal(profile, name: str, layout: str | None) -> str | None:
+    """The profile's `capabilities:` refusal for `name` ('torque' or 'torque_limit') on `layout`, None
+    when it is declared possible there or not declared at all (the Drive's own answer then decides).
+    Bus-free, so run, checklist and API refuse with the same words before anything moves."""
+    caps = getattr(profile, "capabilities", None)
+    if caps is None or name not in getattr(caps, "decl", {}):
+        return None
+    return caps.refusal(name, layout or profile.default_layout)
+
+
 def torque_counts(percent: float, resolution: float, what: str = "--torque") -> int:
     """Percent of rated torque -> signed word counts; UsageError when out of range or not exact."""
     if not math.isfinite(percent):

@@ -1,6 +1,9 @@
 """Monitor values while a drive runs (`run --monitor`) and the card's trip records (`faults`).
 
-Cyclic words first: where the layout has parameter words in its input (PPO2/4/5 beyond STW/MAV),
+Cyclic words first: a monitor the layout's input words carry anyway (the profile's `monitors.cyclic`:
+  Toyo current, torque, DC voltage in PPO2/4/5 and mode 1, output voltage in mode 1) is read from its word
+  every cycle, with the parameter's own scaling; where the layout has parameter words in its input
+  (PPO2/4/5 beyond STW/MAV),
   * Moeller: a monitor of at most 2 octets is mapped into PZD3..PZD10 with PNU 916 (volatile, spec
     2.4 / manual example 2) for the session; Monitors.restore() writes the old assignment back;
   * Fuji: o48..o51 (= PNU 916) need a power cycle after a change (spec 2.4), so nothing is written:
@@ -18,7 +21,7 @@ from dataclasses import dataclass, field
 
 from profidrive_cli import UsageError
 from profidrive_cli.drives.base import DriveError, ParamError
-from profidrive_cli.drives.monitors import monitor_config, trip_record_config
+from profidrive_cli.drives.monitors import cyclic_monitors, monitor_config, trip_record_config
 
 NO_TRIP_RECORDS = "this card keeps no trip records"
 
@@ -30,6 +33,12 @@ def monitor_codes(profile, layout: str, spec: str) -> list[str]:
     words = monitor_config(profile).words
     lay = profile.layouts.get(layout)
     pkw = lay is None or lay.pkw
+    carried = cyclic_monitors(profile, layout) if lay is not None else {}
+
+    def cyclic(c: str) -> bool:
+        p = profile.param(c)
+        return c in words or (p is not None and p.code in carried)
+
     codes: list[str] = []
     for part in (p.strip() for p in spec.split(",")):
         if not part:
@@ -39,16 +48,20 @@ def monitor_codes(profile, layout: str, spec: str) -> list[str]:
             if not d:
                 raise UsageError(f"--monitor default: profile {profile.name} has no default monitor set")
             # without a parameter channel the default set keeps what the cyclic words carry
-            codes.extend(c for c in d if pkw or c in words)
+            codes.extend(c for c in d if pkw or cyclic(c))
         else:
             codes.append(part)
+    here = f" (its input words carry {', '.join(carried)})" if carried else ""
     if not codes:
         raise UsageError("--monitor: give monitor codes (CODE[,CODE...]) or 'default'" if pkw else
                          f"--monitor: layout {layout} of {profile.name} has no parameter channel to read "
-                         f"monitors through (choose a layout with one)")
-    if not pkw and any(c not in words for c in codes):
-        raise UsageError(f"--monitor: layout {layout} of {profile.name} has no parameter channel to read "
-                         f"monitors through (choose a layout with one)")
+                         f"monitors through (choose a layout with one){here}")
+    if not pkw:
+        bad = [c for c in codes if not cyclic(c)]
+        if bad:
+            raise UsageError(f"--monitor {bad[0]}: layout {layout} of {profile.name} has no parameter "
+                             f"channel to read monitors through and no input word carries it (choose a "
+                             f"layout with one){here}")
     out: list[str] = []
     for c in codes:
         if c in words:
@@ -97,6 +110,8 @@ class Monitors:
     dropped: dict[str, str] = field(default_factory=dict)
     #: code -> input PZD index (0-based, STW = 0) of the monitors carried in the cyclic words
     cyclic: dict[str, int] = field(default_factory=dict)
+    #: parameter code -> the input word carrying it (the profile's monitors.cyclic on this layout)
+    carried: dict[str, str] = field(default_factory=dict)
     #: (assignment code, old value) to write back on restore()
     saved_map: list = field(default_factory=list)
     _i: int = 0
@@ -128,6 +143,10 @@ class Monitors:
         module's text). Returns the codes now carried cyclically. Call before the motor starts."""
         sess = self.sess
         drive = sess._need_drive()
+        for c, word in cyclic_monitors(sess.profile, sess.layout).items():
+            if c in self.codes:                          # a parameter the input words carry anyway
+                self.carried[c] = word
+                self.cyclic[c] = -1
         in_words = getattr(getattr(drive, "fmt", None), "in_words", ())
         for c in self.codes:                             # the family's own input words
             w = self.words.get(c)
@@ -195,6 +214,13 @@ class Monitors:
         area = getattr(drive, "last_area", None)
         t = self.sess.channel.now() - self.sess._t0
         for c, i in self.cyclic.items():
+            if c in self.carried:
+                raw = sample.status.raw.get(self.carried[c]) if sample is not None else None
+                if raw is not None:
+                    pv = drive._param_value(drive.resolve_param(c), raw)
+                    mv = self.values[c]
+                    mv.value, mv.raw, mv.t = pv.value, pv.raw, t
+                continue
             w = self.words.get(c)
             if w is not None:
                 raw = sample.status.raw.get(w.word) if sample is not None else None

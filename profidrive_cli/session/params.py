@@ -14,7 +14,7 @@ from typing import Any
 
 from profidrive_cli import UsageError
 from profidrive_cli.drives.base import DriveError, ParamValue
-from profidrive_cli.drives.formats import display_text
+from profidrive_cli.drives.formats import display_text, value_from_text
 from profidrive_cli.drives.profile import Profile, all_profiles
 from profidrive_cli.drives.values import danger, raw_value_problem, value_problem
 from profidrive_cli.session.cycle import Sample
@@ -88,6 +88,9 @@ def parse_value(sess, code: str, text: str | float | int, info: ParamInfo | None
     if isinstance(text, (int, float)) and not isinstance(text, bool):
         return text
     t = str(text).strip()
+    raw = value_from_text(sess.profile, info.param, t)     # the card's own notation (Fuji o40 "041A")
+    if raw is not None:
+        return raw
     try:
         if t.lower().startswith(("0x", "-0x")):
             return int(t, 16)

@@ -22,6 +22,10 @@ Dialect on top of sim/profidrive_model.py:
     operation: coast or F08 ramp, at once or after o28, forgotten when the link returns within o28
     where o27 says so, then Er5
   * OPC-PDP3: y97 (0 EEPROM, 1 RAM, 2 save -> reads 1 when done, 1 s here), o32 all-zero output data
+  * y97 and the EEPROM (PDP3 manual 000_59efe766ba1d441f.txt L4325-4333, *6): `eeprom` holds what
+    survives `power_cycle()`. A PKW write with y97 = 0 (or on the G1, which has no y97) is stored there
+    too; with y97 = 1 it stays in RAM; y97 = 2 copies all RAM data into it and then reads 1. For a write
+    of y97 itself the value written decides (a sim choice: the manual does not say).
 """
 
 from __future__ import annotations
@@ -68,6 +72,8 @@ class FujiModel(ProfidriveModel):
         m = self.profile.param("M16")
         self._m_pnu = m.pnu if m is not None else None
         self.motor = Motor()
+        #: the non-volatile copy of the parameters (power_cycle restores it)
+        self.eeprom: dict[str, int] = dict(self.values)
 
     # -- configuration (o30) ---------------------------------------------------------------------
     def check_cfg(self, cfg: bytes) -> bool:
@@ -258,6 +264,7 @@ class FujiModel(ProfidriveModel):
             if self.busy_next > 0:
                 self.busy_next -= 1
             return pd.PkwFrame(7, req.pnu, req.subindex, self.fc.busy_error)
+        before = dict(self.values) if write else None
         resp = super().pkw_answer(req)       # generic edit_rights stays 1: PNU927 blocks writes only
         if write and resp.ak in (1, 4) and self.fc.storage is not None:
             sp = self.profile.param(self.fc.storage["param"])
@@ -267,7 +274,19 @@ class FujiModel(ProfidriveModel):
                     self.saves += 1
                 else:
                     self._save_until = None
+        if write and resp.ak in (1, 4) and self._stores_writes():
+            self.eeprom.update({k: v for k, v in self.values.items() if before.get(k) != v})
         return resp
+
+    def _stores_writes(self) -> bool:
+        """A PKW write goes to the EEPROM too: G1 always, PDP3 with y97 = 0 (EEPROM)."""
+        s = self.fc.storage
+        return s is None or self.values.get(s["param"], s["eeprom"]) == s["eeprom"]
+
+    def power_cycle(self) -> None:
+        """Tests: switch the inverter off and on: the parameters are what the EEPROM holds."""
+        self.values = dict(self.eeprom)
+        self._save_until = None
 
     def _saving(self) -> bool:
         return self._save_until is not None and self._now < self._save_until
@@ -287,7 +306,9 @@ class FujiModel(ProfidriveModel):
     def _tick_to(self, now: float) -> None:
         self._now = now
         if self._save_until is not None and now >= self._save_until and self.fc.storage is not None:
+            # "if the value has returned to 1, data saving is complete" (PDP3 manual L4331-4333)
             self.values[self.fc.storage["param"]] = self.fc.storage["saved_reads"]
+            self.eeprom = dict(self.values)
             self._save_until = None
         super().tick(now)
         self._comm_loss_tick(now)

@@ -28,6 +28,10 @@
   * communication loss (DP watchdog) while in operation: protection 18 (COMM), run bits forced off;
     comm_loss="ignore" (sim only, the manual names no setting) keeps it running
   * fan failure (26) is a warning: ZSW bit 7, fault flag 2 bit 9, multi-function output bit 15
+  * date/time words (J-14 = 1; spec §4.5, manual L1137-1143: low byte day 1-31, high month 1-12; low
+    byte minute 0-59, high hour 0-23): a valid pair is kept as `net_clock` (month, day, hour, minute);
+    an invalid one (month 0, day 0, ...) is counted in `bad_clock` and not taken (the manual does not
+    say what the inverter does with it)
   * Slave_Diag device block after the first trip: 09 + status flag, fault flags 1/2, multi-function
     output, high byte first
 """
@@ -87,6 +91,8 @@ class ToyoModel(ProfidriveModel):
         self.torque_out: float | None = None           # torque produced while torque controlled
         self.fan_failure = False
         self.comm_error = False
+        self.net_clock: tuple[int, int, int, int] | None = None     # J-14 = 1: (month, day, hour, minute)
+        self.bad_clock = 0
         self.had_exchange = False
         self.trip_log: list[int] = []                  # history words, newest first (max 6)
         self.recordings: list[list[tuple]] = []        # traceback recordings, newest first (max 4)
@@ -256,6 +262,8 @@ class ToyoModel(ProfidriveModel):
             self._mf_input2(w["mf_input2"], now)
         if "torque_ref" in w:
             self.torque_cmd = pd.to_signed16(w["torque_ref"]) * 100.0 / 5000
+        if "month_day" in w and "hour_minute" in w and self.values.get("J-14", 0) == 1:
+            self._clock(w["month_day"], w["hour_minute"])
         speed = w.get("speed_ref", 0)
         if self.mode == 0:
             self.apply_control(w.get("ctw", 0), speed, now)
@@ -264,6 +272,13 @@ class ToyoModel(ProfidriveModel):
         self.stw = self.status_word()
         words = [self._input_word(n) for n in tl.words("response", self._plch())]
         return pd.encode_area(lay, pd.PpoArea(resp, words), "response")
+
+    def _clock(self, month_day: int, hour_minute: int) -> None:
+        month, day, hour, minute = month_day >> 8, month_day & 0xFF, hour_minute >> 8, hour_minute & 0xFF
+        if 1 <= month <= 12 and 1 <= day <= 31 and hour <= 23 and minute <= 59:
+            self.net_clock = (month, day, hour, minute)
+        else:
+            self.bad_clock += 1
 
     def _mode1_ctw(self) -> int:
         rc = self.run_cmd

@@ -19,7 +19,7 @@ Package API (re-exported here; import the package, not its modules): make_drive,
 param_value, profidrive_config, fuji_config, parse_function_code, function_code_name,
 pcd_assignment, pcd_assignment_code, alarm_candidates, alarm_by_mcode, alarm_text, mcode_of,
 ppo_for_o30, o30_for_layout, comm_loss_action, comm_loss_text, FujiDrive, FujiConfig, CommLossAction,
-FORMATTERS (value texts by `format:`, fuji/formats.py).
+FORMATTERS (value texts by `format:`) and PARSERS (typed texts, o40 "041A"), fuji/formats.py.
 Modules: config.py (the profile's Fuji keys -> FujiConfig, the core's ProfidriveConfig), codes.py
 (function codes, PCD words, alarms, o30, o27), drive.py (FujiDrive), describe.py (decode_area).
 """
@@ -36,7 +36,7 @@ from profidrive_cli.drives.fuji.config import (FAMILY_PARAM_KEYS, FORMATS, FUJI_
                                                FujiConfig, fuji_config, parse_int_set,
                                                profidrive_config)
 from profidrive_cli.drives.fuji.describe import decode_area
-from profidrive_cli.drives.fuji.formats import FORMATTERS
+from profidrive_cli.drives.fuji.formats import FORMATTERS, PARSERS
 from profidrive_cli.drives.fuji.drive import FujiDrive, make_drive
 
 __all__ = ["FujiConfig", "FujiDrive", "make_drive", "decode_area", "param_value", "fuji_config",
@@ -44,4 +44,4 @@ __all__ = ["FujiConfig", "FujiDrive", "make_drive", "decode_area", "param_value"
            "pcd_assignment_code", "alarm_candidates", "alarm_by_mcode", "alarm_text", "ppo_for_o30",
            "o30_for_layout", "comm_loss_action", "comm_loss_text", "mcode_of", "CommLossAction",
            "parse_int_set", "FAMILY_PARAM_KEYS", "FORMATS", "STOP_ACTIONS", "FUJI_CTW_BITS",
-           "FUJI_STW_BITS", "FORMATTERS"]
+           "FUJI_STW_BITS", "FORMATTERS", "PARSERS"]

@@ -218,7 +218,10 @@ def profidrive_config(profile) -> pd.ProfidriveConfig:
     stw.update(FUJI_STW_BITS)
     cfg = pd.ProfidriveConfig(labels={"control": "CTW", "status": "STW", "reference": "MRV",
                                       "actual": "MAV"},
-                              ctw_names=ctw, stw_names=stw)
+                              ctw_names=ctw, stw_names=stw,
+                              # Table 8.5: "b8, b9 Not used", "b12 to b15 Not used" (G1 manual L2227,
+                              # L2230; PDP3 manual L5166)
+                              unused_ctw_bits=frozenset({8, 9, 12, 13, 14, 15}))
     cfg.array_pnus = frozenset({pd.PNU_PZD_SETPOINT, pd.PNU_PZD_ACTUAL, fc.history_pnu})
     cfg.pkw_timeout = 2.0
     # the manual gives no handshake; hold the request until answered, AK 0 between two identical

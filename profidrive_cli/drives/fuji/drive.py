@@ -140,22 +140,36 @@ class FujiDrive(pd.ProfidriveDrive):
 
     # -- storage -------------------------------------------------------------------------------
     def save(self, timeout: float = 15.0) -> None:
-        """OPC-PDP3: y97 = 2 copies the RAM data into EEPROM; y97 reads 1 when done."""
+        """OPC-PDP3: y97 = 2 copies the RAM data into EEPROM; y97 reads 1 when done (PDP3 manual
+        *6: "change the setting value to 2 ... if the value has returned to 1, data saving is
+        complete"). The drive's save mode is kept: y97 is read first and, when it was 0 (every
+        write to EEPROM), written back to 0 after the save, so later changes still reach the EEPROM."""
         s = self.fc.storage
         if s is None:
             raise DriveError(f"{self.profile.name}: PKW writes go straight to the inverter's memory; "
                              f"there is no separate save (y97 is an OPC-PDP3 feature)")
         code = s["param"]
+        found = int(self.read_param(code).raw)
         self.write_raw_code(code, s["save"])
         end = self.channel.now() + max(timeout, float(s.get("save_time_s", 5.0)) + 1.0)
         while True:
             if int(self.read_param(code).raw) == s["saved_reads"]:
+                if found == s["eeprom"]:
+                    self._restore_storage(code, found)
                 return
             if self.channel.now() > end:
                 raise DriveError(f"{code} did not return to {s['saved_reads']} within {timeout:g} s: "
                                  f"save not confirmed (do not switch off yet)")
             for _ in range(10):
                 self.cycle()
+
+    def _restore_storage(self, code: str, mode: int) -> None:
+        """y97 back to the mode found before the save (0: EEPROM), checked by reading it back."""
+        self.write_raw_code(code, mode)
+        now = int(self.read_param(code).raw)
+        if now != mode:
+            raise DriveError(f"saved, but {code} reads {now} after writing {mode} back: later changes "
+                             f"go to RAM only (write {code} = {mode})")
 
     def write_raw_code(self, code: str, raw: int) -> None:
         ref = self.resolve_param(code)

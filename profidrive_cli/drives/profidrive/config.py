@@ -29,6 +29,8 @@ class ProfidriveConfig:
     ctw_names: dict[int, str]
     stw_names: dict[int, str]
     held_ctw_bits: int = 0
+    #: control-word bits the card's manual marks "not used" (decoders name them so, never "jog")
+    unused_ctw_bits: frozenset[int] = frozenset()
     array_pnus: frozenset[int] = frozenset({PNU_PZD_SETPOINT, PNU_PZD_ACTUAL, PNU_FAULT_NUMBER})
     pzd_map: tuple[int, int] = (PNU_PZD_SETPOINT, PNU_PZD_ACTUAL)
     pkw_timeout: float = 2.0
@@ -71,7 +73,8 @@ class ProfidriveConfig:
                          f"{', '.join(labels)} with a text value")
             labels[k] = v
         ctw = dict(CTW_NAMES)
-        ctw.update(_bit_names(path, sec, "ctw_bits"))
+        own = _bit_names(path, sec, "ctw_bits")
+        ctw.update(own)
         stw = dict(STW_NAMES)
         stw.update(_bit_names(path, sec, "stw_bits"))
         ctw = {b: n for b, n in ctw.items() if n is not None}      # null = bit not used
@@ -82,7 +85,8 @@ class ProfidriveConfig:
         if held & DERIVED_BITS:
             raise _e(path, sec, "held_ctw_bits",
                      "held_ctw_bits cannot include bits 0-3, 7 or 10 (the state machine sets them)")
-        cfg = cls(labels=labels, ctw_names=ctw, stw_names=stw, held_ctw_bits=held)
+        cfg = cls(labels=labels, ctw_names=ctw, stw_names=stw, held_ctw_bits=held,
+                  unused_ctw_bits=frozenset(b for b, n in own.items() if n is None))
         if "array_pnus" in sec:
             cfg.array_pnus = frozenset(_int_list(path, sec, "array_pnus", 1, 0x7FF))
         pm = _map(path, sec, "pzd_map")

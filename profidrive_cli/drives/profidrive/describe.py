@@ -127,14 +127,16 @@ def _family_value(profile, p, raw: int):
 
 def describe_control_word(profile, ctw: int, cfg: ProfidriveConfig | None = None) -> dict:
     cfg = cfg or config(profile)
-    names = cfg.ctw_names
+    names = dict(cfg.ctw_names)
+    for b in cfg.unused_ctw_bits | ({8, 9} - set(names)):
+        names[b] = f"bit {b} (not used)"
     bits = []
     for b in range(16):
         on = bool(ctw >> b & 1)
         if b in names or on:
             bits.append({"bit": b, "set": on, "name": names.get(b, f"bit {b}")})
     zero = [CTW_ZERO_NAMES[b] for b in (0, 1, 2) if not ctw >> b & 1 and ctw & Ctw.CONTROL_BY_PLC]
-    command = command_from_control_word(ctw)
+    command = command_from_control_word(ctw, cfg.ctw_names, cfg.unused_ctw_bits)
     lab = cfg.labels["control"]
     text = (f"{lab} (control word) 0x{ctw:04X}: " + (", ".join(bit_list(ctw, names)) or "no bits set")
             + (f" [{', '.join(zero)} active]" if zero else "") + f" -> {command}")

@@ -203,8 +203,12 @@ def target_reached(status_word: int, target: "Target | str", moving: bool | None
     return False
 
 
-def command_from_control_word(ctw: int) -> str:
-    """A short description of what a control word asks for (for decoders)."""
+def command_from_control_word(ctw: int, names: dict[int, str] | None = None,
+                              unused: frozenset[int] = frozenset()) -> str:
+    """A short description of what a control word asks for (for decoders). Bits 8 and 9 are named
+    as the card names them (`names`, the profile's ctw_names: jog 1 / jog 2 in the PROFIdrive
+    profile, Moeller "inching 1"), and a set bit the card does not use (`unused`) as such."""
+    names = CTW_NAMES if names is None else names
     if not ctw & Ctw.CONTROL_BY_PLC:
         return "no control (bit 10 = 0: control word and reference ignored)"
     parts = []
@@ -223,8 +227,11 @@ def command_from_control_word(ctw: int) -> str:
         parts.append("operate without " + ", ".join(missing))
     if ctw & Ctw.FAULT_ACK:
         parts.append("fault acknowledge")
-    if ctw & Ctw.JOG1:
-        parts.append("jog 1")
-    if ctw & Ctw.JOG2:
-        parts.append("jog 2")
+    for b in (8, 9):
+        if ctw >> b & 1 and b not in unused and b in names:
+            parts.append(names[b])
+    off = [b for b in range(16) if ctw >> b & 1 and (b in unused or (b in (8, 9) and b not in names))]
+    if off:
+        parts.append(f"bit{'s' if len(off) > 1 else ''} {', '.join(map(str, off))} set "
+                     f"(not used by this card)")
     return "; ".join(parts)

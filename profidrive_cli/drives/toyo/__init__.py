@@ -31,7 +31,7 @@ decode_area; the core: profidrive_config, param_value), sim/toyo.py and users ne
 from profidrive_cli.drives.toyo.codec import (RECORDING_TEXT, bit_names, ctw_command, decode_history_word,
                                               decode_traceback_ind, history_word, protection, run_cmd_fields,
                                               speed_percent, speed_word, traceback_ind)
-from profidrive_cli.drives.toyo.config import ToyoConfig, ToyoLayout, profidrive_config, toyo_config
+from profidrive_cli.drives.toyo.config import ToyoConfig, ToyoLayout, input_words, profidrive_config, toyo_config
 from profidrive_cli.drives.toyo.describe import decode_area, decode_diag, describe_pkw, describe_word
 from profidrive_cli.drives.toyo.drive import ToyoDrive, make_drive
 from profidrive_cli.drives.toyo.formats import FORMATTERS
@@ -44,4 +44,4 @@ __all__ = ["ToyoConfig", "ToyoDrive", "make_drive", "decode_area", "param_value"
            "traceback_ind", "decode_traceback_ind", "decode_diag", "protection", "describe_pkw",
            "ctw_command", "run_cmd_fields", "value_from_wire", "wire_from_value", "ToyoLayout",
            "RECORDING_TEXT", "bit_names", "describe_word", "effective_scale", "param_at", "_toyo_frame",
-           "FORMATTERS"]
+           "FORMATTERS", "input_words"]

@@ -61,6 +61,13 @@ class ToyoConfig:
     traceback_points: int = 100
 
 
+def input_words(profile, layout: str) -> list[str]:
+    """The names of `layout`'s input words as the drive reads them (PLC registers with PLCH on)."""
+    tc = toyo_config(profile)
+    tl = tc.layouts[layout]
+    return list(tl.words("response", tc.plch or tl.plch))
+
+
 def _err(profile, node, key, msg) -> DataFileError:
     line = node.line_of(key) if isinstance(node, LineDict) else getattr(node, "line", None)
     return DataFileError(profile.path or "<profile>", line, msg)

@@ -8,6 +8,8 @@ params.
 
 from __future__ import annotations
 
+from datetime import datetime
+
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.base import DriveError, DriveStatus, FaultRecord, ParamError, ParamValue
 from profidrive_cli.drives.toyo.codec import (bit_names, decode_history_word, speed_percent, speed_word,
@@ -20,6 +22,13 @@ from profidrive_cli.drives.values import value_problem
 
 TORQUE_RES = 100.0 / 5000          # % of rated torque per count (spec §4.2: 5000 = rated torque)
 TORQUE_SELECT = 0x0002             # multi-function input 2 bit 1: speed/torque control select (Table 3.8)
+
+
+def date_words(now) -> dict[str, int]:
+    """The date/time words from a datetime (used by the VF66 when J-14 = 1; spec toyo-vf66-pbus66z.md
+    §4.5, manual L1137-1143): month/day = month << 8 | day (low byte day 1-31, high byte month 1-12),
+    hour/minute = hour << 8 | minute (low byte minute 0-59, high byte hour 0-23), binary."""
+    return {"month_day": now.month << 8 | now.day, "hour_minute": now.hour << 8 | now.minute}
 
 
 class ToyoDrive(pd.ProfidriveDrive):
@@ -40,6 +49,9 @@ class ToyoDrive(pd.ProfidriveDrive):
         self.words_out: dict[str, int] = {}
         self.jogging = False
         self._reset_pulse = 0
+        #: the host clock for the date/time words (tests replace it)
+        self.clock = datetime.now
+        self._dated = {"month_day", "hour_minute"} & set(self.tl.words("request", self.plch))
 
     # -- addressing ----------------------------------------------------------------------------
     def resolve_param(self, code: str) -> pd.ParamRef:
@@ -138,6 +150,8 @@ class ToyoDrive(pd.ProfidriveDrive):
         names = self.tl.words("request", self.plch)
         vals = {"ctw": ctw, "speed_ref": self.reference, "torque_ref": self.torque_ref,
                 "run_cmd": self.run_cmd | (0x20 if self._reset_pulse else 0), "mf_input2": self.mf_input2}
+        if self._dated:
+            vals.update(date_words(self.clock()))
         vals.update(self.words_out)
         return [vals.get(n, 0) & 0xFFFF for n in names]
 

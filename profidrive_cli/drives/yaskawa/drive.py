@@ -10,7 +10,7 @@ from __future__ import annotations
 from profidrive_cli import UsageError
 from profidrive_cli.drives.base import (Drive, DriveError, DriveStatus, FaultRecord, ParamError,
                                         ParamValue)
-from profidrive_cli.drives.torque import torque_counts
+from profidrive_cli.drives.torque import capability_refusal, torque_counts
 from profidrive_cli.drives.values import raw_value_problem, value_problem
 from profidrive_cli.drives.yaskawa.codec import (COMMAND_BITS, FORMATS, FrequencyScale, _s16, decode_status,
                                                  mfi_bit, pack_words, unpack_words)
@@ -199,7 +199,9 @@ class YaskawaDrive(Drive):
                 f"have one)")
 
     def torque_limit_support(self) -> str | None:
-        return self.torque_support()
+        # basic bytes 4-5 are a torque reference only (yaskawa-profibus-dp.md L412); the limit /
+        # compensation words are extended1's (L341-342): the profile's torque_limit capability says where
+        return self.torque_support() or capability_refusal(self.profile, "torque_limit", self.layout)
 
     def torque_resolution(self) -> float:
         return TORQUE_RES
