@@ -134,7 +134,7 @@ def test_pdp3_clear_mode_reads_o32_factory_0_keeps_running():
         res = run_commloss(s, 20.0, mode="clear")
     assert res.reaction.settings == {"o32": 0}
     assert res.outcome == "fail" and "o32 = 0" in res.verdict
-    assert res.verdict.startswith("FAIL: the drive is set to keep running without a master")
+    assert res.verdict.startswith("FAIL: the drive is set to keep running on all-zero outputs")
 
 
 def test_pdp3_clear_mode_o32_1_coasts_and_passes():

@@ -360,7 +360,9 @@ def _verdict(res: CommLossResult, st: DriveStatus, sample, late: tuple | None) -
         res.verdict = f"{outcome.upper()}: {text}"
 
     if reaction.stop == "none":
-        done("fail", "the drive is set to keep running without a master (" + reaction.words + ")" +
+        done("fail", "the drive is set to keep running " + ("without a master" if res.mode == "silence"
+                                                          else "on all-zero outputs (master in CLEAR)") +
+             " (" + reaction.words + ")" +
              (f"; it reported {what} anyway after {res.measured_s:.3f} s" if res.reacted else
               f"; it was still running at {sample.actual_hz} Hz {res.last_running_s:.3f} s after "
               f"the last telegram") + warn)
