@@ -82,7 +82,7 @@ class Limit:
         return self.watchdog_s + self.delay_s + self.stop_s + self.tolerance_s
 
     def words(self) -> str:
-        return (f"{self.total:.3f} s = watchdog {self.watchdog_s:.3f} + delay {self.delay_s:.3f} + "
+        return (f"{_down(self.total):.3f} s = watchdog {self.watchdog_s:.3f} + delay {self.delay_s:.3f} + "
                 f"stop {self.stop_s:.3f} + tolerance {self.tolerance_s:.3f}")
 
     def to_dict(self) -> dict:
@@ -132,6 +132,17 @@ class CommLossResult:
                 "fault_code": self.fault_code, "acknowledged": self.acknowledged,
                 "watchdog_expired": self.watchdog_expired, "back_s": _r(self.back_s),
                 "stop": _stop_json(self.stop), "counters": self.counters}
+
+
+def _up(x: float) -> float:
+    """To the millisecond, up (a "by then at the latest" figure stays one; float noise below 1 us
+    is ignored), so that the printed figures compare as the verdict does."""
+    return math.ceil(x * 1000.0 - 1e-3) / 1000.0
+
+
+def _down(x: float) -> float:
+    """To the millisecond, down (the limit, and a "still running at" figure)."""
+    return math.floor(x * 1000.0 + 1e-3) / 1000.0
 
 
 def _stop_json(stop: dict | None) -> dict | None:
@@ -228,7 +239,7 @@ def run_commloss(sess, hz: float, mode: str = "silence", timeout: float | None =
     else:
         limit = Limit(0.0, 0.0, stop_s, tol)
         hold = 0.0
-    expected = limit.total
+    expected = _down(limit.total)
     res = CommLossResult(sess.address, mode, hz, sess.watchdog_ms, reaction, expected, hold, limit)
     emit({"event": "reaction", "station": sess.address, "words": reaction.words,
           "settings": reaction.settings, "warnings": list(reaction.warnings),
@@ -273,7 +284,7 @@ def run_commloss(sess, hz: float, mode: str = "silence", timeout: float | None =
             now = sess.channel.now()
             due = now if prev is None else max(now, prev + period)
             # the two looks at the limit: one back by it, one going out at it
-            for at in ((expected - rtt,) if rtt is not None else ()) + (expected,):
+            for at in ((expected - rtt - 0.001,) if rtt is not None else ()) + (expected,):
                 if now < t_last + at < due:
                     due = t_last + at
                     break
@@ -291,14 +302,14 @@ def run_commloss(sess, hz: float, mode: str = "silence", timeout: float | None =
                 rtt = back - sent if rtt is None else min(rtt, back - sent)
             if res.watchdog_expired is None and mode == "silence":
                 res.watchdog_expired = sess.counters.get("reparams", 0) > reparams_before
-                res.back_s = back - t_last
+                res.back_s = _up(back - t_last)
                 emit({"event": "back", "t_s": round(sample.t, 3),
                       "after_s": round(now - t_last, 3), "watchdog_expired": res.watchdog_expired})
             if _reacted(st):
                 res.reacted = True
-                res.measured_s = back - t_last
+                res.measured_s = _up(back - t_last)
                 break
-            res.last_running_s = sent - t_last
+            res.last_running_s = _down(sent - t_last)
             if late_seen is None and res.last_running_s >= expected:
                 late_seen = (res.last_running_s, sample.actual_hz)
             if now - t_last > watch or (reaction.stop == "none" and late_seen is not None):
@@ -381,7 +392,7 @@ def _verdict(res: CommLossResult, st: DriveStatus, sample, late: tuple | None) -
     if not res.reacted:              # the watch ended before a look at the limit (cannot happen)
         done("fail", f"no stop or trip seen ({limit})" + warn)
         return
-    if res.measured_s <= lim + 1e-9:
+    if res.measured_s <= lim:
         done("pass", f"{what}{code} within {res.measured_s:.3f} s of the last telegram (a look that "
              f"came back then saw it); {limit}")
         return
