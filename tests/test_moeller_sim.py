@@ -338,7 +338,7 @@ def test_seed_faults_and_trip_records(prof):
     drive.cycles_until(lambda s: s.flags["at setpoint"], 10, "speed")
     model.trip("E07", ch.now())
     assert drive.read_param("d080").value == 1
-    assert drive.read_param("PNU354").value == 1
+    assert drive.read_param("PNU354").value == 0         # 00..05 (manual L1116): 00 = record 1 (d081)
     assert drive.read_param("d081").raw == 7
     assert drive.read_param("PNU356").value == 25.0        # frequency at the trip
     drive.reset_fault()

@@ -54,7 +54,7 @@ NAME_FIX = {
     348: "Zero adjustment of analogue input terminal, 1st of 3 (terminal name lost in the manual)",
     349: "Zero adjustment of analogue input terminal, 2nd of 3 (terminal name lost in the manual)",
     350: "Zero adjustment of analogue input terminal, 3rd of 3 (terminal name lost in the manual)",
-    354: "Pointer to the latest trip record (1..6)",
+    354: "Pointer to the latest trip record (00..05: 00 = record 1, assumed)",
 }
 
 # our notes on rows the manual prints oddly

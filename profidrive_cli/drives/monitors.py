@@ -12,7 +12,8 @@ parameter, or a family address form such as Toyo's TB03[0,99]).
         dc-voltage: dc_voltage           # same value and scaling): read from that word there, through
                                          # the parameter channel elsewhere (Toyo PPO2/4/5, mode 1)
     trip_records:
-      latest: PNU354                     # optional: which record is the newest (1-based)
+      latest: PNU354                     # optional: which record is the newest
+      latest_first: 0                    # optional: the value it shows for record 1 (default 1)
       empty: zero                        # zero: a record whose first field reads 0 is empty;
                                          # error: the first refused read ends the list
       records:                           # one list of codes per record, the first names the trip
@@ -55,6 +56,7 @@ class TripRecordConfig:
     records: list[TripRecordSpec]
     latest: str | None = None
     empty: str = "zero"
+    latest_first: int = 1
 
 
 def _line(node, key=None) -> int | None:
@@ -128,7 +130,7 @@ def trip_record_config(profile) -> TripRecordConfig | None:
     if not isinstance(doc, dict):
         raise DataFileError(profile.path, where, "'trip_records' must be a mapping")
     for k in doc:
-        if k not in ("latest", "empty", "records"):
+        if k not in ("latest", "latest_first", "empty", "records"):
             raise DataFileError(profile.path, _line(doc, k), f"trip_records: unknown key '{k}'")
     empty = doc.get("empty", "zero")
     if empty not in ("zero", "error"):
@@ -143,4 +145,7 @@ def trip_record_config(profile) -> TripRecordConfig | None:
             raise DataFileError(profile.path, line, "trip record: {position: TEXT, fields: [CODE, ...]}")
         out.append(TripRecordSpec(str(r.get("position", i + 1)), _codes(profile, r, "fields", r["fields"])))
     latest = doc.get("latest")
-    return TripRecordConfig(out, str(latest) if latest is not None else None, empty)
+    first = doc.get("latest_first", 1)
+    if first not in (0, 1):
+        raise DataFileError(profile.path, _line(doc, "latest_first"), "trip_records.latest_first: 0 or 1")
+    return TripRecordConfig(out, str(latest) if latest is not None else None, empty, first)

@@ -311,7 +311,7 @@ def trip_records(sess) -> TripRecords:
                                       f"not readable")
     out = TripRecords(True)
     if cfg.latest:
-        out.latest = int(sess.read_param(cfg.latest).raw)
+        out.latest = int(sess.read_param(cfg.latest).raw) - cfg.latest_first + 1
     for spec in cfg.records:
         fields = []
         for j, code in enumerate(spec.fields):

@@ -20,7 +20,9 @@ Dialect on top of sim/profidrive_model.py:
     only the PPO that o30 selects (a mismatch is the ERR LED: Chk_Cfg refused)
   * communication loss (DP watchdog, after at least one data exchange) per o27/o28 for a drive in
     operation: coast or F08 ramp, at once or after o28, forgotten when the link returns within o28
-    where o27 says so, then Er5
+    where o27 says so, then Er5; none with y98 = 0 (OPC-PDP3 manual L3783-3789) or with H81 != 0
+    (er5 a light alarm, manual L6557-6559: which bit is er5's is not in the card manuals, so any);
+    loss_lag_s (tests) makes a delayed reaction late
   * OPC-PDP3: y97 (0 EEPROM, 1 RAM, 2 save -> reads 1 when done, 1 s here), o32 all-zero output data
   * y97 and the EEPROM (PDP3 manual 000_59efe766ba1d441f.txt L4325-4333, *6): `eeprom` holds what
     survives `power_cycle()`. A PKW write with y97 = 0 (or on the G1, which has no y97) is stored there
@@ -69,6 +71,8 @@ class FujiModel(ProfidriveModel):
         self._loss_action: fj.CommLossAction | None = None
         self._forced_stop = False       # o27 ramp stop in progress: ignore the bus, trip when stopped
         self.last_ctw_in = 0
+        #: tests: a card that reacts this much later than o28 says (o27 = 1, 2, 11, 12)
+        self.loss_lag_s = 0.0
         m = self.profile.param("M16")
         self._m_pnu = m.pnu if m is not None else None
         self.motor = Motor()
@@ -301,7 +305,7 @@ class FujiModel(ProfidriveModel):
         act = self._loss_action
         if act is None or not act.delayed or self.comm_lost_at is None or self._forced_stop:
             return None
-        return self.comm_lost_at + float(self.param_value(self.fc.comm_loss_timer))
+        return self.comm_lost_at + float(self.param_value(self.fc.comm_loss_timer)) + self.loss_lag_s
 
     def _tick_to(self, now: float) -> None:
         self._now = now
@@ -353,6 +357,8 @@ class FujiModel(ProfidriveModel):
             return          # Er5 needs a break after at least one good exchange
         if self.state not in (State.S4, State.S5):
             return          # see decisions: the sim applies o27 to a drive in operation only
+        if self._y98() == 0 or self.values.get("H81", 0):
+            return          # no er5 with y98 = 0; er5 a light alarm (H81, see decisions): keep running
         o27 = self.values.get(self.fc.comm_loss_param, 0)
         act = fj.comm_loss_action(self.profile, o27)
         if act.stop == "none":
@@ -382,7 +388,7 @@ class FujiModel(ProfidriveModel):
                 self.trip(self.fc.comm_loss_alarm, now)
             return
         if act.delayed and self.comm_lost_at is not None:
-            delay = float(self.param_value(self.fc.comm_loss_timer))
+            delay = float(self.param_value(self.fc.comm_loss_timer)) + self.loss_lag_s
             if now - self.comm_lost_at >= delay - 1e-9:
                 if act.recover and self.link_up:
                     self._loss_action, self.comm_lost_at = None, None

@@ -11,7 +11,8 @@ Dialect on top of the generic PROFIdrive model:
   * ZSW bit 8 (at set-point) also when stopped (manual example 0x0331); bit 10 when |f| >= C042 > 0
   * parameters as 1/2/4-octet wire values (profile `bytes`), R/WOS refused with error 17 while running
   * communication loss: P002 = 0 trips E70 (only a running drive), 1 keeps running
-  * trips count d080 (PNU 352) and fill the trip records d081..d086 (PNU 354 points at the latest)
+  * trips count d080 (PNU 352) and fill the trip records d081..d086 (PNU 354, 00..05, points at the
+    latest: 00 = record 1)
     with the frequency, current and DC-link voltage at the trip
   * monitors d001 (frequency), d002 (current), d013 (voltage), d012 (torque) follow the motor
     (sim/motor.py: current with load and acceleration, voltage with frequency)
@@ -48,6 +49,7 @@ class MoellerModel(ProfidriveModel):
         self.device = dev
         self.dc_bus_voltage = 560.0 if dev == "DF6" else 540.0
         self.run_seconds = 0.0
+        self.records_written = 0        # trip records filled since power-up
         self.motor = Motor(dc_v=self.dc_bus_voltage)
 
     # -- control source ----------------------------------------------------------------------
@@ -143,9 +145,12 @@ class MoellerModel(ProfidriveModel):
             self.values["d080"] = min(0xFFFF, self.values["d080"] + 1)
         if not par("PNU354"):
             return
-        k = self.values["PNU354"] % 6 + 1            # trip record 1..6, round robin
+        # the pointer runs 00..05 (manual L1116); 00 is taken as trip record 1 (d081), round robin;
+        # the first trip goes to record 1
+        k = (self.values["PNU354"] + 1) % 6 if self.records_written else 0
+        self.records_written += 1
         self.values["PNU354"] = k
-        base = 355 + 6 * (k - 1)
+        base = 355 + 6 * k
         freq = abs(self.last_trip[1]) if self.last_trip else 0.0
         cur = self.motor.current_a(self.max_frequency())     # the motor as at the last tick
         fields = [number, freq, round(cur, 1), round(self.motor.dc_link_v(), 1), int(self.run_seconds), int(now)]

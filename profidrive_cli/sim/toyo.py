@@ -25,6 +25,8 @@
     677-698 computed from the drive, traceback 700-715 (four recordings of 100 samples, taken at trips),
     fault history 720 (six entries: protection code | inverter mode << 8 | block << 12)
   * multi-function input 2 bits 3-10 (external faults) trip EXT1-4 on a rising edge (C-00 = 1)
+  * C-00 = 0 (the manual's factory value; bus_control seeds 1) or the PLC in use: OFF2 and OFF3 act as
+    a normal stop (Table 3.5 notes 1 and 2, src L2769-2773)
   * communication loss (DP watchdog) while in operation: protection 18 (COMM), run bits forced off;
     comm_loss="ignore" (sim only, the manual names no setting) keeps it running
   * fan failure (26) is a warning: ZSW bit 7, fault flag 2 bit 9, multi-function output bit 15
@@ -168,6 +170,9 @@ class ToyoModel(ProfidriveModel):
         eff = self.effective_control_word(ctw)
         if eff is None:
             return
+        off23 = int(Ctw.NO_OFF2 | Ctw.NO_OFF3)
+        if (eff & off23) != off23 and (self._v("C-00") != 1 or self._plch()):
+            eff = (eff | off23) & ~int(Ctw.ON)    # C-00 = 0 or PLC: OFF2 / OFF3 = a normal stop
         prev, self.ctw_eff = self.ctw_eff, eff
         self._transition(eff, prev, now)
 

@@ -16,6 +16,7 @@ What it does:
 - the manual's error replies: 01 bad function, 02 unknown register, 03 bad data quantity,
   21 out of range, 22 read-only / running (for stop-only parameters) / ENTER while running / while
   storing;
+- Global_Control Clear: outputs of zero (no run command: the drive stops by b1-03), no BUS fault;
 - BUS fault when the master stops talking (on_leave_data_exchange, or no Data_Exchange for
   comm_timeout s) while b1-01 or b1-02 = 3, stopping per F6-01 (0 ramp with C1-02 and BUS at 0 Hz,
   1 coast and BUS (factory), 2 fast stop with C1-09 and BUS at 0 Hz, 3 alarm only: keeps running on
@@ -220,6 +221,13 @@ class YaskawaModel(SlaveModel):
             self._loss_stop = "C1-09" if f601 == 2 else "C1-02"    # ramp, BUS once at 0 Hz
         else:
             self.trip("BUS", now)
+
+    def clear_outputs(self, now: float) -> None:
+        """Global_Control Clear: the outputs read as zero (Fail_Safe 0, spec: "In the master's CLEAR
+        state the slave receives outputs set to 0"): no run command, so the drive stops by b1-03;
+        the link stays up, so no BUS fault."""
+        self._apply_command(0, now)
+        self._ref_raw = 0
 
     def _f601(self) -> int:
         p = self.profile.param("F6-01")

@@ -1,13 +1,14 @@
 """Step type `comm_loss`: the comm-loss acceptance test (session/commloss.py) on the station.
 
-    - comm_loss: {hz: 20, mode: silence, timeout: 5, ack: false}
+    - comm_loss: {hz: 20, mode: silence, timeout: 5, tolerance: 0.35, start_timeout: 30, ack: false}
     - comm_loss: 20                      # shorthand: hz
 
 Runs the drive at hz, breaks the link (silence: the master goes quiet; clear: Global_Control
-Clear_Data), measures the reaction and passes when the drive stops or trips within the bound from the
-watchdog and its configured reaction; a drive set to keep running without a master fails. The drive is
-left stopped; the fault is acknowledged only with ack: true. Needs the station's parameter channel
-(the configured reaction is read from the drive).
+Clear_Data), measures the reaction and passes only when a look that came back by the limit (watchdog +
+configured delay + stop time + tolerance) saw the drive stopped or tripped; a drive set to keep running
+without a master, or seen running at or after the limit, fails, and a result the figures cannot decide
+(INCONCLUSIVE) fails the step too. The drive is left stopped; the fault is acknowledged only with
+ack: true. Needs the station's parameter channel (the configured reaction is read from the drive).
 """
 
 from __future__ import annotations
@@ -23,20 +24,23 @@ class CommLoss(StepType):
     name = "comm_loss"
 
     def validate(self, check, st, rs, body, state):
-        d = check.fields(rs, body, ("hz", "mode", "timeout", "ack"), "hz")
+        d = check.fields(rs, body, ("hz", "mode", "timeout", "tolerance", "start_timeout", "ack"), "hz")
         w = f"step {rs.index} (comm_loss)"
         hz = check.num(rs, d, "hz", default=20.0, positive=True)
         mode = d.get("mode", "silence")
         if mode not in MODES:
             check.fail(d.line_of("mode"), f"{w}: mode must be silence or clear, got {mode!r}")
         timeout = check.num(rs, d, "timeout", positive=True)
+        tolerance = check.num(rs, d, "tolerance", minimum=0.0)
+        start_timeout = check.num(rs, d, "start_timeout", positive=True)
         ack = d.get("ack", False)
         if not isinstance(ack, bool):
             check.fail(d.line_of("ack"), f"{w}: 'ack' must be true or false, got {ack!r}")
         if mode == "silence" and st.profile.family != "toyo":     # Toyo's reaction is fixed
             check.need_param_channel(st, rs)
         state["running"] = False          # the step leaves the drive stopped
-        return ({"hz": hz, "mode": mode, "timeout": timeout, "ack": ack},
+        return ({"hz": hz, "mode": mode, "timeout": timeout, "tolerance": tolerance,
+                 "start_timeout": start_timeout, "ack": ack},
                 f"comm-loss test at {fmt(hz)} Hz ({mode})" + (", acknowledge the fault" if ack else ""))
 
     def execute(self, run, sr, r, d, h):
@@ -45,11 +49,12 @@ class CommLoss(StepType):
         if h is None or h.session is None:
             raise PdriveError("comm_loss needs a drive session")
         run.progress(sr, r, f"running at {fmt(a['hz'])} Hz, then breaking the link ({a['mode']})")
-        res = run_commloss(h.session, float(a["hz"]), a["mode"], timeout=a["timeout"], ack=a["ack"])
+        res = run_commloss(h.session, float(a["hz"]), a["mode"], timeout=a["timeout"], ack=a["ack"],
+                           tolerance=a.get("tolerance"), start_timeout=a.get("start_timeout"))
         doc = res.to_dict()
         doc.pop("event", None)
-        r.expected = {"within_s": doc["expected_s"], "reaction": res.reaction.words,
-                      "watchdog_s": res.watchdog_ms / 1000.0}
+        r.expected = {"within_s": doc["expected_s"], "limit": doc["limit"],
+                      "reaction": res.reaction.words, "watchdog_s": res.watchdog_ms / 1000.0}
         r.measured = doc
         if not res.passed:
             raise StepFailed(res.verdict)
