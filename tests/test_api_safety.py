@@ -204,6 +204,21 @@ def test_leaving_the_with_sends_every_stop_command_in_the_same_cycle():
     assert d3.session.stop_report.how == d4.session.stop_report.how == "normal"
 
 
+def test_a_failure_of_the_stop_together_still_stops_every_drive_one_by_one(monkeypatch):
+    import profidrive_cli.session.multirun as multirun
+
+    def broken(*a, **k):
+        raise RuntimeError("a bug in the group stop")
+    monkeypatch.setattr(multirun, "stop_together", broken)
+    with pytest.raises(RuntimeError, match="a bug in the group stop"):
+        with pdrive.open_bus(SIM) as bus:
+            d3, d4 = bus.drive(3), bus.drive(4)
+            d3.run(hz=30, wait=True, timeout=30)
+            d4.run(hz=30, wait=True, timeout=30)
+    assert _model(bus, 3).freq == 0.0 and _model(bus, 4).freq == 0.0
+    assert d3.session.stop_report.stopped and d4.session.stop_report.stopped
+
+
 # -- a bus never closed ----------------------------------------------------------------------------
 
 @pytest.mark.parametrize("ending", ["", "raise RuntimeError('the rig script failed')\n"])

@@ -61,8 +61,10 @@ def open_bus(port: str | None = None, *, baud: str | int | None = None,
     master_address as the CLI's --baud / --master-address (default: PDRIVE_BAUD, the config file,
     19200 and 2). The API never asks: on a real port, anything that moves a drive or writes a
     setting needs allow_real_port_writes=True (sim:// is always allowed). Use it as a context
-    manager (or call close()): every drive it started is stopped on the way out. on_message(text):
-    warnings and what the safe stop did, one line each (also kept in Drive.warnings). env: the
+    manager (or call close()): every drive it started is stopped on the way out (a bus never
+    closed: at interpreter exit, with a ResourceWarning). on_message(text): warnings and what the
+    safe stop did, one line each (also kept in Drive.warnings); what it raises is raised after the
+    call (after the stop), never inside it. env: the
     environment read for PDRIVE_PORT, PDRIVE_BAUD, PDRIVE_CONFIG and PDRIVE_STATION (default
     os.environ)."""
     from profidrive_cli.config import resolve
@@ -241,7 +243,11 @@ class Bus:
         first: BaseException | None = None
         try:
             with self._lock:
-                close_exc = self._stop_together(exc) or exc
+                close_exc = exc
+                try:
+                    close_exc = self._stop_together(exc) or exc
+                except BaseException as e:          # noqa: BLE001  (each drive's own stop next)
+                    first = e
                 while self._drives:
                     # out of the keep-alive before its stop and release (the others stay kept)
                     _, drive = self._drives.popitem()
