@@ -174,7 +174,7 @@ class Bus:
             return
         started = sorted(a for a, d in self._drives.items() if d.session.may_run)
         warnings.warn(f"pdrive: the bus on {self.port} was never closed; pdrive stops "
-                      f"{'its drives ' + ', '.join(map(str, started)) if started else 'it'} {when} "
+                      f"{'the drives it started (' + ', '.join(map(str, started)) + ')' if started else 'it'} {when} "
                       f"(use `with open_bus(...)` or bus.close())", ResourceWarning, source=self)
         self.close()
 
