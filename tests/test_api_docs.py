@@ -69,3 +69,10 @@ def test_the_examples_print_what_the_comments_say(capsys):
     assert "fuji-opc-g1-pdp 0xFD01" in out
     m = re.search(r"^(-?\d+\.\d) Hz, S4 operation$", out, re.M)
     assert m and abs(float(m.group(1)) - 30.0) <= 0.3, out       # within 1 % of 30 Hz
+
+
+def test_the_failing_callback_example_stops_both_drives(capsys):
+    # the example's comments: the callback's error comes out after the stop, both drives stopped
+    [(line, code)] = [(n, c) for n, c in BLOCKS if "the display is gone" in c]
+    exec(compile(_virtual(code), f"docs/api.md:{line}", "exec"), {})
+    assert capsys.readouterr().out == "the display is gone\nTrue True\n"

@@ -5,13 +5,24 @@ Thread model: every public call holds the bus lock for its whole duration; the k
 takes the same lock, so the master is only ever used by one thread at a time. While a call talks
 to one station, every other opened station still gets a Data_Exchange at least every KEEP_S
 seconds (a hook on each drive's channel); while nobody calls, the keep-alive thread sends them.
+
+The stop on close (bus.close(), leaving the `with`): the stop command of every started drive in one
+bus cycle and one bounded wait for all together (session/groupcycle.py and multirun.stop_together,
+as `pdrive run 3,4,5`), a coast stop for each one not stopped in its time. A bus never closed is
+closed at interpreter exit (atexit; also when the script ends with an exception) or when it is
+garbage collected, with a ResourceWarning. An exception raised by on_message is recorded and
+raised after the call (after the stop, on close), never from inside a cycle or the stop.
 """
 
 from __future__ import annotations
 
+import atexit
+import contextlib
 import threading
 import os
-from typing import TYPE_CHECKING, Any, Callable, Mapping
+import warnings
+import weakref
+from typing import TYPE_CHECKING, Any, Callable, Iterator, Mapping
 
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.api.results import Station
@@ -22,6 +33,21 @@ if TYPE_CHECKING:                                   # pragma: no cover
 #: at most this long between two Data_Exchanges of an opened station (well inside the 500 ms
 #: default DP watchdog; a shorter watchdog shortens it to a fifth of the watchdog)
 KEEP_S = 0.1
+
+#: every bus not yet closed (weakly: a closed or dropped bus is not kept alive by this)
+_open_buses: "weakref.WeakSet[Bus]" = weakref.WeakSet()
+#: the master (so the port) of every bus not yet closed, held strongly: when a dropped bus is
+#: collected, its port is not collected with it (closed by its own finalizer first), so the stop
+#: can still be sent. id(bus) -> master
+_masters: dict[int, Any] = {}
+
+
+@atexit.register
+def _close_at_exit() -> None:
+    """At interpreter exit (also after an uncaught exception): every bus still open is closed, so its
+    drives are stopped, with a ResourceWarning that the script did not close it."""
+    for bus in list(_open_buses):
+        bus._close_unclosed("at interpreter exit")
 
 
 def open_bus(port: str | None = None, *, baud: str | int | None = None,
@@ -35,8 +61,10 @@ def open_bus(port: str | None = None, *, baud: str | int | None = None,
     master_address as the CLI's --baud / --master-address (default: PDRIVE_BAUD, the config file,
     19200 and 2). The API never asks: on a real port, anything that moves a drive or writes a
     setting needs allow_real_port_writes=True (sim:// is always allowed). Use it as a context
-    manager (or call close()): every drive it started is stopped on the way out. on_message(text):
-    warnings and what the safe stop did, one line each (also kept in Drive.warnings). env: the
+    manager (or call close()): every drive it started is stopped on the way out (a bus never
+    closed: at interpreter exit, with a ResourceWarning). on_message(text): warnings and what the
+    safe stop did, one line each (also kept in Drive.warnings); what it raises is raised after the
+    call (after the stop), never inside it. env: the
     environment read for PDRIVE_PORT, PDRIVE_BAUD, PDRIVE_CONFIG and PDRIVE_STATION (default
     os.environ)."""
     from profidrive_cli.config import resolve
@@ -121,11 +149,62 @@ class Bus:
         self._drives: dict[int, "Drive"] = {}
         self._last: dict[int, float] = {}
         self._closed = False
+        #: exceptions raised by on_message, raised after the call (after the stop on close)
+        self._callback_errors: list[BaseException] = []
+        #: the bus cycle of the stop on close (the keep-alive hooks stand aside meanwhile)
+        self._group = None
         self._signals = SignalGuard(handle_signals)
         self._signals.install()
         self._stop_keepalive = threading.Event()
         self._keepalive_error: BaseException | None = None
         self._thread: threading.Thread | None = None
+        _open_buses.add(self)
+        _masters[id(self)] = master
+
+    def __del__(self) -> None:
+        if getattr(self, "_closed", True):
+            return
+        try:
+            self._close_unclosed("when it was garbage collected")
+        except BaseException:               # noqa: BLE001  (never from __del__)
+            pass
+
+    def _close_unclosed(self, when: str) -> None:
+        if self._closed:
+            return
+        started = sorted(a for a, d in self._drives.items() if d.session.may_run)
+        warnings.warn(f"pdrive: the bus on {self.port} was never closed; pdrive stops "
+                      f"{'the drives it started (' + ', '.join(map(str, started)) + ')' if started else 'it'} {when} "
+                      f"(use `with open_bus(...)` or bus.close())", ResourceWarning, source=self)
+        self.close()
+
+    # -- callbacks -----------------------------------------------------------------------------
+    def _message(self, text: str) -> None:
+        """on_message(text); what it raises is kept for after the call (never inside a stop)."""
+        if self.on_message is None:
+            return
+        try:
+            self.on_message(text)
+        except BaseException as e:          # noqa: BLE001  (reported after the call / the stop)
+            self._callback_errors.append(e)
+
+    def _raise_callback_error(self, exc: BaseException | None = None) -> None:
+        """The first exception on_message raised: raised now, or, when `exc` already ends the work,
+        noted on it."""
+        if not self._callback_errors:
+            return
+        e, self._callback_errors = self._callback_errors[0], []
+        if exc is None:
+            raise e
+        if hasattr(exc, "add_note"):
+            exc.add_note(f"on_message raised {type(e).__name__}: {e} (after the stop)")
+
+    @contextlib.contextmanager
+    def _call(self) -> Iterator[None]:
+        """A public call: the bus lock for its whole duration; an on_message error after it."""
+        with self._lock:
+            yield
+            self._raise_callback_error()
 
     # -- context manager ------------------------------------------------------------------------
     def __enter__(self) -> "Bus":
@@ -148,28 +227,95 @@ class Bus:
         return self._closed
 
     def close(self, exc: BaseException | None = None) -> None:
-        """Stop every drive this bus started (normal stop, coast if it does not stop; bounded),
-        release every station, close the port. Idempotent. `exc`: the exception that ends the
-        work, if any (the line is flushed first)."""
+        """Stop every drive this bus started (the stop command of all in one bus cycle, one
+        bounded wait for all together, coast for each one not stopped in its time), release every
+        station, close the port. Idempotent. `exc`: the exception that ends the work, if any (the
+        line is flushed first). Raises, after all that, the first error of a drive's close or of
+        on_message (when `exc` is None)."""
         if self._closed:
             return
         self._closed = True
+        _open_buses.discard(self)
         self._stop_keepalive.set()
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(timeout=5.0)
         self._signals.guard()
+        first: BaseException | None = None
         try:
             with self._lock:
+                close_exc = exc
+                try:
+                    close_exc = self._stop_together(exc) or exc
+                except BaseException as e:          # noqa: BLE001  (each drive's own stop next)
+                    first = e
                 while self._drives:
                     # out of the keep-alive before its stop and release (the others stay kept)
                     _, drive = self._drives.popitem()
-                    drive._close(exc)
+                    try:
+                        drive._close(close_exc)
+                    except BaseException as e:      # noqa: BLE001  (the others still need theirs)
+                        first = first or e
         finally:
             try:
                 self.master.link.close()
             except Exception:
                 pass
+            _masters.pop(id(self), None)
             self._signals.restore()
+        if first is not None and exc is None:
+            raise first
+        self._raise_callback_error(exc)
+
+    def _stop_together(self, exc: BaseException | None) -> BaseException | None:
+        """The stop of every drive that may run, together (see the module doc); each session's
+        stop_report is set. Returns the LinkLost that ended it, if one did (the sessions' close
+        then says what the watchdog will do); a drive not confirmed stopped here gets its own
+        safe stop in its session's close."""
+        import time
+        from profidrive_cli.link.base import LinkLost
+        from profidrive_cli.session.groupcycle import GroupCycle
+        from profidrive_cli.session.multirun import attach, group_rate, stop_together
+        if isinstance(exc, LinkLost):
+            return None
+        sessions = [d.session for d in self._drives.values() if d.session.channel is not None]
+        running = [s for s in sessions if s.may_run and not s.link_lost and s.drive is not None]
+        if not running:
+            return None
+        if exc is not None:
+            # an interrupted request may have left a reply on the line: start clean
+            try:
+                time.sleep(min(0.05, self.master.params.reply_timeout(64)))
+                self.master.link.flush_input()
+            except Exception:               # noqa: BLE001
+                pass
+        rate = min([group_rate(self.master, sessions)[0]] + [s.cycle_hz for s in sessions if s.cycle_hz])
+        self._group = GroupCycle(self.master, 1.0 / rate if rate > 0 else 0.0)
+        for s in sessions:
+            attach(self._group, s)
+
+        def hurry() -> bool:
+            h, self._signals.hurry = self._signals.hurry, False
+            return h
+        try:
+            stop_together([(s.address, s, _speed_percent(s)) for s in running], self._group, hurry)
+            self._group.finish()
+        except LinkLost as e:
+            for s in running:
+                s.link_lost = True
+            return e
+        except BusError as e:
+            self._message(f"stop: {e}; each drive not yet stopped gets its own stop")
+        for s in running:
+            r = s.stop_report
+            if r is None or not r.stopped:
+                continue
+            if r.how == "normal":
+                s._say(f"station {s.address}: stopped (normal stop, {r.seconds:.1f} s)"
+                       if not (r.status and r.status.fault) else f"station {s.address}: {r.message}")
+            else:
+                s._say(f"station {s.address}: stopped by a coast stop after {r.seconds:.1f} s "
+                       f"({r.message})")
+        return None
 
     # -- checks ------------------------------------------------------------------------------------
     def _check_open(self) -> None:
@@ -193,7 +339,7 @@ class Bus:
         from profidrive_cli.drives.profile import profile_for_ident
         if not 0 <= first <= last <= 126:
             raise UsageError(f"scan: range {first}..{last} is not within 0..126")
-        with self._lock:
+        with self._call():
             self._check_open()
             out = []
             opened = set(self._drives)
@@ -222,7 +368,7 @@ class Bus:
         The same station twice: the same Drive."""
         from profidrive_cli.api.drive import Drive
         from profidrive_cli.session import DriveSession
-        with self._lock:
+        with self._call():
             self._check_open()
             if station is not None and (isinstance(station, bool) or not isinstance(station, int)
                                         or not 0 <= station <= 125):
@@ -237,7 +383,7 @@ class Bus:
             sess = DriveSession(self.master, station, profile=profile or defaults.get("profile"),
                                 layout=layout, ppo=ppo, watchdog_ms=watchdog_ms,
                                 cycle_hz=cycle_hz, stop_timeout=stop_timeout, close_link=False,
-                                handle_signals=False, on_message=self.on_message, env=self.env)
+                                handle_signals=False, on_message=self._message, env=self.env)
             sess.signals = _SharedSignals(self._signals)
             try:
                 sess.open()
@@ -266,6 +412,8 @@ class Bus:
     def _exchanged(self, address: int, t: float) -> None:
         """After a Data_Exchange with `address`: the other opened stations that are due get one."""
         self._last[address] = t
+        if self._group is not None:
+            return                          # the stop's bus cycle exchanges every station
         self._keep_others(address)
 
     def _keep_others(self, busy: int | None) -> None:
@@ -295,21 +443,36 @@ class Bus:
     def _start_keepalive(self) -> None:
         if self._thread is not None:
             return
-        self._thread = threading.Thread(target=self._keepalive, name="pdrive-keepalive", daemon=True)
+        # the thread holds the bus weakly: a bus the script drops is closed (and warned about)
+        self._thread = threading.Thread(target=_keepalive, args=(weakref.ref(self),
+                                                                  self._stop_keepalive),
+                                        name="pdrive-keepalive", daemon=True)
         self._thread.start()
 
-    def _keepalive(self) -> None:
-        period = KEEP_S / 2
-        while not self._stop_keepalive.wait(period):
-            if not self._lock.acquire(timeout=0.05):
-                continue                     # a call is talking to the bus (and keeps the others)
-            try:
-                if self._closed:
-                    return
-                period = self._keep_s() / 2
-                self._keep_others(None)
-            except BaseException as e:      # noqa: BLE001  (reported at the next call)
-                self._keepalive_error = e
+
+def _keepalive(ref: "weakref.ref[Bus]", stop: threading.Event) -> None:
+    period = KEEP_S / 2
+    while not stop.wait(period):
+        bus = ref()
+        if bus is None:
+            return
+        if not bus._lock.acquire(timeout=0.05):
+            continue                         # a call is talking to the bus (and keeps the others)
+        try:
+            if bus._closed:
                 return
-            finally:
-                self._lock.release()
+            period = bus._keep_s() / 2
+            bus._keep_others(None)
+        except BaseException as e:          # noqa: BLE001  (reported at the next call)
+            bus._keepalive_error = e
+            return
+        finally:
+            bus._lock.release()
+            del bus
+
+
+def _speed_percent(sess) -> float | None:
+    """The speed the drive last reported, in % (sizes its stop time as safestop.stop does)."""
+    d = sess.drive
+    last = getattr(d, "last_status", None) or getattr(d, "last", None)
+    return last.speed_percent if last is not None else None

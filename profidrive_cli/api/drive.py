@@ -78,7 +78,7 @@ class Drive:
     @property
     def fmax_hz(self) -> float:
         """The frequency 100 % stands for (read from the drive where it can be)."""
-        with self._bus._lock:
+        with self._bus._call():
             self._check()
             return self.session.fmax(self._fmax_override)[0]
 
@@ -106,7 +106,7 @@ class Drive:
     # -- status -------------------------------------------------------------------------------------
     def status(self) -> Status:
         """One read of the status (the current fault named where the card can say it)."""
-        with self._bus._lock:
+        with self._bus._call():
             self._check()
             return self._status(self.session.status())
 
@@ -124,7 +124,7 @@ class Drive:
             raise UsageError(f"run: {v!r} is not a speed")
         if timeout is not None and not timeout > 0:
             raise UsageError(f"run: timeout {timeout!r} must be above 0 s")
-        with self._bus._lock:
+        with self._bus._call():
             self._check()
             s = self.session
             pct = float(percent) if percent is not None else s.percent_for_hz(float(hz),
@@ -158,7 +158,7 @@ class Drive:
     def stop(self, *, timeout: float | None = None) -> StopResult:
         """The family's normal stop, waiting (bounded: `timeout`, default from the drive's
         deceleration time) until the drive reports stopped; a coast stop when it does not."""
-        with self._bus._lock:
+        with self._bus._call():
             self._check()
             r = self.session.stop(timeout=timeout)
             return StopResult(r.how, bool(r.stopped), round(r.seconds, 3), r.message)
@@ -166,7 +166,7 @@ class Drive:
     # -- parameters --------------------------------------------------------------------------------
     def param(self, code: str) -> Param:
         """Read one parameter by its native code ("F07", "A004", "C1-01", "PNU23[1]", ...)."""
-        with self._bus._lock:
+        with self._bus._call():
             self._check()
             self.session.param_info(code)
             return _param(self.session.read_param(code))
@@ -179,7 +179,7 @@ class Drive:
         drive runs (DriveError)."""
         if isinstance(value, bool) or not isinstance(value, (int, float, str)):
             raise UsageError(f"set_param {code}: {value!r} is not a value")
-        with self._bus._lock:
+        with self._bus._call():
             self._check()
             s = self.session
             info = s.param_info(code)
@@ -192,7 +192,7 @@ class Drive:
     def faults(self) -> Faults:
         """The current fault and the fault history (alarm names; every candidate where one number
         means several)."""
-        with self._bus._lock:
+        with self._bus._call():
             self._check()
             cur = self.session.status().status
             hist = self.session.fault_history()
@@ -202,7 +202,7 @@ class Drive:
 
     def clear_fault(self) -> Status:
         """Acknowledge the current fault (its cause must be gone); the history stays."""
-        with self._bus._lock:
+        with self._bus._call():
             self._check()
             self._bus._check_write(f"acknowledge the fault of station {self.station}")
             return self._status(self.session.clear_fault())
@@ -211,7 +211,7 @@ class Drive:
     def close(self) -> StopResult | None:
         """Stop the drive if this API started it, release the station (it leaves data exchange);
         the bus stays open. Bus.close() does this for every drive still open."""
-        with self._bus._lock:
+        with self._bus._call():
             if self._closed:
                 return None
             self._bus._drives.pop(self.station, None)
