@@ -165,7 +165,9 @@ def test_dump_change_restore(sim, pdrive, tmp_path, address):
         return
     code, value, factory = WRITABLE[address]
     ok(pdrive("param", "set", str(address), code, value))
-    diff = json.loads(ok(pdrive("param", "diff", str(address), str(f), "--json")).stdout)
+    r = pdrive("param", "diff", str(address), str(f), "--json")
+    assert r.exit_code == 1, r.output       # like diff(1): 1 when the drive differs from the file
+    diff = json.loads(r.stdout)
     changed = [row for row in diff["rows"] if row["result"] == "differs"]
     assert [row["code"] for row in changed] == [code]
     dry = json.loads(ok(pdrive("param", "restore", str(address), str(f), "--dry-run", "--json")).stdout)
@@ -176,6 +178,8 @@ def test_dump_change_restore(sim, pdrive, tmp_path, address):
     assert d["parameters"][0]["value"] == pytest.approx(factory)
     diff = json.loads(ok(pdrive("param", "diff", str(address), str(f), "--json")).stdout)
     assert "differs" not in diff["counts"]
+    r = pdrive("param", "diff", str(address), str(f))       # equal again: 0, the count says so
+    assert r.exit_code == 0 and "0 parameter(s) differ" in r.stdout, r.output
 
 
 # -- faults ----------------------------------------------------------------------------------------
@@ -209,6 +213,7 @@ def test_faults_clear_acknowledges(sim, pdrive, status):
     (["param", "set", "7", "E1-04", "-5"], 2, "outside 40..400 Hz"),
     (["param", "set", "3", "M16", "1"], 2, "read-only"),
     (["param", "set", "3", "F07"], 2, "expected [ADDRESS] CODE VALUE"),
+    (["param", "get", "3"], 2, "param get: missing argument CODE after the address 3"),
     (["param", "get", "42", "F03"], 1, "station 42 does not answer"),
     (["status", "42"], 1, "station 42 does not answer"),
     (["status", "200"], 2, "outside 0..125"),
@@ -224,3 +229,4 @@ def test_bad_input_is_one_line(pdrive, args, code, msg):
     assert r.exit_code == code, r.output
     assert msg in r.output
     assert "Traceback" not in r.output
+    assert len(r.output.strip().splitlines()) == 1, r.output
