@@ -89,13 +89,32 @@ def test_run_in_reverse_with_percent_and_a_csv_log(sim, pdrive, tmp_path):
     assert len(rows) - 1 == ev[-1]["cycles"]
 
 
+#: station 3 with F07 = 0.1 s (0 -> F03 60 Hz): a 0.2 s run reaches its reference (a run that does
+#: not, exits 1: test_run_not_reaching_its_reference_exits_1)
+FAST3 = "sim://?set=3:F07=0.1"
+
+
 def test_run_without_parameter_channel_says_where_fmax_comes_from(pdrive):
-    r = ok(pdrive("run", "3", "--ppo", "3", "--hz", "30", "--fmax", "50", "--duration", "0.2", "--json"))
+    r = ok(pdrive("run", "3", "--ppo", "3", "--hz", "30", "--fmax", "50", "--duration", "0.2", "--json",
+                  port=FAST3))
     start = lines(r)[0]
     assert start["fmax_hz"] == 50.0 and start["fmax_source"] == "from --fmax"
     assert start["reference_percent"] == pytest.approx(60.0)
-    r = ok(pdrive("run", "3", "--ppo", "4", "--hz", "30", "--duration", "0.2"))
+    r = ok(pdrive("run", "3", "--ppo", "4", "--hz", "30", "--duration", "0.2", port=FAST3))
     assert "the profile default (layout ppo4 has no parameter channel" in r.stdout
+
+
+def test_run_not_reaching_its_reference_exits_1(pdrive):
+    # F07 = 6 s from 0 to F03 = 60 Hz (profile fuji-opc-g1-pdp defaults; the sim ramps with F07):
+    # 30 Hz takes 3 s, so a 1 s run ends at about 10 Hz, short of its reference
+    r = pdrive("run", "3", "--hz", "30", "--duration", "1")
+    assert r.exit_code == 1, r.output
+    err = [x for x in r.stderr.splitlines() if x.startswith("pdrive:")]
+    assert len(err) == 1 and "station 3: did not reach its reference (30 Hz) within 1 s" in err[0]
+    assert "the drive is stopped" in err[0] and "Traceback" not in r.output
+    # several drives: the same rule and the same words (session/multirun.py)
+    r = pdrive("run", "3,4", "--hz", "30", "--duration", "1")
+    assert r.exit_code == 1 and "station 3: did not reach its reference" in r.stderr, r.output
 
 
 def test_run_of_a_tripped_drive_fails_with_the_reason(pdrive):
@@ -105,7 +124,8 @@ def test_run_of_a_tripped_drive_fails_with_the_reason(pdrive):
 
 
 def test_run_warns_about_a_cycle_rate_above_the_baud_rate(pdrive):
-    r = ok(pdrive("run", "7", "--hz", "5", "--duration", "0.2", "--cycle-hz", "400", "--json"))
+    r = ok(pdrive("run", "7", "--hz", "5", "--duration", "0.2", "--cycle-hz", "400", "--json",
+                  port="sim://?set=7:C1-01=0.1"))       # C1-01 0.1 s: 5 Hz reached in the 0.2 s
     assert any("more than 19.2k allows" in w for w in lines(r)[0]["warnings"])
 
 
