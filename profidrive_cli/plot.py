@@ -6,7 +6,14 @@ the run command and the checklist's HTML report share it.
 
     trace = Trace("station 3, fuji-opc-g1-pdp: run 30 Hz")
     trace.add(t, reference=30.0, actual=12.5, monitors={"d002 [A]": 3.4})
+    trace.band = (29.5, 30.5, "tolerance 30 ± 0.5 Hz")      # what a checklist step expected
+    trace.deadlines.append((15.0, "deadline: within 15 s"))
     svg = render(trace, "svg")
+
+Layout: the legends stand outside the axes, to their right (they never cover a curve); the phase
+marks are dotted lines with their names in a band above the axes (never across the data); a
+step's tolerance band is a shaded span with its own gid ("tolerance-band"), its deadline a dash-dot
+line ("deadline"), both in the legend.
 """
 
 from __future__ import annotations
@@ -61,6 +68,8 @@ class Trace:
     actual: list = field(default_factory=list)
     monitors: dict = field(default_factory=dict)      # label -> list of values (None: not read yet)
     marks: list = field(default_factory=list)
+    band: tuple | None = None            # (low, high, label): the speed band a step expected
+    deadlines: list = field(default_factory=list)      # (time, label): by when it expected it
     _stride: int = 1
     _skip: int = 0
 
@@ -113,6 +122,18 @@ def _unit_of(label: str) -> str:
 
 def render(trace: Trace, fmt: str = "svg", width_in: float = 9.0) -> bytes:
     """The figure as SVG or PNG bytes: speed on top, one panel per monitor unit below, shared time axis."""
+    import matplotlib
+    fig = figure(trace, width_in)
+    buf = io.BytesIO()
+    meta = {"Date": None} if fmt == "svg" else {}          # reproducible SVG: no timestamp
+    # SVG text stays text (searchable, small, the browser's font), not outlines
+    with matplotlib.rc_context({"svg.fonttype": "none"}):
+        fig.savefig(buf, format=fmt, dpi=DPI, metadata=meta)
+    return buf.getvalue()
+
+
+def figure(trace: Trace, width_in: float = 9.0):
+    """The matplotlib Figure that render() saves (Agg backend)."""
     require_matplotlib()
     import matplotlib
     matplotlib.use("Agg", force=True)
@@ -129,20 +150,30 @@ def render(trace: Trace, fmt: str = "svg", width_in: float = 9.0) -> bytes:
     axes = fig.subplots(panels, 1, sharex=True, squeeze=False)[:, 0]
 
     ax = axes[0]
+    if trace.band is not None:
+        lo, hi, text = trace.band
+        ax.axhspan(lo, hi, color="tab:green", alpha=0.18, linewidth=0, label=text,
+                   gid="tolerance-band")
     if any(v is not None for v in trace.reference):
         ax.plot(t, [_nan(trace.reference[i]) for i in idx], label="reference", color="tab:blue",
                 linestyle="--", drawstyle="steps-post")
     ax.plot(t, [_nan(trace.actual[i]) for i in idx], label="actual", color="tab:orange")
+    for dt, text in trace.deadlines:
+        ax.axvline(dt, color="tab:red", linewidth=1.2, linestyle="-.", label=text, gid="deadline")
     ax.set_ylabel(f"speed [{trace.speed_unit}]")
     ax.grid(True, alpha=0.3)
-    ax.legend(loc="best")
-    if trace.title:
-        ax.set_title(trace.title)
-    for mt, text in trace.marks:
+    _legend_outside(ax)
+    for mt, _ in trace.marks:
         for a in axes:
             a.axvline(mt, color="grey", linewidth=0.8, linestyle=":")
-        ax.annotate(text, (mt, 1.0), xycoords=("data", "axes fraction"), fontsize=8, color="grey",
-                    rotation=90, va="top", ha="right")
+    rows = _mark_rows(trace.marks, t)
+    for (mt, text), row in zip(trace.marks, rows):
+        # in a band above the axes, left-aligned on its line: above the data, never across it
+        ax.annotate(text, (mt, 1.0), xycoords=("data", "axes fraction"), xytext=(2, 3 + 10 * row),
+                    textcoords="offset points", fontsize=8, color="dimgrey", va="bottom", ha="left",
+                    annotation_clip=False, gid="phase-label")
+    if trace.title:
+        ax.set_title(trace.title, pad=8 + 10 * (max(rows) + 1 if rows else 0))
 
     for ax, (unit, labels) in zip(axes[1:], sorted(units.items())):
         for label in labels:
@@ -150,15 +181,32 @@ def render(trace: Trace, fmt: str = "svg", width_in: float = 9.0) -> bytes:
             ax.plot(t, [_nan(col[i]) for i in idx], label=label)
         ax.set_ylabel(unit or "value")
         ax.grid(True, alpha=0.3)
-        ax.legend(loc="best")
+        _legend_outside(ax)
     axes[-1].set_xlabel("time [s]")
+    return fig
 
-    buf = io.BytesIO()
-    meta = {"Date": None} if fmt == "svg" else {}          # reproducible SVG: no timestamp
-    # SVG text stays text (searchable, small, the browser's font), not outlines
-    with matplotlib.rc_context({"svg.fonttype": "none"}):
-        fig.savefig(buf, format=fmt, dpi=DPI, metadata=meta)
-    return buf.getvalue()
+
+def _legend_outside(ax) -> None:
+    """The legend to the right of the axes (constrained layout makes room): it covers no curve."""
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, fontsize=8,
+              frameon=False)
+
+
+def _mark_rows(marks: list, t: list) -> list[int]:
+    """The line of the band each phase name goes on: the next line up when it would start within
+    12 % of the time axis of the previous name on that line (names of close phases do not overlap)."""
+    if not marks:
+        return []
+    times = [m[0] for m in marks] + list(t[:1]) + list(t[-1:])
+    span = (max(times) - min(times)) or 1.0
+    rows, last = [], {}
+    for mt, _ in marks:
+        row = 0
+        while row in last and mt - last[row] < 0.12 * span:
+            row += 1
+        last[row] = mt
+        rows.append(row)
+    return rows
 
 
 def _nan(v):
@@ -171,4 +219,4 @@ def write_plot(trace: Trace, path, what: str = "--plot"):
     return write_bytes_atomic(path, render(trace, plot_format(path, what)), what=what)
 
 
-__all__ = ["Trace", "render", "write_plot", "require_matplotlib", "plot_format", "INSTALL_HINT", "FORMATS"]
+__all__ = ["Trace", "render", "figure", "write_plot", "require_matplotlib", "plot_format", "INSTALL_HINT", "FORMATS"]

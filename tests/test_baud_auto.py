@@ -250,3 +250,35 @@ def test_pdrive_as_second_client_is_told_the_simulator_is_busy():
     lines = p.stderr.strip().splitlines()
     assert len(lines) == 1 and "busy" in lines[0] and "another client is connected" in lines[0]
     assert "Traceback" not in p.stderr
+
+
+# -- a line without a baud rate of its own: a pty, TCP, the simulator without baud= ------------------
+
+RATELESS_WORDS = "has no baud rate of its own, so any rate answers; 19.2k is used, the default"
+
+
+def test_baud_auto_over_tcp_says_the_line_has_no_rate():
+    # `pdrive sim --listen` answers whatever rate the master sets (the octets do not carry it), so
+    # the first rate tried (1.5M) used to be reported as found. The honest answer names the line and
+    # the rate used: 19.2k, the rate the commands use without --baud (`pdrive --help`: --baud 19200).
+    with TcpSim("sim://?stations=3:fuji-g1") as srv:
+        code, out, err = _run("status", "3", "--json", "--baud", "auto", "--port", srv.url)
+    assert code == 0, err
+    assert "a TCP connection (socket://) " + RATELESS_WORDS in err
+    assert "1.5M" not in err and json.loads(out)["station"] == 3
+
+
+def test_baud_auto_over_a_pty_says_the_line_has_no_rate():
+    from conftest import pty_sim_process
+    with pty_sim_process() as port:
+        code, out, err = _run("scan", "--json", "--baud", "auto", "--port", port)
+    assert code == 0, err
+    assert f"a pty ({port}) " + RATELESS_WORDS in err
+    doc = json.loads(out)
+    assert doc["baud"] == 19200 and 3 in [s["station"] for s in doc["stations"]]
+
+
+def test_baud_auto_on_the_simulator_without_baud():
+    code, out, err = _run("status", "3", "--json", "--baud", "auto", "--port", "sim://?stations=3:fuji-g1")
+    assert code == 0, err
+    assert "the simulator without baud= " + RATELESS_WORDS in err

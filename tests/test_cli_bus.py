@@ -133,7 +133,8 @@ MOELLER_RUN = "0000 0000 0000 0000 047F 2000"
 
 def _moeller_ready(sim_port):
     """Station 6 in S2 (ready to switch on): a short run leaves it there, so 047F starts it."""
-    r = run("run", "6", "--hz", "5", "--duration", "0.2", "--port", sim_port)
+    # F002 = 5 s from 0 to A004 50 Hz (the profile's sim default): 5 Hz after 0.5 s, within the 1 s
+    r = run("run", "6", "--hz", "5", "--duration", "1", "--port", sim_port)
     assert r.exit_code == 0, r.output
 
 

@@ -203,7 +203,8 @@ def test_a_named_port_works_in_bus_commands(env, args, expect, monkeypatch):
 
 def test_run_takes_fmax_from_the_station_defaults(env, tmp_path):
     # layout ppo3 has no parameter channel: F03 cannot be read, the config's fmax 50 Hz applies
-    r = CliRunner().invoke(cli, ["run", "3", "--hz", "10", "--duration", "0.2", "--json"])
+    # 20 % of the drive's F03 60 Hz = 12 Hz, F07 6 s for 60 Hz: reached after 1.2 s, within the 2 s
+    r = CliRunner().invoke(cli, ["run", "3", "--hz", "10", "--duration", "2", "--json"])
     assert r.exit_code == 0, r.output
     # stdout only: the project file's settings in use are named on stderr (docs/config.md)
     start = json.loads(r.stdout.splitlines()[0])

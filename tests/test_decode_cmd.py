@@ -141,3 +141,12 @@ def test_exit_code_2_through_main(capsys):
         main(["decode", "moeller", "--ppo", "1", "--request", "3017 0000 0000 0190 047F 2000"])
     assert ei.value.code == 0
     assert "reference 50 %" in capsys.readouterr().out
+
+
+def test_request_and_response_together_are_refused():
+    # one area is either the master's output or the drive's input: both flags cannot be meant
+    r = run("moeller", "--ppo", "1", "--request", "--response", "3017 0000 0000 0190 047F 2000")
+    assert r.exit_code != 0 and isinstance(r.exception, UsageError)
+    assert "either --request or --response, not both" in str(r.exception)
+    r = run("moeller", "--ppo", "1", "--response", "--request", "3017 0000 0000 0190 047F 2000")
+    assert isinstance(r.exception, UsageError) and r.output == ""

@@ -89,13 +89,32 @@ def test_run_in_reverse_with_percent_and_a_csv_log(sim, pdrive, tmp_path):
     assert len(rows) - 1 == ev[-1]["cycles"]
 
 
+#: station 3 with F07 = 0.1 s (0 -> F03 60 Hz): a 0.2 s run reaches its reference (a run that does
+#: not, exits 1: test_run_not_reaching_its_reference_exits_1)
+FAST3 = "sim://?set=3:F07=0.1"
+
+
 def test_run_without_parameter_channel_says_where_fmax_comes_from(pdrive):
-    r = ok(pdrive("run", "3", "--ppo", "3", "--hz", "30", "--fmax", "50", "--duration", "0.2", "--json"))
+    r = ok(pdrive("run", "3", "--ppo", "3", "--hz", "30", "--fmax", "50", "--duration", "0.2", "--json",
+                  port=FAST3))
     start = lines(r)[0]
     assert start["fmax_hz"] == 50.0 and start["fmax_source"] == "from --fmax"
     assert start["reference_percent"] == pytest.approx(60.0)
-    r = ok(pdrive("run", "3", "--ppo", "4", "--hz", "30", "--duration", "0.2"))
+    r = ok(pdrive("run", "3", "--ppo", "4", "--hz", "30", "--duration", "0.2", port=FAST3))
     assert "the profile default (layout ppo4 has no parameter channel" in r.stdout
+
+
+def test_run_not_reaching_its_reference_exits_1(pdrive):
+    # F07 = 6 s from 0 to F03 = 60 Hz (profile fuji-opc-g1-pdp defaults; the sim ramps with F07):
+    # 30 Hz takes 3 s, so a 1 s run ends at about 10 Hz, short of its reference
+    r = pdrive("run", "3", "--hz", "30", "--duration", "1")
+    assert r.exit_code == 1, r.output
+    err = [x for x in r.stderr.splitlines() if x.startswith("pdrive:")]
+    assert len(err) == 1 and "station 3: did not reach its reference (30 Hz) within 1 s" in err[0]
+    assert "the drive is stopped" in err[0] and "Traceback" not in r.output
+    # several drives: the same rule and the same words (session/multirun.py)
+    r = pdrive("run", "3,4", "--hz", "30", "--duration", "1")
+    assert r.exit_code == 1 and "station 3: did not reach its reference" in r.stderr, r.output
 
 
 def test_run_of_a_tripped_drive_fails_with_the_reason(pdrive):
@@ -105,7 +124,8 @@ def test_run_of_a_tripped_drive_fails_with_the_reason(pdrive):
 
 
 def test_run_warns_about_a_cycle_rate_above_the_baud_rate(pdrive):
-    r = ok(pdrive("run", "7", "--hz", "5", "--duration", "0.2", "--cycle-hz", "400", "--json"))
+    r = ok(pdrive("run", "7", "--hz", "5", "--duration", "0.2", "--cycle-hz", "400", "--json",
+                  port="sim://?set=7:C1-01=0.1"))       # C1-01 0.1 s: 5 Hz reached in the 0.2 s
     assert any("more than 19.2k allows" in w for w in lines(r)[0]["warnings"])
 
 
@@ -165,7 +185,9 @@ def test_dump_change_restore(sim, pdrive, tmp_path, address):
         return
     code, value, factory = WRITABLE[address]
     ok(pdrive("param", "set", str(address), code, value))
-    diff = json.loads(ok(pdrive("param", "diff", str(address), str(f), "--json")).stdout)
+    r = pdrive("param", "diff", str(address), str(f), "--json")
+    assert r.exit_code == 1, r.output       # like diff(1): 1 when the drive differs from the file
+    diff = json.loads(r.stdout)
     changed = [row for row in diff["rows"] if row["result"] == "differs"]
     assert [row["code"] for row in changed] == [code]
     dry = json.loads(ok(pdrive("param", "restore", str(address), str(f), "--dry-run", "--json")).stdout)
@@ -176,6 +198,8 @@ def test_dump_change_restore(sim, pdrive, tmp_path, address):
     assert d["parameters"][0]["value"] == pytest.approx(factory)
     diff = json.loads(ok(pdrive("param", "diff", str(address), str(f), "--json")).stdout)
     assert "differs" not in diff["counts"]
+    r = pdrive("param", "diff", str(address), str(f))       # equal again: 0, the count says so
+    assert r.exit_code == 0 and "0 parameter(s) differ" in r.stdout, r.output
 
 
 # -- faults ----------------------------------------------------------------------------------------
@@ -209,6 +233,7 @@ def test_faults_clear_acknowledges(sim, pdrive, status):
     (["param", "set", "7", "E1-04", "-5"], 2, "outside 40..400 Hz"),
     (["param", "set", "3", "M16", "1"], 2, "read-only"),
     (["param", "set", "3", "F07"], 2, "expected [ADDRESS] CODE VALUE"),
+    (["param", "get", "3"], 2, "param get: missing argument CODE after the address 3"),
     (["param", "get", "42", "F03"], 1, "station 42 does not answer"),
     (["status", "42"], 1, "station 42 does not answer"),
     (["status", "200"], 2, "outside 0..125"),
@@ -224,3 +249,4 @@ def test_bad_input_is_one_line(pdrive, args, code, msg):
     assert r.exit_code == code, r.output
     assert msg in r.output
     assert "Traceback" not in r.output
+    assert len(r.output.strip().splitlines()) == 1, r.output

@@ -158,6 +158,26 @@ def test_jog_on_sim_reaches_the_jog_speed_and_ends_stopped(address, args, hz, sp
     assert end["stopped"] and end["stop"]["how"] == "normal" and not end["fault"]
 
 
+def test_jog_is_paced_like_run_not_by_the_cpu():
+    # `run --help`: the Data_Exchange rate defaults to "the fastest the bus allows, at most 100/s"
+    # (session/cycle.py CAP_REAL_HZ); at 1.5 Mbit/s on the virtual-time bus the wire allows ~2,900
+    # exchanges/s (the start event's wire_hz), so the cap decides: 100/s. Unpaced, a jog ran every
+    # exchange the wire allows (4,422 over 1.5 s here).
+    port, baud = "sim://?timing=virtual&baud=1500000", "1500000"
+    r = pdrive("jog", "6", "--port", port, "--baud", baud, "--duration", "1")
+    assert r.returncode == 0, r.stderr
+    assert "cycle 100.0 Hz (bus limit" in r.stdout + r.stderr, r.stdout + r.stderr
+    r = pdrive("jog", "6", "--port", port, "--baud", baud, "--duration", "1", "--json")
+    assert r.returncode == 0, r.stderr
+    ev = _events(r.stdout)
+    start, end = ev[0], ev[-1]
+    assert start["cycle_hz_target"] == 100.0 and start["wire_hz"] > 1000
+    # every exchange lies between the session's start and its last event, on the bus's own clock
+    elapsed = max(e["t_s"] for e in ev if "t_s" in e)
+    assert elapsed >= 1.0
+    assert end["cycles"] <= elapsed * 100.0 * 1.2 + 20, (end["cycles"], elapsed)
+
+
 @pytest.mark.parametrize("address", [3, 4, 7])
 def test_jog_refused_on_cards_without_jog(address):
     r = pdrive("jog", str(address), "--port", "sim://", "--duration", "1")

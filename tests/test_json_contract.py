@@ -313,9 +313,12 @@ def test_faults(args):
 
 
 def test_run_stream():
-    lines = lines_of(pdrive("run", "3", "--hz", "20", "--duration", "0.3", *SIM, "--json"))
+    # F07 0.1 s: the 20 Hz are reached within the 0.3 s (a run that does not: exit 1, below)
+    lines = lines_of(pdrive("run", "3", "--hz", "20", "--duration", "0.3", "--port", "sim://?set=3:F07=0.1",
+                            "--json"))
     events = assert_stream(lines, "run")
     assert events[0] == "start" and events[-1] == "end" and "update" in events
+    assert lines[-1]["failed"] is False and lines[-1]["problem"] is None
     start = lines[0]
     assert (start["station"], start["ident"], start["ident_hex"]) == (3, 0xFD01, "0xFD01")
     assert start["watchdog_s"] == 0.5                   # --watchdog default 500 ms
@@ -324,13 +327,26 @@ def test_run_stream():
 
 @pytest.mark.parametrize("args", [("6", "--hz", "10", "--monitor", "default"), ("5", "--ppo", "5", "--torque", "20")])
 def test_run_stream_with_monitors_and_torque(args):
-    lines = lines_of(pdrive("run", *args, "--duration", "0.3", *SIM, "--json"))
+    # F002 0.1 s (for A004 50 Hz): the 10 Hz are reached within the 0.3 s; a torque run is not judged
+    lines = lines_of(pdrive("run", *args, "--duration", "0.3", "--port", "sim://?set=6:F002=0.1", "--json"))
     events = assert_stream(lines, "run")
     assert events[0] == "start" and events[-1] == "end"
     if "--monitor" in args:
         assert lines[-1]["monitors"] and all("t_s" in m for m in lines[-1]["monitors"].values())
     else:
         assert lines[0]["torque_ref_percent"] == 20
+
+
+def test_run_not_reaching_its_reference_ends_failed_then_the_error():
+    # F07 = 6 s from 0 to F03 60 Hz (the sim's ramp, profile fuji-opc-g1-pdp F07 default): 30 Hz
+    # would take 3 s, so after 1 s the run has not reached it: the end says so, then the error, exit 1
+    lines = lines_of(pdrive("run", "3", "--hz", "30", "--duration", "1", *SIM, "--json"), code=1)
+    events = assert_stream(lines, "run")
+    assert events[-2:] == ["end", "error"]
+    end, error = lines[-2], lines[-1]
+    assert end["failed"] is True and end["problem"] == "did not reach its reference"
+    assert end["reached_after_s"] is None and end["stopped"]
+    assert error["exit_code"] == 1 and "did not reach its reference (30 Hz) within 1 s" in error["error"]
 
 
 def test_jog_stream():

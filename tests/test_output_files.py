@@ -121,8 +121,8 @@ def test_run_log_in_a_missing_directory_is_refused_before_the_bus_is_opened(tmp_
 def test_run_log_replaces_the_old_file_when_complete(tmp_path):
     log = tmp_path / "run.csv"
     log.write_text("old log\n")
-    r = run("run", "3", "--hz", "5", "--duration", "0.3", "--port", "sim://", "--log", log)
-    assert r.exit_code == 0, r.output
+    r = run("run", "3", "--hz", "5", "--duration", "0.3", "--port", "sim://?set=3:F07=0.1", "--log", log)
+    assert r.exit_code == 0, r.output          # F07 0.1 s: the 5 Hz are reached within the 0.3 s
     rows = log.read_text().splitlines()
     assert rows[0].startswith("time_s,cycle,control_word") and len(rows) > 5
     assert [p.name for p in tmp_path.iterdir()] == ["run.csv"]

@@ -48,6 +48,62 @@ def test_a_trace_renders_labelled_axes_and_one_panel_per_monitor_unit():
     assert {"M11 current [A]", "M12 voltage [V]", "A", "V"} <= texts      # two monitor panels, by unit
 
 
+def _drawn(tr):
+    """The figure render() saves, laid out (Agg), with its axes' boxes in display units."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from profidrive_cli.plot import figure
+    fig = figure(tr)
+    FigureCanvasAgg(fig)
+    fig.draw_without_rendering()
+    return fig
+
+
+def _ramp_with_phases():
+    from profidrive_cli.plot import Trace
+    tr = Trace(title="station 3: run 30 Hz")
+    for i in range(60):                       # the ramp ends at the reference, where a legend
+        t = i * 0.1                           # in a corner of the axes would lie on the curves
+        tr.add(t, 30.0, min(30.0, 10.0 * t) if t < 5 else 30.0 - 20.0 * (t - 5),
+               {"M11 current [A]": 2.0 + i * 0.01})
+    tr.mark(0.0, "running")
+    tr.mark(5.0, "stopping")
+    tr.mark(5.5, "stopped")                   # close to the previous one: its own line of the band
+    return tr
+
+
+def test_legends_stand_outside_the_axes():
+    fig = _drawn(_ramp_with_phases())
+    for ax in fig.axes:
+        box, leg = ax.get_window_extent(), ax.get_legend().get_window_extent()
+        assert leg.x0 >= box.x1, (leg, box)          # to the right of the plotting area
+
+
+def test_phase_names_stand_in_a_band_above_the_axes_not_across_the_data():
+    fig = _drawn(_ramp_with_phases())
+    ax = fig.axes[0]
+    box = ax.get_window_extent()
+    names = [a for a in ax.texts if a.get_text() in ("running", "stopping", "stopped")]
+    assert sorted(a.get_text() for a in names) == ["running", "stopped", "stopping"]
+    extents = [a.get_window_extent() for a in names]
+    assert all(e.y0 >= box.y1 for e in extents), (extents, box)       # above the data
+    assert ax.title.get_window_extent().y0 >= max(e.y1 for e in extents)   # under the title
+    for i, a in enumerate(extents):                                   # and not on each other
+        assert not any(a.overlaps(b) for b in extents[i + 1:])
+
+
+def test_a_band_and_a_deadline_are_drawn_and_named():
+    from profidrive_cli.plot import render
+    tr = _ramp_with_phases()
+    tr.band = (29.5, 30.5, "tolerance 30 ± 0.5 Hz")
+    tr.deadlines.append((2.0, "deadline: within 2 s"))
+    svg = render(tr, "svg")
+    root = ET.fromstring(svg)
+    ids = {g.get("id") for g in root.iter(SVG_NS + "g")}
+    assert {"tolerance-band", "deadline"} <= ids
+    assert {"tolerance 30 ± 0.5 Hz", "deadline: within 2 s"} <= svg_texts(svg)   # in the legend
+
+
 def test_png_has_the_documented_width():
     from profidrive_cli.plot import Trace, render
     tr = Trace()
@@ -99,7 +155,9 @@ def test_plot_format_follows_the_extension_svg_or_png_only(name):
 
 def test_run_plot_draws_the_ramp_and_the_stop(tmp_path):
     out = tmp_path / "run.svg"
-    r = run("run", "3", "--hz", "30", "--duration", "1.5", "--plot", out, "--port", "sim://", "--json")
+    # F07 = 2 s from 0 to 60 Hz: 30 Hz after 1 s, within the 1.5 s (a ramp to draw, then the stop)
+    r = run("run", "3", "--hz", "30", "--duration", "1.5", "--plot", out, "--port", "sim://?set=3:F07=2",
+            "--json")
     assert r.exit_code == 0, r.output
     texts = svg_texts(out.read_bytes())
     assert {"speed [Hz]", "reference", "actual", "running", "stopping"} <= texts
@@ -155,7 +213,8 @@ def test_a_plot_that_cannot_be_written_keeps_the_old_file(tmp_path, monkeypatch)
     def full(*a, **k):
         raise outfile.OutputWriteError("--plot run.svg: write failed: No space left on device")
     monkeypatch.setattr(outfile, "write_bytes_atomic", full)
-    r = run("run", "3", "--hz", "10", "--duration", "0.5", "--plot", old, "--port", "sim://")
+    # F07 0.1 s: the 10 Hz are reached within the 0.5 s, a good run (one that is not: exit 1 anyway)
+    r = run("run", "3", "--hz", "10", "--duration", "0.5", "--plot", old, "--port", "sim://?set=3:F07=0.1")
     assert isinstance(r.exception, outfile.OutputWriteError)     # exit 1 after a good run
     assert old.read_text() == "old plot"
 
@@ -218,6 +277,40 @@ def test_the_html_report_of_a_failing_run_shows_failed(tmp_path):
     r, rep = _html(tmp_path, CHECKLIST.replace("faults: none", "faults: {expect: OC1}"))
     assert r.exit_code == 1
     assert "FAILED" in rep.read_text()
+
+
+def test_a_failed_run_steps_plot_shows_the_band_and_the_deadline(tmp_path):
+    # F07 6 s from 0 to F03 60 Hz (the profile's defaults, the sim ramps with F07): 20 Hz take 2 s,
+    # so "within 1" fails; its plot must show the band it missed (20 ± 0.5 Hz) and the 1 s deadline
+    text = CHECKLIST.replace("  - write: {param: F07, value: 1}\n", "").replace(
+        "run: {hz: 20, duration: 0.3}", "run: {hz: 20, within: 1}")
+    r, rep = _html(tmp_path, text)
+    assert r.exit_code == 1
+    html = rep.read_text()
+    step = html[html.index("<h3>Step 2: run forward at 20 Hz"):]
+    assert "failed" in step[:step.index("</h3>")]
+    svg = step[step.index("<svg"):step.index("</svg>") + 6]
+    root = ET.fromstring(svg)
+    assert {"tolerance-band", "deadline"} <= {g.get("id") for g in root.iter(SVG_NS + "g")}
+    texts = {"".join(t.itertext()).strip() for t in root.iter(SVG_NS + "text")}
+    assert {"tolerance 20 ± 0.5 Hz", "deadline: within 1 s"} <= texts
+
+
+def test_step_expectations_become_the_band_and_deadline_in_the_plots_unit():
+    from profidrive_cli.checklist.steptrace import StepTrace, to_plot_trace
+
+    class St:
+        def __init__(self, hz, pct, ref):
+            self.speed_hz, self.speed_percent, self.reference_percent = hz, pct, ref
+    tr = StepTrace()
+    tr.add(0.0, St(0.0, 0.0, 50.0))
+    tr.add(1.0, St(15.0, 25.0, 50.0))       # 15 Hz is 25 %: max frequency 60 Hz
+    pt = to_plot_trace(tr, "t", {"speed": 50.0, "unit": "%", "tolerance": 1.0, "within_s": 15})
+    assert pt.speed_unit == "Hz"            # 50 % ± 1 % of 60 Hz = 30 ± 0.6 Hz
+    assert pt.band[:2] == (pytest.approx(29.4), pytest.approx(30.6))
+    assert pt.deadlines == [(15.0, "deadline: within 15 s")]
+    pt = to_plot_trace(tr, "t", {"stopped": True, "within_s": 5})      # a stop: no band
+    assert pt.band is None and pt.deadlines == [(5.0, "deadline: within 5 s")]
 
 
 def test_without_matplotlib_the_html_report_is_written_and_says_how_to_get_plots(tmp_path, monkeypatch):

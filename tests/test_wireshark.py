@@ -505,7 +505,8 @@ def test_sniff_and_extcap_capture_a_running_bus_and_tshark_decodes_it(tshark, tm
                 reader_done.set()
             threading.Thread(target=read_fifo, daemon=True).start()
             time.sleep(1.5)                            # both listeners up
-            master_run = subprocess.run(pdrive_cmd() + ["run", "6", "--hz", "25", "--duration", "1",
+            # 25 Hz: reached after 2.5 s (F002 5 s for A004 50 Hz), within the 3.5 s: a good run
+            master_run = subprocess.run(pdrive_cmd() + ["run", "6", "--hz", "25", "--duration", "3.5",
                                                         "--port", master, "--yes", "--json"],
                                         capture_output=True, text=True, timeout=120)
             assert master_run.returncode == 0, master_run.stderr

@@ -134,7 +134,7 @@ def _station(sr: StationResult, plots: bool) -> list[str]:
 def _svg(r, title: str) -> str:
     """The step's plot as inline SVG (the XML declaration and DOCTYPE dropped)."""
     from profidrive_cli.plot import render
-    svg = render(to_plot_trace(r.trace, title), "svg", width_in=8.0).decode("utf-8")
+    svg = render(to_plot_trace(r.trace, title, r.expected), "svg", width_in=8.0).decode("utf-8")
     i = svg.find("<svg")
     return svg[i:] if i >= 0 else svg
 

@@ -3,7 +3,9 @@
 record(drive) shadows the Drive's cycle() for the length of a step (every status a step sees comes
 through it: start, status, the run and stop loops) and keeps (time, actual Hz, actual %, reference
 %) per cycle, bounded. to_plot_trace() turns it into a plot.Trace in Hz where the drive reports Hz
-(the max frequency derived from its own Hz/% pair, no parameter read), else in %.
+(the max frequency derived from its own Hz/% pair, no parameter read), else in %. With the step's
+`expected` (StepResult.expected) the plot also shows what the step asked for: the tolerance band
+around the speed it was to reach and the deadline (`within`), so a failed step's picture shows why.
 """
 
 from __future__ import annotations
@@ -59,7 +61,7 @@ def record(drive):
             drive.cycle = inner
 
 
-def to_plot_trace(tr: StepTrace, title: str):
+def to_plot_trace(tr: StepTrace, title: str, expected: dict | None = None):
     from profidrive_cli.plot import Trace
     rows = tr.rows
     fmax = None
@@ -74,7 +76,32 @@ def to_plot_trace(tr: StepTrace, title: str):
             out.add(t, None if ref is None else ref * fmax / 100.0, hz if hz is not None else None)
         else:
             out.add(t, ref, pct)
+    if expected:
+        _expectations(out, expected, fmax)
     return out
+
+
+def _expectations(out, expected: dict, fmax: float | None) -> None:
+    """The band and the deadline of a run step ({speed, unit, tolerance, within_s}), the band of a
+    jog ({speed_hz, tolerance}), the deadline of a stop ({stopped, within_s}), in the plot's unit.
+    The deadline is counted from the start of the step's trace (the step's own clock starts a cycle
+    or two later: a few tens of ms)."""
+    speed, unit = expected.get("speed"), expected.get("unit")
+    if speed is None and expected.get("speed_hz") is not None:
+        speed, unit = expected["speed_hz"], "Hz"
+    tol = expected.get("tolerance")
+    if speed is not None and tol is not None:
+        k = 1.0
+        if unit != out.speed_unit:                         # Hz <-> % by the drive's own pair
+            k = (None if fmax is None else
+                 fmax / 100.0 if out.speed_unit == "Hz" else 100.0 / fmax)
+        if k is not None:
+            u = out.speed_unit
+            c, w = float(speed) * k, float(tol) * k
+            out.band = (c - w, c + w, f"tolerance {c:g} ± {w:.3g} {u}")
+    within = expected.get("within_s")
+    if within is not None:
+        out.deadlines.append((float(within), f"deadline: within {float(within):g} s"))
 
 
 __all__ = ["record", "to_plot_trace", "StepTrace", "PLOTTED"]

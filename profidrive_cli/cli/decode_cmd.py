@@ -16,12 +16,10 @@ from profidrive_cli.dp.cfg import parse_hex
 @click.option("--ppo", type=int, default=None, metavar="N", help="PPO type 1..5 (layout ppoN)")
 @click.option("--format", "layout_name", default=None, metavar="NAME",
               help="a non-PPO layout of the profile, e.g. extended1 (see the profile's layouts)")
-@click.option("--request", "direction", flag_value="request",
-              help="master -> drive (DP output area)")
-@click.option("--response", "direction", flag_value="response",
-              help="drive -> master (DP input area)")
+@click.option("--request", "request", is_flag=True, help="master -> drive (DP output area)")
+@click.option("--response", "response", is_flag=True, help="drive -> master (DP input area)")
 @click.option("--json", "as_json", is_flag=True, help="print the decoded fields as JSON")
-def decode_cmd(profile, hex_octets, ppo, layout_name, direction, as_json):
+def decode_cmd(profile, hex_octets, ppo, layout_name, request, response, as_json):
     """Decode a captured area of PROFILE's layout into named fields.
 
     HEX is the area as hex octets or words, with or without spaces:
@@ -30,6 +28,9 @@ def decode_cmd(profile, hex_octets, ppo, layout_name, direction, as_json):
     from profidrive_cli.drives import decode_area
     from profidrive_cli.drives.profile import load_profile
 
+    if request and response:
+        raise UsageError("give either --request or --response, not both: one area is decoded")
+    direction = "request" if request else "response" if response else None
     if direction is None:
         raise UsageError("say which area this is: --request (master -> drive) or --response")
     if ppo is not None and layout_name is not None:

@@ -181,6 +181,10 @@ def param_group():
 @_terminations
 def param_get(opts, args, profile_name, ppo, fmt, watchdog_ms):
     """Read parameters (engineering value with unit, and the raw wire value)."""
+    if len(args) == 1 and args[0].isdigit() and int(args[0]) <= 125:
+        # a lone station address: the code is what is missing, not the address
+        raise UsageError(f"param get: missing argument CODE after the address {args[0]} "
+                         f"(e.g. pdrive param get {args[0]} F07)")
     address, codes = _split_address(args, 1)
     if not codes:
         raise UsageError("param get: give at least one parameter code")
@@ -338,12 +342,15 @@ def param_restore(opts, args, dry_run, yes, allow_dangerous, profile_name, ppo, 
 @bus_options
 @_terminations
 def param_diff(opts, args, profile_name, ppo, fmt, watchdog_ms):
-    """Compare the drive with a dump (nothing is written)."""
+    """Compare the drive with a dump (nothing is written). Exit code as diff's: 0 when the drive
+    holds what the file says, 1 when a parameter differs or cannot be read, 2 for bad input."""
     address, path = _file_args(args, "diff")
     doc = DriveSession.load_dump(path)
     with _session(opts, address, profile_name, ppo, fmt, watchdog_ms) as s:
         rows = _with_progress(opts, "comparing", lambda prog: s.compare(doc, prog))
     _print_rows(opts, s, rows, "diff", False)
+    if any(r.result in ("differs", "missing") for r in rows):
+        raise SystemExit(1)             # the table (or the JSON document) is the message
 
 
 def _print_rows(opts, s, rows, what: str, dry_run: bool, interrupted: str | None = None) -> None:

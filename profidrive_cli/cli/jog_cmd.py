@@ -61,7 +61,8 @@ def jog_cmd(opts, address, reverse, duration, yes, profile_name, ppo, fmt, watch
         raise UsageError("jog without a terminal to hold a key on: give --duration S")
     mode = "json" if opts.json else ("live" if sys.stdout.isatty() else "text")
     direction = "reverse" if reverse else "forward"
-    session = _session(opts, address, profile_name, ppo, fmt, watchdog_ms,
+    # cycle_hz=None: paced like `run` (session/cycle.default_cycle_hz), not as fast as the CPU goes
+    session = _session(opts, address, profile_name, ppo, fmt, watchdog_ms, cycle_hz=None,
                        before=_refuse_or_confirm(opts, yes, f"jog the drive {direction}"))
     view = R.RunView(mode)
     end: dict = {"reason": "", "stop": None}

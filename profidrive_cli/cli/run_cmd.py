@@ -19,6 +19,11 @@ from profidrive_cli.cli.drive_cmds import (_confirmer, _session, _terminations, 
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.link.base import LinkLost
 from profidrive_cli.outfile import check_output_path
+from profidrive_cli.session.multirun import at_reference
+
+#: the verdict of a run whose actual speed never came within at_reference before its --duration
+#: ended: the words session/multirun.py gives a drive of several (its StationRun.problem)
+NOT_REACHED = "did not reach its reference"
 
 
 @click.command("run")
@@ -103,9 +108,10 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
     view = R.RunView(mode)
     if plotter is not None:
         plotter.attach(view)
-    end = {"reason": "", "stop": None}
+    end = {"reason": "", "stop": None, "failed": False, "problem": None}
     started = False
     exit_code = 0
+    short_of = None                          # the actual speed when the time was up, not reached
 
     def stopping(sample):                    # every stop, also the one on any exit, stays visible
         view.monitors = None                 # no monitor reads during the stop: show none stale
@@ -175,15 +181,24 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
                         mons[0].poll(sample)     # one monitor read per loop, round robin
                         view.monitors = mons[0]  # shown again after a stop (space) and start
                     view.update(sample)
-                    if running and view.reached_after is None and _at_reference(sample):
+                    if running and view.reached_after is None and at_reference(sample):
                         view.reached_after = round(sample.t - t_start, 3)
                     if sample.status.fault:
                         end["reason"] = "the drive tripped" + (f" ({sample.status.fault_code})"
                                                                if sample.status.fault_code else "")
+                        end["failed"] = True
+                        end["problem"] = "tripped" + (f" ({sample.status.fault_code})"
+                                                      if sample.status.fault_code else "")
                         exit_code = 1
                         break
                     if duration is not None and sample.t - t_start >= duration:
                         end["reason"] = f"duration {duration:g} s reached"
+                        if running and view.reached_after is None and torque is None:
+                            # multirun's rule: the time is up and the actual speed never came
+                            # within at_reference (a torque run has no speed to reach: not judged)
+                            end["failed"], end["problem"] = True, NOT_REACHED
+                            short_of = sample.actual_hz
+                            exit_code = 1
                         break
                     if keys is None:
                         continue
@@ -230,7 +245,11 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
                 if s.stop_report.how in ("normal", "coast"):
                     view.set_phase("stopped", s._sample(s.final_status) if s.final_status else None)
     if exit_code:
-        raise DriveError(f"station {session.address}: {end['reason']}; the drive is stopped")
+        why = end["reason"]
+        if end["problem"] == NOT_REACHED:
+            act = f"; actual {short_of:.2f} Hz at the end" if short_of is not None else ""
+            why = (f"{NOT_REACHED} ({pct * fmax_hz / 100.0:g} Hz) within {duration:g} s{act}")
+        raise DriveError(f"station {session.address}: {why}; the drive is stopped")
 
 
 def _run_extra(view, mons) -> dict:
@@ -238,12 +257,3 @@ def _run_extra(view, mons) -> dict:
     if mons:
         d["monitors"], d["monitors_dropped"] = mons[0].to_dict(), mons[0].dropped
     return d
-
-
-def _at_reference(sample) -> bool:
-    ref, act = sample.reference_percent, sample.actual_percent
-    if ref is None or act is None:
-        return False
-    return abs(act - ref) <= max(0.01 * abs(ref), 0.05)
-
-

@@ -7,6 +7,12 @@
 2. Probe: at each rate, FDL status requests (one attempt each) to the given station, or to every
    address until one answers. A slave locked to the bus rate answers only at that rate.
 
+A line without a baud rate of its own -- a pty (`pdrive sim --pty`), a TCP connection (socket://, a
+converter or `pdrive sim --listen`), the simulator without baud= -- carries the octets whatever rate
+the master sets, so every rate "answers" and the first one tried would be reported. There nothing can
+be found: the station's answer (or the master heard) is reported with the words that the line has no
+rate of its own, and RATELESS_BAUD, the rate the commands use without --baud, is used.
+
 The caller opens the link at a rate (`open_link(rate)`) and makes a Master on it (`make_master`);
 this module does the reading and the probing through the Link and Master interfaces and closes every
 link it opened except the one it returns.
@@ -26,6 +32,9 @@ PROBE_ORDER = (1500000, 187500, 19200, 500000, 93750, 12000000, 45450, 9600, 300
 #: telegrams with FCS that must be heard to take a rate from listening
 HEARD_NEEDED = 2
 
+#: the rate used on a line that has none of its own: the commands' default without --baud
+RATELESS_BAUD = 19200
+
 
 @dataclass
 class BaudFound:
@@ -34,6 +43,20 @@ class BaudFound:
 
     def describe(self) -> str:
         return f"baud rate {BAUD_NAMES[self.baud]} ({self.how})"
+
+
+def rateless(link) -> str | None:
+    """What the line is when it has no baud rate of its own (a pty, a TCP connection, the simulator
+    without baud=), None for a serial line (or rfc2217://, which sets the converter's rate)."""
+    from profidrive_cli.link.serial_link import _is_pty
+    name = str(getattr(link, "name", "") or "")
+    if name.startswith("socket://"):
+        return "a TCP connection (socket://)"
+    if _is_pty(name):
+        return f"a pty ({name})"
+    if name.startswith("sim://") and getattr(getattr(link, "ser", None), "locked_baud", 0) is None:
+        return "the simulator without baud="
+    return None
 
 
 def listen_window(baud: int) -> float:
@@ -71,9 +94,14 @@ def detect_baud(open_link: Callable[[int], object], make_master: Callable[[objec
     With probe=False only listening is done (and the open link is returned instead of a master).
     """
     rates = tuple(rates)
+    checked = False                      # the first link opened says whether the line has a rate
     if listen:
         for baud in rates:
             link = open_link(baud)
+            what, checked = (rateless(link) if not checked else None), True
+            if what is not None:
+                return _on_a_rateless_line(link, what, make_master, addresses, listen=listen,
+                                           probe=probe, progress=progress)
             if getattr(link, "instant", False):
                 # the instant simulator has no other master on it: nothing to hear
                 link.close()
@@ -98,6 +126,10 @@ def detect_baud(open_link: Callable[[int], object], make_master: Callable[[objec
         if progress:
             progress(f"probing at {BAUD_NAMES[baud]}")
         link = open_link(baud)
+        what, checked = (rateless(link) if not checked else None), True
+        if what is not None:
+            return _on_a_rateless_line(link, what, make_master, addresses, listen=False,
+                                       probe=True, progress=progress)
         try:
             from profidrive_cli.dp.scan import probe as probe_one
             master = make_master(link, baud)
@@ -116,3 +148,37 @@ def detect_baud(open_link: Callable[[int], object], make_master: Callable[[objec
             return BaudFound(baud, f"station {hit} answered"), master
         link.close()
     return None, None
+
+
+def _on_a_rateless_line(link, what: str, make_master, addresses, *, listen: bool, probe: bool,
+                        progress):
+    """detect_baud on a line without a rate: listen and probe once on `link` (opened at whatever
+    rate: the octets are the same) with a master at RATELESS_BAUD, and say so."""
+    name = BAUD_NAMES[RATELESS_BAUD]
+    why = f"{what} has no baud rate of its own, so any rate answers; {name} is used, the default"
+    try:
+        if listen and not getattr(link, "instant", False):
+            if progress:
+                progress(f"listening on {what}")
+            n = heard_telegrams(link, listen_window(RATELESS_BAUD))
+            if n >= HEARD_NEEDED:
+                found = BaudFound(RATELESS_BAUD, f"heard {n} telegrams of a running master; {why}")
+                return (found, link) if not probe else (found, make_master(link, RATELESS_BAUD))
+        if not probe:
+            link.close()
+            return None, None
+        if progress:
+            progress(f"probing on {what}")
+        from profidrive_cli.dp.scan import probe as probe_one
+        master = make_master(link, RATELESS_BAUD)
+        targets = list(addresses) if addresses is not None else list(range(0, 127))
+        hit = next((a for a in targets if a != master.address and probe_one(master, a) is not None),
+                   None)
+    except BaseException:
+        link.close()
+        raise
+    if hit is None:
+        link.close()
+        return None, None
+    master.fdl.counters.clear()          # the probes are not the command's traffic
+    return BaudFound(RATELESS_BAUD, f"station {hit} answered; {why}"), master
