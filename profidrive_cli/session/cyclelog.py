@@ -39,25 +39,37 @@ class CycleLog:
                    "actual", "outputs", "inputs"] + (list(extra[0]) if extra else []))
 
     def log_cycle(self, t: float, outputs: bytes, inputs: bytes) -> None:
+        # called inside every Data_Exchange, the safe stop's too: nothing may escape from here
         if self._file is None:
             return
-        ctw, ref, stw, act = cycle_words(self.drive_of(), outputs, inputs)
-        self._row([f"{t - self.t0:.4f}", self.channel.cycles, _hex4(ctw), _s16(ref), _hex4(stw),
-                   _s16(act), outputs.hex(), inputs.hex()] + (list(self.extra[1]()) if self.extra else []))
+        try:
+            ctw, ref, stw, act = cycle_words(self.drive_of(), outputs, inputs)
+            row = [f"{t - self.t0:.4f}", self.channel.cycles, _hex4(ctw), _s16(ref), _hex4(stw),
+                   _s16(act), outputs.hex(), inputs.hex()] + (list(self.extra[1]()) if self.extra
+                                                              else [])
+        except Exception as e:              # noqa: BLE001  (a column's value: logging stops)
+            self._failed(e)
+            return
+        self._row(row)
 
     def _row(self, row: list) -> None:
         try:
             self._writer.writerow(row)
-        except OSError as e:
+        except Exception as e:              # noqa: BLE001  (OSError: disk full; any other: logging stops)
             self._failed(e)
 
-    def _failed(self, e: OSError) -> None:
+    def _failed(self, e: Exception) -> None:
         out, self._file = self._file, None
         kept = out.path.is_file()           # a regular file there: it stays as it was
         out.discard()
-        self.error = OutputWriteError(f"--log {self.path}: write failed: {e.strerror or e}"
+        why = (f"write failed: {e.strerror or e}" if isinstance(e, OSError) else
+               f"logging failed: {type(e).__name__}: {e}")
+        self.error = OutputWriteError(f"--log {self.path}: {why}"
                                       + ("; the previous file is untouched" if kept else ""))
-        self.warn(f"{self.error}; logging stopped")
+        try:
+            self.warn(f"{self.error}; logging stopped")
+        except Exception:                   # noqa: BLE001  (said again when the session closes)
+            pass
 
     def close(self) -> None:
         out, self._file = self._file, None
