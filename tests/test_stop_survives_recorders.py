@@ -6,7 +6,7 @@ Each command runs in this process on the simulated bus (the `sim` fixture keeps 
 stations are inspected afterwards). The file fails with ENOSPC on its first write once a simulated
 motor turns (or after N frames where nothing turns). The simulated slave records every time it
 leaves data exchange: the drive must have left it released by pdrive (Set_Prm with Unlock_Req,
-after the stop) with its motor at 0 Hz and off -- not by its DP watchdog.
+after the stop) at standstill and out of operation -- not by its DP watchdog.
 """
 
 import errno
@@ -52,9 +52,9 @@ class _DiskFull:
 
 
 def _motors(buses) -> dict:
-    """{address: motor frequency} of every simulated drive with a motor model."""
-    return {a: s.model.motor.freq for b in buses.values() for a, s in b.slaves.items()
-            if getattr(s.model, "motor", None) is not None}
+    """{address: output frequency in Hz} of every simulated drive."""
+    return {a: s.model.freq for b in buses.values() for a, s in b.slaves.items()
+            if getattr(s.model, "freq", None) is not None}
 
 
 @pytest.fixture
@@ -80,15 +80,16 @@ def disk_full(monkeypatch, sim):
 
 @pytest.fixture
 def leaves(monkeypatch):
-    """[(address, reason, motor Hz, motor on)] each time a simulated slave leaves data exchange."""
+    """[(address, reason, output Hz, drive state, max Hz)] each time a simulated slave leaves data
+    exchange."""
     got = []
     real = SimSlave._leave
 
     def _leave(self, now, reason, to=None):
         if self.state == DATA_EXCH:
-            m = getattr(self.model, "motor", None)
-            got.append((self.address, reason, None if m is None else m.freq,
-                        None if m is None else m.on))
+            m = self.model
+            got.append((self.address, reason, m.freq, getattr(m.state, "name", str(m.state)),
+                        m.max_frequency()))
         return real(self, now, reason) if to is None else real(self, now, reason, to)
     monkeypatch.setattr(SimSlave, "_leave", _leave)
     return got
@@ -122,7 +123,15 @@ def _stopped_by_pdrive(leaves, addresses):
     for a in addresses:
         mine = [x for x in leaves if x[0] == a]
         assert mine and mine[-1][1] == "released by master", leaves
-        assert mine[-1][2] in (None, 0.0) and mine[-1][3] in (None, False), mine
+        assert _at_rest(mine[-1]), mine
+
+
+def _at_rest(leave) -> bool:
+    """Not in operation (S4: a run command in force) and at standstill as pdrive counts it
+    (drives/base.py DriveStatus.stopped: |speed| < 0.05 % of the maximum frequency; the model
+    may still be a few mHz into its last ramp step when its status word says so)."""
+    _, _, hz, state, fmax = leave
+    return state != "S4" and abs(hz) < 0.0005 * fmax
 
 
 TRACE = "trace file /dev/full"          # what the failed trace is called in its one line
@@ -183,7 +192,7 @@ def test_commloss_test_with_a_failing_trace_ends_stopped(capsys, monkeypatch, si
     assert "PASS" in r.stdout                           # the test itself went through
     # the watchdog expiry is the test's own break; the end is pdrive's: released, motor stopped
     mine = [x for x in leaves if x[0] == 6]
-    assert mine[-1][1] == "released by master" and mine[-1][2] == 0.0 and not mine[-1][3], leaves
+    assert mine[-1][1] == "released by master" and _at_rest(mine[-1]), leaves
 
 
 def test_param_restore_with_a_failing_trace_finishes_and_releases(capsys, monkeypatch, sim,
@@ -211,3 +220,77 @@ def test_run_with_a_log_that_fails_mid_run_stops_the_drive(capsys, monkeypatch, 
     # the error line after the stop (the live view also said "logging stopped" when it happened)
     _one_line_about(r, "pdrive: --log /dev/full: write failed")
     _stopped_by_pdrive(leaves, [3])
+
+
+# -- the session itself: callbacks and log columns -----------------------------------------------
+
+
+def _session(**kw):
+    from profidrive_cli.cli.common import BusOptions
+    from profidrive_cli.session import DriveSession
+    m = BusOptions("sim://", "19200", 2, None, None, False, False, 0, False).open_master()
+    return DriveSession(m, 3, handle_signals=False, cycle_hz=0, **kw)
+
+
+def _turn(s, sim):
+    s.start(50.0)
+    for _ in range(200):
+        if _motors(sim)[3] != 0.0:
+            return
+        s.poll()
+    raise AssertionError("the simulated drive never turned")
+
+
+def test_a_sample_callback_that_raises_during_the_stop_does_not_skip_it(sim, leaves):
+    """A closed stdout under --json (BrokenPipeError from the live view) while the drive stops."""
+    calls = []
+
+    def broken(sample):
+        calls.append(sample)
+        raise BrokenPipeError(32, "Broken pipe")
+    s = _session()
+    with pytest.raises(BrokenPipeError):           # said after the stop and the release
+        with s:
+            _turn(s, sim)
+            s.on_sample = broken
+    assert len(calls) == 1                          # not called again once it raised
+    assert s.stop_report.how == "normal" and s.stop_report.stopped, s.stop_report
+    _stopped_by_pdrive(leaves, [3])
+
+
+def test_a_message_callback_that_raises_during_the_stop_does_not_skip_it(sim, leaves):
+    def broken(text):
+        raise BrokenPipeError(32, "Broken pipe")
+    s = _session()
+    with pytest.raises(BrokenPipeError):
+        with s:
+            _turn(s, sim)
+            s.on_message = broken                   # "stopped (normal stop, ...)" raises
+    assert s.stop_report.stopped and any(m.startswith("stopped") for m in s.messages)
+    _stopped_by_pdrive(leaves, [3])
+
+
+def test_a_log_column_that_raises_ends_logging_not_the_run(sim, leaves, tmp_path):
+    """run --monitor's columns beside each exchange: an exception there (not an OSError) stops the
+    log; the run and its stop go on; the session raises the log's error after the stop (exit 1)."""
+    from profidrive_cli.outfile import OutputWriteError
+    n = [0]
+
+    def row():
+        n[0] += 1
+        if _motors(sim).get(3):
+            raise ValueError("no such monitor")
+        return [n[0]]
+    log = tmp_path / "run.csv"
+    s = _session(log_csv=str(log))
+    s.log_extra = (["m"], row)
+    with pytest.raises(OutputWriteError) as e:
+        with s:
+            _turn(s, sim)
+            for _ in range(5):
+                s.poll()
+    assert f"--log {log}: logging failed: ValueError: no such monitor" in str(e.value)
+    assert s.stop_report.stopped
+    _stopped_by_pdrive(leaves, [3])
+    assert not log.exists()                         # no half log: the temporary file is gone
+    assert os.listdir(tmp_path) == []
