@@ -1,9 +1,10 @@
 """The --log CSV: one row per Data_Exchange (time, cycle, control word, reference, status word,
 actual, output and input octets), written through outfile.OutputFile to a temporary file beside the
 target and renamed over it when the session closes, also after Ctrl-C or a trip (the log of such a
-run is the one wanted). A write that fails mid-run never disturbs the cycle (nor the stop): logging
-ends, the temporary file is dropped, the old file stays, and `error` holds the OutputWriteError the
-session raises on close (exit 1). Reads the drive's layout only to name the words; no bus traffic.
+run is the one wanted). A write that fails mid-run, or any exception while a row is made (a
+column's value), never disturbs the cycle (nor the stop): logging ends, the temporary file is
+dropped, the old file stays, and `error` holds the OutputWriteError the session raises on close
+(exit 1). Reads the drive's layout only to name the words; no bus traffic.
 """
 
 from __future__ import annotations
