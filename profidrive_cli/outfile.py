@@ -96,6 +96,9 @@ class OutputFile:
         self.file = None
         self._tmp: str | None = None
         self.committed = False
+        #: the OutputWriteError of a failed write: every later write, flush or commit raises it
+        #: again (the file is gone; nothing more can be written to it)
+        self.error: OutputWriteError | None = None
 
     # -- life cycle -------------------------------------------------------------------------------
     def open(self):
@@ -115,21 +118,28 @@ class OutputFile:
         return self.file
 
     def write(self, data) -> None:
+        self._check_open()
         try:
             self.file.write(data)
         except OSError as e:
             self._fail(e)
 
     def flush(self) -> None:
+        self._check_open()
         try:
             self.file.flush()
         except OSError as e:
             self._fail(e)
 
+    def _check_open(self) -> None:
+        if self.file is None:
+            raise self.error or OutputWriteError(f"{self.what} {self.path}: not open")
+
     def commit(self) -> Path:
         """Flush, fsync and rename over the target. Raises OutputWriteError (target untouched)."""
         if self.committed:
             return self.path
+        self._check_open()
         f = self.file
         try:
             f.flush()
@@ -173,8 +183,8 @@ class OutputFile:
         self.discard()
         kept = ("; the previous file is untouched" if self.path.exists() and not
                 _is_special(self.path) else "")
-        raise OutputWriteError(f"{self.what} {self.path}: write failed: {_reason(e)}{kept}") \
-            from None
+        self.error = OutputWriteError(f"{self.what} {self.path}: write failed: {_reason(e)}{kept}")
+        raise self.error from None
 
     def __enter__(self):
         self.open()

@@ -337,3 +337,79 @@ def test_run_reconnect_resumes_and_leaves_the_drive_stopped():
     finally:
         proxy.cut()
         _stop(sim)
+
+
+# -- a vanished device: every read, write and flush is LinkLost (EIO on a pty) -------------------
+
+
+@pytest.mark.parametrize("op", ["flush_input", "read", "write"])
+def test_a_pty_whose_other_end_closed_is_link_lost_in_every_operation(op):
+    """A cable pull on a pty: the other end closes and the kernel answers EIO (tcflush raises
+    termios.error, not OSError: flush_input gave a traceback and --reconnect was not tried)."""
+    from profidrive_cli.link.serial_link import SerialLink
+    m, s = os.openpty()
+    link = SerialLink(os.ttyname(s), 19200)
+    os.close(s)
+    os.close(m)                                          # the other end goes away
+    try:
+        with pytest.raises(LinkLost) as e:
+            if op == "flush_input":
+                link.flush_input()
+            elif op == "read":
+                link.read(link.now() + 0.5)
+            else:
+                link.write(bytes.fromhex("10 03 02 49 4E 16"))
+        assert str(e.value).startswith(f"{link.name}: port lost")
+        assert e.value.port == link.name
+    finally:
+        link.close()
+
+
+class _VanishedSerial:
+    """A pyserial-like port (not a POSIX fd read by os.read) whose device is gone."""
+
+    def __init__(self, exc):
+        self.exc = exc
+        self.write_timeout = 2.0
+
+    @property
+    def in_waiting(self):
+        raise self.exc
+
+    def read(self, n=1):
+        raise self.exc
+
+    def write(self, data):
+        raise self.exc
+
+    def reset_input_buffer(self):
+        raise self.exc
+
+    def close(self):
+        pass
+
+
+def _eio_termios():
+    import termios
+    return termios.error(5, "Input/output error")
+
+
+@pytest.mark.parametrize("make_exc", [_eio_termios, lambda: OSError(5, "Input/output error")],
+                         ids=["termios.error", "OSError"])
+@pytest.mark.parametrize("op", ["flush_input", "read", "write"])
+def test_eio_from_the_port_object_is_link_lost(make_exc, op):
+    from profidrive_cli.link.serial_link import SerialLink
+    link = SerialLink.__new__(SerialLink)
+    link.name, link.baud, link.echo, link._recent = "/dev/ttyUSB9", 19200, False, b""
+    link.ser = _VanishedSerial(make_exc())
+    link._posix = link._fd_read = False
+    link._clock = link.now = time.monotonic
+    with pytest.raises(LinkLost) as e:
+        if op == "flush_input":
+            link.flush_input()
+        elif op == "read":
+            link.read(time.monotonic() + 0.1)
+        else:
+            link.write(b"\xE5")
+    assert "port lost" in str(e.value) and "Input/output error" in str(e.value)
+    assert "[Errno 5]" in str(e.value)                   # termios.error's tuple put in words

@@ -70,3 +70,30 @@ def test_mode_of_existing_file_kept(tmp_path):
     p.chmod(0o640)
     write_text_atomic(p, "b\n")
     assert (p.stat().st_mode & 0o777) == 0o640
+
+
+def test_after_a_failed_write_every_use_raises_the_same_one_line_error(tmp_path):
+    """A file that failed (disk full) is gone: a later write, flush or commit says so again as
+    OutputWriteError -- never AttributeError on the dropped file object (issue: a failed --trace
+    made the safe stop's own telegrams raise AttributeError)."""
+    import errno
+    p = tmp_path / "t.pcap"
+    out = OutputFile(p, "wb", what="trace file")
+    out.open()
+
+    class Full:
+        def write(self, data):
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+        def close(self):
+            pass
+    out.file = Full()
+    with pytest.raises(OutputWriteError) as first:
+        out.write(b"x")
+    text = str(first.value)
+    assert text == f"trace file {p}: write failed: No space left on device"
+    for use in (lambda: out.write(b"y"), out.flush, out.commit):
+        with pytest.raises(OutputWriteError) as again:
+            use()
+        assert str(again.value) == text
+    assert os.listdir(tmp_path) == []                  # the temporary file is gone, none created

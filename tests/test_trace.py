@@ -99,3 +99,67 @@ def test_v_shows_retries_on_a_lossy_bus():
     assert p.returncode == 1
     assert "station 3: retry (no valid reply in time)" in p.stderr
     assert "station 3: no valid reply after 1 retry" in p.stderr
+
+
+class _FailingRecorder:
+    """A recorder that raises OSError(ENOSPC) after `n` frames (a full disk under --trace)."""
+
+    def __init__(self, n):
+        self.n, self.frames = n, []
+
+    def write(self, t, raw):
+        import errno
+        if len(self.frames) >= self.n:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        self.frames.append(raw)
+
+
+def test_a_recorder_that_raises_never_breaks_an_exchange():
+    """The recorder sits in the link's write and read path: its failure is kept, the telegrams go
+    on (and the poller's exchanges with them)."""
+    from profidrive_cli.dp.poller import Master
+    from profidrive_cli.dp.station import SlaveConfig
+    from profidrive_cli.dp.trace import TraceLink
+    from profidrive_cli.fdl.timing import BusParams
+    from profidrive_cli.link import open_link
+    rec = _FailingRecorder(3)
+    link = TraceLink(open_link("sim://?stations=3:fuji-g1"), rec)
+    m = Master(link, BusParams.for_baud(19200))
+    try:
+        m.add_station(3, SlaveConfig(ident=0xFD01, cfg=bytes.fromhex("F3F1"), wd_ms=500))
+        m.bring_up(3)                   # Slave_Diag, Set_Prm, Chk_Cfg, Slave_Diag: 8 telegrams
+        for _ in range(5):
+            m.exchange(3, bytes(12))
+        assert m.stations[3].in_data_exchange
+    finally:
+        link.close()
+    assert len(rec.frames) == 3
+    assert isinstance(link.recorder_error, OSError) and link.recorder is None
+    assert link.sent >= 9 and link.received >= 9       # every telegram still decoded and counted
+
+
+def test_checklist_run_records_its_trace(tmp_path):
+    """checklist run accepted --trace and wrote nothing; now the pcap has the run's telegrams."""
+    ex = os.path.join(os.path.dirname(__file__), "..", "examples", "checklists", "moeller.yaml")
+    path = tmp_path / "cl.pcap"
+    p = _pdrive("checklist", "run", ex, "--yes", "--cycle-hz", "200", "--var", "accel_s=1",
+                "--var", "decel_s=1", "--var", "hold_s=0.2", "--trace", str(path))
+    assert p.returncode == 0, p.stderr
+    _, pkts = read_pcap(path.read_bytes())
+    # Set_Prm to station 6 (the checklist's Moeller) from master 2: SD2, DA 6 | 0x80, SA 2 | 0x80,
+    # DSAP 61, SSAP 62 (reference §3: SAP 61 = Set_Prm, 62 = the master's)
+    assert any(r[0] == 0x68 and r[4] == 0x86 and r[5] == 0x82 and r[7] == 61 and r[8] == 62
+               for _, r in pkts)
+    assert len(pkts) > 100                              # and the cycles of its run steps
+    assert sorted(os.listdir(tmp_path)) == ["cl.pcap"]
+
+
+def test_doctor_refuses_trace_before_opening_the_port(tmp_path):
+    """doctor tests the port with raw octets, never DP telegrams through a master: --trace would
+    write nothing, so it is refused (exit 2, one line, no file) instead of accepted silently."""
+    path = tmp_path / "d.pcap"
+    p = _pdrive("doctor", "--port", str(tmp_path / "no-such-port"), "--trace", str(path))
+    assert p.returncode == 2, p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1 and "--trace" in p.stderr
+    assert "no such port" not in p.stderr               # refused before the port was tried
+    assert os.listdir(tmp_path) == []

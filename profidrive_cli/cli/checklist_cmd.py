@@ -154,7 +154,7 @@ def run_cmd(ctx, opts: BusOptions, file, reports, dry_run, yes, variables, cycle
     if cl.master_address is not None and _defaulted(ctx, "master_address"):
         master_address = cl.master_address
     bus = BusOptions(port, baud, master_address, opts.slot_time, opts.retries, opts.rs485, opts.echo,
-                     opts.verbose, opts.json)
+                     opts.verbose, opts.json, opts.trace)
 
     live = is_tty() and not opts.json
     con = make_console(stderr=opts.json)

@@ -293,15 +293,75 @@ def configure_logging(verbose: int) -> None:
 def _open_trace(path: str):
     """The --trace recorder: a pcap written beside the target and renamed over it when the command
     ends (whatever way it ends: the trace of a failure is the useful one)."""
-    from profidrive_cli.dp.capture import PcapWriter
-    from profidrive_cli.outfile import OutputFile
-    f = OutputFile(path, "wb", what="trace file")
-    f.open()
-    writer = PcapWriter(f)
+    rec = TraceFile(path)
     ctx = click.get_current_context(silent=True)
     if ctx is not None:
-        ctx.call_on_close(f.commit)
-    return writer
+        ctx.with_resource(rec)
+    return rec
+
+
+class TraceFile:
+    """The --trace pcap file. write(t, raw) never raises: it runs inside every Data_Exchange and
+    the safe stop's telegrams. A failed write (disk full, /dev/full) ends the recording and is kept
+    in `error`; it is reported when the command's context closes, after the stop and the release:
+    one line and exit 1 when the command itself succeeded (a file the user asked for is lost), the
+    same line before the command's own error otherwise."""
+
+    def __init__(self, path: str):
+        from profidrive_cli.dp.capture import PcapWriter
+        from profidrive_cli.outfile import OutputFile
+        self.file = OutputFile(path, "wb", what="trace file")
+        self.file.open()
+        #: OutputWriteError (or any exception of the writer) once recording failed
+        self.error: Exception | None = None
+        self._pcap = None
+        try:
+            self._pcap = PcapWriter(self.file)
+        except Exception as e:          # noqa: BLE001
+            self._failed(e)
+
+    def write(self, t: float, raw: bytes) -> None:
+        if self._pcap is None:
+            return
+        try:
+            self._pcap.write(t, raw)
+        except Exception as e:          # noqa: BLE001  (never from inside an exchange)
+            self._failed(e)
+
+    def _failed(self, e: Exception) -> None:
+        from profidrive_cli.outfile import OutputWriteError
+        self._pcap = None
+        self.file.discard()
+        self.error = e if isinstance(e, OutputWriteError) else OutputWriteError(
+            f"trace file {self.file.path}: recording failed: {e}")
+
+    def close(self) -> Exception | None:
+        """Rename the pcap into place; the error, if recording or the rename failed."""
+        from profidrive_cli.outfile import OutputWriteError
+        if self._pcap is not None:
+            self._pcap = None
+            try:
+                self.file.commit()
+            except OutputWriteError as e:
+                self.error = e
+        return self.error
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        e = self.close()
+        if e is None:
+            return False
+        # a clean end: no exception, or an exit with code 0 (sys.exit / click's ctx.exit)
+        code = getattr(exc, "exit_code", getattr(exc, "code", 1)) if exc is not None else 0
+        ok = exc_type is None or (issubclass(exc_type, (SystemExit, click.exceptions.Exit))
+                                  and code in (0, None))
+        if ok:
+            raise e                     # the command worked, its trace is lost: exit 1
+        sys.stdout.flush()
+        click.echo(f"pdrive: {e}", err=True)
+        return False
 
 
 def complete_port(ctx, param, incomplete: str):

@@ -27,6 +27,12 @@ def doctor_cmd(opts, probe_address, station, listen_s):
     """Check a serial setup for PROFIBUS: permission, DP baud rates, FTDI latency_timer, echo,
     kernel RS-485; recommend --slot-time and --retries. Without --port: list the ports."""
     from profidrive_cli.dp.doctor import diagnose
+    if opts.trace:
+        # doctor tests the port's serial settings with raw octets at several rates, not DP
+        # telegrams through a master: nothing it sends would be in the pcap
+        raise UsageError(f"doctor records no --trace (it tests the serial port itself, not DP "
+                         f"telegrams); trace a bus command instead, e.g. pdrive scan --trace "
+                         f"{opts.trace}")
     if not opts.port:
         _list_ports(opts)
         return

@@ -8,6 +8,12 @@ a reply ("<-"), through the same capture decoder `pdrive sniff` uses, and each t
   SD, addresses, SAPs, FC in words, the DP service's name, the data in hex), and
 - written to a pcap recorder, when one is given (anything with write(t, raw): dp.capture.PcapWriter).
 
+The recorder sits in the link's write and read path, in the middle of every Data_Exchange and of
+the safe stop's own telegrams: it must never break them. A recorder that raises (a full disk, any
+bug) is dropped at once and its exception kept in `recorder_error`; the telegram itself has been
+sent (write) or is returned (read) as if nothing happened. Whoever gave the recorder reports the
+error when the command is over (cli/common.py: one line, exit 1).
+
 The DP service steps (station start-up, diagnosis, retries, re-parameterisation) are logged by the
 poller on `profidrive_cli.dp` at INFO (`-v`). A library user configures these loggers like any other.
 """
@@ -39,6 +45,8 @@ class TraceLink(Link):
         #: telegrams seen each way (tests, summaries)
         self.sent = 0
         self.received = 0
+        #: the exception the recorder raised (recording stopped there), else None
+        self.recorder_error: BaseException | None = None
 
     def __getattr__(self, name):
         # anything else the wrapped link offers (ser, reopen hooks, …)
@@ -50,7 +58,10 @@ class TraceLink(Link):
         for c in merge_errors(cap.feed(data, t)):
             n += 1
             if self.recorder is not None and c.frame is not None:
-                self.recorder.write(self._wall0 + c.t, c.raw)
+                try:
+                    self.recorder.write(self._wall0 + c.t, c.raw)
+                except Exception as e:      # noqa: BLE001  (never from inside an exchange)
+                    self.recorder, self.recorder_error = None, e
             if log.isEnabledFor(logging.DEBUG):
                 log.debug(format_line(c, arrow))
         return n

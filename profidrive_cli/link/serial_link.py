@@ -32,6 +32,17 @@ except ImportError:                          # pragma: no cover
     class _SocketSerial:                     # (no socket:// in this pyserial)
         pass
 
+try:
+    from termios import error as _TermiosError
+except ImportError:                          # pragma: no cover (Windows: no termios)
+    class _TermiosError(Exception):
+        pass
+
+#: what a read, write or flush raises when the device vanished (USB pulled, the pty's other end
+#: closed: EIO): pyserial's exceptions, OSError from os.read / os.write / select / ioctl, and
+#: termios.error (not an OSError) from tcflush / tcsetattr. Each is LinkLost to the master.
+_GONE = (serial.SerialException, OSError, _TermiosError)
+
 #: the most one read takes from a socket:// port (more than any telegram)
 _SOCKET_CHUNK = 4096
 
@@ -245,6 +256,14 @@ def _write_rest(fd: int, view: memoryview, timeout: float) -> None:
         select.select([], [fd], [], deadline - now)
 
 
+def _why(e: BaseException) -> str:
+    """The reason of a lost port in words: termios.error(5, 'Input/output error') has no str() of
+    its own beyond the tuple."""
+    if isinstance(e, _TermiosError) and not isinstance(e, OSError) and len(e.args) == 2:
+        return f"[Errno {e.args[0]}] {e.args[1]}"
+    return str(e)
+
+
 def _rate_text(baud: int) -> str:
     """19200 -> '19.2k', 1500000 -> '1.5M' (the DP rates' usual names)."""
     return f"{baud / 1e6:g}M" if baud >= 1000000 else f"{baud / 1e3:g}k" if baud >= 1000 else str(baud)
@@ -316,8 +335,8 @@ class SerialLink(Link):
                 self._swallow_echo(data)
         except serial.SerialTimeoutException:
             raise LinkLost(f"{self.name}: write timed out (adapter gone?)", self.name) from None
-        except (serial.SerialException, OSError) as e:
-            raise LinkLost(f"{self.name}: port lost while writing: {e}", self.name) from None
+        except _GONE as e:
+            raise LinkLost(f"{self.name}: port lost while writing: {_why(e)}", self.name) from None
 
     def _swallow_echo(self, data: bytes) -> None:
         deadline = self.now() + 0.05 + len(data) * 11 / self.baud
@@ -336,8 +355,8 @@ class SerialLink(Link):
                 data = _read_fd(self.ser, deadline - self._clock())
             else:
                 data = read_available(self.ser, deadline - self.now())
-        except (serial.SerialException, OSError) as e:
-            raise LinkLost(f"{self.name}: port lost while reading: {e}{self._last_words()}",
+        except _GONE as e:
+            raise LinkLost(f"{self.name}: port lost while reading: {_why(e)}{self._last_words()}",
                            self.name) from None
         except TypeError:
             # pyserial raises TypeError from os.read on a closed fd in some versions
@@ -366,8 +385,9 @@ class SerialLink(Link):
                     self._recent = (self._recent + data)[-160:]
             else:
                 self.ser.reset_input_buffer()
-        except (serial.SerialException, OSError) as e:
-            raise LinkLost(f"{self.name}: port lost: {e}{self._last_words()}", self.name) from None
+        except _GONE as e:
+            raise LinkLost(f"{self.name}: port lost: {_why(e)}{self._last_words()}",
+                           self.name) from None
 
     def close(self) -> None:
         try:

@@ -1,9 +1,10 @@
 """The --log CSV: one row per Data_Exchange (time, cycle, control word, reference, status word,
 actual, output and input octets), written through outfile.OutputFile to a temporary file beside the
 target and renamed over it when the session closes, also after Ctrl-C or a trip (the log of such a
-run is the one wanted). A write that fails mid-run never disturbs the cycle (nor the stop): logging
-ends, the temporary file is dropped, the old file stays, and `error` holds the OutputWriteError the
-session raises on close (exit 1). Reads the drive's layout only to name the words; no bus traffic.
+run is the one wanted). A write that fails mid-run, or any exception while a row is made (a
+column's value), never disturbs the cycle (nor the stop): logging ends, the temporary file is
+dropped, the old file stays, and `error` holds the OutputWriteError the session raises on close
+(exit 1). Reads the drive's layout only to name the words; no bus traffic.
 """
 
 from __future__ import annotations
@@ -39,25 +40,37 @@ class CycleLog:
                    "actual", "outputs", "inputs"] + (list(extra[0]) if extra else []))
 
     def log_cycle(self, t: float, outputs: bytes, inputs: bytes) -> None:
+        # called inside every Data_Exchange, the safe stop's too: nothing may escape from here
         if self._file is None:
             return
-        ctw, ref, stw, act = cycle_words(self.drive_of(), outputs, inputs)
-        self._row([f"{t - self.t0:.4f}", self.channel.cycles, _hex4(ctw), _s16(ref), _hex4(stw),
-                   _s16(act), outputs.hex(), inputs.hex()] + (list(self.extra[1]()) if self.extra else []))
+        try:
+            ctw, ref, stw, act = cycle_words(self.drive_of(), outputs, inputs)
+            row = [f"{t - self.t0:.4f}", self.channel.cycles, _hex4(ctw), _s16(ref), _hex4(stw),
+                   _s16(act), outputs.hex(), inputs.hex()] + (list(self.extra[1]()) if self.extra
+                                                              else [])
+        except Exception as e:              # noqa: BLE001  (a column's value: logging stops)
+            self._failed(e)
+            return
+        self._row(row)
 
     def _row(self, row: list) -> None:
         try:
             self._writer.writerow(row)
-        except OSError as e:
+        except Exception as e:              # noqa: BLE001  (OSError: disk full; any other: logging stops)
             self._failed(e)
 
-    def _failed(self, e: OSError) -> None:
+    def _failed(self, e: Exception) -> None:
         out, self._file = self._file, None
         kept = out.path.is_file()           # a regular file there: it stays as it was
         out.discard()
-        self.error = OutputWriteError(f"--log {self.path}: write failed: {e.strerror or e}"
+        why = (f"write failed: {e.strerror or e}" if isinstance(e, OSError) else
+               f"logging failed: {type(e).__name__}: {e}")
+        self.error = OutputWriteError(f"--log {self.path}: {why}"
                                       + ("; the previous file is untouched" if kept else ""))
-        self.warn(f"{self.error}; logging stopped")
+        try:
+            self.warn(f"{self.error}; logging stopped")
+        except Exception:                   # noqa: BLE001  (said again when the session closes)
+            pass
 
     def close(self) -> None:
         out, self._file = self._file, None

@@ -4,6 +4,11 @@ hurries it, and the shutdown on every way out of a session (stop if the drive ma
 release the station; with the link lost, say what the station's watchdog and the drive will do).
 Sends only stop commands (drives.base.Drive.stop) and the release; reads parameters only to size the
 wait and to name the comm-loss behaviour.
+
+Nothing the caller hands in can skip the stop: an exception of a sample or message callback during
+the stop (a closed stdout, a bug) is kept in `sess.callback_error`, the callback is not called again,
+and the stop and the release go on; shutdown raises it after the release when nothing else went
+wrong (the command then ends with its one line).
 """
 
 from __future__ import annotations
@@ -100,7 +105,7 @@ def stop(sess, on_sample, timeout) -> StopReport:
     why = ""
     try:
         d.stop("normal", wait=False)
-        st = wait_stopped(sess, limit, on_sample)
+        st, on_sample = _wait(sess, limit, on_sample)
         if st is not None:
             sess._may_run = False
             how = "normal"
@@ -112,11 +117,11 @@ def stop(sess, on_sample, timeout) -> StopReport:
     except DriveError as e:
         why = f"normal stop failed: {e}"
     # escalate: coast (OFF2 / base block / run bit off)
-    sess._warn(f"{why}: coasting")
+    _tell(sess, sess._warn, f"{why}: coasting")
     try:
         d.stop("coast", wait=False)
         sess.signals.hurry = False
-        st = wait_stopped(sess, COAST_TIMEOUT_S, on_sample)
+        st, on_sample = _wait(sess, COAST_TIMEOUT_S, on_sample)
     except DriveError as e:
         return StopReport("failed", False, sess.channel.now() - t_start,
                           f"{why}; coast stop not possible: {e}", sess.final_status)
@@ -129,13 +134,22 @@ def stop(sess, on_sample, timeout) -> StopReport:
 
 
 def wait_stopped(sess, timeout: float, on_sample) -> DriveStatus | None:
+    return _wait(sess, timeout, on_sample)[0]
+
+
+def _wait(sess, timeout: float, on_sample):
+    """(the status once stopped or in fault, else None; on_sample, or None once it raised)."""
     d = sess.drive
     end = sess.channel.now() + timeout
     while True:
         st = d.cycle()
         if on_sample is not None:
-            on_sample(make_sample(sess, st))
-        else:
+            try:
+                on_sample(make_sample(sess, st))
+            except Exception as e:          # noqa: BLE001  (the stop goes on without it)
+                callback_failed(sess, e)
+                on_sample = None
+        if on_sample is None:
             sess.final_status = st
         if st.fault or st.stopped:
             if st.fault and st.fault_code is None:
@@ -143,9 +157,23 @@ def wait_stopped(sess, timeout: float, on_sample) -> DriveStatus | None:
                     st = d.status()
                 except DriveError:
                     pass
-            return st
+            return st, on_sample
         if sess.signals.hurry or sess.channel.now() > end:
-            return None
+            return None, on_sample
+
+
+def callback_failed(sess, e: BaseException) -> None:
+    """Keep the first exception a callback raised during the stop (reported after the release)."""
+    if getattr(sess, "callback_error", None) is None:
+        sess.callback_error = e
+
+
+def _tell(sess, say, text: str) -> None:
+    """sess._say / sess._warn: the text is kept in the session even when on_message raises."""
+    try:
+        say(text)
+    except Exception as e:                  # noqa: BLE001
+        callback_failed(sess, e)
 
 
 def link_lost_words(sess, e: BaseException) -> str:
@@ -158,6 +186,16 @@ def link_lost_words(sess, e: BaseException) -> str:
 
 
 def shutdown(sess, exc: BaseException | None) -> None:
+    """The stop and the release on every way out; a callback's exception during them is raised
+    after the release (when `exc` is None: the session's own error comes first)."""
+    _shutdown(sess, exc)
+    late = getattr(sess, "callback_error", None)
+    if late is not None and exc is None:
+        sess.callback_error = None
+        raise late
+
+
+def _shutdown(sess, exc: BaseException | None) -> None:
     from profidrive_cli.link.base import LinkLost
     if isinstance(exc, LinkLost):
         sess.link_lost = True
@@ -167,7 +205,7 @@ def shutdown(sess, exc: BaseException | None) -> None:
         if sess._may_run:
             sess.stop_report = StopReport("not sent (link lost)", False, 0.0,
                                           link_lost_words(sess, exc))
-            sess._say(sess.stop_report.message)
+            _tell(sess, sess._say, sess.stop_report.message)
         _after_stop(sess, False)
         return
     if exc is not None:
@@ -181,22 +219,22 @@ def shutdown(sess, exc: BaseException | None) -> None:
         try:
             r = sess.stop()
             if r.how == "normal":
-                sess._say(f"stopped (normal stop, {r.seconds:.1f} s)" if not (r.status and r.status.fault)
-                          else r.message)
+                _tell(sess, sess._say, f"stopped (normal stop, {r.seconds:.1f} s)"
+                      if not (r.status and r.status.fault) else r.message)
             elif r.how == "coast":
-                sess._say(f"stopped by a coast stop after {r.seconds:.1f} s ({r.message})")
+                _tell(sess, sess._say, f"stopped by a coast stop after {r.seconds:.1f} s ({r.message})")
             else:
-                sess._say(f"could not confirm the stop: {r.message}")
+                _tell(sess, sess._say, f"could not confirm the stop: {r.message}")
         except LinkLost as e:
             sess.link_lost = True
             sess.stop_report = StopReport("not sent (link lost)", False, 0.0, link_lost_words(sess, e))
-            sess._say(sess.stop_report.message)
+            _tell(sess, sess._say, sess.stop_report.message)
             _after_stop(sess, False)
             return
         except PdriveError as e:
             sess.stop_report = StopReport("failed", False, 0.0, f"stop failed: {e}")
-            sess._say(f"stop failed: {e}; the station's watchdog ({sess.watchdog_ms:g} ms) "
-                      f"ends data exchange when pdrive lets go")
+            _tell(sess, sess._say, f"stop failed: {e}; the station's watchdog "
+                                   f"({sess.watchdog_ms:g} ms) ends data exchange when pdrive lets go")
     elif sess.stop_report is None:
         sess.stop_report = StopReport("not needed", True, 0.0, "not started by this session",
                                       sess.final_status)
@@ -214,4 +252,4 @@ def _after_stop(sess, link_ok: bool) -> None:
         try:
             hook(link_ok)
         except Exception as e:          # noqa: BLE001  (the stop is done; say what was left)
-            sess._say(f"after the stop: {e}")
+            _tell(sess, sess._say, f"after the stop: {e}")
