@@ -89,22 +89,33 @@ def test_run_brings_up_five_stations_at_9600_without_a_watchdog_expiring(sim, mo
     assert master.keep_alives > 0
 
 
-def test_run_of_several_yaskawa_stations_at_19200_passes(sim):
-    """The issue's other case: several Yaskawa stations (32-octet telegrams) at 19.2k, the whole run."""
+@pytest.mark.parametrize("sync", [False, True])
+def test_run_of_several_yaskawa_stations_at_19200_passes(sim, sync):
+    """The issue's other case: several Yaskawa stations (32-octet telegrams) at 19.2k, the whole run
+    (a regression check: on the virtual clock this one came up before too). With --sync (every
+    YASK00CA.GSD claims Sync and Freeze) the keep-alives of the bring-up are no rounds: one
+    Global_Control per round, then Unsync+Unfreeze, as without them."""
     from profidrive_cli.cli.common import BusOptions
     from profidrive_cli.session.multirun import MultiRun
-    ramps = "&".join(f"set={a}:C1-01=0.3,C1-02=0.3" for a in (3, 4, 5, 7))
-    url = ("sim://?timing=virtual&baud=19200&stations=3:yaskawa,4:yaskawa,5:yaskawa,6:fuji-g1,"
-           f"7:yaskawa&{ramps}&set=6:F07=0.3,F08=0.3")
+    # without --sync four Yaskawa and a Fuji (its GSD claims no Sync); with it four Yaskawa
+    yask = (3, 4, 5, 6) if sync else (3, 4, 5, 7)
+    addresses = [3, 4, 5, 6] if sync else [3, 4, 5, 6, 7]
+    plant = ",".join(f"{a}:yaskawa" if a in yask else f"{a}:fuji-g1" for a in addresses)
+    ramps = "&".join(f"set={a}:C1-01=0.3,C1-02=0.3" if a in yask else f"set={a}:F07=0.3,F08=0.3"
+                     for a in addresses)
+    url = f"sim://?timing=virtual&baud=19200&stations={plant}&{ramps}"
     master = BusOptions(url, "19200", 2, None, None, False, False, 0, False).open_master()
     bus = next(iter(sim.values()))
     bus.log = []
-    run = MultiRun(master, [3, 4, 5, 6, 7], [("hz", 20.0)] * 5, duration=2.0,
-                   watchdog_ms=WATCHDOG_MS)
+    run = MultiRun(master, addresses, [("hz", 20.0)] * len(addresses), duration=2.0,
+                   watchdog_ms=WATCHDOG_MS, sync=sync)
     assert run.run() == 0, run.end_dict()
     spans = no_dx_spans(bus.log, 19200)
     assert max(spans.values()) <= WATCHDOG_MS / 1000.0, spans
     assert all(s.stats["watchdog_expired"] == 0 for s in bus.slaves.values())
+    assert master.keep_alives > 0
+    end = run.end_dict()
+    assert end["global_controls"] == (end["rounds"] + 1 if sync else 0)
 
 
 LINE = """name: line
@@ -160,3 +171,51 @@ def test_api_drives_opened_one_after_another_keep_the_first_running():
         spans = no_dx_spans(sim_bus.log, 9600)
         assert max(spans.values()) <= WATCHDOG_MS / 1000.0, spans
     assert sim_bus.slave(3).model.freq == 0.0
+
+
+def test_keep_within_is_a_quarter_of_the_watchdog_never_later_than_the_period():
+    from profidrive_cli.dp.poller import keep_within
+    assert keep_within(500) == pytest.approx(0.125)           # 500 ms / 4
+    assert keep_within(500, 0.05) == pytest.approx(0.05)      # 20 rounds/s: every period
+    assert keep_within(500, 0.4) == pytest.approx(0.125)
+    assert keep_within(None, 0.1) == pytest.approx(0.1)       # no watchdog: the period alone
+    assert keep_within(None) is None                          # neither: not kept
+
+
+def _master(baud=9600):
+    from profidrive_cli.dp.poller import Master
+    from profidrive_cli.fdl.timing import BusParams
+    from profidrive_cli.link import open_link
+    link = open_link("sim://?timing=virtual", baud)
+    return Master(link, BusParams.for_baud(baud, retries=1))
+
+
+def _configs(m):
+    from profidrive_cli.dp.station import SlaveConfig
+    return {a: SlaveConfig(ident=s.model.ident, cfg=s.model.real_cfg(), wd_ms=WATCHDOG_MS)
+            for a, s in sorted(m.link.bus.slaves.items())}
+
+
+@pytest.mark.parametrize("kept", [True, False])
+def test_only_stations_marked_kept_get_keep_alives(kept):
+    """Master level: stations 3..7 brought up one after another at 9.6k. Marked kept, none goes a
+    watchdog without a Data_Exchange; unmarked, the master sends nothing it was not asked for (the
+    comm-loss test's silence stays silence) and the first one's watchdog expires, as before."""
+    m = _master()
+    bus = m.link.bus
+    bus.log = []
+    for a, cfg in _configs(m).items():
+        m.add_station(a, cfg)
+        m.bring_up(a)
+        if kept:
+            m.keep(a)
+    m.exchange(3)                                  # the first one's next cycle
+    spans = no_dx_spans(bus.log, 9600)
+    expired = bus.slaves[3].stats["watchdog_expired"]
+    if kept:
+        assert max(spans.values()) <= WATCHDOG_MS / 1000.0, spans
+        assert expired == 0 and m.keep_alives > 0
+    else:
+        assert m.keep_alives == 0
+        assert spans[3] > WATCHDOG_MS / 1000.0 and expired == 1
+    m.link.close()
