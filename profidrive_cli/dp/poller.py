@@ -8,6 +8,13 @@ Everything it decides comes from the sans-IO pieces (fdl.master.FdlMaster, dp.st
 
 When the port goes away, every call raises LinkLost with the port and the counters; reconnect()
 reopens the same port and brings every station back to data exchange.
+
+Kept stations (keep()): before each request to another station -- a start-up step, a diagnosis, a
+scan, an exchange of a station not yet kept -- once a kept station in data exchange has had no
+request for keep_within() (a quarter of its watchdog, never later than its cycle period), every kept
+station in data exchange gets one Data_Exchange with its last outputs (keep_alive()), so bringing
+up station 4 never lets the watchdog of station 3 expire (pdrive run 3,4,5, the checklist's
+`together`, the API's drives): one start-up request per keep round, as a PLC's bus cycle does.
 """
 
 from __future__ import annotations
@@ -27,6 +34,18 @@ from profidrive_cli.fdl.timing import BusParams
 from profidrive_cli.link.base import Link, LinkLost
 
 log = logging.getLogger("profidrive_cli.dp")
+
+#: a kept station gets a Data_Exchange while the master is busy elsewhere once its last request is
+#: this part of its DP watchdog old (the rest covers the request in progress and the other kept
+#: stations' keep-alives before it)
+KEEP_FRACTION = 0.25
+
+
+def keep_within(wd_ms: float | None, period: float = 0.0) -> float | None:
+    """How old a kept station's last request may get while the master talks to others: a quarter
+    of its watchdog, never later than its cycle period (when it has one); None: neither."""
+    bounds = [b for b in ((wd_ms or 0.0) / 1000.0 * KEEP_FRACTION, period or 0.0) if b > 0.0]
+    return min(bounds) if bounds else None
 
 
 class Master:
@@ -51,6 +70,15 @@ class Master:
         #: how often the port went away, and how often reconnect() brought it back
         self.link_losses = 0
         self.reconnects = 0
+        #: stations kept in data exchange while the master talks to others (keep()):
+        #: address -> the age of its last request at which it gets a keep-alive Data_Exchange
+        self.kept: dict[int, float] = {}
+        self._last_req: dict[int, float] = {}   # address -> when its last request went
+        self._keeping = False
+        #: keep-alive Data_Exchanges sent (each one is an exchange like any other: counters,
+        #: inputs) and the link time they took
+        self.keep_alives = 0
+        self.keep_time = 0.0
 
     @property
     def params(self) -> BusParams:
@@ -103,6 +131,7 @@ class Master:
     def _transact(self, da, function, data, dsap, ssap, expect) -> Outcome:
         self._wait_idle()
         now = self.link.now()
+        self._last_req[da] = now
         out, deadline = self.fdl.request(da, function, data, dsap, ssap, now, expect)
         self.link.write(out)
         if not self.link.instant:
@@ -176,10 +205,12 @@ class Master:
     # -- single services (scan, diag, io) ------------------------------------------------------
     def fdl_status(self, da: int) -> F.Frame | None:
         """FDL status request (live-list probe): the reply frame, or None when nobody answered."""
+        self.keep_alive(da)
         res = self.transact(da, F.FDL_STATUS, expect=6)
         return res.frame if res.kind == REPLY else None
 
     def slave_diag(self, da: int) -> S.SlaveDiag | None:
+        self.keep_alive(da)
         res = self.transact(da, F.SRD_HIGH, b"", S.SAP_SLAVE_DIAG, S.SAP_MASTER, 250)
         if res.kind != REPLY or res.frame.sd == F.SC:
             return None
@@ -191,6 +222,7 @@ class Master:
             raise BusError(f"station {da}: {e}") from None
 
     def get_cfg(self, da: int) -> bytes | None:
+        self.keep_alive(da)
         res = self.transact(da, F.SRD_HIGH, b"", S.SAP_GET_CFG, S.SAP_MASTER, 250)
         if res.kind != REPLY or res.frame.sd == F.SC:
             return None
@@ -221,9 +253,14 @@ class Master:
                 self.on_event(address, e)
 
     def step(self, st: StationMachine) -> bool:
-        """One request for one station (if it wants one now). True if something was sent."""
+        """One request for one station (if it wants one now). True if something was sent.
+        Anything but the cycle of a kept station in data exchange lets the kept ones that are
+        due have their keep-alive first (keep_alive)."""
+        if self.kept and not (st.address in self.kept and st.in_data_exchange):
+            self.keep_alive(st.address)
         now = self.link.now()
         if self.fast_dx and st.dx_ready(now):
+            self._last_req[st.address] = now
             return exchange_fast(self, st)
         req = st.next_request(now)
         if req is None:
@@ -253,8 +290,11 @@ class Master:
         fail_fast: give up at the first Cfg_Fault / Prm_Fault / lock instead of retrying."""
         st = self.stations[address]
         end = self.link.now() + timeout
+        kept0 = self.keep_time
         while not st.in_data_exchange:
-            if self.link.now() > end or (fail_fast and st.state in (CFG_FAULT, PRM_FAULT, LOCKED)):
+            # the time the kept stations' keep-alives took is not this station's start-up time
+            if self.link.now() - (self.keep_time - kept0) > end or \
+                    (fail_fast and st.state in (CFG_FAULT, PRM_FAULT, LOCKED)):
                 why = st.last_error or STATE_WORDS.get(st.state, st.state)
                 if st.last_diag is not None and st.state != "absent":
                     why += f" (diagnosis: {st.last_diag.state_words(self.address)})"
@@ -262,6 +302,51 @@ class Master:
             if not self.step(st):
                 self.link.sleep(min(0.01, max(0.0, st.wait_until - self.link.now())))
         return st
+
+    # -- kept stations ---------------------------------------------------------------------------
+    def keep(self, address: int, period: float = 0.0) -> None:
+        """Keep `address` in data exchange while the master talks to other stations: once its last
+        request is keep_within(its watchdog, period) old, the next request to another station waits
+        for one Data_Exchange of it (its last outputs). period: its cycle period (0: none)."""
+        within = keep_within(self.stations[address].config.wd_ms, period)
+        if within is None:
+            self.kept.pop(address, None)
+        else:
+            self.kept[address] = within
+
+    def unkeep(self, address: int) -> None:
+        self.kept.pop(address, None)
+
+    def keep_alive(self, busy: int | None = None) -> int:
+        """When a kept station in data exchange (other than `busy`) is due -- its last request is
+        its keep_within() old -- a keep round: one Data_Exchange (its last outputs) for every kept
+        station in data exchange other than `busy`, the oldest first. Returns how many went.
+
+        Rounds rather than each station when due: the stations stay in the order of their last
+        requests, so none waits longer than max(keep_within, the round's own time) plus the one
+        request in progress (a station due alone would wait for the others' keep-alives too).
+        LinkLost is raised; a station that answers otherwise goes through its machine (RS:
+        start-up again) and is seen by its own next exchange."""
+        if not self.kept or self._keeping:
+            return 0
+        now = self.link.now()
+        never = float("-inf")
+        kept = sorted((self._last_req.get(a, never), a) for a in self.kept
+                      if a != busy and a in self.stations and self.stations[a].in_data_exchange)
+        if not any(now - t >= self.kept[a] for t, a in kept):
+            return 0
+        self._keeping = True
+        n = 0
+        try:
+            for _, a in kept:
+                st = self.stations[a]
+                if st.in_data_exchange:
+                    n += self.step(st)
+        finally:
+            self._keeping = False
+            self.keep_alives += n
+            self.keep_time += self.link.now() - now
+        return n
 
     def exchange(self, address: int, outputs: bytes | None = None) -> bytes:
         """One Data_Exchange with a station in data exchange; restarts it if it dropped out."""
@@ -282,6 +367,7 @@ class Master:
         """Leave data exchange cleanly: Set_Prm with Unlock_Req (station back to Wait_Prm, outputs
         to their safe state). Best effort: no exception if the station does not answer."""
         st = self.stations.get(address)
+        self.unkeep(address)
         if st is None:
             return
         prm = st.config.set_prm()

@@ -1,6 +1,7 @@
 """Bring-up: parameterise and configure the chosen station (Set_Prm with the DP watchdog and the
 GSD's User_Prm_Data, Chk_Cfg of the layout), reach Data_Exchange at the session's rate, and build the
-family's Drive on a MeteredChannel; remember when anything may have set the motor turning. Talks to
+family's Drive on a MeteredChannel (the station kept in data exchange while the master talks to
+other stations: Master.keep); remember when anything may have set the motor turning. Talks to
 the bus through dp.poller.Master only; starts nothing.
 """
 
@@ -28,6 +29,9 @@ def connect(sess):
         raise BusError(f"{e} (profile {sess.profile.name}, layout {sess.layout}: Chk_Cfg "
                        f"{lay.cfg.hex(' ').upper()})") from None
     period = 1.0 / sess.cycle_hz if sess.cycle_hz else 0.0
+    # kept in data exchange while the master brings up (or talks to) other stations on this bus
+    # (pdrive run 3,4,5, the checklist's together, the API's drives): dp.poller.Master.keep
+    sess.master.keep(sess.address, period)
     sess.channel = MeteredChannel(sess.master.channel(sess.address, period))
     sess._t0 = sess.channel.now()
     if sess.log_csv:

@@ -10,7 +10,10 @@ outputs of the round take effect in the same instant on every station (and the i
 next round were sampled in that instant too).
 
 A station that leaves data exchange is never waited for: each round sends it one request of its
-start-up (Master.step) and its exchange raises StationOut, so the others keep their cycle.
+start-up (Master.step) and its exchange raises StationOut, so the others keep their cycle. While a
+station is brought up (or talks to the bus outside the rounds), the master itself keeps the group's
+stations in data exchange (Master.keep / keep_alive); those keep-alives are exchanges like any
+other but no rounds: the period and the Sync/Freeze broadcasts stay the rounds'.
 Talks to the bus through dp.poller.Master only.
 """
 
@@ -51,11 +54,15 @@ class GroupCycle:
             self.addresses.append(address)
 
     def channel(self, address: int) -> "GroupChannel":
-        """The station's channel; from now on it is kept in the cycle (with the outputs it has)."""
+        """The station's channel; from now on it is kept in the cycle (with the outputs it has), and
+        by the master while it brings up or talks to another station (Master.keep: at least once a
+        period, a quarter of the watchdog at the latest)."""
         self.add(address)
         st = self.master.stations.get(address)
         if st is not None and address not in self.outputs:
             self.outputs[address] = bytes(st.outputs)
+        if st is not None and (self.period or address not in self.master.kept):
+            self.master.keep(address, self.period)
         return GroupChannel(self, address)
 
     def now(self) -> float:
