@@ -266,3 +266,19 @@ def test_the_plc_takes_only_an_in_process_simulated_bus():
             Plc(link)                          # a port (even the simulator's) is not a plant
     finally:
         link.close()
+
+
+def test_the_plc_keeps_each_station_in_the_cycle_while_it_brings_up_the_next():
+    """The built-in PLC brings its stations up one after another, like `run 3,4,5`: each one in data
+    exchange is kept by the master (dp/poller.py Master.keep), so its watchdog never waits for the
+    others' start-up (tests/test_keep_in_dx.py checks the keep rounds themselves on the wire)."""
+    from profidrive_cli.dp.poller import keep_within
+    from profidrive_cli.session.plc import WATCHDOG_MS, Plc
+    from profidrive_cli.sim.plant import build_bus
+    bus = build_bus("sim://?timing=virtual&baud=9600", now=0.0)
+    plc = Plc(bus, lambda data: None)
+    plc.bring_up()
+    assert sorted(plc.plans) == [3, 4, 5, 6, 7]
+    # a quarter of the watchdog (no cycle period of its own): WATCHDOG_MS / 4
+    assert keep_within(WATCHDOG_MS, 0.0) == pytest.approx(WATCHDOG_MS / 4000.0)
+    assert plc.master.kept == dict.fromkeys([3, 4, 5, 6, 7], pytest.approx(WATCHDOG_MS / 4000.0))

@@ -217,6 +217,10 @@ class Plc:
             except BusError as e:              # the others run on; this one stays out
                 self.log(f"plc: {e}")
                 del self.plans[a]
+                continue
+            # kept in the cycle while the next station is brought up (dp/poller.py Master.keep),
+            # as a PLC does: its watchdog never waits for the others' start-up
+            self.master.keep(a)
 
     # -- the cycle -------------------------------------------------------------------------------
     def cycle(self) -> None:
