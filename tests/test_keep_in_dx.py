@@ -219,3 +219,35 @@ def test_only_stations_marked_kept_get_keep_alives(kept):
         assert m.keep_alives == 0
         assert spans[3] > WATCHDOG_MS / 1000.0 and expired == 1
     m.link.close()
+
+
+@pytest.mark.parametrize("round_s, expect_ms", [
+    (0.3115, 940.0),      # 3 x 311.5 ms = 934.5 ms -> the next multiple of 10
+    (0.1, 300.0),         # exactly 3 rounds of 100 ms
+    (0.0266, 80.0),       # 3 x 26.6 = 79.8 ms -> 80
+])
+def test_the_group_watchdog_outlasts_three_rounds(round_s, expect_ms):
+    from profidrive_cli.session.groupcycle import min_watchdog_ms
+    assert min_watchdog_ms(round_s) == expect_ms
+
+
+def test_run_of_five_stations_at_9600_runs_through_with_a_watchdog_raised_to_three_rounds(sim):
+    """`run 3,4,5,6,7` at 9.6k: one round of five Data_Exchanges takes ~0.31 s, and a station can
+    wait two rounds (0.62 s) for its next exchange while a drive's handshake completes rounds early:
+    a 500 ms watchdog expired while station 7 started (station 6 left data exchange, RS). The run
+    raises the watchdog to three rounds, says so, and every drive reaches 20 Hz and stops."""
+    from profidrive_cli.cli.common import BusOptions
+    from profidrive_cli.session.multirun import MultiRun
+    url = "sim://?timing=virtual&baud=9600"
+    master = BusOptions(url, "9600", 2, None, None, False, False, 0, False).open_master()
+    bus = next(iter(sim.values()))
+    run = MultiRun(master, [3, 4, 5, 6, 7], [("hz", 20.0)] * 5, duration=5.0,
+                   watchdog_ms=WATCHDOG_MS)
+    assert run.run() == 0, run.end_dict()
+    round_s = 1.0 / run.wire_hz
+    assert 0.2 < round_s < 0.5                                 # five telegram pairs at 9.6k
+    assert run.watchdog_ms >= 3 * round_s * 1000.0 > WATCHDOG_MS
+    assert any(w.startswith(f"watchdog raised from {WATCHDOG_MS} ms to {run.watchdog_ms:g} ms")
+               for w in run.warnings), run.warnings
+    assert all(r.reached_after is not None for r in run.runs)
+    assert all(s.stats["watchdog_expired"] == 0 for s in bus.slaves.values())

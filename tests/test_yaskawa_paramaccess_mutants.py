@@ -302,3 +302,31 @@ def test_watchdog_frozen_note_needs_more_than_0_2_s_and_is_appended():
     pa2.submit(ParamRequest.read(0x37), 0.0)
     r2 = pa2.feed(resp(EXT2, "", 0xA2), 0.2)                 # exactly 0.2 s: not yet "frozen"
     assert r2.timeout and "frozen" not in r2.message
+
+
+def test_a_slow_cycle_never_times_out_a_handshake_still_under_way():
+    """Several stations at 9.6k: one round takes 0.3-0.4 s, so the handshake's few exchanges (align,
+    settle, toggle, reply: spec §4.7) take longer than timeout_s = 1 s. With min_exchanges = 8
+    (twice the 1 + 1 + 1 + 1 of settle_cycles = 1) the request completes; it times out only when
+    both the time and the exchanges have run out."""
+    pa = ParamAccess(EXT2, timeout=1.0, settle_cycles=1, min_exchanges=8)
+    t = 0.0
+    assert pa.feed(resp(EXT2, "", 0x00), t) is None           # aligned, idle
+    pa.submit(ParamRequest.read(0x37), t)
+    t += 0.4
+    assert pa.feed(resp(EXT2, "", 0x00), t) is None           # settled once: toggle to HS 1
+    assert pa.phase == "wait" and pa.hs == 1
+    for _ in range(2):                                        # the option has not answered yet
+        t += 0.4
+        assert pa.feed(resp(EXT2, "", 0x00), t) is None       # at 0.8 and 1.2 s (> timeout 1 s)
+    t += 0.4
+    r = pa.feed(resp(EXT2, "03 00 37 02 12 34", 0xE0), t)     # HS 1, STATUS 11: done at 1.6 s
+    assert r is not None and r.ok and r.values == [0x1234]
+    # and a dead option still times out: after 1 s and 8 exchanges, not before
+    pa2 = ParamAccess(EXT2, timeout=1.0, min_exchanges=8)
+    pa2.feed(resp(EXT2, "", 0x00), 0.0)
+    pa2.submit(ParamRequest.read(0x37), 0.0)
+    results = [pa2.feed(resp(EXT2, "", 0xA0 | (2 * i % 32)), 0.4 * (i + 1)) for i in range(8)]
+    assert results[:7] == [None] * 7
+    assert results[7].timeout and results[7].message == (
+        "read 0x0037: no reply within 1 s and 8 exchanges (waiting for the option's handshake to settle)")

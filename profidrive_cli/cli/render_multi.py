@@ -68,6 +68,8 @@ class MultiView:
         if self.mode == "json":
             emit_json(start_json(header))
             return
+        for w in header.get("warnings") or ():   # (--json carries them in the start event)
+            err.print(escape(f"warning: {w}"))
         if self.mode == "text":
             for line in self._header_lines():
                 out.print(escape(line))

@@ -19,9 +19,19 @@ Talks to the bus through dp.poller.Master only.
 
 from __future__ import annotations
 
+import math
+
 from profidrive_cli import BusError
 from profidrive_cli.dp import services as S
 from profidrive_cli.dp.station import RELEASED
+
+
+def min_watchdog_ms(round_s: float) -> float:
+    """The shortest DP watchdog (ms, a multiple of 10) a station of a group can hold: a station waits
+    up to two rounds for its next Data_Exchange (exchanged early in one round; a drive that asks
+    twice completes the next round early and its own exchange opens it, so the others go last),
+    plus a third round for a retry or a keep-alive round of the bring-up in between."""
+    return float(math.ceil(3.0 * round_s * 1000.0 / 10.0 - 1e-9) * 10)
 
 
 class StationOut(BusError):

@@ -25,7 +25,7 @@ from profidrive_cli.drives.base import DriveError
 from profidrive_cli.link.base import LinkLost
 from profidrive_cli.session.cycle import default_cycle_hz, make_sample
 from profidrive_cli.session.drivesession import DriveSession
-from profidrive_cli.session.groupcycle import GroupCycle, StationOut
+from profidrive_cli.session.groupcycle import GroupCycle, StationOut, min_watchdog_ms
 from profidrive_cli.session.safestop import COAST_TIMEOUT_S, StopReport
 from profidrive_cli.session.signals import SessionTerminated, SignalGuard
 
@@ -198,6 +198,18 @@ class MultiRun:
                 self.warnings.append(f"--cycle-hz {self.cycle_rate:g} is more than the bus allows for "
                                      f"{len(sessions)} stations ({self.wire_hz:.1f} rounds/s); on a "
                                      f"real bus the wire sets the pace")
+        round_s = 1.0 / min(self.cycle_rate or self.wire_hz, self.wire_hz)
+        need = min_watchdog_ms(round_s)
+        if self.watchdog_ms < need:
+            # a slow bus (5 stations at 9.6k: 0.31 s a round): the watchdog asked for would expire
+            # between two exchanges of the group; the Set_Prm of every station carries the raised one
+            self.warnings.append(f"watchdog raised from {self.watchdog_ms:g} ms to {need:g} ms: one round "
+                                 f"of {len(sessions)} stations takes {round_s * 1000:.0f} ms, and a "
+                                 f"station may wait up to two rounds (plus a retry) for its next "
+                                 f"exchange")
+            self.watchdog_ms = need
+            for s in sessions:
+                s.watchdog_ms = need
         if self.confirm:
             self.confirm(sessions)
         self.group = GroupCycle(self.master, 1.0 / self.cycle_rate if self.cycle_rate else 0.0,

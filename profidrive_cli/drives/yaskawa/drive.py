@@ -38,7 +38,12 @@ class YaskawaDrive(Drive):
         self.cfg = family_config(profile)
         self.fmt = FORMATS[self.layout]
         self.order = profile.word_order
-        self.params = (ParamAccess(self.fmt, self.cfg.timeout_s, self.cfg.settle_cycles)
+        # the handshake takes align (1) + settle_cycles + the toggle (1) + the reply (1) exchanges
+        # (spec §4.7); a request times out after timeout_s only once twice that many exchanges went,
+        # so a slow cycle (several stations at 9.6k) never times out a handshake still under way
+        min_exchanges = 2 * (self.cfg.settle_cycles + 3)
+        self.params = (ParamAccess(self.fmt, self.cfg.timeout_s, self.cfg.settle_cycles,
+                                   min_exchanges=min_exchanges)
                        if self.fmt.has_params else None)
         self._result: ParamResult | None = None
         # command state

@@ -151,11 +151,17 @@ class ParamAccess:
     the command HS and STATUS = 11) -> idle (function code 00h, HS held).
     """
 
-    def __init__(self, fmt: AreaFormat, timeout: float = 1.0, settle_cycles: int = 1, hs: int = 0):
+    def __init__(self, fmt: AreaFormat, timeout: float = 1.0, settle_cycles: int = 1, hs: int = 0,
+                 min_exchanges: int = 1):
         if not fmt.has_params:
             raise ValueError(f"yaskawa {fmt.name}: no parameter-access area")
         self.fmt = fmt
         self.timeout = timeout
+        #: a request times out only after `timeout` s AND this many exchanges since it was submitted:
+        #: on a slow bus (a group of stations at 9.6k, 0.3-0.4 s a round) the handshake's few
+        #: exchanges take longer than the time alone allows
+        self.min_exchanges = max(1, min_exchanges)
+        self._fed = 0
         self.settle_cycles = max(1, settle_cycles)
         self.hs = hs & 1                 # E11: the command HS starts cleared unless told otherwise
         self.phase = "align"
@@ -177,6 +183,7 @@ class ParamAccess:
         request.check(self.fmt)
         self.request = request
         self._deadline = now + self.timeout
+        self._fed = 0
         self._settled = 0
         if self.phase == "idle":
             self.phase = "load"
@@ -224,8 +231,10 @@ class ParamAccess:
             if hs == self.hs and status == 3:
                 return self._finish(self._complete(ParamArea.parse(self.fmt, area)))
 
-        if self.request is not None and now > self._deadline:
-            return self._finish(self._timed_out(now))
+        if self.request is not None:
+            self._fed += 1
+            if now > self._deadline and self._fed >= self.min_exchanges:
+                return self._finish(self._timed_out(now))
         return None
 
     def _finish(self, result: ParamResult) -> ParamResult:
@@ -258,7 +267,8 @@ class ParamAccess:
         assert req is not None
         where = {"align": "waiting for the option's handshake to settle",
                  "load": "loading the request", "wait": "waiting for STATUS 11 with our HS"}[self.phase]
-        msg = f"{req.describe()}: no reply within {self.timeout:g} s ({where})"
+        within = f"{self.timeout:g} s" + (f" and {self._fed} exchanges" if self.min_exchanges > 1 else "")
+        msg = f"{req.describe()}: no reply within {within} ({where})"
         if now - self._wd_changed > 0.2 and self._wd is not None:
             msg += "; the handshake watchdog counter is frozen: the option CPU may have stopped"
         return ParamResult(req, False, timeout=True, message=msg)
