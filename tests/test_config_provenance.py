@@ -19,7 +19,9 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-SIM = "sim://?stations=3:fuji-g1&timing=virtual"
+# F07/F08 = 0.1 s (0 -> F03 60 Hz): every run here reaches its reference within its 0.2-0.3 s (a run
+# that does not exits 1); 5 Hz in 8 ms, 60 Hz (PPO3 with fmax 1: 100 %) in 0.1 s
+SIM = "sim://?stations=3:fuji-g1&timing=virtual&set=3:F07=0.1,F08=0.1"
 
 # the project file: a parent folder's pdrive.yaml sets the default port (a name) and, for
 # station 3, layout PPO3 (no parameter channel: F03 cannot be read) and fmax 1 Hz

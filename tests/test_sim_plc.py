@@ -47,11 +47,16 @@ KNOWN = {"F03": "60.0 Hz", "F07": "6.0 s", "A004": "50 Hz", "E1-04": "60 Hz"}
 def test_sniff_shows_the_plcs_commands_to_each_drive_in_words(plc_pty):
     out = sniff(plc_pty, 6, *STATION_ARGS, "--json")
     objs = [json.loads(line) for line in out.splitlines()]
-    # a tap that joins a running line may hear the tail of a frame first (one bad_frame at most,
-    # before the first whole frame); every frame after that is whole
+    # a tap that joins a running line may hear the tail of a frame first, in one or more pieces (on
+    # a loaded machine a read can split it): bad_frames only before the first whole frame, together
+    # shorter than the longest telegram (SD2 with LE = 249: 4 + 249 + 2 = 255 octets); every frame
+    # after that is whole
+    tail = 0
     while objs and objs[0]["event"] == "bad_frame":
-        assert_contract(objs.pop(0), "sniff event=bad_frame")
-        assert objs and objs[0]["event"] == "frame"
+        bad = objs.pop(0)
+        assert_contract(bad, "sniff event=bad_frame")
+        tail += len(bad["raw"].split())
+    assert tail < 255, tail
     assert objs and all(o["event"] == "frame" for o in objs)
     for o in objs:                         # the JSON contract (docs/json.md), every family's drive object
         assert_contract(o, "sniff event=frame")

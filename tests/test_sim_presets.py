@@ -30,6 +30,10 @@ def test_preset_values_read_back(url, address, code, raw):
     ("sim://?set=3:XX=1", "XX is not a parameter"),
     ("sim://?set=3:F07", "must be CODE=NUMBER"),
     ("sim://?set=3:F07=fast", "must be CODE=NUMBER"),
+    # F07 has a 0.1 s resolution (profile: scale 0.1): 0.01 s cannot be held, and was taken as 0
+    ("sim://?set=3:F07=0.01", "F07 = 0.01 s cannot be held exactly: resolution 0.1 s; nearest 0 s or 0.1 s"),
+    # E1-04 (max output frequency) 40.0..400.0 Hz (Yaskawa profile): 1000 is outside
+    ("sim://?set=7:E1-04=1000", "E1-04"),
 ])
 def test_bad_presets_are_one_line_exit_2(url, words):
     p = _pdrive("status", "3", "--port", url)

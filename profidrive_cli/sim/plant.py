@@ -141,9 +141,16 @@ def _preset_options(profile, values: dict[str, float]) -> dict:
     options (E1_04=50), the PROFIdrive models as `defaults`."""
     if not values:
         return {}
-    for code in values:
-        if profile.param(code) is None:
+    from profidrive_cli.drives.values import profile_value_problem
+    for code, v in values.items():
+        p = profile.param(code)
+        if p is None:
             raise UsageError(f"sim URL: set=: {code} is not a parameter of {profile.name}")
+        # a setting the drive cannot hold exactly is refused, as on the master side (never rounded:
+        # F07=0.01 with F07's 0.1 s resolution used to start the plant with F07 = 0)
+        why = profile_value_problem(profile, p, v)
+        if why is not None:
+            raise UsageError(f"sim URL: set=: {why}")
     if profile.family == "yaskawa":
         return {code.replace("-", "_"): v for code, v in values.items()}
     return {"defaults": dict(values)}
