@@ -12,6 +12,8 @@ Speed: when PyYAML has libyaml, its C parser (yaml._yaml.CParser) makes the even
 else through the same Python composer and constructors as the pure loader. The limits, the refusal of
 aliases, the data and the line numbers are the same either way (tests/test_yaml_loaders.py checks
 every shipped profile and example checklist); the five profiles load in 21 ms instead of 281 ms.
+A text libyaml itself refuses (its own nesting limit or syntax check, whose words and limits change
+with its version) is parsed again by the pure loader, so the answer is always pdrive's (_LIBYAML_ERRORS).
 Without libyaml, or with PDRIVE_PURE_YAML=1 in the environment, the pure-Python parser is used.
 `load_yaml_head` reads only the first top-level keys of a file (the profile index).
 """
@@ -246,6 +248,15 @@ def _loader_class(pure: bool | None, text: str = ""):
     return _CLoader
 
 
+# libyaml's own refusals (CParser raises these; the Python composer and constructors never do). Its
+# words, its limits and where it stops depend on its version: libyaml 0.2.6 refuses nesting deeper than
+# 1000 levels ("exceeded maximum nesting depth") while scanning ahead, before the composer sees the
+# events and so before pdrive's 64-level check. On any of them the text is parsed again by the
+# pure-Python loader, which checks pdrive's limits node by node: the answer (data, or pdrive's message
+# at its file:line) is the pure loader's whatever libyaml does. Only a file libyaml refuses pays for it.
+_LIBYAML_ERRORS = (yaml.reader.ReaderError, yaml.scanner.ScannerError, yaml.parser.ParserError)
+
+
 class _errors_as_data_file_error:
     """Every YAML or construction error raised inside as one DataFileError with file:line."""
 
@@ -284,16 +295,27 @@ def load_yaml_text(text: str, path: str | Path = "<string>", *, pure: bool | Non
         loader = cls(text)
         try:
             return _direct_data(loader)
+        except _LibyamlRefused:
+            cls = _PureLoader
         except _Fallback:
             pass
         finally:
             loader.dispose()
     with _errors_as_data_file_error(path):
-        loader = cls(text)
-        try:
-            return loader.get_single_data()
-        finally:
-            loader.dispose()
+        if cls is _CLoader:
+            try:
+                return _node_data(cls, text)
+            except _LIBYAML_ERRORS:
+                cls = _PureLoader
+        return _node_data(cls, text)
+
+
+def _node_data(cls, text: str) -> Any:
+    loader = cls(text)
+    try:
+        return loader.get_single_data()
+    finally:
+        loader.dispose()
 
 
 # The direct path: data straight from libyaml's events, without the node tree. It takes only plain
@@ -304,6 +326,10 @@ def load_yaml_text(text: str, path: str | Path = "<string>", *, pure: bool | Non
 
 class _Fallback(Exception):
     """The direct path met something it leaves to the node path."""
+
+
+class _LibyamlRefused(_Fallback):
+    """libyaml itself refused the text: the pure loader decides (see _LIBYAML_ERRORS)."""
 
 
 _STR_TAG = "tag:yaml.org,2002:str"
@@ -322,6 +348,10 @@ def _direct_data(loader) -> Any:
         if not loader.check_event(yaml.StreamEndEvent):
             raise _Fallback                                 # a second document: an error, by the node path
         return data
+    except _Fallback:
+        raise
+    except _LIBYAML_ERRORS:
+        raise _LibyamlRefused from None
     except Exception:
         raise _Fallback from None
 
@@ -401,35 +431,44 @@ def load_yaml_head(text: str, keys, path: str | Path = "<string>", *,
     checked: load the whole file before trusting it)."""
     if len(text) > MAX_YAML_BYTES:
         raise DataFileError(path, None, f"too large: {len(text)} characters (limit {MAX_YAML_BYTES})")
-    want = set(keys)
+    cls = _loader_class(pure, text)
     with _errors_as_data_file_error(path):
-        loader = _loader_class(pure, text)(text)
-        try:
-            loader.get_event()                              # StreamStart
-            if not loader.check_event(yaml.DocumentStartEvent):
-                return None
-            loader.get_event()
-            if not loader.check_event(yaml.MappingStartEvent):
-                return None
-            start = loader.get_event()
-            out = LineDict()
-            out.line = start.start_mark.line + 1
-            out.key_lines = {}
-            loader._depth = 1                               # the root mapping's children, as in a full load
-            while want and not loader.check_event(yaml.MappingEndEvent):
-                knode = loader.compose_node(None, None)
-                vnode = loader.compose_node(None, None)
-                if not isinstance(knode, yaml.ScalarNode):
-                    continue
-                key = loader.construct_object(knode, deep=True)
-                if not isinstance(key, str) or key not in want:
-                    continue
-                want.discard(key)
-                out[key] = loader.construct_object(vnode, deep=True)
-                out.key_lines[key] = knode.start_mark.line + 1
-            return out
-        finally:
-            loader.dispose()
+        if cls is _CLoader:
+            try:
+                return _head_data(cls, text, set(keys))
+            except _LIBYAML_ERRORS:             # libyaml's own refusal: the pure loader decides
+                cls = _PureLoader
+        return _head_data(cls, text, set(keys))
+
+
+def _head_data(cls, text: str, want: set) -> LineDict | None:
+    loader = cls(text)
+    try:
+        loader.get_event()                              # StreamStart
+        if not loader.check_event(yaml.DocumentStartEvent):
+            return None
+        loader.get_event()
+        if not loader.check_event(yaml.MappingStartEvent):
+            return None
+        start = loader.get_event()
+        out = LineDict()
+        out.line = start.start_mark.line + 1
+        out.key_lines = {}
+        loader._depth = 1                               # the root mapping's children, as in a full load
+        while want and not loader.check_event(yaml.MappingEndEvent):
+            knode = loader.compose_node(None, None)
+            vnode = loader.compose_node(None, None)
+            if not isinstance(knode, yaml.ScalarNode):
+                continue
+            key = loader.construct_object(knode, deep=True)
+            if not isinstance(key, str) or key not in want:
+                continue
+            want.discard(key)
+            out[key] = loader.construct_object(vnode, deep=True)
+            out.key_lines[key] = knode.start_mark.line + 1
+        return out
+    finally:
+        loader.dispose()
 
 
 def load_yaml(path: str | Path, what: str = "data file") -> Any:

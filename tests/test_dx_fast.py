@@ -288,18 +288,26 @@ def _stop(p):
         raise
 
 
+WD_MS = 2000
+
+
 @pytest.mark.parametrize("faults", ["", "&drop=0.05&flip=0.05&noise=0.05&seed=4"])
 def test_fast_path_over_a_pty(faults):
     """Replies through a real pty arrive in pieces: the fast path collects them (as the general
     engine would) and takes them; faults on the way still go through the general engine."""
     p, port = _pty_sim("sim://?stations=7:yaskawa" + faults)
     try:
-        # 187.5k (the instant simulator answers at any rate): 150 exchanges take under a second;
-        # the 20 ms margin pdrive gives every reply over a real port (a pty included), as the
-        # simulator's octets come late when the machine is busy (without it: retries, flaky)
+        # 187.5k (the instant simulator answers at any rate): 150 exchanges take under a second.
+        # The reply margin: without faults every reply comes, only late when the machine is busy
+        # (the simulator's process not run for a while: at load 20 more than pdrive's usual 20 ms,
+        # which then counted retries and no-answers), so the margin is half the watchdog (WD_MS):
+        # a reply later than that would find the slave out of data exchange anyway; a reply that
+        # comes ends the wait at once. With faults every dropped or spoilt reply waits the whole
+        # margin: pdrive's 20 ms, and what is checked there allows for retries and no-answers.
         link = open_link(port, 187500)
-        m = Master(link, BusParams.for_baud(187500, retries=1, link_latency=0.02))
-        cfg = SlaveConfig(ident=0x00CA, cfg=bytes.fromhex("5F6F"), wd_ms=2000)
+        margin = 0.02 if faults else WD_MS / 2 / 1000
+        m = Master(link, BusParams.for_baud(187500, retries=1, link_latency=margin))
+        cfg = SlaveConfig(ident=0x00CA, cfg=bytes.fromhex("5F6F"), wd_ms=WD_MS)
         st = m.add_station(7, cfg)
         m.bring_up(7)
         taken = [0]

@@ -1,16 +1,58 @@
-"""The README's two commands are the ones CI runs and the ones a newcomer types."""
+"""The README's commands are the ones CI runs and the ones a newcomer types."""
 
+import re
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+PINNED = "PIP_CONSTRAINT=constraints.txt pip install '.[test]' && pytest -q"
+NEWEST = "pip install --upgrade --upgrade-strategy eager '.[test]' && pytest -q"
 
 
-def test_ci_runs_exactly_the_readme_test_command():
+def _blocks(text: str) -> list[str]:
+    return [b.split("```")[0].strip() for b in text.split("```sh")[1:]]
+
+
+def test_ci_runs_exactly_the_readme_pinned_test_command():
     readme = (ROOT / "README.md").read_text()
     ci = (ROOT / ".ci" / "run").read_text()
-    cmd = "pip install '.[test]' && pytest -q"
-    assert cmd in readme.split("```sh")[2]
-    assert any(line.strip() == cmd for line in ci.splitlines())
+    assert _blocks(readme)[1] == PINNED
+    assert any(line.strip() == PINNED for line in ci.splitlines())
+
+
+def test_the_readme_documents_the_run_against_the_newest_releases():
+    """Unpinned: the command that shows whether constraints.txt can be moved on; never CI's."""
+    readme = (ROOT / "README.md").read_text()
+    assert _blocks(readme)[2] == NEWEST
+    assert "constraints" not in NEWEST and NEWEST not in (ROOT / ".ci" / "run").read_text()
+    assert "pip freeze --exclude profidrive-cli" in readme      # how constraints.txt is updated
+
+
+def test_ci_installs_nothing_unpinned():
+    """Every pip install in .ci/run is the pinned command: no `pip install --upgrade pip` and such
+    that a new release could break."""
+    ci = (ROOT / ".ci" / "run").read_text()
+    installs = [line.strip() for line in ci.splitlines()
+                if re.search(r"\bpip\b.*\binstall\b", line) and not line.lstrip().startswith("#")]
+    assert installs == [PINNED]
+
+
+def test_the_constraints_pin_every_dependency_exactly():
+    """constraints.txt pins (==) each runtime and test dependency of pyproject.toml, and the build
+    backend (setuptools, wheel) that pip's isolated build would otherwise take at its newest."""
+    pins = {}
+    for line in (ROOT / "constraints.txt").read_text().splitlines():
+        line = line.split("#")[0].strip()
+        if line:
+            name, sep, version = line.partition("==")
+            assert sep and re.fullmatch(r"[0-9][0-9A-Za-z.+!-]*", version), line
+            pins[name.lower().replace("_", "-")] = version
+    pyproject = (ROOT / "pyproject.toml").read_text()
+    deps = re.search(r"(?ms)^dependencies = \[(.*?)\]", pyproject).group(1)
+    test = re.search(r"(?m)^test = \[(.*?)\]", pyproject).group(1)
+    backend = re.search(r"(?m)^requires = \[(.*?)\]", pyproject).group(1)
+    wanted = {re.match(r"[A-Za-z0-9_.-]+", d).group(0).lower().replace("_", "-")
+              for d in re.findall(r'"([^"]+)"', deps + test + backend)}
+    assert wanted and wanted <= set(pins), wanted - set(pins)
 
 
 def test_readme_opens_with_the_main_job():

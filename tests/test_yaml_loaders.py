@@ -245,3 +245,60 @@ def test_the_direct_path_leaves_the_unusual_to_the_node_path(text):
         assert ei.value.line == e.line
     else:
         _same(expected, load_yaml_text(text, "f.yaml", pure=False))
+
+
+# ------------------------------------------------------------------ libyaml's own limits and words
+
+def _shallow_libyaml(levels: int):
+    """A libyaml of another version: it refuses nesting deeper than `levels` in words of its own (as
+    libyaml 0.2.6 does beyond 1000 levels with "exceeded maximum nesting depth", while scanning ahead)."""
+    import yaml
+
+    class Shallow(datafile._CLoader):
+        _levels = 0
+
+        def get_event(self):
+            ev = super().get_event()
+            if isinstance(ev, (yaml.SequenceStartEvent, yaml.MappingStartEvent)):
+                self._levels += 1
+                if self._levels > levels:
+                    raise yaml.scanner.ScannerError("while scanning", ev.start_mark,
+                                                    "too deep for this libyaml", ev.start_mark)
+            elif isinstance(ev, (yaml.SequenceEndEvent, yaml.MappingEndEvent)):
+                self._levels -= 1
+            return ev
+    return Shallow
+
+
+@needs_libyaml
+@pytest.mark.parametrize("text", [
+    "a:\n b: " + "[" * 5000 + "]" * 5000 + "\n",
+    "[" * 400_000,
+    "a:\n" + "".join(" " * i + f"k{i}:\n" for i in range(1, 80)),
+    "a:\n b: [1, [2, 3]\n",                                     # a syntax error: the pure loader's words
+])
+@pytest.mark.parametrize("levels", [10, 1000])
+def test_pdrive_s_limits_and_words_whatever_libyaml_refuses(monkeypatch, text, levels):
+    """Whatever libyaml's own nesting limit and words, the error is the pure loader's: pdrive's words
+    ("nested deeper than 64 levels") at pdrive's file:line."""
+    with pytest.raises(DataFileError) as pure:
+        load_yaml_text(text, "f.yaml", pure=True)
+    monkeypatch.setattr(datafile, "_CLoader", _shallow_libyaml(levels))
+    with pytest.raises(DataFileError) as fast:
+        load_yaml_text(text, "f.yaml", pure=False)
+    assert str(fast.value) == str(pure.value)
+    assert "too deep for this libyaml" not in str(fast.value)
+
+
+@needs_libyaml
+def test_a_file_within_pdrive_s_limits_loads_even_if_libyaml_refuses_it(monkeypatch):
+    """A libyaml stricter than pdrive (10 levels) does not turn a good file (20 levels) into an error:
+    the data and lines are the pure loader's; so is the head."""
+    text = "profile: p\nfamily:\n  x: " + "[" * 19 + "1" + "]" * 19 + "\n"
+    pure = load_yaml_text(text, "f.yaml", pure=True)
+    pure_head = load_yaml_head(text, ("family",), "f.yaml", pure=True)
+    monkeypatch.setattr(datafile, "_CLoader", _shallow_libyaml(10))
+    _same(pure, load_yaml_text(text, "f.yaml", pure=False))
+    _same(pure_head, load_yaml_head(text, ("family",), "f.yaml", pure=False))
+    with pytest.raises(DataFileError, match=r"f.yaml:1: .*nested deeper than 64 levels"):
+        load_yaml_head("profile: " + "[" * 5000, ("profile",), "f.yaml", pure=False)

@@ -155,7 +155,8 @@ def status_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms):
         drive = bus.drive(address, profile=profile_name, layout=fmt, ppo=ppo,
                           watchdog_ms=watchdog_ms, cycle_hz=0.0)
         s = drive.session
-        sample = s.status()
+        with bus._lock:     # as Drive.status: the keep-alive thread keeps off the master meanwhile
+            sample = s.status()
         d = R.status_dict(s, sample)
     if opts.json:
         emit_json(R.status_json(d))

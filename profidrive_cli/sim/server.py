@@ -91,6 +91,7 @@ class TcpEndpoint:
         #: clients turned away because another was connected
         self.refused = 0
         self._drop_requested = False
+        self._waited = False        # a waiting client was seen while the served one had input
 
     def request_drop(self) -> None:
         """Ask the serving loop (maybe another thread) to drop the client at its next read."""
@@ -105,10 +106,20 @@ class TcpEndpoint:
         if not r:
             return b""
         if self.conn is not None and self.srv in r:
-            self._refuse()
-            if self.conn not in r:
-                return b""
+            # a client waits while one is served. If the served one has closed (its end, maybe
+            # behind its last octets, not read yet: a busy machine), the waiting one is served;
+            # it is refused only when the served one is still there (idle, or talking again after
+            # its pending octets were read once)
+            if self.conn in r and self._client_gone():
+                self.drop()
+            elif self.conn in r and not self._waited:
+                self._waited = True
+            else:
+                self._refuse()
+                if self.conn not in r:
+                    return b""
         if self.conn is None:
+            self._waited = False
             self.conn, _ = self.srv.accept()
             self.conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             self.accepted += 1
@@ -121,12 +132,22 @@ class TcpEndpoint:
             self.drop()
         return data
 
+    def _client_gone(self) -> bool:
+        """The client's connection is at its end (closed or reset), its input read up to there."""
+        try:
+            return self.conn.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT) == b""
+        except BlockingIOError:
+            return False
+        except OSError:
+            return True
+
     def _refuse(self) -> None:
         try:
             extra, _ = self.srv.accept()
         except OSError:
             return
         self.refused += 1
+        self._waited = False
         # say why, then close gracefully: a socket closed with unread input (the client's first
         # request) is reset, and a reset can discard the line before the client reads it
         threading.Thread(target=_send_and_close, args=(extra, BUSY_LINE), daemon=True).start()
