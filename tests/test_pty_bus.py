@@ -9,24 +9,12 @@ import time
 import pytest
 import serial
 
-from conftest import pdrive_cmd
-
-
-def _like_hardware():
-    """The simulated slaves answer as hardware does, within their TSDR whatever the load of the
-    machine the master runs on: the simulator process is scheduled before ordinary busy processes
-    (nice -10; as root, as CI runs; elsewhere it runs as it is). At load 8 without it, `pdrive scan`
-    missed stations 5 and 6 (their replies came after slot time + retries: the simulator had not
-    run), which says nothing about the master."""
-    try:
-        os.nice(-10)
-    except OSError:
-        pass
+from conftest import like_hardware, pdrive_cmd
 
 
 def _start_sim(args):
     p = subprocess.Popen(pdrive_cmd() + ["sim", "--json"] + args, stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True, preexec_fn=_like_hardware)
+                         stderr=subprocess.PIPE, text=True, preexec_fn=like_hardware)
     line = p.stdout.readline()
     if not line:
         p.kill()
