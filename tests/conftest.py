@@ -223,3 +223,22 @@ def status_of(port, address) -> dict:
     r = run_pdrive("status", address, "--port", port, "--json")
     assert r.returncode == 0, r.stderr
     return json.loads(r.stdout)
+
+
+class MainResult:
+    """What pdrive's own entry point did in this process: exit code, stdout, stderr (and both)."""
+
+    def __init__(self, code, out, err):
+        self.exit_code, self.stdout, self.stderr = code, out, err
+        self.output = out + err
+
+
+def run_main(capsys, monkeypatch, *args) -> MainResult:
+    """pdrive's own entry point (cli.main.main) in this process, PDRIVE_PORT unset."""
+    from profidrive_cli.cli.main import main
+    monkeypatch.delenv("PDRIVE_PORT", raising=False)
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as e:
+        main([str(a) for a in args])
+    got = capsys.readouterr()
+    return MainResult(e.value.code, got.out, got.err)

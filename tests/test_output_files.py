@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from conftest import pdrive_cmd
+from conftest import pdrive_cmd, run_main
 from profidrive_cli.cli.main import cli
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -27,21 +27,9 @@ def run(*args):
     return CliRunner().invoke(cli, [str(a) for a in args], env={"PDRIVE_PORT": ""})
 
 
-class Done:
-    def __init__(self, code, out, err):
-        self.exit_code, self.stdout, self.stderr = code, out, err
-        self.output = out + err
-
-
 def pdrive(capsys, monkeypatch, *args):
     """pdrive's own entry point in this process: its exit code and its one-line errors."""
-    from profidrive_cli.cli.main import main
-    monkeypatch.delenv("PDRIVE_PORT", raising=False)
-    capsys.readouterr()
-    with pytest.raises(SystemExit) as e:
-        main([str(a) for a in args])
-    got = capsys.readouterr()
-    return Done(e.value.code, got.out, got.err)
+    return run_main(capsys, monkeypatch, *args)
 
 
 # -- sniff ------------------------------------------------------------------------------------
@@ -72,6 +60,25 @@ def test_sniff_pcap_in_a_missing_directory_is_refused_before_listening(tmp_path,
     assert not (tmp_path / "nodir").exists()
 
 
+def _wait_until_listening(pid: int, port: str, limit_s: float = 60.0) -> None:
+    """Until process `pid` has `port` open and waits in poll/select for its input: sniff flushes the
+    port's input once it has opened it, so octets written before then are lost (a fixed sleep was
+    too short on a loaded machine). Linux /proc; a hang guard of 60 s, not a timing assertion."""
+    real = os.path.realpath(port)
+    end = time.monotonic() + limit_s
+    while time.monotonic() < end:
+        try:
+            fds = [os.readlink(f"/proc/{pid}/fd/{n}") for n in os.listdir(f"/proc/{pid}/fd")]
+            with open(f"/proc/{pid}/wchan") as f:
+                wchan = f.read()
+        except OSError:
+            fds, wchan = [], ""
+        if real in fds and ("poll" in wchan or "select" in wchan):
+            return
+        time.sleep(0.02)
+    pytest.fail(f"sniff did not start listening on {port} within {limit_s:g} s")
+
+
 def test_sniff_raw_and_pcap_over_a_real_byte_path(socat_pair, tmp_path):
     """What arrives on the port is in --raw octet for octet, and --from-file decodes it back."""
     a, b = socat_pair
@@ -82,7 +89,7 @@ def test_sniff_raw_and_pcap_over_a_real_byte_path(socat_pair, tmp_path):
                                          "--pcap", str(pcap)],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        time.sleep(1.0)
+        _wait_until_listening(p.pid, a)
         fd = os.open(b, os.O_WRONLY | os.O_NOCTTY)
         os.write(fd, sent)
         os.close(fd)

@@ -14,24 +14,14 @@ import os
 
 import pytest
 
+from conftest import run_main
 from profidrive_cli.outfile import OutputFile
 from profidrive_cli.sim.slave import DATA_EXCH, SimSlave
 
 
-class Done:
-    def __init__(self, code, out, err):
-        self.exit_code, self.stdout, self.stderr = code, out, err
-
-
 def pdrive(capsys, monkeypatch, *args):
     """pdrive's own entry point in this process: exit code, stdout, stderr."""
-    from profidrive_cli.cli.main import main
-    monkeypatch.delenv("PDRIVE_PORT", raising=False)
-    capsys.readouterr()
-    with pytest.raises(SystemExit) as e:
-        main([str(a) for a in args])
-    got = capsys.readouterr()
-    return Done(e.value.code, got.out, got.err)
+    return run_main(capsys, monkeypatch, *args)
 
 
 class _DiskFull:
