@@ -158,6 +158,13 @@ def test_moeller_trip_record_after_an_injected_trip(pdrive):
     assert "trip records" in r.stdout and "1 (d081)" in r.stdout
 
 
+def test_a_moeller_with_no_trip_stored_names_no_newest_record(pdrive):
+    # PNU 354 (trip pointer) runs 00..05 and reads 00 before the first trip as after it (DE6-NET-DP
+    # manual: the pointer names the last record written): with none stored, no record is "newest"
+    r = ok(pdrive("faults", "6", port="sim://"))
+    assert "trip records: none stored\n" in r.stdout and "newest" not in r.stdout
+
+
 def test_trip_record_of_a_drive_that_tripped_while_running(sim, pdrive):
     port = "sim://?drivetrip=0.01&only=6&seed=1"
     r = pdrive("run", "6", "--hz", "30", "--duration", "20", "--json", port=port)

@@ -423,7 +423,8 @@ def print_trip_records(trips) -> None:
         return
     latest = f" (newest: record {trips.latest})" if trips.latest is not None else ""
     if not trips.records:
-        out.print(f"trip records: none stored{latest}")
+        # no record: the pointer names none (Moeller PNU 354 reads 00 before the first trip too)
+        out.print("trip records: none stored")
         return
     t = Table(title=f"trip records{latest}", show_header=True)
     t.add_column("record")
