@@ -159,8 +159,8 @@ def test_moeller_trip_record_after_an_injected_trip(pdrive):
 
 
 def test_a_moeller_with_no_trip_stored_names_no_newest_record(pdrive):
-    # PNU 354 (trip pointer) runs 00..05 and reads 00 before the first trip as after it (DE6-NET-DP
-    # manual: the pointer names the last record written): with none stored, no record is "newest"
+    # PNU 354, "Pointer of history of last trip", runs 00 to 05 (DE6-NET-DP parameter list L1116):
+    # it reads 00 before the first trip as after it, so with none stored no record is "newest"
     r = ok(pdrive("faults", "6", port="sim://"))
     assert "trip records: none stored\n" in r.stdout and "newest" not in r.stdout
 
