@@ -93,6 +93,9 @@ class DriveSession:
         self.cyclelog: CycleLog | None = None
         #: (column names, row()) the --log CSV writes beside each exchange (set before connecting)
         self.log_extra = None
+        #: Sync_Req / Freeze_Req with the parameters (MultiRun --sync / --freeze sets them)
+        self.dp_sync = False
+        self.dp_freeze = False
         #: called with link_ok after the safe stop on close, before the station is released
         self.after_stop: list[Callable[[bool], None]] = []
 
@@ -135,6 +138,7 @@ class DriveSession:
         """Step 1: which station, which profile, which layout; the cycle rate (discovery.py, cycle.py)."""
         locate(self)
         choose_rate(self)
+        assert self.station is not None         # locate() found it (or raised)
         return self.station
 
     def connect(self):
