@@ -261,8 +261,8 @@ def station_name(ident: int, extra_dir: str | Path | None = None) -> str | None:
             hit = next((h for h in map(_head, gsd_files(folder)) if h[0] == ident), None)
             if hit is not None and hit[1] is not None:
                 return hit[1]
-    hit = _find(ident, extra_dir, strict=False)
-    return None if hit is None else hit[1].title
+    found = _find(ident, extra_dir, strict=False)
+    return None if found is None else found[1].title
 
 
 def _as_ident(text: str) -> int | None:
