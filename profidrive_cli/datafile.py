@@ -228,7 +228,7 @@ if _CParser is not None:
             Resolver.__init__(self)
             Composer.__init__(self)
 else:                                   # pragma: no cover - depends on the PyYAML build
-    _CLoader = None
+    _CLoader = None  # type: ignore[assignment, misc]  # (no libyaml: no such class)
 
 for _cls in filter(None, (_PureLoader, _CLoader)):
     _cls.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
