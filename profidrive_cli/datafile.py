@@ -24,7 +24,7 @@ import os
 import reprlib
 import stat
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import yaml
 from yaml.composer import Composer
@@ -151,6 +151,8 @@ class _Limits:
     nested file never reaches Python's (or C's) recursion limit."""
 
     _depth = 0
+    #: (SafeConstructor's, which every loader this is mixed into has)
+    flatten_mapping: Callable[[Any], None]
 
     def compose_node(self, parent, index):
         if self.check_event(yaml.AliasEvent):

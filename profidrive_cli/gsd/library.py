@@ -283,6 +283,8 @@ def load_gsd(path_or_ident: str | Path | int, extra_dir: str | Path | None = Non
             raise UsageError(f"no GSD file with ident 0x{path_or_ident:04X} in the library"
                              + ("" if extra_dir else " (add your vendor's file with --gsd-dir DIR)"))
         return g
+    if isinstance(path_or_ident, bool):
+        raise TypeError(f"load_gsd: a path, a file name or an ident, not {path_or_ident!r}")
     p = Path(path_or_ident)
     try:
         is_file, exists = p.is_file(), p.exists()
