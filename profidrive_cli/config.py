@@ -170,9 +170,9 @@ def config_files(env: Mapping[str, str] | None = None, cwd: str | Path | None = 
         p = Path(named)
         files.append(ConfigFile("PDRIVE_CONFIG", p, p.exists()))
     else:
-        p = project_config_path(cwd)
-        if p is not None:
-            files.append(ConfigFile("project", p, True))
+        found = project_config_path(cwd)
+        if found is not None:
+            files.append(ConfigFile("project", found, True))
     return files
 
 
@@ -191,14 +191,14 @@ def load(env: Mapping[str, str] | None = None, cwd: str | Path | None = None) ->
 
 
 def _apply(cfg: Config, path: Path, project: bool = False) -> None:
-    from profidrive_cli.datafile import DataFileError, load_yaml
+    from profidrive_cli.datafile import DataFileError, LineDict, load_yaml
 
     def Setting(value, source):             # every value of this file: its kind travels with it
         return _Setting(value, source, project)
     doc = load_yaml(path, "config file")
     if doc is None:
         return
-    if not isinstance(doc, dict):
+    if not isinstance(doc, LineDict):
         raise DataFileError(path, getattr(doc, "line", None) or 1, "a config file is a mapping "
                             f"(keys: {', '.join(_TOP_KEYS)})")
     _known(doc, _TOP_KEYS, path, "config file")
@@ -215,7 +215,7 @@ def _apply(cfg: Config, path: Path, project: bool = False) -> None:
     ports = doc.get("ports")
     if ports is None:
         return
-    if not isinstance(ports, dict):
+    if not isinstance(ports, LineDict):
         raise DataFileError(path, doc.line_of("ports"), "ports: a mapping of names to ports expected")
     for name, entry in ports.items():
         line = ports.line_of(name)
@@ -225,7 +225,7 @@ def _apply(cfg: Config, path: Path, project: bool = False) -> None:
         if isinstance(entry, str):
             cfg.ports[name] = NamedPort(name, Setting(entry, f"{path}:{line}"), source=f"{path}:{line}")
             continue
-        if not isinstance(entry, dict):
+        if not isinstance(entry, LineDict):
             raise DataFileError(path, line, f"ports.{name}: a mapping with `port:` expected")
         _known(entry, _PORT_KEYS, path, f"ports.{name}")
         if "port" not in entry:
@@ -245,11 +245,11 @@ def _apply(cfg: Config, path: Path, project: bool = False) -> None:
 
 
 def _stations(entry, path: Path, name: str, project: bool = False) -> dict[int, dict[str, Setting]]:
-    from profidrive_cli.datafile import DataFileError
+    from profidrive_cli.datafile import DataFileError, LineDict
     st = entry.get("stations")
     if st is None:
         return {}
-    if not isinstance(st, dict):
+    if not isinstance(st, LineDict):
         raise DataFileError(path, entry.line_of("stations"),
                             f"ports.{name}.stations: a mapping of station addresses expected")
     out: dict[int, dict[str, Setting]] = {}
@@ -259,7 +259,7 @@ def _stations(entry, path: Path, name: str, project: bool = False) -> dict[int, 
             raise DataFileError(path, line, f"ports.{name}.stations: {addr!r} is not a station "
                                 f"address 0..125")
         what = f"ports.{name}.stations.{addr}"
-        if not isinstance(d, dict):
+        if not isinstance(d, LineDict):
             raise DataFileError(path, line, f"{what}: a mapping (profile, layout, fmax) expected")
         _known(d, _STATION_KEYS, path, what)
         vals: dict[str, Setting] = {}
@@ -346,7 +346,7 @@ def resolve(port: str | None = None, baud: str | int | None = None,
     else:
         chosen = cfg.port
     named = cfg.ports.get(chosen.value) if chosen is not None else None
-    if named is not None:
+    if chosen is not None and named is not None:
         dev = Setting(named.port.value, f"{chosen.source} -> {named.port.source}",
                       chosen.project or named.port.project)
     else:

@@ -24,7 +24,7 @@ import os
 import reprlib
 import stat
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import yaml
 from yaml.composer import Composer
@@ -151,6 +151,8 @@ class _Limits:
     nested file never reaches Python's (or C's) recursion limit."""
 
     _depth = 0
+    #: (SafeConstructor's, which every loader this is mixed into has)
+    flatten_mapping: Callable[[Any], None]
 
     def compose_node(self, parent, index):
         if self.check_event(yaml.AliasEvent):
@@ -228,7 +230,7 @@ if _CParser is not None:
             Resolver.__init__(self)
             Composer.__init__(self)
 else:                                   # pragma: no cover - depends on the PyYAML build
-    _CLoader = None
+    _CLoader = None  # type: ignore[assignment, misc]  # (no libyaml: no such class)
 
 for _cls in filter(None, (_PureLoader, _CLoader)):
     _cls.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)

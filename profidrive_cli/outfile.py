@@ -24,6 +24,7 @@ import os
 import stat
 import tempfile
 from pathlib import Path
+from typing import IO, Any
 
 from profidrive_cli import PdriveError, UsageError
 
@@ -93,7 +94,7 @@ class OutputFile:
         self.encoding = None if "b" in mode else encoding
         self.newline = None if "b" in mode else newline
         self.what = what
-        self.file = None
+        self.file: IO[Any] | None = None
         self._tmp: str | None = None
         self.committed = False
         #: the OutputWriteError of a failed write: every later write, flush or commit raises it
@@ -101,7 +102,7 @@ class OutputFile:
         self.error: OutputWriteError | None = None
 
     # -- life cycle -------------------------------------------------------------------------------
-    def open(self):
+    def open(self) -> IO[Any]:
         check_output_path(self.path, self.what)
         try:
             if _is_special(self.path):
@@ -118,29 +119,29 @@ class OutputFile:
         return self.file
 
     def write(self, data) -> None:
-        self._check_open()
+        f = self._check_open()
         try:
-            self.file.write(data)
+            f.write(data)
         except OSError as e:
             self._fail(e)
 
     def flush(self) -> None:
-        self._check_open()
+        f = self._check_open()
         try:
-            self.file.flush()
+            f.flush()
         except OSError as e:
             self._fail(e)
 
-    def _check_open(self) -> None:
+    def _check_open(self) -> IO[Any]:
         if self.file is None:
             raise self.error or OutputWriteError(f"{self.what} {self.path}: not open")
+        return self.file
 
     def commit(self) -> Path:
         """Flush, fsync and rename over the target. Raises OutputWriteError (target untouched)."""
         if self.committed:
             return self.path
-        self._check_open()
-        f = self.file
+        f = self._check_open()
         try:
             f.flush()
             if self._tmp is not None:

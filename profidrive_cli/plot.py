@@ -199,7 +199,8 @@ def _mark_rows(marks: list, t: list) -> list[int]:
         return []
     times = [m[0] for m in marks] + list(t[:1]) + list(t[-1:])
     span = (max(times) - min(times)) or 1.0
-    rows, last = [], {}
+    rows: list[int] = []
+    last: dict[int, float] = {}
     for mt, _ in marks:
         row = 0
         while row in last and mt - last[row] < 0.12 * span:

@@ -22,13 +22,18 @@ import threading
 import os
 import warnings
 import weakref
-from typing import TYPE_CHECKING, Any, Callable, Iterator, Mapping
+from types import TracebackType
+from typing import TYPE_CHECKING, Any, Callable, Iterator, Literal, Mapping
 
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.api.results import Station
 
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.api.drive import Drive
+    from profidrive_cli.dp.poller import Master
+    from profidrive_cli.session import DriveSession
+    from profidrive_cli.session.groupcycle import GroupCycle
+    from profidrive_cli.session.signals import SignalGuard
 
 #: at most this long between two Data_Exchanges of an opened station (well inside the 500 ms
 #: default DP watchdog; a shorter watchdog shortens it to a fifth of the watchdog)
@@ -79,7 +84,7 @@ def open_bus(port: str | None = None, *, baud: str | int | None = None,
 
 
 def _open_master(port: str, baud: str, baud_source: str, address: int, retries: int | None,
-                 slot_time: int | None, rs485: bool, echo: bool):
+                 slot_time: int | None, rs485: bool, echo: bool) -> "Master":
     from profidrive_cli.dp.poller import Master
     from profidrive_cli.fdl.timing import BusParams, parse_baud
     from profidrive_cli.link import open_link
@@ -111,12 +116,12 @@ class _SharedSignals:
     """A drive session's signal guard that only shares the bus's `hurry` (the bus installs and
     restores the handlers once for all its drives)."""
 
-    def __init__(self, guard):
+    def __init__(self, guard: "SignalGuard") -> None:
         self._guard = guard
 
     @property
     def hurry(self) -> bool:
-        return self._guard.hurry
+        return bool(self._guard.hurry)
 
     @hurry.setter
     def hurry(self, value: bool) -> None:
@@ -135,9 +140,9 @@ class _SharedSignals:
 class Bus:
     """An open bus. Made by open_bus(); see there and docs/api.md."""
 
-    def __init__(self, master, *, allow_real_port_writes: bool = False, handle_signals: bool = True,
+    def __init__(self, master: "Master", *, allow_real_port_writes: bool = False, handle_signals: bool = True,
                  settings: Any = None, on_message: Callable[[str], None] | None = None,
-                 env: Mapping[str, str] | None = None):
+                 env: Mapping[str, str] | None = None) -> None:
         from profidrive_cli.session.signals import SignalGuard
         self.master = master
         self.port: str = getattr(master.link, "name", "") or ""
@@ -152,7 +157,7 @@ class Bus:
         #: exceptions raised by on_message, raised after the call (after the stop on close)
         self._callback_errors: list[BaseException] = []
         #: the bus cycle of the stop on close (the keep-alive hooks stand aside meanwhile)
-        self._group = None
+        self._group: "GroupCycle | None" = None
         self._signals = SignalGuard(handle_signals)
         self._signals.install()
         self._stop_keepalive = threading.Event()
@@ -210,7 +215,8 @@ class Bus:
     def __enter__(self) -> "Bus":
         return self
 
-    def __exit__(self, exc_type, exc, tb) -> bool:
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> Literal[False]:
         self.close(exc)
         return False
 
@@ -289,16 +295,16 @@ class Bus:
             except Exception:               # noqa: BLE001
                 pass
         rate = min([group_rate(self.master, sessions)[0]] + [s.cycle_hz for s in sessions if s.cycle_hz])
-        self._group = GroupCycle(self.master, 1.0 / rate if rate > 0 else 0.0)
+        self._group = group = GroupCycle(self.master, 1.0 / rate if rate > 0 else 0.0)
         for s in sessions:
-            attach(self._group, s)
+            attach(group, s)
 
         def hurry() -> bool:
             h, self._signals.hurry = self._signals.hurry, False
             return h
         try:
-            stop_together([(s.address, s, _speed_percent(s)) for s in running], self._group, hurry)
-            self._group.finish()
+            stop_together([(s.address, s, _speed_percent(s)) for s in running], group, hurry)
+            group.finish()
         except LinkLost as e:
             for s in running:
                 s.link_lost = True
@@ -393,9 +399,11 @@ class Bus:
             if fmax is None:                         # the config's: used where the drive's own is
                 fmax = defaults.get("fmax")          # not readable, else checked against it (warning)
             drive = Drive(self, sess, fmax)
-            self._drives[sess.address] = drive
-            self._last[sess.address] = self.master.link.now()
-            sess.channel.hooks.append(lambda t, o, i, a=sess.address: self._exchanged(a, t))
+            address, channel = sess.address, sess.channel
+            assert address is not None and channel is not None      # open() found and connected it
+            self._drives[address] = drive
+            self._last[address] = self.master.link.now()
+            channel.hooks.append(lambda t, o, i: self._exchanged(address, t))
             self._start_keepalive()
             return drive
 
@@ -471,7 +479,7 @@ def _keepalive(ref: "weakref.ref[Bus]", stop: threading.Event) -> None:
             del bus
 
 
-def _speed_percent(sess) -> float | None:
+def _speed_percent(sess: "DriveSession") -> float | None:
     """The speed the drive last reported, in % (sizes its stop time as safestop.stop does)."""
     d = sess.drive
     last = getattr(d, "last_status", None) or getattr(d, "last", None)

@@ -13,6 +13,8 @@ from profidrive_cli.api.results import Fault, Faults, Param, Status, StopResult
 from profidrive_cli.drives.base import DriveError
 
 if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.drives.base import ParamValue
+    from profidrive_cli.drives.profile import Profile
     from profidrive_cli.session import DriveSession, Sample
 
 #: run(wait=True) without a timeout waits at most this long for the reference
@@ -27,13 +29,15 @@ def at_reference(ref: float | None, act: float | None) -> bool:
     return abs(act - ref) <= max(0.01 * abs(ref), 0.05)
 
 
-def fmax_readable(session) -> bool:
+def fmax_readable(session: "DriveSession") -> bool:
     """The drive's own maximum frequency can be read (a parameter channel and a parameter number
     for the profile's max-frequency parameter): an fmax default from the config file then stays
     unused (an fmax given explicitly is checked against the drive's, with a warning)."""
     prof = session.profile
+    assert prof is not None                         # the session is open (identify() chose it)
     code = prof.max_frequency_param
     pdef = prof.param(code) if code else None
+    assert session.drive is not None                # ... and connected it
     return bool(session.drive.has_param_channel and pdef is not None
                 and (getattr(pdef, "pnu", None) is not None or getattr(pdef, "register", None) is not None))
 
@@ -53,7 +57,9 @@ class Drive:
     # -- identity ---------------------------------------------------------------------------------
     @property
     def station(self) -> int:
-        return int(self.session.address)
+        address = self.session.address
+        assert address is not None                  # Bus.drive() opened the session
+        return int(address)
 
     @property
     def ident(self) -> int | None:
@@ -65,11 +71,16 @@ class Drive:
 
     @property
     def profile(self) -> str:
-        return self.session.profile.name
+        return self._profile().name
 
     @property
     def family(self) -> str:
-        return self.session.profile.family
+        return self._profile().family
+
+    def _profile(self) -> "Profile":
+        prof = self.session.profile
+        assert prof is not None                     # Bus.drive() opened the session
+        return prof
 
     @property
     def layout(self) -> str:
@@ -127,7 +138,7 @@ class Drive:
         with self._bus._call():
             self._check()
             s = self.session
-            pct = float(percent) if percent is not None else s.percent_for_hz(float(hz),
+            pct = float(percent) if percent is not None else s.percent_for_hz(float(v),
                                                                                self._fmax_override)
             self._bus._check_write(f"run station {self.station} at "
                                    f"{f'{hz:g} Hz' if hz is not None else f'{percent:g} %'}")
@@ -227,5 +238,5 @@ class Drive:
         self.session.close(exc)
 
 
-def _param(pv) -> Param:
+def _param(pv: "ParamValue") -> Param:
     return Param(pv.code, pv.name, pv.value, pv.unit or "", int(pv.raw), getattr(pv, "text", None))

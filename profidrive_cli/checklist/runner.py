@@ -489,7 +489,7 @@ def session_opener(master, *, cycle_hz: float | None = None, watchdog_ms: float 
             rep = s.stop_report
             if rep is None:
                 return {}
-            out = {"exit_stop": rep.how, "exit_stop_message": rep.message}
+            out: dict[str, Any] = {"exit_stop": rep.how, "exit_stop_message": rep.message}
             if rep.how not in ("not needed",):
                 out["stopped"] = rep.stopped
                 if rep.status is not None:
@@ -514,10 +514,11 @@ def session_identity(s) -> dict:
         gsd = p.name if p is not None else None
     except PdriveError:
         gsd = None
-    out = {"address": s.address, "ident": s.ident, "profile": s.profile.name if s.profile else None,
-           "layout": s.layout, "gsd": gsd}
+    out: dict[str, Any] = {"address": s.address, "ident": s.ident,
+                           "profile": s.profile.name if s.profile else None,
+                           "layout": s.layout, "gsd": gsd}
     st = getattr(s, "station", None)
-    if st is not None and getattr(st, "state", ""):
+    if st is not None and getattr(st, "state", None):
         out["dp_state"] = st.state
     if s.warnings:
         out["warnings"] = list(s.warnings)

@@ -169,6 +169,7 @@ def load_checklist_text(text: str, path: str | Path = "<string>", overrides: dic
     cl = v.checklist(doc, hashlib.sha256(text.encode("utf-8")).hexdigest())
     if v.errors:
         raise ChecklistError(sorted(v.errors, key=lambda e: (e.path != str(path), e.line or 0)))
+    assert cl is not None                   # None only with errors
     return cl
 
 
@@ -192,6 +193,8 @@ class _Validator(FieldChecker):
             if k not in HEADER_KEYS:
                 self.err(doc.line_of(k), self.unknown_key(k, HEADER_KEYS, "header key"))
         name = self.opt(doc, "name", str, required=True, default="")
+        if "name" in doc and name == "":
+            self.err(doc.line_of("name"), "'name' must not be empty")
         description = self.opt(doc, "description", str, default="")
         port = self.opt(doc, "port", str)
         baud = self.opt(doc, "baud", (str, int))
@@ -272,7 +275,7 @@ class _Validator(FieldChecker):
 
     def variables(self, node: LineDict, key: str) -> dict:
         vs = self.opt(node, key, dict, default=None)
-        out = {}
+        out: dict = {}
         if not vs:
             return out
         for k, v in vs.items():
@@ -309,9 +312,9 @@ class _Validator(FieldChecker):
                 out[k] = self.subst(v, variables, value.line_of(k), where)
             return out
         if isinstance(value, LineList):
-            out = LineList(self.subst(v, variables, value.line_of(i), where) for i, v in enumerate(value))
-            out.line, out.item_lines = value.line, list(value.item_lines)
-            return out
+            lst = LineList(self.subst(v, variables, value.line_of(i), where) for i, v in enumerate(value))
+            lst.line, lst.item_lines = value.line, list(value.item_lines)
+            return lst
         return value
 
     def _undefined(self, name, variables, where) -> str:

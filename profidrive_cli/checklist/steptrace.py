@@ -91,7 +91,7 @@ def _expectations(out, expected: dict, fmax: float | None) -> None:
         speed, unit = expected["speed_hz"], "Hz"
     tol = expected.get("tolerance")
     if speed is not None and tol is not None:
-        k = 1.0
+        k: float | None = 1.0
         if unit != out.speed_unit:                         # Hz <-> % by the drive's own pair
             k = (None if fmax is None else
                  fmax / 100.0 if out.speed_unit == "Hz" else 100.0 / fmax)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+from typing import TYPE_CHECKING, NoReturn, cast
 
 import click
 from rich.console import Console
@@ -15,13 +16,16 @@ from profidrive_cli.cli.common import (BusOptions, bus_options, can_ask, confirm
                                        is_sim_port, is_tty, make_console)
 from profidrive_cli.outfile import check_output_path
 
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.checklist.runner import Observer    # (_LiveView and _Quiet have its methods)
+
 _MARK = {"passed": "[green]✔[/]", "failed": "[red]✘[/]", "error": "[red]✘[/]", "not run": "[dim]–[/]",
          "skipped": "[dim]–[/]", "interrupted": "[yellow]![/]"}
 _PLAIN = {"passed": "PASS", "failed": "FAIL", "error": "ERROR", "not run": "not run", "skipped": "skip",
           "interrupted": "INTERRUPTED"}
 
 
-def _usage(ctx, message: str, problems: list[str] | None = None):
+def _usage(ctx: click.Context, message: str, problems: list[str] | None = None) -> NoReturn:
     """A usage error as one line and exit code 2 (also under click's test runner); under --json also
     the error object on stdout (docs/json.md)."""
     click.echo(f"pdrive: {message}", err=True)
@@ -127,6 +131,7 @@ def run_cmd(ctx, opts: BusOptions, file, reports, dry_run, yes, variables, cycle
         _usage(ctx, f"{cl.path}:{line}: the checklist has prompt steps and there is no terminal to "
                     f"answer them: give --yes to take them as confirmed (nothing was sent to any drive)")
     # port: --port / PDRIVE_PORT, else the checklist's; --dry-run: a simulated bus of the same stations
+    port: str | None
     if dry_run:
         port = dry_run_port(cl)
         if opts.port:
@@ -170,7 +175,7 @@ def run_cmd(ctx, opts: BusOptions, file, reports, dry_run, yes, variables, cycle
         try:
             runner = Runner(cl, session_opener(master, cycle_hz=cycle_hz, watchdog_ms=watchdog_ms,
                                                on_message=view.message),
-                            port=port, yes=yes, ask=ask, dry_run=dry_run, observer=view, options=options,
+                            port=port, yes=yes, ask=ask, dry_run=dry_run, observer=cast("Observer", view), options=options,
                             trace_steps=any(report_format(r) == "html" for r in reports))
             try:
                 view.begin(cl, port, dry_run)

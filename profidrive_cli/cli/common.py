@@ -8,12 +8,16 @@ import logging
 import os
 import sys
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import click
 from rich.console import Console
 
 from profidrive_cli import UsageError
 from profidrive_cli.fdl.timing import BusParams, parse_baud
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.config import Effective
 
 def baud_from(text, source: str) -> int:
     """A baud rate a bus command takes, from where it came (`source`: "option --baud", "env
@@ -67,7 +71,7 @@ class BusOptions:
     found_baud: int | None = None
     _recorder: object = None
     #: config.Effective: the settings with their sources (config file, env, option, default)
-    settings: object = None
+    settings: Effective | None = None
     #: the settings of a project file named (or to be named) on stderr (BusOptions._announce)
     _announced: set = field(default_factory=set)
     #: those lines before the port is opened: printed then (_notices_now), after the checks of

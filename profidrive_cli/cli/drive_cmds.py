@@ -129,10 +129,10 @@ def _is_number(text: str) -> bool:
 
 def _split_address(args: tuple[str, ...], min_rest: int) -> tuple[int | None, list[str]]:
     """A leading number 0..125 is the station address when at least `min_rest` arguments follow."""
-    args = list(args)
-    if len(args) > min_rest and args[0].isdigit():
-        return station_address(int(args[0])), args[1:]
-    return None, args
+    rest = list(args)
+    if len(rest) > min_rest and rest[0].isdigit():
+        return station_address(int(rest[0])), rest[1:]
+    return None, rest
 
 
 # =============================================================================================
@@ -371,7 +371,7 @@ def _print_rows(opts, s, rows, what: str, dry_run: bool, interrupted: str | None
     shown = [r for r in rows if r.result not in ("unchanged", "skipped") or opts.verbose
              or r.why == "dangerous"]
     if what == "diff":
-        cols = ("code", "name", "file", "drive", "result", "reason")
+        cols: tuple[str, ...] = ("code", "name", "file", "drive", "result", "reason")
         title = f"station {s.address}: {counts.get('differs', 0)} parameter(s) differ from the file"
     else:
         cols = ("code", "name", "file", "drive", "now", "result", "reason")

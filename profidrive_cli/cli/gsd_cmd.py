@@ -156,10 +156,11 @@ def show_cmd(source: str, gsd_dir: str | None, module_params: bool, as_json: boo
     t = Table(title=g.title, show_header=False, title_justify="left")
     t.add_column("key", style="bold")
     t.add_column("value")
+    station_types: dict[int | None, object] = {0: "0 (DP slave)", 1: "1 (DP master)"}
     rows = [
         ("File", g.path), ("Vendor", g.vendor_name), ("Model", g.model_name), ("Revision", g.revision),
         ("Ident", _ident(g.ident_number)), ("GSD revision", g.gsd_revision),
-        ("Station type", {0: "0 (DP slave)", 1: "1 (DP master)"}.get(g.station_type, g.station_type)),
+        ("Station type", station_types.get(g.station_type, g.station_type)),
         ("Slave family", g.slave_family_text), ("HW / SW release", f"{g.hardware_release} / {g.software_release}"),
         ("Freeze / Sync", f"{_yn(g.freeze_mode_supp)} / {_yn(g.sync_mode_supp)}"),
         ("Auto baud / Set_Slave_Add", f"{_yn(g.auto_baud_supp)} / {_yn(g.set_slave_add_supp)}"),

@@ -62,6 +62,6 @@ def station_identity(d: dict) -> dict:
 
 
 def error_object(message: str, exit_code: int, stream: bool) -> dict:
-    d = {"event": "error"} if stream else {}
+    d: dict[str, Any] = {"event": "error"} if stream else {}
     d.update({"error": message, "exit_code": exit_code})
     return d

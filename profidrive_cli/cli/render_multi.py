@@ -5,6 +5,8 @@ Rendering only; the run is session/multirun.py."""
 
 from __future__ import annotations
 
+from typing import Any
+
 from rich.live import Live
 from rich.markup import escape
 from rich.table import Table
@@ -27,7 +29,7 @@ def sample_dict(address: int, t_s: float, sample, phase: str) -> dict:
 
 def start_json(header: dict) -> dict:
     """The start event in the contract's names (docs/json.md): the watchdog as `watchdog_s`."""
-    d = {"event": "start"}
+    d: dict[str, Any] = {"event": "start"}
     for k, v in header.items():
         if k == "watchdog_ms":
             d["watchdog_s"] = None if v is None else v / 1000.0

@@ -107,7 +107,7 @@ def run_several(opts, addresses: tuple, *, hz, percent, reverse, duration, fmax,
         opts.check_station(a)               # 0..125 and not the master's own address
     interactive = not opts.json and sys.stdin.isatty() and sys.stdout.isatty()
     view = MultiView("json" if opts.json else ("live" if sys.stdout.isatty() else "text"))
-    keys = []
+    keys: list[KeyReader] = []
 
     def confirm(sessions):
         what = ", ".join(f"{s.address} ({s.profile.name})" for s in sessions)

@@ -7,8 +7,13 @@ Rendering only: the decoding is session/passive.py, the live list session/passiv
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from profidrive_cli.cli.common import emit_json, out
 from profidrive_cli.dp.capture import format_line
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from rich.live import Live
 
 REFRESH_S = 0.5
 
@@ -27,7 +32,7 @@ class SniffView:
         self.as_json = as_json
         self.refresh_s = refresh_s
         self._shown_at: float | None = None
-        self._rich_live = None
+        self._rich_live: Live | None = None
 
     # -- one frame -------------------------------------------------------------------------------
     def frame(self, c) -> None:
@@ -156,7 +161,7 @@ COLUMNS = ("station", "ident", "state", "exchanges", "cycle ms min/mean/max", "r
 
 
 def _rows(snap: dict) -> list[tuple[str, ...]]:
-    rows = []
+    rows: list[tuple[str, ...]] = []
     for s in snap["stations"]:
         c = s["cycle_s"]
         k = s["counters"]

@@ -21,10 +21,14 @@ link it opened except the one it returns.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, Iterable
+from typing import TYPE_CHECKING, Callable, Iterable
 
 from profidrive_cli.fdl import frames as F
 from profidrive_cli.fdl.timing import BAUD_NAMES, CHAR_BITS
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.dp.poller import Master
+    from profidrive_cli.link.base import Link
 
 #: the rates tried, most common on drive buses first
 PROBE_ORDER = (1500000, 187500, 19200, 500000, 93750, 12000000, 45450, 9600, 3000000, 6000000)
@@ -85,7 +89,7 @@ def heard_telegrams(link, seconds: float) -> int:
             return good
 
 
-def detect_baud(open_link: Callable[[int], object], make_master: Callable[[object, int], object],
+def detect_baud(open_link: Callable[[int], Link], make_master: Callable[[Link, int], Master],
                 addresses: Iterable[int] | None = None, *, listen: bool = True,
                 probe: bool = True, rates: Iterable[int] = PROBE_ORDER,
                 progress: Callable[[str], None] | None = None):

@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
+from typing import Literal, overload
 
 from profidrive_cli import BusError
 from profidrive_cli.dp import services as S
@@ -51,9 +52,10 @@ def keep_within(wd_ms: float | None, period: float = 0.0) -> float | None:
 class Master:
     def __init__(self, link: Link, params: BusParams, address: int = F.DEFAULT_MASTER):
         self.link = link
-        if getattr(link, "latency", None) is not None and link.latency != params.link_latency:
+        latency = getattr(link, "latency", None)
+        if latency is not None and latency != params.link_latency:
             # the link knows its own latency (the simulator: none): no margin for a USB adapter
-            params = dataclasses.replace(params, link_latency=link.latency)
+            params = dataclasses.replace(params, link_latency=latency)
         self.fdl = FdlMaster(params, address)
         self.address = address
         self.stations: dict[int, StationMachine] = {}
@@ -138,6 +140,12 @@ class Master:
             self._sent(out)
         return self._await(da)
 
+    @overload
+    def _await(self, da: int, dx: Literal[False] = False) -> Outcome: ...
+
+    @overload
+    def _await(self, da: int, dx: bool) -> Outcome | bytes: ...
+
     def _await(self, da: int, dx: bool = False) -> Outcome | bytes:
         """Wait for the reply to the request just sent (retrying it) until it has an outcome.
         dx: a request from FdlMaster.dx_request; its expected reply is taken by the fast check
@@ -212,23 +220,25 @@ class Master:
     def slave_diag(self, da: int) -> S.SlaveDiag | None:
         self.keep_alive(da)
         res = self.transact(da, F.SRD_HIGH, b"", S.SAP_SLAVE_DIAG, S.SAP_MASTER, 250)
-        if res.kind != REPLY or res.frame.sd == F.SC:
+        f = res.frame
+        if res.kind != REPLY or f is None or f.sd == F.SC:
             return None
-        if (res.frame.fc & 0x0F) not in (F.DL, F.DH):
-            raise BusError(f"station {da}: Slave_Diag answered {F.describe_fc(res.frame.fc)}")
+        if (f.fc & 0x0F) not in (F.DL, F.DH):
+            raise BusError(f"station {da}: Slave_Diag answered {F.describe_fc(f.fc)}")
         try:
-            return S.SlaveDiag.decode(res.frame.data)
+            return S.SlaveDiag.decode(f.data)
         except S.ServiceError as e:
             raise BusError(f"station {da}: {e}") from None
 
     def get_cfg(self, da: int) -> bytes | None:
         self.keep_alive(da)
         res = self.transact(da, F.SRD_HIGH, b"", S.SAP_GET_CFG, S.SAP_MASTER, 250)
-        if res.kind != REPLY or res.frame.sd == F.SC:
+        f = res.frame
+        if res.kind != REPLY or f is None or f.sd == F.SC:
             return None
-        if (res.frame.fc & 0x0F) not in (F.DL, F.DH):
+        if (f.fc & 0x0F) not in (F.DL, F.DH):
             return None
-        return res.frame.data
+        return f.data
 
     def global_control(self, command: int = 0, group: int = 0, da: int = F.BROADCAST) -> None:
         self.send_sdn(da, S.SAP_GLOBAL_CONTROL, S.GlobalControl(command, group).encode())

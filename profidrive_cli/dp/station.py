@@ -176,6 +176,7 @@ class StationMachine:
             return ev
         self._silent = 0
         f = out.frame
+        assert f is not None                # a REPLY carries its frame (fdl/master.py Outcome)
         if req.service == "Slave_Diag":
             return self._on_diag(f, now, ev)
         if req.service in ("Set_Prm", "Chk_Cfg"):

@@ -336,8 +336,8 @@ class IndexEntry:
 
 
 _Stamp = tuple[int, int]
-_index: dict[Path, tuple[_Stamp, IndexEntry]] = {}
-_cache: dict[Path, tuple[_Stamp, Profile]] = {}
+_index: dict[Path, tuple[_Stamp | None, IndexEntry]] = {}
+_cache: dict[Path, tuple[_Stamp | None, Profile]] = {}
 
 
 def _stamp(path: Path) -> _Stamp | None:

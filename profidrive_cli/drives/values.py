@@ -24,6 +24,7 @@ import math
 import re
 from decimal import Decimal, InvalidOperation
 from fractions import Fraction
+from typing import Sequence
 
 NOISE = Fraction(1, 10**9)        # of one resolution step
 
@@ -75,7 +76,7 @@ def code_values(p) -> list[tuple[int, int]] | None:
     return sorted(out) or None
 
 
-def _ranges(p) -> list[tuple[Fraction, Fraction]] | None:
+def _ranges(p) -> Sequence[tuple[Fraction | None, Fraction | None]] | None:
     """Allowed intervals: `values` codes, else `ranges`, else min..max (None: unbounded)."""
     cv = code_values(p)
     if cv:

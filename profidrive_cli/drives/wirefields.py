@@ -16,6 +16,8 @@ hand. Field kinds:
 
 from __future__ import annotations
 
+from typing import Any
+
 from profidrive_cli import UsageError
 
 DIRECTIONS = ("request", "response")
@@ -89,7 +91,7 @@ def _yaskawa_fields(profile, layout: str, direction: str) -> tuple[int, list[dic
             fields.append(_field("scaled" if name in SIGNED_WORDS else "word", name, off,
                                  signed=True if name in SIGNED_WORDS else None,
                                  scale=1 if name in SIGNED_WORDS else None))
-    if fmt.has_params:
+    if fmt.param_offset is not None:                 # (fmt.has_params)
         fields.append(_field("bytes", "parameter access", fmt.param_offset, fmt.param_len))
     return fmt.size, fields
 
@@ -156,7 +158,7 @@ def area_fields(profile, layout: str, direction: str) -> dict:
     return {"length": length, "fields": fields}
 
 
-def _ak_texts(profile) -> tuple[dict, dict] | None:
+def _ak_texts(profile) -> tuple[dict, dict]:
     if profile.family == "toyo":
         from profidrive_cli.drives.toyo.describe import REQUEST_TEXT, RESPONSE_TEXT
         return dict(REQUEST_TEXT), dict(RESPONSE_TEXT)
@@ -179,7 +181,7 @@ def _params(profile) -> dict[int, str]:
 def layout_table(profile, layout: str) -> dict:
     """Everything a decoder needs for one layout of a profile: both directions' fields, the word order,
     PKW request/response texts and parameter names."""
-    d = {"profile": profile.name, "layout": layout, "title": profile.title,
+    d: dict[str, Any] = {"profile": profile.name, "layout": layout, "title": profile.title,
          "word_order": profile.word_order,
          "request": area_fields(profile, layout, "request"),
          "response": area_fields(profile, layout, "response")}

@@ -135,7 +135,7 @@ def encode(f: Frame, force_sd2: bool = False) -> bytes:
         raise ValueError("a DP telegram carries both SAPs or none")
     if not 0 <= f.da <= 127 or not 0 <= f.sa <= 127:
         raise ValueError(f"address out of range: DA {f.da} SA {f.sa}")
-    if f.dsap is not None:
+    if f.dsap is not None and f.ssap is not None:        # (both or none: checked above)
         body = bytes((f.da | ADDR_EXT, f.sa | ADDR_EXT, f.fc, f.dsap, f.ssap)) + f.data
     else:
         body = bytes((f.da, f.sa, f.fc)) + f.data
@@ -292,7 +292,7 @@ class Receiver:
 
     def drain(self) -> list:
         """Every complete frame / error currently in the buffer."""
-        out = []
+        out: list = []
         while True:
             r = self.next()
             if r is None:

@@ -175,6 +175,7 @@ def parse_value(text: str) -> int | None:
 def _resolve_value(d: ExtUserPrmData, raw: int | str, label: str) -> int:
     if isinstance(raw, bool):
         raw = int(raw)
+    v: int | None
     if isinstance(raw, int):
         v = raw
     else:
@@ -204,6 +205,7 @@ def _choices(d: ExtUserPrmData) -> str:
 def _write(buf: bytearray, off: int, d: ExtUserPrmData, value: int) -> None:
     if d.is_bits:
         lo, hi = d.bit_lo, d.bit_hi
+        assert lo is not None and hi is not None    # a Bit / BitArea has both (gsd/parser.py)
         mask = ((1 << (hi - lo + 1)) - 1) << lo
         buf[off] = (buf[off] & ~mask & 0xFF) | ((value << lo) & mask)
     else:
@@ -330,7 +332,8 @@ def _build(gsd: Gsd, mods: list[Module], overrides) -> PrmResult:
                                      f"{v} does not fit {d.describe_type()}")
             _write(buf, r.offset, d, v)
             fields.append(PrmField(offset=len(out) + r.offset, size=d.size,
-                                   bits=(d.bit_lo, d.bit_hi) if d.is_bits else None,
+                                   bits=(d.bit_lo, d.bit_hi) if d.is_bits and d.bit_lo is not None
+                                   and d.bit_hi is not None else None,
                                    name=d.name.strip(), value=v, text=text or d.text_for(v), block=label,
                                    block_index=idx, ref=d.ref, overridden=i in values, param=d))
         blocks.append(PrmBlockInfo(label, idx, len(out), len(buf)))

@@ -8,6 +8,7 @@ words and punctuation. Knows no keyword (that is parser.py) and touches only dat
 
 from __future__ import annotations
 
+import builtins
 import re
 from typing import Any
 
@@ -129,9 +130,9 @@ class Toks:
             return True
         return False
 
-    def int_list(self, what: str, lo: int | None = None, hi: int | None = None,
-                 signed: bool = False) -> list[int]:
-        out: list[int] = []
+    def int_list(self, what: str, lo: builtins.int | None = None, hi: builtins.int | None = None,
+                 signed: bool = False) -> list[builtins.int]:      # (builtins: Toks.int is a method)
+        out: list[builtins.int] = []
         while not self.at_end():
             v = self.int(what, signed=signed)
             if (lo is not None and v < lo) or (hi is not None and v > hi):

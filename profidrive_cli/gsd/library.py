@@ -261,8 +261,8 @@ def station_name(ident: int, extra_dir: str | Path | None = None) -> str | None:
             hit = next((h for h in map(_head, gsd_files(folder)) if h[0] == ident), None)
             if hit is not None and hit[1] is not None:
                 return hit[1]
-    hit = _find(ident, extra_dir, strict=False)
-    return None if hit is None else hit[1].title
+    found = _find(ident, extra_dir, strict=False)
+    return None if found is None else found[1].title
 
 
 def _as_ident(text: str) -> int | None:
@@ -283,6 +283,8 @@ def load_gsd(path_or_ident: str | Path | int, extra_dir: str | Path | None = Non
             raise UsageError(f"no GSD file with ident 0x{path_or_ident:04X} in the library"
                              + ("" if extra_dir else " (add your vendor's file with --gsd-dir DIR)"))
         return g
+    if isinstance(path_or_ident, bool):
+        raise TypeError(f"load_gsd: a path, a file name or an ident, not {path_or_ident!r}")
     p = Path(path_or_ident)
     try:
         is_file, exists = p.is_file(), p.exists()

@@ -116,6 +116,7 @@ class ExtUserPrmData:
 
     def type_range(self) -> tuple[int, int]:
         if self.is_bits:
+            assert self.bit_lo is not None and self.bit_hi is not None   # the parser sets both
             return 0, (1 << (self.bit_hi - self.bit_lo + 1)) - 1
         if self.data_type in INT_TYPES:
             _, lo, hi = INT_TYPES[self.data_type]

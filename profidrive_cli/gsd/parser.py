@@ -216,12 +216,12 @@ class _Parser:
         elif kw in _STR_KEYS:
             t = self.toks(rest, line, kw_raw)
             if t.peek() == "s":
-                v = t.string()
+                text = t.string()
                 t.end()
             else:
-                v = rest.strip()
+                text = rest.strip()
                 self.warn(line, f"{kw_raw}: value is not in quotes")
-            self.store(line, kw, v)
+            self.store(line, kw, text)
         elif kw == "slave_family":
             self.store(line, kw, rest.strip())
         elif kw == "user_prm_data":

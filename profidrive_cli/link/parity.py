@@ -113,4 +113,4 @@ if os.name == "posix":
             self._carry = b""
             super().reset_input_buffer()
 else:                                        # pragma: no cover (Windows: no termios)
-    ParityMarkingSerial = None
+    ParityMarkingSerial = None  # type: ignore[assignment, misc]  # (no termios: no such class)

@@ -18,6 +18,7 @@ import errno
 import os
 import select
 import time
+from typing import Any
 
 import serial
 import serial.rs485
@@ -29,13 +30,13 @@ from profidrive_cli.link.parity import ParityMarkingSerial
 try:
     from serial.urlhandler.protocol_socket import Serial as _SocketSerial
 except ImportError:                          # pragma: no cover
-    class _SocketSerial:                     # (no socket:// in this pyserial)
+    class _SocketSerial:  # type: ignore[no-redef]  # (no socket:// in this pyserial: a stand-in)
         pass
 
 try:
     from termios import error as _TermiosError
 except ImportError:                          # pragma: no cover (Windows: no termios)
-    class _TermiosError(Exception):
+    class _TermiosError(Exception):  # type: ignore[no-redef]  # (no termios: a stand-in)
         pass
 
 #: what a read, write or flush raises when the device vanished (USB pulled, the pty's other end
@@ -278,7 +279,7 @@ class SerialLink(Link):
         self.rs485 = rs485
         self.echo = echo
         self.echo_errors = 0
-        self.ser = None
+        self.ser: Any = None                # a pyserial port (pyserial has no type hints)
         self._open()
 
     def _open(self) -> None:
@@ -297,7 +298,8 @@ class SerialLink(Link):
         self._sim_sleep = getattr(self.ser, "sim_sleep", None) if self.bus is not None else None
         self._clock = getattr(self.ser, "clock", time.monotonic) if self.bus is not None \
             else time.monotonic
-        self.now = self._clock           # (hot path: the clock itself, no method call around it)
+        # (hot path: the clock itself, no method call around it)
+        self.now = self._clock  # type: ignore[method-assign]  # (on purpose: see the line above)
         # a POSIX device or pty read with os.read (read_available's _read_fd): its own read,
         # without the dispatch on the kind of port for every read
         self._fd_read = (FD_IO and type(self.ser) is serial.Serial and os.name == "posix"

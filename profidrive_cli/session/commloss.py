@@ -392,6 +392,7 @@ def _verdict(res: CommLossResult, st: DriveStatus, sample, late: tuple | None) -
     if not res.reacted:              # the watch ended before a look at the limit (cannot happen)
         done("fail", f"no stop or trip seen ({limit})" + warn)
         return
+    assert res.measured_s is not None       # set with reacted
     if res.measured_s <= lim:
         done("pass", f"{what}{code} within {res.measured_s:.3f} s of the last telegram (a look that "
              f"came back then saw it); {limit}")

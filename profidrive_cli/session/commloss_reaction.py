@@ -122,7 +122,7 @@ def _fuji_reaction(sess) -> Reaction:
     o28 = float(_read(sess, fc.comm_loss_timer).value)
     act = fj.comm_loss_action(sess.profile, o27)
     words = fj.comm_loss_text(sess.profile, o27, o28)
-    settings = {fc.comm_loss_param: o27, fc.comm_loss_timer: o28}
+    settings: dict[str, float | None] = {fc.comm_loss_param: o27, fc.comm_loss_timer: o28}
     warnings = _fuji_light_alarm(sess, settings)
     if act.stop == "none":
         return Reaction(words + " -- the drive keeps running without a master", "none",
@@ -144,7 +144,7 @@ def _yaskawa_reaction(sess) -> Reaction:
         return Reaction("BUS fault (the profile has no F6-01: assumed coast)", "trip", alarm="BUS")
     f601 = int(_read(sess, "F6-01").raw)
     stop, ramp_code, words = _YASKAWA_F601.get(f601, ("coast", None, "outside 0..3: assumed coast"))
-    settings = {"F6-01": f601}
+    settings: dict[str, float] = {"F6-01": f601}
     decel = None
     if ramp_code:
         decel = float(_read(sess, ramp_code).value)

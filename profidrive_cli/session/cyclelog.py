@@ -32,9 +32,9 @@ class CycleLog:
         #: OutputWriteError when the --log file could not be written
         self.error: OutputWriteError | None = None
         out = OutputFile(path, "w", newline="", what="--log")
-        out.open()
-        self._file = out
-        self._writer = csv.writer(out.file)
+        f = out.open()
+        self._file: OutputFile | None = out
+        self._writer = csv.writer(f)
         channel.hooks.append(self.log_cycle)
         self._row(["time_s", "cycle", "control_word", "reference", "status_word",
                    "actual", "outputs", "inputs"] + (list(extra[0]) if extra else []))
@@ -61,6 +61,7 @@ class CycleLog:
 
     def _failed(self, e: Exception) -> None:
         out, self._file = self._file, None
+        assert out is not None              # only while logging (log_cycle checks it)
         kept = out.path.is_file()           # a regular file there: it stays as it was
         out.discard()
         why = (f"write failed: {e.strerror or e}" if isinstance(e, OSError) else

@@ -40,7 +40,7 @@ def find_drive_stations(master, first: int = 0, last: int = 125) -> list[DriveSt
     for e in entries:
         if e.station_type != "slave" or e.diag is None:
             continue
-        out.append(DriveStation(e.address, e.ident, profile_for_ident(e.ident),
+        out.append(DriveStation(e.address, e.ident, profile_for_ident(e.diag.ident),
                                 e.diag.state_words(master.address)))
     return out
 
@@ -98,6 +98,7 @@ def resolve_layout(profile: Profile, layout: str | None = None, ppo: int | None 
     if len(given) > 1:
         raise UsageError("give at most one of --ppo N and --format NAME")
     names = ", ".join(profile.layouts)
+    name: str | None
     if ppo is not None:
         name = f"ppo{ppo}"
         if name not in profile.layouts:
@@ -115,9 +116,10 @@ def resolve_layout(profile: Profile, layout: str | None = None, ppo: int | None 
         low = {n.lower(): n for n in profile.layouts}
         if name.lower() in low:
             return low[name.lower()]
-        given = f"{layout.source}: layout {name}" if fmt is None and hasattr(layout, "source") \
+        source = getattr(layout, "source", None)
+        said = f"{source}: layout {name}" if fmt is None and hasattr(layout, "source") \
             else f"--format {name}"               # a config file's layout names its FILE:LINE
-        raise UsageError(f"{given}: {profile.name} has the layouts {names}")
+        raise UsageError(f"{said}: {profile.name} has the layouts {names}")
     return name
 
 

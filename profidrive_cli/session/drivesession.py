@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Literal, Mapping
 
 from profidrive_cli import PdriveError, UsageError
-from profidrive_cli.drives.base import DriveStatus, FaultRecord, ParamValue
+from profidrive_cli.drives.base import Drive, DriveStatus, FaultRecord, ParamValue
 from profidrive_cli.drives.profile import Profile
 import profidrive_cli.session.backup as backup
 import profidrive_cli.session.bringup as bringup
@@ -29,7 +29,7 @@ from profidrive_cli.session.discovery import DriveStation, locate
 from profidrive_cli.session.params import ParamInfo
 from profidrive_cli.session.backup import ParamRow
 from profidrive_cli.session.safestop import StopReport
-from profidrive_cli.session.signals import SignalGuard
+from profidrive_cli.session.signals import Guard, SignalGuard
 
 DEFAULT_WATCHDOG_MS = 500
 
@@ -44,7 +44,7 @@ class DriveSession:
                  handle_signals: bool = True,
                  before_connect: Callable[["DriveSession"], None] | None = None,
                  on_message: Callable[[str], None] | None = None,
-                 log_csv: str | Path | None = None, env: dict | None = None):
+                 log_csv: str | Path | None = None, env: Mapping[str, str] | None = None):
         if address is not None and not 0 <= address <= 125:
             raise UsageError(f"station address {address} outside 0..125")
         if not 10 <= watchdog_ms <= 650000:
@@ -72,7 +72,7 @@ class DriveSession:
         self.ident: int | None = None
         self.profile: Profile | None = None
         self.layout: str | None = None
-        self.drive = None
+        self.drive: Drive | None = None
         self.channel: MeteredChannel | None = None
         self.cycle_hz: float = 0.0
         self.wire_hz: float = 0.0
@@ -87,12 +87,15 @@ class DriveSession:
         self._decel_s: float | None = None
         self._fmax: tuple[float, str] | None = None
         self._fmax_override: float | None = None
-        self.signals = SignalGuard(handle_signals)
+        self.signals: Guard = SignalGuard(handle_signals)
         self._closed = False
         #: the --log CSV once connected (cyclelog.CycleLog)
         self.cyclelog: CycleLog | None = None
         #: (column names, row()) the --log CSV writes beside each exchange (set before connecting)
         self.log_extra = None
+        #: Sync_Req / Freeze_Req with the parameters (MultiRun --sync / --freeze sets them)
+        self.dp_sync = False
+        self.dp_freeze = False
         #: called with link_ok after the safe stop on close, before the station is released
         self.after_stop: list[Callable[[bool], None]] = []
 
@@ -118,7 +121,7 @@ class DriveSession:
             raise
         return self
 
-    def __exit__(self, exc_type, exc, tb) -> bool:
+    def __exit__(self, exc_type, exc, tb) -> Literal[False]:
         self.close(exc)
         return False
 
@@ -135,6 +138,7 @@ class DriveSession:
         """Step 1: which station, which profile, which layout; the cycle rate (discovery.py, cycle.py)."""
         locate(self)
         choose_rate(self)
+        assert self.station is not None         # locate() found it (or raised)
         return self.station
 
     def connect(self):

@@ -18,6 +18,7 @@ read_param on the codes the profile's `trip_records:` names (drives/monitors.py)
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 from profidrive_cli import UsageError
 from profidrive_cli.drives.base import DriveError, ParamError
@@ -104,7 +105,8 @@ class MonitorValue:
 @dataclass
 class Monitors:
     """Round-robin reader of `codes` through `sess.read_param`."""
-    sess: object
+    #: the DriveSession (or a stand-in with its attributes; its profile and drive are set by then)
+    sess: Any
     codes: list[str]
     values: dict[str, MonitorValue] = field(default_factory=dict)
     dropped: dict[str, str] = field(default_factory=dict)
@@ -165,8 +167,8 @@ class Monitors:
         if fam == "fuji":
             from profidrive_cli.drives.fuji.codes import pcd_assignment_code
             for n in slots:
-                word = int(sess.read_param(f"o{47 + n}").raw)
-                code = pcd_assignment_code(sess.profile, word)
+                assigned = int(sess.read_param(f"o{47 + n}").raw)
+                code = pcd_assignment_code(sess.profile, assigned)
                 if code in self.codes and code not in self.cyclic:
                     self.cyclic[code] = 1 + n
         elif fam == "moeller":

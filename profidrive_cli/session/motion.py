@@ -24,7 +24,8 @@ def fmax(sess, override: float | None = None) -> tuple[float, str]:
     pdef = sess.profile.param(code) if code else None
     readable = pdef is not None and (pdef.pnu is not None or pdef.register is not None)
     # an fmax from a config file keeps its FILE:LINE (config.FileHz): the label names that line
-    given = f"fmax {override:g} Hz from {override.source}" if hasattr(override, "source") else \
+    source = getattr(override, "source", None)
+    given = f"fmax {override:g} Hz from {source}" if hasattr(override, "source") else \
         f"--fmax {override:g}" if override is not None else ""
     if d.has_param_channel and readable:
         hz = float(d.max_frequency())

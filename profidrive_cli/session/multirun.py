@@ -18,7 +18,7 @@ No click and no rich here: the cli renders through the callbacks.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.drives.base import DriveError
@@ -28,6 +28,9 @@ from profidrive_cli.session.drivesession import DriveSession
 from profidrive_cli.session.groupcycle import GroupCycle, StationOut, min_watchdog_ms
 from profidrive_cli.session.safestop import COAST_TIMEOUT_S, StopReport
 from profidrive_cli.session.signals import SessionTerminated, SignalGuard
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.dp.poller import Master
 
 DEFAULT_WATCHDOG_MS = 500
 
@@ -95,7 +98,7 @@ class MultiRun:
     """The run; callbacks (all optional): on_start(header), on_phase(phase, address or None),
     on_sample(address, t_s, sample, phase), on_end(end), confirm(sessions), should_quit() -> bool,
     on_message(text)."""
-    master: object
+    master: "Master"
     addresses: list[int]
     refs: list[tuple[str, float]]        # one per station
     reverse: bool = False
@@ -230,6 +233,7 @@ class MultiRun:
             if not -100.0 <= pct <= 100.0:
                 raise UsageError(f"station {r.address}: {pct:g} % is outside -100..100")
             r.percent = -abs(pct) if self.reverse else pct
+            assert s.profile is not None    # open() chose it
             stations.append({"station": r.address, "ident": s.ident, "ident_hex": f"0x{s.ident:04X}",
                              "profile": s.profile.name, "family": s.profile.family,
                              "title": s.profile.title, "layout": s.layout, "fmax_hz": top,
@@ -244,6 +248,8 @@ class MultiRun:
     def _start_all(self) -> None:
         """Each drive started at 0 (its own handshake, one after the other: nothing turns yet), then the
         references of all in one round: with --sync they take effect in the same instant."""
+        group = self.group
+        assert group is not None            # _open() made it
         for r in self.runs:
             self._phase("starting", r.address)
             try:
@@ -256,18 +262,20 @@ class MultiRun:
                 raise DriveError(f"station {r.address}: {e}") from None
             r.started = True
             self._sample(r, sample, "starting")
-        self.group.end_round()
+        group.end_round()
         t = self.now()
         for r in self.runs:
             r.session.set_reference(r.percent)
             r.t_start = t
         for r in self.runs:                 # a codec that sets its words without an exchange
-            if not self.group.exchanged(r.address):
+            if not group.exchanged(r.address):
                 self._sample(r, r.session.poll(), "running")
-        self.group.end_round()              # (Sync: every new reference takes effect now)
+        group.end_round()              # (Sync: every new reference takes effect now)
         self._phase("running")
 
     def _cycle(self) -> None:
+        group = self.group
+        assert group is not None            # _open() made it
         t_start = self.now()
         while True:
             for r in self.runs:
@@ -286,9 +294,9 @@ class MultiRun:
                     self._end(f"station {r.address} tripped" + (f" ({st.fault_code})" if st.fault_code
                                                                  else ""))
                     return
-            self.group.end_round()
-            if self.group.dropped:
-                a, why = next(iter(self.group.dropped.items()))
+            group.end_round()
+            if group.dropped:
+                a, why = next(iter(group.dropped.items()))
                 for r in self.runs:
                     if r.address == a:
                         r.problem = f"dropped out of data exchange ({why})"
@@ -334,6 +342,7 @@ class MultiRun:
         def hurry() -> bool:
             h, self.guard.hurry = self.guard.hurry, False
             return h
+        assert self.group is not None       # _stop_all() checked it
         stop_together([(r.address, r.session, r.percent) for r in runs], self.group, hurry, on_sample)
         for r in runs:
             rep = r.session.stop_report

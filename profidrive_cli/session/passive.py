@@ -16,17 +16,21 @@ from __future__ import annotations
 
 import inspect
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from profidrive_cli import UsageError
 from profidrive_cli.dp import services as S
 from profidrive_cli.fdl import frames as F
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.drives.profile import Profile
 
 
 @dataclass
 class Watched:
     """One station given with --station."""
     address: int
-    profile: object
+    profile: Profile
     layout: str | None = None        # as given; None: inferred
     seen_cfg: bytes | None = None    # the last Chk_Cfg the master sent it
     fmax: float | None = None        # learnt from a PKW answer of the max-frequency parameter

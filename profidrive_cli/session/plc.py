@@ -18,9 +18,14 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.link.base import Link, plain_sleep
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.drives.base import Drive
+    from profidrive_cli.drives.profile import Profile
 
 #: DP watchdog armed in Set_Prm for every station (ms): far above a cycle of five stations at 9.6 kbit/s
 WATCHDOG_MS = 2000.0
@@ -161,10 +166,10 @@ def _accel_code(profile) -> str | None:
 @dataclass
 class StationPlan:
     address: int
-    profile: object
+    profile: Profile
     layout: str
     script: MotionScript
-    drive: object = None
+    drive: Drive | None = None
     thread: threading.Thread | None = None
     errors: list[str] = field(default_factory=list)
     reads: list[str] = field(default_factory=list)

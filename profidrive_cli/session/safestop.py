@@ -176,10 +176,12 @@ def _tell(sess, say, text: str) -> None:
         callback_failed(sess, e)
 
 
-def link_lost_words(sess, e: BaseException) -> str:
+def link_lost_words(sess, e: BaseException | None) -> str:
+    """What the watchdog does now that no stop can be sent; `e`: the LinkLost, None when the link
+    was found lost before (sess.link_lost) and the session is closed without an exception."""
     fam_text = sess.comm_loss_text or _COMM_LOSS_WORDS.get(
         sess.profile.family if sess.profile else "", "its communication-loss setting")
-    return (f"link lost ({e}): pdrive cannot send a stop. The station's DP watchdog "
+    return (f"link lost{f' ({e})' if e is not None else ''}: pdrive cannot send a stop. The station's DP watchdog "
             f"({sess.watchdog_ms:g} ms) takes it out of data exchange within "
             f"{sess.watchdog_ms / 1000.0:g} s of the last telegram; the drive then stops by "
             f"{fam_text}")

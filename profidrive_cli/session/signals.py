@@ -16,7 +16,7 @@ from __future__ import annotations
 import os
 import signal
 import threading
-from typing import Any
+from typing import Any, Protocol
 
 
 class SessionTerminated(BaseException):
@@ -78,6 +78,18 @@ def _sync() -> None:
                 signal.signal(s, h if h is not None else signal.SIG_DFL)
         except (TypeError, ValueError):
             pass
+
+
+class Guard(Protocol):
+    """What a session needs of its signal guard (SignalGuard, or the API's guard that shares a bus's)."""
+
+    hurry: bool
+
+    def install(self) -> None: ...
+
+    def guard(self) -> None: ...
+
+    def restore(self) -> None: ...
 
 
 class SignalGuard:

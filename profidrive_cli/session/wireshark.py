@@ -15,6 +15,7 @@ import shlex
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Sequence
 
 from profidrive_cli import PdriveError, UsageError, __version__
 from profidrive_cli.outfile import check_output_path, write_text_atomic
@@ -180,7 +181,7 @@ class Installed:
     stations: list[StationSpec] = field(default_factory=list)
 
 
-def install(plugins_dir: str | None = None, stations: list[str] = (), extcap_dir: str | None = None,
+def install(plugins_dir: str | None = None, stations: Sequence[str] = (), extcap_dir: str | None = None,
             with_extcap: bool = True) -> Installed:
     """Write pdrive.lua, pdrive_stations.lua and (with_extcap) the extcap launcher into each extcap
     folder. The personal folders are created when missing; a folder given with --dir / --extcap-dir

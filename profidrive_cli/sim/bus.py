@@ -210,6 +210,7 @@ class SimBus:
                 reply, answering = r, s
         if reply is None:
             return None
+        assert answering is not None        # the station that gave the reply
         start = t + (answering.reply_delay_bits / self.params.baud if self.wire else 0.0)
         late = False
         if self.faults is not None:

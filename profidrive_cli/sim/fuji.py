@@ -252,9 +252,8 @@ class FujiModel(ProfidriveModel):
             p = self._assigned_param(word)
             v = 0
             if p is not None:
-                v = self._read_special_mcode(p.pnu, p.index)
-                if v is None:
-                    v = self.values.get(p.code, 0)
+                special = self._read_special_mcode(p.pnu, p.index)
+                v = special if special is not None else self.values.get(p.code, 0)
             out.append(v & 0xFFFF)
         return out
 
@@ -268,7 +267,7 @@ class FujiModel(ProfidriveModel):
             if self.busy_next > 0:
                 self.busy_next -= 1
             return pd.PkwFrame(7, req.pnu, req.subindex, self.fc.busy_error)
-        before = dict(self.values) if write else None
+        before = dict(self.values) if write else {}
         resp = super().pkw_answer(req)       # generic edit_rights stays 1: PNU927 blocks writes only
         if write and resp.ak in (1, 4) and self.fc.storage is not None:
             sp = self.profile.param(self.fc.storage["param"])

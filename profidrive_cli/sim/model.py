@@ -19,6 +19,9 @@ class SlaveModel:
 
     #: short family name ("fuji-g1", "plain", ...) shown by the sim
     family = "plain"
+    #: Sync / Freeze offered (sim/plant.py sets them where the profile's GSD file claims them)
+    sync_supported = False
+    freeze_supported = False
 
     def __init__(self, ident: int, cfgs: dict[str, bytes] | None = None, name: str = "DP-V0 slave",
                  user_prm_len: int | None = None, max_diag_len: int = 6):

@@ -63,11 +63,12 @@ def make_model(profile: Profile, **options) -> SlaveModel:
 def _gsd_modes(profile: Profile, m: SlaveModel) -> None:
     """The station offers Sync / Freeze (sim/slave.py) exactly where its own GSD file, the library file
     the profile names (`gsd:`), claims them (Sync_Mode_supp / Freeze_Mode_supp)."""
-    if not getattr(profile, "gsd", None):
+    gsd = getattr(profile, "gsd", None)
+    if not gsd:
         return
     from profidrive_cli.data import gsd_dir
     from profidrive_cli.gsd.library import parse_cached
-    path = gsd_dir() / profile.gsd
+    path = gsd_dir() / gsd
     if path.is_file():
         g = parse_cached(path)
         m.sync_supported, m.freeze_supported = bool(g.sync_mode_supp), bool(g.freeze_mode_supp)
@@ -93,7 +94,7 @@ def _build_model(name: str, addr: int, baud: int, preset: dict | None = None) ->
 
 
 def _station_list(text: str) -> list[tuple[int, str]]:
-    out = []
+    out: list[tuple[int, str]] = []
     for item in filter(None, (t.strip() for t in text.split(","))):
         addr, _, name = item.partition(":")
         try:
@@ -183,6 +184,7 @@ def build_bus(url: str, now: float = 0.0, default_baud: int = 19200) -> SimBus:
     for addr, name in stations:
         preset = presets.pop(addr, {})
         entry = None if preset else _index_entry(name)
+        model: SlaveModel | LazyModel
         if entry is not None:
             # built on first use (sim/lazy.py): a scan loads no profile, no model, no codec
             model = LazyModel(functools.partial(_build_model, name, addr, baud), entry.ident,
@@ -190,7 +192,7 @@ def build_bus(url: str, now: float = 0.0, default_baud: int = 19200) -> SimBus:
         else:
             model = _build_model(name, addr, baud, preset)
         slave = SimSlave(addr, model)
-        if entry is not None:
+        if isinstance(model, LazyModel):            # (entry is not None)
             model.attach(slave)
         slaves.append(slave)
     if presets:

@@ -134,6 +134,7 @@ class TcpEndpoint:
 
     def _client_gone(self) -> bool:
         """The client's connection is at its end (closed or reset), its input read up to there."""
+        assert self.conn is not None        # called while a client is connected
         try:
             return self.conn.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT) == b""
         except BlockingIOError:

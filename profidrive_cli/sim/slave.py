@@ -8,17 +8,22 @@ next diagnosis for rejected Set_Prm / Chk_Cfg, the cached reply for an FCB repet
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from profidrive_cli.dp import services as S
 from profidrive_cli.fdl import frames as F
 from profidrive_cli.fdl.fcb import SlaveFcb
 from profidrive_cli.sim.model import SlaveModel
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.sim.lazy import LazyModel
 
 WAIT_PRM, WAIT_CFG, DATA_EXCH = "Wait_Prm", "Wait_Cfg", "Data_Exch"
 DEFAULT_MIN_TSDR = 11        # bit times, until a Set_Prm says otherwise
 
 
 class SimSlave:
-    def __init__(self, address: int, model: SlaveModel, set_slave_add_supported: bool = False,
+    def __init__(self, address: int, model: SlaveModel | LazyModel, set_slave_add_supported: bool = False,
                  response_bits: int | None = None):
         self.address = address
         self.model = model

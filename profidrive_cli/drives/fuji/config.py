@@ -126,8 +126,8 @@ def _build_config(profile) -> FujiConfig:
             continue
         try:
             c.ppo_values[name] = parse_int_set(vals if isinstance(vals, list) else [vals], "o30 value")
-        except ValueError as e:
-            raise _err(profile, doc.get("layouts"), name, f"layout {name}: {e}") from None
+        except ValueError as err:
+            raise _err(profile, doc.get("layouts"), name, f"layout {name}: {err}") from None
     pc = _section(profile, doc, "parameter_channel")
     errs = pc.get("errors", {})
     if not isinstance(errs, dict):
@@ -165,8 +165,8 @@ def _build_config(profile) -> FujiConfig:
                                 f"needs o27: [values], stop: {' | '.join(STOP_ACTIONS)}")
         try:
             vals = parse_int_set(a.get("o27", []), "o27 value")
-        except ValueError as e:
-            raise DataFileError(path, getattr(a, "line", cl.line), f"comm_loss.actions[{i}]: {e}") from None
+        except ValueError as err:
+            raise DataFileError(path, getattr(a, "line", cl.line), f"comm_loss.actions[{i}]: {err}") from None
         c.comm_loss_actions.append(CommLossAction(vals, a["stop"], bool(a.get("delayed", False)),
                                                   bool(a.get("recover", False)), bool(a.get("trip", True))))
     c.zero_data = _section(profile, doc, "zero_data", required=False)

@@ -72,20 +72,20 @@ class ProfidriveConfig:
                 raise _e(path, lab, k, f"profidrive.labels: '{k}' must be one of "
                          f"{', '.join(labels)} with a text value")
             labels[k] = v
-        ctw = dict(CTW_NAMES)
+        ctw: dict[int, str | None] = dict(CTW_NAMES)
         own = _bit_names(path, sec, "ctw_bits")
         ctw.update(own)
-        stw = dict(STW_NAMES)
+        stw: dict[int, str | None] = dict(STW_NAMES)
         stw.update(_bit_names(path, sec, "stw_bits"))
-        ctw = {b: n for b, n in ctw.items() if n is not None}      # null = bit not used
-        stw = {b: n for b, n in stw.items() if n is not None}
+        ctw_names = {b: n for b, n in ctw.items() if n is not None}      # null = bit not used
+        stw_names = {b: n for b, n in stw.items() if n is not None}
         held = 0
         for b in _int_list(path, sec, "held_ctw_bits", 0, 15):
             held |= 1 << b
         if held & DERIVED_BITS:
             raise _e(path, sec, "held_ctw_bits",
                      "held_ctw_bits cannot include bits 0-3, 7 or 10 (the state machine sets them)")
-        cfg = cls(labels=labels, ctw_names=ctw, stw_names=stw, held_ctw_bits=held,
+        cfg = cls(labels=labels, ctw_names=ctw_names, stw_names=stw_names, held_ctw_bits=held,
                   unused_ctw_bits=frozenset(b for b, n in own.items() if n is None))
         if "array_pnus" in sec:
             cfg.array_pnus = frozenset(_int_list(path, sec, "array_pnus", 1, 0x7FF))
@@ -205,7 +205,7 @@ def _int_list(path, node, key, lo: int, hi: int) -> list[int]:
     return list(v)
 
 
-def _bit_names(path, node, key) -> dict[int, str]:
+def _bit_names(path, node, key) -> dict[int, str | None]:
     m = _map(path, node, key)
     out = {}
     for k, v in m.items():

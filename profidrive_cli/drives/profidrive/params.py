@@ -9,9 +9,13 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from profidrive_cli import UsageError
 from profidrive_cli.drives.profidrive.config import ProfidriveConfig, config
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.drives.profile import ParamDef
 
 _RAW_RE = re.compile(r"^PNU\s*(0x[0-9a-f]+|\d+)\s*(?:\[\s*(0x[0-9a-f]+|\d+)\s*\])?$", re.I)
 _CODE_IND_RE = re.compile(r"^(.+?)\s*\[\s*(0x[0-9a-f]+|\d+)\s*\]$", re.I)
@@ -26,7 +30,7 @@ class ParamRef:
     subindex: int = 0
     array: bool = False
     size: int = 16                  # 16 or 32 bits (selects the word / long-word AK)
-    param: object | None = None     # the profile's ParamDef, when known
+    param: ParamDef | None = None   # the profile's ParamDef, when known
 
     @property
     def label(self) -> str:

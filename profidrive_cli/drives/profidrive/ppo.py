@@ -7,30 +7,30 @@ the profile's layouts (sizes, `pkw:` flag, word order); no parameter or state-ma
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Iterable
+from typing import Iterable, Literal
 
 from profidrive_cli import UsageError
 
-def _check_order(word_order: str) -> str:
+def _check_order(word_order: str) -> Literal["big", "little"]:
     if word_order not in ("big", "little"):
         raise ValueError(f"word order must be big or little, got {word_order!r}")
-    return word_order
+    return "big" if word_order == "big" else "little"
 
 
 def words_to_bytes(words: Iterable[int], word_order: str = "big") -> bytes:
     """16-bit words to octets; `word_order` big = high octet first (PROFIBUS default)."""
-    _check_order(word_order)
+    order = _check_order(word_order)
     out = bytearray()
     for w in words:
-        out += (int(w) & 0xFFFF).to_bytes(2, word_order)
+        out += (int(w) & 0xFFFF).to_bytes(2, order)
     return bytes(out)
 
 
 def bytes_to_words(data: bytes, word_order: str = "big") -> list[int]:
-    _check_order(word_order)
+    order = _check_order(word_order)
     if len(data) % 2:
         raise ValueError(f"{len(data)} octets is not a whole number of words")
-    return [int.from_bytes(data[i:i + 2], word_order) for i in range(0, len(data), 2)]
+    return [int.from_bytes(data[i:i + 2], order) for i in range(0, len(data), 2)]
 
 
 # =============================================================================================

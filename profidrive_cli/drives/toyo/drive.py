@@ -201,6 +201,7 @@ class ToyoDrive(pd.ProfidriveDrive):
         speed = w.get("motor_speed")
         pct = speed_percent(self.profile, speed) if speed is not None else None
         ref_pct = speed_percent(self.profile, self.reference)
+        state: pd.State | str
         if self.mode == 0:
             zsw = w["zsw"]
             raw["status_word"] = zsw

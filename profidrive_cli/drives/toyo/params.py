@@ -82,9 +82,9 @@ def resolve_param(profile, tc: ToyoConfig, code: str) -> pd.ParamRef:
             raise UsageError(f"{code}: channel 0..{tc.traceback_channels - 1}, recording 0..3, "
                              f"point 0..{tc.traceback_points - 1}")
         p = param_at(profile, tc.traceback_pnu + ch)
-        ind = traceback_ind(rec, pt)
+        tb_ind = traceback_ind(rec, pt)
         return pd.ParamRef(f"TB{ch:02d}[{rec},{pt}]", p.name if p else "", tc.traceback_pnu + ch,
-                           ind, True, 16, p)
+                           tb_ind, True, 16, p)
     m = re.fullmatch(r"(?i)(?:PNU\s*)?(0x[0-9a-f]+|\d+)(?:\s*\[\s*(0x[0-9a-f]+|\d+)\s*\])?", t)
     base = None
     ind = None

@@ -91,7 +91,7 @@ class YaskawaDrive(Drive):
                 "torque_reference": int(round(self.torque_reference * 10)) & 0xFFFF,
                 "torque_compensation": int(round(self.torque_compensation * 10)) & 0xFFFF}
         img = pack_words([vals.get(n, 0) for n in self.fmt.out_words], self.order)
-        if self.params is not None:
+        if self.params is not None and self.fmt.param_offset is not None:     # (both or neither)
             img += bytes(self.fmt.param_offset - len(img)) + self.params.outputs()
         return img
 

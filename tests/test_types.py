@@ -1,0 +1,71 @@
+"""The types are held: mypy (pyproject.toml [tool.mypy]) is clean on the whole package, and
+`mypy --strict` is clean on the public Python API (profidrive_cli/api/, docs/api.md): its errors are
+reported in api/ files only, the modules it imports are followed silently.
+
+mypy is in the `test` extra (pinned in constraints.txt). Without it the two checks are skipped, except
+under CI=true, where they fail. Each run uses its own cache under pytest's tmp_path (a fresh clone works).
+Also here: the bugs mypy found, each with its test."""
+
+import importlib.util
+import os
+import subprocess
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from profidrive_cli.checklist.spec import ChecklistError, load_checklist_text
+from profidrive_cli.session.safestop import link_lost_words
+
+ROOT = Path(__file__).resolve().parents[1]
+#: generous: one cold run takes a few seconds alone, far longer on a loaded machine
+MYPY_TIMEOUT_S = 900
+
+
+def _mypy(tmp_path: Path, *args: str) -> tuple[int, str]:
+    if importlib.util.find_spec("mypy") is None:
+        if os.environ.get("CI") == "true":
+            pytest.fail("mypy is not installed (it is in the `test` extra: pip install '.[test]')")
+        pytest.skip("mypy is not installed (pip install '.[test]')")
+    cmd = [sys.executable, "-m", "mypy", "--config-file", str(ROOT / "pyproject.toml"),
+           "--cache-dir", str(tmp_path / "mypy_cache"), *args]
+    r = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=MYPY_TIMEOUT_S)
+    return r.returncode, f"$ {' '.join(cmd[2:])}\n{r.stdout}{r.stderr}"
+
+
+def test_mypy_is_clean_on_the_package(tmp_path):
+    rc, output = _mypy(tmp_path, "profidrive_cli")
+    assert rc == 0, output
+    assert "Success: no issues found" in output, output
+
+
+def test_mypy_strict_is_clean_on_the_public_api(tmp_path):
+    rc, output = _mypy(tmp_path, "--strict", "profidrive_cli/api")
+    assert rc == 0, output
+    assert "Success: no issues found in 4 source files" in output, output
+
+
+# -- the bugs mypy found ---------------------------------------------------------------------------
+
+def test_a_checklist_with_an_empty_name_is_a_file_line_error():
+    # spec.load_checklist_text returned None for `name: ""` (no error was recorded), and
+    # `pdrive checklist validate` then failed with a traceback (AttributeError on None)
+    text = ('name: ""\n'
+            "stations:\n"
+            "  - {name: c1, address: 3, profile: fuji-g1}\n"
+            "steps:\n"
+            "  - note: a\n")
+    with pytest.raises(ChecklistError) as ei:
+        load_checklist_text(text, "t.yaml")
+    assert [(e.line, e.message) for e in ei.value.errors] == [(1, "'name' must not be empty")]
+
+
+def test_link_lost_words_without_the_exception_name_no_none():
+    # safestop._shutdown passes `exc`, None when a session already marked link_lost is closed
+    # without an exception: the words said "link lost (None)"
+    sess = SimpleNamespace(comm_loss_text="its comm-loss setting", profile=None, watchdog_ms=500.0)
+    text = link_lost_words(sess, None)
+    assert text.startswith("link lost: pdrive cannot send a stop."), text
+    assert "None" not in text
+    assert link_lost_words(sess, OSError("gone")).startswith("link lost (gone): ")
