@@ -13,7 +13,7 @@ import json
 import pytest
 from click.testing import CliRunner
 
-from conftest import pdrive_cmd, pty_sim_process
+from conftest import pdrive_cmd, pty_sim_process, run_main
 from profidrive_cli.cli.common import BusOptions
 from profidrive_cli.cli.main import cli
 from profidrive_cli.session import DriveSession
@@ -261,3 +261,21 @@ def test_a_layout_without_parameter_channel_is_refused():
                        capture_output=True, text=True, timeout=60)
     assert p.returncode == 2
     assert "layout ppo4 has no parameter channel" in p.stderr and "Traceback" not in p.stderr
+
+
+@pytest.mark.parametrize("args, words", [
+    (("--tolerance", "-1"), "--tolerance -1 must be 0 s or more"),
+    (("--start-timeout", "0"), "--start-timeout 0 must be above 0 s"),
+    (("--hz", "0"), "--hz 0: the test needs a speed other than 0 Hz"),
+])
+def test_bad_options_are_refused_before_the_bus_is_opened(capsys, monkeypatch, args, words):
+    """One line, exit 2, and no telegram: the header (printed once the station is open) never comes,
+    and a bus that fails when opened shows the check ran first."""
+    from profidrive_cli.cli import common
+
+    def no_bus(*a, **k):
+        raise AssertionError("the bus was opened")
+    monkeypatch.setattr(common.BusOptions, "open_master", no_bus)
+    r = run_main(capsys, monkeypatch, "commloss-test", "3", "--port", "sim://", *args)
+    assert r.exit_code == 2, r.output
+    assert r.stderr == f"pdrive: {words}\n" and r.stdout == ""

@@ -50,7 +50,8 @@ def commloss_cmd(opts, address, hz, mode, timeout, tolerance, start_timeout, ack
                     ("--start-timeout", start_timeout), ("--cycle-hz", cycle_hz)):
         if v is not None and not math.isfinite(v):
             raise UsageError(f"{name} must be a number")
-    from profidrive_cli.session.commloss import run_commloss
+    from profidrive_cli.session.commloss import check_args, run_commloss
+    check_args(hz, mode, timeout, tolerance, start_timeout)     # before the bus is opened
     session = _session(opts, address, profile_name, ppo, fmt, watchdog_ms, cycle_hz=cycle_hz,
                        before=_confirmer(opts, yes, f"comm-loss test: run at {hz:g} Hz, then break "
                                                     f"the link ({mode})"))

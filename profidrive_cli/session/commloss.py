@@ -174,7 +174,8 @@ def _reacted(st: DriveStatus) -> bool:
     return bool(st.fault) or st.stopped
 
 
-def _check_args(hz, mode, timeout, tolerance, start_timeout) -> None:
+def check_args(hz, mode, timeout, tolerance, start_timeout) -> None:
+    """The test's options in range (UsageError): called by the CLI before the bus is opened."""
     if mode not in MODES:
         raise UsageError(f"--mode {mode!r}: must be {' or '.join(MODES)}")
     if not math.isfinite(hz) or hz == 0:
@@ -224,7 +225,7 @@ def run_commloss(sess, hz: float, mode: str = "silence", timeout: float | None =
                  tolerance: float | None = None, start_timeout: float | None = None) -> CommLossResult:
     """The whole test on an open DriveSession (see the module docstring). Raises UsageError for bad
     arguments before anything moves; the session's close does the safe stop on every other way out."""
-    _check_args(hz, mode, timeout, tolerance, start_timeout)
+    check_args(hz, mode, timeout, tolerance, start_timeout)
     emit = on_event or (lambda ev: None)
     fmax_hz, _ = sess.fmax()
     pct = sess.percent_for_hz(hz)           # refuses speeds the drive cannot hold
