@@ -15,8 +15,10 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from profidrive_cli import BusError
+from profidrive_cli import BusError, UsageError
 from profidrive_cli.drives.torque import no_torque_reason
+from profidrive_cli.drives.values import raw_value_problem
+from profidrive_cli.drives.values import value_problem as exact_value_problem
 
 
 class CyclicChannel(Protocol):
@@ -79,6 +81,19 @@ class ParamValue:
 
     def __str__(self) -> str:
         return f"{self.code} = {self.value}{(' ' + self.unit) if self.unit else ''}"
+
+
+@dataclass
+class ParamInfo:
+    code: str                      # the code as the family names it
+    name: str
+    unit: str
+    param: Any                     # the profile's ParamDef (None for raw PNU / register access)
+    access: str                    # rw / ro / stop / wo / "raw"
+
+    @property
+    def writable(self) -> bool:
+        return self.access in ("rw", "stop", "wo", "raw")
 
 
 @dataclass
@@ -195,6 +210,35 @@ class Drive(ABC):
     def save(self) -> None:
         """Store parameters in non-volatile memory where the card supports it."""
         raise DriveError(f"{self.family}: this card has no separate save command")
+
+    # -- family hooks for session/params.py (defaults here; each codec answers what differs) ----
+    def param_info(self, code: str) -> ParamInfo:
+        """How this family addresses `code` (no bus traffic); UsageError when it does not."""
+        p = self.profile.param(code)
+        if p is None:
+            raise UsageError(f"{self.profile.name}: unknown parameter {code!r}")
+        return ParamInfo(p.code, p.name, p.unit, p, p.access)
+
+    def value_problem(self, info: ParamInfo, value: float | int) -> str | None:
+        """The exact-value check before a write (drives/values.py): None when `value` may be
+        written to `info`, else the one-line reason."""
+        if info.param is not None:
+            return exact_value_problem(info.param, value)
+        return raw_value_problem(info.code, value, 16)
+
+    def params_at(self, info: ParamInfo) -> list[Any]:
+        """The profile's entries at the address `info` reaches (its raw PNU/index or register),
+        for the `dangerous:` marks of a parameter written by its raw address."""
+        return []
+
+    def take_notes(self) -> list[str]:
+        """Remarks for the user the codec collected since the last call (then cleared)."""
+        return []
+
+    def save_support(self) -> str:
+        """'command' (the card has a save command), 'automatic' (every write is stored), or
+        'unsupported'."""
+        return "unsupported"
 
     @abstractmethod
     def fault_history(self) -> list[FaultRecord]: ...

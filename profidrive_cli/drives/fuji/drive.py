@@ -24,6 +24,14 @@ class FujiDrive(pd.ProfidriveDrive):
         #: remarks for the user from the last calls (e.g. "o30 takes effect after a power cycle")
         self.notes: list[str] = []
 
+    def take_notes(self) -> list[str]:
+        n = list(self.notes)
+        self.notes.clear()
+        return n
+
+    def save_support(self) -> str:
+        return "command" if self.fc.storage else "automatic"
+
     # -- addressing ----------------------------------------------------------------------------
     def resolve_param(self, code: str) -> pd.ParamRef:
         text = code.strip()

@@ -53,6 +53,9 @@ class ToyoDrive(pd.ProfidriveDrive):
         self.clock = datetime.now
         self._dated = {"month_day", "hour_minute"} & set(self.tl.words("request", self.plch))
 
+    def save_support(self) -> str:
+        return "automatic"               # every write is stored by the card itself
+
     # -- addressing ----------------------------------------------------------------------------
     def resolve_param(self, code: str) -> pd.ParamRef:
         """See params.resolve_param: monitor names, console codes, TBnn[r,p], FH[n], PNU<n>[ind]."""

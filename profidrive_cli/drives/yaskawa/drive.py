@@ -7,9 +7,11 @@ drives/values, drives/torque, and this package's codec, paramaccess and config.
 
 from __future__ import annotations
 
+from typing import Any
+
 from profidrive_cli import UsageError
 from profidrive_cli.drives.base import (Drive, DriveError, DriveStatus, FaultRecord, ParamError,
-                                        ParamValue)
+                                        ParamInfo, ParamValue)
 from profidrive_cli.drives.torque import capability_refusal, torque_counts
 from profidrive_cli.drives.values import raw_value_problem, value_problem
 from profidrive_cli.drives.yaskawa.codec import (COMMAND_BITS, FORMATS, FrequencyScale, _s16, decode_status,
@@ -369,6 +371,19 @@ class YaskawaDrive(Drive):
             chunk, values = values[:self.fmt.max_registers], values[self.fmt.max_registers:]
             self._transact(ParamRequest.write(start, chunk))
             start += len(chunk)
+
+    def param_info(self, code: str) -> ParamInfo:
+        reg, p = self._resolve(code)          # MEMOBUS register
+        if p is None:
+            return ParamInfo(f"REG0x{reg:04X}", "MEMOBUS register", "", None, "raw")
+        return ParamInfo(p.code, p.name, p.unit, p, p.access)
+
+    def params_at(self, info: ParamInfo) -> list[Any]:
+        reg, _ = self._resolve(info.code)
+        return [q for q in self.profile.parameters.values() if q.register == reg]
+
+    def save_support(self) -> str:
+        return "command" if self.cfg.enter_register is not None else "unsupported"
 
     def _resolve(self, code: str):
         reg = parse_register_code(code)
