@@ -246,3 +246,11 @@ class Drive(ABC):
     def max_frequency(self) -> float:
         """Max frequency in Hz: read from the drive when a parameter channel exists, else the profile."""
         return float(self.profile.max_frequency_default)
+
+    #: the max frequency (Hz = 100 %) the codec scales speed words with; None = not known yet
+    _fmax: float | None = None
+
+    def use_max_frequency(self, hz: float) -> None:
+        """Scale speed words with `hz` as 100 % (the --fmax / config / profile value the session
+        settled on when the drive's own max frequency cannot be read)."""
+        self._fmax = hz
