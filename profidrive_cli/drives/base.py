@@ -247,6 +247,11 @@ class Drive(ABC):
         """Max frequency in Hz: read from the drive when a parameter channel exists, else the profile."""
         return float(self.profile.max_frequency_default)
 
+    def comm_loss_summary(self) -> str | None:
+        """What the drive does when the master goes silent, read from its settings in one line
+        (needs the parameter channel); None when the family has no such reading."""
+        return None
+
     #: the max frequency (Hz = 100 %) the codec scales speed words with; None = not known yet
     _fmax: float | None = None
 

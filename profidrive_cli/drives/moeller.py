@@ -350,6 +350,13 @@ class MoellerDrive(pd.ProfidriveDrive):
             out[self.mc.comm_loss_other_param] = self.read_param(self.mc.comm_loss_other_param)
         return out
 
+    def comm_loss_summary(self) -> str | None:
+        first = next(iter(self.comm_loss_setting().values()))
+        keep = int(first.raw) == 1
+        return (f"{first.code} = {first.raw}: " +
+                ("the drive keeps running on the last command" if keep else
+                 "the drive trips (E70) and coasts"))
+
     def bus_control_check(self) -> list[str]:
         """Problems that keep the bus from controlling the inverter (empty = fine)."""
         mc = self.mc

@@ -68,15 +68,9 @@ def read_comm_loss(sess) -> str:
     d = sess.drive
     fam = sess.profile.family
     try:
-        if fam == "fuji" and d.has_param_channel and hasattr(d, "comm_loss_setting"):
-            return d.comm_loss_setting()
-        if fam == "moeller" and d.has_param_channel and hasattr(d, "comm_loss_setting"):
-            vals = d.comm_loss_setting()
-            first = next(iter(vals.values()))
-            keep = int(first.raw) == 1
-            return (f"{first.code} = {first.raw}: " +
-                    ("the drive keeps running on the last command" if keep else
-                     "the drive trips (E70) and coasts"))
+        said = d.comm_loss_summary() if d.has_param_channel else None
+        if said:
+            return said
     except (DriveError, UsageError):
         pass
     return _COMM_LOSS_WORDS.get(fam, "its communication-loss setting")

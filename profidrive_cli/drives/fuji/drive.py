@@ -208,6 +208,9 @@ class FujiDrive(pd.ProfidriveDrive):
         o28 = float(self.read_param(fc.comm_loss_timer).value)
         return comm_loss_text(self.profile, o27, o28)
 
+    def comm_loss_summary(self) -> str | None:
+        return self.comm_loss_setting()
+
     def ppo_setting(self) -> str:
         v = int(self.read_param(self.fc.ppo_param).raw)
         lay = ppo_for_o30(self.profile, v)
