@@ -231,6 +231,28 @@ class Drive(ABC):
         for the `dangerous:` marks of a parameter written by its raw address."""
         return []
 
+    # -- family hooks for session/backup.py (dump, compare, restore) --------------------------
+    def dumpable(self, p: Any) -> bool:
+        """The profile entry `p` has an address this family reads parameters by (PNU here)."""
+        return p.pnu is not None
+
+    def on_device(self, p: Any) -> bool:
+        """False for entries the connected device variant does not have, and for fault memories
+        (`pdrive faults` reads those)."""
+        return True
+
+    def not_restored(self, p: Any) -> str:
+        """Why a writable profile entry `p` is never written back by `restore` ('' = it is)."""
+        if p.extra.get("dangerous"):
+            return "dangerous (initialisation / auto-tuning)"
+        if p.access == "wo":
+            return "a command, not a setting"
+        return self._family_not_restored(p)
+
+    def _family_not_restored(self, p: Any) -> str:
+        """The family's own exclusions after the shared ones of not_restored ('' = none)."""
+        return ""
+
     def take_notes(self) -> list[str]:
         """Remarks for the user the codec collected since the last call (then cleared)."""
         return []

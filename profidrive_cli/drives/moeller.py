@@ -19,6 +19,9 @@ address_from_switches(right, left), value_from_wire(param, raw), wire_from_value
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
+
+from profidrive_cli import UsageError
 
 from profidrive_cli.datafile import DataFileError, LineDict
 from profidrive_cli.drives import profidrive as pd
@@ -349,6 +352,15 @@ class MoellerDrive(pd.ProfidriveDrive):
         if self.mc.comm_loss_other_param:
             out[self.mc.comm_loss_other_param] = self.read_param(self.mc.comm_loss_other_param)
         return out
+
+    def on_device(self, p: Any) -> bool:
+        """`df6: false` entries are not on a DF6 (PNU 964 says which device it is)."""
+        if p.extra.get("df6") is False:
+            try:
+                return not self.device().startswith("DF")
+            except (DriveError, UsageError):
+                return True
+        return True
 
     def comm_loss_summary(self) -> str | None:
         first = next(iter(self.comm_loss_setting().values()))

@@ -7,6 +7,7 @@ Subclasses drives/profidrive ProfidriveDrive through its hooks; the channel does
 from __future__ import annotations
 
 import re
+from typing import Any
 
 from profidrive_cli import UsageError
 from profidrive_cli.drives import profidrive as pd
@@ -31,6 +32,11 @@ class FujiDrive(pd.ProfidriveDrive):
 
     def save_support(self) -> str:
         return "command" if self.fc.storage else "automatic"
+
+    def _family_not_restored(self, p: Any) -> str:
+        if p.code[:1].upper() == "S" and p.code[1:].isdigit():
+            return "command data (S codes), not a setting"
+        return super()._family_not_restored(p)
 
     # -- addressing ----------------------------------------------------------------------------
     def resolve_param(self, code: str) -> pd.ParamRef:

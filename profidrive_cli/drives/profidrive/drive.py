@@ -98,6 +98,13 @@ class ProfidriveDrive(Drive):
     def save_support(self) -> str:
         return "command" if getattr(self.cfg, "save_pnu", None) is not None else "unsupported"
 
+    def _family_not_restored(self, p: Any) -> str:
+        if p.pnu in (927, 928):
+            return "access rights, left as they are"
+        if p.pnu in (970, 971):
+            return "a command, not a setting"
+        return ""
+
     def raw_to_value(self, ref: ParamRef, raw: int):
         p = ref.param
         if p is None:

@@ -9,6 +9,7 @@ params.
 from __future__ import annotations
 
 from datetime import datetime
+from typing import Any
 
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.base import DriveError, DriveStatus, FaultRecord, ParamError, ParamValue
@@ -55,6 +56,9 @@ class ToyoDrive(pd.ProfidriveDrive):
 
     def save_support(self) -> str:
         return "automatic"               # every write is stored by the card itself
+
+    def on_device(self, p: Any) -> bool:
+        return p.pnu != self.tc.history_pnu      # the fault history: `pdrive faults` reads it
 
     # -- addressing ----------------------------------------------------------------------------
     def resolve_param(self, code: str) -> pd.ParamRef:

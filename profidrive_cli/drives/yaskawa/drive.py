@@ -385,6 +385,9 @@ class YaskawaDrive(Drive):
     def save_support(self) -> str:
         return "command" if self.cfg.enter_register is not None else "unsupported"
 
+    def dumpable(self, p: Any) -> bool:
+        return p.register is not None            # MEMOBUS registers, not PNUs
+
     def _resolve(self, code: str):
         reg = parse_register_code(code)
         if reg is not None:
