@@ -274,6 +274,20 @@ class Drive(ABC):
         (needs the parameter channel); None when the family has no such reading."""
         return None
 
+    # -- family hooks for session/monitors.py (run --monitor) ----------------------------------
+    #: how --monitor uses the layout's parameter input words (PZD3..): "" not at all; "read" the
+    #: card's own assignment is read and used, nothing written; "map" monitors are assigned for the
+    #: session (pzd_assignment_param) and the old assignment written back after
+    monitor_mapping: str = ""
+
+    def pzd_assignment_param(self, slot: int) -> str:
+        """The parameter that assigns input word PZD(slot + 2) (PROFIdrive PNU 916[slot])."""
+        return f"PNU916[{slot}]"
+
+    def pzd_assigned_code(self, raw: int) -> str | None:
+        """The profile code an assignment value read from pzd_assignment_param names (None: none)."""
+        return None
+
     #: the max frequency (Hz = 100 %) the codec scales speed words with; None = not known yet
     _fmax: float | None = None
 

@@ -353,6 +353,8 @@ class MoellerDrive(pd.ProfidriveDrive):
             out[self.mc.comm_loss_other_param] = self.read_param(self.mc.comm_loss_other_param)
         return out
 
+    monitor_mapping = "map"           # PNU 916 is volatile (spec 2.4, manual example 2)
+
     def on_device(self, p: Any) -> bool:
         """`df6: false` entries are not on a DF6 (PNU 964 says which device it is)."""
         if p.extra.get("df6") is False:
@@ -420,7 +422,10 @@ def decode_area(profile, layout: str, direction: str, data: bytes, *,
     return out
 
 
-__all__ = ["MoellerConfig", "MoellerDrive", "make_drive", "decode_area", "param_value",
+#: the family's Drive class, for its class-level facts without a bus (drives.drive_class)
+DRIVE_CLASS = MoellerDrive
+
+__all__ = ["DRIVE_CLASS", "MoellerConfig", "MoellerDrive", "make_drive", "decode_area", "param_value",
            "moeller_config", "source_selection", "device_name", "baud_text", "fault_text",
            "address_from_switches", "value_from_wire", "wire_from_value", "in_ranges",
            "direction_text", "DriveError"]

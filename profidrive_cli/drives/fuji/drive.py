@@ -13,7 +13,7 @@ from profidrive_cli import UsageError
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.base import DriveError, DriveStatus, FaultRecord, ParamError, ParamValue
 from profidrive_cli.drives.fuji.codes import (alarm_by_mcode, alarm_candidates, comm_loss_text,
-                                              parse_function_code, ppo_for_o30)
+                                              parse_function_code, pcd_assignment_code, ppo_for_o30)
 from profidrive_cli.drives.fuji.config import FUJI_STW_BITS, fuji_config
 
 class FujiDrive(pd.ProfidriveDrive):
@@ -213,6 +213,14 @@ class FujiDrive(pd.ProfidriveDrive):
         o27 = int(self.read_param(fc.comm_loss_param).raw)
         o28 = float(self.read_param(fc.comm_loss_timer).value)
         return comm_loss_text(self.profile, o27, o28)
+
+    monitor_mapping = "read"          # o48..o51 (= PNU 916) take effect only after a power cycle
+
+    def pzd_assignment_param(self, slot: int) -> str:
+        return f"o{47 + slot}"
+
+    def pzd_assigned_code(self, raw: int) -> str | None:
+        return pcd_assignment_code(self.profile, raw)
 
     def comm_loss_summary(self) -> str | None:
         return self.comm_loss_setting()
