@@ -274,6 +274,11 @@ class Drive(ABC):
         (needs the parameter channel); None when the family has no such reading."""
         return None
 
+    #: the shape of the codec's decode_area (drives.decode_area): "ppo" control/status words, N2 or
+    #: the family's speed words and the PKW channel; "memobus" Yaskawa's run command / status words
+    #: and the MEMOBUS parameter area (session/passive.py normalises each)
+    area_shape: str = "ppo"
+
     # -- family hooks for session/monitors.py (run --monitor) ----------------------------------
     #: how --monitor uses the layout's parameter input words (PZD3..): "" not at all; "read" the
     #: card's own assignment is read and used, nothing written; "map" monitors are assigned for the

@@ -27,6 +27,7 @@ TORQUE_RES = 0.1                   # % per count (spec §2.4 / §2.7: 0.1 %)
 class YaskawaDrive(Drive):
     family = FAMILY
     supports_jog = False
+    area_shape = "memobus"
 
     def jog_refusal(self) -> str:
         return (f"{self.profile.name}: the SI-P1 run command word has no jog bit (bit 0 forward run, bit 1 "
