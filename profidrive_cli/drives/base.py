@@ -97,6 +97,30 @@ class ParamInfo:
 
 
 @dataclass
+class Reaction:
+    """The drive's configured reaction to a lost master (or to all-zero outputs), read from the
+    drive (Drive.comm_loss_reaction / zero_data_reaction; the comm-loss test checks against it)."""
+    words: str                     # e.g. "o27 = 0: coast to a stop at once, then trip Er5"
+    stop: str                      # "coast" | "ramp" | "trip" | "none"
+    delay_s: float = 0.0           # configured delay after the watchdog
+    recover: bool = False          # forgotten when the link returns within the delay
+    alarm: str | None = None       # the fault the drive shows
+    decel_s: float | None = None   # ramp time from max frequency to 0 (stop == "ramp")
+    settings: dict = field(default_factory=dict)   # code -> value read from the drive
+    warnings: list = field(default_factory=list)   # what may make the drive act otherwise
+
+    def stop_s(self, hz: float, fmax_hz: float) -> float:
+        if self.stop != "ramp" or not self.decel_s or fmax_hz <= 0:
+            return 0.0
+        return self.decel_s * min(1.0, abs(hz) / fmax_hz)
+
+    @property
+    def stop_known(self) -> bool:
+        """False: a ramp stop whose time could not be read (the limit counts none)."""
+        return self.stop != "ramp" or bool(self.decel_s)
+
+
+@dataclass
 class FaultRecord:
     position: str        # "current", "last", "2nd last", ... or an index
     raw: int             # code on the wire
@@ -291,6 +315,38 @@ class Drive(ABC):
 
     def pzd_assigned_code(self, raw: int) -> str | None:
         """The profile code an assignment value read from pzd_assignment_param names (None: none)."""
+        return None
+
+    # -- family hooks for session/commloss_reaction.py (the comm-loss test) -------------------
+    #: True when the reaction to a lost master is fixed by the card (read without a parameter
+    #: channel: Toyo protection 18); False when it is a setting read from the drive
+    comm_loss_reaction_fixed: bool = False
+
+    def can_read(self, code: str) -> bool:
+        """The profile has `code` with an address and this layout has a parameter channel."""
+        p = self.profile.param(code)
+        return (p is not None and (p.pnu is not None or p.register is not None)
+                and self.has_param_channel)
+
+    def comm_loss_reaction(self) -> Reaction | None:
+        """What the drive is set to do when its master goes away, read from it (the card
+        manuals' rules); None when the family knows no such reaction. DriveError, KeyError,
+        ValueError when a setting cannot be read."""
+        return None
+
+    def zero_data_reaction(self, head: str) -> Reaction | None:
+        """What the drive does with all-zero outputs (Global_Control Clear_Data), when the family
+        says more than "its normal stop" (None); `head` starts the words. DriveError when a
+        setting cannot be read."""
+        return None
+
+    def normal_stop_warnings(self) -> list[str]:
+        """What may make the normal stop act otherwise when its deceleration time is unknown."""
+        return []
+
+    def bus_run_refusal(self) -> str | None:
+        """Why the bus cannot run this drive at the speed it asks (read from the drive; None: it
+        can). DriveError when the setting cannot be read."""
         return None
 
     #: the max frequency (Hz = 100 %) the codec scales speed words with; None = not known yet

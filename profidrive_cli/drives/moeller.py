@@ -26,7 +26,7 @@ from profidrive_cli import UsageError
 from profidrive_cli.datafile import DataFileError, LineDict
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.values import value_problem
-from profidrive_cli.drives.base import DriveError, DriveStatus, ParamError, ParamValue
+from profidrive_cli.drives.base import DriveError, DriveStatus, ParamError, ParamValue, Reaction
 from profidrive_cli.drives.profile import COMMON_EXTRA_KEYS, per_profile
 
 FAMILY_PARAM_KEYS = {"bytes", "format", "ranges", "df6", "df6_max", "note", "array"}
@@ -370,6 +370,21 @@ class MoellerDrive(pd.ProfidriveDrive):
         return (f"{first.code} = {first.raw}: " +
                 ("the drive keeps running on the last command" if keep else
                  "the drive trips (E70) and coasts"))
+
+    def comm_loss_reaction(self) -> Reaction | None:
+        """P002 (+ P001 shown): 1 keeps running on the last command, else trip (output off)."""
+        vals = self.comm_loss_setting()
+        code = self.mc.comm_loss_param
+        main = vals[code]
+        shown = {k: int(v.raw) for k, v in vals.items()}
+        others = ", ".join(f"{k} = {v}" for k, v in shown.items() if k != code)
+        extra = f" ({others} shown as well: the card's slot decides which one applies)" if others else ""
+        if int(main.raw) == 1:
+            return Reaction(f"{code} = 1: keep running on the last command{extra}", "none",
+                            settings=shown)
+        return Reaction(f"{code} = {int(main.raw)}: trip {self.mc.comm_loss_alarm} (output off, "
+                        f"the motor coasts){extra}", "trip", alarm=self.mc.comm_loss_alarm,
+                        settings=shown)
 
     def bus_control_check(self) -> list[str]:
         """Problems that keep the bus from controlling the inverter (empty = fine)."""

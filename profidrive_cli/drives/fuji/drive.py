@@ -11,9 +11,11 @@ from typing import Any
 
 from profidrive_cli import UsageError
 from profidrive_cli.drives import profidrive as pd
-from profidrive_cli.drives.base import DriveError, DriveStatus, FaultRecord, ParamError, ParamValue
+from profidrive_cli.drives.base import (DriveError, DriveStatus, FaultRecord, ParamError, ParamValue,
+                                        Reaction)
 from profidrive_cli.drives.fuji.codes import (alarm_by_mcode, alarm_candidates, comm_loss_text,
                                               parse_function_code, pcd_assignment_code, ppo_for_o30)
+from profidrive_cli.drives.fuji import reaction
 from profidrive_cli.drives.fuji.config import FUJI_STW_BITS, fuji_config
 
 class FujiDrive(pd.ProfidriveDrive):
@@ -224,6 +226,15 @@ class FujiDrive(pd.ProfidriveDrive):
 
     def comm_loss_summary(self) -> str | None:
         return self.comm_loss_setting()
+
+    def comm_loss_reaction(self) -> Reaction | None:
+        return reaction.comm_loss_reaction(self)
+
+    def zero_data_reaction(self, head: str) -> Reaction | None:
+        return reaction.zero_data_reaction(self, head)
+
+    def bus_run_refusal(self) -> str | None:
+        return reaction.bus_run_refusal(self)
 
     def ppo_setting(self) -> str:
         v = int(self.read_param(self.fc.ppo_param).raw)

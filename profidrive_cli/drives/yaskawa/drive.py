@@ -11,7 +11,7 @@ from typing import Any
 
 from profidrive_cli import UsageError
 from profidrive_cli.drives.base import (Drive, DriveError, DriveStatus, FaultRecord, ParamError,
-                                        ParamInfo, ParamValue)
+                                        ParamInfo, ParamValue, Reaction)
 from profidrive_cli.drives.torque import capability_refusal, torque_counts
 from profidrive_cli.drives.values import raw_value_problem, value_problem
 from profidrive_cli.drives.yaskawa.codec import (COMMAND_BITS, FORMATS, FrequencyScale, _s16, decode_status,
@@ -22,6 +22,13 @@ from profidrive_cli.drives.yaskawa.paramaccess import ParamAccess, ParamRequest,
 FAMILY = "yaskawa"
 
 TORQUE_RES = 0.1                   # % per count (spec §2.4 / §2.7: 0.1 %)
+
+
+#: F6-01, the reaction to a communication error (SI-P1 / drive manuals)
+_F601 = {0: ("ramp", "C1-02", "ramp to stop with C1-02, then the BUS fault"),
+         1: ("coast", None, "coast to stop and trip BUS"),
+         2: ("ramp", "C1-09", "fast stop with C1-09, then the BUS fault"),
+         3: ("none", None, "alarm only: BUS is shown and the drive keeps running")}
 
 
 class YaskawaDrive(Drive):
@@ -385,6 +392,25 @@ class YaskawaDrive(Drive):
 
     def save_support(self) -> str:
         return "command" if self.cfg.enter_register is not None else "unsupported"
+
+    def comm_loss_reaction(self) -> Reaction | None:
+        """F6-01 (+ C1-02 / C1-09 for the ramp)."""
+        if self.profile.param("F6-01") is None:
+            return Reaction("BUS fault (the profile has no F6-01: assumed coast)", "trip", alarm="BUS")
+        f601 = int(self.read_param("F6-01").raw)
+        stop, ramp_code, words = _F601.get(f601, ("coast", None, "outside 0..3: assumed coast"))
+        settings: dict[str, float] = {"F6-01": f601}
+        decel = None
+        if ramp_code:
+            decel = float(self.read_param(ramp_code).value)
+            settings[ramp_code] = decel
+        return Reaction(f"F6-01 = {f601}: {words}", "trip" if stop == "coast" else stop,
+                        alarm=None if stop == "none" else "BUS", decel_s=decel, settings=settings)
+
+    def zero_data_reaction(self, head: str) -> Reaction | None:
+        if self.can_read("b1-03") and int(self.read_param("b1-03").raw) == 1:
+            return Reaction(head + "; b1-03 = 1: coast to stop", "coast", settings={"b1-03": 1})
+        return None
 
     def dumpable(self, p: Any) -> bool:
         return p.register is not None            # MEMOBUS registers, not PNUs
