@@ -243,6 +243,16 @@ class Drive(ABC):
             raise UsageError(f"{self.profile.name}: unknown parameter {code!r}")
         return ParamInfo(p.code, p.name, p.unit, p, p.access)
 
+    def param_label(self, code: str) -> tuple[str, Any]:
+        """(canonical label, ParamDef or None for a raw address) for a checklist's `code`, without
+        a bus; UsageError ("unknown ...") when the family does not address it."""
+        p = self.profile.param(code)
+        if p is not None:
+            if p.register is None and p.pnu is None:
+                raise UsageError(f"{p.code}: the profile gives no address for it")
+            return p.code, p
+        raise UsageError(f"unknown parameter '{code}' in profile {self.profile.name}")
+
     def value_problem(self, info: ParamInfo, value: float | int) -> str | None:
         """The exact-value check before a write (drives/values.py): None when `value` may be
         written to `info`, else the one-line reason."""

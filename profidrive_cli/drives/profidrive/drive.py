@@ -87,6 +87,10 @@ class ProfidriveDrive(Drive):
         return ParamInfo(ref.code, ref.name, p.unit if p is not None else "", p,
                          p.access if p is not None else "raw")
 
+    def param_label(self, code: str) -> tuple[str, Any]:
+        ref = self.resolve_param(code)
+        return ref.code, ref.param
+
     def value_problem(self, info: ParamInfo, value: float | int) -> str | None:
         return self.check_value(self.resolve_param(info.code), value)
 

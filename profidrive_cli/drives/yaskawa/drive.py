@@ -386,6 +386,13 @@ class YaskawaDrive(Drive):
             return ParamInfo(f"REG0x{reg:04X}", "MEMOBUS register", "", None, "raw")
         return ParamInfo(p.code, p.name, p.unit, p, p.access)
 
+    def param_label(self, code: str) -> tuple[str, Any]:
+        if self.profile.param(code) is None:
+            reg = parse_register_code(code)
+            if reg is not None and 0 <= reg <= 0xFFFF:
+                return f"REG0x{reg:04X}", None
+        return super().param_label(code)
+
     def params_at(self, info: ParamInfo) -> list[Any]:
         reg, _ = self._resolve(info.code)
         return [q for q in self.profile.parameters.values() if q.register == reg]
