@@ -313,6 +313,12 @@ class Drive(ABC):
     #: and the MEMOBUS parameter area (session/passive.py normalises each)
     area_shape: str = "ppo"
 
+    def cycle_words(self, outputs: bytes, inputs: bytes) -> tuple[int | None, int | None,
+                                                                   int | None, int | None]:
+        """(control word, reference, status word, actual) of one exchange's output and input
+        octets, in the family's words (the cycle log's columns); None where it has no such word."""
+        return None, None, None, None
+
     # -- family hooks for session/monitors.py (run --monitor) ----------------------------------
     #: how --monitor uses the layout's parameter input words (PZD3..): "" not at all; "read" the
     #: card's own assignment is read and used, nothing written; "map" monitors are assigned for the

@@ -109,6 +109,13 @@ class ProfidriveDrive(Drive):
             return "a command, not a setting"
         return ""
 
+    def cycle_words(self, outputs: bytes, inputs: bytes) -> tuple[int | None, int | None,
+                                                                   int | None, int | None]:
+        out = decode_area_bytes(self.ppo, outputs, "request").pzd
+        inp = decode_area_bytes(self.ppo, inputs, "response").pzd
+        return (out[0] if out else None, out[1] if len(out) > 1 else None,
+                inp[0] if inp else None, inp[1] if len(inp) > 1 else None)
+
     def raw_to_value(self, ref: ParamRef, raw: int):
         p = ref.param
         if p is None:

@@ -65,6 +65,15 @@ class ToyoDrive(pd.ProfidriveDrive):
     def save_support(self) -> str:
         return "automatic"               # every write is stored by the card itself
 
+    def cycle_words(self, outputs: bytes, inputs: bytes) -> tuple[int | None, int | None,
+                                                                   int | None, int | None]:
+        out = pd.decode_area_bytes(self.ppo, outputs, "request").pzd
+        inp = pd.decode_area_bytes(self.ppo, inputs, "response").pzd
+        o = dict(zip(self.tl.words("request", self.plch), out))      # the layout's named words
+        n = dict(zip(self.tl.words("response", self.plch), inp))
+        return (o.get("ctw", o.get("run_cmd")), o.get("speed_ref"),
+                n.get("zsw", n.get("status_flag")), n.get("motor_speed"))
+
     comm_loss_reaction_fixed = True           # protection 18: no setting to read
 
     def comm_loss_reaction(self) -> Reaction | None:

@@ -400,6 +400,15 @@ class YaskawaDrive(Drive):
     def save_support(self) -> str:
         return "command" if self.cfg.enter_register is not None else "unsupported"
 
+    def cycle_words(self, outputs: bytes, inputs: bytes) -> tuple[int | None, int | None,
+                                                                   int | None, int | None]:
+        fmt, order = self.fmt, self.profile.word_order                # the fast I/O words
+        ow = [int.from_bytes(outputs[i:i + 2], order) for i in range(0, 2 * len(fmt.out_words), 2)]
+        iw = [int.from_bytes(inputs[i:i + 2], order) for i in range(0, 2 * len(fmt.in_words), 2)]
+        o = dict(zip(fmt.out_words, ow))
+        n = dict(zip(fmt.in_words, iw))
+        return o.get("command"), o.get("reference"), n.get("status"), n.get("speed_feedback")
+
     def comm_loss_reaction(self) -> Reaction | None:
         """F6-01 (+ C1-02 / C1-09 for the ramp)."""
         if self.profile.param("F6-01") is None:
