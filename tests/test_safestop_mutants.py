@@ -55,6 +55,11 @@ class Drive:
         self._left = None
         self.fail_on: dict[str, Exception] = {}
 
+    def last_seen(self):
+        """The PROFIdrive codecs' own (drives/profidrive): their last_status."""
+        from profidrive_cli.drives.profidrive import ProfidriveDrive
+        return ProfidriveDrive.last_seen(self)
+
     def stop(self, how, wait=True):
         self.commands.append((how, wait))
         if how in self.fail_on:
@@ -391,6 +396,8 @@ def test_escalation_reads_drive_last_when_there_is_no_last_status():
     clock = Clock()
     d = Drive(clock, coast_after=0, last=None)
     d.last = status(speed=20.0)                         # 1.5 * 10 * 0.2 + 3 = 6 s
+    from profidrive_cli.drives.yaskawa import YaskawaDrive
+    d.last_seen = lambda: YaskawaDrive.last_seen(d)     # Yaskawa keeps it in `last`
     s = Session(d, clock, decel_s=10.0)
     ss.stop(s, None, None)
     assert s.warnings == ["not stopped after 6 s: coasting"]

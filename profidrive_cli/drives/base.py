@@ -313,6 +313,10 @@ class Drive(ABC):
     #: and the MEMOBUS parameter area (session/passive.py normalises each)
     area_shape: str = "ppo"
 
+    def last_seen(self) -> DriveStatus | None:
+        """The status decoded from the last exchange (None before the first)."""
+        return None
+
     def cycle_words(self, outputs: bytes, inputs: bytes) -> tuple[int | None, int | None,
                                                                    int | None, int | None]:
         """(control word, reference, status word, actual) of one exchange's output and input

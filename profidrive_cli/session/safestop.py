@@ -91,8 +91,7 @@ def stop(sess, on_sample, timeout) -> StopReport:
     """Normal stop, bounded wait, coast if it does not stop (or a signal hurries it)."""
     d = sess._need_drive()
     t_start = sess.channel.now()
-    last = d.last_status if hasattr(d, "last_status") else None
-    last = last or getattr(d, "last", None)
+    last = d.last_seen()
     pct = last.speed_percent if last is not None else None
     limit = timeout if timeout is not None else sess.stop_timeout(pct)
     st = None

@@ -109,6 +109,9 @@ class ProfidriveDrive(Drive):
             return "a command, not a setting"
         return ""
 
+    def last_seen(self) -> DriveStatus | None:
+        return self.last_status
+
     def cycle_words(self, outputs: bytes, inputs: bytes) -> tuple[int | None, int | None,
                                                                    int | None, int | None]:
         out = decode_area_bytes(self.ppo, outputs, "request").pzd

@@ -400,6 +400,9 @@ class YaskawaDrive(Drive):
     def save_support(self) -> str:
         return "command" if self.cfg.enter_register is not None else "unsupported"
 
+    def last_seen(self) -> DriveStatus | None:
+        return self.last
+
     def cycle_words(self, outputs: bytes, inputs: bytes) -> tuple[int | None, int | None,
                                                                    int | None, int | None]:
         fmt, order = self.fmt, self.profile.word_order                # the fast I/O words
