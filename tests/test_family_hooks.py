@@ -14,8 +14,7 @@ Remaining sites (none compares a family with a name):
     FILE:LINE provenance (config.FileHz), not the family
   * session/backup.py compare: `hasattr(params, "line_of")` asks a loaded dump for line numbers
   * checklist/runner.py _traced: `hasattr(drive, "channel")` (a drive on a bus, not a family question)
-Family-keyed tables and getattr duck-typing left (not counted): session/jog.py (start_hint,
-last_status), safestop.read_decel / commloss_reaction.read_accel (cfg.ramps), the tables
+Family-keyed tables and getattr duck-typing left (not counted): safestop.read_decel / commloss_reaction.read_accel (cfg.ramps), the tables
 safestop._DECEL_CODES / _COMM_LOSS_WORDS and commloss_reaction._ACCEL_CODES.
 """
 
@@ -59,7 +58,7 @@ def test_the_hooks_have_a_default_in_base_and_the_codecs_answer():
     hooks = ("param_info", "param_label", "value_problem", "params_at", "take_notes", "save_support",
              "use_max_frequency", "comm_loss_summary", "dumpable", "on_device", "not_restored",
              "pzd_assignment_param", "pzd_assigned_code", "comm_loss_reaction", "zero_data_reaction",
-             "normal_stop_warnings", "bus_run_refusal", "can_read", "cycle_words", "last_seen")
+             "normal_stop_warnings", "bus_run_refusal", "can_read", "cycle_words", "last_seen", "start_hint")
     assert [h for h in hooks if not callable(getattr(Drive, h, None))] == []
     facts = {name: (drive_class(load_profile(name)).monitor_mapping,
                     drive_class(load_profile(name)).comm_loss_reaction_fixed,

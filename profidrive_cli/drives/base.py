@@ -313,6 +313,11 @@ class Drive(ABC):
     #: and the MEMOBUS parameter area (session/passive.py normalises each)
     area_shape: str = "ppo"
 
+    def start_hint(self, status: DriveStatus) -> str | None:
+        """What to check when the drive does not start from the bus (appended to the timeout's
+        line); None when the family names nothing."""
+        return None
+
     def last_seen(self) -> DriveStatus | None:
         """The status decoded from the last exchange (None before the first)."""
         return None
