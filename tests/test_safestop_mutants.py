@@ -55,6 +55,11 @@ class Drive:
         self._left = None
         self.fail_on: dict[str, Exception] = {}
 
+    def last_seen(self):
+        """The PROFIdrive codecs' own (drives/profidrive): their last_status."""
+        from profidrive_cli.drives.profidrive import ProfidriveDrive
+        return ProfidriveDrive.last_seen(self)
+
     def stop(self, how, wait=True):
         self.commands.append((how, wait))
         if how in self.fail_on:
@@ -246,15 +251,25 @@ def test_read_decel_none_value_is_none():
 
 
 class CommDrive:
+    """comm_loss_setting() scripted; comm_loss_summary() is the family codec's own (drives/fuji,
+    drives/moeller; the base default for the others) run on it."""
     has_param_channel = True
 
-    def __init__(self, value):
+    def __init__(self, value, family="fuji"):
         self.value = value
+        self.family = family
 
     def comm_loss_setting(self):
         if isinstance(self.value, Exception):
             raise self.value
         return self.value
+
+    def comm_loss_summary(self):
+        from profidrive_cli.drives.base import Drive as BaseDrive
+        from profidrive_cli.drives.fuji.drive import FujiDrive
+        from profidrive_cli.drives.moeller import MoellerDrive
+        codec = {"fuji": FujiDrive, "moeller": MoellerDrive}.get(self.family, BaseDrive)
+        return codec.comm_loss_summary(self)
 
 
 @pytest.mark.parametrize("raw,words", [
@@ -263,12 +278,12 @@ class CommDrive:
     (2, "P002 = 2: the drive trips (E70) and coasts"),
 ])
 def test_read_comm_loss_moeller_from_p002(raw, words):
-    s = Session(CommDrive({"P002": ParamValue("P002", "comm loss", raw, raw)}), family="moeller")
+    s = Session(CommDrive({"P002": ParamValue("P002", "comm loss", raw, raw)}, "moeller"), family="moeller")
     assert ss.read_comm_loss(s) == words
 
 
 def test_read_comm_loss_fuji_reads_the_card():
-    s = Session(CommDrive("o27 = 0: trips at once"), family="fuji")
+    s = Session(CommDrive("o27 = 0: trips at once", "fuji"), family="fuji")
     assert ss.read_comm_loss(s) == "o27 = 0: trips at once"
 
 
@@ -278,9 +293,9 @@ def test_read_comm_loss_fuji_reads_the_card():
     ("other", "its communication-loss setting")])
 def test_read_comm_loss_words_when_it_cannot_be_read(family, start):
     for err in (DriveError("x"), UsageError("y")):
-        s = Session(CommDrive(err), family=family)
+        s = Session(CommDrive(err, family), family=family)
         assert ss.read_comm_loss(s).startswith(start)
-    d = CommDrive("read")
+    d = CommDrive("read", family)
     d.has_param_channel = False
     assert ss.read_comm_loss(Session(d, family=family)).startswith(start)
 
@@ -381,6 +396,8 @@ def test_escalation_reads_drive_last_when_there_is_no_last_status():
     clock = Clock()
     d = Drive(clock, coast_after=0, last=None)
     d.last = status(speed=20.0)                         # 1.5 * 10 * 0.2 + 3 = 6 s
+    from profidrive_cli.drives.yaskawa import YaskawaDrive
+    d.last_seen = lambda: YaskawaDrive.last_seen(d)     # Yaskawa keeps it in `last`
     s = Session(d, clock, decel_s=10.0)
     ss.stop(s, None, None)
     assert s.warnings == ["not stopped after 6 s: coasting"]

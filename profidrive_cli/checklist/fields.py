@@ -187,20 +187,7 @@ def resolve_param(profile, code: str, layout: str | None = None) -> tuple[str, A
     drive = make_drive(_NoChannel(), profile, layout or profile.default_layout)
     text = str(code).strip()
     try:
-        if hasattr(drive, "resolve_param"):
-            ref = drive.resolve_param(text)
-            return ref.code, ref.param
-        p = profile.param(text)
-        if p is not None:
-            if p.register is None and p.pnu is None:
-                raise UsageError(f"{p.code}: the profile gives no address for it")
-            return p.code, p
-        from profidrive_cli.drives import codec_module
-        parse = getattr(codec_module(profile), "parse_register_code", None)
-        reg = parse(text) if parse else None
-        if reg is not None and 0 <= reg <= 0xFFFF:
-            return f"REG0x{reg:04X}", None
-        raise UsageError(f"unknown parameter '{code}' in profile {profile.name}")
+        return drive.param_label(text)
     except UsageError as e:
         msg = str(e)
         if "unknown" in msg.lower():

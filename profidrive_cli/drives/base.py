@@ -15,8 +15,10 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from profidrive_cli import BusError
+from profidrive_cli import BusError, UsageError
 from profidrive_cli.drives.torque import no_torque_reason
+from profidrive_cli.drives.values import raw_value_problem
+from profidrive_cli.drives.values import value_problem as exact_value_problem
 
 
 class CyclicChannel(Protocol):
@@ -79,6 +81,43 @@ class ParamValue:
 
     def __str__(self) -> str:
         return f"{self.code} = {self.value}{(' ' + self.unit) if self.unit else ''}"
+
+
+@dataclass
+class ParamInfo:
+    code: str                      # the code as the family names it
+    name: str
+    unit: str
+    param: Any                     # the profile's ParamDef (None for raw PNU / register access)
+    access: str                    # rw / ro / stop / wo / "raw"
+
+    @property
+    def writable(self) -> bool:
+        return self.access in ("rw", "stop", "wo", "raw")
+
+
+@dataclass
+class Reaction:
+    """The drive's configured reaction to a lost master (or to all-zero outputs), read from the
+    drive (Drive.comm_loss_reaction / zero_data_reaction; the comm-loss test checks against it)."""
+    words: str                     # e.g. "o27 = 0: coast to a stop at once, then trip Er5"
+    stop: str                      # "coast" | "ramp" | "trip" | "none"
+    delay_s: float = 0.0           # configured delay after the watchdog
+    recover: bool = False          # forgotten when the link returns within the delay
+    alarm: str | None = None       # the fault the drive shows
+    decel_s: float | None = None   # ramp time from max frequency to 0 (stop == "ramp")
+    settings: dict = field(default_factory=dict)   # code -> value read from the drive
+    warnings: list = field(default_factory=list)   # what may make the drive act otherwise
+
+    def stop_s(self, hz: float, fmax_hz: float) -> float:
+        if self.stop != "ramp" or not self.decel_s or fmax_hz <= 0:
+            return 0.0
+        return self.decel_s * min(1.0, abs(hz) / fmax_hz)
+
+    @property
+    def stop_known(self) -> bool:
+        """False: a ramp stop whose time could not be read (the limit counts none)."""
+        return self.stop != "ramp" or bool(self.decel_s)
 
 
 @dataclass
@@ -196,9 +235,149 @@ class Drive(ABC):
         """Store parameters in non-volatile memory where the card supports it."""
         raise DriveError(f"{self.family}: this card has no separate save command")
 
+    # -- family hooks for session/params.py (defaults here; each codec answers what differs) ----
+    def param_info(self, code: str) -> ParamInfo:
+        """How this family addresses `code` (no bus traffic); UsageError when it does not."""
+        p = self.profile.param(code)
+        if p is None:
+            raise UsageError(f"{self.profile.name}: unknown parameter {code!r}")
+        return ParamInfo(p.code, p.name, p.unit, p, p.access)
+
+    def param_label(self, code: str) -> tuple[str, Any]:
+        """(canonical label, ParamDef or None for a raw address) for a checklist's `code`, without
+        a bus; UsageError ("unknown ...") when the family does not address it."""
+        p = self.profile.param(code)
+        if p is not None:
+            if p.register is None and p.pnu is None:
+                raise UsageError(f"{p.code}: the profile gives no address for it")
+            return p.code, p
+        raise UsageError(f"unknown parameter '{code}' in profile {self.profile.name}")
+
+    def value_problem(self, info: ParamInfo, value: float | int) -> str | None:
+        """The exact-value check before a write (drives/values.py): None when `value` may be
+        written to `info`, else the one-line reason."""
+        if info.param is not None:
+            return exact_value_problem(info.param, value)
+        return raw_value_problem(info.code, value, 16)
+
+    def params_at(self, info: ParamInfo) -> list[Any]:
+        """The profile's entries at the address `info` reaches (its raw PNU/index or register),
+        for the `dangerous:` marks of a parameter written by its raw address."""
+        return []
+
+    # -- family hooks for session/backup.py (dump, compare, restore) --------------------------
+    def dumpable(self, p: Any) -> bool:
+        """The profile entry `p` has an address this family reads parameters by (PNU here)."""
+        return p.pnu is not None
+
+    def on_device(self, p: Any) -> bool:
+        """False for entries the connected device variant does not have, and for fault memories
+        (`pdrive faults` reads those)."""
+        return True
+
+    def not_restored(self, p: Any) -> str:
+        """Why a writable profile entry `p` is never written back by `restore` ('' = it is)."""
+        if p.extra.get("dangerous"):
+            return "dangerous (initialisation / auto-tuning)"
+        if p.access == "wo":
+            return "a command, not a setting"
+        return self._family_not_restored(p)
+
+    def _family_not_restored(self, p: Any) -> str:
+        """The family's own exclusions after the shared ones of not_restored ('' = none)."""
+        return ""
+
+    def take_notes(self) -> list[str]:
+        """Remarks for the user the codec collected since the last call (then cleared)."""
+        return []
+
+    def save_support(self) -> str:
+        """'command' (the card has a save command), 'automatic' (every write is stored), or
+        'unsupported'."""
+        return "unsupported"
+
     @abstractmethod
     def fault_history(self) -> list[FaultRecord]: ...
 
     def max_frequency(self) -> float:
         """Max frequency in Hz: read from the drive when a parameter channel exists, else the profile."""
         return float(self.profile.max_frequency_default)
+
+    def comm_loss_summary(self) -> str | None:
+        """What the drive does when the master goes silent, read from its settings in one line
+        (needs the parameter channel); None when the family has no such reading."""
+        return None
+
+    #: the shape of the codec's decode_area (drives.decode_area): "ppo" control/status words, N2 or
+    #: the family's speed words and the PKW channel; "memobus" Yaskawa's run command / status words
+    #: and the MEMOBUS parameter area (session/passive.py normalises each)
+    area_shape: str = "ppo"
+
+    def start_hint(self, status: DriveStatus) -> str | None:
+        """What to check when the drive does not start from the bus (appended to the timeout's
+        line); None when the family names nothing."""
+        return None
+
+    def last_seen(self) -> DriveStatus | None:
+        """The status decoded from the last exchange (None before the first)."""
+        return None
+
+    def cycle_words(self, outputs: bytes, inputs: bytes) -> tuple[int | None, int | None,
+                                                                   int | None, int | None]:
+        """(control word, reference, status word, actual) of one exchange's output and input
+        octets, in the family's words (the cycle log's columns); None where it has no such word."""
+        return None, None, None, None
+
+    # -- family hooks for session/monitors.py (run --monitor) ----------------------------------
+    #: how --monitor uses the layout's parameter input words (PZD3..): "" not at all; "read" the
+    #: card's own assignment is read and used, nothing written; "map" monitors are assigned for the
+    #: session (pzd_assignment_param) and the old assignment written back after
+    monitor_mapping: str = ""
+
+    def pzd_assignment_param(self, slot: int) -> str:
+        """The parameter that assigns input word PZD(slot + 2) (PROFIdrive PNU 916[slot])."""
+        return f"PNU916[{slot}]"
+
+    def pzd_assigned_code(self, raw: int) -> str | None:
+        """The profile code an assignment value read from pzd_assignment_param names (None: none)."""
+        return None
+
+    # -- family hooks for session/commloss_reaction.py (the comm-loss test) -------------------
+    #: True when the reaction to a lost master is fixed by the card (read without a parameter
+    #: channel: Toyo protection 18); False when it is a setting read from the drive
+    comm_loss_reaction_fixed: bool = False
+
+    def can_read(self, code: str) -> bool:
+        """The profile has `code` with an address and this layout has a parameter channel."""
+        p = self.profile.param(code)
+        return (p is not None and (p.pnu is not None or p.register is not None)
+                and self.has_param_channel)
+
+    def comm_loss_reaction(self) -> Reaction | None:
+        """What the drive is set to do when its master goes away, read from it (the card
+        manuals' rules); None when the family knows no such reaction. DriveError, KeyError,
+        ValueError when a setting cannot be read."""
+        return None
+
+    def zero_data_reaction(self, head: str) -> Reaction | None:
+        """What the drive does with all-zero outputs (Global_Control Clear_Data), when the family
+        says more than "its normal stop" (None); `head` starts the words. DriveError when a
+        setting cannot be read."""
+        return None
+
+    def normal_stop_warnings(self) -> list[str]:
+        """What may make the normal stop act otherwise when its deceleration time is unknown."""
+        return []
+
+    def bus_run_refusal(self) -> str | None:
+        """Why the bus cannot run this drive at the speed it asks (read from the drive; None: it
+        can). DriveError when the setting cannot be read."""
+        return None
+
+    #: the max frequency (Hz = 100 %) the codec scales speed words with; None = not known yet
+    _fmax: float | None = None
+
+    def use_max_frequency(self, hz: float) -> None:
+        """Scale speed words with `hz` as 100 % (the --fmax / config / profile value the session
+        settled on when the drive's own max frequency cannot be read)."""
+        self._fmax = hz

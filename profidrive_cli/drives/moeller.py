@@ -19,11 +19,14 @@ address_from_switches(right, left), value_from_wire(param, raw), wire_from_value
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
+
+from profidrive_cli import UsageError
 
 from profidrive_cli.datafile import DataFileError, LineDict
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.values import value_problem
-from profidrive_cli.drives.base import DriveError, DriveStatus, ParamError, ParamValue
+from profidrive_cli.drives.base import DriveError, DriveStatus, ParamError, ParamValue, Reaction
 from profidrive_cli.drives.profile import COMMON_EXTRA_KEYS, per_profile
 
 FAMILY_PARAM_KEYS = {"bytes", "format", "ranges", "df6", "df6_max", "note", "array"}
@@ -350,6 +353,39 @@ class MoellerDrive(pd.ProfidriveDrive):
             out[self.mc.comm_loss_other_param] = self.read_param(self.mc.comm_loss_other_param)
         return out
 
+    monitor_mapping = "map"           # PNU 916 is volatile (spec 2.4, manual example 2)
+
+    def on_device(self, p: Any) -> bool:
+        """`df6: false` entries are not on a DF6 (PNU 964 says which device it is)."""
+        if p.extra.get("df6") is False:
+            try:
+                return not self.device().startswith("DF")
+            except (DriveError, UsageError):
+                return True
+        return True
+
+    def comm_loss_summary(self) -> str | None:
+        first = next(iter(self.comm_loss_setting().values()))
+        keep = int(first.raw) == 1
+        return (f"{first.code} = {first.raw}: " +
+                ("the drive keeps running on the last command" if keep else
+                 "the drive trips (E70) and coasts"))
+
+    def comm_loss_reaction(self) -> Reaction | None:
+        """P002 (+ P001 shown): 1 keeps running on the last command, else trip (output off)."""
+        vals = self.comm_loss_setting()
+        code = self.mc.comm_loss_param
+        main = vals[code]
+        shown = {k: int(v.raw) for k, v in vals.items()}
+        others = ", ".join(f"{k} = {v}" for k, v in shown.items() if k != code)
+        extra = f" ({others} shown as well: the card's slot decides which one applies)" if others else ""
+        if int(main.raw) == 1:
+            return Reaction(f"{code} = 1: keep running on the last command{extra}", "none",
+                            settings=shown)
+        return Reaction(f"{code} = {int(main.raw)}: trip {self.mc.comm_loss_alarm} (output off, "
+                        f"the motor coasts){extra}", "trip", alarm=self.mc.comm_loss_alarm,
+                        settings=shown)
+
     def bus_control_check(self) -> list[str]:
         """Problems that keep the bus from controlling the inverter (empty = fine)."""
         mc = self.mc
@@ -401,7 +437,10 @@ def decode_area(profile, layout: str, direction: str, data: bytes, *,
     return out
 
 
-__all__ = ["MoellerConfig", "MoellerDrive", "make_drive", "decode_area", "param_value",
+#: the family's Drive class, for its class-level facts without a bus (drives.drive_class)
+DRIVE_CLASS = MoellerDrive
+
+__all__ = ["DRIVE_CLASS", "MoellerConfig", "MoellerDrive", "make_drive", "decode_area", "param_value",
            "moeller_config", "source_selection", "device_name", "baud_text", "fault_text",
            "address_from_switches", "value_from_wire", "wire_from_value", "in_ranges",
            "direction_text", "DriveError"]

@@ -13,7 +13,7 @@ from typing import Any, Callable
 
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.drives.base import DriveError
-from profidrive_cli.drives.profile import Profile, load_profile
+from profidrive_cli.drives.profile import load_profile
 from profidrive_cli.session.discovery import family_words
 from profidrive_cli.session.dumpfile import DUMP_END, DUMP_FORMAT
 from profidrive_cli.session.params import param_info
@@ -47,40 +47,22 @@ def same_value(a, b, scale: float | None) -> bool:
     return abs(fa - fb) <= max(tol * 0.999, 1e-9)
 
 
-def not_restored(profile: Profile, p) -> str:
-    """Why a writable parameter is never written back by `restore` ('' = it is)."""
-    if p.extra.get("dangerous"):
-        return "dangerous (initialisation / auto-tuning)"
-    if p.access == "wo":
-        return "a command, not a setting"
-    if profile.family == "fuji" and p.code[:1].upper() == "S" and p.code[1:].isdigit():
-        return "command data (S codes), not a setting"
-    if p.pnu in (927, 928) and profile.family != "yaskawa":
-        return "access rights, left as they are"
-    if p.pnu in (970, 971) and profile.family != "yaskawa":
-        return "a command, not a setting"
-    return ""
-
-
 def dump_plan(sess) -> list[tuple[str, Any, str]]:
     """(code, ParamDef, kind) for every parameter of the profile that the family can read:
     kind 'setting' (restored), 'readonly', or 'excluded: why' (read, never restored)."""
     out = []
-    sess._need_drive()
+    d = sess._need_drive()
     for p in sess.profile.parameters.values():
         if p.access == "wo":
             continue
-        if sess.profile.family == "yaskawa":
-            if p.register is None:
-                continue
-        elif p.pnu is None:
+        if not d.dumpable(p):
             continue
         if p.extra.get("traceback"):
             continue                          # Toyo traceback channels: 4 x 100 samples each
-        if not exists_on_device(sess, p):
+        if not d.on_device(p):
             continue
         kind = "setting" if p.writable else "readonly"
-        why = not_restored(sess.profile, p)
+        why = d.not_restored(p)
         if why and p.writable:
             kind = f"excluded: {why}"
         arr = p.extra.get("array")
@@ -91,21 +73,6 @@ def dump_plan(sess) -> list[tuple[str, Any, str]]:
             continue                           # read-only arrays (fault memory): `pdrive faults`
         out.append((p.code, p, kind))
     return out
-
-
-def exists_on_device(sess, p) -> bool:
-    """False for parameters the connected device variant does not have (Moeller: `df6: false`
-    on a DF6) and for fault memories (`pdrive faults` reads those)."""
-    fam = sess.profile.family
-    d = sess.drive
-    if fam == "toyo" and p.pnu == getattr(getattr(d, "tc", None), "history_pnu", None):
-        return False
-    if fam == "moeller" and p.extra.get("df6") is False and hasattr(d, "device"):
-        try:
-            return not d.device().startswith("DF")
-        except (DriveError, UsageError):
-            return True
-    return True
 
 
 def dump(sess, progress: Callable[[int, int, str], None] | None = None) -> dict:
@@ -208,7 +175,7 @@ def compare(sess, doc: dict, progress: Callable[[int, int, str], None] | None = 
         base = code.split("[", 1)[0]
         pdef = sess.profile.param(base) or p
         if pdef is not None:
-            why = not_restored(sess.profile, pdef) if pdef.writable else "read-only"
+            why = d.not_restored(pdef) if pdef.writable else "read-only"
             if why and not (allow_dangerous and why.startswith("dangerous")):
                 kind = ("read-only" if why == "read-only" else
                         "dangerous" if why.startswith("dangerous") else "not restored")

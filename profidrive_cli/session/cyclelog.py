@@ -97,28 +97,7 @@ def _s16(v) -> str:
 def cycle_words(drive, outputs: bytes, inputs: bytes) -> tuple[int | None, int | None, int | None, int | None]:
     """(control word, reference, status word, actual) of one exchange, whatever the family."""
     try:
-        fmt = getattr(drive, "fmt", None)
-        if fmt is not None and hasattr(fmt, "out_words"):           # Yaskawa fast I/O words
-            order = drive.profile.word_order
-            ow = [int.from_bytes(outputs[i:i + 2], order) for i in range(0, 2 * len(fmt.out_words), 2)]
-            iw = [int.from_bytes(inputs[i:i + 2], order) for i in range(0, 2 * len(fmt.in_words), 2)]
-            o = dict(zip(fmt.out_words, ow))
-            n = dict(zip(fmt.in_words, iw))
-            return o.get("command"), o.get("reference"), n.get("status"), n.get("speed_feedback")
-        ppo = getattr(drive, "ppo", None)
-        if ppo is not None:
-            from profidrive_cli.drives import profidrive as pd
-            out = pd.decode_area_bytes(ppo, outputs, "request").pzd
-            inp = pd.decode_area_bytes(ppo, inputs, "response").pzd
-            tl = getattr(drive, "tl", None)
-            if tl is not None:                                      # Toyo: named words
-                plch = getattr(drive, "plch", False)
-                o = dict(zip(tl.words("request", plch), out))
-                n = dict(zip(tl.words("response", plch), inp))
-                return (o.get("ctw", o.get("run_cmd")), o.get("speed_ref"),
-                        n.get("zsw", n.get("status_flag")), n.get("motor_speed"))
-            return (out[0] if out else None, out[1] if len(out) > 1 else None,
-                    inp[0] if inp else None, inp[1] if len(inp) > 1 else None)
+        return drive.cycle_words(outputs, inputs)        # drives.base.Drive: the codec's own words
     except Exception:
         pass
     return None, None, None, None

@@ -51,9 +51,9 @@ def start(sess, reverse: bool = False, timeout: float = 5.0) -> Sample:
     try:
         st = d.cycles_until(lambda s: s.fault or s.running or not s.stopped, timeout, "the jog to start")
     except DriveError as e:
-        hint = getattr(d, "start_hint", None)
-        last = getattr(d, "last_status", None)
-        raise DriveError(f"{e}; {hint(last)}" if hint and last is not None else str(e)) from None
+        last = d.last_seen()
+        hint = d.start_hint(last) if last is not None else None
+        raise DriveError(f"{e}; {hint}" if hint else str(e)) from None
     if st.fault:
         raise DriveError(f"the drive tripped at the jog ({st.fault_code or st.state})")
     return make_sample(sess, st)

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from profidrive_cli import UsageError
+from profidrive_cli.drives import drive_class
 from profidrive_cli.drives.base import DriveError, ParamError
 from profidrive_cli.drives.monitors import cyclic_monitors, monitor_config, trip_record_config
 
@@ -135,7 +136,8 @@ class Monitors:
     def question_note(self) -> str:
         """What the confirmation before a real-port run adds: the mapping map_cyclic() will write."""
         lay = self.sess.profile.layouts.get(self.sess.layout)
-        if self.sess.profile.family == "moeller" and lay is not None and lay.pkw and lay.input_len > 12:
+        if drive_class(self.sess.profile).monitor_mapping == "map" and lay is not None and lay.pkw \
+                and lay.input_len > 12:
             return " (--monitor maps PNU 916 for the session and restores it after)"
         return ""
 
@@ -162,23 +164,21 @@ class Monitors:
         ppo = getattr(drive, "ppo", None)
         if ppo is None or ppo.pzd_in <= 2 or not drive.has_param_channel:
             return list(self.cyclic)
-        fam = sess.profile.family
         slots = list(range(1, ppo.pzd_in - 1))            # PNU 916 subindex n = input word PZD(n+2)
-        if fam == "fuji":
-            from profidrive_cli.drives.fuji.codes import pcd_assignment_code
+        if drive.monitor_mapping == "read":
             for n in slots:
-                assigned = int(sess.read_param(f"o{47 + n}").raw)
-                code = pcd_assignment_code(sess.profile, assigned)
+                assigned = int(sess.read_param(drive.pzd_assignment_param(n)).raw)
+                code = drive.pzd_assigned_code(assigned)
                 if code in self.codes and code not in self.cyclic:
                     self.cyclic[code] = 1 + n
-        elif fam == "moeller":
+        elif drive.monitor_mapping == "map":
             free = list(slots)
             for c in self.codes:
                 p = sess.profile.param(c)
                 if not free or p is None or p.pnu is None or p.size != 16 or c in self.cyclic:
                     continue
                 n = free.pop(0)
-                key = f"PNU916[{n}]"
+                key = drive.pzd_assignment_param(n)
                 old = int(sess.read_param(key).raw)
                 try:
                     sess.write_param(key, p.pnu)

@@ -55,10 +55,9 @@ def fmax(sess, override: float | None = None) -> tuple[float, str]:
 
 
 def set_drive_fmax(sess, hz: float) -> None:
-    # the codecs keep the max frequency they scale speed words with in `_fmax`; without a
-    # parameter channel they would use the profile default, so keep them consistent with ours
-    if hasattr(sess.drive, "_fmax"):
-        sess.drive._fmax = hz
+    # without a parameter channel the codec would scale speed words with the profile default:
+    # keep it consistent with ours
+    sess.drive.use_max_frequency(hz)
 
 
 def percent_for_hz(sess, hz: float, fmax_override: float | None = None) -> float:

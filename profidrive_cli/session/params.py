@@ -9,28 +9,12 @@ from __future__ import annotations
 
 import difflib
 import math
-from dataclasses import dataclass
-from typing import Any
-
 from profidrive_cli import UsageError
-from profidrive_cli.drives.base import DriveError, ParamValue
+from profidrive_cli.drives.base import DriveError, ParamInfo, ParamValue
 from profidrive_cli.drives.formats import display_text, value_from_text
 from profidrive_cli.drives.profile import Profile, all_profiles
-from profidrive_cli.drives.values import danger, raw_value_problem, value_problem
+from profidrive_cli.drives.values import danger
 from profidrive_cli.session.cycle import Sample
-
-
-@dataclass
-class ParamInfo:
-    code: str                      # the code as the family names it
-    name: str
-    unit: str
-    param: Any                     # the profile's ParamDef (None for raw PNU / register access)
-    access: str                    # rw / ro / stop / wo / "raw"
-
-    @property
-    def writable(self) -> bool:
-        return self.access in ("rw", "stop", "wo", "raw")
 
 
 def suggest_codes(profile: Profile, code: str, n: int = 5) -> list[str]:
@@ -52,15 +36,7 @@ def param_info(sess, code: str) -> ParamInfo:
     if not text:
         raise UsageError("empty parameter code")
     try:
-        if hasattr(d, "resolve_param"):
-            ref = d.resolve_param(text)
-            p = ref.param
-            return ParamInfo(ref.code, ref.name, p.unit if p is not None else "", p,
-                             p.access if p is not None else "raw")
-        reg, p = d._resolve(text)          # Yaskawa: MEMOBUS register
-        if p is None:
-            return ParamInfo(f"REG0x{reg:04X}", "MEMOBUS register", "", None, "raw")
-        return ParamInfo(p.code, p.name, p.unit, p, p.access)
+        return d.param_info(text)
     except UsageError as e:
         raise UsageError(unknown_code_message(sess, text, str(e))) from None
 
@@ -127,13 +103,7 @@ def danger_of(sess, info: ParamInfo) -> str | None:
         return danger(info.param)
     d = sess.drive
     try:
-        if hasattr(d, "resolve_param"):
-            ref = d.resolve_param(info.code)
-            hits = [q for q in sess.profile.parameters.values()
-                    if q.pnu is not None and q.pnu == ref.pnu and (q.index or 0) == (ref.subindex or 0)]
-        else:
-            reg, _ = d._resolve(info.code)
-            hits = [q for q in sess.profile.parameters.values() if q.register == reg]
+        hits = d.params_at(info)
     except (UsageError, DriveError, AttributeError):
         return None
     return next((danger(q) for q in hits if danger(q)), None)
@@ -154,13 +124,7 @@ def check_write(sess, info: ParamInfo, value, allow_dangerous: bool = False) -> 
     if p is not None and not p.writable:
         raise UsageError(f"{info.code} ({info.name}) is read-only")
     check_dangerous(sess, info, allow_dangerous)
-    d = sess.drive
-    if hasattr(d, "check_value") and hasattr(d, "resolve_param"):
-        msg = d.check_value(d.resolve_param(info.code), value)
-    elif p is not None:
-        msg = value_problem(p, value)
-    else:
-        msg = raw_value_problem(info.code, value, 16)
+    msg = sess.drive.value_problem(info, value)
     if msg:
         raise UsageError(msg)
 
@@ -195,26 +159,13 @@ def write_param(sess, code: str, value, *, check_running: bool = True,
 
 def notes(sess) -> list[str]:
     """Remarks the codec collected (e.g. Fuji: 'o30 takes effect after a power cycle'); cleared."""
-    n = list(getattr(sess.drive, "notes", []) or [])
-    if hasattr(sess.drive, "notes"):
-        sess.drive.notes.clear()
-    return n
+    return sess.drive.take_notes() if sess.drive is not None else []
 
 
 def save_support(sess) -> str:
     """'command' (the card has a save command), 'automatic' (every write is stored), or
     'unsupported'."""
-    d = sess._need_drive()
-    fam = sess.profile.family
-    if fam == "toyo":
-        return "automatic"
-    if fam == "fuji":
-        return "command" if getattr(d, "fc", None) is not None and d.fc.storage else "automatic"
-    if fam == "yaskawa":
-        return "command" if getattr(d, "cfg", None) is not None and d.cfg.enter_register is not None \
-            else "unsupported"
-    cfg = getattr(d, "cfg", None)
-    return "command" if cfg is not None and getattr(cfg, "save_pnu", None) is not None else "unsupported"
+    return sess._need_drive().save_support()
 
 
 def save(sess) -> str:

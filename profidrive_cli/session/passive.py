@@ -155,7 +155,8 @@ def _learn_fmax(st: Watched, param: dict) -> None:
 def normalise(profile, direction: str, area: dict) -> dict:
     """The common fields of a decoded area: command / control (request), state / status
     (response), reference_hz / actual_hz, param (the parameter channel), text (one line)."""
-    if profile.family == "yaskawa":
+    from profidrive_cli.drives import drive_class
+    if drive_class(profile).area_shape == "memobus":
         d = _yaskawa(profile, direction, area)
     else:
         d = _ppo(direction, area)

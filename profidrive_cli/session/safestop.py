@@ -68,15 +68,9 @@ def read_comm_loss(sess) -> str:
     d = sess.drive
     fam = sess.profile.family
     try:
-        if fam == "fuji" and d.has_param_channel and hasattr(d, "comm_loss_setting"):
-            return d.comm_loss_setting()
-        if fam == "moeller" and d.has_param_channel and hasattr(d, "comm_loss_setting"):
-            vals = d.comm_loss_setting()
-            first = next(iter(vals.values()))
-            keep = int(first.raw) == 1
-            return (f"{first.code} = {first.raw}: " +
-                    ("the drive keeps running on the last command" if keep else
-                     "the drive trips (E70) and coasts"))
+        said = d.comm_loss_summary() if d.has_param_channel else None
+        if said:
+            return said
     except (DriveError, UsageError):
         pass
     return _COMM_LOSS_WORDS.get(fam, "its communication-loss setting")
@@ -97,8 +91,7 @@ def stop(sess, on_sample, timeout) -> StopReport:
     """Normal stop, bounded wait, coast if it does not stop (or a signal hurries it)."""
     d = sess._need_drive()
     t_start = sess.channel.now()
-    last = d.last_status if hasattr(d, "last_status") else None
-    last = last or getattr(d, "last", None)
+    last = d.last_seen()
     pct = last.speed_percent if last is not None else None
     limit = timeout if timeout is not None else sess.stop_timeout(pct)
     st = None

@@ -16,6 +16,7 @@ from __future__ import annotations
 from profidrive_cli import PdriveError
 from profidrive_cli.checklist.fields import fmt
 from profidrive_cli.checklist.steps.base import StepFailed, StepType
+from profidrive_cli.drives import drive_class
 
 MODES = ("silence", "clear")
 
@@ -36,7 +37,8 @@ class CommLoss(StepType):
         ack = d.get("ack", False)
         if not isinstance(ack, bool):
             check.fail(d.line_of("ack"), f"{w}: 'ack' must be true or false, got {ack!r}")
-        if mode == "silence" and st.profile.family != "toyo":     # Toyo's reaction is fixed
+        # a reaction the card fixes (Toyo protection 18) is known without a parameter channel
+        if mode == "silence" and not drive_class(st.profile).comm_loss_reaction_fixed:
             check.need_param_channel(st, rs)
         state["running"] = False          # the step leaves the drive stopped
         return ({"hz": hz, "mode": mode, "timeout": timeout, "tolerance": tolerance,

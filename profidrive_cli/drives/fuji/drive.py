@@ -7,12 +7,15 @@ Subclasses drives/profidrive ProfidriveDrive through its hooks; the channel does
 from __future__ import annotations
 
 import re
+from typing import Any
 
 from profidrive_cli import UsageError
 from profidrive_cli.drives import profidrive as pd
-from profidrive_cli.drives.base import DriveError, DriveStatus, FaultRecord, ParamError, ParamValue
+from profidrive_cli.drives.base import (DriveError, DriveStatus, FaultRecord, ParamError, ParamValue,
+                                        Reaction)
 from profidrive_cli.drives.fuji.codes import (alarm_by_mcode, alarm_candidates, comm_loss_text,
-                                              parse_function_code, ppo_for_o30)
+                                              parse_function_code, pcd_assignment_code, ppo_for_o30)
+from profidrive_cli.drives.fuji import reaction
 from profidrive_cli.drives.fuji.config import FUJI_STW_BITS, fuji_config
 
 class FujiDrive(pd.ProfidriveDrive):
@@ -23,6 +26,19 @@ class FujiDrive(pd.ProfidriveDrive):
         super().__init__(channel, profile, layout)
         #: remarks for the user from the last calls (e.g. "o30 takes effect after a power cycle")
         self.notes: list[str] = []
+
+    def take_notes(self) -> list[str]:
+        n = list(self.notes)
+        self.notes.clear()
+        return n
+
+    def save_support(self) -> str:
+        return "command" if self.fc.storage else "automatic"
+
+    def _family_not_restored(self, p: Any) -> str:
+        if p.code[:1].upper() == "S" and p.code[1:].isdigit():
+            return "command data (S codes), not a setting"
+        return super()._family_not_restored(p)
 
     # -- addressing ----------------------------------------------------------------------------
     def resolve_param(self, code: str) -> pd.ParamRef:
@@ -199,6 +215,26 @@ class FujiDrive(pd.ProfidriveDrive):
         o27 = int(self.read_param(fc.comm_loss_param).raw)
         o28 = float(self.read_param(fc.comm_loss_timer).value)
         return comm_loss_text(self.profile, o27, o28)
+
+    monitor_mapping = "read"          # o48..o51 (= PNU 916) take effect only after a power cycle
+
+    def pzd_assignment_param(self, slot: int) -> str:
+        return f"o{47 + slot}"
+
+    def pzd_assigned_code(self, raw: int) -> str | None:
+        return pcd_assignment_code(self.profile, raw)
+
+    def comm_loss_summary(self) -> str | None:
+        return self.comm_loss_setting()
+
+    def comm_loss_reaction(self) -> Reaction | None:
+        return reaction.comm_loss_reaction(self)
+
+    def zero_data_reaction(self, head: str) -> Reaction | None:
+        return reaction.zero_data_reaction(self, head)
+
+    def bus_run_refusal(self) -> str | None:
+        return reaction.bus_run_refusal(self)
 
     def ppo_setting(self) -> str:
         v = int(self.read_param(self.fc.ppo_param).raw)

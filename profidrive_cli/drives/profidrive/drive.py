@@ -7,9 +7,11 @@ hooks. `make_drive` makes `family: profidrive` work.
 
 from __future__ import annotations
 
+from typing import Any
+
 from profidrive_cli import UsageError
 from profidrive_cli.drives.base import (Drive, DriveError, DriveStatus, FaultRecord, ParamError,
-                                        ParamValue)
+                                        ParamInfo, ParamValue)
 from profidrive_cli.drives.values import raw_value_problem, value_problem
 from profidrive_cli.drives.profidrive.config import ProfidriveConfig, config
 from profidrive_cli.drives.profidrive.params import ParamRef, resolve_code
@@ -78,6 +80,44 @@ class ProfidriveDrive(Drive):
 
     def resolve_param(self, code: str) -> ParamRef:
         return resolve_code(self.profile, code, self.cfg)
+
+    def param_info(self, code: str) -> ParamInfo:
+        ref = self.resolve_param(code)
+        p = ref.param
+        return ParamInfo(ref.code, ref.name, p.unit if p is not None else "", p,
+                         p.access if p is not None else "raw")
+
+    def param_label(self, code: str) -> tuple[str, Any]:
+        ref = self.resolve_param(code)
+        return ref.code, ref.param
+
+    def value_problem(self, info: ParamInfo, value: float | int) -> str | None:
+        return self.check_value(self.resolve_param(info.code), value)
+
+    def params_at(self, info: ParamInfo) -> list[Any]:
+        ref = self.resolve_param(info.code)
+        return [q for q in self.profile.parameters.values()
+                if q.pnu is not None and q.pnu == ref.pnu and (q.index or 0) == (ref.subindex or 0)]
+
+    def save_support(self) -> str:
+        return "command" if getattr(self.cfg, "save_pnu", None) is not None else "unsupported"
+
+    def _family_not_restored(self, p: Any) -> str:
+        if p.pnu in (927, 928):
+            return "access rights, left as they are"
+        if p.pnu in (970, 971):
+            return "a command, not a setting"
+        return ""
+
+    def last_seen(self) -> DriveStatus | None:
+        return self.last_status
+
+    def cycle_words(self, outputs: bytes, inputs: bytes) -> tuple[int | None, int | None,
+                                                                   int | None, int | None]:
+        out = decode_area_bytes(self.ppo, outputs, "request").pzd
+        inp = decode_area_bytes(self.ppo, inputs, "response").pzd
+        return (out[0] if out else None, out[1] if len(out) > 1 else None,
+                inp[0] if inp else None, inp[1] if len(inp) > 1 else None)
 
     def raw_to_value(self, ref: ParamRef, raw: int):
         p = ref.param

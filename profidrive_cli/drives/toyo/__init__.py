@@ -39,7 +39,10 @@ from profidrive_cli.drives.toyo.params import (_toyo_frame, effective_scale, par
                                                value_from_wire, wire_from_value)
 
 # _toyo_frame (a PKW frame with the card's 16-bit IND) stays reachable here for the tests that build raw frames
-__all__ = ["ToyoConfig", "ToyoDrive", "make_drive", "decode_area", "param_value", "profidrive_config",
+#: the family's Drive class, for its class-level facts without a bus (drives.drive_class)
+DRIVE_CLASS = ToyoDrive
+
+__all__ = ["DRIVE_CLASS", "ToyoConfig", "ToyoDrive", "make_drive", "decode_area", "param_value", "profidrive_config",
            "toyo_config", "speed_word", "speed_percent", "history_word", "decode_history_word",
            "traceback_ind", "decode_traceback_ind", "decode_diag", "protection", "describe_pkw",
            "ctw_command", "run_cmd_fields", "value_from_wire", "wire_from_value", "ToyoLayout",

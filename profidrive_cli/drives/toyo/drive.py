@@ -9,9 +9,11 @@ params.
 from __future__ import annotations
 
 from datetime import datetime
+from typing import Any
 
 from profidrive_cli.drives import profidrive as pd
-from profidrive_cli.drives.base import DriveError, DriveStatus, FaultRecord, ParamError, ParamValue
+from profidrive_cli.drives.base import (DriveError, DriveStatus, FaultRecord, ParamError, ParamValue,
+                                        Reaction)
 from profidrive_cli.drives.toyo.codec import (bit_names, decode_history_word, speed_percent, speed_word,
                                               traceback_ind)
 from profidrive_cli.drives.toyo.config import toyo_config
@@ -29,6 +31,13 @@ def date_words(now) -> dict[str, int]:
     §4.5, manual L1137-1143): month/day = month << 8 | day (low byte day 1-31, high byte month 1-12),
     hour/minute = hour << 8 | minute (low byte minute 0-59, high byte hour 0-23), binary."""
     return {"month_day": now.month << 8 | now.day, "hour_minute": now.hour << 8 | now.minute}
+
+
+#: Toyo PBUS66-Z manual L612-620 (C-00 factory 0) and Table 3.5 notes 1-2 (L2769-2773)
+TOYO_C00_WARNING = ("C-00 (multi-function input source) cannot be read over the bus (Toyo publishes "
+                    "no PNU); with C-00 = 0, the factory setting, OFF2 and OFF3 from the bus act as "
+                    "a normal stop (manual Table 3.5 notes 1 and 2): a coast or quick stop pdrive "
+                    "sends takes the deceleration time; set C-00 = 1 for the full control word")
 
 
 class ToyoDrive(pd.ProfidriveDrive):
@@ -52,6 +61,38 @@ class ToyoDrive(pd.ProfidriveDrive):
         #: the host clock for the date/time words (tests replace it)
         self.clock = datetime.now
         self._dated = {"month_day", "hour_minute"} & set(self.tl.words("request", self.plch))
+
+    def save_support(self) -> str:
+        return "automatic"               # every write is stored by the card itself
+
+    def cycle_words(self, outputs: bytes, inputs: bytes) -> tuple[int | None, int | None,
+                                                                   int | None, int | None]:
+        out = pd.decode_area_bytes(self.ppo, outputs, "request").pzd
+        inp = pd.decode_area_bytes(self.ppo, inputs, "response").pzd
+        o = dict(zip(self.tl.words("request", self.plch), out))      # the layout's named words
+        n = dict(zip(self.tl.words("response", self.plch), inp))
+        return (o.get("ctw", o.get("run_cmd")), o.get("speed_ref"),
+                n.get("zsw", n.get("status_flag")), n.get("motor_speed"))
+
+    comm_loss_reaction_fixed = True           # protection 18: no setting to read
+
+    def comm_loss_reaction(self) -> Reaction | None:
+        return Reaction("protection 18 (COMM, communication timeout): trip, run commands forced "
+                        "off (fixed: the manual names no setting)", "trip", alarm="COMM",
+                        warnings=[TOYO_C00_WARNING])
+
+    def zero_data_reaction(self, head: str) -> Reaction | None:
+        if self.layout == "toyo":
+            return None
+        return Reaction(head + "; control word bit 10 = 0: the card ignores the master's command and "
+                        "keeps the previous cycle's (manual Table 3.5) -- the drive keeps running",
+                        "none", warnings=[TOYO_C00_WARNING])
+
+    def normal_stop_warnings(self) -> list[str]:
+        return [TOYO_C00_WARNING]
+
+    def on_device(self, p: Any) -> bool:
+        return p.pnu != self.tc.history_pnu      # the fault history: `pdrive faults` reads it
 
     # -- addressing ----------------------------------------------------------------------------
     def resolve_param(self, code: str) -> pd.ParamRef:

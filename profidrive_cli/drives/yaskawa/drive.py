@@ -7,9 +7,11 @@ drives/values, drives/torque, and this package's codec, paramaccess and config.
 
 from __future__ import annotations
 
+from typing import Any
+
 from profidrive_cli import UsageError
 from profidrive_cli.drives.base import (Drive, DriveError, DriveStatus, FaultRecord, ParamError,
-                                        ParamValue)
+                                        ParamInfo, ParamValue, Reaction)
 from profidrive_cli.drives.torque import capability_refusal, torque_counts
 from profidrive_cli.drives.values import raw_value_problem, value_problem
 from profidrive_cli.drives.yaskawa.codec import (COMMAND_BITS, FORMATS, FrequencyScale, _s16, decode_status,
@@ -22,9 +24,17 @@ FAMILY = "yaskawa"
 TORQUE_RES = 0.1                   # % per count (spec §2.4 / §2.7: 0.1 %)
 
 
+#: F6-01, the reaction to a communication error (SI-P1 / drive manuals)
+_F601 = {0: ("ramp", "C1-02", "ramp to stop with C1-02, then the BUS fault"),
+         1: ("coast", None, "coast to stop and trip BUS"),
+         2: ("ramp", "C1-09", "fast stop with C1-09, then the BUS fault"),
+         3: ("none", None, "alarm only: BUS is shown and the drive keeps running")}
+
+
 class YaskawaDrive(Drive):
     family = FAMILY
     supports_jog = False
+    area_shape = "memobus"
 
     def jog_refusal(self) -> str:
         return (f"{self.profile.name}: the SI-P1 run command word has no jog bit (bit 0 forward run, bit 1 "
@@ -369,6 +379,60 @@ class YaskawaDrive(Drive):
             chunk, values = values[:self.fmt.max_registers], values[self.fmt.max_registers:]
             self._transact(ParamRequest.write(start, chunk))
             start += len(chunk)
+
+    def param_info(self, code: str) -> ParamInfo:
+        reg, p = self._resolve(code)          # MEMOBUS register
+        if p is None:
+            return ParamInfo(f"REG0x{reg:04X}", "MEMOBUS register", "", None, "raw")
+        return ParamInfo(p.code, p.name, p.unit, p, p.access)
+
+    def param_label(self, code: str) -> tuple[str, Any]:
+        if self.profile.param(code) is None:
+            reg = parse_register_code(code)
+            if reg is not None and 0 <= reg <= 0xFFFF:
+                return f"REG0x{reg:04X}", None
+        return super().param_label(code)
+
+    def params_at(self, info: ParamInfo) -> list[Any]:
+        reg, _ = self._resolve(info.code)
+        return [q for q in self.profile.parameters.values() if q.register == reg]
+
+    def save_support(self) -> str:
+        return "command" if self.cfg.enter_register is not None else "unsupported"
+
+    def last_seen(self) -> DriveStatus | None:
+        return self.last
+
+    def cycle_words(self, outputs: bytes, inputs: bytes) -> tuple[int | None, int | None,
+                                                                   int | None, int | None]:
+        fmt, order = self.fmt, self.profile.word_order                # the fast I/O words
+        ow = [int.from_bytes(outputs[i:i + 2], order) for i in range(0, 2 * len(fmt.out_words), 2)]
+        iw = [int.from_bytes(inputs[i:i + 2], order) for i in range(0, 2 * len(fmt.in_words), 2)]
+        o = dict(zip(fmt.out_words, ow))
+        n = dict(zip(fmt.in_words, iw))
+        return o.get("command"), o.get("reference"), n.get("status"), n.get("speed_feedback")
+
+    def comm_loss_reaction(self) -> Reaction | None:
+        """F6-01 (+ C1-02 / C1-09 for the ramp)."""
+        if self.profile.param("F6-01") is None:
+            return Reaction("BUS fault (the profile has no F6-01: assumed coast)", "trip", alarm="BUS")
+        f601 = int(self.read_param("F6-01").raw)
+        stop, ramp_code, words = _F601.get(f601, ("coast", None, "outside 0..3: assumed coast"))
+        settings: dict[str, float] = {"F6-01": f601}
+        decel = None
+        if ramp_code:
+            decel = float(self.read_param(ramp_code).value)
+            settings[ramp_code] = decel
+        return Reaction(f"F6-01 = {f601}: {words}", "trip" if stop == "coast" else stop,
+                        alarm=None if stop == "none" else "BUS", decel_s=decel, settings=settings)
+
+    def zero_data_reaction(self, head: str) -> Reaction | None:
+        if self.can_read("b1-03") and int(self.read_param("b1-03").raw) == 1:
+            return Reaction(head + "; b1-03 = 1: coast to stop", "coast", settings={"b1-03": 1})
+        return None
+
+    def dumpable(self, p: Any) -> bool:
+        return p.register is not None            # MEMOBUS registers, not PNUs
 
     def _resolve(self, code: str):
         reg = parse_register_code(code)

@@ -1,0 +1,71 @@
+"""Families answer family questions (docs/architecture.md, issue 25 step 1): session/ and checklist/
+ask the Drive (its hooks in drives/base.py, each codec filling what differs) or a class-level fact
+on the family's Drive class (drives.drive_class), instead of branching on the family's name or on
+hasattr. Counted from the source, as the layering tests read imports: the count may only go down.
+
+The grep this counts (43 lines, 47 matches before step 1; 7 after it):
+
+    grep -rn "family ==\\|family !=\\|fam ==\\|fam !=\\|hasattr(" profidrive_cli/session profidrive_cli/checklist
+
+Remaining sites (none compares a family with a name):
+  * session/params.py unknown_code_message, checklist/fields.py resolve_param: `p.family !=
+    prof.family` picks the OTHER profiles a foreign code belongs to, for the message (not a dispatch)
+  * session/discovery.py, session/motion.py (2): `hasattr(x, "source")` asks a config value for its
+    FILE:LINE provenance (config.FileHz), not the family
+  * session/backup.py compare: `hasattr(params, "line_of")` asks a loaded dump for line numbers
+  * checklist/runner.py _traced: `hasattr(drive, "channel")` (a drive on a bus, not a family question)
+Family-keyed tables and getattr duck-typing left (not counted): safestop.read_decel / commloss_reaction.read_accel (cfg.ramps), the tables
+safestop._DECEL_CODES / _COMM_LOSS_WORDS and commloss_reaction._ACCEL_CODES.
+"""
+
+import re
+from pathlib import Path
+
+PKG = Path(__file__).resolve().parent.parent / "profidrive_cli"
+
+#: the brief's grep, as a regular expression
+SITES = re.compile(r"family ==|family !=|fam ==|fam !=|hasattr\(")
+#: a family compared with a literal name: none may remain
+BY_NAME = re.compile(r"""\b(?:family|fam)\s*[!=]=\s*["']""")
+
+MAX_SITES = 7
+
+
+def _sites(pattern: re.Pattern, root: Path = PKG) -> list[str]:
+    out = []
+    for sub in ("session", "checklist"):
+        for f in sorted((root / sub).rglob("*.py")):
+            for n, line in enumerate(f.read_text(encoding="utf-8").splitlines(), 1):
+                out += [f"{f.relative_to(root.parent).as_posix()}:{n}: {line.strip()}"] * \
+                    len(pattern.findall(line))
+    return out
+
+
+def test_family_branches_and_hasattr_dispatches_only_go_down():
+    found = _sites(SITES)
+    assert len(found) <= MAX_SITES, "new family branch / hasattr dispatch:\n" + "\n".join(found)
+
+
+def test_no_family_is_compared_with_its_name_above_drives():
+    assert _sites(BY_NAME) == []
+
+
+def test_the_hooks_have_a_default_in_base_and_the_codecs_answer():
+    # python-can's BusABC pattern: every hook exists on the base Drive; a family fills what differs
+    from profidrive_cli.drives import drive_class
+    from profidrive_cli.drives.base import Drive
+    from profidrive_cli.drives.profile import load_profile
+    hooks = ("param_info", "param_label", "value_problem", "params_at", "take_notes", "save_support",
+             "use_max_frequency", "comm_loss_summary", "dumpable", "on_device", "not_restored",
+             "pzd_assignment_param", "pzd_assigned_code", "comm_loss_reaction", "zero_data_reaction",
+             "normal_stop_warnings", "bus_run_refusal", "can_read", "cycle_words", "last_seen", "start_hint")
+    assert [h for h in hooks if not callable(getattr(Drive, h, None))] == []
+    facts = {name: (drive_class(load_profile(name)).monitor_mapping,
+                    drive_class(load_profile(name)).comm_loss_reaction_fixed,
+                    drive_class(load_profile(name)).area_shape)
+             for name in ("fuji-g1", "moeller", "toyo-pbus66z", "yaskawa-si-p1")}
+    # Fuji o48..o51 take effect after a power cycle (read, never written); Moeller PNU 916 is
+    # volatile (mapped for the session); Toyo's comm-loss reaction is protection 18, fixed (PBUS66-Z
+    # manual: no setting names it); Yaskawa's SI-P1 has MEMOBUS registers, no PZD mapping
+    assert facts == {"fuji-g1": ("read", False, "ppo"), "moeller": ("map", False, "ppo"),
+                     "toyo-pbus66z": ("", True, "ppo"), "yaskawa-si-p1": ("", False, "memobus")}
