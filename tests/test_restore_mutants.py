@@ -64,7 +64,7 @@ class Session:
         self.warnings: list[str] = []
         self.compared = []
 
-    def _warn(self, text):
+    def warn(self, text):
         self.warnings.append(text)
 
     def compare(self, doc, progress, allow_dangerous=False, check_identity=True):

@@ -143,13 +143,13 @@ class Session:
         self.stop_calls = 0
         self.stop_result = None
 
-    def _need_drive(self):
+    def need_drive(self):
         return self.drive
 
-    def _warn(self, text):
+    def warn(self, text):
         self.warnings.append(text)
 
-    def _say(self, text):
+    def say(self, text):
         self.messages.append(text)
 
     def stop_timeout(self, percent=None):
@@ -318,7 +318,7 @@ def test_stop_samples_go_to_on_sample():
     clock = Clock()
     d = Drive(clock, normal_after=2)
     s = Session(d, clock, decel_s=10.0)
-    s._fmax, s._t0, s.achieved_hz, s.cycles, s.counters = (50.0,), clock.t, 4.0, 0, {}
+    s._fmax, s.t0, s.achieved_hz, s.cycles, s.counters = (50.0,), clock.t, 4.0, 0, {}
     got = []
     r = ss.stop(s, got.append, None)
     assert r.how == "normal" and [smp.status for smp in got] == [RUNNING, RUNNING, STOPPED]
@@ -329,7 +329,7 @@ def test_coast_samples_go_to_on_sample_too():
     clock = Clock()
     d = Drive(clock, coast_after=2)
     s = Session(d, clock, decel_s=10.0)
-    s._fmax, s._t0, s.achieved_hz, s.cycles, s.counters = (50.0,), clock.t, 4.0, 0, {}
+    s._fmax, s.t0, s.achieved_hz, s.cycles, s.counters = (50.0,), clock.t, 4.0, 0, {}
     got = []
     r = ss.stop(s, got.append, 1.0)
     assert r.how == "coast"

@@ -316,10 +316,10 @@ class Bus:
             if r is None or not r.stopped:
                 continue
             if r.how == "normal":
-                s._say(f"station {s.address}: stopped (normal stop, {r.seconds:.1f} s)"
+                s.say(f"station {s.address}: stopped (normal stop, {r.seconds:.1f} s)"
                        if not (r.status and r.status.fault) else f"station {s.address}: {r.message}")
             else:
-                s._say(f"station {s.address}: stopped by a coast stop after {r.seconds:.1f} s "
+                s.say(f"station {s.address}: stopped by a coast stop after {r.seconds:.1f} s "
                        f"({r.message})")
         return None
 

@@ -51,7 +51,7 @@ def dump_plan(sess) -> list[tuple[str, Any, str]]:
     """(code, ParamDef, kind) for every parameter of the profile that the family can read:
     kind 'setting' (restored), 'readonly', or 'excluded: why' (read, never restored)."""
     out = []
-    d = sess._need_drive()
+    d = sess.need_drive()
     for p in sess.profile.parameters.values():
         if p.access == "wo":
             continue
@@ -77,7 +77,7 @@ def dump_plan(sess) -> list[tuple[str, Any, str]]:
 
 def dump(sess, progress: Callable[[int, int, str], None] | None = None) -> dict:
     """Read every readable parameter; a YAML-ready document with the station's identity."""
-    d = sess._need_drive()
+    d = sess.need_drive()
     if not d.has_param_channel:
         raise DriveError(no_channel_words(sess))
     plan = dump_plan(sess)
@@ -150,12 +150,12 @@ def compare(sess, doc: dict, progress: Callable[[int, int, str], None] | None = 
             allow_dangerous: bool = False, check_identity: bool = True) -> list[ParamRow]:
     """Each parameter of the file against the drive: 'unchanged', 'differs', 'missing' (cannot
     be read), 'skipped' (unknown code / read-only / not restorable / dangerous; .why says which)."""
-    d = sess._need_drive()
+    d = sess.need_drive()
     if not d.has_param_channel:
         raise DriveError(no_channel_words(sess))
     if check_identity:
         for n in identity_notes(sess, doc):
-            sess._warn(n)
+            sess.warn(n)
     rows: list[ParamRow] = []
     params = doc["parameters"]
     items = list(params.items())

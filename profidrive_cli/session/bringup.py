@@ -33,9 +33,9 @@ def connect(sess):
     # (pdrive run 3,4,5, the checklist's together, the API's drives): dp.poller.Master.keep
     sess.master.keep(sess.address, period)
     sess.channel = MeteredChannel(sess.master.channel(sess.address, period))
-    sess._t0 = sess.channel.now()
+    sess.t0 = sess.channel.now()
     if sess.log_csv:
-        sess.cyclelog = CycleLog(sess.log_csv, sess.channel, sess._t0, lambda: sess.drive, sess._warn,
+        sess.cyclelog = CycleLog(sess.log_csv, sess.channel, sess.t0, lambda: sess.drive, sess.warn,
                                  getattr(sess, "log_extra", None))
     drive = make_drive(sess.channel, sess.profile, sess.layout)
     track_motion(sess, drive)

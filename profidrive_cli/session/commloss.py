@@ -203,7 +203,7 @@ def _run_to_speed(sess, hz: float, pct: float, fmax_hz: float, start_timeout: fl
             why = (f"the acceleration time{f' ({code})' if code else ''} cannot be read; "
                    f"--start-timeout to change")
     band = max(AT_SPEED_HZ, AT_SPEED_FRAC * abs(hz))
-    sess._say(f"waiting for the drive to reach {hz:g} Hz (± {band:g} Hz), at most {limit:.3g} s ({why})")
+    sess.say(f"waiting for the drive to reach {hz:g} Hz (± {band:g} Hz), at most {limit:.3g} s ({why})")
     sample = sess.start(pct)
     emit({"event": "started", "t_s": round(sample.t, 3)})
     end = sess.channel.now() + limit
@@ -258,13 +258,13 @@ def run_commloss(sess, hz: float, mode: str = "silence", timeout: float | None =
     inner_channel = drive.channel
     if mode == "silence":
         t_last = sess.channel.now()
-        emit({"event": "silence", "t_s": round(t_last - sess._t0, 3), "hold_s": round(hold, 3)})
+        emit({"event": "silence", "t_s": round(t_last - sess.t0, 3), "hold_s": round(hold, 3)})
         master.link.sleep(hold)
     else:
         from profidrive_cli.dp import services as S
         master.global_control(S.GC_CLEAR, da=addr)
         t_last = sess.channel.now()
-        emit({"event": "clear", "t_s": round(t_last - sess._t0, 3)})
+        emit({"event": "clear", "t_s": round(t_last - sess.t0, 3)})
         inner_channel = _ZeroOutputs(sess.channel)
     drive.channel = inner_channel
 

@@ -113,7 +113,7 @@ class Sample:
 
 def choose_rate(sess) -> None:
     """Set sess.wire_hz (the bus limit for its station and layout) and sess.cycle_hz (asked, or the
-    default); a rate above the wire limit adds a warning (sess._warn)."""
+    default); a rate above the wire limit adds a warning (sess.warn)."""
     lay = sess.profile.layouts[sess.layout]
     baud = sess.master.params.baud
     sess.wire_hz = wire_limit_hz(baud, lay.output_len, lay.input_len)
@@ -123,7 +123,7 @@ def choose_rate(sess) -> None:
         sess.cycle_hz = float(sess.requested_cycle_hz)
         if sess.cycle_hz > sess.wire_hz * 1.0001:
             from profidrive_cli.fdl.timing import BAUD_NAMES
-            sess._warn(f"--cycle-hz {sess.cycle_hz:g} is more than {BAUD_NAMES.get(baud, baud)} "
+            sess.warn(f"--cycle-hz {sess.cycle_hz:g} is more than {BAUD_NAMES.get(baud, baud)} "
                        f"allows for this station ({sess.wire_hz:.1f} Hz: "
                        f"{1000.0 / sess.wire_hz:.1f} ms per Data_Exchange of "
                        f"{lay.output_len}/{lay.input_len} octets); on a real bus the wire sets "
@@ -137,6 +137,6 @@ def make_sample(sess, st: DriveStatus) -> Sample:
     else:
         fmax = getattr(sess.drive, "_fmax", None) or float(sess.profile.max_frequency_default)
     sess.final_status = st
-    return Sample(sess.channel.now() - sess._t0, st, float(fmax), sess.achieved_hz,
+    return Sample(sess.channel.now() - sess.t0, st, float(fmax), sess.achieved_hz,
                   sess.cycles, sess.counters)
 

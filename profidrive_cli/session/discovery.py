@@ -126,7 +126,7 @@ def resolve_layout(profile: Profile, layout: str | None = None, ppo: int | None 
 def locate(sess) -> DriveStation:
     """Find the session's station (its address, PDRIVE_STATION, or the only drive on the bus), its
     profile and layout; sets sess.station, address, ident, profile, layout (warnings through
-    sess._warn)."""
+    sess.warn)."""
     addr = sess.requested_address
     if addr is None:
         addr = station_from_env(sess.env)
@@ -155,6 +155,6 @@ def locate(sess) -> DriveStation:
     sess.ident = sess.station.ident
     sess.profile, warns = choose_profile(sess.ident, sess.profile_name, sess.address)
     for w in warns:
-        sess._warn(w)
-    sess.layout = resolve_layout(sess.profile, *sess._layout_args)
+        sess.warn(w)
+    sess.layout = resolve_layout(sess.profile, *sess.layout_args)
     return sess.station

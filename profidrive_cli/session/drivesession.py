@@ -54,7 +54,7 @@ class DriveSession:
         self.master = master
         self.requested_address = address
         self.profile_name = profile
-        self._layout_args = (layout, ppo, fmt)
+        self.layout_args = (layout, ppo, fmt)
         self.watchdog_ms = float(watchdog_ms)
         self.requested_cycle_hz = cycle_hz
         self.stop_timeout_s = stop_timeout
@@ -83,7 +83,7 @@ class DriveSession:
         self.final_status: DriveStatus | None = None
         self.comm_loss_text: str | None = None
         self._may_run = False
-        self._t0 = 0.0
+        self.t0 = 0.0
         self._decel_s: float | None = None
         self._fmax: tuple[float, str] | None = None
         self._fmax_override: float | None = None
@@ -101,12 +101,12 @@ class DriveSession:
 
 
     # -- messages ------------------------------------------------------------------------------
-    def _warn(self, text: str) -> None:
+    def warn(self, text: str) -> None:
         self.warnings.append(text)
         if self.on_message:
             self.on_message(f"warning: {text}")
 
-    def _say(self, text: str) -> None:
+    def say(self, text: str) -> None:
         self.messages.append(text)
         if self.on_message:
             self.on_message(text)
@@ -165,7 +165,7 @@ class DriveSession:
         if self.log_error is not None:
             if exc is None:
                 raise self.log_error          # the run went well, its log did not: exit 1
-            self._say(str(self.log_error))
+            self.say(str(self.log_error))
 
     @property
     def log_error(self):
@@ -191,7 +191,16 @@ class DriveSession:
     def may_run(self) -> bool:
         return self._may_run
 
-    def _need_drive(self):
+    @property
+    def fmax_hz(self) -> float:
+        """The maximum frequency (Hz) that 100 % stands for, as known so far: read from the drive or
+        given (fmax()), else the profile default. No bus traffic."""
+        if self._fmax is not None:
+            return float(self._fmax[0])
+        assert self.profile is not None
+        return float(self.profile.max_frequency_default)
+
+    def need_drive(self):
         if self.drive is None:
             raise PdriveError("DriveSession: not connected (use it as a context manager or call open())")
         return self.drive
@@ -297,7 +306,7 @@ class DriveSession:
         return self.status()
 
     def fault_history(self) -> list[FaultRecord]:
-        return self._need_drive().fault_history()
+        return self.need_drive().fault_history()
 
     def trip_records(self):
         """The card's trip records (session/monitors.py): TripRecords, .supported False when it keeps none."""
@@ -306,7 +315,7 @@ class DriveSession:
 
     def clear_fault(self, timeout: float = 5.0) -> Sample:
         """Acknowledge the current fault (the cause must be gone). The history stays."""
-        st = self._need_drive().reset_fault(timeout=timeout)
+        st = self.need_drive().reset_fault(timeout=timeout)
         return self._sample(st)
 
     # -- dump / compare / restore (backup.py, dumpfile.py, restore.py) ----------------------------

@@ -14,7 +14,7 @@ from profidrive_cli.session.safestop import read_comm_loss, read_decel
 
 def refusal(sess) -> str | None:
     """Why this station cannot jog (one line), None when it can."""
-    d = sess._need_drive()
+    d = sess.need_drive()
     return None if d.supports_jog else d.jog_refusal()
 
 
@@ -27,7 +27,7 @@ def check(sess) -> None:
 def jog_speed(sess) -> ParamValue | None:
     """The jog speed parameter read from the drive (Moeller A038), None where the card names none or
     the layout has no parameter channel."""
-    d = sess._need_drive()
+    d = sess.need_drive()
     code = d.jog_reference()
     if code is None or not d.has_param_channel:
         return None
@@ -38,7 +38,7 @@ def start(sess, reverse: bool = False, timeout: float = 5.0) -> Sample:
     """Jog on; waits until the drive reports running (or moving); DriveError with the family's hint
     after `timeout` s."""
     check(sess)
-    d = sess._need_drive()
+    d = sess.need_drive()
     if sess._decel_s is None:
         sess._decel_s = read_decel(sess)
     if sess.comm_loss_text is None:
@@ -61,6 +61,6 @@ def start(sess, reverse: bool = False, timeout: float = 5.0) -> Sample:
 
 def release(sess) -> Sample:
     """Jog off (one cycle); the caller then stops the drive (DriveSession.stop)."""
-    d = sess._need_drive()
+    d = sess.need_drive()
     d.jog(False)
     return make_sample(sess, d.cycle())

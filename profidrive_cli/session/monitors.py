@@ -146,7 +146,7 @@ class Monitors:
         """Put the monitors into the layout's cyclic input words where the card allows (see the
         module's text). Returns the codes now carried cyclically. Call before the motor starts."""
         sess = self.sess
-        drive = sess._need_drive()
+        drive = sess.need_drive()
         for c, word in cyclic_monitors(sess.profile, sess.layout).items():
             if c in self.codes:                          # a parameter the input words carry anyway
                 self.carried[c] = word
@@ -160,7 +160,7 @@ class Monitors:
                 self.cyclic[c] = -1
             else:
                 self.dropped[c] = f"layout {sess.layout} has no '{w.word}' input word"
-                sess._say(f"--monitor {c}: {self.dropped[c]}; not monitored")
+                sess.say(f"--monitor {c}: {self.dropped[c]}; not monitored")
         ppo = getattr(drive, "ppo", None)
         if ppo is None or ppo.pzd_in <= 2 or not drive.has_param_channel:
             return list(self.cyclic)
@@ -183,7 +183,7 @@ class Monitors:
                 try:
                     sess.write_param(key, p.pnu)
                 except ParamError as e:
-                    sess._say(f"--monitor {c}: not mapped into PZD{n + 2} ({e}); read through the PKW")
+                    sess.say(f"--monitor {c}: not mapped into PZD{n + 2} ({e}); read through the PKW")
                     continue
                 if not self.saved_map:
                     sess.after_stop.append(self.restore)
@@ -198,7 +198,7 @@ class Monitors:
             failed = [f"{k} not restored to {old} (link lost)" for k, old in self.saved_map]
             self.saved_map.clear()
             for f in failed:
-                self.sess._say(f"--monitor: {f}")
+                self.sess.say(f"--monitor: {f}")
             return failed
         failed = []
         while self.saved_map:
@@ -208,13 +208,13 @@ class Monitors:
             except Exception as e:            # noqa: BLE001  (the link may be gone: say what is left)
                 failed.append(f"{key} not restored to {old} ({e})")
         for f in failed:
-            self.sess._say(f"--monitor: {f}")
+            self.sess.say(f"--monitor: {f}")
         return failed
 
     def _read_cyclic(self, sample=None) -> None:
         drive = self.sess.drive
         area = getattr(drive, "last_area", None)
-        t = self.sess.channel.now() - self.sess._t0
+        t = self.sess.channel.now() - self.sess.t0
         for c, i in self.cyclic.items():
             if c in self.carried:
                 raw = sample.status.raw.get(self.carried[c]) if sample is not None else None
@@ -253,13 +253,13 @@ class Monitors:
             pv = self.sess.read_param(code)
         except ParamError as e:              # the drive refused it: it has no such monitor
             self.dropped[code] = str(e)
-            self.sess._say(f"--monitor {code}: {e}; not monitored")
+            self.sess.say(f"--monitor {code}: {e}; not monitored")
             return None
         except DriveError as e:              # no answer in time: keep the last value, try again later
-            self.sess._say(f"--monitor {code}: {e}")
+            self.sess.say(f"--monitor {code}: {e}")
             return None
         mv = self.values[code]
-        mv.value, mv.raw, mv.t = pv.value, pv.raw, self.sess.channel.now() - self.sess._t0
+        mv.value, mv.raw, mv.t = pv.value, pv.raw, self.sess.channel.now() - self.sess.t0
         if pv.unit:
             mv.unit = pv.unit
         return mv
@@ -307,7 +307,7 @@ def trip_records(sess) -> TripRecords:
     cfg = trip_record_config(sess.profile)
     if cfg is None:
         return TripRecords(False, note=NO_TRIP_RECORDS)
-    drive = sess._need_drive()
+    drive = sess.need_drive()
     if not drive.has_param_channel:
         return TripRecords(True, note=f"layout {sess.layout} has no parameter channel: trip records "
                                       f"not readable")

@@ -17,7 +17,7 @@ from profidrive_cli.session.safestop import read_comm_loss, read_decel
 def fmax(sess, override: float | None = None) -> tuple[float, str]:
     """(max frequency in Hz = 100 %, where it came from). With a parameter channel the drive's own
     value is read; without one `override` (--fmax) or the profile default is used."""
-    d = sess._need_drive()
+    d = sess.need_drive()
     if sess._fmax is not None and override == sess._fmax_override:
         return sess._fmax
     code = sess.profile.max_frequency_param
@@ -31,7 +31,7 @@ def fmax(sess, override: float | None = None) -> tuple[float, str]:
         hz = float(d.max_frequency())
         src = f"read from the drive ({code})"
         if override is not None and not math.isclose(override, hz, rel_tol=1e-3):
-            sess._warn(f"{given}{'' if hasattr(override, 'source') else ' Hz'} ignored: the drive "
+            sess.warn(f"{given}{'' if hasattr(override, 'source') else ' Hz'} ignored: the drive "
                        f"says {code} = {hz:g} Hz")
     elif override is not None:
         if override <= 0:
@@ -71,12 +71,12 @@ def percent_for_hz(sess, hz: float, fmax_override: float | None = None) -> float
 def set_reference(sess, percent: float) -> None:
     if not -100.0 <= percent <= 100.0:
         raise UsageError(f"speed {percent:g} % is outside -100..100 % of the maximum frequency")
-    sess._need_drive().set_speed(percent)
+    sess.need_drive().set_speed(percent)
 
 
 def start(sess, percent: float | None = None, timeout: float = 5.0) -> Sample:
     """Set the reference (if given) and step the drive to operation."""
-    d = sess._need_drive()
+    d = sess.need_drive()
     if sess._decel_s is None:
         sess._decel_s = read_decel(sess)
     if sess.comm_loss_text is None:
@@ -90,15 +90,15 @@ def start(sess, percent: float | None = None, timeout: float = 5.0) -> Sample:
 
 def poll(sess) -> Sample:
     """One Data_Exchange with the current command, decoded."""
-    st = sess._need_drive().cycle()
+    st = sess.need_drive().cycle()
     if st.fault and st.fault_code is None:
-        st = sess._need_drive().status()
+        st = sess.need_drive().status()
     return make_sample(sess, st)
 
 
 def status(sess) -> Sample:
     """One read of the status, with the current fault named where the card can say it."""
-    d = sess._need_drive()
+    d = sess.need_drive()
     if d.has_param_channel:
         try:
             fmax(sess)

@@ -441,7 +441,7 @@ def stop_together(items, group: GroupCycle, hurry: Callable[[], bool] = lambda: 
             if mode == "normal" and (hurried or now > deadline):
                 why = why or ("stop hurried by a second signal" if hurried else
                               f"not stopped after {limit:g} s")
-                s._warn(f"station {a}: {why}: coasting")
+                s.warn(f"station {a}: {why}: coasting")
                 pending[a] = ["coast", now + COAST_TIMEOUT_S, COAST_TIMEOUT_S, why]
                 try:
                     s.drive.stop("coast", wait=False)

@@ -31,7 +31,7 @@ def profiles_with_code(code: str) -> list[Profile]:
 def param_info(sess, code: str) -> ParamInfo:
     """How the station's family addresses `code` (no bus traffic). UsageError with the closest
     codes of the family, or with the family the code belongs to."""
-    d = sess._need_drive()
+    d = sess.need_drive()
     text = code.strip()
     if not text:
         raise UsageError("empty parameter code")
@@ -135,7 +135,7 @@ def stopped_for(sess, info: ParamInfo) -> str | None:
         return None
     st = sess.drive.cycle()
     if st.running or not st.stopped:
-        hz = Sample(0, st, sess._fmax[0] if sess._fmax else float(sess.profile.max_frequency_default),
+        hz = Sample(0, st, sess.fmax_hz,
                     0, 0, {}).actual_hz
         return (f"{info.code} ({info.name}) can only be changed while the motor is "
                 f"stopped (the drive is {st.state}" + (f", {hz:g} Hz" if hz else "") + "); stop it first")
@@ -165,7 +165,7 @@ def notes(sess) -> list[str]:
 def save_support(sess) -> str:
     """'command' (the card has a save command), 'automatic' (every write is stored), or
     'unsupported'."""
-    return sess._need_drive().save_support()
+    return sess.need_drive().save_support()
 
 
 def save(sess) -> str:

@@ -113,7 +113,7 @@ def restore(session, doc: dict, dry_run: bool = False, progress=None,
     apply (dry run). A write that fails, or a link lost mid-way -> RestoreInterrupted with the
     rows: 'applied' landed, 'unknown' was being written, 'not written' were not reached."""
     for w in doc.get("_warnings", []):
-        session._warn(w)
+        session.warn(w)
     rows = session.compare(doc, progress, allow_dangerous=allow_dangerous, check_identity=False)
     problems = restore_problems(session, doc, rows, allow_dangerous)
     if problems:

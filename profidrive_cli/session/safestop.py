@@ -89,7 +89,7 @@ def stop_timeout(sess, percent: float | None = None) -> float:
 
 def stop(sess, on_sample, timeout) -> StopReport:
     """Normal stop, bounded wait, coast if it does not stop (or a signal hurries it)."""
-    d = sess._need_drive()
+    d = sess.need_drive()
     t_start = sess.channel.now()
     last = d.last_seen()
     pct = last.speed_percent if last is not None else None
@@ -110,7 +110,7 @@ def stop(sess, on_sample, timeout) -> StopReport:
     except DriveError as e:
         why = f"normal stop failed: {e}"
     # escalate: coast (OFF2 / base block / run bit off)
-    _tell(sess, sess._warn, f"{why}: coasting")
+    _tell(sess, sess.warn, f"{why}: coasting")
     try:
         d.stop("coast", wait=False)
         sess.signals.hurry = False
@@ -162,7 +162,7 @@ def callback_failed(sess, e: BaseException) -> None:
 
 
 def _tell(sess, say, text: str) -> None:
-    """sess._say / sess._warn: the text is kept in the session even when on_message raises."""
+    """sess.say / sess.warn: the text is kept in the session even when on_message raises."""
     try:
         say(text)
     except Exception as e:                  # noqa: BLE001
@@ -200,7 +200,7 @@ def _shutdown(sess, exc: BaseException | None) -> None:
         if sess._may_run:
             sess.stop_report = StopReport("not sent (link lost)", False, 0.0,
                                           link_lost_words(sess, exc))
-            _tell(sess, sess._say, sess.stop_report.message)
+            _tell(sess, sess.say, sess.stop_report.message)
         _after_stop(sess, False)
         return
     if exc is not None:
@@ -214,21 +214,21 @@ def _shutdown(sess, exc: BaseException | None) -> None:
         try:
             r = sess.stop()
             if r.how == "normal":
-                _tell(sess, sess._say, f"stopped (normal stop, {r.seconds:.1f} s)"
+                _tell(sess, sess.say, f"stopped (normal stop, {r.seconds:.1f} s)"
                       if not (r.status and r.status.fault) else r.message)
             elif r.how == "coast":
-                _tell(sess, sess._say, f"stopped by a coast stop after {r.seconds:.1f} s ({r.message})")
+                _tell(sess, sess.say, f"stopped by a coast stop after {r.seconds:.1f} s ({r.message})")
             else:
-                _tell(sess, sess._say, f"could not confirm the stop: {r.message}")
+                _tell(sess, sess.say, f"could not confirm the stop: {r.message}")
         except LinkLost as e:
             sess.link_lost = True
             sess.stop_report = StopReport("not sent (link lost)", False, 0.0, link_lost_words(sess, e))
-            _tell(sess, sess._say, sess.stop_report.message)
+            _tell(sess, sess.say, sess.stop_report.message)
             _after_stop(sess, False)
             return
         except PdriveError as e:
             sess.stop_report = StopReport("failed", False, 0.0, f"stop failed: {e}")
-            _tell(sess, sess._say, f"stop failed: {e}; the station's watchdog "
+            _tell(sess, sess.say, f"stop failed: {e}; the station's watchdog "
                                    f"({sess.watchdog_ms:g} ms) ends data exchange when pdrive lets go")
     elif sess.stop_report is None:
         sess.stop_report = StopReport("not needed", True, 0.0, "not started by this session",
@@ -247,4 +247,4 @@ def _after_stop(sess, link_ok: bool) -> None:
         try:
             hook(link_ok)
         except Exception as e:          # noqa: BLE001  (the stop is done; say what was left)
-            _tell(sess, sess._say, f"after the stop: {e}")
+            _tell(sess, sess.say, f"after the stop: {e}")

@@ -14,7 +14,7 @@ from profidrive_cli.session.cycle import Sample
 
 def check(sess, torque: float | None, limit: float | None) -> None:
     """UsageError with the card's reason when it cannot take this torque reference or limit."""
-    d = sess._need_drive()
+    d = sess.need_drive()
     if torque is not None:
         why = d.torque_support()
         if why:
@@ -33,10 +33,10 @@ def start(sess, torque: float | None, limit: float | None, percent: float | None
           timeout: float = 5.0) -> Sample:
     """Check, warn, set the torque word, start (with the speed reference `percent` if given)."""
     check(sess, torque, limit)
-    d = sess._need_drive()
+    d = sess.need_drive()
     for note in d.torque_notes():
         if note not in sess.warnings:
-            sess._warn(note)
+            sess.warn(note)
     if torque is not None:
         d.set_torque(torque)
     if limit is not None:
@@ -47,4 +47,4 @@ def start(sess, torque: float | None, limit: float | None, percent: float | None
 def set_torque(sess, percent: float) -> None:
     """A new torque reference while running (keys in the live view)."""
     check(sess, percent, None)
-    sess._need_drive().set_torque(percent)
+    sess.need_drive().set_torque(percent)
