@@ -4,7 +4,7 @@ import re
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-PINNED = "PIP_CONSTRAINT=constraints.txt pip install '.[test]' && pytest -q"
+PINNED = "PIP_CONSTRAINT=constraints.txt pip install -c constraints.txt '.[test]' && pytest -q"
 NEWEST = "pip install --upgrade --upgrade-strategy eager '.[test]' && pytest -q"
 
 
