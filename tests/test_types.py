@@ -1,6 +1,7 @@
 """The types are held: mypy (pyproject.toml [tool.mypy]) is clean on the whole package, and
-`mypy --strict` is clean on the public Python API (profidrive_cli/api/, docs/api.md): its errors are
-reported in api/ files only, the modules it imports are followed silently.
+`mypy --strict` is clean on the public Python API (profidrive_cli/api/, docs/api.md) and on the Drive
+interface (profidrive_cli/drives/base.py): their errors are reported in those files only, the modules
+they import are followed silently.
 
 mypy is in the `test` extra (pinned in constraints.txt). Without it the two checks are skipped, except
 under CI=true, where they fail. Each run uses its own cache under pytest's tmp_path (a fresh clone works).
@@ -44,6 +45,13 @@ def test_mypy_strict_is_clean_on_the_public_api(tmp_path):
     rc, output = _mypy(tmp_path, "--strict", "profidrive_cli/api")
     assert rc == 0, output
     assert "Success: no issues found in 4 source files" in output, output
+
+
+def test_mypy_strict_is_clean_on_the_drive_interface(tmp_path):
+    # drives/base.py: the Drive interface and its family hooks, which session/ and checklist/ stand on
+    rc, output = _mypy(tmp_path, "--strict", "profidrive_cli/drives/base.py")
+    assert rc == 0, output
+    assert "Success: no issues found in 1 source file" in output, output
 
 
 # -- the bugs mypy found ---------------------------------------------------------------------------

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Callable, Protocol
 
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.drives.torque import no_torque_reason
@@ -62,7 +62,7 @@ class DriveStatus:
         return not self.running and (self.speed_percent in (None, 0.0) or abs(self.speed_percent) < 0.05)
 
 
-def value_text(v, unit: str = "") -> str:
+def value_text(v: object, unit: str = "") -> str:
     """An engineering value with its unit for messages and tables ("6 Hz", "2.5 s", "-")."""
     if v is None:
         return "-"
@@ -106,8 +106,8 @@ class Reaction:
     recover: bool = False          # forgotten when the link returns within the delay
     alarm: str | None = None       # the fault the drive shows
     decel_s: float | None = None   # ramp time from max frequency to 0 (stop == "ramp")
-    settings: dict = field(default_factory=dict)   # code -> value read from the drive
-    warnings: list = field(default_factory=list)   # what may make the drive act otherwise
+    settings: dict[str, Any] = field(default_factory=dict)   # code -> value read from the drive
+    warnings: list[str] = field(default_factory=list)   # what may make the drive act otherwise
 
     def stop_s(self, hz: float, fmax_hz: float) -> float:
         if self.stop != "ramp" or not self.decel_s or fmax_hz <= 0:
@@ -143,7 +143,8 @@ class Drive(ABC):
     def cycle(self) -> DriveStatus:
         """One Data_Exchange with the current command; returns the decoded status."""
 
-    def cycles_until(self, predicate, timeout: float, what: str) -> DriveStatus:
+    def cycles_until(self, predicate: Callable[[DriveStatus], bool], timeout: float, what: str
+                     ) -> DriveStatus:
         """Cycle until predicate(status) is true; DriveError naming `what` after `timeout` s."""
         end = self.channel.now() + timeout
         st = self.cycle()
