@@ -10,7 +10,8 @@ dropped, the old file stays, and `error` holds the OutputWriteError the session 
 from __future__ import annotations
 
 import csv
-from typing import Callable
+from pathlib import Path
+from typing import Any, Callable, Sequence
 
 from profidrive_cli.outfile import OutputFile, OutputWriteError
 
@@ -20,8 +21,9 @@ class CycleLog:
     gives the Drive whose layout names the words (None before it exists); `warn(text)` is told when
     logging stops. close() renames the file into place (or keeps the error in .error)."""
 
-    def __init__(self, path, channel, t0: float, drive_of: Callable[[], object],
-                 warn: Callable[[str], None], extra=None):
+    def __init__(self, path: str | Path, channel: Any, t0: float, drive_of: Callable[[], object],
+                 warn: Callable[[str], None],
+                 extra: tuple[Sequence[str], Callable[[], Sequence[object]]] | None = None):
         self.path = path
         #: (column names, row()) of values logged beside each exchange (run --monitor), or None
         self.extra = extra
@@ -53,7 +55,7 @@ class CycleLog:
             return
         self._row(row)
 
-    def _row(self, row: list) -> None:
+    def _row(self, row: Sequence[object]) -> None:
         try:
             self._writer.writerow(row)
         except Exception as e:              # noqa: BLE001  (OSError: disk full; any other: logging stops)
@@ -83,21 +85,23 @@ class CycleLog:
             self.error = e
 
 
-def _hex4(v) -> str:
+def _hex4(v: int | None) -> str:
     return "" if v is None else f"0x{v & 0xFFFF:04X}"
 
 
-def _s16(v) -> str:
+def _s16(v: int | None) -> str:
     if v is None:
         return ""
     v &= 0xFFFF
     return str(v - 0x10000 if v & 0x8000 else v)
 
 
-def cycle_words(drive, outputs: bytes, inputs: bytes) -> tuple[int | None, int | None, int | None, int | None]:
+def cycle_words(drive: Any, outputs: bytes, inputs: bytes
+                ) -> tuple[int | None, int | None, int | None, int | None]:
     """(control word, reference, status word, actual) of one exchange, whatever the family."""
     try:
-        return drive.cycle_words(outputs, inputs)        # drives.base.Drive: the codec's own words
+        words: tuple[int | None, int | None, int | None, int | None] = drive.cycle_words(outputs, inputs)
+        return words                                     # drives.base.Drive: the codec's own words
     except Exception:
         pass
     return None, None, None, None

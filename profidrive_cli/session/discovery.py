@@ -8,9 +8,14 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Mapping
 
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.drives.profile import Profile, all_profiles, load_profile, profile_for_ident
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.dp.poller import Master
+    from profidrive_cli.session.drivesession import DriveSession
 
 
 @dataclass
@@ -26,7 +31,7 @@ class DriveStation:
         return f"{self.address} (ident 0x{self.ident:04X})" if self.ident is not None else str(self.address)
 
 
-def find_drive_stations(master, first: int = 0, last: int = 125) -> list[DriveStation]:
+def find_drive_stations(master: "Master", first: int = 0, last: int = 125) -> list[DriveStation]:
     """Every slave that answers FDL status and Slave_Diag, with its profile (None when the ident is
     not one of ours). Retries are off during the probe so an empty bus is scanned quickly."""
     from profidrive_cli.dp.scan import scan
@@ -36,7 +41,7 @@ def find_drive_stations(master, first: int = 0, last: int = 125) -> list[DriveSt
         entries = scan(master, first, last)
     finally:
         master.fdl.params = saved
-    out = []
+    out: list[DriveStation] = []
     for e in entries:
         if e.station_type != "slave" or e.diag is None:
             continue
@@ -45,7 +50,7 @@ def find_drive_stations(master, first: int = 0, last: int = 125) -> list[DriveSt
     return out
 
 
-def station_from_env(env) -> int | None:
+def station_from_env(env: Mapping[str, str] | None) -> int | None:
     text = (env or {}).get("PDRIVE_STATION")
     if text in (None, ""):
         return None
@@ -123,7 +128,7 @@ def resolve_layout(profile: Profile, layout: str | None = None, ppo: int | None 
     return name
 
 
-def locate(sess) -> DriveStation:
+def locate(sess: "DriveSession") -> DriveStation:
     """Find the session's station (its address, PDRIVE_STATION, or the only drive on the bus), its
     profile and layout; sets sess.station, address, ident, profile, layout (warnings through
     sess.warn)."""
@@ -151,6 +156,7 @@ def locate(sess) -> DriveStation:
             raise BusError(f"station {addr} does not answer on {port}")
         sess.station = DriveStation(addr, d.ident, profile_for_ident(d.ident),
                                     d.state_words(sess.master.address))
+    assert sess.station is not None
     sess.address = sess.station.address
     sess.ident = sess.station.ident
     sess.profile, warns = choose_profile(sess.ident, sess.profile_name, sess.address)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import os
 import signal
 import threading
+from types import FrameType
 from typing import Any, Protocol
 
 
@@ -39,7 +40,7 @@ _original: dict[int, Any] = {}
 _pending: list[int] = []
 
 
-def _dispatch(signum, frame):
+def _dispatch(signum: int, frame: FrameType | None) -> None:
     guarding = [g for g in _active if g._guarding]
     if guarding:
         for g in guarding:
@@ -52,7 +53,7 @@ def _dispatch(signum, frame):
     _call_original(signum, frame)
 
 
-def _call_original(signum, frame):
+def _call_original(signum: int, frame: FrameType | None) -> Any:
     h = _original.get(signum, signal.SIG_DFL)
     if callable(h):
         return h(signum, frame)
