@@ -528,18 +528,9 @@ _flag_cache: dict[tuple[str, str], list[str]] = {}
 
 
 def _flag_names(profile, layout: str) -> list[str]:
-    """The family's status flag names, taken from one status decode on a simulated drive of this profile."""
+    """The family's status flag names in this layout: a class fact of its Drive (no bus, no simulator)."""
     key = (profile.name, layout)
     if key not in _flag_cache:
-        names: list[str] = []
-        try:
-            from profidrive_cli.drives import make_drive
-            from profidrive_cli.sim.direct import DirectChannel
-            from profidrive_cli.sim.plant import make_model
-            model = make_model(profile)
-            drive = make_drive(DirectChannel(model, profile.layouts[layout].cfg), profile, layout)
-            names = list(drive.cycle().flags)
-        except Exception:             # noqa: BLE001 - no sim model: only the generic names are known
-            names = []
-        _flag_cache[key] = names
+        from profidrive_cli.drives import drive_class
+        _flag_cache[key] = drive_class(profile).status_flag_names(profile, layout)
     return _flag_cache[key]

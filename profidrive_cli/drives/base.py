@@ -178,6 +178,20 @@ class Drive(ABC):
         """Why this card cannot jog over the bus (one line; only asked when supports_jog is False)."""
         return f"{self.family}: jog is not supported by this card"
 
+    @classmethod
+    def jog_refusal_for(cls, profile: Any, layout: str) -> str | None:
+        """Class fact, no bus: None when this family's card can jog in `layout`, else one line saying
+        why not; the same answer as a connected drive's supports_jog / jog_refusal()."""
+        if cls.supports_jog is True:
+            return None
+        return f"{cls.family}: jog is not supported by this card"
+
+    @classmethod
+    def status_flag_names(cls, profile: Any, layout: str) -> list[str]:
+        """Class fact, no bus: the names this family's status decode can give DriveStatus.flags in
+        `layout` (what a checklist's expect_status may name besides the generic ones)."""
+        return []
+
     def jog_reference(self) -> str | None:
         """The parameter code holding the jog speed (e.g. Moeller A038), None where the card has none."""
         return None

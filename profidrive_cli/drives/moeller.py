@@ -317,6 +317,14 @@ class MoellerDrive(pd.ProfidriveDrive):
     # -- jog: CTW bit 8 "inching 1" at A038 from "Enable operation" (spec 3.1, manual L542-543) --
     supports_jog = True
 
+    @classmethod
+    def jog_refusal_for(cls, profile: Any, layout: str) -> str | None:
+        return None                           # jog 1 / jog 2 (CTW bits 8, 9) on every DE6-NET-DP layout
+
+    @classmethod
+    def extra_flag_names(cls, profile: Any, layout: str) -> list[str]:
+        return ["bus gives commands"]         # status_extras()
+
     def jog(self, on: bool = True, reverse: bool = False) -> None:
         """Inching 1: operation (bits 0-6, 10) with HSW = 0 and bit 8; reverse = bit 11 (REV), the
         direction of every run on this card (sign of HSW XOR bit 11). Bit 9 (inching 2) is not used."""

@@ -8,14 +8,29 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Mapping
+from typing import TYPE_CHECKING, Any, Mapping, Protocol
 
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.drives.profile import Profile, all_profiles, load_profile, profile_for_ident
 
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.dp.poller import Master
-    from profidrive_cli.session.drivesession import DriveSession
+
+
+class Locating(Protocol):
+    """What locate() reads and sets on the station being opened (session.DriveSession)."""
+    master: Any
+    requested_address: int | None
+    env: Mapping[str, str]
+    profile_name: str | None
+    layout_args: tuple[str | None, int | None, str | None]
+    station: "DriveStation | None"
+    address: int | None
+    ident: int | None
+    profile: Profile | None
+    layout: str | None
+
+    def warn(self, text: str) -> None: ...
 
 
 @dataclass
@@ -128,7 +143,7 @@ def resolve_layout(profile: Profile, layout: str | None = None, ppo: int | None 
     return name
 
 
-def locate(sess: "DriveSession") -> DriveStation:
+def locate(sess: Locating) -> DriveStation:
     """Find the session's station (its address, PDRIVE_STATION, or the only drive on the bus), its
     profile and layout; sets sess.station, address, ident, profile, layout (warnings through
     sess.warn)."""

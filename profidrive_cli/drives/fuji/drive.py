@@ -91,8 +91,16 @@ class FujiDrive(pd.ProfidriveDrive):
     supports_jog = False
 
     def jog_refusal(self) -> str:
-        return (f"{self.profile.name}: CTW bits 8 and 9 are not used by this card; there is no jog "
+        return self._no_jog_words(self.profile)
+
+    @staticmethod
+    def _no_jog_words(profile: Any) -> str:
+        return (f"{profile.name}: CTW bits 8 and 9 are not used by this card; there is no jog "
                 f"over PROFIBUS (use run with a low speed instead)")
+
+    @classmethod
+    def jog_refusal_for(cls, profile: Any, layout: str) -> str | None:
+        return cls._no_jog_words(profile)
 
     def jog(self, on: bool = True, reverse: bool = False) -> None:
         raise DriveError(self.jog_refusal())

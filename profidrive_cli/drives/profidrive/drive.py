@@ -386,8 +386,27 @@ class ProfidriveDrive(Drive):
         return self.cfg.jog_reference is not None
 
     def jog_refusal(self) -> str:
-        return (f"{self.profile.name}: the profile names no jog function (profidrive: jog_reference), so "
+        return self._no_jog_words(self.profile)
+
+    @staticmethod
+    def _no_jog_words(profile: Any) -> str:
+        return (f"{profile.name}: the profile names no jog function (profidrive: jog_reference), so "
                 f"pdrive does not set CTW bit 8")
+
+    @classmethod
+    def jog_refusal_for(cls, profile: Any, layout: str) -> str | None:
+        return None if config(profile).jog_reference is not None else cls._no_jog_words(profile)
+
+    @classmethod
+    def status_flag_names(cls, profile: Any, layout: str) -> list[str]:
+        """The status word's named bits (profidrive stw names), then the family's extras."""
+        names = config(profile).stw_names
+        return [names[b] for b in sorted(names)] + cls.extra_flag_names(profile, layout)
+
+    @classmethod
+    def extra_flag_names(cls, profile: Any, layout: str) -> list[str]:
+        """Flags status_extras() adds (none in the plain PROFIdrive core)."""
+        return []
 
     def jog_reference(self) -> str | None:
         return self.cfg.jog_reference

@@ -347,8 +347,35 @@ class ToyoDrive(pd.ProfidriveDrive):
         return not self.plch
 
     def jog_refusal(self) -> str:
-        return (f"{self.profile.name}: with the built-in PLC in use (PLCH) the jog bit goes to PLC contact "
+        return self._no_jog_words(self.profile)
+
+    @staticmethod
+    def _no_jog_words(profile: Any) -> str:
+        return (f"{profile.name}: with the built-in PLC in use (PLCH) the jog bit goes to PLC contact "
                 f"I00021, not to the inverter (spec 3.4); pdrive does not jog through a PLC program")
+
+    @classmethod
+    def jog_refusal_for(cls, profile: Any, layout: str) -> str | None:
+        tc = toyo_config(profile)
+        plch = tc.plch or tc.layouts[layout].plch
+        return cls._no_jog_words(profile) if plch else None
+
+    @classmethod
+    def status_flag_names(cls, profile: Any, layout: str) -> list[str]:
+        """_decode_status's flags: the status-flag word's bits, a name per fault-flag bit
+        ("fault: ..."), and in PROFIdrive mode "jogging" and the ZSW's bits."""
+        tc = toyo_config(profile)
+        tl = tc.layouts[layout]
+        words = tl.words("response", tc.plch or tl.plch)
+        names: list[str] = []
+        if "status_flag" in words:
+            names += list(tc.bits["status_flag"].values())
+        for table in ("fault_flag1", "fault_flag2"):
+            if table in words:
+                names += [f"fault: {t}" for t in tc.bits[table].values()]
+        if tl.mode == 0:
+            names += ["jogging"] + list(tc.bits["zsw"].values())
+        return list(dict.fromkeys(names))
 
     def jog_reference(self) -> str | None:
         return None        # the PBUS66-Z manual names no jog-speed parameter (set on the VF66 itself)

@@ -14,8 +14,8 @@ from profidrive_cli.drives.base import (Drive, DriveError, DriveStatus, FaultRec
                                         ParamInfo, ParamValue, Reaction)
 from profidrive_cli.drives.torque import capability_refusal, torque_counts
 from profidrive_cli.drives.values import raw_value_problem, value_problem
-from profidrive_cli.drives.yaskawa.codec import (COMMAND_BITS, FORMATS, FrequencyScale, _s16, decode_status,
-                                                 mfi_bit, pack_words, unpack_words)
+from profidrive_cli.drives.yaskawa.codec import (COMMAND_BITS, FORMATS, STATUS_BITS, FrequencyScale, _s16,
+                                                 decode_status, mfi_bit, pack_words, unpack_words)
 from profidrive_cli.drives.yaskawa.config import family_config, parse_register_code, register_name
 from profidrive_cli.drives.yaskawa.paramaccess import ParamAccess, ParamRequest, ParamResult, error_text
 
@@ -37,9 +37,21 @@ class YaskawaDrive(Drive):
     area_shape = "memobus"
 
     def jog_refusal(self) -> str:
-        return (f"{self.profile.name}: the SI-P1 run command word has no jog bit (bit 0 forward run, bit 1 "
+        return self._no_jog_words(self.profile)
+
+    @staticmethod
+    def _no_jog_words(profile: Any) -> str:
+        return (f"{profile.name}: the SI-P1 run command word has no jog bit (bit 0 forward run, bit 1 "
                 f"reverse run, the others multi-function inputs whose function the drive's own H1 settings "
                 f"choose); use run with a low speed instead")
+
+    @classmethod
+    def jog_refusal_for(cls, profile: Any, layout: str) -> str | None:
+        return cls._no_jog_words(profile)
+
+    @classmethod
+    def status_flag_names(cls, profile: Any, layout: str) -> list[str]:
+        return list(STATUS_BITS)              # the status word's bits (spec 2.5), whatever the layout
 
     def __init__(self, channel, profile, layout: str | None = None):
         super().__init__(channel, profile, layout)
