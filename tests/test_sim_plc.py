@@ -194,7 +194,7 @@ def test_a_script_that_fails_unexpectedly_stops_its_drive(monkeypatch):
     # turning: the PLC stops it and keeps its station in data exchange with idle cycles
     from profidrive_cli.dp.capture import Capture
     from profidrive_cli.sim import plc as plc_mod
-    from profidrive_cli.session.passive import PassiveDecoder, watch_list
+    from profidrive_cli.bustools.passive import PassiveDecoder, watch_list
     from profidrive_cli.sim.plant import build_bus
     import profidrive_cli.drives as drives
 
