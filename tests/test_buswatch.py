@@ -1,4 +1,4 @@
-"""scan --watch (session/buswatch.py, cli/scan_watch.py) and the checklist step bus_health.
+"""scan --watch (bustools/buswatch.py, cli/scan_watch.py) and the checklist step bus_health.
 
 Expected values: the Slave_Diag bit positions from the DP reference (st1 bit 0 Station_Non_Existent,
 1 Station_Not_Ready, 2 Cfg_Fault, 3 Ext_Diag, 4 Not_Supported, 6 Prm_Fault; st2 bit 0 Prm_Req,
@@ -12,9 +12,9 @@ import json
 import pytest
 from click.testing import CliRunner
 
+from profidrive_cli.bustools.buswatch import BusWatch, categorize, health_figures
 from profidrive_cli.cli.main import cli
 from profidrive_cli.dp.services import SlaveDiag
-from profidrive_cli.session.buswatch import BusWatch, categorize, health_figures
 from test_json_contract import assert_stream
 
 ST2_FIXED = 0x04        # st2 bit 2 is always 1 in a slave's reply

@@ -15,11 +15,11 @@ Manual lines (/work/shared/seeds/):
 
 import pytest
 
+from profidrive_cli.bustools.passive import PassiveDecoder, watch_list
 from profidrive_cli.drives import decode_area
 from profidrive_cli.drives.profile import load_profile
 from profidrive_cli.fdl import frames as F
 from profidrive_cli.dp.capture import Capture
-from profidrive_cli.session.passive import PassiveDecoder, watch_list
 
 MASTER = 2
 

@@ -1,8 +1,14 @@
 """The house rules, read from the source: which layer may import which, no import cycles, no module
 over 600 lines. Every import counts, also those inside functions (a lazy import is still a dependency).
 
-Layers, lowest first, and what each may import (besides the standard library, its own layer and the
-top-level modules profidrive_cli/__init__, datafile, outfile, data, config):
+The layer plan -- the one version of it: docs/architecture.md, README.md, the packages' docstrings and
+tests/test_session_layer.py point here -- is PLAN below, as data: each layer and the layers it stands
+on directly. A layer may import its own modules, the top-level modules (profidrive_cli/__init__,
+datafile, outfile, data, config, plot) and every layer below it, following PLAN down:
+
+    link -> fdl -> dp -> gsd -> drives -> session -> api -> checklist, cli
+                                  |-> bustools   (beside session)
+                                  '-> sim        (beside the master stack)
 
     link       nothing of pdrive: bytes in and out of a port (the sim:// handler is named, not imported)
     fdl        link at most; today nothing. Sans-IO frames and bus timing: bytes and times in, bytes and
@@ -11,11 +17,15 @@ top-level modules profidrive_cli/__init__, datafile, outfile, data, config):
                sends its FDL probes through a port)
     gsd        dp and below (dp.cfg decodes the module identifiers)
     drives     gsd and below
-    sim        drives and below (the drive models reuse the codecs); sim:// is registered from here
-    session    sim and below (profidrive_cli/session/)
-    checklist  session and below
-    api        checklist and below (profidrive_cli/api/: the Python API, built on session/)
-    cli        everything (api included); profidrive_cli/__main__ counts as cli
+    session    drives and below: one drive station (profidrive_cli/session/)
+    bustools   drives and below, beside session: the bus-level tools without a drive session (listen,
+               passive decoding, the live lists, Wireshark); never session, api, checklist, cli, sim
+    sim        drives and below, beside the master stack: the slave side (the drive models reuse the
+               codecs; sim:// is registered from here) and the built-in PLC of `sim --plc`; never
+               session, api, checklist, cli, bustools
+    api        session, bustools and below (profidrive_cli/api/: the Python API, the front door)
+    checklist  api, sim and below (the dry run drives the simulated models)
+    cli        everything (checklist included); profidrive_cli/__main__ counts as cli
     top-level  (__init__, datafile, outfile, data, config, plot) nothing of any layer -- with one
                exception: profidrive_cli/__init__ may import profidrive_cli.api inside its PEP 562
                module __getattr__ (the lazy `pdrive.open_bus`), and nowhere else; `import
@@ -35,13 +45,39 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 PKG = ROOT / "profidrive_cli"
 
-ORDER = ("link", "fdl", "dp", "gsd", "drives", "sim", "session", "checklist", "api", "cli")
+#: THE layer plan: layer -> the layers it stands on directly (see the module doc)
+PLAN: dict[str, tuple[str, ...]] = {
+    "link": (),
+    "fdl": ("link",),
+    "dp": ("fdl",),
+    "gsd": ("dp",),
+    "drives": ("gsd",),
+    "session": ("drives",),
+    "bustools": ("drives",),            # beside session
+    "sim": ("drives",),                 # beside the master stack
+    "api": ("session", "bustools"),
+    "checklist": ("api", "sim"),
+    "cli": ("checklist",),
+}
 TOP = "top"
 TOP_MODULES = {"profidrive_cli", "profidrive_cli.datafile", "profidrive_cli.outfile", "profidrive_cli.data",
                "profidrive_cli.config", "profidrive_cli.plot"}
 
+
+def _below(layer: str) -> set[str]:
+    """Every layer `layer` stands on, directly or through another (PLAN followed down)."""
+    out: set[str] = set()
+    todo = list(PLAN[layer])
+    while todo:
+        low = todo.pop()
+        if low not in out:
+            out.add(low)
+            todo += PLAN[low]
+    return out
+
+
 #: layer -> the layers it may import (its own and the top-level modules always)
-ALLOWED = {layer: set(ORDER[:i + 1]) | {TOP} for i, layer in enumerate(ORDER)}
+ALLOWED = {layer: _below(layer) | {layer, TOP} for layer in PLAN}
 ALLOWED[TOP] = {TOP}
 
 MAX_LINES = 600
@@ -67,9 +103,9 @@ def layer_of(module: str) -> str:
         return TOP
     if module == "profidrive_cli.__main__":
         return "cli"
-    if len(parts) >= 2 and parts[1] in ORDER:
+    if len(parts) >= 2 and parts[1] in PLAN:
         return parts[1]
-    raise AssertionError(f"{module}: in no layer; add it to ORDER or TOP_MODULES in tests/test_layering.py")
+    raise AssertionError(f"{module}: in no layer; add it to PLAN or TOP_MODULES in tests/test_layering.py")
 
 
 def _resolve(name: str) -> str | None:
@@ -144,14 +180,75 @@ def test_every_module_is_in_a_layer_and_the_rules_cover_the_package():
         layer_of(m)
 
 
-def test_imports_follow_the_layer_order():
+def test_every_package_is_a_layer_of_the_plan():
+    # each sub-package of profidrive_cli is one layer of PLAN, and PLAN names no layer that is not
+    # there: the plan is the package as built
+    packages = {d.name for d in PKG.iterdir() if (d / "__init__.py").is_file()}
+    assert packages == set(PLAN)
+    for layer, lower in PLAN.items():
+        assert set(lower) <= set(PLAN), layer
+
+
+def test_the_plan_is_one_order():
+    # no layer stands on itself through others (a cycle in the plan would allow any import)
+    assert all(layer not in _below(layer) for layer in PLAN)
+
+
+def test_the_plan_is_the_documented_one():
+    # the plan of issue 25 (docs/architecture.md, "Where the house is going"):
+    #   link -> fdl -> dp -> gsd -> drives -> session -> api -> checklist, cli;
+    #   bustools beside session (link/fdl/dp/gsd/drives, not session/api/cli); sim beside the master stack
+    chain = ["link", "fdl", "dp", "gsd", "drives", "session", "api", "checklist", "cli"]
+    for i, layer in enumerate(chain):
+        assert ALLOWED[layer] & set(chain) == set(chain[:i + 1]), layer
+    stack = {"link", "fdl", "dp", "gsd", "drives"}
+    assert ALLOWED["bustools"] == stack | {"bustools", TOP}
+    assert ALLOWED["sim"] == stack | {"sim", TOP}
+    assert not {"bustools", "sim"} & ALLOWED["session"]         # beside: neither way
+    assert "session" not in ALLOWED["bustools"] and "session" not in ALLOWED["sim"]
+    assert "sim" not in ALLOWED["api"] and "sim" not in ALLOWED["bustools"]
+    assert {"bustools", "sim", "api", "session"} <= ALLOWED["checklist"]
+    assert ALLOWED["cli"] == set(PLAN) | {TOP}
+    assert ALLOWED[TOP] == {TOP}
+
+
+def _against_the_plan(graph: dict[str, list[tuple[int, str, str]]]) -> list[str]:
+    """One line per import of `graph` that PLAN does not allow: file:line (or module:line), the import
+    and the two layers."""
     bad = []
-    for m, edges in GRAPH.items():
+    for m, edges in graph.items():
         src = layer_of(m)
         for line, target, text in edges:
             dst = layer_of(target)
             if dst not in ALLOWED[src]:
-                bad.append(f"{_where(MODULES[m], line)}: {text} ({src} must not import {dst})")
+                where = _where(MODULES[m], line) if m in MODULES else f"{m}:{line}"
+                bad.append(f"{where}: {text} ({src} must not import {dst})")
+    return bad
+
+
+def test_the_check_finds_an_import_against_the_plan():
+    # made-up imports: a bus tool reaching into session/, the sim into the api, session into the sim
+    # and the api into the checklist are refused, each with its place; the same layers' allowed ways
+    # (cli -> bustools, checklist -> sim, bustools -> dp) pass
+    graph = {
+        "profidrive_cli.bustools.x": [(3, "profidrive_cli.session.signals", "import s"),
+                                      (4, "profidrive_cli.dp.poller", "import p")],
+        "profidrive_cli.sim.x": [(5, "profidrive_cli.api.bus", "import b")],
+        "profidrive_cli.session.x": [(6, "profidrive_cli.sim.plant", "import q")],
+        "profidrive_cli.api.x": [(7, "profidrive_cli.checklist.spec", "import c")],
+        "profidrive_cli.checklist.x": [(8, "profidrive_cli.sim.direct", "import d")],
+        "profidrive_cli.cli.x": [(9, "profidrive_cli.bustools.passive", "import e")],
+    }
+    assert _against_the_plan(graph) == [
+        "profidrive_cli.bustools.x:3: import s (bustools must not import session)",
+        "profidrive_cli.sim.x:5: import b (sim must not import api)",
+        "profidrive_cli.session.x:6: import q (session must not import sim)",
+        "profidrive_cli.api.x:7: import c (api must not import checklist)",
+    ]
+
+
+def test_imports_follow_the_layer_order():
+    bad = _against_the_plan(GRAPH)
     assert not bad, "imports against the layer order:\n" + "\n".join(bad)
 
 

@@ -1,42 +1,42 @@
-"""The session layer's place (issue 15): profidrive_cli/session/ sits between drives/ and checklist/ +
-cli/. From each module's imports (ast): session/ imports nothing of checklist, cli or sim; drives/ and
-everything below it import nothing of session/; no module of session/ exceeds 600 lines; the modules
-of session/ import each other without a cycle."""
+"""The session layer's place (issue 15), on the one layer plan of tests/test_layering.py (PLAN there;
+this file keeps the session-specific checks and reads the same plan and the same import graph):
+profidrive_cli/session/ sits on drives/ and under api/ + checklist/ + cli/. From each module's imports
+(ast, also inside functions): session/ imports nothing of checklist, cli or sim (nor bustools or
+api); drives/ and everything below it (and bustools/, sim/ beside it) import nothing of session/; no
+module of session/ exceeds 600 lines; the modules of session/ import each other without a cycle."""
 
-import ast
 from pathlib import Path
 
+from test_layering import ALLOWED, GRAPH, MODULES, layer_of
+
 PKG = Path(__file__).resolve().parent.parent / "profidrive_cli"
-
-
-def _imports(path: Path) -> list[str]:
-    """Every profidrive_cli module named by an import in `path` (also inside functions)."""
-    out = []
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-        if isinstance(node, ast.Import):
-            out += [a.name for a in node.names]
-        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            out.append(node.module)
-            out += [f"{node.module}.{a.name}" for a in node.names]
-    return [m for m in out if m.startswith("profidrive_cli")]
 
 
 def _rel(path: Path) -> str:
     return path.relative_to(PKG.parent).as_posix()
 
 
+def _session_modules() -> dict[str, Path]:
+    return {m: p for m, p in MODULES.items() if m != "profidrive_cli.session" and layer_of(m) == "session"}
+
+
 def test_session_imports_nothing_above_it():
     files = sorted((PKG / "session").glob("*.py"))
     assert files, "profidrive_cli/session/ is missing"
-    bad = [f"{_rel(f)} imports {m}" for f in files for m in _imports(f)
-           if m.split(".")[1:2] in (["checklist"], ["cli"], ["sim"])]
+    # the plan: session stands on drives and below; checklist, cli and sim (and api, bustools) are not
+    # under it
+    assert not {"checklist", "cli", "sim", "api", "bustools"} & ALLOWED["session"]
+    bad = [f"{_rel(MODULES[m])}:{line} imports {t}" for m in MODULES if layer_of(m) == "session"
+           for line, t, _ in GRAPH[m] if layer_of(t) not in ALLOWED["session"]]
     assert bad == []
 
 
 def test_nothing_below_imports_session():
     below = ["link", "fdl", "dp", "drives", "gsd"]
-    bad = [f"{_rel(f)} imports {m}" for d in below for f in sorted((PKG / d).rglob("*.py"))
-           for m in _imports(f) if m.split(".")[1:2] == ["session"]]
+    beside = ["bustools", "sim"]
+    assert all("session" not in ALLOWED[d] for d in below + beside)
+    bad = [f"{_rel(MODULES[m])}:{line} imports {t}" for m in MODULES if layer_of(m) in below + beside
+           for line, t, _ in GRAPH[m] if layer_of(t) == "session"]
     assert bad == []
 
 
@@ -48,9 +48,8 @@ def test_session_modules_stay_small():
 
 
 def test_no_import_cycle_inside_session():
-    mods = {f"profidrive_cli.session.{f.stem}": f for f in (PKG / "session").glob("*.py")
-            if f.stem != "__init__"}
-    graph = {m: {i for i in _imports(f) if i in mods and i != m} for m, f in mods.items()}
+    mods = _session_modules()
+    graph = {m: {t for _, t, _ in GRAPH[m] if t in mods and t != m} for m in mods}
     seen: dict[str, int] = {}            # 1 = on the current path, 2 = done
 
     def visit(m, path):

@@ -1,6 +1,6 @@
 """`pdrive sim --plc`: a built-in PLC runs the plant and the whole bus goes to the endpoint as a tap
 hears it; `pdrive sniff --port <pty> --station ...` then shows the PLC's commands to every drive in
-words. Expected words from the specs' bit tables, speeds from the PLC's script (session/plc.py:
+words. Expected words from the specs' bit tables, speeds from the PLC's script (sim/plc.py:
 50 % of the max frequency first) and the profiles' max frequencies (F03 = 60 Hz Fuji, A-00 = 60 Hz
 Toyo, A004 = 50 Hz Moeller, E1-04 = 60 Hz Yaskawa)."""
 
@@ -145,7 +145,7 @@ def test_plc_refuses_a_real_serial_device():
 
 def test_plc_in_process_brings_up_every_station_and_releases_them():
     from profidrive_cli.dp.capture import Capture
-    from profidrive_cli.session.plc import WATCHDOG_MS, Plc
+    from profidrive_cli.sim.plc import WATCHDOG_MS, Plc
     from profidrive_cli.sim.plant import build_bus
     bus = build_bus("sim://?timing=wire&baud=187500", now=time.monotonic())
     cap = Capture()
@@ -193,8 +193,8 @@ def test_a_script_that_fails_unexpectedly_stops_its_drive(monkeypatch):
     # a codec bug in the middle of a run (here: read_param raising) must not leave the drive
     # turning: the PLC stops it and keeps its station in data exchange with idle cycles
     from profidrive_cli.dp.capture import Capture
-    from profidrive_cli.session import plc as plc_mod
-    from profidrive_cli.session.passive import PassiveDecoder, watch_list
+    from profidrive_cli.sim import plc as plc_mod
+    from profidrive_cli.bustools.passive import PassiveDecoder, watch_list
     from profidrive_cli.sim.plant import build_bus
     import profidrive_cli.drives as drives
 
@@ -264,7 +264,7 @@ def test_tap_on_a_serial_device_drops_instead_of_blocking(socat_pair):
 
 def test_the_plc_takes_only_an_in_process_simulated_bus():
     from profidrive_cli.link.serial_link import SerialLink
-    from profidrive_cli.session.plc import Plc
+    from profidrive_cli.sim.plc import Plc
     link = SerialLink("sim://")
     try:
         with pytest.raises(TypeError):
@@ -278,7 +278,7 @@ def test_the_plc_keeps_each_station_in_the_cycle_while_it_brings_up_the_next():
     exchange is kept by the master (dp/poller.py Master.keep), so its watchdog never waits for the
     others' start-up (tests/test_keep_in_dx.py checks the keep rounds themselves on the wire)."""
     from profidrive_cli.dp.poller import keep_within
-    from profidrive_cli.session.plc import WATCHDOG_MS, Plc
+    from profidrive_cli.sim.plc import WATCHDOG_MS, Plc
     from profidrive_cli.sim.plant import build_bus
     bus = build_bus("sim://?timing=virtual&baud=9600", now=0.0)
     plc = Plc(bus, lambda data: None)

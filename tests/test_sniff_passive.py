@@ -8,10 +8,10 @@ import pytest
 from click.testing import CliRunner
 
 from profidrive_cli import UsageError
+from profidrive_cli.bustools.passive import PassiveDecoder, parse_station, watch_list
+from profidrive_cli.bustools.passive_live import LiveList
 from profidrive_cli.dp.capture import Capture
 from profidrive_cli.fdl import frames as F
-from profidrive_cli.session.passive import PassiveDecoder, parse_station, watch_list
-from profidrive_cli.session.passive_live import LiveList
 
 MASTER = 2
 

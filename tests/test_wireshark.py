@@ -328,14 +328,14 @@ def test_tshark_captures_live_through_the_installed_extcap(tshark, tmp_path, mon
 
 
 def test_windows_personal_folders_are_under_appdata():
-    from profidrive_cli.session.wireshark import personal_dirs
+    from profidrive_cli.bustools.wireshark import personal_dirs
     plugins, extcap = personal_dirs("win32", {"APPDATA": r"C:\Users\u\AppData\Roaming"})
     assert str(plugins).endswith("Wireshark/plugins") or str(plugins).endswith(r"Wireshark\plugins")
     assert [(e.name, e.parent.name) for e in extcap] == [("extcap", "Wireshark")]
 
 
 def test_extcap_launchers_run_pdrive_with_this_python():
-    from profidrive_cli.session.wireshark import launcher_text
+    from profidrive_cli.bustools.wireshark import launcher_text
     name, text = launcher_text("win32", r"C:\Python\python.exe")
     assert name == "pdrive-extcap.bat"
     assert '"C:\\Python\\python.exe" -m profidrive_cli wireshark extcap %*' in text

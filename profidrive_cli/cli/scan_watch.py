@@ -1,11 +1,11 @@
-"""pdrive scan --watch: the watched live list (session/buswatch.py) rendered — refreshed in place on a
+"""pdrive scan --watch: the watched live list (bustools/buswatch.py) rendered — refreshed in place on a
 terminal, a JSON Lines stream with --json, one table at the end otherwise. No protocol logic here."""
 
 from __future__ import annotations
 
+from profidrive_cli.bustools.buswatch import COUNTER_KEYS, BusWatch, WatchView
 from profidrive_cli.cli.common import emit_json, err, is_tty, out
 from profidrive_cli.cli.names import device_name
-from profidrive_cli.session.buswatch import COUNTER_KEYS, BusWatch, WatchView
 
 #: rich style per state category
 COLOURS = {"data exchange": "green", "waiting": "cyan", "diagnosis pending": "yellow",

@@ -112,7 +112,7 @@ def _wire_timed(plant: str) -> str:
 
 
 def _run_plc(bus, ep, stop) -> None:
-    from profidrive_cli.session.plc import Plc
+    from profidrive_cli.sim.plc import Plc
     from profidrive_cli.sim.tap import Tap
     tap = Tap(ep)
     Plc(bus, tap.write, log=lambda line: err.print(line, markup=False)).run(stop)

@@ -8,11 +8,11 @@ import time
 import click
 
 from profidrive_cli import UsageError
+from profidrive_cli.bustools.listen import listen
 from profidrive_cli.cli.common import bus_options, out
 from profidrive_cli.datafile import read_input_file
 from profidrive_cli.dp.capture import LINKTYPES, Capture, PcapWriter, format_line, merge_errors
 from profidrive_cli.outfile import OutputFile, check_output_path
-from profidrive_cli.session.listen import listen
 
 
 # a raw capture file: 16 MiB is ~14 s of a saturated bus at 12 Mbit/s, ~2 h at 19.2 kbit/s

@@ -2,7 +2,7 @@
 with --station the watched drives' outputs and inputs in words; with --live the passive live list
 instead (rich Live on a terminal, a plain table at the end otherwise, JSON Lines with --json).
 
-Rendering only: the decoding is session/passive.py, the live list session/passive_live.py.
+Rendering only: the decoding is bustools/passive.py, the live list bustools/passive_live.py.
 """
 
 from __future__ import annotations
@@ -23,11 +23,11 @@ class SniffView:
                  refresh_s: float = REFRESH_S):
         self.decoder = None
         if station_specs:
-            from profidrive_cli.session.passive import PassiveDecoder, watch_list
+            from profidrive_cli.bustools.passive import PassiveDecoder, watch_list
             self.decoder = PassiveDecoder(watch_list(station_specs))
         self.live = None
         if live:
-            from profidrive_cli.session.passive_live import LiveList
+            from profidrive_cli.bustools.passive_live import LiveList
             self.live = LiveList()
         self.as_json = as_json
         self.refresh_s = refresh_s
@@ -53,7 +53,7 @@ class SniffView:
         else:
             line = format_line(c)
             if d is not None:
-                from profidrive_cli.session.passive import frame_suffix
+                from profidrive_cli.bustools.passive import frame_suffix
                 line += frame_suffix(d)
             out.print(line, markup=False)
 

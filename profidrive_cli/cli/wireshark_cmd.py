@@ -33,7 +33,7 @@ def install_cmd(plugins_dir, stations, extcap_dir, no_extcap, as_json):
     --station) and the extcap launcher `pdrive-extcap`, each replacing the old file only when
     complete. Restart Wireshark (or Analyze > Reload Lua Plugins) to load them.
     """
-    from profidrive_cli.session.wireshark import install
+    from profidrive_cli.bustools.wireshark import install
     with_extcap = not no_extcap and (extcap_dir is not None or plugins_dir is None)
     res = install(plugins_dir, list(stations), extcap_dir, with_extcap)
     if as_json:
@@ -73,7 +73,7 @@ def install_cmd(plugins_dir, stations, extcap_dir, no_extcap, as_json):
 def extcap_cmd(ctx, extcap_interfaces, extcap_interface, extcap_dlts, extcap_config, extcap_version,
                capture, fifo, port, baud, rs485, duration):
     """The extcap entry point Wireshark runs (through the launcher pdrive wireshark install writes)."""
-    from profidrive_cli.session import extcap as X
+    from profidrive_cli.bustools import extcap as X
     if extcap_interfaces:
         sys.stdout.write(X.interfaces_text())
         return

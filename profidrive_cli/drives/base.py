@@ -325,7 +325,7 @@ class Drive(ABC):
 
     #: the shape of the codec's decode_area (drives.decode_area): "ppo" control/status words, N2 or
     #: the family's speed words and the PKW channel; "memobus" Yaskawa's run command / status words
-    #: and the MEMOBUS parameter area (session/passive.py normalises each)
+    #: and the MEMOBUS parameter area (bustools/passive.py normalises each)
     area_shape: str = "ppo"
 
     def start_hint(self, status: DriveStatus) -> str | None:

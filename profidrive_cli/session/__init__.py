@@ -1,7 +1,8 @@
 """The session layer: one drive station in Data_Exchange behind the Drive interface, with a safe stop
 on every way out. Between drives/ (profiles, make_drive) and checklist/ + cli/; it may import link,
-fdl, dp, gsd, drives, outfile and datafile -- nothing of checklist, cli or sim. No click and no rich:
-cli/drive_cmds.py and the checklist runner build on it.
+fdl, dp, gsd, drives, outfile and datafile -- nothing of checklist, cli, api, sim or bustools/ (the
+bus-level tools without a drive session; the layer plan: tests/test_layering.py). No click and no
+rich: cli/drive_cmds.py and the checklist runner build on it.
 
     drivesession.py  DriveSession: ties the parts below together (small; delegates)
     discovery.py     finding the station (scan, PDRIVE_STATION), choosing the profile and the layout
@@ -14,9 +15,6 @@ cli/drive_cmds.py and the checklist runner build on it.
     params.py        parameter codes, parsing, checked read/write, save
     backup.py        dump and compare (ParamRow);  dumpfile.py: the dump file format and loading
     restore.py       restore: validate every row, then write and read back
-    listen.py        the passive reading loop of sniff and the extcap capture (never transmits)
-    wireshark.py     wireshark install: dissector, station table from the profiles, extcap launcher
-    extcap.py        the Wireshark extcap protocol answers and the capture into its fifo
 
 Public API (stable; everything else is internal)
 ------------------------------------------------

@@ -68,10 +68,6 @@ class Reply:
 
 
 class SimBus:
-    #: what the built-in PLC (session/plc.py) checks before it runs: an in-process simulated bus,
-    #: never a port (session/ does not import sim/: it asks the object instead)
-    IN_PROCESS_SIMULATION = True
-
     def __init__(self, slaves: list[SimSlave], baud: int = 19200, timing: str = "instant",
                  tsdr_bits: int = 11, faults=None):
         if timing not in TIMINGS:

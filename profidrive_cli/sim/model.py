@@ -10,6 +10,11 @@ be run on a simulated clock.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.drives.profile import Profile
+
 
 class SlaveModel:
     """A plain DP-V0 slave: fixed ident, a set of accepted configurations, zero inputs.
@@ -22,6 +27,8 @@ class SlaveModel:
     #: Sync / Freeze offered (sim/plant.py sets them where the profile's GSD file claims them)
     sync_supported = False
     freeze_supported = False
+    #: the drive profile the model was built from (drive models set it); None: a plain DP-V0 slave
+    profile: Profile | None = None
 
     def __init__(self, ident: int, cfgs: dict[str, bytes] | None = None, name: str = "DP-V0 slave",
                  user_prm_len: int | None = None, max_diag_len: int = 6):
@@ -96,3 +103,9 @@ class SlaveModel:
     def seed_faults(self, alarms: list[str]) -> None:
         """Pre-fill the fault history (drive models)."""
         raise ValueError(f"{self.family} station has no fault history")
+
+
+class DriveModel(SlaveModel):
+    """A drive's model (sim/<family>.py): built from its drive profile, which it keeps in `profile`."""
+
+    profile: Profile

@@ -54,7 +54,7 @@ class MoellerModel(ProfidriveModel):
 
     # -- control source ----------------------------------------------------------------------
     def _raw(self, code: str) -> int:
-        return self.values[self.profile.param(code).code]
+        return self.values[self.profile.param(code).code]  # type: ignore[union-attr]  # (codes named here)
 
     def commands_from_bus(self, ctw: int) -> bool:
         mc = self.mc

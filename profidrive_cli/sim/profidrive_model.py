@@ -52,7 +52,7 @@ import math
 
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.profidrive import Ctw, PkwFrame, State, Stw
-from profidrive_cli.sim.model import SlaveModel
+from profidrive_cli.sim.model import DriveModel
 
 STATE_BITS = {
     State.S1: Stw.SWITCHING_ON_INHIBITED,
@@ -70,7 +70,7 @@ SPECIAL_READ_ONLY = (pd.PNU_NODE_ADDRESS, pd.PNU_BAUD, pd.PNU_DEVICE_ID, pd.PNU_
                      pd.PNU_CONTROL_WORD, pd.PNU_STATUS_WORD, pd.PNU_FAULT_NUMBER)
 
 
-class ProfidriveModel(SlaveModel):
+class ProfidriveModel(DriveModel):
     family = "profidrive"
     #: how the family calls its faults in messages ("alarm", "protection") and extra hint text
     alarm_noun = "alarm"
@@ -164,7 +164,7 @@ class ProfidriveModel(SlaveModel):
 
     def param_value(self, code: str):
         p = self.profile.param(code)
-        return self.value_from_wire(p, self.values[p.code])
+        return self.value_from_wire(p, self.values[p.code])  # type: ignore[union-attr]  # (config codes)
 
     def ramp_times(self) -> tuple[float, float, float]:
         def t(role: str, default: float) -> float:

@@ -51,7 +51,7 @@ from __future__ import annotations
 import struct
 
 from profidrive_cli.sim import torque_axis
-from profidrive_cli.sim.model import SlaveModel
+from profidrive_cli.sim.model import DriveModel
 
 # command word bits (spec §2.2)
 FWD, REV, EXT_FAULT, RESET, CLEAR_LOG, BASE_BLOCK = 0, 1, 8, 9, 14, 15
@@ -75,7 +75,7 @@ def _s16(w: int) -> int:
     return w - 0x10000 if w & 0x8000 else w
 
 
-class YaskawaModel(SlaveModel):
+class YaskawaModel(DriveModel):
     family = "yaskawa"
 
     def __init__(self, profile, b1_01=3, b1_02=3, processing_ms=12.0, comm_timeout=1.0,

@@ -16,9 +16,9 @@ execute() runs it on the station's Drive for the Runner. Imports only the checkl
 from __future__ import annotations
 
 from profidrive_cli import PdriveError
+from profidrive_cli.bustools.buswatch import health_figures
 from profidrive_cli.checklist.fields import fmt
 from profidrive_cli.checklist.steps.base import StepFailed, StepType
-from profidrive_cli.session.buswatch import health_figures
 
 DEFAULT_SECONDS = 10.0
 #: the figures in words

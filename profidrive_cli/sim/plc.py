@@ -11,6 +11,12 @@ only, and everything on its bus is mirrored to a tap (an RS-485 tap's view of th
                    the family's Drive codec (start, ramp, hold, PKW reads, stop, pause, repeat)
 
 The Plc never opens a port: it is given a SimBus, and PlantLink is the only link it uses.
+
+Its place (tests/test_layering.py): sim/, beside the master stack. The PLC is a master of the
+simulated plant, built from the master stack's lower rooms -- dp.poller.Master (bring-up, keep,
+exchange, release), the families' Drive codecs (drives.make_drive) and the device's GSD (gsd/) --
+never from session/ or api/, which sim/ must not import. Reading the plant (SimBus, its stations'
+models) it may: that is sim/ itself.
 """
 
 from __future__ import annotations
@@ -22,10 +28,11 @@ from typing import TYPE_CHECKING
 
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.link.base import Link, plain_sleep
+from profidrive_cli.sim.bus import SimBus
 
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.drives.base import Drive
-    from profidrive_cli.drives.profile import Profile
+    from profidrive_cli.drives.profile import ParamDef, Profile
 
 #: DP watchdog armed in Set_Prm for every station (ms): far above a cycle of five stations at 9.6 kbit/s
 WATCHDOG_MS = 2000.0
@@ -139,24 +146,23 @@ class MotionScript:
     read_codes: tuple[str, ...] = ()
 
 
-def default_script(profile) -> MotionScript:
+def default_script(profile: Profile) -> MotionScript:
     """Reads of the max frequency parameter, the acceleration time and the first read-only
     parameter (where the profile names them; a code the card cannot address is dropped when the
     drive refuses it, e.g. Toyo's parameters without a published PNU)."""
     codes = []
-    ro = next((p.code for p in _params(profile) if getattr(p, "access", "") == "ro"), None)
-    for code in (getattr(profile, "max_frequency_param", None), _accel_code(profile), ro):
+    ro = next((p.code for p in _params(profile) if p.access == "ro"), None)
+    for code in (profile.max_frequency_param, _accel_code(profile), ro):
         if code and profile.param(code) is not None and code not in codes:
             codes.append(code)
     return MotionScript(read_codes=tuple(codes))
 
 
-def _params(profile) -> list:
-    ps = getattr(profile, "parameters", None) or {}
-    return list(ps.values()) if isinstance(ps, dict) else list(ps)
+def _params(profile: Profile) -> list[ParamDef]:
+    return list(profile.parameters.values())
 
 
-def _accel_code(profile) -> str | None:
+def _accel_code(profile: Profile) -> str | None:
     for p in _params(profile):
         if "acceleration time 1" in (p.name or "").lower():
             return p.code
@@ -186,7 +192,7 @@ class Plc:
                  scripts: dict[int, MotionScript] | None = None):
         from profidrive_cli.dp.poller import Master
         from profidrive_cli.fdl.timing import BusParams
-        if getattr(type(bus), "IN_PROCESS_SIMULATION", False) is not True:
+        if not isinstance(bus, SimBus):
             raise TypeError("the built-in PLC runs only on an in-process simulated bus (SimBus)")
         self.bus = bus
         self.link = PlantLink(bus, tap)
@@ -200,10 +206,10 @@ class Plc:
         self.plans: dict[int, StationPlan] = {}
         self.cycles = 0
         for a, s in sorted(bus.slaves.items()):
-            prof = getattr(s.model, "profile", None)
+            prof = s.model.profile
             if prof is None:
                 continue                      # a plain DP-V0 slave: no drive to script
-            layout = getattr(s.model, "default_layout", None) or prof.default_layout
+            layout = s.model.default_layout or prof.default_layout
             script = (scripts or {}).get(a) or default_script(prof)
             self.plans[a] = StationPlan(a, prof, layout, script)
 
@@ -344,9 +350,12 @@ class Plc:
 
 
 def _user_prm(ident: int) -> bytes:
-    """The device's default User_Prm_Data from its GSD (session/bringup.py, as a drive session
-    sends it), else none."""
-    from types import SimpleNamespace
-
-    from profidrive_cli.session.bringup import user_prm
-    return user_prm(SimpleNamespace(ident=ident))
+    """The device's default User_Prm_Data from its GSD (library or PDRIVE_GSD_DIR), else none: what
+    a drive session sends (session/bringup.py user_prm)."""
+    try:
+        from profidrive_cli.gsd.interp import device_user_prm
+        from profidrive_cli.gsd.library import find_by_ident
+        g = find_by_ident(ident)
+        return device_user_prm(g) if g is not None else b""
+    except Exception:       # a broken user GSD must not keep the PLC from starting
+        return b""

@@ -8,20 +8,22 @@ Wireshark runs the launcher that `pdrive wireshark install` put into its extcap 
     pdrive-extcap --extcap-interface pdrive --extcap-config
     pdrive-extcap --extcap-interface pdrive --capture --fifo PATH --port PORT --baud RATE
 
-The capture reuses sniff's reading loop (session/listen.py), the capture decoder and the PcapWriter
+The capture reuses sniff's reading loop (bustools/listen.py), the capture decoder and the PcapWriter
 (dp/capture.py, link type 147 which the shipped dissector binds). It never transmits, and ends when
 Wireshark stops it (SIGTERM), closes the fifo, or on Ctrl-C.
 """
 
 from __future__ import annotations
 
+import signal
+import threading
 import time
+from typing import Any
 
 from profidrive_cli import UsageError, __version__
+from profidrive_cli.bustools.listen import listen
 from profidrive_cli.dp.capture import LINKTYPE_USER0, Capture, PcapWriter, merge_errors
 from profidrive_cli.fdl.timing import BAUD_NAMES, BAUD_RATES
-from profidrive_cli.session.listen import listen
-from profidrive_cli.session.signals import SessionTerminated, SignalGuard
 
 INTERFACE = "pdrive"
 DEFAULT_BAUD = 19200
@@ -59,6 +61,42 @@ def config_text(interface: str | None) -> str:
     return "\n".join(lines) + "\n"
 
 
+class _Terminated(BaseException):
+    """Wireshark stopped the capture with SIGTERM (raised in the main thread, like KeyboardInterrupt)."""
+
+
+def _raise_terminated(signum: int, frame: Any) -> None:
+    raise _Terminated()
+
+
+class _TermGuard:
+    """While the capture runs (main thread only; elsewhere no handler changes): SIGTERM raises
+    _Terminated; restore() puts the handler from before back. The capture's own guard: bustools/
+    does not stand on session/ (whose SignalGuard does this for a drive session)."""
+
+    def __init__(self) -> None:
+        self._old: Any = None
+        self._installed = False
+
+    def install(self) -> None:
+        if threading.current_thread() is not threading.main_thread():
+            return
+        try:
+            self._old = signal.signal(signal.SIGTERM, _raise_terminated)
+            self._installed = True
+        except (TypeError, ValueError):
+            pass
+
+    def restore(self) -> None:
+        if not self._installed:
+            return
+        self._installed = False
+        try:
+            signal.signal(signal.SIGTERM, self._old if self._old is not None else signal.SIG_DFL)
+        except (TypeError, ValueError):
+            pass
+
+
 class _Fifo:
     """The pcap stream to Wireshark: every write flushed at once (a live view)."""
 
@@ -74,7 +112,7 @@ def capture(link, fifo_path: str, duration: float | None = None, clock=time.mono
     """Listen on `link` and stream every telegram to the fifo (pcap, DLT_USER0, wall-clock times)
     until SIGTERM, Ctrl-C, a closed fifo or `duration`. Returns the number of frames written; the
     link is closed on every way out."""
-    guard = SignalGuard()
+    guard = _TermGuard()
     count = 0
     try:
         with open(fifo_path, "wb", buffering=0) as fh:
@@ -92,7 +130,7 @@ def capture(link, fifo_path: str, duration: float | None = None, clock=time.mono
             try:
                 writer.start = time.time()
                 listen(link, duration, on_data, clock)
-            except (KeyboardInterrupt, SessionTerminated, BrokenPipeError):
+            except (KeyboardInterrupt, _Terminated, BrokenPipeError):
                 pass                      # Wireshark stopped the capture
     except BrokenPipeError:
         pass

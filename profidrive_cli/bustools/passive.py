@@ -145,7 +145,7 @@ def _decode(st: Watched, layout: str, direction: str, data: bytes) -> dict:
 
 
 def _learn_fmax(st: Watched, param: dict) -> None:
-    if param.get("code") and param.get("code") == getattr(st.profile, "max_frequency_param", None) \
+    if param.get("code") and param.get("code") == st.profile.max_frequency_param \
             and isinstance(param.get("value"), (int, float)) and param["value"] > 0:
         st.fmax = float(param["value"])
 
