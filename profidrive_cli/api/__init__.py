@@ -13,8 +13,8 @@
         drive.stop()                                 # -> StopResult
     # leaving the block (also by an exception): every drive this bus started is stopped safely
 
-The api layer sits between checklist and cli (tests/test_layering.py): built on session/
-(DriveSession), it never prompts and never prints. Errors are the CLI's: UsageError (bad input,
+The api layer stands on session/ and bustools/, and checklist/ and cli/ on it (PLAN in
+tests/test_layering.py): built on session/ (DriveSession), it never prompts and never prints. Errors are the CLI's: UsageError (bad input,
 refused writes), BusError / DriveError (the bus or the drive).
 """
 
