@@ -92,8 +92,10 @@ def test_the_hooks_have_a_default_in_base_and_the_codecs_answer():
 
 def test_the_codecs_name_their_ramp_parameters_and_comm_loss_words():
     # what safestop._DECEL_CODES / _COMM_LOSS_WORDS and commloss_reaction._ACCEL_CODES said, now
-    # each codec's: Fuji F07/F08 (acceleration / deceleration time 1), Moeller F002/F003, Yaskawa
-    # C1-01/C1-02 (acceleration / deceleration time 1); Toyo's ramps have no published PNU
+    # each codec's: Fuji F07/F08 "Acceleration / Deceleration time 1" (profiles/fuji-opc-g1-pdp.yaml
+    # lines 112-113), Moeller F002/F003 (profiles/moeller-de6-net-dp.yaml line 72, its ramps), Yaskawa
+    # C1-01/C1-02 "Acceleration / Deceleration time 1" (profiles/yaskawa-si-p1.yaml lines 99-101);
+    # Toyo's ramps have no published PNU (sim/toyo.py)
     from profidrive_cli.drives import drive_class
     from profidrive_cli.drives.base import Drive
     from profidrive_cli.drives.profile import load_profile
