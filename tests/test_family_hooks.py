@@ -3,19 +3,27 @@ ask the Drive (its hooks in drives/base.py, each codec filling what differs) or 
 on the family's Drive class (drives.drive_class), instead of branching on the family's name or on
 hasattr. Counted from the source, as the layering tests read imports: the count may only go down.
 
-The grep this counts (43 lines, 47 matches before step 1; 7 after it):
+The grep this counts (43 lines, 47 matches before step 1; 7 after it; 5 after step 3a, Motion):
 
     grep -rn "family ==\\|family !=\\|fam ==\\|fam !=\\|hasattr(" profidrive_cli/session profidrive_cli/checklist
 
 Remaining sites (none compares a family with a name):
   * session/params.py unknown_code_message, checklist/fields.py resolve_param: `p.family !=
     prof.family` picks the OTHER profiles a foreign code belongs to, for the message (not a dispatch)
-  * session/discovery.py, session/motion.py (2): `hasattr(x, "source")` asks a config value for its
-    FILE:LINE provenance (config.FileHz), not the family
+  * session/discovery.py: `hasattr(layout, "source")` asks a config value for its FILE:LINE
+    provenance (config.FileText), not the family
   * session/backup.py compare: `hasattr(params, "line_of")` asks a loaded dump for line numbers
   * checklist/runner.py _traced: `hasattr(drive, "channel")` (a drive on a bus, not a family question)
-Family-keyed tables and getattr duck-typing left (not counted): safestop.read_decel / commloss_reaction.read_accel (cfg.ramps), the tables
-safestop._DECEL_CODES / _COMM_LOSS_WORDS and commloss_reaction._ACCEL_CODES.
+
+Family-keyed tables and getattr duck-typing on a session or a Drive, counted by TABLES_AND_GETATTR
+(22 matches before step 3a; 5 after it): the tables safestop._DECEL_CODES / _COMM_LOSS_WORDS and
+commloss_reaction._ACCEL_CODES became Drive.ramp_param / ramp_codes and Drive.comm_loss_words;
+cfg.ramps in safestop.read_decel / commloss_reaction.read_accel Drive.ramp_param; cycle.make_sample's
+drive._fmax Drive.speed_scale_hz; bringup's getattr(sess, "dp_sync" / "dp_freeze" / "log_extra")
+attributes DriveSession declares; safestop's callback_error / after_stop SafeStop's own; bringup's
+track_motion wrapper Drive.on_motion. Left (another slice): session/monitors.py (3: drive.fmt,
+drive.ppo, drive.last_area), checklist/runner.py (drive.has_param_channel on a bare Drive),
+checklist/steps/write.py (d.notes).
 """
 
 import re
@@ -28,7 +36,12 @@ SITES = re.compile(r"family ==|family !=|fam ==|fam !=|hasattr\(")
 #: a family compared with a literal name: none may remain
 BY_NAME = re.compile(r"""\b(?:family|fam)\s*[!=]=\s*["']""")
 
-MAX_SITES = 7
+MAX_SITES = 5
+
+#: a family-keyed table above drives/, or getattr duck-typing directly on a session or a Drive
+TABLES_AND_GETATTR = re.compile(r"_DECEL_CODES|_COMM_LOSS_WORDS|_ACCEL_CODES|"
+                                r"getattr\((?:sess|session|drive|d|sess\.drive)\s*,")
+MAX_TABLES_AND_GETATTR = 5
 
 
 def _sites(pattern: re.Pattern, root: Path = PKG) -> list[str]:
@@ -46,6 +59,11 @@ def test_family_branches_and_hasattr_dispatches_only_go_down():
     assert len(found) <= MAX_SITES, "new family branch / hasattr dispatch:\n" + "\n".join(found)
 
 
+def test_family_tables_and_getattr_dispatches_only_go_down():
+    found = _sites(TABLES_AND_GETATTR)
+    assert len(found) <= MAX_TABLES_AND_GETATTR, "new family table / getattr dispatch:\n" + "\n".join(found)
+
+
 def test_no_family_is_compared_with_its_name_above_drives():
     assert _sites(BY_NAME) == []
 
@@ -58,7 +76,8 @@ def test_the_hooks_have_a_default_in_base_and_the_codecs_answer():
     hooks = ("param_info", "param_label", "value_problem", "params_at", "take_notes", "save_support",
              "use_max_frequency", "comm_loss_summary", "dumpable", "on_device", "not_restored",
              "pzd_assignment_param", "pzd_assigned_code", "comm_loss_reaction", "zero_data_reaction",
-             "normal_stop_warnings", "bus_run_refusal", "can_read", "cycle_words", "last_seen", "start_hint")
+             "normal_stop_warnings", "bus_run_refusal", "can_read", "cycle_words", "last_seen", "start_hint",
+             "ramp_param", "speed_scale_hz", "on_motion")
     assert [h for h in hooks if not callable(getattr(Drive, h, None))] == []
     facts = {name: (drive_class(load_profile(name)).monitor_mapping,
                     drive_class(load_profile(name)).comm_loss_reaction_fixed,
@@ -69,3 +88,26 @@ def test_the_hooks_have_a_default_in_base_and_the_codecs_answer():
     # manual: no setting names it); Yaskawa's SI-P1 has MEMOBUS registers, no PZD mapping
     assert facts == {"fuji-g1": ("read", False, "ppo"), "moeller": ("map", False, "ppo"),
                      "toyo-pbus66z": ("", True, "ppo"), "yaskawa-si-p1": ("", False, "memobus")}
+
+
+def test_the_codecs_name_their_ramp_parameters_and_comm_loss_words():
+    # what safestop._DECEL_CODES / _COMM_LOSS_WORDS and commloss_reaction._ACCEL_CODES said, now
+    # each codec's: Fuji F07/F08 "Acceleration / Deceleration time 1" (profiles/fuji-opc-g1-pdp.yaml
+    # lines 112-113), Moeller F002/F003 (profiles/moeller-de6-net-dp.yaml line 72, its ramps), Yaskawa
+    # C1-01/C1-02 "Acceleration / Deceleration time 1" (profiles/yaskawa-si-p1.yaml lines 99-101);
+    # Toyo's ramps have no published PNU (sim/toyo.py)
+    from profidrive_cli.drives import drive_class
+    from profidrive_cli.drives.base import Drive
+    from profidrive_cli.drives.profile import load_profile
+    got = {}
+    for name in ("fuji-g1", "moeller", "toyo-pbus66z", "yaskawa-si-p1"):
+        cls = drive_class(load_profile(name))
+        got[name] = (cls.ramp_codes.get("accel"), cls.ramp_codes.get("decel"), cls.comm_loss_words)
+    assert got == {
+        "fuji-g1": ("F07", "F08", "its o27/o28 setting (o27 = 3 or 13..15 ignores the loss: the motor "
+                                  "keeps running)"),
+        "moeller": ("F002", "F003", "P002 (0 = trip E70 and coast; 1 = keep running on the last command)"),
+        "toyo-pbus66z": (None, None, "protection 18 (COMM): the inverter trips and coasts"),
+        "yaskawa-si-p1": ("C1-01", "C1-02", "a BUS fault after the option's communication timeout (the "
+                                            "drive stops by its BUS fault setting)")}
+    assert Drive.comm_loss_words == "its communication-loss setting" and Drive.ramp_codes == {}

@@ -1,5 +1,6 @@
 """session/safestop.py sans-IO, with a scripted drive on a fake clock: the escalation time rule,
-the normal stop / coast escalation and its messages, the shutdown on every way out.
+the normal stop / coast escalation and its messages, the shutdown on every way out. Reached through
+session/motion.py's Motion (a SafeStop) on a fake station, as DriveSession builds it.
 
 Expected values are worked by hand from the documented rule (docs/commands.md "the safe stop",
 tests/test_escalation.py): wait 1.5 x the deceleration time (scaled by the speed it ran at, at most
@@ -14,8 +15,10 @@ import pytest
 
 import profidrive_cli.session.safestop as ss
 from profidrive_cli import PdriveError, UsageError
+from profidrive_cli.drives.base import Drive as BaseDrive
 from profidrive_cli.drives.base import DriveError, DriveStatus, ParamValue
 from profidrive_cli.link.base import LinkLost
+from profidrive_cli.session.motion import Motion
 
 DT = 0.25          # one cycle on the fake clock (exact in binary)
 
@@ -37,8 +40,21 @@ class Clock:
         return self.t
 
 
+def codec_of(family):
+    """The family's Drive class (the base Drive for a family without a codec here)."""
+    from profidrive_cli.drives.fuji.drive import FujiDrive
+    from profidrive_cli.drives.moeller import MoellerDrive
+    from profidrive_cli.drives.toyo.drive import ToyoDrive
+    from profidrive_cli.drives.yaskawa import YaskawaDrive
+    return {"fuji": FujiDrive, "moeller": MoellerDrive, "toyo": ToyoDrive,
+            "yaskawa": YaskawaDrive}.get(family, BaseDrive)
+
+
 class Drive:
-    """Scripted: `normal_after` / `coast_after` cycles after that stop command, it reports `rest`."""
+    """Scripted: `normal_after` / `coast_after` cycles after that stop command, it reports `rest`.
+    The family hooks (ramp_param, comm_loss_words) are the family codec's own, run on it."""
+
+    family = "fuji"
 
     def __init__(self, clock, normal_after=None, coast_after=None, rest=STOPPED, fault_status=None,
                  channel=True, decel=None, ramps=None, last=RUNNING):
@@ -54,6 +70,32 @@ class Drive:
         self.cycles = 0
         self._left = None
         self.fail_on: dict[str, Exception] = {}
+
+    @property
+    def ramp_codes(self):
+        return codec_of(self.family).ramp_codes
+
+    @property
+    def comm_loss_words(self):
+        return codec_of(self.family).comm_loss_words
+
+    def ramp_param(self, role):
+        # a codec's cfg.ramps is always a mapping (the profile's ramps); without one (no cfg, or
+        # not a mapping) the card's own codes answer (the base Drive's rule)
+        ramps = getattr(getattr(self, "cfg", None), "ramps", None)
+        codec = codec_of(self.family) if isinstance(ramps, dict) else BaseDrive
+        return codec.ramp_param(self, role)
+
+    def speed_scale_hz(self):
+        return None
+
+    def on_motion(self, listener):
+        self.listeners = [*getattr(self, "listeners", []), listener]
+
+    def turn(self):
+        """Something tells the drive to turn the motor (a codec's start / jog on)."""
+        for listener in getattr(self, "listeners", []):
+            listener()
 
     def last_seen(self):
         """The PROFIdrive codecs' own (drives/profidrive): their last_status."""
@@ -92,6 +134,7 @@ class Profile:
         self.family = family
         self.codes = set(codes)
         self.name = f"{family}-test"
+        self.max_frequency_default = 50.0
 
     def param(self, code):
         return object() if code in self.codes else None
@@ -121,27 +164,53 @@ class Master:
 
 
 class Session:
+    """The station Motion reads (motion.MotionStation), with its Motion as DriveSession has it.
+    may_run: the drive was told to turn (Drive.on_motion, as a start or jog does). stop_result:
+    None runs Motion's own stop; a StopReport / exception scripts it (the shutdown's tests)."""
+
     def __init__(self, drive=None, clock=None, family="fuji", decel_s=None, stop_timeout_s=None,
                  may_run=True, watchdog_ms=500.0):
         self.channel = clock or Clock()
         self.drive = drive
         self.profile = Profile(family)
-        self._decel_s = decel_s
+        self.layout = "ppo1"
         self.stop_timeout_s = stop_timeout_s
         self.signals = SimpleNamespace(hurry=False)
         self.warnings: list[str] = []
         self.messages: list[str] = []
-        self._may_run = may_run
-        self.final_status = None
         self.master = Master()
         self.watchdog_ms = watchdog_ms
-        self.comm_loss_text = None
         self.link_lost = False
         self.address = 3
-        self.stop_report = None
-        self.after_stop = []
+        self.on_sample = None
+        self.t0, self.achieved_hz, self.cycles, self.counters = 0.0, 0.0, 0, {}
         self.stop_calls = 0
         self.stop_result = None
+        self.motion = Motion(self)
+        self.motion.decel_s = decel_s
+        real_stop = self.motion.stop
+
+        def stop(on_sample=None, timeout=None):
+            self.stop_calls += 1
+            if self.stop_result is None:
+                return real_stop(on_sample, timeout)
+            if isinstance(self.stop_result, BaseException):
+                raise self.stop_result
+            return self.stop_result
+        self.motion.stop = stop
+        if drive is not None:
+            drive.family = family
+            self.motion.watch(drive)
+            if may_run:
+                drive.turn()
+
+    # what DriveSession delegates to its Motion
+    final_status = property(lambda self: self.motion.final_status,
+                            lambda self, v: setattr(self.motion, "final_status", v))
+    stop_report = property(lambda self: self.motion.stop_report,
+                           lambda self, v: setattr(self.motion, "stop_report", v))
+    comm_loss_text = property(lambda self: self.motion.comm_loss_text,
+                              lambda self, v: setattr(self.motion, "comm_loss_text", v))
 
     def need_drive(self):
         return self.drive
@@ -151,15 +220,6 @@ class Session:
 
     def say(self, text):
         self.messages.append(text)
-
-    def stop_timeout(self, percent=None):
-        return ss.stop_timeout(self, percent)
-
-    def stop(self):
-        self.stop_calls += 1
-        if isinstance(self.stop_result, BaseException):
-            raise self.stop_result
-        return self.stop_result
 
 
 # -- the escalation time ---------------------------------------------------------------------------
@@ -179,17 +239,17 @@ class Session:
 ])
 def test_stop_timeout_rule(decel, percent, expected):
     s = Session(decel_s=decel)
-    assert ss.stop_timeout(s, percent) == pytest.approx(expected)
+    assert s.motion.stop_timeout(percent) == pytest.approx(expected)
 
 
 def test_stop_timeout_unknown_deceleration_is_30_s():
-    assert ss.stop_timeout(Session(decel_s=None)) == 30.0
-    assert ss.stop_timeout(Session(decel_s=None), 50.0) == 30.0
+    assert Session(decel_s=None).motion.stop_timeout() == 30.0
+    assert Session(decel_s=None).motion.stop_timeout(50.0) == 30.0
 
 
 def test_stop_timeout_given_by_the_user_wins():
     s = Session(decel_s=10.0, stop_timeout_s=2)
-    assert ss.stop_timeout(s, 100.0) == 2.0 and isinstance(ss.stop_timeout(s), float)
+    assert s.motion.stop_timeout(100.0) == 2.0 and isinstance(s.motion.stop_timeout(), float)
 
 
 def test_coast_timeout_and_default_constants():
@@ -202,52 +262,52 @@ def test_coast_timeout_and_default_constants():
 def test_read_decel_uses_the_family_code(family, code):
     clock = Clock()
     s = Session(Drive(clock, decel=7.5), clock, family=family)
-    v = ss.read_decel(s)
+    v = ss.read_decel(s.drive, s.profile)
     assert v == 7.5 and isinstance(v, float) and s.drive.reads == [code]
 
 
 def test_read_decel_prefers_the_profiles_ramp_code():
     clock = Clock()
     s = Session(Drive(clock, decel=2, ramps={"decel": "X9"}), clock, family="fuji")
-    assert ss.read_decel(s) == 2.0 and s.drive.reads == ["X9"]
+    assert ss.read_decel(s.drive, s.profile) == 2.0 and s.drive.reads == ["X9"]
 
 
 def test_read_decel_drive_without_cfg_or_with_odd_ramps_uses_the_family_code():
     clock = Clock()
     d = Drive(clock, decel=4)
     del d.cfg
-    assert ss.read_decel(Session(d, clock, family="fuji")) == 4.0 and d.reads == ["F08"]
+    assert ss.read_decel(d, Profile("fuji")) == 4.0 and d.reads == ["F08"]
     d = Drive(clock, decel=4, ramps=["X9"])                          # not a mapping: ignored
-    assert ss.read_decel(Session(d, clock, family="fuji")) == 4.0 and d.reads == ["F08"]
+    assert ss.read_decel(d, Profile("fuji")) == 4.0 and d.reads == ["F08"]
 
 
 def test_read_decel_ramps_without_decel_falls_back_to_the_family_code():
     clock = Clock()
     s = Session(Drive(clock, decel=3, ramps={"accel": "F07"}), clock, family="fuji")
-    assert ss.read_decel(s) == 3.0 and s.drive.reads == ["F08"]
+    assert ss.read_decel(s.drive, s.profile) == 3.0 and s.drive.reads == ["F08"]
 
 
 def test_read_decel_none_without_channel_code_or_param():
     clock = Clock()
     s = Session(Drive(clock, decel=3, channel=False), clock)
-    assert ss.read_decel(s) is None and s.drive.reads == []
+    assert ss.read_decel(s.drive, s.profile) is None and s.drive.reads == []
     s = Session(Drive(clock, decel=3), clock, family="toyo")        # no deceleration code known
-    assert ss.read_decel(s) is None and s.drive.reads == []
+    assert ss.read_decel(s.drive, s.profile) is None and s.drive.reads == []
     s = Session(Drive(clock, decel=3), clock, family="fuji")
     s.profile.codes = set()                                          # the profile lacks F08
-    assert ss.read_decel(s) is None and s.drive.reads == []
+    assert ss.read_decel(s.drive, s.profile) is None and s.drive.reads == []
 
 
 @pytest.mark.parametrize("err", [DriveError("no answer"), UsageError("bad"), "slow"])
 def test_read_decel_unreadable_is_none(err):
     clock = Clock()
     s = Session(Drive(clock, decel=err if isinstance(err, Exception) else err), clock)
-    assert ss.read_decel(s) is None                                  # "slow": float() ValueError
+    assert ss.read_decel(s.drive, s.profile) is None                 # "slow": float() ValueError
 
 
 def test_read_decel_none_value_is_none():
     clock = Clock()
-    assert ss.read_decel(Session(Drive(clock, decel=None), clock)) is None   # float(None): TypeError
+    assert ss.read_decel(Drive(clock, decel=None), Profile()) is None   # float(None): TypeError
 
 
 class CommDrive:
@@ -265,11 +325,11 @@ class CommDrive:
         return self.value
 
     def comm_loss_summary(self):
-        from profidrive_cli.drives.base import Drive as BaseDrive
-        from profidrive_cli.drives.fuji.drive import FujiDrive
-        from profidrive_cli.drives.moeller import MoellerDrive
-        codec = {"fuji": FujiDrive, "moeller": MoellerDrive}.get(self.family, BaseDrive)
-        return codec.comm_loss_summary(self)
+        return codec_of(self.family).comm_loss_summary(self)
+
+    @property
+    def comm_loss_words(self):
+        return codec_of(self.family).comm_loss_words
 
 
 @pytest.mark.parametrize("raw,words", [
@@ -278,13 +338,13 @@ class CommDrive:
     (2, "P002 = 2: the drive trips (E70) and coasts"),
 ])
 def test_read_comm_loss_moeller_from_p002(raw, words):
-    s = Session(CommDrive({"P002": ParamValue("P002", "comm loss", raw, raw)}, "moeller"), family="moeller")
-    assert ss.read_comm_loss(s) == words
+    d = CommDrive({"P002": ParamValue("P002", "comm loss", raw, raw)}, "moeller")
+    assert ss.read_comm_loss(d) == words
 
 
 def test_read_comm_loss_fuji_reads_the_card():
-    s = Session(CommDrive("o27 = 0: trips at once", "fuji"), family="fuji")
-    assert ss.read_comm_loss(s) == "o27 = 0: trips at once"
+    d = CommDrive("o27 = 0: trips at once", "fuji")
+    assert ss.read_comm_loss(d) == "o27 = 0: trips at once"
 
 
 @pytest.mark.parametrize("family,start", [
@@ -293,11 +353,10 @@ def test_read_comm_loss_fuji_reads_the_card():
     ("other", "its communication-loss setting")])
 def test_read_comm_loss_words_when_it_cannot_be_read(family, start):
     for err in (DriveError("x"), UsageError("y")):
-        s = Session(CommDrive(err, family), family=family)
-        assert ss.read_comm_loss(s).startswith(start)
+        assert ss.read_comm_loss(CommDrive(err, family)).startswith(start)
     d = CommDrive("read", family)
     d.has_param_channel = False
-    assert ss.read_comm_loss(Session(d, family=family)).startswith(start)
+    assert ss.read_comm_loss(d).startswith(start)
 
 
 # -- the stop and its escalation -------------------------------------------------------------------
@@ -306,11 +365,11 @@ def test_normal_stop_reports_the_time_on_the_session_clock():
     clock = Clock()
     d = Drive(clock, normal_after=7)
     s = Session(d, clock, decel_s=10.0)
-    r = ss.stop(s, None, None)
+    r = s.motion.stop(None, None)
     assert d.commands == [("normal", False)]
     assert (r.how, r.stopped, r.message) == ("normal", True, "stopped")
     assert r.seconds == pytest.approx(8 * DT)          # 7 running cycles, the 8th reports stopped
-    assert r.status is STOPPED and s.final_status is STOPPED and s._may_run is False
+    assert r.status is STOPPED and s.final_status is STOPPED and s.motion.may_run is False
     assert s.warnings == []
 
 
@@ -318,9 +377,9 @@ def test_stop_samples_go_to_on_sample():
     clock = Clock()
     d = Drive(clock, normal_after=2)
     s = Session(d, clock, decel_s=10.0)
-    s._fmax, s.t0, s.achieved_hz, s.cycles, s.counters = (50.0,), clock.t, 4.0, 0, {}
+    s.t0, s.achieved_hz, s.cycles, s.counters = clock.t, 4.0, 0, {}
     got = []
-    r = ss.stop(s, got.append, None)
+    r = s.motion.stop(got.append, None)
     assert r.how == "normal" and [smp.status for smp in got] == [RUNNING, RUNNING, STOPPED]
     assert got[-1].t == pytest.approx(3 * DT)
 
@@ -329,9 +388,9 @@ def test_coast_samples_go_to_on_sample_too():
     clock = Clock()
     d = Drive(clock, coast_after=2)
     s = Session(d, clock, decel_s=10.0)
-    s._fmax, s.t0, s.achieved_hz, s.cycles, s.counters = (50.0,), clock.t, 4.0, 0, {}
+    s.t0, s.achieved_hz, s.cycles, s.counters = clock.t, 4.0, 0, {}
     got = []
-    r = ss.stop(s, got.append, 1.0)
+    r = s.motion.stop(got.append, 1.0)
     assert r.how == "coast"
     # normal: 5 cycles (the first past 1 s); coast: 2 running cycles and the stopped one
     assert len(got) == 5 + 3 and got[-1].status is STOPPED
@@ -343,7 +402,7 @@ def test_fault_during_stop_reads_the_fault_code():
     d = Drive(clock, normal_after=1, rest=tripped,
               fault_status=status("fault", running=False, speed=0.0, fault=True, fault_code="OC3"))
     s = Session(d, clock, decel_s=10.0)
-    r = ss.stop(s, None, None)
+    r = s.motion.stop(None, None)
     assert (r.how, r.stopped) == ("normal", True)
     assert r.message == "the drive is in fault (OC3): its output is off"
     assert r.status.fault_code == "OC3"
@@ -353,7 +412,7 @@ def test_fault_code_unreadable_keeps_the_fault():
     clock = Clock()
     tripped = status("fault", running=False, speed=0.0, fault=True)
     s = Session(Drive(clock, normal_after=0, rest=tripped), clock, decel_s=10.0)
-    r = ss.stop(s, None, None)
+    r = s.motion.stop(None, None)
     assert r.message == "the drive is in fault: its output is off" and r.status is tripped
 
 
@@ -361,7 +420,7 @@ def test_fault_with_a_code_is_not_read_again():
     clock = Clock()
     tripped = status("fault", running=False, speed=0.0, fault=True, fault_code="E70")
     d = Drive(clock, normal_after=0, rest=tripped, fault_status=status(fault_code="WRONG"))
-    r = ss.stop(Session(d, clock, decel_s=10.0), None, None)
+    r = Session(d, clock, decel_s=10.0).motion.stop(None, None)
     assert r.message == "the drive is in fault (E70): its output is off"
 
 
@@ -369,7 +428,7 @@ def run_stuck(decel_s, last=RUNNING, coast_after=3, timeout=None, **kw):
     clock = Clock()
     d = Drive(clock, normal_after=None, coast_after=coast_after, last=last, **kw)
     s = Session(d, clock, decel_s=decel_s)
-    r = ss.stop(s, None, timeout)
+    r = s.motion.stop(None, timeout)
     return s, d, r
 
 
@@ -382,7 +441,7 @@ def test_stuck_drive_is_coasted_after_the_escalation_time():
     assert r.message == "not stopped after 10.5 s; coasted"
     # the normal wait ends at the first cycle past 10.5 s (43 cycles = 10.75 s), the coast takes 4
     assert r.seconds == pytest.approx(43 * DT + 4 * DT)
-    assert s._may_run is False and r.status is STOPPED
+    assert s.motion.may_run is False and r.status is STOPPED
 
 
 def test_escalation_uses_the_last_status_speed():
@@ -399,7 +458,7 @@ def test_escalation_reads_drive_last_when_there_is_no_last_status():
     from profidrive_cli.drives.yaskawa import YaskawaDrive
     d.last_seen = lambda: YaskawaDrive.last_seen(d)     # Yaskawa keeps it in `last`
     s = Session(d, clock, decel_s=10.0)
-    ss.stop(s, None, None)
+    s.motion.stop(None, None)
     assert s.warnings == ["not stopped after 6 s: coasting"]
 
 
@@ -413,7 +472,7 @@ def test_wait_stopped_gives_up_at_the_first_cycle_past_the_timeout():
     clock = Clock()
     d = Drive(clock)
     s = Session(d, clock)
-    assert ss.wait_stopped(s, 5.0, None) is None
+    assert s.motion.wait_stopped(5.0, None) is None
     assert d.cycles == 21 and s.final_status is RUNNING     # 5.25 s > 5 s
 
 
@@ -422,7 +481,7 @@ def test_a_second_signal_hurries_to_the_coast():
     d = Drive(clock, coast_after=1)
     s = Session(d, clock, decel_s=10.0)
     s.signals.hurry = True
-    r = ss.stop(s, None, None)
+    r = s.motion.stop(None, None)
     assert d.cycles == 1 + 2                             # one normal cycle, then the coast
     assert s.warnings == ["stop hurried by a second signal: coasting"]
     assert r.how == "coast" and r.message == "stop hurried by a second signal; coasted"
@@ -434,7 +493,7 @@ def test_a_failed_normal_stop_coasts():
     d = Drive(clock, coast_after=0)
     d.fail_on["normal"] = DriveError("refused")
     s = Session(d, clock, decel_s=10.0)
-    r = ss.stop(s, None, None)
+    r = s.motion.stop(None, None)
     assert s.warnings == ["normal stop failed: refused: coasting"]
     assert (r.how, r.stopped, r.message) == ("coast", True, "normal stop failed: refused; coasted")
 
@@ -446,11 +505,11 @@ def test_coast_not_possible():
     d.fail_on["coast"] = DriveError("b")
     s = Session(d, clock, decel_s=10.0)
     s.final_status = RUNNING
-    r = ss.stop(s, None, None)
+    r = s.motion.stop(None, None)
     assert (r.how, r.stopped) == ("failed", False)
     assert r.message == "normal stop failed: a; coast stop not possible: b"
     assert r.seconds == 0.0                              # both refused at once: no cycle passed
-    assert r.status is RUNNING and s._may_run is True
+    assert r.status is RUNNING and s.motion.may_run is True
 
 
 def test_coast_that_does_not_stop_either_fails_after_10_s():
@@ -460,7 +519,7 @@ def test_coast_that_does_not_stop_either_fails_after_10_s():
                          "stop either")
     # normal: first cycle past 1 s (5 cycles); coast: first cycle past 10 s (41 cycles)
     assert r.seconds == pytest.approx(5 * DT + 41 * DT)
-    assert r.status is RUNNING and s._may_run is True
+    assert r.status is RUNNING and s.motion.may_run is True
 
 
 def test_stop_report_to_dict():
@@ -478,21 +537,21 @@ def shut(exc=None, may_run=True, result=None, family="toyo"):
     s = Session(Drive(clock), clock, family=family, may_run=may_run)
     s.stop_result = result
     hooks = []
-    s.after_stop = [hooks.append]
-    ss.shutdown(s, exc)
+    s.motion.after_stop = [hooks.append]
+    s.motion.shutdown(exc)
     return s, hooks
 
 
 def test_link_lost_words():
     s = Session(Drive(Clock()), family="toyo", watchdog_ms=1500)
-    assert ss.link_lost_words(s, OSError("gone")) == (
+    assert s.motion.link_lost_words(OSError("gone")) == (
         "link lost (gone): pdrive cannot send a stop. The station's DP watchdog (1500 ms) takes it "
         "out of data exchange within 1.5 s of the last telegram; the drive then stops by protection "
         "18 (COMM): the inverter trips and coasts")
     s.comm_loss_text = "P002 = 1: keeps running"
-    assert ss.link_lost_words(s, OSError("x")).endswith("the drive then stops by P002 = 1: keeps running")
-    s.comm_loss_text, s.profile = None, None
-    assert ss.link_lost_words(s, OSError("x")).endswith("stops by its communication-loss setting")
+    assert s.motion.link_lost_words(OSError("x")).endswith("the drive then stops by P002 = 1: keeps running")
+    s.comm_loss_text, s.drive = None, None                          # no family known
+    assert s.motion.link_lost_words(OSError("x")).endswith("stops by its communication-loss setting")
 
 
 def test_shutdown_after_a_lost_link_sends_nothing():
@@ -512,12 +571,12 @@ def test_shutdown_link_lost_not_running_says_nothing():
 
 def test_shutdown_without_drive_or_address_does_nothing():
     s = Session(None)
-    ss.shutdown(s, None)
+    s.motion.shutdown(None)
     assert s.master.released == [] and s.messages == []
     clock = Clock()
     s = Session(Drive(clock), clock)
     s.address = None
-    ss.shutdown(s, None)
+    s.motion.shutdown(None)
     assert s.master.released == [] and s.stop_calls == 0
 
 
@@ -564,8 +623,8 @@ def test_shutdown_not_started_is_not_needed():
     s = Session(Drive(clock), clock, may_run=False)
     s.final_status = STOPPED
     hooks = []
-    s.after_stop = [hooks.append]
-    ss.shutdown(s, None)
+    s.motion.after_stop = [hooks.append]
+    s.motion.shutdown(None)
     assert s.stop_calls == 0
     r = s.stop_report
     assert r.status is STOPPED
@@ -579,7 +638,7 @@ def test_shutdown_keeps_an_earlier_stop_report():
     s = Session(Drive(clock), clock, may_run=False)
     earlier = ss.StopReport("normal", True, 1.0, "stopped", STOPPED)
     s.stop_report = earlier
-    ss.shutdown(s, None)
+    s.motion.shutdown(None)
     assert s.stop_report is earlier and s.master.released == [3]
 
 
@@ -587,7 +646,7 @@ def test_shutdown_release_error_is_swallowed():
     clock = Clock()
     s = Session(Drive(clock), clock, may_run=False)
     s.master.release_error = PdriveError("gone")
-    ss.shutdown(s, None)
+    s.motion.shutdown(None)
     assert s.master.released == [3]
 
 
@@ -598,14 +657,14 @@ def test_shutdown_after_an_exception_flushes_a_stale_reply(monkeypatch):
     s = Session(Drive(clock), clock)
     s.stop_result = ss.StopReport("normal", True, 1.0, "stopped", STOPPED)
     s.master.rt = 0.02                     # a reply of 64 octets is over after 20 ms: wait that
-    ss.shutdown(s, KeyboardInterrupt())
+    s.motion.shutdown(KeyboardInterrupt())
     assert slept == [0.02] and s.master.asked == [64] and s.master.flushed == 1
     assert s.master.released == [3]
     slept.clear()
     s = Session(Drive(clock), clock)
     s.stop_result = ss.StopReport("normal", True, 1.0, "stopped", STOPPED)
     s.master.rt = 1.0                      # but never more than 50 ms
-    ss.shutdown(s, RuntimeError("x"))
+    s.motion.shutdown(RuntimeError("x"))
     assert slept == [0.05] and s.master.flushed == 1
 
 
@@ -618,15 +677,15 @@ def test_shutdown_flush_error_does_not_stop_the_stop(monkeypatch):
     def boom():
         raise OSError("closed")
     s.master.link.flush_input = boom
-    ss.shutdown(s, RuntimeError("x"))
+    s.motion.shutdown(RuntimeError("x"))
     assert s.stop_calls == 1 and s.master.released == [3]
 
 
 def test_a_session_without_after_stop_hooks():
     clock = Clock()
     s = Session(Drive(clock), clock, may_run=False)
-    del s.after_stop
-    ss.shutdown(s, None)
+    s.motion.after_stop = []
+    s.motion.shutdown(None)
     assert s.master.released == [3] and s.messages == []
 
 
@@ -637,7 +696,7 @@ def test_after_stop_hook_errors_are_said_and_the_others_run():
 
     def bad(ok):
         raise RuntimeError("PZD map not restored")
-    s.after_stop = [bad, seen.append]
-    ss.shutdown(s, None)
+    s.motion.after_stop = [bad, seen.append]
+    s.motion.shutdown(None)
     assert s.messages == ["after the stop: PZD map not restored"] and seen == [True]
     assert s.master.released == [3]

@@ -17,7 +17,7 @@ from types import SimpleNamespace
 import pytest
 
 from profidrive_cli.checklist.spec import ChecklistError, load_checklist_text
-from profidrive_cli.session.safestop import link_lost_words
+from profidrive_cli.session.safestop import SafeStop
 
 ROOT = Path(__file__).resolve().parents[1]
 #: generous: one cold run takes a few seconds alone, far longer on a loaded machine
@@ -72,8 +72,9 @@ def test_a_checklist_with_an_empty_name_is_a_file_line_error():
 def test_link_lost_words_without_the_exception_name_no_none():
     # safestop._shutdown passes `exc`, None when a session already marked link_lost is closed
     # without an exception: the words said "link lost (None)"
-    sess = SimpleNamespace(comm_loss_text="its comm-loss setting", profile=None, watchdog_ms=500.0)
-    text = link_lost_words(sess, None)
+    stop = SafeStop(SimpleNamespace(drive=None, watchdog_ms=500.0))
+    stop.comm_loss_text = "its comm-loss setting"
+    text = stop.link_lost_words(None)
     assert text.startswith("link lost: pdrive cannot send a stop."), text
     assert "None" not in text
-    assert link_lost_words(sess, OSError("gone")).startswith("link lost (gone): ")
+    assert stop.link_lost_words(OSError("gone")).startswith("link lost (gone): ")

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from typing import Any, Callable, Protocol
+from typing import Any, Callable, ClassVar, Protocol
 
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.drives.torque import no_torque_reason
@@ -396,3 +396,35 @@ class Drive(ABC):
         """Scale speed words with `hz` as 100 % (the --fmax / config / profile value the session
         settled on when the drive's own max frequency cannot be read)."""
         self._fmax = hz
+
+    def speed_scale_hz(self) -> float | None:
+        """The max frequency (Hz = 100 %) the codec scales speed words with now; None when it has
+        not settled on one yet (a Sample then shows the profile default)."""
+        return self._fmax
+
+    # -- family hooks for session/motion.py and session/safestop.py (the run and the safe stop) --
+    #: the card's own ramp-time parameters by role ("accel", "decel": seconds from 0 to the max
+    #: frequency), asked when the profile's `profidrive.ramps` names none
+    ramp_codes: ClassVar[dict[str, str]] = {}
+
+    def ramp_param(self, role: str) -> str | None:
+        """The parameter code holding the ramp time `role` ("accel" / "decel"), None where the card
+        names none (no bus traffic; the caller checks the profile can address it)."""
+        return self.ramp_codes.get(role)
+
+    #: what the drive does when its master goes silent, in words, for when its setting cannot be
+    #: read (comm_loss_summary reads it)
+    comm_loss_words: ClassVar[str] = "its communication-loss setting"
+
+    #: called when a command may set the motor turning (on_motion)
+    _motion_listeners: tuple[Callable[[], None], ...] = ()
+
+    def on_motion(self, listener: Callable[[], None]) -> None:
+        """Call `listener` whenever this Drive is told to turn the motor (start, jog on), whoever
+        tells it (session/motion.py: the safe stop on every way out then covers it)."""
+        self._motion_listeners = (*self._motion_listeners, listener)
+
+    def _notify_motion(self) -> None:
+        """Each codec's start() and jog(on) call this first, before anything is sent."""
+        for listener in self._motion_listeners:
+            listener()

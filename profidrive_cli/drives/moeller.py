@@ -274,6 +274,9 @@ def direction_text(ctw: int, hsw: int, mc: MoellerConfig | None = None) -> str:
 
 class MoellerDrive(pd.ProfidriveDrive):
     family = "moeller"
+    #: F002 acceleration time, F003 deceleration time (when the profile's ramps name none)
+    ramp_codes = {"accel": "F002", "decel": "F003"}
+    comm_loss_words = "P002 (0 = trip E70 and coast; 1 = keep running on the last command)"
 
     def __init__(self, channel, profile, layout: str | None = None):
         super().__init__(channel, profile, layout)

@@ -1,8 +1,7 @@
 """Bring-up: parameterise and configure the chosen station (Set_Prm with the DP watchdog and the
 GSD's User_Prm_Data, Chk_Cfg of the layout), reach Data_Exchange at the session's rate, and build the
 family's Drive on a MeteredChannel (the station kept in data exchange while the master talks to
-other stations: Master.keep); remember when anything may have set the motor turning. Talks to
-the bus through dp.poller.Master only; starts nothing.
+other stations: Master.keep). Talks to the bus through dp.poller.Master only; starts nothing.
 """
 
 from __future__ import annotations
@@ -20,8 +19,8 @@ def connect(sess):
     assert sess.profile is not None and sess.layout is not None
     lay = sess.profile.layouts[sess.layout]
     sc = SlaveConfig(ident=sess.ident, cfg=lay.cfg, user_prm=user_prm(sess),
-                     wd_ms=sess.watchdog_ms, sync=getattr(sess, "dp_sync", False),
-                     freeze=getattr(sess, "dp_freeze", False))   # Sync_Req / Freeze_Req (multirun.py)
+                     wd_ms=sess.watchdog_ms, sync=sess.dp_sync,
+                     freeze=sess.dp_freeze)          # Sync_Req / Freeze_Req (multirun.py)
     sess.master.add_station(sess.address, sc)
     try:
         sess.master.bring_up(sess.address, timeout=3.0, fail_fast=True)
@@ -36,9 +35,8 @@ def connect(sess):
     sess.t0 = sess.channel.now()
     if sess.log_csv:
         sess.cyclelog = CycleLog(sess.log_csv, sess.channel, sess.t0, lambda: sess.drive, sess.warn,
-                                 getattr(sess, "log_extra", None))
+                                 sess.log_extra)
     drive = make_drive(sess.channel, sess.profile, sess.layout)
-    track_motion(sess, drive)
     sess.drive = drive
     return drive
 
@@ -53,15 +51,3 @@ def user_prm(sess) -> bytes:
     except Exception:       # a broken user GSD must not keep the drive from starting
         return b""
 
-
-def track_motion(sess, drive) -> None:
-    """Remember when anything may have set the motor turning (start / jog), whoever called it."""
-    for name in ("start", "jog"):
-        orig = getattr(drive, name, None)
-        if orig is None:
-            continue
-
-        def wrapped(*a, _orig=orig, **k):
-            sess._may_run = True
-            return _orig(*a, **k)
-        setattr(drive, name, wrapped)

@@ -6,7 +6,8 @@
     read_accel(sess) -> (s, code)        the acceleration time, for the wait until at speed
 
 Family rules from the card manuals (see the profiles' decisions), answered by each codec's Drive hooks
-(drives/base.py comm_loss_reaction, zero_data_reaction, bus_run_refusal, normal_stop_warnings):
+(drives/base.py comm_loss_reaction, zero_data_reaction, bus_run_refusal, normal_stop_warnings,
+ramp_param):
 Fuji o27/o28 + F08 (Table 9.1), H81 (light alarms), y98, OPC-PDP3 o32 (Table 10.1; drives/fuji/
 reaction.py); Moeller P002 (+ P001 shown); Yaskawa F6-01 + C1-02 / C1-09, b1-03; Toyo protection 18
 (fixed), control word bit 10 and C-00.
@@ -18,9 +19,6 @@ from profidrive_cli import UsageError
 from profidrive_cli.drives.base import DriveError, Reaction
 
 __all__ = ["Reaction", "read_reaction", "clear_reaction", "check_bus_control", "read_accel"]
-
-_ACCEL_CODES = {"fuji": "F07", "moeller": "F002", "yaskawa": "C1-01"}
-
 
 # -- reads ----------------------------------------------------------------------------------
 def _read(sess, code: str):
@@ -72,7 +70,7 @@ def clear_reaction(sess) -> Reaction:
     except DriveError as e:
         raise DriveError(f"station {sess.address}: cannot read the all-zero-data setting: {e}") from None
     from profidrive_cli.session.safestop import read_decel
-    decel = read_decel(sess)
+    decel = read_decel(d, sess.profile)
     extra = [] if decel else d.normal_stop_warnings()
     return Reaction(head + "; the drive must stop by its normal stop" +
                     (f" (deceleration time {decel:g} s from max frequency)" if decel else
@@ -82,10 +80,7 @@ def clear_reaction(sess) -> Reaction:
 
 def read_accel(sess) -> tuple[float | None, str | None]:
     """(acceleration time from 0 to the max frequency, its code) where the drive says it."""
-    d = sess.drive
-    ramps = getattr(getattr(d, "cfg", None), "ramps", {}) or {}
-    code = (ramps.get("accel") if isinstance(ramps, dict) else None) or \
-        _ACCEL_CODES.get(sess.profile.family)
+    code = sess.drive.ramp_param("accel")      # the profile's ramps, else the card's own
     if not code or not _readable(sess, code):
         return None, code
     try:

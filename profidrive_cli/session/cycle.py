@@ -131,12 +131,7 @@ def choose_rate(sess) -> None:
 
 
 def make_sample(sess, st: DriveStatus) -> Sample:
-    """A Sample of status `st` on the session's clock (also remembered as sess.final_status)."""
-    if sess._fmax is not None:
-        fmax = sess._fmax[0]
-    else:
-        fmax = getattr(sess.drive, "_fmax", None) or float(sess.profile.max_frequency_default)
-    sess.final_status = st
-    return Sample(sess.channel.now() - sess.t0, st, float(fmax), sess.achieved_hz,
-                  sess.cycles, sess.counters)
+    """A Sample of status `st` on the session's clock (also remembered as its final_status): the
+    session's Motion makes it (session/motion.py Motion.sample)."""
+    return sess.motion.sample(st)
 

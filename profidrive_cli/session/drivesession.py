@@ -1,6 +1,7 @@
 """DriveSession: one drive station in Data_Exchange behind the Drive interface, with a safe stop on
 every way out. Ties the session's parts together and keeps their shared state; the work is done in
-discovery.py, cycle.py, bringup.py, motion.py, safestop.py + signals.py, cyclelog.py, params.py,
+discovery.py, cycle.py, bringup.py, motion.py (Motion: run, jog, torque, the safe stop of
+safestop.py, may_run) + signals.py, cyclelog.py, params.py,
 backup.py + dumpfile.py + restore.py (the API is described in session/__init__.py). No click and no
 rich here.
 """
@@ -17,17 +18,14 @@ from profidrive_cli.drives.profile import Profile
 import profidrive_cli.session.backup as backup
 import profidrive_cli.session.bringup as bringup
 import profidrive_cli.session.dumpfile as dumpfile
-import profidrive_cli.session.jog as _jog
-import profidrive_cli.session.motion as motion
 import profidrive_cli.session.params as params
 import profidrive_cli.session.restore as _restore
-import profidrive_cli.session.safestop as safestop
-import profidrive_cli.session.torque as torque
-from profidrive_cli.session.cycle import MeteredChannel, Sample, choose_rate, make_sample
+from profidrive_cli.session.cycle import MeteredChannel, Sample, choose_rate
 from profidrive_cli.session.cyclelog import CycleLog
 from profidrive_cli.session.discovery import DriveStation, locate
 from profidrive_cli.session.params import ParamInfo
 from profidrive_cli.session.backup import ParamRow
+from profidrive_cli.session.motion import Motion
 from profidrive_cli.session.safestop import StopReport
 from profidrive_cli.session.signals import Guard, SignalGuard
 
@@ -79,25 +77,18 @@ class DriveSession:
         self.warnings: list[str] = []
         self.messages: list[str] = []
         self.link_lost = False
-        self.stop_report: StopReport | None = None
-        self.final_status: DriveStatus | None = None
-        self.comm_loss_text: str | None = None
-        self._may_run = False
         self.t0 = 0.0
-        self._decel_s: float | None = None
-        self._fmax: tuple[float, str] | None = None
-        self._fmax_override: float | None = None
         self.signals: Guard = SignalGuard(handle_signals)
         self._closed = False
         #: the --log CSV once connected (cyclelog.CycleLog)
         self.cyclelog: CycleLog | None = None
         #: (column names, row()) the --log CSV writes beside each exchange (set before connecting)
-        self.log_extra = None
+        self.log_extra: tuple[list[str], Callable[[], list[Any]]] | None = None
         #: Sync_Req / Freeze_Req with the parameters (MultiRun --sync / --freeze sets them)
         self.dp_sync = False
         self.dp_freeze = False
-        #: called with link_ok after the safe stop on close, before the station is released
-        self.after_stop: list[Callable[[bool], None]] = []
+        #: start / jog / torque, the safe stop and may_run (motion.py)
+        self.motion = Motion(self)
 
 
     # -- messages ------------------------------------------------------------------------------
@@ -142,8 +133,11 @@ class DriveSession:
         return self.station
 
     def connect(self):
-        """Step 2: Set_Prm/Chk_Cfg, Data_Exchange, the family's Drive (bringup.py)."""
-        return bringup.connect(self)
+        """Step 2: Set_Prm/Chk_Cfg, Data_Exchange, the family's Drive (bringup.py), watched by
+        Motion for anything that may set the motor turning."""
+        drive = bringup.connect(self)
+        self.motion.watch(drive)
+        return drive
 
     def close(self, exc: BaseException | None = None) -> None:
         """Safe stop (if the drive may be running), release the station, close the link. Idempotent."""
@@ -152,7 +146,7 @@ class DriveSession:
         self._closed = True
         self.signals.guard()
         try:
-            safestop.shutdown(self, exc)
+            self.motion.shutdown(exc)
         finally:
             if self.cyclelog is not None:
                 self.cyclelog.close()
@@ -188,17 +182,10 @@ class DriveSession:
         return self.channel.cycles if self.channel is not None else 0
 
     @property
-    def may_run(self) -> bool:
-        return self._may_run
-
-    @property
     def fmax_hz(self) -> float:
         """The maximum frequency (Hz) that 100 % stands for, as known so far: read from the drive or
         given (fmax()), else the profile default. No bus traffic."""
-        if self._fmax is not None:
-            return float(self._fmax[0])
-        assert self.profile is not None
-        return float(self.profile.max_frequency_default)
+        return self.motion.fmax_hz
 
     def need_drive(self):
         if self.drive is None:
@@ -206,64 +193,90 @@ class DriveSession:
         return self.drive
 
     def _sample(self, st: DriveStatus) -> Sample:
-        return make_sample(self, st)
+        return self.motion.sample(st)
 
-    # -- speed and motion (motion.py) -------------------------------------------------------------
+    # -- motion: speed, run, jog, torque, the safe stop (motion.py Motion) ----------------------
+    @property
+    def may_run(self) -> bool:
+        return self.motion.may_run
+
+    @property
+    def stop_report(self) -> StopReport | None:
+        return self.motion.stop_report
+
+    @stop_report.setter
+    def stop_report(self, report: StopReport | None) -> None:
+        self.motion.stop_report = report
+
+    @property
+    def final_status(self) -> DriveStatus | None:
+        return self.motion.final_status
+
+    @final_status.setter
+    def final_status(self, st: DriveStatus | None) -> None:
+        self.motion.final_status = st
+
+    @property
+    def comm_loss_text(self) -> str | None:
+        return self.motion.comm_loss_text
+
+    @property
+    def after_stop(self) -> list[Callable[[bool], None]]:
+        """Called with link_ok after the safe stop on close, before the station is released."""
+        return self.motion.after_stop
+
     def fmax(self, override: float | None = None) -> tuple[float, str]:
-        return motion.fmax(self, override)
+        return self.motion.fmax(override)
 
     def percent_for_hz(self, hz: float, fmax_override: float | None = None) -> float:
-        return motion.percent_for_hz(self, hz, fmax_override)
+        return self.motion.percent_for_hz(hz, fmax_override)
 
     def set_reference(self, percent: float) -> None:
-        motion.set_reference(self, percent)
+        self.motion.set_reference(percent)
 
     def start(self, percent: float | None = None, timeout: float = 5.0) -> Sample:
-        return motion.start(self, percent, timeout)
+        return self.motion.start(percent, timeout)
 
     def start_torque(self, torque_percent: float | None, limit_percent: float | None = None,
                      percent: float | None = None, timeout: float = 5.0) -> Sample:
         """A torque run (torque.py): torque reference or torque limit, then start."""
-        return torque.start(self, torque_percent, limit_percent, percent, timeout)
+        return self.motion.start_torque(torque_percent, limit_percent, percent, timeout)
 
     def check_torque(self, torque_percent: float | None, limit_percent: float | None = None) -> None:
-        torque.check(self, torque_percent, limit_percent)
+        self.motion.check_torque(torque_percent, limit_percent)
 
     def set_torque(self, percent: float) -> None:
-        torque.set_torque(self, percent)
+        self.motion.set_torque(percent)
 
     def poll(self) -> Sample:
-        return motion.poll(self)
+        return self.motion.poll()
 
     def status(self) -> Sample:
-        return motion.status(self)
+        return self.motion.status()
 
-    # -- jog (jog.py) -----------------------------------------------------------------------------
     def jog_refusal(self) -> str | None:
         """Why this station cannot jog (one line), None when it can."""
-        return _jog.refusal(self)
+        return self.motion.jog_refusal()
 
     def jog_speed(self) -> ParamValue | None:
-        return _jog.jog_speed(self)
+        return self.motion.jog_speed()
 
     def jog(self, reverse: bool = False, timeout: float = 5.0) -> Sample:
         """The card's jog on (UsageError where the card has none); stop() ends it."""
-        return _jog.start(self, reverse, timeout)
+        return self.motion.jog(reverse, timeout)
 
     def release_jog(self) -> Sample:
-        return _jog.release(self)
+        return self.motion.release_jog()
 
-    # -- the safe stop (safestop.py) --------------------------------------------------------------
     def stop_timeout(self, percent: float | None = None) -> float:
-        return safestop.stop_timeout(self, percent)
+        return self.motion.stop_timeout(percent)
 
     def stop(self, on_sample: Callable[[Sample], None] | None = None,
              timeout: float | None = None) -> StopReport:
         """The family's normal stop; wait (bounded) until the drive reports stopped; coast if it does
         not. A second SIGINT/SIGTERM during the wait (when signals are handled) coasts at once.
         The report is also kept in .stop_report."""
-        self.stop_report = safestop.stop(self, on_sample or self.on_sample, timeout)
-        return self.stop_report
+        return self.motion.stop(on_sample, timeout)
 
     # -- parameters (params.py) -------------------------------------------------------------------
     def param_info(self, code: str) -> ParamInfo:

@@ -428,7 +428,7 @@ def stop_together(items, group: GroupCycle, hurry: Callable[[], bool] = lambda: 
             mode, _, _, why = pending.pop(a)
             msg = (f"the drive is in fault{f' ({st.fault_code})' if st.fault_code else ''}: its output "
                    f"is off" if st.fault else "stopped")
-            s._may_run = False
+            s.motion.confirm_stopped()
             s.final_status = st
             s.stop_report = StopReport(mode, True, group.master.link.now() - t0,
                                        msg + (f"; {why}; coasted" if mode == "coast" else ""), st)

@@ -5,8 +5,12 @@ release the station; with the link lost, say what the station's watchdog and the
 Sends only stop commands (drives.base.Drive.stop) and the release; reads parameters only to size the
 wait and to name the comm-loss behaviour.
 
+SafeStop keeps what the stop knows and reports (deceleration time, comm-loss words, stop report, the
+last status, the after_stop hooks); session/motion.py's Motion is one and says whether the drive may
+be turning (may_run). It reads of its station only what StopStation names.
+
 Nothing the caller hands in can skip the stop: an exception of a sample or message callback during
-the stop (a closed stdout, a bug) is kept in `sess.callback_error`, the callback is not called again,
+the stop (a closed stdout, a bug) is kept in `callback_error`, the callback is not called again,
 and the stop and the release go on; shutdown raises it after the release when nothing else went
 wrong (the command then ends with its one line).
 """
@@ -15,24 +19,17 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import Any, Callable, Protocol
 
 from profidrive_cli import PdriveError, UsageError
-from profidrive_cli.drives.base import DriveError, DriveStatus
-from profidrive_cli.session.cycle import make_sample
+from profidrive_cli.drives.base import Drive, DriveError, DriveStatus
+from profidrive_cli.session.cycle import MeteredChannel, Sample
+from profidrive_cli.session.signals import Guard
 
 COAST_TIMEOUT_S = 10.0
 DEFAULT_STOP_TIMEOUT_S = 30.0
 
-#: deceleration-time parameter per family when the profile's `profidrive.ramps` names none
-_DECEL_CODES = {"fuji": "F08", "moeller": "F003", "yaskawa": "C1-02"}
-#: what the drive does when the master goes silent, per family (when it cannot be read)
-_COMM_LOSS_WORDS = {
-    "fuji": "its o27/o28 setting (o27 = 3 or 13..15 ignores the loss: the motor keeps running)",
-    "moeller": "P002 (0 = trip E70 and coast; 1 = keep running on the last command)",
-    "toyo": "protection 18 (COMM): the inverter trips and coasts",
-    "yaskawa": "a BUS fault after the option's communication timeout (the drive stops by its BUS "
-               "fault setting)",
-}
+OnSample = Callable[[Sample], None]
 
 
 @dataclass
@@ -43,20 +40,44 @@ class StopReport:
     message: str = ""
     status: DriveStatus | None = None
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {"how": self.how, "stopped": self.stopped, "seconds": round(self.seconds, 3),
                 "message": self.message,
                 "state": self.status.state if self.status is not None else None}
 
 
-def read_decel(sess) -> float | None:
-    d = sess.drive
+class StopStation(Protocol):
+    """What the safe stop reads of its station (DriveSession today); link_lost it also sets."""
+    link_lost: bool
+
+    @property
+    def drive(self) -> Drive | None: ...
+    @property
+    def address(self) -> int | None: ...
+    @property
+    def channel(self) -> MeteredChannel | None: ...
+    @property
+    def master(self) -> Any: ...
+    @property
+    def signals(self) -> Guard: ...
+    @property
+    def watchdog_ms(self) -> float: ...
+    @property
+    def stop_timeout_s(self) -> float | None: ...
+    @property
+    def on_sample(self) -> OnSample | None: ...
+    def need_drive(self) -> Drive: ...
+    def say(self, text: str) -> None: ...
+    def warn(self, text: str) -> None: ...
+
+
+def read_decel(d: Drive, profile: Any) -> float | None:
+    """The deceleration time (s from the max frequency to 0) read from the drive: the parameter the
+    family names (Drive.ramp_param), None without a parameter channel or when it cannot be read."""
     if not d.has_param_channel:
         return None
-    code = getattr(getattr(d, "cfg", None), "ramps", {}) or {}
-    code = code.get("decel") if isinstance(code, dict) else None
-    code = code or _DECEL_CODES.get(sess.profile.family)
-    if not code or sess.profile.param(code) is None:
+    code = d.ramp_param("decel")
+    if not code or profile.param(code) is None:
         return None
     try:
         return float(d.read_param(code).value)
@@ -64,187 +85,220 @@ def read_decel(sess) -> float | None:
         return None
 
 
-def read_comm_loss(sess) -> str:
-    d = sess.drive
-    fam = sess.profile.family
+def read_comm_loss(d: Drive) -> str:
+    """What the drive does when the master goes silent: read from its settings where the family can
+    (Drive.comm_loss_summary), else the family's words (Drive.comm_loss_words)."""
     try:
         said = d.comm_loss_summary() if d.has_param_channel else None
         if said:
             return said
     except (DriveError, UsageError):
         pass
-    return _COMM_LOSS_WORDS.get(fam, "its communication-loss setting")
+    return d.comm_loss_words
 
 
-def stop_timeout(sess, percent: float | None = None) -> float:
-    if sess.stop_timeout_s is not None:
-        return float(sess.stop_timeout_s)
-    if sess._decel_s is None:
-        return DEFAULT_STOP_TIMEOUT_S
-    frac = 1.0
-    if percent is not None:
-        frac = min(1.0, abs(percent) / 100.0)
-    return max(5.0, min(600.0, 1.5 * sess._decel_s * frac + 3.0))
+class SafeStop:
+    """The stop of one station's drive and the shutdown on every way out (session/motion.py: Motion
+    is one and owns may_run)."""
 
+    def __init__(self, station: StopStation) -> None:
+        self.station = station
+        #: deceleration time (s, max frequency -> 0), read from the drive at the first start / jog
+        self.decel_s: float | None = None
+        #: what the drive does when its master goes silent (read at the first start / jog)
+        self.comm_loss_text: str | None = None
+        #: the last stop's report (stop(), the shutdown, a group's stop)
+        self.stop_report: StopReport | None = None
+        #: the last status seen
+        self.final_status: DriveStatus | None = None
+        #: the first exception a callback raised during the stop (raised after the release)
+        self.callback_error: BaseException | None = None
+        #: called with link_ok after the safe stop on close, before the station is released
+        self.after_stop: list[Callable[[bool], None]] = []
 
-def stop(sess, on_sample, timeout) -> StopReport:
-    """Normal stop, bounded wait, coast if it does not stop (or a signal hurries it)."""
-    d = sess.need_drive()
-    t_start = sess.channel.now()
-    last = d.last_seen()
-    pct = last.speed_percent if last is not None else None
-    limit = timeout if timeout is not None else sess.stop_timeout(pct)
-    st = None
-    why = ""
-    try:
-        d.stop("normal", wait=False)
-        st, on_sample = _wait(sess, limit, on_sample)
-        if st is not None:
-            sess._may_run = False
-            how = "normal"
-            msg = (f"the drive is in fault{f' ({st.fault_code})' if st.fault_code else ''}: "
-                   f"its output is off" if st.fault else "stopped")
-            return StopReport(how, True, sess.channel.now() - t_start, msg, st)
-        why = ("stop hurried by a second signal" if sess.signals.hurry else
-               f"not stopped after {limit:g} s")
-    except DriveError as e:
-        why = f"normal stop failed: {e}"
-    # escalate: coast (OFF2 / base block / run bit off)
-    _tell(sess, sess.warn, f"{why}: coasting")
-    try:
-        d.stop("coast", wait=False)
-        sess.signals.hurry = False
-        st, on_sample = _wait(sess, COAST_TIMEOUT_S, on_sample)
-    except DriveError as e:
-        return StopReport("failed", False, sess.channel.now() - t_start,
-                          f"{why}; coast stop not possible: {e}", sess.final_status)
-    if st is None:
-        return StopReport("failed", False, sess.channel.now() - t_start,
-                          f"{why}; the drive does not report stopped after a coast stop either",
-                          sess.final_status)
-    sess._may_run = False
-    return StopReport("coast", True, sess.channel.now() - t_start, f"{why}; coasted", st)
+    @property
+    def may_run(self) -> bool:
+        """Whether the drive may be turning (Motion says)."""
+        raise NotImplementedError
 
+    def sample(self, st: DriveStatus) -> Sample:
+        """A Sample of status `st` (Motion makes it)."""
+        raise NotImplementedError
 
-def wait_stopped(sess, timeout: float, on_sample) -> DriveStatus | None:
-    return _wait(sess, timeout, on_sample)[0]
+    def _now(self) -> float:
+        ch = self.station.channel
+        assert ch is not None
+        return ch.now()
 
+    def stop_timeout(self, percent: float | None = None) -> float:
+        """How long the normal stop may take before it escalates: the user's, else 1.5 x the
+        deceleration time scaled by `percent` + 3 s (5..600 s), else 30 s."""
+        if self.station.stop_timeout_s is not None:
+            return float(self.station.stop_timeout_s)
+        if self.decel_s is None:
+            return DEFAULT_STOP_TIMEOUT_S
+        frac = 1.0
+        if percent is not None:
+            frac = min(1.0, abs(percent) / 100.0)
+        return max(5.0, min(600.0, 1.5 * self.decel_s * frac + 3.0))
 
-def _wait(sess, timeout: float, on_sample):
-    """(the status once stopped or in fault, else None; on_sample, or None once it raised)."""
-    d = sess.drive
-    end = sess.channel.now() + timeout
-    while True:
-        st = d.cycle()
-        if on_sample is not None:
-            try:
-                on_sample(make_sample(sess, st))
-            except Exception as e:          # noqa: BLE001  (the stop goes on without it)
-                callback_failed(sess, e)
-                on_sample = None
-        if on_sample is None:
-            sess.final_status = st
-        if st.fault or st.stopped:
-            if st.fault and st.fault_code is None:
+    def stop(self, on_sample: OnSample | None = None, timeout: float | None = None) -> StopReport:
+        """The family's normal stop; wait (bounded) until the drive reports stopped; coast if it does
+        not (or a signal hurries it). The report is also kept in .stop_report."""
+        self.stop_report = self._stop(on_sample or self.station.on_sample, timeout)
+        return self.stop_report
+
+    def _stop(self, on_sample: OnSample | None, timeout: float | None) -> StopReport:
+        sta = self.station
+        d = sta.need_drive()
+        t_start = self._now()
+        last = d.last_seen()
+        pct = last.speed_percent if last is not None else None
+        limit = timeout if timeout is not None else self.stop_timeout(pct)
+        st = None
+        why = ""
+        try:
+            d.stop("normal", wait=False)
+            st, on_sample = self._wait(limit, on_sample)
+            if st is not None:
+                msg = (f"the drive is in fault{f' ({st.fault_code})' if st.fault_code else ''}: "
+                       f"its output is off" if st.fault else "stopped")
+                return StopReport("normal", True, self._now() - t_start, msg, st)
+            why = ("stop hurried by a second signal" if sta.signals.hurry else
+                   f"not stopped after {limit:g} s")
+        except DriveError as e:
+            why = f"normal stop failed: {e}"
+        # escalate: coast (OFF2 / base block / run bit off)
+        self._tell(sta.warn, f"{why}: coasting")
+        try:
+            d.stop("coast", wait=False)
+            sta.signals.hurry = False
+            st, on_sample = self._wait(COAST_TIMEOUT_S, on_sample)
+        except DriveError as e:
+            return StopReport("failed", False, self._now() - t_start,
+                              f"{why}; coast stop not possible: {e}", self.final_status)
+        if st is None:
+            return StopReport("failed", False, self._now() - t_start,
+                              f"{why}; the drive does not report stopped after a coast stop either",
+                              self.final_status)
+        return StopReport("coast", True, self._now() - t_start, f"{why}; coasted", st)
+
+    def wait_stopped(self, timeout: float, on_sample: OnSample | None) -> DriveStatus | None:
+        return self._wait(timeout, on_sample)[0]
+
+    def _wait(self, timeout: float, on_sample: OnSample | None
+              ) -> tuple[DriveStatus | None, OnSample | None]:
+        """(the status once stopped or in fault, else None; on_sample, or None once it raised)."""
+        d = self.station.need_drive()
+        end = self._now() + timeout
+        while True:
+            st = d.cycle()
+            if on_sample is not None:
                 try:
-                    st = d.status()
-                except DriveError:
-                    pass
-            return st, on_sample
-        if sess.signals.hurry or sess.channel.now() > end:
-            return None, on_sample
+                    on_sample(self.sample(st))
+                except Exception as e:          # noqa: BLE001  (the stop goes on without it)
+                    self.callback_failed(e)
+                    on_sample = None
+            if on_sample is None:
+                self.final_status = st
+            if st.fault or st.stopped:
+                if st.fault and st.fault_code is None:
+                    try:
+                        st = d.status()
+                    except DriveError:
+                        pass
+                return st, on_sample
+            if self.station.signals.hurry or self._now() > end:
+                return None, on_sample
 
+    def callback_failed(self, e: BaseException) -> None:
+        """Keep the first exception a callback raised during the stop (reported after the release)."""
+        if self.callback_error is None:
+            self.callback_error = e
 
-def callback_failed(sess, e: BaseException) -> None:
-    """Keep the first exception a callback raised during the stop (reported after the release)."""
-    if getattr(sess, "callback_error", None) is None:
-        sess.callback_error = e
-
-
-def _tell(sess, say, text: str) -> None:
-    """sess.say / sess.warn: the text is kept in the session even when on_message raises."""
-    try:
-        say(text)
-    except Exception as e:                  # noqa: BLE001
-        callback_failed(sess, e)
-
-
-def link_lost_words(sess, e: BaseException | None) -> str:
-    """What the watchdog does now that no stop can be sent; `e`: the LinkLost, None when the link
-    was found lost before (sess.link_lost) and the session is closed without an exception."""
-    fam_text = sess.comm_loss_text or _COMM_LOSS_WORDS.get(
-        sess.profile.family if sess.profile else "", "its communication-loss setting")
-    return (f"link lost{f' ({e})' if e is not None else ''}: pdrive cannot send a stop. The station's DP watchdog "
-            f"({sess.watchdog_ms:g} ms) takes it out of data exchange within "
-            f"{sess.watchdog_ms / 1000.0:g} s of the last telegram; the drive then stops by "
-            f"{fam_text}")
-
-
-def shutdown(sess, exc: BaseException | None) -> None:
-    """The stop and the release on every way out; a callback's exception during them is raised
-    after the release (when `exc` is None: the session's own error comes first)."""
-    _shutdown(sess, exc)
-    late = getattr(sess, "callback_error", None)
-    if late is not None and exc is None:
-        sess.callback_error = None
-        raise late
-
-
-def _shutdown(sess, exc: BaseException | None) -> None:
-    from profidrive_cli.link.base import LinkLost
-    if isinstance(exc, LinkLost):
-        sess.link_lost = True
-    if sess.drive is None or sess.address is None:
-        return
-    if sess.link_lost:
-        if sess._may_run:
-            sess.stop_report = StopReport("not sent (link lost)", False, 0.0,
-                                          link_lost_words(sess, exc))
-            _tell(sess, sess.say, sess.stop_report.message)
-        _after_stop(sess, False)
-        return
-    if exc is not None:
-        # an interrupted request may have left a reply on the line: start clean
+    def _tell(self, say: Callable[[str], None], text: str) -> None:
+        """station.say / station.warn: the text is kept even when on_message raises."""
         try:
-            time.sleep(min(0.05, sess.master.params.reply_timeout(64)))
-            sess.master.link.flush_input()
-        except Exception:
-            pass
-    if sess._may_run:
-        try:
-            r = sess.stop()
-            if r.how == "normal":
-                _tell(sess, sess.say, f"stopped (normal stop, {r.seconds:.1f} s)"
-                      if not (r.status and r.status.fault) else r.message)
-            elif r.how == "coast":
-                _tell(sess, sess.say, f"stopped by a coast stop after {r.seconds:.1f} s ({r.message})")
-            else:
-                _tell(sess, sess.say, f"could not confirm the stop: {r.message}")
-        except LinkLost as e:
-            sess.link_lost = True
-            sess.stop_report = StopReport("not sent (link lost)", False, 0.0, link_lost_words(sess, e))
-            _tell(sess, sess.say, sess.stop_report.message)
-            _after_stop(sess, False)
+            say(text)
+        except Exception as e:                  # noqa: BLE001
+            self.callback_failed(e)
+
+    def link_lost_words(self, e: BaseException | None) -> str:
+        """What the watchdog does now that no stop can be sent; `e`: the LinkLost, None when the link
+        was found lost before (station.link_lost) and the session is closed without an exception."""
+        d = self.station.drive
+        fam_text = self.comm_loss_text or (d.comm_loss_words if d is not None
+                                           else Drive.comm_loss_words)
+        wd = self.station.watchdog_ms
+        return (f"link lost{f' ({e})' if e is not None else ''}: pdrive cannot send a stop. The station's DP watchdog "
+                f"({wd:g} ms) takes it out of data exchange within "
+                f"{wd / 1000.0:g} s of the last telegram; the drive then stops by "
+                f"{fam_text}")
+
+    def shutdown(self, exc: BaseException | None) -> None:
+        """The stop and the release on every way out; a callback's exception during them is raised
+        after the release (when `exc` is None: the session's own error comes first)."""
+        self._shutdown(exc)
+        late = self.callback_error
+        if late is not None and exc is None:
+            self.callback_error = None
+            raise late
+
+    def _shutdown(self, exc: BaseException | None) -> None:
+        from profidrive_cli.link.base import LinkLost
+        sta = self.station
+        if isinstance(exc, LinkLost):
+            sta.link_lost = True
+        if sta.drive is None or sta.address is None:
             return
-        except PdriveError as e:
-            sess.stop_report = StopReport("failed", False, 0.0, f"stop failed: {e}")
-            _tell(sess, sess.say, f"stop failed: {e}; the station's watchdog "
-                                   f"({sess.watchdog_ms:g} ms) ends data exchange when pdrive lets go")
-    elif sess.stop_report is None:
-        sess.stop_report = StopReport("not needed", True, 0.0, "not started by this session",
-                                      sess.final_status)
-    _after_stop(sess, True)
-    try:
-        sess.master.release(sess.address)
-    except PdriveError:
-        pass
-
-
-def _after_stop(sess, link_ok: bool) -> None:
-    """The session's after_stop hooks (e.g. restoring a PZD mapping), after the stop and before the
-    station is released; told whether the link still works. Their errors are said, never raised."""
-    for hook in getattr(sess, "after_stop", ()):
+        if sta.link_lost:
+            if self.may_run:
+                self.stop_report = StopReport("not sent (link lost)", False, 0.0,
+                                              self.link_lost_words(exc))
+                self._tell(sta.say, self.stop_report.message)
+            self._after_stop(False)
+            return
+        if exc is not None:
+            # an interrupted request may have left a reply on the line: start clean
+            try:
+                time.sleep(min(0.05, sta.master.params.reply_timeout(64)))
+                sta.master.link.flush_input()
+            except Exception:
+                pass
+        if self.may_run:
+            try:
+                r = self.stop()
+                if r.how == "normal":
+                    self._tell(sta.say, f"stopped (normal stop, {r.seconds:.1f} s)"
+                               if not (r.status and r.status.fault) else r.message)
+                elif r.how == "coast":
+                    self._tell(sta.say, f"stopped by a coast stop after {r.seconds:.1f} s ({r.message})")
+                else:
+                    self._tell(sta.say, f"could not confirm the stop: {r.message}")
+            except LinkLost as e:
+                sta.link_lost = True
+                self.stop_report = StopReport("not sent (link lost)", False, 0.0, self.link_lost_words(e))
+                self._tell(sta.say, self.stop_report.message)
+                self._after_stop(False)
+                return
+            except PdriveError as e:
+                self.stop_report = StopReport("failed", False, 0.0, f"stop failed: {e}")
+                self._tell(sta.say, f"stop failed: {e}; the station's watchdog "
+                                    f"({sta.watchdog_ms:g} ms) ends data exchange when pdrive lets go")
+        elif self.stop_report is None:
+            self.stop_report = StopReport("not needed", True, 0.0, "not started by this session",
+                                          self.final_status)
+        self._after_stop(True)
         try:
-            hook(link_ok)
-        except Exception as e:          # noqa: BLE001  (the stop is done; say what was left)
-            _tell(sess, sess.say, f"after the stop: {e}")
+            sta.master.release(sta.address)
+        except PdriveError:
+            pass
+
+    def _after_stop(self, link_ok: bool) -> None:
+        """The after_stop hooks (e.g. restoring a PZD mapping), after the stop and before the station
+        is released; told whether the link still works. Their errors are said, never raised."""
+        for hook in self.after_stop:
+            try:
+                hook(link_ok)
+            except Exception as e:          # noqa: BLE001  (the stop is done; say what was left)
+                self._tell(self.station.say, f"after the stop: {e}")

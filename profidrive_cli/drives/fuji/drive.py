@@ -20,6 +20,9 @@ from profidrive_cli.drives.fuji.config import FUJI_STW_BITS, fuji_config
 
 class FujiDrive(pd.ProfidriveDrive):
     family = "fuji"
+    #: F07 acceleration time 1, F08 deceleration time 1 (when the profile's ramps name none)
+    ramp_codes = {"accel": "F07", "decel": "F08"}
+    comm_loss_words = "its o27/o28 setting (o27 = 3 or 13..15 ignores the loss: the motor keeps running)"
 
     def __init__(self, channel, profile, layout: str | None = None):
         self.fc = fuji_config(profile)

@@ -411,6 +411,10 @@ class ProfidriveDrive(Drive):
     def jog_reference(self) -> str | None:
         return self.cfg.jog_reference
 
+    def ramp_param(self, role: str) -> str | None:
+        """The profile's `profidrive.ramps` code for `role`, else the card's own (ramp_codes)."""
+        return self.cfg.ramps.get(role) or self.ramp_codes.get(role)
+
     def jog(self, on: bool = True, reverse: bool = False) -> None:
         """Jog 1 (CTW bit 8) from the operation state with a zero reference; a card without a jog
         reference (or without jog) refuses (supports_jog, jog_refusal)."""
@@ -419,6 +423,7 @@ class ProfidriveDrive(Drive):
         if reverse:
             raise DriveError(f"{self.family}: this card has no reverse jog")
         if on:
+            self._notify_motion()
             self.reference = 0
             self.extra_bits |= int(Ctw.JOG1)
             self.target = Target.OPERATE
@@ -438,6 +443,7 @@ class ProfidriveDrive(Drive):
             raise
 
     def start(self, timeout: float = 5.0) -> DriveStatus:
+        self._notify_motion()
         st = self.cycle()
         if st.fault:
             raise DriveError("the drive is in fault: acknowledge it first (reset)")

@@ -44,6 +44,7 @@ class ToyoDrive(pd.ProfidriveDrive):
     """Mode 0 (PPO1-5) runs the PROFIdrive state machine; mode 1 (toyo, toyo_plch) the run-command word."""
 
     family = "toyo"
+    comm_loss_words = "protection 18 (COMM): the inverter trips and coasts"
 
     def __init__(self, channel, profile, layout: str | None = None):
         self.tc = toyo_config(profile)
@@ -307,6 +308,7 @@ class ToyoDrive(pd.ProfidriveDrive):
         self.cycle()
 
     def start(self, timeout: float = 5.0) -> DriveStatus:
+        self._notify_motion()
         if self.mode == 0:
             self.jogging = False
             self.extra_bits &= ~int(pd.Ctw.JOG1 | pd.Ctw.JOG2)
@@ -383,6 +385,8 @@ class ToyoDrive(pd.ProfidriveDrive):
     def jog(self, on: bool = True, reverse: bool = False) -> None:
         """Mode 0: CTW bit 8 (forward) / 9 (reverse) with bits 4-6 = 0 from "switched on" (spec 3.1,
         3.3; manual L2725-2731, L2919). Mode 1: run-command bit 1 (jog) with bit 2 (reverse)."""
+        if on:
+            self._notify_motion()
         if self.mode == 1:
             self.run_cmd = (self.run_cmd | 0x2) if on else (self.run_cmd & ~0x2)
             if on:

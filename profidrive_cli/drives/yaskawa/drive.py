@@ -35,6 +35,10 @@ class YaskawaDrive(Drive):
     family = FAMILY
     supports_jog = False
     area_shape = "memobus"
+    #: C1-01 acceleration time 1, C1-02 deceleration time 1 (from 0 to the max frequency)
+    ramp_codes = {"accel": "C1-01", "decel": "C1-02"}
+    comm_loss_words = ("a BUS fault after the option's communication timeout (the drive stops by its BUS "
+                       "fault setting)")
 
     def jog_refusal(self) -> str:
         return self._no_jog_words(self.profile)
@@ -180,6 +184,7 @@ class YaskawaDrive(Drive):
                 "when b1-02 = 3 (option card)")
 
     def start(self, timeout: float = 5.0) -> DriveStatus:
+        self._notify_motion()
         st = self.cycle()
         if st.fault:
             raise DriveError("yaskawa: the drive is in fault; reset it first (pdrive reset)")
