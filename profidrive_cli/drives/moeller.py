@@ -437,10 +437,7 @@ def decode_area(profile, layout: str, direction: str, data: bytes, *,
     return out
 
 
-#: the family's Drive class, for its class-level facts without a bus (drives.drive_class)
-DRIVE_CLASS = MoellerDrive
-
-__all__ = ["DRIVE_CLASS", "MoellerConfig", "MoellerDrive", "make_drive", "decode_area", "param_value",
+__all__ = ["MoellerConfig", "MoellerDrive", "make_drive", "decode_area", "param_value",
            "moeller_config", "source_selection", "device_name", "baud_text", "fault_text",
            "address_from_switches", "value_from_wire", "wire_from_value", "in_ranges",
            "direction_text", "DriveError"]

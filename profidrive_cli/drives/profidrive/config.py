@@ -8,7 +8,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from profidrive_cli import UsageError
 from profidrive_cli.datafile import DataFileError, LineDict
 from profidrive_cli.drives.profidrive.pkw import GENERIC_ERRORS
 from profidrive_cli.drives.profidrive.pnu import (PNU_FAULT_NUMBER, PNU_PZD_ACTUAL,
@@ -221,18 +220,14 @@ _config_cache: dict[int, tuple[object, ProfidriveConfig]] = {}
 def config(profile) -> ProfidriveConfig:
     """The profile's ProfidriveConfig (validated once, cached per profile object).
 
-    A family codec (drives/<family>.py or the package drives/<family>/) may define
-    `profidrive_config(profile) -> ProfidriveConfig` to build it from its own profile keys;
-    otherwise the `profidrive:` section is read.
+    A family's row in drives/registry.py may name a `core_config` builder (profile ->
+    ProfidriveConfig) from its own profile keys; otherwise the `profidrive:` section is read.
     """
     hit = _config_cache.get(id(profile))
     if hit is not None and hit[0] is profile:
         return hit[1]
-    from profidrive_cli.drives import codec_module
-    try:
-        hook = getattr(codec_module(profile), "profidrive_config", None)
-    except UsageError:
-        hook = None
+    from profidrive_cli.drives.registry import core_config_reader
+    hook = core_config_reader(profile)
     cfg = hook(profile) if hook is not None else ProfidriveConfig.from_profile(profile)
     _config_cache[id(profile)] = (profile, cfg)
     return cfg
