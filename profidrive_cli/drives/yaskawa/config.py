@@ -1,15 +1,18 @@
 """Yaskawa profile keys: the `yaskawa:` section, layouts, registers, alarms and LED table, validated
 with file:line (DataFileError); plus the register names and 'REG0x..' codes used to address them.
 
-May touch: datafile, codec (FORMATS). Reads the profile, writes nothing but its cache on the profile.
+May touch: datafile, drives/sections (the `yaskawa:` section's declaration), codec (FORMATS). Reads the
+profile, writes nothing but its cache on the profile.
 """
 
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
+from typing import Any, Callable, ClassVar
 
 from profidrive_cli.datafile import DataFileError, LineDict
+from profidrive_cli.drives.sections import key, section
 from profidrive_cli.drives.yaskawa.codec import FORMATS
 
 # ---------------------------------------------------------------------------------------------------
@@ -36,15 +39,33 @@ class YaskawaConfig:
     led_diagnostics: list[dict] = field(default_factory=list)
 
 
-def _num(path, node: LineDict, key, default, types=(int, float), allow_none=False):
-    if key not in node:
-        return default
-    v = node[key]
-    if v is None and allow_none:
-        return None
-    if isinstance(v, bool) or not isinstance(v, types):
-        raise DataFileError(path, node.line_of(key), f"'{key}' must be a number, got {v!r}")
-    return v
+_NUMBER = "'{key}' must be a number, got {value!r}"
+
+
+@dataclass(frozen=True)
+class HandshakeKeys:
+    """yaskawa.handshake: how long a parameter-access request may take, how many cycles to settle."""
+    RULES: ClassVar[tuple[tuple[Callable[[HandshakeKeys], bool], str], ...]] = (
+        (lambda h: h.timeout_s > 0 and h.settle_cycles >= 1,
+         "handshake: timeout_s must be > 0 and settle_cycles >= 1"),)
+    timeout_s: float = key("number", 1.0, type_msg=_NUMBER)
+    settle_cycles: int = key("int", 1, type_msg=_NUMBER)
+
+
+@dataclass(frozen=True)
+class YaskawaKeys:
+    """The profile's `yaskawa:` section (read by drives/sections.py)."""
+    reference_unit_hz: float = key("number", 0.01, gt=0, type_msg=_NUMBER, range_msg="'{key}' must be > 0")
+    feedback_unit_hz: float = key("number", 0.1, gt=0, type_msg=_NUMBER, range_msg="'{key}' must be > 0")
+    o1_03: int = key("int", 0, lo=0, hi=39999, type_msg=_NUMBER, range_msg="'o1_03' must be 0..39999")
+    rated_current_a: float | None = key("number", None, nullable=True, gt=0, type_msg=_NUMBER,
+                                        range_msg="'rated_current_a' must be > 0 or null")
+    fast_stop_input: int | None = key("int", None, nullable=True, lo=3, hi=12, type_msg=_NUMBER,
+                                      range_msg="'fast_stop_input' must be a multi-function input 3..12 or null")
+    handshake: HandshakeKeys = key("section", section=HandshakeKeys, type_msg="'handshake' must be a mapping")
+    enter_register: Any = key("mapping", None, nullable=True,
+                              type_msg="'enter_register' must be a mapping with an integer 'register'")
+    fault_history: list[Any] = key("list", [], type_msg="'fault_history' must be a list")
 
 
 def family_config(profile) -> YaskawaConfig:
@@ -68,46 +89,20 @@ def family_config(profile) -> YaskawaConfig:
                 line = lnode.line_of("cfg")
             raise DataFileError(path, line, f"layout '{name}': cfg must be {FORMATS[name].cfg.hex(' ').upper()}")
 
-    y = raw.get("yaskawa", LineDict())
-    if not isinstance(y, LineDict):
-        raise DataFileError(path, raw.line_of("yaskawa"), "'yaskawa' must be a mapping")
-    cfg.reference_unit_hz = float(_num(path, y, "reference_unit_hz", cfg.reference_unit_hz))
-    cfg.feedback_unit_hz = float(_num(path, y, "feedback_unit_hz", cfg.feedback_unit_hz))
-    for k in ("reference_unit_hz", "feedback_unit_hz"):
-        if getattr(cfg, k) <= 0:
-            raise DataFileError(path, y.line_of(k), f"'{k}' must be > 0")
-    cfg.o1_03 = _num(path, y, "o1_03", 0, int)
-    if not 0 <= cfg.o1_03 <= 39999:
-        raise DataFileError(path, y.line_of("o1_03"), "'o1_03' must be 0..39999")
-    rc = _num(path, y, "rated_current_a", None, allow_none=True)
-    if rc is not None and rc <= 0:
-        raise DataFileError(path, y.line_of("rated_current_a"), "'rated_current_a' must be > 0 or null")
-    cfg.rated_current_a = None if rc is None else float(rc)
-    fs = _num(path, y, "fast_stop_input", None, int, allow_none=True)
-    if fs is not None and not 3 <= fs <= 12:
-        raise DataFileError(path, y.line_of("fast_stop_input"),
-                            "'fast_stop_input' must be a multi-function input 3..12 or null")
-    cfg.fast_stop_input = fs
+    y = section(YaskawaKeys, path, raw, "yaskawa")
+    cfg.reference_unit_hz, cfg.feedback_unit_hz = y.reference_unit_hz, y.feedback_unit_hz
+    cfg.o1_03, cfg.rated_current_a, cfg.fast_stop_input = y.o1_03, y.rated_current_a, y.fast_stop_input
+    cfg.timeout_s, cfg.settle_cycles = y.handshake.timeout_s, y.handshake.settle_cycles
 
-    hsn = y.get("handshake", LineDict())
-    if not isinstance(hsn, LineDict):
-        raise DataFileError(path, y.line_of("handshake"), "'handshake' must be a mapping")
-    cfg.timeout_s = float(_num(path, hsn, "timeout_s", 1.0))
-    cfg.settle_cycles = _num(path, hsn, "settle_cycles", 1, int)
-    if cfg.timeout_s <= 0 or cfg.settle_cycles < 1:
-        raise DataFileError(path, hsn.line, "handshake: timeout_s must be > 0 and settle_cycles >= 1")
-
-    en = y.get("enter_register")
+    en = y.enter_register
     if en is not None:
-        if not isinstance(en, LineDict) or not isinstance(en.get("register"), int):
-            raise DataFileError(path, y.line_of("enter_register"),
+        if not isinstance(en.get("register"), int):
+            raise DataFileError(path, raw["yaskawa"].line_of("enter_register"),
                                 "'enter_register' must be a mapping with an integer 'register'")
         _check_source(path, en)
         cfg.enter_register = en["register"]
 
-    fh = y.get("fault_history", [])
-    if not isinstance(fh, list):
-        raise DataFileError(path, y.line_of("fault_history"), "'fault_history' must be a list")
+    fh = y.fault_history
     for i, item in enumerate(fh):
         line = fh.line_of(i) if hasattr(fh, "line_of") else None
         if not isinstance(item, LineDict) or not isinstance(item.get("position"), str) \
