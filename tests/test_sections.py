@@ -96,6 +96,9 @@ YASKAWA = [
     ("    settle_cycles: 1 ", "    settle_cycles: 1.5 ", "'settle_cycles' must be a number, got 1.5"),
     ("  handshake:\n", "  handshake: 3\n  x_handshake:\n", "'handshake' must be a mapping"),
     ("  enter_register:", "  enter_register: 7\n  x_enter_register:", "'enter_register' must be a mapping with an integer 'register'"),
+    ("decisions:\n", "decisions: [1, 2]\nx_decisions:\n", "'decisions' must be a list of strings"),
+    ("led_diagnostics:\n", "led_diagnostics: {}\nx_led_diagnostics:\n", "'led_diagnostics' must be a list"),
+    ('  - {pwr: "off", com: "off"', '  - {pwr: "blue", com: "off"', "LED row: 'pwr' must be one of off, green, red, green-flash, red-flash"),
 ]
 
 

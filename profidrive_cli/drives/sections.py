@@ -12,8 +12,9 @@ mapping read the same way; `section(...)` reads one from its parent (missing / n
         settle_cycles: int = key("int", 1, lo=1)
 
 Kinds: "number" (int or float, not bool; read as float), "int", "bool", "text", "mapping" (a dict,
-kept as is), "list", "section" (nested declaration). Messages are str.format templates with {key},
-{value} (use {value!r}), {lo}, {hi}, {gt}, {where} (the section's dotted path). What the declaration
+kept as is), "list", "texts" (a list of texts), "section" (nested declaration); `choices=` narrows a
+value to a set. Messages are str.format templates with {key},
+{value} (use {value!r}), {lo}, {hi}, {gt}, {choices}, {where} (the section's dotted path). What the declaration
 cannot say key by key, one key against another, is a rule of the declaration: a class attribute
 `RULES: ClassVar[tuple[tuple[Callable[[Decl], bool], str], ...]]`, each (holds, message) checked on the
 read instance and reported on the section's line. What needs the rest of the profile (a key naming
@@ -33,9 +34,9 @@ from profidrive_cli.datafile import DataFileError, LineDict
 
 T = TypeVar("T")
 
-KINDS = ("number", "int", "bool", "text", "mapping", "list", "section")
+KINDS = ("number", "int", "bool", "text", "mapping", "list", "texts", "section")
 _KIND_TEXT = {"number": "a number", "int": "an integer", "bool": "true or false", "text": "a text",
-              "mapping": "a mapping", "list": "a list", "section": "a mapping"}
+              "mapping": "a mapping", "list": "a list", "texts": "a list of texts", "section": "a mapping"}
 _REQUIRED = object()
 
 
@@ -49,6 +50,7 @@ class Key:
     lo: float | None = None                 # inclusive range
     hi: float | None = None
     gt: float | None = None                 # strictly greater than
+    choices: tuple[Any, ...] = ()           # the value must be one of these (range_msg, {choices})
     type_msg: str = "'{key}' must be {kind_text}, got {value!r}"
     range_msg: str | None = None            # None: type_msg
     missing_msg: str = "missing field '{key}'"
@@ -122,7 +124,7 @@ def read(decl: type[T], path: str | Path, node: LineDict, *, where: str = "",
 
 def _value(path: str | Path, node: LineDict, spec: Key, name: str, where: str) -> Any:
     words = {"key": name, "kind_text": _KIND_TEXT[spec.kind], "lo": spec.lo, "hi": spec.hi,
-             "gt": spec.gt, "where": where}
+             "gt": spec.gt, "where": where, "choices": ", ".join(str(c) for c in spec.choices)}
     if name not in node:
         raise DataFileError(path, node.line or None, spec.missing_msg.format(**words))
     v = node[name]
@@ -137,6 +139,8 @@ def _value(path: str | Path, node: LineDict, spec: Key, name: str, where: str) -
                     unknown_msg=spec.unknown_msg)
     if not _is_kind(v, spec.kind):
         raise DataFileError(path, line, spec.type_msg.format(value=v, **words))
+    if spec.choices and v not in spec.choices:
+        raise DataFileError(path, line, (spec.range_msg or spec.type_msg).format(value=v, **words))
     if spec.kind in ("number", "int"):
         if (spec.lo is not None and v < spec.lo) or (spec.hi is not None and v > spec.hi) \
                 or (spec.gt is not None and not v > spec.gt):
@@ -156,4 +160,6 @@ def _is_kind(v: object, kind: str) -> bool:
         return isinstance(v, str)
     if kind == "mapping":
         return isinstance(v, dict)
+    if kind == "texts":
+        return isinstance(v, list) and all(isinstance(x, str) for x in v)
     return isinstance(v, list)

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, ClassVar
 
 from profidrive_cli.datafile import DataFileError, LineDict
-from profidrive_cli.drives.sections import key, section
+from profidrive_cli.drives.sections import key, read, section
 from profidrive_cli.drives.yaskawa.codec import FORMATS
 
 # ---------------------------------------------------------------------------------------------------
@@ -68,6 +68,13 @@ class YaskawaKeys:
     fault_history: list[Any] = key("list", [], type_msg="'fault_history' must be a list")
 
 
+@dataclass(frozen=True)
+class YaskawaTopKeys:
+    """Top-level keys only this family reads (the common ones are drives/profile.py's)."""
+    led_diagnostics: list[Any] = key("list", [], type_msg="'led_diagnostics' must be a list")
+    decisions: list[str] = key("texts", [], type_msg="'decisions' must be a list of strings")
+
+
 def family_config(profile) -> YaskawaConfig:
     """Validate and return the Yaskawa keys of a profile (cached on the profile object)."""
     cached = getattr(profile, "_yaskawa_config", None)
@@ -75,8 +82,26 @@ def family_config(profile) -> YaskawaConfig:
         return cached
     path = profile.path or profile.name
     raw = profile.raw if isinstance(profile.raw, LineDict) else LineDict()
-    cfg = YaskawaConfig()
+    _check_layouts(path, profile, raw)
+    y = section(YaskawaKeys, path, raw, "yaskawa")
+    cfg = YaskawaConfig(reference_unit_hz=y.reference_unit_hz, feedback_unit_hz=y.feedback_unit_hz,
+                        o1_03=y.o1_03, rated_current_a=y.rated_current_a, fast_stop_input=y.fast_stop_input,
+                        timeout_s=y.handshake.timeout_s, settle_cycles=y.handshake.settle_cycles)
+    if y.enter_register is not None:
+        cfg.enter_register = _enter_register(path, raw, y.enter_register)
+    cfg.fault_history = _fault_history(path, profile, y.fault_history)
+    _check_params(path, profile, raw)
+    cfg.alarm_kinds = _alarm_kinds(path, raw)
+    top = read(YaskawaTopKeys, path, raw)
+    cfg.led_diagnostics = [_led_row(path, item) for item in top.led_diagnostics]
+    try:
+        profile._yaskawa_config = cfg
+    except AttributeError:   # pragma: no cover - a frozen profile object
+        pass
+    return cfg
 
+
+def _check_layouts(path, profile, raw: LineDict) -> None:
     layouts_node = raw.get("layouts")
     for name, lay in profile.layouts.items():
         line = layouts_node.line_of(name) if isinstance(layouts_node, LineDict) else None
@@ -89,20 +114,17 @@ def family_config(profile) -> YaskawaConfig:
                 line = lnode.line_of("cfg")
             raise DataFileError(path, line, f"layout '{name}': cfg must be {FORMATS[name].cfg.hex(' ').upper()}")
 
-    y = section(YaskawaKeys, path, raw, "yaskawa")
-    cfg.reference_unit_hz, cfg.feedback_unit_hz = y.reference_unit_hz, y.feedback_unit_hz
-    cfg.o1_03, cfg.rated_current_a, cfg.fast_stop_input = y.o1_03, y.rated_current_a, y.fast_stop_input
-    cfg.timeout_s, cfg.settle_cycles = y.handshake.timeout_s, y.handshake.settle_cycles
 
-    en = y.enter_register
-    if en is not None:
-        if not isinstance(en.get("register"), int):
-            raise DataFileError(path, raw["yaskawa"].line_of("enter_register"),
-                                "'enter_register' must be a mapping with an integer 'register'")
-        _check_source(path, en)
-        cfg.enter_register = en["register"]
+def _enter_register(path, raw: LineDict, en: LineDict) -> int:
+    if not isinstance(en.get("register"), int):
+        raise DataFileError(path, raw["yaskawa"].line_of("enter_register"),
+                            "'enter_register' must be a mapping with an integer 'register'")
+    _check_source(path, en)
+    return en["register"]
 
-    fh = y.fault_history
+
+def _fault_history(path, profile, fh: list) -> list[tuple[str, str]]:
+    out = []
     for i, item in enumerate(fh):
         line = fh.line_of(i) if hasattr(fh, "line_of") else None
         if not isinstance(item, LineDict) or not isinstance(item.get("position"), str) \
@@ -112,8 +134,11 @@ def family_config(profile) -> YaskawaConfig:
         if p is None or p.register is None:
             raise DataFileError(path, item.line_of("param"),
                                 f"fault_history: {item['param']} is not a parameter with a register")
-        cfg.fault_history.append((item["position"], p.code))
+        out.append((item["position"], p.code))
+    return out
 
+
+def _check_params(path, profile, raw: LineDict) -> None:
     for code, p in profile.parameters.items():
         node = _param_node(raw, p.line)
         src = p.extra.get("register_source")
@@ -128,40 +153,32 @@ def family_config(profile) -> YaskawaConfig:
             raise DataFileError(path, node.line_of("register") if node else p.line,
                                 f"{code}: register must be 0..0xFFFF")
 
+
+def _alarm_kinds(path, raw: LineDict) -> dict[str, str]:
+    out = {}
     alarms = raw.get("alarms", [])
-    for i, a in enumerate(alarms if isinstance(alarms, list) else []):
+    for a in alarms if isinstance(alarms, list) else []:
         if not isinstance(a, LineDict):
             continue
         kind = a.get("kind", "fault")
         if kind not in ALARM_KINDS:
             raise DataFileError(path, a.line_of("kind"), f"alarm kind must be one of {', '.join(ALARM_KINDS)}")
-        cfg.alarm_kinds[str(a.get("code")).upper()] = kind
+        out[str(a.get("code")).upper()] = kind
+    return out
 
-    leds = raw.get("led_diagnostics", [])
-    if not isinstance(leds, list):
-        raise DataFileError(path, raw.line_of("led_diagnostics"), "'led_diagnostics' must be a list")
-    for item in leds:
-        if not isinstance(item, LineDict):
-            raise DataFileError(path, getattr(item, "line", None), "an LED row must be a mapping")
-        for k in ("pwr", "com", "err", "wd"):
-            if item.get(k) is False:        # YAML 1.1 reads a bare `off` as false
-                item[k] = "off"
-            if item.get(k) not in LED_STATES:
-                raise DataFileError(path, item.line_of(k) if k in item else item.line,
-                                    f"LED row: '{k}' must be one of {', '.join(LED_STATES)}")
-        if not isinstance(item.get("condition"), str):
-            raise DataFileError(path, item.line, "LED row: 'condition' (text) is missing")
-        cfg.led_diagnostics.append({k: str(v) for k, v in item.items()})
 
-    decisions = raw.get("decisions", [])
-    if not isinstance(decisions, list) or not all(isinstance(d, str) for d in decisions):
-        raise DataFileError(path, raw.line_of("decisions"), "'decisions' must be a list of strings")
-
-    try:
-        profile._yaskawa_config = cfg
-    except AttributeError:   # pragma: no cover - a frozen profile object
-        pass
-    return cfg
+def _led_row(path, item) -> dict[str, str]:
+    if not isinstance(item, LineDict):
+        raise DataFileError(path, getattr(item, "line", None), "an LED row must be a mapping")
+    for k in ("pwr", "com", "err", "wd"):
+        if item.get(k) is False:        # YAML 1.1 reads a bare `off` as false
+            item[k] = "off"
+        if item.get(k) not in LED_STATES:
+            raise DataFileError(path, item.line_of(k) if k in item else item.line,
+                                f"LED row: '{k}' must be one of {', '.join(LED_STATES)}")
+    if not isinstance(item.get("condition"), str):
+        raise DataFileError(path, item.line, "LED row: 'condition' (text) is missing")
+    return {k: str(v) for k, v in item.items()}
 
 
 def _check_source(path, node: LineDict) -> None:
