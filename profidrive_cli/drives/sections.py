@@ -18,7 +18,8 @@ value to a set. Messages are str.format templates with {key},
 cannot say key by key, one key against another, is a rule of the declaration: a class attribute
 `RULES: ClassVar[tuple[tuple[Callable[[Decl], bool], str], ...]]`, each (holds, message) checked on the
 read instance and reported on the section's line. What needs the rest of the profile (a key naming
-one of its parameters) stays in the family's builder, which reads the instance and the node's lines.
+one of its parameters) stays in the family's builder, which reads the instance and, for its own
+complaints, `key_line(instance, name)`.
 
 May touch: datafile. Reads the profile's nodes only.
 """
@@ -87,6 +88,15 @@ def line_of(node: object, name: object) -> int | None:
     return line if isinstance(line, int) else None
 
 
+def key_line(instance: object, name: str) -> int | None:
+    """The line of `name` in the mapping `instance` was read from (of the mapping if the key is absent);
+    None for an instance made in code or read from a mapping without lines."""
+    node = getattr(instance, "_node", None)
+    if node is None:
+        return None
+    return line_of(node, name) or None
+
+
 def section(decl: type[T], path: str | Path, parent: LineDict, name: str, *, required: bool = False,
             missing_msg: str = "missing section '{key}'", mapping_msg: str = "'{key}' must be a mapping",
             unknown_msg: str | None = None, where: str | None = None) -> T:
@@ -116,6 +126,7 @@ def read(decl: type[T], path: str | Path, node: LineDict, *, where: str = "",
     values = {f.name: _value(path, node, f.metadata["key"], f.metadata["key"].name or f.name, where)
               for f in fields if (f.metadata["key"].name or f.name) in node or f.metadata["key"].required}
     out = decl(**values)
+    object.__setattr__(out, "_node", node)          # for key_line(): the builder's own complaints
     for ok, message in getattr(decl, "RULES", ()):
         if not ok(out):
             raise DataFileError(path, node.line or None, message.format(where=where))
