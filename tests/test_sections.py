@@ -5,6 +5,7 @@ before the move; these tests pass on main's hand-written readers too)."""
 from __future__ import annotations
 
 import dataclasses
+import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
@@ -132,3 +133,116 @@ def test_yaskawa_section_values_reach_the_config(tmp_path):
     assert (c.reference_unit_hz, c.feedback_unit_hz, c.o1_03, c.rated_current_a, c.fast_stop_input,
             c.timeout_s, c.settle_cycles) == (0.01, 0.1, 0, 12.0, None, 1.0, 1)
     assert isinstance(c.rated_current_a, float)
+
+
+# -- the PROFIdrive core: the `profidrive:` section --------------------------------------------------
+
+GENERIC = """\
+profile: generic-test
+family: profidrive
+title: Generic PROFIdrive test drive
+identity: {ident: 0x1234}
+layouts:
+  ppo1: {cfg: "F3 F1", pkw: true}
+default_layout: ppo1
+max_frequency: {param: FMAX, default_hz: 50.0}
+profidrive:
+%s
+parameters:
+  - {code: FMAX, name: Max frequency, pnu: 10, unit: Hz, scale: 0.01, min: 25, max: 400, default: 50}
+  - {code: ACC, name: Acceleration time, pnu: 11, unit: s, scale: 0.1, min: 0.1, max: 3600, default: 2.0}
+"""
+
+_KNOWN = ("array_pnus, baud_codes, ctw_bits, device_ids, fault_memory, held_ctw_bits, jog_reference, "
+          "labels, pkw, pzd_map, ramps, save, stw_bits")
+_PKW = ("error_numbers, errors, max_zero_cycles, requests, responses, timeout_s, unsupported_text, "
+        "zero_after_error, zero_between_identical")
+_ROLES = "unknown_pnu, read_only, out_of_range, bad_subindex, not_array, wrong_type, stop_only, no_rights, bad_request"
+
+#: (the section's text under `profidrive:`, line of the complaint (profidrive: is line 9), message)
+PROFIDRIVE = [
+    ("  bogus: 1", 10, f"profidrive: unknown key 'bogus' (known: {_KNOWN})"),
+    ("  labels: {foo: x}", 10, "profidrive.labels: 'foo' must be one of control, status, reference, actual with a text value"),
+    ("  labels: {control: 5}", 10, "profidrive.labels: 'control' must be one of control, status, reference, actual with a text value"),
+    ("  labels: 5", 10, "'labels' must be a mapping"),
+    ("  ctw_bits: {16: x}", 10, "ctw_bits: keys are bit numbers 0..15, values names (null = unused)"),
+    ("  stw_bits: [1]", 10, "'stw_bits' must be a mapping"),
+    ("  held_ctw_bits: [16]", 10, "'held_ctw_bits' must be a list of integers 0..15"),
+    ("  held_ctw_bits: [0]", 10, "held_ctw_bits cannot include bits 0-3, 7 or 10 (the state machine sets them)"),
+    ("  array_pnus: [0]", 10, "'array_pnus' must be a list of integers 1..2047"),
+    ("  pzd_map: {foo: 1}", 10, "profidrive.pzd_map: unknown key 'foo' (known: actual, setpoint)"),
+    ("  pzd_map: {setpoint: x}", 10, "'setpoint' must be an integer, got 'x'"),
+    ("  pzd_map: 1", 10, "'pzd_map' must be a mapping"),
+    ("  pkw: 3", 10, "'pkw' must be a mapping"),
+    ("  pkw: {timeout_s: -1}", 10, "pkw.timeout_s must be a number > 0"),
+    ("  pkw: {timeout_s: true}", 10, "pkw.timeout_s must be a number > 0"),
+    ("  pkw:\n    max_zero_cycles: 3\n    timeout_s: 0", 12, "pkw.timeout_s must be a number > 0"),
+    ("  pkw: {zero_after_error: 1}", 10, "pkw.zero_after_error must be true or false"),
+    ("  pkw: {max_zero_cycles: 1.5}", 10, "'max_zero_cycles' must be an integer, got 1.5"),
+    ("  pkw: {requests: [16]}", 10, "'requests' must be a list of integers 0..15"),
+    ("  pkw: {responses: x}", 10, "'responses' must be a list of integers 0..15"),
+    ("  pkw: {unsupported_text: ' '}", 10, "pkw.unsupported_text must be a text"),
+    ("  pkw: {errors: {x: y}}", 10, "pkw.errors: keys are error numbers, values texts"),
+    ("  pkw:\n    error_numbers: {nonsense: 3}", 11, f"pkw.error_numbers: 'nonsense' must be one of {_ROLES} with a number"),
+    ("  pkw: {colour: 1}", 10, f"profidrive.pkw: unknown key 'colour' (known: {_PKW})"),
+    ("  fault_memory: {subindexes: [1, 9], positions: [a]}", 10, "fault_memory.positions must be one text per subindex"),
+    ("  fault_memory: {positions: [a, 1, c, d]}", 10, "fault_memory.positions must be one text per subindex"),
+    ("  fault_memory: {subindexes: [256]}", 10, "'subindexes' must be a list of integers 0..255"),
+    ("  fault_memory: {pnu: x}", 10, "'pnu' must be an integer, got 'x'"),
+    ("  fault_memory: {x: 1}", 10, "profidrive.fault_memory: unknown key 'x' (known: pnu, positions, subindexes)"),
+    ("  save: {pnu: x}", 10, "'pnu' must be an integer, got 'x'"),
+    ("  save: {at: 1}", 10, "profidrive.save: unknown key 'at' (known: pnu)"),
+    ("  baud_codes: {x: y}", 10, "baud_codes: keys are numbers, values texts"),
+    ("  device_ids: {1: 2}", 10, "device_ids: keys are numbers, values texts"),
+    ("  ramps: {up: ACC}", 10, "ramps: keys accel, decel, quick_decel; values parameter codes"),
+    ("  ramps:\n    decel: ACC\n    accel: NOPE", 12, "ramps.accel: parameter NOPE is not in parameters"),
+    ("  jog_reference: NOPE", 10, "jog_reference 'NOPE' is not in parameters"),
+    ("  jog_reference: 5", 10, "jog_reference 5 is not in parameters"),
+]
+
+
+@pytest.mark.parametrize("text,line,message", PROFIDRIVE, ids=[t.strip() for t, _, _ in PROFIDRIVE])
+def test_profidrive_section_complaints_keep_words_and_line(tmp_path, text, line, message):
+    from profidrive_cli.drives.profidrive.config import ProfidriveConfig
+    f = tmp_path / "generic-test.yaml"
+    f.write_text(GENERIC % text, encoding="utf-8")
+    with pytest.raises(DataFileError) as e:
+        ProfidriveConfig.from_profile(load_profile_file(f))
+    assert (e.value.line, e.value.message) == (line, message)
+    assert str(e.value).startswith(f"{f}:{line}: ")
+
+
+def test_profidrive_section_values(tmp_path):
+    from profidrive_cli.drives.profidrive.config import ProfidriveConfig
+    f = tmp_path / "generic-test.yaml"
+    f.write_text(GENERIC % textwrap.indent(textwrap.dedent("""\
+        labels: {reference: HSW}
+        ctw_bits: {11: reverse, 9: null}
+        stw_bits: {8: at speed}
+        held_ctw_bits: [4, 5]
+        array_pnus: [947]
+        pzd_map: {setpoint: 915}
+        pkw: {timeout_s: 1, zero_between_identical: true, max_zero_cycles: 5, requests: [1, 2],
+              responses: [1], unsupported_text: not here, errors: {104: busy}, error_numbers: {stop_only: 11}}
+        fault_memory: {pnu: 947, subindexes: [1, 9], positions: [now, before]}
+        save: {pnu: 971}
+        baud_codes: {1: 12 Mbit/s}
+        device_ids: {0x812C: DF6}
+        ramps: {accel: ACC}
+        jog_reference: FMAX"""), "  "), encoding="utf-8")
+    c = ProfidriveConfig.from_profile(load_profile_file(f))
+    assert c.labels == {"control": "CTW", "status": "STW", "reference": "HSW", "actual": "MAV"}
+    assert c.ctw_names[11] == "reverse" and 9 not in c.ctw_names and c.unused_ctw_bits == frozenset({9})
+    assert c.stw_names[8] == "at speed"
+    assert c.held_ctw_bits == 0x30 and c.array_pnus == frozenset({947}) and c.pzd_map[0] == 915
+    assert (c.pkw_timeout, c.zero_after_error, c.zero_between_identical, c.max_zero_cycles) == (1.0, False, True, 5)
+    assert isinstance(c.pkw_timeout, float)
+    assert (c.supported_requests, c.supported_responses, c.unsupported_text) == (
+        frozenset({1, 2}), frozenset({1}), "not here")
+    assert c.error_texts[104] == "busy" and c.error_numbers["stop_only"] == 11
+    assert (c.fault_memory_pnu, c.fault_subindexes, c.fault_positions) == (947, [1, 9], ["now", "before"])
+    assert c.save_pnu == 971 and c.baud_codes == {1: "12 Mbit/s"} and c.device_ids == {0x812C: "DF6"}
+    assert c.ramps == {"accel": "ACC"} and c.jog_reference == "FMAX"
+    f.write_text(GENERIC % "  save: {}", encoding="utf-8")
+    c = ProfidriveConfig.from_profile(load_profile_file(f))
+    assert c.save_pnu is None and c.fault_positions == ["current", "last", "2nd last", "3rd last"]

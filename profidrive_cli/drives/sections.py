@@ -12,8 +12,8 @@ mapping read the same way; `section(...)` reads one from its parent (missing / n
         settle_cycles: int = key("int", 1, lo=1)
 
 Kinds: "number" (int or float, not bool; read as float), "int", "bool", "text", "mapping" (a dict,
-kept as is), "list", "texts" (a list of texts), "section" (nested declaration); `choices=` narrows a
-value to a set. Messages are str.format templates with {key},
+kept as is), "list", "texts" (a list of texts), "ints" (a list of integers, each in lo..hi), "section"
+(nested declaration); `choices=` narrows a value to a set, `nonblank=True` a text to a non-blank one. Messages are str.format templates with {key},
 {value} (use {value!r}), {lo}, {hi}, {gt}, {choices}, {where} (the section's dotted path). What the declaration
 cannot say key by key, one key against another, is a rule of the declaration: a class attribute
 `RULES: ClassVar[tuple[tuple[Callable[[Decl], bool], str], ...]]`, each (holds, message) checked on the
@@ -35,9 +35,10 @@ from profidrive_cli.datafile import DataFileError, LineDict
 
 T = TypeVar("T")
 
-KINDS = ("number", "int", "bool", "text", "mapping", "list", "texts", "section")
+KINDS = ("number", "int", "bool", "text", "mapping", "list", "texts", "ints", "section")
 _KIND_TEXT = {"number": "a number", "int": "an integer", "bool": "true or false", "text": "a text",
-              "mapping": "a mapping", "list": "a list", "texts": "a list of texts", "section": "a mapping"}
+              "mapping": "a mapping", "list": "a list", "texts": "a list of texts",
+              "ints": "a list of integers", "section": "a mapping"}
 _REQUIRED = object()
 
 
@@ -52,6 +53,7 @@ class Key:
     hi: float | None = None
     gt: float | None = None                 # strictly greater than
     choices: tuple[Any, ...] = ()           # the value must be one of these (range_msg, {choices})
+    nonblank: bool = False                  # kind "text": not empty or only spaces (range_msg)
     type_msg: str = "'{key}' must be {kind_text}, got {value!r}"
     range_msg: str | None = None            # None: type_msg
     missing_msg: str = "missing field '{key}'"
@@ -152,12 +154,18 @@ def _value(path: str | Path, node: LineDict, spec: Key, name: str, where: str) -
         raise DataFileError(path, line, spec.type_msg.format(value=v, **words))
     if spec.choices and v not in spec.choices:
         raise DataFileError(path, line, (spec.range_msg or spec.type_msg).format(value=v, **words))
-    if spec.kind in ("number", "int"):
-        if (spec.lo is not None and v < spec.lo) or (spec.hi is not None and v > spec.hi) \
-                or (spec.gt is not None and not v > spec.gt):
+    if spec.kind in ("number", "int", "ints"):
+        if not all(_in_range(x, spec) for x in (v if spec.kind == "ints" else [v])):
             raise DataFileError(path, line, (spec.range_msg or spec.type_msg).format(value=v, **words))
         return float(v) if spec.kind == "number" else v
+    if spec.nonblank and not v.strip():
+        raise DataFileError(path, line, (spec.range_msg or spec.type_msg).format(value=v, **words))
     return v
+
+
+def _in_range(v: float, spec: Key) -> bool:
+    return not ((spec.lo is not None and v < spec.lo) or (spec.hi is not None and v > spec.hi)
+                or (spec.gt is not None and not v > spec.gt))
 
 
 def _is_kind(v: object, kind: str) -> bool:
@@ -173,4 +181,6 @@ def _is_kind(v: object, kind: str) -> bool:
         return isinstance(v, dict)
     if kind == "texts":
         return isinstance(v, list) and all(isinstance(x, str) for x in v)
+    if kind == "ints":
+        return isinstance(v, list) and all(isinstance(x, int) and not isinstance(x, bool) for x in v)
     return isinstance(v, list)
