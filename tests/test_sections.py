@@ -246,3 +246,56 @@ def test_profidrive_section_values(tmp_path):
     f.write_text(GENERIC % "  save: {}", encoding="utf-8")
     c = ProfidriveConfig.from_profile(load_profile_file(f))
     assert c.save_pnu is None and c.fault_positions == ["current", "last", "2nd last", "3rd last"]
+
+
+# -- toyo: the top-level Toyo keys and sections ------------------------------------------------------
+
+TOYO = [
+    ("diag_word_order: big", "diag_word_order: middle", "diag_word_order must be big or little"),
+    ("diag_word_order: big", "diag_word_order: 5", "diag_word_order must be big or little"),
+    ("plch: false", "plch: 0", "plch must be true or false"),
+    ("speed_full_scale: 20000", "speed_full_scale: 0", "speed_full_scale must be a positive integer"),
+    ("speed_full_scale: 20000", "speed_full_scale: 2e4", "speed_full_scale must be a positive integer"),
+    ("voltage_class: 200", "voltage_class: 300", "voltage_class must be 200 or 400"),
+    ("bits:\n", "bits: 5\nx_bits:\n", "'bits' must be a mapping"),
+    ("fields:\n", "fields: []\nx_fields:\n", "'fields' must be a mapping"),
+    ("parameter_channel:\n", "parameter_channel: 1\nx_parameter_channel:\n", "'parameter_channel' must be a mapping"),
+    ("traceback:\n", "traceback: null\nx_traceback:\n", "'traceback' must be a mapping"),
+    ("fault_history:\n", "fault_history: [1]\nx_fault_history:\n", "'fault_history' must be a mapping"),
+    ("  ctw: {name: Control word, kind: ctw}", "  ctw: {name: Control word, kind: word}",
+     "fields.ctw: kind must be one of ctw, zsw, run_cmd, bits, speed, scaled, date, raw, param"),
+    ("    mode: 0\n    description: \"Mode 0 PPO1", "    mode: 2\n    description: \"Mode 0 PPO1",
+     "layout ppo1: mode must be 0 or 1"),
+    ("    out: [ctw, speed_ref]", "    out: [ctw, nosuch]", "layout ppo1: unknown field 'nosuch'"),
+]
+
+
+@pytest.mark.parametrize("old,new,message", TOYO, ids=[m for _, _, m in TOYO])
+def test_toyo_complaints_keep_words_and_line(tmp_path, old, new, message):
+    from profidrive_cli.drives.toyo import toyo_config
+    f, lines = _edited(tmp_path, "toyo-pbus66z.yaml", old, new)
+    with pytest.raises(DataFileError) as e:
+        toyo_config(load_profile_file(f))
+    assert e.value.message == message
+    assert lines[e.value.line - 1].strip().startswith(new.split("\n")[0].strip()), (e.value.line, lines[e.value.line - 1])
+
+
+@pytest.mark.parametrize("name", ["bits", "fields", "parameter_channel", "traceback", "fault_history"])
+def test_toyo_sections_are_required(tmp_path, name):
+    from profidrive_cli.drives.toyo import toyo_config
+    f, lines = _edited(tmp_path, "toyo-pbus66z.yaml", f"\n{name}:\n", f"\nx_{name}:\n")
+    with pytest.raises(DataFileError) as e:
+        toyo_config(load_profile_file(f))
+    assert e.value.message == f"missing section '{name}'"
+    assert lines[e.value.line - 1].startswith("profile:")         # the document's mapping starts there
+
+
+def test_toyo_speed_full_scale_true_is_not_the_integer_1(tmp_path):
+    """YAML `true` is a Python bool, an int subclass: the hand-written reader took it as 1 (100 % speed
+    = 1 count); the declared int kind refuses a bool, as every other integer key does."""
+    from profidrive_cli.drives.toyo import toyo_config
+    f, lines = _edited(tmp_path, "toyo-pbus66z.yaml", "speed_full_scale: 20000", "speed_full_scale: true")
+    with pytest.raises(DataFileError) as e:
+        toyo_config(load_profile_file(f))
+    assert e.value.message == "speed_full_scale must be a positive integer"
+    assert lines[e.value.line - 1].startswith("speed_full_scale: true")

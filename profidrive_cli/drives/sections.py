@@ -13,7 +13,8 @@ mapping read the same way; `section(...)` reads one from its parent (missing / n
 
 Kinds: "number" (int or float, not bool; read as float), "int", "bool", "text", "mapping" (a dict,
 kept as is), "list", "texts" (a list of texts), "ints" (a list of integers, each in lo..hi), "section"
-(nested declaration); `choices=` narrows a value to a set, `nonblank=True` a text to a non-blank one. Messages are str.format templates with {key},
+(nested declaration), "any" (not checked: kept as it is); `choices=` narrows a value to a set,
+`nonblank=True` a text to a non-blank one. Messages are str.format templates with {key},
 {value} (use {value!r}), {lo}, {hi}, {gt}, {choices}, {where} (the section's dotted path). What the declaration
 cannot say key by key, one key against another, is a rule of the declaration: a class attribute
 `RULES: ClassVar[tuple[tuple[Callable[[Decl], bool], str], ...]]`, each (holds, message) checked on the
@@ -35,10 +36,10 @@ from profidrive_cli.datafile import DataFileError, LineDict
 
 T = TypeVar("T")
 
-KINDS = ("number", "int", "bool", "text", "mapping", "list", "texts", "ints", "section")
+KINDS = ("number", "int", "bool", "text", "mapping", "list", "texts", "ints", "section", "any")
 _KIND_TEXT = {"number": "a number", "int": "an integer", "bool": "true or false", "text": "a text",
               "mapping": "a mapping", "list": "a list", "texts": "a list of texts",
-              "ints": "a list of integers", "section": "a mapping"}
+              "ints": "a list of integers", "section": "a mapping", "any": "a value"}
 _REQUIRED = object()
 
 
@@ -103,7 +104,8 @@ def section(decl: type[T], path: str | Path, parent: LineDict, name: str, *, req
             missing_msg: str = "missing section '{key}'", mapping_msg: str = "'{key}' must be a mapping",
             unknown_msg: str | None = None, where: str | None = None) -> T:
     """The section `name` of `parent` read as `decl`; an absent one is the declaration's defaults
-    (or, if required, `missing_msg` at the parent's line)."""
+    (or, if required, `missing_msg` at the parent's line; `name: null` counts as absent then). A
+    section inside another declaration is a field of kind "section" instead."""
     if name not in parent or (parent[name] is None and required):
         if required:
             raise DataFileError(path, parent.line or None, missing_msg.format(key=name))
@@ -169,6 +171,8 @@ def _in_range(v: float, spec: Key) -> bool:
 
 
 def _is_kind(v: object, kind: str) -> bool:
+    if kind == "any":
+        return True
     if kind == "number":
         return isinstance(v, (int, float)) and not isinstance(v, bool)
     if kind == "int":
