@@ -299,3 +299,76 @@ def test_toyo_speed_full_scale_true_is_not_the_integer_1(tmp_path):
         toyo_config(load_profile_file(f))
     assert e.value.message == "speed_full_scale must be a positive integer"
     assert lines[e.value.line - 1].startswith("speed_full_scale: true")
+
+
+# -- fuji: the Fuji keys ----------------------------------------------------------------------------
+
+FUJI = [
+    ("  pnu_base: 0x100", "  pnu_base: 0x800", "function_codes.pnu_base must be an integer"),
+    ("  pnu_base: 0x100", "  pnu_base: x", "function_codes.pnu_base must be an integer"),
+    ("  groups:\n", "  groups: {}\n  x_groups:\n", "function_codes.groups must map group letters to {code, name}"),
+    ("    S: {code: 0x02,", "    S: {code: 0x100,", "group S: needs code 0..255"),
+    ("    S: {code: 0x02,", "    S1x: {code: 0x02,", "group 'S1x': one letter, optionally followed by one character"),
+    ("ppo_select: {param: o30, power_cycle: true}", "ppo_select: 3", "'ppo_select' must be a mapping"),
+    ('o30: [0, 1, "6-255"]', 'o30: [0, 1, "6-x"]', "layout ppo1: o30 value '6-x' is neither a number nor a range 'a-b'"),
+    ("  errors:\n    0:", "  errors: 5\n  x_errors:\n    0:", "parameter_channel.errors must map numbers to texts"),
+    ("    0: parameter (PNU", "    x: parameter (PNU", "parameter_channel.errors: keys are numbers, values texts"),
+    ("storage: {param: y97,", "storage: {param: y97x,", "storage.param y97x is not a parameter"),
+    ("storage: {param: y97, eeprom: 0,", "storage: {param: y97,", "storage: missing 'eeprom'"),
+    ("storage: {param: y97, eeprom: 0, ram: 1, save: 2, saved_reads: 1, save_time_s: 5.0}", "storage: [y97]",
+     "'storage' must be a mapping"),
+    ("  action_param: o27", "  action_param: o99", "comm_loss.action_param: o99 is not a parameter"),
+    ("  alarm: Er5", "  alarm: Er9", "comm_loss.alarm Er9 is not in alarms"),
+    ("    - {o27: [0, \"4-9\"], stop: coast,", "    - {o27: [0, \"4-9\"], stop: brake,",
+     "comm_loss.actions[0]: needs o27: [values], stop: coast | ramp | none"),
+    ("    - {o27: [0, \"4-9\"], stop: coast,", "    - {o27: [0, \"9-4\"], stop: coast,",
+     "comm_loss.actions[0]: o27 value '9-4' is neither a number nor a range 'a-b'"),
+    ("zero_data: {param: o32, actions: {0: ignore, 1: coast, 2: coast_if_last_ctw_bit10}}", "zero_data: 0",
+     "'zero_data' must be a mapping"),
+    ("    - {position: latest, index: 1, mcode_param: M16}", "    - {position: latest, index: x, mcode_param: M16}",
+     "fault_history entry needs position and index"),
+    ("    - {position: latest, index: 1, mcode_param: M16}", "    - {position: latest, index: 1, mcode_param: M99}",
+     "fault_history: M99 is not a parameter"),
+    ("fault_history:\n  pnu: 947\n  elements: 32\n  entries:\n", "fault_history:\n  pnu: 947\n  elements: 32\n  entries: []\n  x_entries:\n",
+     "fault_history.entries must be a list"),
+]
+
+
+@pytest.mark.parametrize("old,new,message", FUJI, ids=[m for _, _, m in FUJI])
+def test_fuji_complaints_keep_words_and_line(tmp_path, old, new, message):
+    from profidrive_cli.drives.fuji import fuji_config
+    f, lines = _edited(tmp_path, "fuji-opc-pdp3.yaml", old, new)
+    with pytest.raises(DataFileError) as e:
+        fuji_config(load_profile_file(f))
+    assert e.value.message == message
+    first = new.split("\n")[0] if not new.startswith("fault_history") else "  entries: []"
+    assert first.strip()[:12] in lines[e.value.line - 1], (e.value.line, lines[e.value.line - 1])
+
+
+@pytest.mark.parametrize("name", ["function_codes", "ppo_select", "parameter_channel", "comm_loss", "fault_history"])
+def test_fuji_sections_are_required(tmp_path, name):
+    from profidrive_cli.drives.fuji import fuji_config
+    f, lines = _edited(tmp_path, "fuji-opc-pdp3.yaml", f"\n{name}:", f"\nx_{name}:")
+    with pytest.raises(DataFileError) as e:
+        fuji_config(load_profile_file(f))
+    assert e.value.message == f"missing section '{name}'"
+    assert lines[e.value.line - 1].startswith("profile:")
+
+
+def test_fuji_null_section_is_missing(tmp_path):
+    from profidrive_cli.drives.fuji import fuji_config
+    f, lines = _edited(tmp_path, "fuji-opc-pdp3.yaml", "ppo_select: {param: o30, power_cycle: true}", "ppo_select: null")
+    with pytest.raises(DataFileError) as e:
+        fuji_config(load_profile_file(f))
+    assert e.value.message == "missing section 'ppo_select'"
+
+
+def test_fuji_pnu_base_true_is_not_the_integer_1(tmp_path):
+    """YAML `true` is a bool (an int subclass): the hand-written reader took it as PNU base 1; the declared
+    int kind refuses it."""
+    from profidrive_cli.drives.fuji import fuji_config
+    f, lines = _edited(tmp_path, "fuji-opc-pdp3.yaml", "  pnu_base: 0x100", "  pnu_base: true")
+    with pytest.raises(DataFileError) as e:
+        fuji_config(load_profile_file(f))
+    assert e.value.message == "function_codes.pnu_base must be an integer"
+    assert lines[e.value.line - 1] == "  pnu_base: true"

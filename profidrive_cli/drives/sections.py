@@ -58,6 +58,7 @@ class Key:
     type_msg: str = "'{key}' must be {kind_text}, got {value!r}"
     range_msg: str | None = None            # None: type_msg
     missing_msg: str = "missing field '{key}'"
+    null_is_missing: bool = False           # a required `key: null` gets missing_msg (else type_msg)
     name: str | None = None                 # the YAML key, when it differs from the field's name
     section: type | None = None             # kind "section": the nested declaration
     unknown_msg: str | None = None          # kind "section": complain about keys it does not declare
@@ -100,6 +101,12 @@ def key_line(instance: object, name: str) -> int | None:
     return line_of(node, name) or None
 
 
+def node_line(instance: object) -> int | None:
+    """The line of the mapping `instance` was read from (None for one made in code)."""
+    node = getattr(instance, "_node", None)
+    return getattr(node, "line", None) or None
+
+
 def section(decl: type[T], path: str | Path, parent: LineDict, name: str, *, required: bool = False,
             missing_msg: str = "missing section '{key}'", mapping_msg: str = "'{key}' must be a mapping",
             unknown_msg: str | None = None, where: str | None = None) -> T:
@@ -140,7 +147,7 @@ def read(decl: type[T], path: str | Path, node: LineDict, *, where: str = "",
 def _value(path: str | Path, node: LineDict, spec: Key, name: str, where: str) -> Any:
     words = {"key": name, "kind_text": _KIND_TEXT[spec.kind], "lo": spec.lo, "hi": spec.hi,
              "gt": spec.gt, "where": where, "choices": ", ".join(str(c) for c in spec.choices)}
-    if name not in node:
+    if name not in node or (node[name] is None and spec.null_is_missing):
         raise DataFileError(path, node.line or None, spec.missing_msg.format(**words))
     v = node[name]
     line = line_of(node, name)
