@@ -14,9 +14,9 @@ mapping read the same way; `section(...)` reads one from its parent (missing / n
 Kinds: "number" (int or float, not bool; read as float), "int", "bool", "text", "mapping" (a dict,
 kept as is), "list", "texts" (a list of texts), "ints" (a list of integers, each in lo..hi), "section"
 (nested declaration), "any" (not checked: kept as it is); `choices=` narrows a value to a set,
-`nonblank=True` a text to a non-blank one. Messages are str.format templates with {key},
-{value} (use {value!r}), {lo}, {hi}, {gt}, {choices}, {where} (the section's dotted path). What the declaration
-cannot say key by key, one key against another, is a rule of the declaration: a class attribute
+`nonblank=True` a text to a non-blank one. Messages are str.format templates with {key}, {value}
+(use {value!r}), {lo}, {hi}, {gt}, {choices}, {where} (the section's dotted path). What the
+declaration cannot say key by key, one key against another, is a rule of the declaration: a class attribute
 `RULES: ClassVar[tuple[tuple[Callable[[Decl], bool], str], ...]]`, each (holds, message) checked on the
 read instance and reported on the section's line. What needs the rest of the profile (a key naming
 one of its parameters) stays in the family's builder, which reads the instance and, for its own
@@ -30,7 +30,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Callable, TypeVar
 
 from profidrive_cli.datafile import DataFileError, LineDict
 
@@ -40,7 +40,6 @@ KINDS = ("number", "int", "bool", "text", "mapping", "list", "texts", "ints", "s
 _KIND_TEXT = {"number": "a number", "int": "an integer", "bool": "true or false", "text": "a text",
               "mapping": "a mapping", "list": "a list", "texts": "a list of texts",
               "ints": "a list of integers", "section": "a mapping", "any": "a value"}
-_REQUIRED = object()
 
 
 @dataclass(frozen=True)
@@ -177,21 +176,27 @@ def _in_range(v: float, spec: Key) -> bool:
                 or (spec.gt is not None and not v > spec.gt))
 
 
+def _number(v: object) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _integer(v: object) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+#: kind -> does the YAML value have it ("section" is checked as a mapping before it is read)
+_IS_KIND: dict[str, Callable[[object], bool]] = {
+    "number": _number,
+    "int": _integer,
+    "bool": lambda v: isinstance(v, bool),
+    "text": lambda v: isinstance(v, str),
+    "mapping": lambda v: isinstance(v, dict),
+    "list": lambda v: isinstance(v, list),
+    "texts": lambda v: isinstance(v, list) and all(isinstance(x, str) for x in v),
+    "ints": lambda v: isinstance(v, list) and all(_integer(x) for x in v),
+    "any": lambda v: True,
+}
+
+
 def _is_kind(v: object, kind: str) -> bool:
-    if kind == "any":
-        return True
-    if kind == "number":
-        return isinstance(v, (int, float)) and not isinstance(v, bool)
-    if kind == "int":
-        return isinstance(v, int) and not isinstance(v, bool)
-    if kind == "bool":
-        return isinstance(v, bool)
-    if kind == "text":
-        return isinstance(v, str)
-    if kind == "mapping":
-        return isinstance(v, dict)
-    if kind == "texts":
-        return isinstance(v, list) and all(isinstance(x, str) for x in v)
-    if kind == "ints":
-        return isinstance(v, list) and all(isinstance(x, int) and not isinstance(x, bool) for x in v)
-    return isinstance(v, list)
+    return _IS_KIND[kind](v)

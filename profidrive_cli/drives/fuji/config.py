@@ -128,9 +128,9 @@ class FujiKeys:
     function_codes: FunctionCodeKeys = _required(FunctionCodeKeys)
     ppo_select: PpoSelectKeys = _required(PpoSelectKeys)
     parameter_channel: ParameterChannelKeys = _required(ParameterChannelKeys)
-    storage: dict[Any, Any] | None = key("mapping", None, nullable=True, type_msg=_MAPPING)      # y97 (OPC-PDP3)
+    storage: dict[Any, Any] | None = key("mapping", None, nullable=True, type_msg=_MAPPING)   # y97 (PDP3)
     comm_loss: CommLossKeys = _required(CommLossKeys)
-    zero_data: dict[Any, Any] | None = key("mapping", None, nullable=True, type_msg=_MAPPING)    # o32 (OPC-PDP3)
+    zero_data: dict[Any, Any] | None = key("mapping", None, nullable=True, type_msg=_MAPPING)   # o32 (PDP3)
     fault_history: FaultHistoryKeys = _required(FaultHistoryKeys)
     baud_codes: Any = key("any", {})                # number -> text; anything else is ignored
 
@@ -215,7 +215,8 @@ def _read_comm_loss(path, profile, cl: CommLossKeys, c: FujiConfig) -> None:
         if profile.param(code) is None:
             raise DataFileError(path, key_line(cl, k), f"comm_loss.{k}: {code} is not a parameter")
     if profile.alarm_by_code(c.comm_loss_alarm) is None:
-        raise DataFileError(path, key_line(cl, "alarm"), f"comm_loss.alarm {c.comm_loss_alarm} is not in alarms")
+        raise DataFileError(path, key_line(cl, "alarm"),
+                            f"comm_loss.alarm {c.comm_loss_alarm} is not in alarms")
     if not cl.actions:
         raise DataFileError(path, key_line(cl, "actions"), "comm_loss.actions must be a list")
     for i, a in enumerate(cl.actions):

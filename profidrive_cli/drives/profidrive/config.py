@@ -76,8 +76,8 @@ class ProfidriveConfig:
         for b in sec.held_ctw_bits:
             held |= 1 << b
         if held & DERIVED_BITS:
-            raise DataFileError(path, key_line(sec, "held_ctw_bits"),
-                                "held_ctw_bits cannot include bits 0-3, 7 or 10 (the state machine sets them)")
+            raise DataFileError(path, key_line(sec, "held_ctw_bits"), "held_ctw_bits cannot include "
+                                "bits 0-3, 7 or 10 (the state machine sets them)")
         cfg = cls(labels=labels, held_ctw_bits=held,
                   ctw_names={b: n for b, n in ctw.items() if n is not None},      # null = bit not used
                   stw_names={b: n for b, n in stw.items() if n is not None},
@@ -165,7 +165,8 @@ class PkwKeys:
     max_zero_cycles: int = key("int", 20, type_msg=_INT)
     requests: list[int] | None = key("ints", None, lo=0, hi=15, type_msg=_INTS)
     responses: list[int] | None = key("ints", None, lo=0, hi=15, type_msg=_INTS)
-    unsupported_text: str | None = key("text", None, nonblank=True, type_msg="pkw.unsupported_text must be a text")
+    unsupported_text: str | None = key("text", None, nonblank=True,
+                                       type_msg="pkw.unsupported_text must be a text")
     errors: dict[Any, Any] = key("mapping", {}, type_msg=_MAPPING)
     error_numbers: dict[Any, Any] = key("mapping", {}, type_msg=_MAPPING)
 
@@ -174,7 +175,8 @@ class PkwKeys:
 class FaultMemoryKeys:
     pnu: int = key("int", PNU_FAULT_NUMBER, type_msg=_INT)
     subindexes: list[int] | None = key("ints", None, lo=0, hi=255, type_msg=_INTS)
-    positions: list[str] | None = key("texts", None, type_msg="fault_memory.positions must be one text per subindex")
+    positions: list[str] | None = key("texts", None,
+                                      type_msg="fault_memory.positions must be one text per subindex")
 
 
 @dataclass(frozen=True)

@@ -60,8 +60,9 @@ class YaskawaKeys:
     o1_03: int = key("int", 0, lo=0, hi=39999, type_msg=_NUMBER, range_msg="'o1_03' must be 0..39999")
     rated_current_a: float | None = key("number", None, nullable=True, gt=0, type_msg=_NUMBER,
                                         range_msg="'rated_current_a' must be > 0 or null")
-    fast_stop_input: int | None = key("int", None, nullable=True, lo=3, hi=12, type_msg=_NUMBER,
-                                      range_msg="'fast_stop_input' must be a multi-function input 3..12 or null")
+    fast_stop_input: int | None = key(
+        "int", None, nullable=True, lo=3, hi=12, type_msg=_NUMBER,
+        range_msg="'fast_stop_input' must be a multi-function input 3..12 or null")
     handshake: HandshakeKeys = key("section", section=HandshakeKeys, type_msg="'handshake' must be a mapping")
     enter_register: Any = key("mapping", None, nullable=True,
                               type_msg="'enter_register' must be a mapping with an integer 'register'")
