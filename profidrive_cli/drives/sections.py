@@ -160,15 +160,18 @@ def _value(path: str | Path, node: LineDict, spec: Key, name: str, where: str) -
                     unknown_msg=spec.unknown_msg)
     if not _is_kind(v, spec.kind):
         raise DataFileError(path, line, spec.type_msg.format(value=v, **words))
+    if not _allowed(v, spec):
+        raise DataFileError(path, line, (spec.range_msg or spec.type_msg).format(value=v, **words))
+    return float(v) if spec.kind == "number" else v
+
+
+def _allowed(v: Any, spec: Key) -> bool:
+    """A value of the right kind inside the declared choices, range or non-blankness."""
     if spec.choices and v not in spec.choices:
-        raise DataFileError(path, line, (spec.range_msg or spec.type_msg).format(value=v, **words))
+        return False
     if spec.kind in ("number", "int", "ints"):
-        if not all(_in_range(x, spec) for x in (v if spec.kind == "ints" else [v])):
-            raise DataFileError(path, line, (spec.range_msg or spec.type_msg).format(value=v, **words))
-        return float(v) if spec.kind == "number" else v
-    if spec.nonblank and not v.strip():
-        raise DataFileError(path, line, (spec.range_msg or spec.type_msg).format(value=v, **words))
-    return v
+        return all(_in_range(x, spec) for x in (v if spec.kind == "ints" else [v]))
+    return not (spec.nonblank and not v.strip())
 
 
 def _in_range(v: float, spec: Key) -> bool:
