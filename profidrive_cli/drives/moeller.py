@@ -28,6 +28,7 @@ from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.values import value_problem
 from profidrive_cli.drives.base import DriveError, DriveStatus, ParamError, ParamValue, Reaction
 from profidrive_cli.drives.profile import COMMON_EXTRA_KEYS, per_profile
+from profidrive_cli.drives.sections import key, key_line, section
 
 FAMILY_PARAM_KEYS = {"bytes", "format", "ranges", "df6", "df6_max", "note", "array"}
 FORMATS = ("code", "hex", "bits", "baud", "alarm947")
@@ -91,66 +92,83 @@ def _validate_params(profile) -> None:
                                 f" (Moeller keys: {', '.join(sorted(FAMILY_PARAM_KEYS))})")
 
 
-def _code(profile, node, key, default, where: str = "moeller"):
-    v = node.get(key, default) if isinstance(node, dict) else default
-    if not isinstance(v, str) or profile.param(v) is None:
-        raise _err(profile, node, key, f"{where}.{key}: {v} is not a parameter of this profile")
-    return v
+_INT = "'{key}' must be an integer {lo}..{hi}, got {value!r}"
+_PARAM = "{where}.{key}: {value} is not a parameter of this profile"
 
 
-def _intv(profile, node, key, default, lo=0, hi=0xFFFF):
-    v = node.get(key, default) if isinstance(node, dict) else default
-    if not isinstance(v, int) or isinstance(v, bool) or not lo <= v <= hi:
-        raise _err(profile, node, key, f"'{key}' must be an integer {lo}..{hi}, got {v!r}")
+@dataclass(frozen=True)
+class SourceKeys:
+    """moeller.control_source.frequency / .commands: the parameter that gives the bus the role, and
+    the value that does (None: the role's default)."""
+    param: str | None = key("text", None, type_msg=_PARAM)
+    bus_value: int | None = key("int", None, lo=0, hi=255, type_msg=_INT)
+
+
+@dataclass(frozen=True)
+class ControlSourceKeys:
+    frequency: SourceKeys | None = key("section", None, nullable=True, section=SourceKeys,
+                                       type_msg="control_source.{key} must be {{param, bus_value}}")
+    commands: SourceKeys | None = key("section", None, nullable=True, section=SourceKeys,
+                                      type_msg="control_source.{key} must be {{param, bus_value}}")
+
+
+@dataclass(frozen=True)
+class CommLossKeys:
+    param: str | None = key("text", None, type_msg=_PARAM)
+    other_param: str | None = key("text", None, type_msg=_PARAM)
+    alarm: str | None = key("text", None, type_msg="comm_loss.alarm {value!r} is not in alarms")
+
+
+@dataclass(frozen=True)
+class MoellerKeys:
+    """The profile's `moeller:` section (read by drives/sections.py)."""
+    control_source: ControlSourceKeys = key("section", section=ControlSourceKeys,
+                                            type_msg="control_source must be a mapping")
+    ctw_commands_invalid_bit: int = key("int", 12, lo=11, hi=15, type_msg=_INT)
+    ctw_reference_invalid_bit: int = key("int", 13, lo=11, hi=15, type_msg=_INT)
+    ctw_reverse_bit: int = key("int", 11, lo=11, hi=15, type_msg=_INT)
+    comm_loss: CommLossKeys = key("section", section=CommLossKeys, type_msg="comm_loss must be a mapping")
+    df6_device_id: int = key("int", 0x812C, lo=0, hi=0xFFFF, type_msg=_INT)
+    sim_defaults: dict[Any, Any] = key("mapping", {}, type_msg="sim_defaults must be a mapping code: value")
+
+
+def _param_of(profile, keys, name: str, default: str, where: str) -> str:
+    """keys.<name> (or the default), which must be a parameter of the profile."""
+    v = getattr(keys, name)
+    v = default if v is None else v
+    if profile.param(v) is None:
+        raise DataFileError(profile.path or "<profile>", key_line(keys, name),
+                            _PARAM.format(where=where, key=name, value=v))
     return v
 
 
 def _build_config(profile) -> MoellerConfig:
     _validate_params(profile)
     doc = profile.raw if isinstance(profile.raw, LineDict) else LineDict()
-    sec = doc.get("moeller")
-    if sec is None:
-        raise DataFileError(profile.path or "<profile>", doc.line if isinstance(doc, LineDict) else None,
-                            "missing section 'moeller'")
-    if not isinstance(sec, dict):
-        raise _err(profile, doc, "moeller", "'moeller' must be a mapping")
-    known = {"control_source", "ctw_commands_invalid_bit", "ctw_reference_invalid_bit",
-             "ctw_reverse_bit", "comm_loss", "df6_device_id", "sim_defaults"}
-    for k in sec:
-        if k not in known:
-            raise _err(profile, sec, k, f"moeller: unknown key '{k}' (known: {', '.join(sorted(known))})")
-    c = MoellerConfig()
-    cs = sec.get("control_source", {})
-    if not isinstance(cs, dict):
-        raise _err(profile, sec, "control_source", "control_source must be a mapping")
-    for role, pattr, vattr in (("frequency", "frequency_param", "frequency_bus_value"),
-                               ("commands", "commands_param", "commands_bus_value")):
-        node = cs.get(role)
-        if node is None:
+    path = profile.path or "<profile>"
+    sec = section(MoellerKeys, path, doc, "moeller", required=True, where="moeller",
+                  unknown_msg="moeller: unknown key '{key}' (known: {known})")
+    c = MoellerConfig(commands_invalid_bit=sec.ctw_commands_invalid_bit,
+                      reference_invalid_bit=sec.ctw_reference_invalid_bit, reverse_bit=sec.ctw_reverse_bit,
+                      df6_device_id=sec.df6_device_id)
+    for role in ("frequency", "commands"):
+        src = getattr(sec.control_source, role)
+        if src is None:
             continue
-        if not isinstance(node, dict):
-            raise _err(profile, cs, role, f"control_source.{role} must be {{param, bus_value}}")
-        setattr(c, pattr, _code(profile, node, "param", getattr(c, pattr),
-                                f"moeller.control_source.{role}"))
-        setattr(c, vattr, _intv(profile, node, "bus_value", getattr(c, vattr), 0, 255))
-    c.commands_invalid_bit = _intv(profile, sec, "ctw_commands_invalid_bit", 12, 11, 15)
-    c.reference_invalid_bit = _intv(profile, sec, "ctw_reference_invalid_bit", 13, 11, 15)
-    c.reverse_bit = _intv(profile, sec, "ctw_reverse_bit", 11, 11, 15)
-    cl = sec.get("comm_loss", {})
-    if not isinstance(cl, dict):
-        raise _err(profile, sec, "comm_loss", "comm_loss must be a mapping")
-    if cl:
-        c.comm_loss_param = _code(profile, cl, "param", c.comm_loss_param, "moeller.comm_loss")
-        c.comm_loss_other_param = _code(profile, cl, "other_param", c.comm_loss_other_param,
-                                        "moeller.comm_loss") if "other_param" in cl else None
-        alarm = cl.get("alarm", c.comm_loss_alarm)
-        if not isinstance(alarm, str) or profile.alarm_by_code(alarm) is None:
-            raise _err(profile, cl, "alarm", f"comm_loss.alarm {alarm!r} is not in alarms")
+        where = f"moeller.control_source.{role}"
+        setattr(c, f"{role}_param", _param_of(profile, src, "param", getattr(c, f"{role}_param"), where))
+        if src.bus_value is not None:
+            setattr(c, f"{role}_bus_value", src.bus_value)
+    cl = sec.comm_loss
+    if doc["moeller"].get("comm_loss"):             # a comm_loss: with any key names both slots itself
+        c.comm_loss_param = _param_of(profile, cl, "param", c.comm_loss_param, "moeller.comm_loss")
+        c.comm_loss_other_param = None if cl.other_param is None else \
+            _param_of(profile, cl, "other_param", "", "moeller.comm_loss")
+        alarm = c.comm_loss_alarm if cl.alarm is None else cl.alarm
+        if profile.alarm_by_code(alarm) is None:
+            raise DataFileError(path, key_line(cl, "alarm"), f"comm_loss.alarm {alarm!r} is not in alarms")
         c.comm_loss_alarm = alarm
-    c.df6_device_id = _intv(profile, sec, "df6_device_id", c.df6_device_id)
-    sd = sec.get("sim_defaults", {})
-    if not isinstance(sd, dict):
-        raise _err(profile, sec, "sim_defaults", "sim_defaults must be a mapping code: value")
+    sd = sec.sim_defaults
     for k, v in sd.items():
         if profile.param(str(k)) is None:
             raise _err(profile, sd, k, f"sim_defaults: {k} is not a parameter of this profile")
@@ -448,10 +466,7 @@ def decode_area(profile, layout: str, direction: str, data: bytes, *,
     return out
 
 
-#: the family's Drive class, for its class-level facts without a bus (drives.drive_class)
-DRIVE_CLASS = MoellerDrive
-
-__all__ = ["DRIVE_CLASS", "MoellerConfig", "MoellerDrive", "make_drive", "decode_area", "param_value",
+__all__ = ["MoellerConfig", "MoellerDrive", "make_drive", "decode_area", "param_value",
            "moeller_config", "source_selection", "device_name", "baud_text", "fault_text",
            "address_from_switches", "value_from_wire", "wire_from_value", "in_ranges",
            "direction_text", "DriveError"]

@@ -4,7 +4,7 @@ Common schema (every family):
 
     profile: fuji-opc-g1-pdp          # the profile's name (= file stem)
     aliases: [fuji-g1]                # short names (sim URLs, --profile)
-    family: fuji                      # codec module drives/<family>.py
+    family: fuji                      # a row of drives/registry.py (codec, Drive, sim model, config)
     title: Fuji FRENIC-MEGA, OPC-G1-PDP
     identity:
       ident: 0xF0A1                   # PROFIBUS ident number
@@ -40,6 +40,7 @@ from profidrive_cli.datafile import DataFileError, LineDict, load_yaml, load_yam
 from profidrive_cli.dp.cfg import CfgError, decode_cfg, io_sizes, parse_hex
 from profidrive_cli.drives.capabilities import Capabilities, parse_capabilities
 from profidrive_cli.drives.formats import FORMATS
+from profidrive_cli.drives.registry import unknown_family
 
 ProfileError = DataFileError
 
@@ -267,9 +268,13 @@ def load_profile_file(path: str | Path) -> Profile:
     if mf_param is not None and mf_param not in params:
         raise _err(path, mf, "param", f"max_frequency.param {mf_param} is not in parameters")
     name = _get(path, doc, "profile", str)
+    family = _get(path, doc, "family", str)
+    unknown = unknown_family(family)
+    if unknown is not None:
+        raise _err(path, doc, "family", unknown)
     return Profile(
         name=name,
-        family=_get(path, doc, "family", str),
+        family=family,
         title=_get(path, doc, "title", str),
         ident=_get(path, ident_node, "ident", int),
         ident_placeholder=_get(path, ident_node, "ident_placeholder", str, False),

@@ -15,11 +15,12 @@
     sim://?faults=6:E01,E05                  station 6's fault history pre-filled (repeat the key per station)
     sim://?wd=0                              (debug) ignore the watchdog... not offered: the sim always enforces it
 
-Each station runs the family's drive model (sim/<family>.py, make_model(profile, **options)); a family
-without a model yet runs a plain DP-V0 slave with the profile's ident and configurations. A station
-named by a profile the index knows, without set=, is built on first use (sim/lazy.py): until a master
-parameterises it (or a trip, a fault history or a look at the model needs it) it answers FDL status
-and Slave_Diag from the index's ident, so a bus scan loads no profile and no drive model.
+Each station runs the family's drive model (the sim_model of its row in drives/registry.py: sim/<family>.py,
+make_model(profile, **options)); a family without a model runs a plain DP-V0 slave with the profile's
+ident and configurations. A station named by a profile the index knows, without set=, is built on first
+use (sim/lazy.py): until a master parameterises it (or a trip, a fault history or a look at the model
+needs it) it answers FDL status and Slave_Diag from the index's ident, so a bus scan loads no profile
+and no drive model.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from urllib.parse import parse_qs, urlsplit
 
 from profidrive_cli import UsageError
 from profidrive_cli.drives.profile import Profile, load_profile, profile_index
+from profidrive_cli.drives.registry import sim_model_ref
 from profidrive_cli.fdl.timing import parse_baud
 from profidrive_cli.sim.bus import SimBus
 from profidrive_cli.sim.lazy import LazyModel
@@ -42,14 +44,10 @@ TIMINGS = ("instant", "wire", "virtual")
 
 
 def make_model(profile: Profile, **options) -> SlaveModel:
-    try:
-        mod = importlib.import_module(f"profidrive_cli.sim.{profile.family}")
-    except ModuleNotFoundError as e:
-        if e.name != f"profidrive_cli.sim.{profile.family}":
-            raise
-        mod = None
-    if mod is not None and hasattr(mod, "make_model"):
-        m = mod.make_model(profile, **options)
+    ref = sim_model_ref(profile)          # the family table (drives/registry.py) names the model
+    if ref is not None:
+        mod_name, _, fn_name = ref.partition(":")
+        m = getattr(importlib.import_module(mod_name), fn_name)(profile, **options)
     else:
         m = SlaveModel(profile.ident, {n: l.cfg for n, l in profile.layouts.items()},
                        name=profile.title)

@@ -39,10 +39,7 @@ from profidrive_cli.drives.fuji.describe import decode_area
 from profidrive_cli.drives.fuji.formats import FORMATTERS, PARSERS
 from profidrive_cli.drives.fuji.drive import FujiDrive, make_drive
 
-#: the family's Drive class, for its class-level facts without a bus (drives.drive_class)
-DRIVE_CLASS = FujiDrive
-
-__all__ = ["DRIVE_CLASS", "FujiConfig", "FujiDrive", "make_drive", "decode_area", "param_value", "fuji_config",
+__all__ = ["FujiConfig", "FujiDrive", "make_drive", "decode_area", "param_value", "fuji_config",
            "profidrive_config", "parse_function_code", "function_code_name", "pcd_assignment",
            "pcd_assignment_code", "alarm_candidates", "alarm_by_mcode", "alarm_text", "ppo_for_o30",
            "o30_for_layout", "comm_loss_action", "comm_loss_text", "mcode_of", "CommLossAction",

@@ -1,19 +1,21 @@
 """Fuji OPC-G1-PDP / OPC-PDP3: the profile's Fuji keys (validated with file:line) and the core config.
 
 `fuji_config(profile)` parses function_codes, ppo_select, parameter_channel, storage, comm_loss,
-zero_data, fault_history, baud_codes and the alarms' M-codes into a FujiConfig (once per profile);
-`profidrive_config(profile)` builds the PROFIdrive core's ProfidriveConfig from it (the hook
-drives/profidrive/config.py calls). Reads the profile only; no bus.
+zero_data, fault_history, baud_codes (declared as FujiKeys, read by drives/sections.py) and the alarms'
+M-codes into a FujiConfig (once per profile); `profidrive_config(profile)` builds the PROFIdrive core's
+ProfidriveConfig from it (the family's core_config in drives/registry.py). Reads the profile only; no bus.
 """
 
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
+from typing import Any
 
 from profidrive_cli.datafile import DataFileError, LineDict
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.profile import COMMON_EXTRA_KEYS, per_profile
+from profidrive_cli.drives.sections import key, key_line, node_line, read
 
 #: parameter keys this family reads besides the common schema
 FAMILY_PARAM_KEYS = {"note", "dangerous", "format", "power_cycle", "array"}
@@ -76,22 +78,100 @@ def parse_int_set(items, what: str = "value") -> frozenset[int]:
     return frozenset(out)
 
 
-def _section(profile, doc, key, required=True):
-    v = doc.get(key)
-    if v is None:
-        if required:
-            raise DataFileError(profile.path or "<profile>", doc.line if isinstance(doc, LineDict) else None,
-                                f"missing section '{key}'")
-        return None
-    if not isinstance(v, dict):
-        raise _err(profile, doc, key, f"'{key}' must be a mapping")
-    return v
+# -- the Fuji keys of the profile, declared (read by drives/sections.py) ------------------------------
+
+_MAPPING = "'{key}' must be a mapping"
+_GROUPS = "function_codes.groups must map group letters to {{code, name}}"
+
+
+def _required(decl: type) -> Any:
+    return key("section", required=True, section=decl, null_is_missing=True, type_msg=_MAPPING,
+               missing_msg="missing section '{key}'")
+
+
+@dataclass(frozen=True)
+class FunctionCodeKeys:
+    pnu_base: int = key("int", 0x100, lo=0, hi=0x700, type_msg="function_codes.pnu_base must be an integer")
+    groups: dict[Any, Any] = key("mapping", required=True, type_msg=_GROUPS, missing_msg=_GROUPS)
+
+
+@dataclass(frozen=True)
+class PpoSelectKeys:
+    param: Any = key("any", "o30")
+
+
+@dataclass(frozen=True)
+class ParameterChannelKeys:
+    errors: dict[Any, Any] = key("mapping", {}, type_msg="parameter_channel.errors must map numbers to texts")
+    busy_error: Any = key("any", 104)
+
+
+@dataclass(frozen=True)
+class CommLossKeys:
+    action_param: Any = key("any", "o27")
+    timer_param: Any = key("any", "o28")
+    decel_param: Any = key("any", "F08")
+    alarm: Any = key("any", "Er5")
+    actions: list[Any] = key("list", [], type_msg="comm_loss.actions must be a list")
+
+
+@dataclass(frozen=True)
+class FaultHistoryKeys:
+    pnu: Any = key("any", 947)
+    elements: Any = key("any", 32)
+    entries: list[Any] = key("list", [], type_msg="fault_history.entries must be a list")
+
+
+@dataclass(frozen=True)
+class FujiKeys:
+    """The top-level keys only the Fuji family reads (the common ones are drives/profile.py's)."""
+    function_codes: FunctionCodeKeys = _required(FunctionCodeKeys)
+    ppo_select: PpoSelectKeys = _required(PpoSelectKeys)
+    parameter_channel: ParameterChannelKeys = _required(ParameterChannelKeys)
+    storage: dict[Any, Any] | None = key("mapping", None, nullable=True, type_msg=_MAPPING)   # y97 (PDP3)
+    comm_loss: CommLossKeys = _required(CommLossKeys)
+    zero_data: dict[Any, Any] | None = key("mapping", None, nullable=True, type_msg=_MAPPING)   # o32 (PDP3)
+    fault_history: FaultHistoryKeys = _required(FaultHistoryKeys)
+    baud_codes: Any = key("any", {})                # number -> text; anything else is ignored
 
 
 def _build_config(profile) -> FujiConfig:
     doc = profile.raw if isinstance(profile.raw, LineDict) else LineDict()
     path = profile.path or "<profile>"
-    c = FujiConfig()
+    _check_params(path, profile)
+    k = read(FujiKeys, path, doc)
+    c = FujiConfig(pnu_base=k.function_codes.pnu_base, ppo_param=str(k.ppo_select.param),
+                   busy_error=k.parameter_channel.busy_error, storage=k.storage, zero_data=k.zero_data,
+                   history_pnu=k.fault_history.pnu, history_elements=k.fault_history.elements)
+    _read_groups(profile, k.function_codes, c)
+    for name, lay in profile.layouts.items():
+        vals = lay.extra.get("o30")
+        if vals is None:
+            continue
+        try:
+            c.ppo_values[name] = parse_int_set(vals if isinstance(vals, list) else [vals], "o30 value")
+        except ValueError as err:
+            raise _err(profile, doc.get("layouts"), name, f"layout {name}: {err}") from None
+    errs = k.parameter_channel.errors
+    for n, v in errs.items():
+        if not isinstance(n, int) or not isinstance(v, str):
+            raise _err(profile, errs, n, "parameter_channel.errors: keys are numbers, values texts")
+        c.errors[n] = v
+    if c.storage is not None:
+        _check_storage(profile, c.storage)
+    _read_comm_loss(path, profile, k.comm_loss, c)
+    c.history = _history(path, profile, k.fault_history)
+    if isinstance(k.baud_codes, dict):
+        c.baud_codes = {int(n): str(v) for n, v in k.baud_codes.items()}
+    for a in doc.get("alarms", []) or []:
+        if isinstance(a, dict) and "mcode" in a:
+            if not isinstance(a["mcode"], int):
+                raise _err(profile, a, "mcode", "mcode must be an integer")
+            c.mcodes[str(a["code"])] = a["mcode"]
+    return c
+
+
+def _check_params(path, profile) -> None:
     for p in profile.parameters.values():
         unknown = set(p.extra) - FAMILY_PARAM_KEYS - COMMON_EXTRA_KEYS
         if unknown:
@@ -100,14 +180,12 @@ def _build_config(profile) -> FujiConfig:
         fmt = p.extra.get("format")
         if fmt is not None and fmt not in FORMATS:
             raise DataFileError(path, p.line, f"{p.code}: format must be one of {', '.join(FORMATS)}")
-    fc = _section(profile, doc, "function_codes")
-    base = fc.get("pnu_base", 0x100)
-    if not isinstance(base, int) or not 0 <= base <= 0x700:
-        raise _err(profile, fc, "pnu_base", "function_codes.pnu_base must be an integer")
-    c.pnu_base = base
-    groups = fc.get("groups")
-    if not isinstance(groups, dict) or not groups:
-        raise _err(profile, fc, "groups", "function_codes.groups must map group letters to {code, name}")
+
+
+def _read_groups(profile, fc: FunctionCodeKeys, c: FujiConfig) -> None:
+    groups = fc.groups
+    if not groups:
+        raise DataFileError(profile.path or "<profile>", key_line(fc, "groups"), _GROUPS.format())
     for g, node in groups.items():
         if not isinstance(node, dict) or not isinstance(node.get("code"), int) \
                 or not 0 <= node["code"] <= 0xFF:
@@ -117,81 +195,56 @@ def _build_config(profile) -> FujiConfig:
         c.groups[str(g)] = node["code"]
         c.group_names[str(g)] = str(node.get("name", ""))
     if len({g.lower() for g in c.groups}) != len(c.groups):
-        raise _err(profile, fc, "groups", "group letters must differ in more than case")
-    ps = _section(profile, doc, "ppo_select")
-    c.ppo_param = str(ps.get("param", "o30"))
-    for name, lay in profile.layouts.items():
-        vals = lay.extra.get("o30")
-        if vals is None:
-            continue
-        try:
-            c.ppo_values[name] = parse_int_set(vals if isinstance(vals, list) else [vals], "o30 value")
-        except ValueError as err:
-            raise _err(profile, doc.get("layouts"), name, f"layout {name}: {err}") from None
-    pc = _section(profile, doc, "parameter_channel")
-    errs = pc.get("errors", {})
-    if not isinstance(errs, dict):
-        raise _err(profile, pc, "errors", "parameter_channel.errors must map numbers to texts")
-    for k, v in errs.items():
-        if not isinstance(k, int) or not isinstance(v, str):
-            raise _err(profile, errs, k, "parameter_channel.errors: keys are numbers, values texts")
-        c.errors[k] = v
-    c.busy_error = pc.get("busy_error", 104)
-    c.storage = _section(profile, doc, "storage", required=False)
-    if c.storage is not None:
-        for k in ("param", "eeprom", "ram", "save", "saved_reads"):
-            if k not in c.storage:
-                raise _err(profile, c.storage, k if k in c.storage else "param",
-                           f"storage: missing '{k}'")
-        if profile.param(c.storage["param"]) is None:
-            raise _err(profile, c.storage, "param", f"storage.param {c.storage['param']} is not a parameter")
-    cl = _section(profile, doc, "comm_loss")
-    c.comm_loss_param = str(cl.get("action_param", "o27"))
-    c.comm_loss_timer = str(cl.get("timer_param", "o28"))
-    c.comm_loss_decel = str(cl.get("decel_param", "F08"))
-    c.comm_loss_alarm = str(cl.get("alarm", "Er5"))
+        raise DataFileError(profile.path or "<profile>", key_line(fc, "groups"),
+                            "group letters must differ in more than case")
+
+
+def _check_storage(profile, storage: dict) -> None:
+    for k in ("param", "eeprom", "ram", "save", "saved_reads"):
+        if k not in storage:
+            raise _err(profile, storage, k if k in storage else "param", f"storage: missing '{k}'")
+    if profile.param(storage["param"]) is None:
+        raise _err(profile, storage, "param", f"storage.param {storage['param']} is not a parameter")
+
+
+def _read_comm_loss(path, profile, cl: CommLossKeys, c: FujiConfig) -> None:
+    c.comm_loss_param, c.comm_loss_timer = str(cl.action_param), str(cl.timer_param)
+    c.comm_loss_decel, c.comm_loss_alarm = str(cl.decel_param), str(cl.alarm)
     for k, code in (("action_param", c.comm_loss_param), ("timer_param", c.comm_loss_timer),
                     ("decel_param", c.comm_loss_decel)):
         if profile.param(code) is None:
-            raise _err(profile, cl, k, f"comm_loss.{k}: {code} is not a parameter")
+            raise DataFileError(path, key_line(cl, k), f"comm_loss.{k}: {code} is not a parameter")
     if profile.alarm_by_code(c.comm_loss_alarm) is None:
-        raise _err(profile, cl, "alarm", f"comm_loss.alarm {c.comm_loss_alarm} is not in alarms")
-    acts = cl.get("actions", [])
-    if not isinstance(acts, list) or not acts:
-        raise _err(profile, cl, "actions", "comm_loss.actions must be a list")
-    for i, a in enumerate(acts):
+        raise DataFileError(path, key_line(cl, "alarm"),
+                            f"comm_loss.alarm {c.comm_loss_alarm} is not in alarms")
+    if not cl.actions:
+        raise DataFileError(path, key_line(cl, "actions"), "comm_loss.actions must be a list")
+    for i, a in enumerate(cl.actions):
+        line = getattr(a, "line", node_line(cl))
         if not isinstance(a, dict) or a.get("stop") not in STOP_ACTIONS:
-            raise DataFileError(path, getattr(a, "line", cl.line), f"comm_loss.actions[{i}]: "
+            raise DataFileError(path, line, f"comm_loss.actions[{i}]: "
                                 f"needs o27: [values], stop: {' | '.join(STOP_ACTIONS)}")
         try:
             vals = parse_int_set(a.get("o27", []), "o27 value")
         except ValueError as err:
-            raise DataFileError(path, getattr(a, "line", cl.line), f"comm_loss.actions[{i}]: {err}") from None
+            raise DataFileError(path, line, f"comm_loss.actions[{i}]: {err}") from None
         c.comm_loss_actions.append(CommLossAction(vals, a["stop"], bool(a.get("delayed", False)),
                                                   bool(a.get("recover", False)), bool(a.get("trip", True))))
-    c.zero_data = _section(profile, doc, "zero_data", required=False)
-    fh = _section(profile, doc, "fault_history")
-    c.history_pnu = fh.get("pnu", 947)
-    c.history_elements = fh.get("elements", 32)
-    entries = fh.get("entries", [])
-    if not isinstance(entries, list) or not entries:
-        raise _err(profile, fh, "entries", "fault_history.entries must be a list")
-    for e in entries:
+
+
+def _history(path, profile, fh: FaultHistoryKeys) -> list[tuple[str, int, str | None]]:
+    if not fh.entries:
+        raise DataFileError(path, key_line(fh, "entries"), "fault_history.entries must be a list")
+    out = []
+    for e in fh.entries:
+        line = getattr(e, "line", node_line(fh))
         if not isinstance(e, dict) or not isinstance(e.get("index"), int):
-            raise DataFileError(path, getattr(e, "line", fh.line), "fault_history entry needs position and index")
+            raise DataFileError(path, line, "fault_history entry needs position and index")
         m = e.get("mcode_param")
         if m is not None and profile.param(m) is None:
-            raise DataFileError(path, getattr(e, "line", fh.line), f"fault_history: {m} is not a parameter")
-        c.history.append((str(e.get("position", e["index"])), e["index"], m))
-    bc = doc.get("baud_codes", {})
-    if isinstance(bc, dict):
-        c.baud_codes = {int(k): str(v) for k, v in bc.items()}
-    for a in doc.get("alarms", []) or []:
-        if isinstance(a, dict) and "mcode" in a:
-            if not isinstance(a["mcode"], int):
-                raise _err(profile, a, "mcode", "mcode must be an integer")
-            c.mcodes[str(a["code"])] = a["mcode"]
-    return c
+            raise DataFileError(path, line, f"fault_history: {m} is not a parameter")
+        out.append((str(e.get("position", e["index"])), e["index"], m))
+    return out
 
 
 fuji_config = per_profile(_build_config)   # -> FujiConfig, built once per profile

@@ -126,10 +126,7 @@ from profidrive_cli.drives.profidrive.words import (CTW_NAMES, CTW_ZERO_NAMES, D
                                                     next_control_word, state_from_status,
                                                     target_reached)
 
-#: the family's Drive class, for its class-level facts without a bus (drives.drive_class)
-DRIVE_CLASS = ProfidriveDrive
-
-__all__ = ["DRIVE_CLASS", "ARRAY_REQUESTS", "CTW_NAMES", "CTW_ZERO_NAMES", "Ctw", "DERIVED_BITS",
+__all__ = ["ARRAY_REQUESTS", "CTW_NAMES", "CTW_ZERO_NAMES", "Ctw", "DERIVED_BITS",
            "ERROR_RESPONSES", "ERROR_ROLES", "GENERIC_ERRORS", "IDLE", "N2_FULL", "PKW_WORDS",
            "PNU_BAUD", "PNU_CONTROL_RIGHTS", "PNU_CONTROL_WORD", "PNU_DEVICE_ID",
            "PNU_EDIT_RIGHTS", "PNU_FAULT_NUMBER", "PNU_NODE_ADDRESS", "PNU_PROFILE",

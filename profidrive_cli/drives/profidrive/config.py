@@ -1,4 +1,6 @@
-"""Per-card PROFIdrive configuration: the profile's `profidrive:` section, validated with file:line.
+"""Per-card PROFIdrive configuration: the profile's `profidrive:` section, validated with file:line
+(declared as ProfidriveKeys and read by drives/sections.py; the checks against the profile's
+parameters stay here).
 
 `ProfidriveConfig.from_profile` parses; `config(profile)` caches it and lets a family module build
 it from its own keys (`profidrive_config(profile)`). Reads the profile only; no bus, no drive.
@@ -6,15 +8,17 @@ it from its own keys (`profidrive_config(profile)`). Reads the profile only; no 
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
+from typing import Any
 
-from profidrive_cli import UsageError
 from profidrive_cli.datafile import DataFileError, LineDict
 from profidrive_cli.drives.profidrive.pkw import GENERIC_ERRORS
 from profidrive_cli.drives.profidrive.pnu import (PNU_FAULT_NUMBER, PNU_PZD_ACTUAL,
-                                                  PNU_PZD_SETPOINT, PNU_SAVE,
+                                                  PNU_PZD_SETPOINT,
                                                   default_fault_positions)
 from profidrive_cli.drives.profidrive.words import CTW_NAMES, DERIVED_BITS, STW_NAMES
+from profidrive_cli.drives.sections import key, key_line, section
 
 ERROR_ROLES = ("unknown_pnu", "read_only", "out_of_range", "bad_subindex", "not_array",
                "wrong_type", "stop_only", "no_rights", "bad_request")
@@ -59,113 +63,162 @@ class ProfidriveConfig:
     def from_profile(cls, profile) -> "ProfidriveConfig":
         path = profile.path or "<profile>"
         doc = profile.raw if isinstance(profile.raw, LineDict) else LineDict()
-        sec = doc.get("profidrive", LineDict())
-        if not isinstance(sec, dict):
-            raise DataFileError(path, doc.line_of("profidrive"), "'profidrive' must be a mapping")
-        known = {"labels", "ctw_bits", "stw_bits", "held_ctw_bits", "array_pnus", "pzd_map", "pkw",
-                 "fault_memory", "save", "baud_codes", "device_ids", "ramps", "jog_reference"}
-        _unknown(path, sec, known, "profidrive")
+        sec = section(ProfidriveKeys, path, doc, "profidrive", where="profidrive",
+                      unknown_msg="{where}: unknown key '{key}' (known: {known})")
         labels = {"control": "CTW", "status": "STW", "reference": "MRV", "actual": "MAV"}
-        lab = _map(path, sec, "labels")
-        for k, v in lab.items():
-            if k not in labels or not isinstance(v, str):
-                raise _e(path, lab, k, f"profidrive.labels: '{k}' must be one of "
-                         f"{', '.join(labels)} with a text value")
-            labels[k] = v
+        labels.update({k: v for k, v in dataclasses.asdict(sec.labels).items() if v is not None})
         ctw: dict[int, str | None] = dict(CTW_NAMES)
-        own = _bit_names(path, sec, "ctw_bits")
+        own = _bit_names(path, sec.ctw_bits, "ctw_bits")
         ctw.update(own)
         stw: dict[int, str | None] = dict(STW_NAMES)
-        stw.update(_bit_names(path, sec, "stw_bits"))
-        ctw_names = {b: n for b, n in ctw.items() if n is not None}      # null = bit not used
-        stw_names = {b: n for b, n in stw.items() if n is not None}
+        stw.update(_bit_names(path, sec.stw_bits, "stw_bits"))
         held = 0
-        for b in _int_list(path, sec, "held_ctw_bits", 0, 15):
+        for b in sec.held_ctw_bits:
             held |= 1 << b
         if held & DERIVED_BITS:
-            raise _e(path, sec, "held_ctw_bits",
-                     "held_ctw_bits cannot include bits 0-3, 7 or 10 (the state machine sets them)")
-        cfg = cls(labels=labels, ctw_names=ctw_names, stw_names=stw_names, held_ctw_bits=held,
+            raise DataFileError(path, key_line(sec, "held_ctw_bits"), "held_ctw_bits cannot include "
+                                "bits 0-3, 7 or 10 (the state machine sets them)")
+        cfg = cls(labels=labels, held_ctw_bits=held,
+                  ctw_names={b: n for b, n in ctw.items() if n is not None},      # null = bit not used
+                  stw_names={b: n for b, n in stw.items() if n is not None},
                   unused_ctw_bits=frozenset(b for b, n in own.items() if n is None))
-        if "array_pnus" in sec:
-            cfg.array_pnus = frozenset(_int_list(path, sec, "array_pnus", 1, 0x7FF))
-        pm = _map(path, sec, "pzd_map")
-        if pm:
-            _unknown(path, pm, {"setpoint", "actual"}, "profidrive.pzd_map")
-            cfg.pzd_map = (_int(path, pm, "setpoint", PNU_PZD_SETPOINT),
-                           _int(path, pm, "actual", PNU_PZD_ACTUAL))
-        pkw = _map(path, sec, "pkw")
-        if pkw:
-            _unknown(path, pkw, {"timeout_s", "zero_after_error", "zero_between_identical",
-                                 "max_zero_cycles", "requests", "responses", "unsupported_text",
-                                 "errors", "error_numbers"},
-                     "profidrive.pkw")
-            t = pkw.get("timeout_s", cfg.pkw_timeout)
-            if not isinstance(t, (int, float)) or isinstance(t, bool) or t <= 0:
-                raise _e(path, pkw, "timeout_s", "pkw.timeout_s must be a number > 0")
-            cfg.pkw_timeout = float(t)
-            for k in ("zero_after_error", "zero_between_identical"):
-                if k in pkw:
-                    if not isinstance(pkw[k], bool):
-                        raise _e(path, pkw, k, f"pkw.{k} must be true or false")
-                    setattr(cfg, k, pkw[k])
-            cfg.max_zero_cycles = _int(path, pkw, "max_zero_cycles", cfg.max_zero_cycles)
-            if "requests" in pkw:
-                cfg.supported_requests = frozenset(_int_list(path, pkw, "requests", 0, 15))
-            if "responses" in pkw:
-                cfg.supported_responses = frozenset(_int_list(path, pkw, "responses", 0, 15))
-            if "unsupported_text" in pkw:
-                if not isinstance(pkw["unsupported_text"], str) or not pkw["unsupported_text"].strip():
-                    raise _e(path, pkw, "unsupported_text", "pkw.unsupported_text must be a text")
-                cfg.unsupported_text = pkw["unsupported_text"]
-            errs = _map(path, pkw, "errors")
-            for k, v in errs.items():
-                if not isinstance(k, int) or not isinstance(v, str):
-                    raise _e(path, errs, k, "pkw.errors: keys are error numbers, values texts")
-                cfg.error_texts[k] = v
-            en = _map(path, pkw, "error_numbers")
-            for k, v in en.items():
-                if k not in ERROR_ROLES or not isinstance(v, int) or isinstance(v, bool):
-                    raise _e(path, en, k, f"pkw.error_numbers: '{k}' must be one of "
-                             f"{', '.join(ERROR_ROLES)} with a number")
-                cfg.error_numbers[k] = v
-        fm = _map(path, sec, "fault_memory")
-        if fm:
-            _unknown(path, fm, {"pnu", "subindexes", "positions"}, "profidrive.fault_memory")
-            cfg.fault_memory_pnu = _int(path, fm, "pnu", PNU_FAULT_NUMBER)
-            if "subindexes" in fm:
-                cfg.fault_subindexes = _int_list(path, fm, "subindexes", 0, 255)
-            cfg.fault_positions = default_fault_positions(len(cfg.fault_subindexes))
-            if "positions" in fm:
-                pos = fm["positions"]
-                if not isinstance(pos, list) or len(pos) != len(cfg.fault_subindexes) \
-                        or not all(isinstance(p, str) for p in pos):
-                    raise _e(path, fm, "positions",
-                             "fault_memory.positions must be one text per subindex")
-                cfg.fault_positions = list(pos)
-        sv = _map(path, sec, "save")
-        if sv:
-            _unknown(path, sv, {"pnu"}, "profidrive.save")
-            cfg.save_pnu = _int(path, sv, "pnu", PNU_SAVE)
-        for key, attr in (("baud_codes", "baud_codes"), ("device_ids", "device_ids")):
-            m = _map(path, sec, key)
-            for k, v in m.items():
-                if not isinstance(k, int) or not isinstance(v, str):
-                    raise _e(path, m, k, f"{key}: keys are numbers, values texts")
-                getattr(cfg, attr)[k] = v
-        rp = _map(path, sec, "ramps")
-        for k, v in rp.items():
-            if k not in ("accel", "decel", "quick_decel") or not isinstance(v, str):
-                raise _e(path, rp, k, "ramps: keys accel, decel, quick_decel; values parameter codes")
-            if profile.param(v) is None:
-                raise _e(path, rp, k, f"ramps.{k}: parameter {v} is not in parameters")
-            cfg.ramps[k] = v
-        if "jog_reference" in sec:
-            jr = sec["jog_reference"]
-            if not isinstance(jr, str) or profile.param(jr) is None:
-                raise _e(path, sec, "jog_reference", f"jog_reference {jr!r} is not in parameters")
-            cfg.jog_reference = jr
+        if sec.array_pnus is not None:
+            cfg.array_pnus = frozenset(sec.array_pnus)
+        cfg.pzd_map = (sec.pzd_map.setpoint, sec.pzd_map.actual)
+        cfg._read_pkw(path, sec.pkw)
+        fm = sec.fault_memory
+        cfg.fault_memory_pnu = fm.pnu
+        if fm.subindexes is not None:
+            cfg.fault_subindexes = list(fm.subindexes)
+        cfg.fault_positions = default_fault_positions(len(cfg.fault_subindexes))
+        if fm.positions is not None:
+            if len(fm.positions) != len(cfg.fault_subindexes):
+                raise DataFileError(path, key_line(fm, "positions"),
+                                    "fault_memory.positions must be one text per subindex")
+            cfg.fault_positions = list(fm.positions)
+        cfg.save_pnu = sec.save.pnu
+        cfg.baud_codes.update(_texts(path, sec.baud_codes, "baud_codes: keys are numbers, values texts"))
+        cfg.device_ids.update(_texts(path, sec.device_ids, "device_ids: keys are numbers, values texts"))
+        cfg.ramps = _ramps(path, profile, sec.ramps)
+        if sec.jog_reference is not None:
+            if profile.param(sec.jog_reference) is None:
+                raise DataFileError(path, key_line(sec, "jog_reference"),
+                                    f"jog_reference {sec.jog_reference!r} is not in parameters")
+            cfg.jog_reference = sec.jog_reference
         return cfg
+
+    def _read_pkw(self, path, pkw: PkwKeys) -> None:
+        self.pkw_timeout = pkw.timeout_s
+        if pkw.zero_after_error is not None:
+            self.zero_after_error = pkw.zero_after_error
+        if pkw.zero_between_identical is not None:
+            self.zero_between_identical = pkw.zero_between_identical
+        self.max_zero_cycles = pkw.max_zero_cycles
+        if pkw.requests is not None:
+            self.supported_requests = frozenset(pkw.requests)
+        if pkw.responses is not None:
+            self.supported_responses = frozenset(pkw.responses)
+        if pkw.unsupported_text is not None:
+            self.unsupported_text = pkw.unsupported_text
+        self.error_texts.update(_texts(path, pkw.errors, "pkw.errors: keys are error numbers, values texts"))
+        en = pkw.error_numbers
+        for k, v in en.items():
+            if k not in ERROR_ROLES or not isinstance(v, int) or isinstance(v, bool):
+                raise _e(path, en, k, f"pkw.error_numbers: '{k}' must be one of "
+                         f"{', '.join(ERROR_ROLES)} with a number")
+            self.error_numbers[k] = v
+
+
+# -- the `profidrive:` section, declared (read by drives/sections.py) ---------------------------------
+
+_MAPPING = "'{key}' must be a mapping"
+_INT = "'{key}' must be an integer, got {value!r}"
+_INTS = "'{key}' must be a list of integers {lo}..{hi}"
+_LABEL = "profidrive.labels: '{key}' must be one of control, status, reference, actual with a text value"
+
+
+def _sub(decl: type, **rules: Any) -> Any:
+    """A nested section field: `'key' must be a mapping`, unknown keys refused."""
+    return key("section", section=decl, type_msg=_MAPPING,
+               unknown_msg="{where}: unknown key '{key}' (known: {known})", **rules)
+
+
+@dataclass(frozen=True)
+class LabelKeys:
+    control: str | None = key("text", None, type_msg=_LABEL)
+    status: str | None = key("text", None, type_msg=_LABEL)
+    reference: str | None = key("text", None, type_msg=_LABEL)
+    actual: str | None = key("text", None, type_msg=_LABEL)
+
+
+@dataclass(frozen=True)
+class PzdMapKeys:
+    setpoint: int = key("int", PNU_PZD_SETPOINT, type_msg=_INT)
+    actual: int = key("int", PNU_PZD_ACTUAL, type_msg=_INT)
+
+
+@dataclass(frozen=True)
+class PkwKeys:
+    timeout_s: float = key("number", 2.0, gt=0, type_msg="pkw.timeout_s must be a number > 0")
+    zero_after_error: bool | None = key("bool", None, type_msg="pkw.{key} must be true or false")
+    zero_between_identical: bool | None = key("bool", None, type_msg="pkw.{key} must be true or false")
+    max_zero_cycles: int = key("int", 20, type_msg=_INT)
+    requests: list[int] | None = key("ints", None, lo=0, hi=15, type_msg=_INTS)
+    responses: list[int] | None = key("ints", None, lo=0, hi=15, type_msg=_INTS)
+    unsupported_text: str | None = key("text", None, nonblank=True,
+                                       type_msg="pkw.unsupported_text must be a text")
+    errors: dict[Any, Any] = key("mapping", {}, type_msg=_MAPPING)
+    error_numbers: dict[Any, Any] = key("mapping", {}, type_msg=_MAPPING)
+
+
+@dataclass(frozen=True)
+class FaultMemoryKeys:
+    pnu: int = key("int", PNU_FAULT_NUMBER, type_msg=_INT)
+    subindexes: list[int] | None = key("ints", None, lo=0, hi=255, type_msg=_INTS)
+    positions: list[str] | None = key("texts", None,
+                                      type_msg="fault_memory.positions must be one text per subindex")
+
+
+@dataclass(frozen=True)
+class SaveKeys:
+    pnu: int | None = key("int", None, type_msg=_INT)      # `save: {}` or none: the card has no save PNU
+
+
+@dataclass(frozen=True)
+class ProfidriveKeys:
+    """The profile's `profidrive:` section: a card's deviations from the PROFIdrive profile."""
+    labels: LabelKeys = key("section", section=LabelKeys, type_msg=_MAPPING, unknown_msg=_LABEL)
+    ctw_bits: dict[Any, Any] = key("mapping", {}, type_msg=_MAPPING)
+    stw_bits: dict[Any, Any] = key("mapping", {}, type_msg=_MAPPING)
+    held_ctw_bits: list[int] = key("ints", [], lo=0, hi=15, type_msg=_INTS)
+    array_pnus: list[int] | None = key("ints", None, lo=1, hi=0x7FF, type_msg=_INTS)
+    pzd_map: PzdMapKeys = _sub(PzdMapKeys)
+    pkw: PkwKeys = _sub(PkwKeys)
+    fault_memory: FaultMemoryKeys = _sub(FaultMemoryKeys)
+    save: SaveKeys = _sub(SaveKeys)
+    baud_codes: dict[Any, Any] = key("mapping", {}, type_msg=_MAPPING)
+    device_ids: dict[Any, Any] = key("mapping", {}, type_msg=_MAPPING)
+    ramps: dict[Any, Any] = key("mapping", {}, type_msg=_MAPPING)
+    jog_reference: str | None = key("text", None, type_msg="jog_reference {value!r} is not in parameters")
+
+
+def _texts(path, m: dict, message: str) -> dict[int, str]:
+    """A mapping number -> text (keys and values checked, `message` on the first bad entry)."""
+    for k, v in m.items():
+        if not isinstance(k, int) or not isinstance(v, str):
+            raise _e(path, m, k, message)
+    return dict(m)
+
+
+def _ramps(path, profile, rp: dict) -> dict[str, str]:
+    out = {}
+    for k, v in rp.items():
+        if k not in ("accel", "decel", "quick_decel") or not isinstance(v, str):
+            raise _e(path, rp, k, "ramps: keys accel, decel, quick_decel; values parameter codes")
+        if profile.param(v) is None:
+            raise _e(path, rp, k, f"ramps.{k}: parameter {v} is not in parameters")
+        out[k] = v
+    return out
 
 
 def _e(path, node, key, msg) -> DataFileError:
@@ -173,40 +226,7 @@ def _e(path, node, key, msg) -> DataFileError:
     return DataFileError(path, line, msg)
 
 
-def _unknown(path, node, known: set, where: str) -> None:
-    for k in node:
-        if k not in known:
-            raise _e(path, node, k, f"{where}: unknown key '{k}' (known: {', '.join(sorted(known))})")
-
-
-def _map(path, node, key) -> LineDict:
-    v = node.get(key, LineDict()) if isinstance(node, dict) else LineDict()
-    if not isinstance(v, dict):
-        raise _e(path, node, key, f"'{key}' must be a mapping")
-    if not isinstance(v, LineDict):
-        ld = LineDict(v)
-        ld.line, ld.key_lines = 0, {}
-        v = ld
-    return v
-
-
-def _int(path, node, key, default: int) -> int:
-    v = node.get(key, default)
-    if not isinstance(v, int) or isinstance(v, bool):
-        raise _e(path, node, key, f"'{key}' must be an integer, got {v!r}")
-    return v
-
-
-def _int_list(path, node, key, lo: int, hi: int) -> list[int]:
-    v = node.get(key, [])
-    if not isinstance(v, list) or not all(isinstance(x, int) and not isinstance(x, bool)
-                                          and lo <= x <= hi for x in v):
-        raise _e(path, node, key, f"'{key}' must be a list of integers {lo}..{hi}")
-    return list(v)
-
-
-def _bit_names(path, node, key) -> dict[int, str | None]:
-    m = _map(path, node, key)
+def _bit_names(path, m: dict, key: str) -> dict[int, str | None]:
     out = {}
     for k, v in m.items():
         if not isinstance(k, int) or not 0 <= k <= 15 or not (v is None or isinstance(v, str)):
@@ -221,18 +241,14 @@ _config_cache: dict[int, tuple[object, ProfidriveConfig]] = {}
 def config(profile) -> ProfidriveConfig:
     """The profile's ProfidriveConfig (validated once, cached per profile object).
 
-    A family codec (drives/<family>.py or the package drives/<family>/) may define
-    `profidrive_config(profile) -> ProfidriveConfig` to build it from its own profile keys;
-    otherwise the `profidrive:` section is read.
+    A family's row in drives/registry.py may name a `core_config` builder (profile ->
+    ProfidriveConfig) from its own profile keys; otherwise the `profidrive:` section is read.
     """
     hit = _config_cache.get(id(profile))
     if hit is not None and hit[0] is profile:
         return hit[1]
-    from profidrive_cli.drives import codec_module
-    try:
-        hook = getattr(codec_module(profile), "profidrive_config", None)
-    except UsageError:
-        hook = None
+    from profidrive_cli.drives.registry import core_config_reader
+    hook = core_config_reader(profile)
     cfg = hook(profile) if hook is not None else ProfidriveConfig.from_profile(profile)
     _config_cache[id(profile)] = (profile, cfg)
     return cfg

@@ -24,7 +24,7 @@ Modules:
     describe  decode_area, the per-word and PKW text, decode_diag
     drive     ToyoDrive (the PROFIdrive core's drive with this dialect) and make_drive
 
-This __init__ is the family's face: what the family registry (drives/__init__.py: make_drive,
+This __init__ is the family's face: what the family registry (drives/registry.py: make_drive,
 decode_area; the core: profidrive_config, param_value), sim/toyo.py and users need.
 """
 
@@ -39,10 +39,8 @@ from profidrive_cli.drives.toyo.params import (_toyo_frame, effective_scale, par
                                                value_from_wire, wire_from_value)
 
 # _toyo_frame (a PKW frame with the card's 16-bit IND) stays reachable here for the tests that build raw frames
-#: the family's Drive class, for its class-level facts without a bus (drives.drive_class)
-DRIVE_CLASS = ToyoDrive
 
-__all__ = ["DRIVE_CLASS", "ToyoConfig", "ToyoDrive", "make_drive", "decode_area", "param_value", "profidrive_config",
+__all__ = ["ToyoConfig", "ToyoDrive", "make_drive", "decode_area", "param_value", "profidrive_config",
            "toyo_config", "speed_word", "speed_percent", "history_word", "decode_history_word",
            "traceback_ind", "decode_traceback_ind", "decode_diag", "protection", "describe_pkw",
            "ctw_command", "run_cmd_fields", "value_from_wire", "wire_from_value", "ToyoLayout",

@@ -2,17 +2,20 @@
 fault history and traceback, checked with file:line (DataFileError); and the PROFIdrive core's
 configuration for this card (the profidrive_config hook).
 
-May touch: datafile, drives/profile, drives/profidrive (its config types). Reads the profile only.
+May touch: datafile, drives/profile, drives/sections (the Toyo keys' declaration), drives/profidrive (its
+config types). Reads the profile only.
 """
 
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
+from typing import Any
 
 from profidrive_cli.datafile import DataFileError, LineDict
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.profile import COMMON_EXTRA_KEYS, per_profile
+from profidrive_cli.drives.sections import key, read
 
 FAMILY_PARAM_KEYS = {"power_cycle", "format", "bits", "plc", "scale_400v", "traceback", "note"}
 FIELD_KINDS = ("ctw", "zsw", "run_cmd", "bits", "speed", "scaled", "date", "raw", "param")
@@ -73,53 +76,102 @@ def _err(profile, node, key, msg) -> DataFileError:
     return DataFileError(profile.path or "<profile>", line, msg)
 
 
-def _sec(profile, doc, key) -> dict:
-    v = doc.get(key)
-    if not isinstance(v, dict):
-        raise _err(profile, doc, key, f"'{key}' must be a mapping") if key in doc else \
-            DataFileError(profile.path or "<profile>", doc.line if isinstance(doc, LineDict) else None,
-                          f"missing section '{key}'")
-    return v
+# -- the Toyo keys of the profile, declared (read by drives/sections.py) ------------------------------
+
+_MAPPING = "'{key}' must be a mapping"
+_MISSING = "missing section '{key}'"
+
+
+def _required(kind: str, **rules) -> Any:
+    return key(kind, required=True, type_msg=_MAPPING, missing_msg=_MISSING, **rules)
+
+
+@dataclass(frozen=True)
+class ParameterChannelKeys:
+    errors: Any = key("any", None)                  # number -> text (the card's PKW error numbers)
+    block_bit: Any = key("any", 10)
+    zero_after_error: Any = key("any", True)
+
+
+@dataclass(frozen=True)
+class FaultHistoryKeys:
+    pnu: Any = key("any", 720)
+    indexes: Any = key("any", [1, 2, 3, 4, 5, 6])
+    code_mask: Any = key("any", 0xFF)
+    mode_shift: Any = key("any", 8)
+    block_bit: Any = key("any", 12)
+    modes: Any = key("any", None)
+    empty_error: Any = key("any", 101)
+
+
+@dataclass(frozen=True)
+class TracebackKeys:
+    pnu: Any = key("any", 700)
+    channels: Any = key("any", 16)
+    recordings: Any = key("any", 4)
+    points: Any = key("any", 100)
+
+
+@dataclass(frozen=True)
+class ToyoKeys:
+    """The top-level keys only the Toyo family reads (the common ones are drives/profile.py's)."""
+    diag_word_order: str = key("any", "big", choices=("big", "little"),
+                               type_msg="diag_word_order must be big or little")
+    plch: bool = key("bool", False, type_msg="plch must be true or false")
+    speed_full_scale: int = key("int", 20000, gt=0, type_msg="speed_full_scale must be a positive integer")
+    voltage_class: int = key("any", 200, choices=(200, 400), type_msg="voltage_class must be 200 or 400")
+    bits: dict[Any, Any] = _required("mapping")
+    fields: dict[Any, Any] = _required("mapping")
+    parameter_channel: ParameterChannelKeys = _required("section", section=ParameterChannelKeys)
+    fault_history: FaultHistoryKeys = _required("section", section=FaultHistoryKeys)
+    traceback: TracebackKeys = _required("section", section=TracebackKeys)
 
 
 def _build_config(profile) -> ToyoConfig:
     doc = profile.raw if isinstance(profile.raw, LineDict) else LineDict()
     path = profile.path or "<profile>"
-    c = ToyoConfig(word_order=profile.word_order)
-    dwo = doc.get("diag_word_order", "big")
-    if dwo not in ("big", "little"):
-        raise _err(profile, doc, "diag_word_order", "diag_word_order must be big or little")
-    c.diag_word_order = dwo
-    plch = doc.get("plch", False)
-    if not isinstance(plch, bool):
-        raise _err(profile, doc, "plch", "plch must be true or false")
-    c.plch = plch
-    c.speed_full_scale = doc.get("speed_full_scale", 20000)
-    if not isinstance(c.speed_full_scale, int) or c.speed_full_scale <= 0:
-        raise _err(profile, doc, "speed_full_scale", "speed_full_scale must be a positive integer")
-    c.voltage_class = doc.get("voltage_class", 200)
-    if c.voltage_class not in (200, 400):
-        raise _err(profile, doc, "voltage_class", "voltage_class must be 200 or 400")
+    k = read(ToyoKeys, path, doc)
+    c = ToyoConfig(word_order=profile.word_order, diag_word_order=k.diag_word_order, plch=k.plch,
+                   speed_full_scale=k.speed_full_scale, voltage_class=k.voltage_class)
     for p in profile.parameters.values():
         unknown = set(p.extra) - FAMILY_PARAM_KEYS - COMMON_EXTRA_KEYS
         if unknown:
             raise DataFileError(path, p.line, f"{p.code}: unknown key(s) {', '.join(sorted(unknown))} "
                                 f"(Toyo keys: {', '.join(sorted(FAMILY_PARAM_KEYS))})")
-    bits = _sec(profile, doc, "bits")
-    for name, table in bits.items():
-        if not isinstance(table, dict) or not all(isinstance(k, int) and 0 <= k <= 15 for k in table):
-            raise _err(profile, bits, name, f"bits.{name}: keys are bit numbers 0..15")
-        c.bits[str(name)] = {int(k): str(v) for k, v in table.items()}
-    fields = _sec(profile, doc, "fields")
+    for name, table in k.bits.items():
+        if not isinstance(table, dict) or not all(isinstance(b, int) and 0 <= b <= 15 for b in table):
+            raise _err(profile, k.bits, name, f"bits.{name}: keys are bit numbers 0..15")
+        c.bits[str(name)] = {int(b): str(v) for b, v in table.items()}
+    c.fields = _fields(profile, k.fields, c.bits)
+    c.layouts = _layouts(profile, doc.get("layouts"), c.fields)
+    pc = k.parameter_channel
+    c.errors = {int(n): str(v) for n, v in (pc.errors or {}).items()}
+    c.block_bit, c.zero_after_error = pc.block_bit, bool(pc.zero_after_error)
+    fh = k.fault_history
+    c.history_pnu, c.history_indexes, c.history_code_mask = fh.pnu, list(fh.indexes), fh.code_mask
+    c.history_mode_shift, c.history_block_bit, c.empty_error = fh.mode_shift, fh.block_bit, fh.empty_error
+    c.history_modes = {int(m): str(v) for m, v in (fh.modes or {}).items()}
+    tb = k.traceback
+    c.traceback_pnu, c.traceback_channels = tb.pnu, tb.channels
+    c.traceback_recordings, c.traceback_points = tb.recordings, tb.points
+    return c
+
+
+def _fields(profile, fields: dict, bits: dict) -> dict[str, dict]:
+    out = {}
     for name, f in fields.items():
         if not isinstance(f, dict) or f.get("kind") not in FIELD_KINDS:
             raise _err(profile, fields, name, f"fields.{name}: kind must be one of {', '.join(FIELD_KINDS)}")
-        if f["kind"] == "bits" and f.get("bits") not in c.bits:
+        if f["kind"] == "bits" and f.get("bits") not in bits:
             raise _err(profile, f, "bits", f"fields.{name}: bits {f.get('bits')!r} is not in bits")
         if f["kind"] == "param" and profile.param(str(f.get("param"))) is None:
             raise _err(profile, f, "param", f"fields.{name}: {f.get('param')!r} is not a parameter")
-        c.fields[str(name)] = dict(f)
-    lays = doc.get("layouts")
+        out[str(name)] = dict(f)
+    return out
+
+
+def _layouts(profile, lays, fields: dict) -> dict[str, ToyoLayout]:
+    out = {}
     for name, lay in profile.layouts.items():
         ex = lay.extra
         node = lays.get(name) if isinstance(lays, dict) else None
@@ -134,7 +186,7 @@ def _build_config(profile) -> ToyoConfig:
             if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
                 raise _err(profile, node, key, f"layout {name}: {key} must be a list of field names")
             for x in v:
-                if x not in c.fields and not re.fullmatch(r"[io]000[0-9A-F]{2}", x):
+                if x not in fields and not re.fullmatch(r"[io]000[0-9A-F]{2}", x):
                     raise _err(profile, node, key, f"layout {name}: unknown field {x!r}")
             pk = 4 if lay.pkw else 0
             want = (lay.output_len if key.startswith("out") else lay.input_len) // 2 - pk
@@ -144,27 +196,9 @@ def _build_config(profile) -> ToyoConfig:
             lists[key] = list(v)
         if "out" not in lists or "in" not in lists:
             raise _err(profile, lays, name, f"layout {name}: needs out and in word lists")
-        c.layouts[name] = ToyoLayout(name, mode, lay.pkw, lists["out"], lists["in"], lists.get("out_plch"),
-                                     lists.get("in_plch"), bool(ex.get("plch", False)))
-    pc = _sec(profile, doc, "parameter_channel")
-    for k, v in (pc.get("errors") or {}).items():
-        c.errors[int(k)] = str(v)
-    c.block_bit = pc.get("block_bit", 10)
-    c.zero_after_error = bool(pc.get("zero_after_error", True))
-    fh = _sec(profile, doc, "fault_history")
-    c.history_pnu = fh.get("pnu", 720)
-    c.history_indexes = list(fh.get("indexes", [1, 2, 3, 4, 5, 6]))
-    c.history_code_mask = fh.get("code_mask", 0xFF)
-    c.history_mode_shift = fh.get("mode_shift", 8)
-    c.history_block_bit = fh.get("block_bit", 12)
-    c.history_modes = {int(k): str(v) for k, v in (fh.get("modes") or {}).items()}
-    c.empty_error = fh.get("empty_error", 101)
-    tb = _sec(profile, doc, "traceback")
-    c.traceback_pnu = tb.get("pnu", 700)
-    c.traceback_channels = tb.get("channels", 16)
-    c.traceback_recordings = tb.get("recordings", 4)
-    c.traceback_points = tb.get("points", 100)
-    return c
+        out[name] = ToyoLayout(name, mode, lay.pkw, lists["out"], lists["in"], lists.get("out_plch"),
+                               lists.get("in_plch"), bool(ex.get("plch", False)))
+    return out
 
 
 toyo_config = per_profile(_build_config)   # -> ToyoConfig, built once per profile

@@ -45,10 +45,7 @@ from profidrive_cli.drives.yaskawa.paramaccess import (ERROR_CODES, FC_NONE, FC_
                                                        FUNCTION_NAMES, ParamAccess, ParamArea, ParamRequest,
                                                        ParamResult, decode_hs, encode_param_area, error_text)
 
-#: the family's Drive class, for its class-level facts without a bus (drives.drive_class)
-DRIVE_CLASS = YaskawaDrive
-
-__all__ = ["DRIVE_CLASS", "COMMAND_BITS", "ERROR_CODES", "FAMILY", "FC_NONE", "FC_READ", "FC_WRITE", "FORMATS",
+__all__ = ["COMMAND_BITS", "ERROR_CODES", "FAMILY", "FC_NONE", "FC_READ", "FC_WRITE", "FORMATS",
            "FUNCTION_NAMES", "MFO_BITS", "SIGNED_WORDS", "STATUS_BITS", "AreaFormat", "FrequencyScale",
            "ParamAccess", "ParamArea", "ParamRequest", "ParamResult", "YaskawaConfig", "YaskawaDrive",
            "decode_area", "decode_bits", "decode_command", "decode_hs", "decode_status", "encode_command",

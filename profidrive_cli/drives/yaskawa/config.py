@@ -1,15 +1,18 @@
 """Yaskawa profile keys: the `yaskawa:` section, layouts, registers, alarms and LED table, validated
 with file:line (DataFileError); plus the register names and 'REG0x..' codes used to address them.
 
-May touch: datafile, codec (FORMATS). Reads the profile, writes nothing but its cache on the profile.
+May touch: datafile, drives/sections (the `yaskawa:` section's declaration), codec (FORMATS). Reads the
+profile, writes nothing but its cache on the profile.
 """
 
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
+from typing import Any, Callable, ClassVar
 
 from profidrive_cli.datafile import DataFileError, LineDict
+from profidrive_cli.drives.sections import key, read, section
 from profidrive_cli.drives.yaskawa.codec import FORMATS
 
 # ---------------------------------------------------------------------------------------------------
@@ -36,15 +39,41 @@ class YaskawaConfig:
     led_diagnostics: list[dict] = field(default_factory=list)
 
 
-def _num(path, node: LineDict, key, default, types=(int, float), allow_none=False):
-    if key not in node:
-        return default
-    v = node[key]
-    if v is None and allow_none:
-        return None
-    if isinstance(v, bool) or not isinstance(v, types):
-        raise DataFileError(path, node.line_of(key), f"'{key}' must be a number, got {v!r}")
-    return v
+_NUMBER = "'{key}' must be a number, got {value!r}"
+
+
+@dataclass(frozen=True)
+class HandshakeKeys:
+    """yaskawa.handshake: how long a parameter-access request may take, how many cycles to settle."""
+    RULES: ClassVar[tuple[tuple[Callable[[HandshakeKeys], bool], str], ...]] = (
+        (lambda h: h.timeout_s > 0 and h.settle_cycles >= 1,
+         "handshake: timeout_s must be > 0 and settle_cycles >= 1"),)
+    timeout_s: float = key("number", 1.0, type_msg=_NUMBER)
+    settle_cycles: int = key("int", 1, type_msg=_NUMBER)
+
+
+@dataclass(frozen=True)
+class YaskawaKeys:
+    """The profile's `yaskawa:` section (read by drives/sections.py)."""
+    reference_unit_hz: float = key("number", 0.01, gt=0, type_msg=_NUMBER, range_msg="'{key}' must be > 0")
+    feedback_unit_hz: float = key("number", 0.1, gt=0, type_msg=_NUMBER, range_msg="'{key}' must be > 0")
+    o1_03: int = key("int", 0, lo=0, hi=39999, type_msg=_NUMBER, range_msg="'o1_03' must be 0..39999")
+    rated_current_a: float | None = key("number", None, nullable=True, gt=0, type_msg=_NUMBER,
+                                        range_msg="'rated_current_a' must be > 0 or null")
+    fast_stop_input: int | None = key(
+        "int", None, nullable=True, lo=3, hi=12, type_msg=_NUMBER,
+        range_msg="'fast_stop_input' must be a multi-function input 3..12 or null")
+    handshake: HandshakeKeys = key("section", section=HandshakeKeys, type_msg="'handshake' must be a mapping")
+    enter_register: Any = key("mapping", None, nullable=True,
+                              type_msg="'enter_register' must be a mapping with an integer 'register'")
+    fault_history: list[Any] = key("list", [], type_msg="'fault_history' must be a list")
+
+
+@dataclass(frozen=True)
+class YaskawaTopKeys:
+    """Top-level keys only this family reads (the common ones are drives/profile.py's)."""
+    led_diagnostics: list[Any] = key("list", [], type_msg="'led_diagnostics' must be a list")
+    decisions: list[str] = key("texts", [], type_msg="'decisions' must be a list of strings")
 
 
 def family_config(profile) -> YaskawaConfig:
@@ -54,8 +83,26 @@ def family_config(profile) -> YaskawaConfig:
         return cached
     path = profile.path or profile.name
     raw = profile.raw if isinstance(profile.raw, LineDict) else LineDict()
-    cfg = YaskawaConfig()
+    _check_layouts(path, profile, raw)
+    y = section(YaskawaKeys, path, raw, "yaskawa")
+    cfg = YaskawaConfig(reference_unit_hz=y.reference_unit_hz, feedback_unit_hz=y.feedback_unit_hz,
+                        o1_03=y.o1_03, rated_current_a=y.rated_current_a, fast_stop_input=y.fast_stop_input,
+                        timeout_s=y.handshake.timeout_s, settle_cycles=y.handshake.settle_cycles)
+    if y.enter_register is not None:
+        cfg.enter_register = _enter_register(path, raw, y.enter_register)
+    cfg.fault_history = _fault_history(path, profile, y.fault_history)
+    _check_params(path, profile, raw)
+    cfg.alarm_kinds = _alarm_kinds(path, raw)
+    top = read(YaskawaTopKeys, path, raw)
+    cfg.led_diagnostics = [_led_row(path, item) for item in top.led_diagnostics]
+    try:
+        profile._yaskawa_config = cfg
+    except AttributeError:   # pragma: no cover - a frozen profile object
+        pass
+    return cfg
 
+
+def _check_layouts(path, profile, raw: LineDict) -> None:
     layouts_node = raw.get("layouts")
     for name, lay in profile.layouts.items():
         line = layouts_node.line_of(name) if isinstance(layouts_node, LineDict) else None
@@ -68,46 +115,17 @@ def family_config(profile) -> YaskawaConfig:
                 line = lnode.line_of("cfg")
             raise DataFileError(path, line, f"layout '{name}': cfg must be {FORMATS[name].cfg.hex(' ').upper()}")
 
-    y = raw.get("yaskawa", LineDict())
-    if not isinstance(y, LineDict):
-        raise DataFileError(path, raw.line_of("yaskawa"), "'yaskawa' must be a mapping")
-    cfg.reference_unit_hz = float(_num(path, y, "reference_unit_hz", cfg.reference_unit_hz))
-    cfg.feedback_unit_hz = float(_num(path, y, "feedback_unit_hz", cfg.feedback_unit_hz))
-    for k in ("reference_unit_hz", "feedback_unit_hz"):
-        if getattr(cfg, k) <= 0:
-            raise DataFileError(path, y.line_of(k), f"'{k}' must be > 0")
-    cfg.o1_03 = _num(path, y, "o1_03", 0, int)
-    if not 0 <= cfg.o1_03 <= 39999:
-        raise DataFileError(path, y.line_of("o1_03"), "'o1_03' must be 0..39999")
-    rc = _num(path, y, "rated_current_a", None, allow_none=True)
-    if rc is not None and rc <= 0:
-        raise DataFileError(path, y.line_of("rated_current_a"), "'rated_current_a' must be > 0 or null")
-    cfg.rated_current_a = None if rc is None else float(rc)
-    fs = _num(path, y, "fast_stop_input", None, int, allow_none=True)
-    if fs is not None and not 3 <= fs <= 12:
-        raise DataFileError(path, y.line_of("fast_stop_input"),
-                            "'fast_stop_input' must be a multi-function input 3..12 or null")
-    cfg.fast_stop_input = fs
 
-    hsn = y.get("handshake", LineDict())
-    if not isinstance(hsn, LineDict):
-        raise DataFileError(path, y.line_of("handshake"), "'handshake' must be a mapping")
-    cfg.timeout_s = float(_num(path, hsn, "timeout_s", 1.0))
-    cfg.settle_cycles = _num(path, hsn, "settle_cycles", 1, int)
-    if cfg.timeout_s <= 0 or cfg.settle_cycles < 1:
-        raise DataFileError(path, hsn.line, "handshake: timeout_s must be > 0 and settle_cycles >= 1")
+def _enter_register(path, raw: LineDict, en: LineDict) -> int:
+    if not isinstance(en.get("register"), int):
+        raise DataFileError(path, raw["yaskawa"].line_of("enter_register"),
+                            "'enter_register' must be a mapping with an integer 'register'")
+    _check_source(path, en)
+    return en["register"]
 
-    en = y.get("enter_register")
-    if en is not None:
-        if not isinstance(en, LineDict) or not isinstance(en.get("register"), int):
-            raise DataFileError(path, y.line_of("enter_register"),
-                                "'enter_register' must be a mapping with an integer 'register'")
-        _check_source(path, en)
-        cfg.enter_register = en["register"]
 
-    fh = y.get("fault_history", [])
-    if not isinstance(fh, list):
-        raise DataFileError(path, y.line_of("fault_history"), "'fault_history' must be a list")
+def _fault_history(path, profile, fh: list) -> list[tuple[str, str]]:
+    out = []
     for i, item in enumerate(fh):
         line = fh.line_of(i) if hasattr(fh, "line_of") else None
         if not isinstance(item, LineDict) or not isinstance(item.get("position"), str) \
@@ -117,8 +135,11 @@ def family_config(profile) -> YaskawaConfig:
         if p is None or p.register is None:
             raise DataFileError(path, item.line_of("param"),
                                 f"fault_history: {item['param']} is not a parameter with a register")
-        cfg.fault_history.append((item["position"], p.code))
+        out.append((item["position"], p.code))
+    return out
 
+
+def _check_params(path, profile, raw: LineDict) -> None:
     for code, p in profile.parameters.items():
         node = _param_node(raw, p.line)
         src = p.extra.get("register_source")
@@ -133,40 +154,32 @@ def family_config(profile) -> YaskawaConfig:
             raise DataFileError(path, node.line_of("register") if node else p.line,
                                 f"{code}: register must be 0..0xFFFF")
 
+
+def _alarm_kinds(path, raw: LineDict) -> dict[str, str]:
+    out = {}
     alarms = raw.get("alarms", [])
-    for i, a in enumerate(alarms if isinstance(alarms, list) else []):
+    for a in alarms if isinstance(alarms, list) else []:
         if not isinstance(a, LineDict):
             continue
         kind = a.get("kind", "fault")
         if kind not in ALARM_KINDS:
             raise DataFileError(path, a.line_of("kind"), f"alarm kind must be one of {', '.join(ALARM_KINDS)}")
-        cfg.alarm_kinds[str(a.get("code")).upper()] = kind
+        out[str(a.get("code")).upper()] = kind
+    return out
 
-    leds = raw.get("led_diagnostics", [])
-    if not isinstance(leds, list):
-        raise DataFileError(path, raw.line_of("led_diagnostics"), "'led_diagnostics' must be a list")
-    for item in leds:
-        if not isinstance(item, LineDict):
-            raise DataFileError(path, getattr(item, "line", None), "an LED row must be a mapping")
-        for k in ("pwr", "com", "err", "wd"):
-            if item.get(k) is False:        # YAML 1.1 reads a bare `off` as false
-                item[k] = "off"
-            if item.get(k) not in LED_STATES:
-                raise DataFileError(path, item.line_of(k) if k in item else item.line,
-                                    f"LED row: '{k}' must be one of {', '.join(LED_STATES)}")
-        if not isinstance(item.get("condition"), str):
-            raise DataFileError(path, item.line, "LED row: 'condition' (text) is missing")
-        cfg.led_diagnostics.append({k: str(v) for k, v in item.items()})
 
-    decisions = raw.get("decisions", [])
-    if not isinstance(decisions, list) or not all(isinstance(d, str) for d in decisions):
-        raise DataFileError(path, raw.line_of("decisions"), "'decisions' must be a list of strings")
-
-    try:
-        profile._yaskawa_config = cfg
-    except AttributeError:   # pragma: no cover - a frozen profile object
-        pass
-    return cfg
+def _led_row(path, item) -> dict[str, str]:
+    if not isinstance(item, LineDict):
+        raise DataFileError(path, getattr(item, "line", None), "an LED row must be a mapping")
+    for k in ("pwr", "com", "err", "wd"):
+        if item.get(k) is False:        # YAML 1.1 reads a bare `off` as false
+            item[k] = "off"
+        if item.get(k) not in LED_STATES:
+            raise DataFileError(path, item.line_of(k) if k in item else item.line,
+                                f"LED row: '{k}' must be one of {', '.join(LED_STATES)}")
+    if not isinstance(item.get("condition"), str):
+        raise DataFileError(path, item.line, "LED row: 'condition' (text) is missing")
+    return {k: str(v) for k, v in item.items()}
 
 
 def _check_source(path, node: LineDict) -> None:

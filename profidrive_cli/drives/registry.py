@@ -1,0 +1,141 @@
+"""The one family table: a profile's `family:` -> where its codec, Drive class, sim model and config live.
+
+Each row names its parts as lazy references ("module" or "module:attribute" strings, the way
+python-can's BACKENDS table names its interfaces), so that reading the table imports nothing: the codec
+is imported when a profile of the family is decoded or driven, the sim model only by sim/plant.py
+(drives/ never imports sim/; the sim reference is a name the sim layer resolves).
+
+    codec        the family module: make_drive(channel, profile, layout), decode_area(profile, layout,
+                 direction, data), and the optional hooks the shared code asks it for by name
+                 (param_value, effective_scale, input_words, FORMATTERS, PARSERS)
+    drive_class  the Drive subclass make_drive returns: its class-level facts (supports_jog,
+                 monitor_mapping, area_shape, ...) are readable before a station is connected
+    sim_model    make_model(profile, **options) -> SlaveModel in sim/; None: the station is a plain DP-V0
+                 slave with the profile's ident and configurations
+    config       the reader of the family's own profile keys: config(profile) -> its config type
+    core_config  for a family on the PROFIdrive core: profile -> drives.profidrive.ProfidriveConfig
+                 built from the family's own keys; None: the profile's `profidrive:` section is read
+
+A profile whose `family:` is not a row here is refused when it loads (drives/profile.py, file:line).
+A new family is one row here, its codec package, its sim model and its profile (docs/architecture.md).
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from types import ModuleType
+from typing import Any, Callable, Protocol
+
+from profidrive_cli import UsageError
+
+# The table imports nothing of drives/ (drives/__init__, drives.profile and the core's config ask it;
+# drives.base -> drives.values -> drives would close an import cycle): a profile is what has a name
+# and a family, a Drive / CyclicChannel / ProfidriveConfig are the codec's own (Any here).
+
+
+class ProfileLike(Protocol):
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def family(self) -> str: ...
+
+
+@dataclass(frozen=True)
+class Family:
+    name: str
+    codec: str
+    drive_class: str
+    sim_model: str | None
+    config: str
+    core_config: str | None = None
+
+
+_PKG = "profidrive_cli.drives"
+_SIM = "profidrive_cli.sim"
+
+FAMILIES: dict[str, Family] = {f.name: f for f in (
+    Family("fuji", f"{_PKG}.fuji", f"{_PKG}.fuji.drive:FujiDrive", f"{_SIM}.fuji:make_model",
+           f"{_PKG}.fuji.config:fuji_config", f"{_PKG}.fuji.config:profidrive_config"),
+    Family("moeller", f"{_PKG}.moeller", f"{_PKG}.moeller:MoellerDrive", f"{_SIM}.moeller:make_model",
+           f"{_PKG}.moeller:moeller_config"),
+    Family("profidrive", f"{_PKG}.profidrive", f"{_PKG}.profidrive.drive:ProfidriveDrive", None,
+           f"{_PKG}.profidrive.config:ProfidriveConfig.from_profile"),
+    Family("toyo", f"{_PKG}.toyo", f"{_PKG}.toyo.drive:ToyoDrive", f"{_SIM}.toyo:make_model",
+           f"{_PKG}.toyo.config:toyo_config", f"{_PKG}.toyo.config:profidrive_config"),
+    Family("yaskawa", f"{_PKG}.yaskawa", f"{_PKG}.yaskawa.drive:YaskawaDrive", f"{_SIM}.yaskawa:make_model",
+           f"{_PKG}.yaskawa.config:family_config"),
+)}
+
+
+def known() -> str:
+    """The family names, sorted, for messages: 'fuji, moeller, ...'."""
+    return ", ".join(sorted(FAMILIES))
+
+
+def unknown_family(name: object) -> str | None:
+    """None for a family in the table, else the one-line complaint (the caller adds file:line)."""
+    if isinstance(name, str) and name in FAMILIES:
+        return None
+    return f"family {name!r} unknown (known: {known()})"
+
+
+def family_of(profile: ProfileLike) -> Family:
+    fam = FAMILIES.get(profile.family)
+    if fam is None:
+        raise UsageError(f"profile {profile.name}: no codec for family '{profile.family}' "
+                         f"(known: {known()})")
+    return fam
+
+
+def resolve(ref: str) -> Any:
+    """'package.module' -> the module; 'package.module:Name.attr' -> that attribute of it."""
+    mod_name, _, attrs = ref.partition(":")
+    obj: Any = importlib.import_module(mod_name)
+    for a in filter(None, attrs.split(".")):
+        obj = getattr(obj, a)
+    return obj
+
+
+def codec_module(profile: ProfileLike) -> ModuleType:
+    mod: ModuleType = resolve(family_of(profile).codec)
+    return mod
+
+
+def drive_class(profile: ProfileLike) -> Any:
+    """The family's Drive class: its class-level facts without a bus."""
+    cls: Any = resolve(family_of(profile).drive_class)
+    return cls
+
+
+def make_drive(channel: Any, profile: ProfileLike, layout: str | None = None) -> Any:
+    fn: Callable[[Any, ProfileLike, str | None], Any] = codec_module(profile).make_drive
+    return fn(channel, profile, layout)
+
+
+def decode_area(profile: ProfileLike, layout: str, direction: str, data: bytes) -> dict[str, Any]:
+    fn: Callable[[ProfileLike, str, str, bytes], dict[str, Any]] = codec_module(profile).decode_area
+    return fn(profile, layout, direction, data)
+
+
+def family_config(profile: ProfileLike) -> object:
+    """The family's own profile keys, read and checked (file:line), as its config type."""
+    fn: Callable[[ProfileLike], object] = resolve(family_of(profile).config)
+    return fn(profile)
+
+
+def core_config_reader(profile: ProfileLike) -> Callable[[ProfileLike], Any] | None:
+    """The family's builder of the PROFIdrive core's config from its own keys; None: the profile's
+    `profidrive:` section is read (or the family is not on the core)."""
+    fam = FAMILIES.get(profile.family)
+    if fam is None or fam.core_config is None:
+        return None
+    fn: Callable[[ProfileLike], Any] = resolve(fam.core_config)
+    return fn
+
+
+def sim_model_ref(profile: ProfileLike) -> str | None:
+    """The 'module:make_model' reference of the family's sim model, for sim/plant.py to import (drives/
+    does not import sim/); None: no model (a plain DP-V0 slave)."""
+    return family_of(profile).sim_model
