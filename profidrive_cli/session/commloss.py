@@ -42,13 +42,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 from profidrive_cli import UsageError
-from profidrive_cli.drives.base import DriveError, DriveStatus
-from profidrive_cli.session.cycle import make_sample
+from profidrive_cli.drives.base import CyclicChannel, DriveError, DriveStatus
+from profidrive_cli.session.cycle import Sample, make_sample
 from profidrive_cli.session.commloss_reaction import (Reaction, check_bus_control, clear_reaction,
                                                       read_accel, read_reaction)
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.session.drivesession import DriveSession
 
 MODES = ("silence", "clear")
 OUTCOMES = ("pass", "fail", "inconclusive")
@@ -85,7 +88,7 @@ class Limit:
         return (f"{_down(self.total):.3f} s = watchdog {self.watchdog_s:.3f} + delay {self.delay_s:.3f} + "
                 f"stop {self.stop_s:.3f} + tolerance {self.tolerance_s:.3f}")
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {"watchdog_s": _r(self.watchdog_s), "delay_s": _r(self.delay_s),
                 "stop_s": _r(self.stop_s), "tolerance_s": _r(self.tolerance_s)}
 
@@ -113,10 +116,10 @@ class CommLossResult:
     acknowledged: bool = False
     watchdog_expired: bool | None = None   # the station had left data exchange when the master came back
     back_s: float | None = None            # last telegram -> the first cycle after the master came back
-    stop: dict | None = None               # the stop pdrive sent afterwards (needed: it was running)
-    counters: dict = field(default_factory=dict)   # the station's bus counters at the end
+    stop: dict[str, Any] | None = None               # the stop pdrive sent afterwards (needed: it was running)
+    counters: dict[str, Any] = field(default_factory=dict)   # the station's bus counters at the end
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         r = self.reaction
         return {"event": "result", "station": self.address, "mode": self.mode, "reference_hz": self.hz,
                 "watchdog_s": self.watchdog_ms / 1000.0,
@@ -145,7 +148,7 @@ def _down(x: float) -> float:
     return math.floor(x * 1000.0 + 1e-3) / 1000.0
 
 
-def _stop_json(stop: dict | None) -> dict | None:
+def _stop_json(stop: dict[str, Any] | None) -> dict[str, Any] | None:
     """The stop pdrive sent, with its time as `duration_s` (docs/json.md)."""
     if stop is None:
         return None
@@ -160,7 +163,7 @@ def _r(v: float | None) -> float | None:
 class _ZeroOutputs:
     """A CyclicChannel that sends all-zero outputs (the master in CLEAR) whatever the drive asks."""
 
-    def __init__(self, inner):
+    def __init__(self, inner: CyclicChannel) -> None:
         self.inner = inner
 
     def now(self) -> float:
@@ -174,7 +177,8 @@ def _reacted(st: DriveStatus) -> bool:
     return bool(st.fault) or st.stopped
 
 
-def check_args(hz, mode, timeout, tolerance, start_timeout) -> None:
+def check_args(hz: float, mode: str, timeout: float | None, tolerance: float | None,
+               start_timeout: float | None) -> None:
     """The test's options in range (UsageError): called by the CLI before the bus is opened."""
     if mode not in MODES:
         raise UsageError(f"--mode {mode!r}: must be {' or '.join(MODES)}")
@@ -187,7 +191,8 @@ def check_args(hz, mode, timeout, tolerance, start_timeout) -> None:
                              f"{name} {v:g} must be 0 s or more")
 
 
-def _run_to_speed(sess, hz: float, pct: float, fmax_hz: float, start_timeout: float | None, emit):
+def _run_to_speed(sess: "DriveSession", hz: float, pct: float, fmax_hz: float, start_timeout: float | None,
+                  emit: Callable[[dict[str, Any]], None]) -> Sample:
     """Start and wait until at speed; says on the session's message line what it waits for and how
     long at most."""
     if start_timeout is not None:
@@ -203,10 +208,12 @@ def _run_to_speed(sess, hz: float, pct: float, fmax_hz: float, start_timeout: fl
             why = (f"the acceleration time{f' ({code})' if code else ''} cannot be read; "
                    f"--start-timeout to change")
     band = max(AT_SPEED_HZ, AT_SPEED_FRAC * abs(hz))
+    channel = sess.channel
+    assert channel is not None                  # the session is connected
     sess.say(f"waiting for the drive to reach {hz:g} Hz (± {band:g} Hz), at most {limit:.3g} s ({why})")
     sample = sess.start(pct)
     emit({"event": "started", "t_s": round(sample.t, 3)})
-    end = sess.channel.now() + limit
+    end = channel.now() + limit
     while True:
         sample = sess.poll()
         st = sample.status
@@ -215,18 +222,20 @@ def _run_to_speed(sess, hz: float, pct: float, fmax_hz: float, start_timeout: fl
                              + (f" ({st.fault_code})" if st.fault_code else ""))
         if sample.actual_hz is not None and abs(sample.actual_hz - hz) <= band:
             return sample
-        if sess.channel.now() > end:
+        if channel.now() > end:
             raise DriveError(f"station {sess.address}: not at {hz:g} Hz (± {band:g} Hz) after "
                              f"{limit:.3g} s (actual {sample.actual_hz} Hz; limit: {why})")
 
 
-def run_commloss(sess, hz: float, mode: str = "silence", timeout: float | None = None,
-                 ack: bool = False, on_event: Callable[[dict], None] | None = None,
+def run_commloss(sess: "DriveSession", hz: float, mode: str = "silence", timeout: float | None = None,
+                 ack: bool = False, on_event: Callable[[dict[str, Any]], None] | None = None,
                  tolerance: float | None = None, start_timeout: float | None = None) -> CommLossResult:
     """The whole test on an open DriveSession (see the module docstring). Raises UsageError for bad
     arguments before anything moves; the session's close does the safe stop on every other way out."""
     check_args(hz, mode, timeout, tolerance, start_timeout)
     emit = on_event or (lambda ev: None)
+    drive, channel, address = sess.need_drive(), sess.channel, sess.address
+    assert channel is not None and address is not None      # the session is connected
     fmax_hz, _ = sess.fmax()
     pct = sess.percent_for_hz(hz)           # refuses speeds the drive cannot hold
     reaction = read_reaction(sess) if mode == "silence" else clear_reaction(sess)
@@ -241,7 +250,7 @@ def run_commloss(sess, hz: float, mode: str = "silence", timeout: float | None =
         limit = Limit(0.0, 0.0, stop_s, tol)
         hold = 0.0
     expected = _down(limit.total)
-    res = CommLossResult(sess.address, mode, hz, sess.watchdog_ms, reaction, expected, hold, limit)
+    res = CommLossResult(address, mode, hz, sess.watchdog_ms, reaction, expected, hold, limit)
     emit({"event": "reaction", "station": sess.address, "words": reaction.words,
           "settings": reaction.settings, "warnings": list(reaction.warnings),
           "expected_s": round(expected, 3), "limit": limit.to_dict()})
@@ -254,18 +263,17 @@ def run_commloss(sess, hz: float, mode: str = "silence", timeout: float | None =
     # 2. the break
     master, addr = sess.master, sess.address
     reparams_before = sess.counters.get("reparams", 0)
-    drive = sess.drive
     inner_channel = drive.channel
     if mode == "silence":
-        t_last = sess.channel.now()
+        t_last = channel.now()
         emit({"event": "silence", "t_s": round(t_last - sess.t0, 3), "hold_s": round(hold, 3)})
         master.link.sleep(hold)
     else:
         from profidrive_cli.dp import services as S
         master.global_control(S.GC_CLEAR, da=addr)
-        t_last = sess.channel.now()
+        t_last = channel.now()
         emit({"event": "clear", "t_s": round(t_last - sess.t0, 3)})
-        inner_channel = _ZeroOutputs(sess.channel)
+        inner_channel = _ZeroOutputs(channel)
     drive.channel = inner_channel
 
     # 3. look until stopped / tripped, or until the limit (+ the timeout) has passed; one look goes
@@ -282,7 +290,7 @@ def run_commloss(sess, hz: float, mode: str = "silence", timeout: float | None =
             station_ch.period = 0.0
         prev, rtt, at_limit = None, None, False
         while True:
-            now = sess.channel.now()
+            now = channel.now()
             due = now if prev is None else max(now, prev + period)
             # the two looks at the limit: one back by it, one going out at it
             for at in ((expected - rtt - 0.001,) if rtt is not None else ()) + (expected,):
@@ -293,9 +301,9 @@ def run_commloss(sess, hz: float, mode: str = "silence", timeout: float | None =
                 due = now
             if due > now:
                 master.link.sleep(due - now)
-            sent = sess.channel.now()
+            sent = channel.now()
             st = drive.cycle()            # one look: the status of this exchange (no fault-code read)
-            back = now = sess.channel.now()
+            back = now = channel.now()
             sample = make_sample(sess, st)
             prev = sent
             at_limit = at_limit or sent >= t_last + expected
@@ -316,7 +324,7 @@ def run_commloss(sess, hz: float, mode: str = "silence", timeout: float | None =
             if now - t_last > watch or (reaction.stop == "none" and late_seen is not None):
                 break
     finally:
-        drive.channel = sess.channel
+        drive.channel = channel
         if station_ch is not None and period:
             station_ch.period = period
         if mode == "clear":
@@ -356,7 +364,8 @@ def run_commloss(sess, hz: float, mode: str = "silence", timeout: float | None =
     return res
 
 
-def _verdict(res: CommLossResult, st: DriveStatus, sample, late: tuple | None) -> None:
+def _verdict(res: CommLossResult, st: DriveStatus, sample: Sample,
+             late: tuple[float | None, float | None] | None) -> None:
     """PASS / FAIL / INCONCLUSIVE from the figures (module docstring); sets outcome, passed, verdict."""
     reaction, lim = res.reaction, res.expected_s
     late_seen, late_hz = late if late is not None else (None, None)

@@ -8,9 +8,10 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
-from typing import Callable
+from typing import Any, Callable, Protocol
 
-from profidrive_cli.drives.base import DriveStatus
+from profidrive_cli.drives.base import CyclicChannel, DriveStatus
+from profidrive_cli.drives.profile import Profile
 
 CAP_REAL_HZ = 100.0          # default cycle-rate cap over real ports
 CAP_SIM_HZ = 50.0            # ... and on the instant simulator
@@ -22,7 +23,7 @@ def wire_limit_hz(baud: int, out_octets: int, in_octets: int) -> float:
     return 1.0 / wire_time_data_exchange(baud, out_octets, in_octets)
 
 
-def default_cycle_hz(link, wire_hz: float) -> float:
+def default_cycle_hz(link: object, wire_hz: float) -> float:
     cap = CAP_SIM_HZ if getattr(link, "instant", False) else CAP_REAL_HZ
     return min(cap, wire_hz)
 
@@ -35,7 +36,7 @@ class MeteredChannel:
     The window is kept up to date as exchanges come in (timestamps older than `window_s` before the
     newest one are dropped on append), so `rate` is O(1): a live view reads it on every cycle."""
 
-    def __init__(self, inner, window_s: float = 2.0):
+    def __init__(self, inner: CyclicChannel, window_s: float = 2.0) -> None:
         self.inner = inner
         self.window_s = window_s
         self.cycles = 0
@@ -80,7 +81,7 @@ class Sample:
     fmax_hz: float
     cycle_hz: float                # achieved
     cycles: int
-    counters: dict
+    counters: dict[str, Any]
 
     @property
     def actual_percent(self) -> float | None:
@@ -100,7 +101,7 @@ class Sample:
         p = self.status.reference_percent
         return None if p is None else round(p * self.fmax_hz / 100.0, 3)
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         st = self.status
         return {"t": round(self.t, 3), "state": st.state, "running": st.running, "fault": st.fault,
                 "stopped": st.stopped, "fault_code": st.fault_code,
@@ -111,9 +112,32 @@ class Sample:
                 "counters": self.counters, "raw": dict(st.raw)}
 
 
-def choose_rate(sess) -> None:
+class Rating(Protocol):
+    """What choose_rate() reads and sets on the station being opened (session.DriveSession)."""
+    profile: Profile | None
+    layout: str | None
+    master: Any
+    requested_cycle_hz: float | None
+    wire_hz: float
+    cycle_hz: float
+
+    def warn(self, text: str) -> None: ...
+
+
+class _Sampler(Protocol):
+    def sample(self, st: DriveStatus) -> Sample: ...
+
+
+class Sampling(Protocol):
+    """A station with a Motion (session.DriveSession)."""
+    @property
+    def motion(self) -> _Sampler: ...
+
+
+def choose_rate(sess: Rating) -> None:
     """Set sess.wire_hz (the bus limit for its station and layout) and sess.cycle_hz (asked, or the
     default); a rate above the wire limit adds a warning (sess.warn)."""
+    assert sess.profile is not None and sess.layout is not None
     lay = sess.profile.layouts[sess.layout]
     baud = sess.master.params.baud
     sess.wire_hz = wire_limit_hz(baud, lay.output_len, lay.input_len)
@@ -130,7 +154,7 @@ def choose_rate(sess) -> None:
                        f"the pace")
 
 
-def make_sample(sess, st: DriveStatus) -> Sample:
+def make_sample(sess: Sampling, st: DriveStatus) -> Sample:
     """A Sample of status `st` on the session's clock (also remembered as its final_status): the
     session's Motion makes it (session/motion.py Motion.sample)."""
     return sess.motion.sample(st)

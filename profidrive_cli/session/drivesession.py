@@ -187,7 +187,7 @@ class DriveSession:
         given (fmax()), else the profile default. No bus traffic."""
         return self.motion.fmax_hz
 
-    def need_drive(self):
+    def need_drive(self) -> Drive:
         if self.drive is None:
             raise PdriveError("DriveSession: not connected (use it as a context manager or call open())")
         return self.drive
