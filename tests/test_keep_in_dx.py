@@ -227,7 +227,7 @@ def test_only_stations_marked_kept_get_keep_alives(kept):
     (0.0266, 80.0),       # 3 x 26.6 = 79.8 ms -> 80
 ])
 def test_the_group_watchdog_outlasts_three_rounds(round_s, expect_ms):
-    from profidrive_cli.session.groupcycle import min_watchdog_ms
+    from profidrive_cli.session.group import min_watchdog_ms
     assert min_watchdog_ms(round_s) == expect_ms
 
 
