@@ -7,7 +7,8 @@ its list: it opens the others' sessions beside that one (run.open_station, the s
 session on one bus cycle (session/group.py: the Group, its rounds and its stop of all in one round) and,
 on the later stations' turns, reports what it measured for them. A trip or a station dropping out ends
 the run for all (every drive stopped). Not a step type of its own: checklist/steps/run.py hands over
-to it.
+to it. The watchdog every station of such a step holds (the Group's three rounds) is decided before
+any of them is parameterised: group_watchdog, asked by runner.session_opener.
 """
 
 from __future__ import annotations
@@ -138,6 +139,31 @@ def execute(run, sr, r, d, h, a, run_measured) -> str:
     if not ok:
         raise StepFailed(msg)
     return msg
+
+
+def group_watchdog(checklist, spec, master, asked_ms: float) -> tuple[float, str | None]:
+    """The DP watchdog (ms) for `spec`'s station: the one asked for, raised to three rounds of the
+    largest group of a `together` step it runs in (Group.watchdog_for, as run 3,4,5), with the
+    warning's words when raised. The rounds as the step paces them (Group.rate of the stations'
+    wire limits at the bus's baud rate); decided before the station is parameterised, because the
+    Set_Prm carries it (on its own turn too: the step runs on the first station's)."""
+    from profidrive_cli.session.cycle import wire_limit_hz
+    best: tuple[float, str | None] = (asked_ms, None)
+    by_name = {s.name: s for s in checklist.stations}
+    steps = {id(st): st for s in checklist.stations for st in s.steps
+             if st.type == "run" and st.args.get("together")}
+    for st in steps.values():
+        names = st.args.get("together_stations") or list(by_name)
+        if spec.name not in names or len(names) < 2:
+            continue
+        members = [by_name[n] for n in names if n in by_name]
+        wire = [wire_limit_hz(master.params.baud, lay.output_len, lay.input_len)
+                for lay in (m.profile.layouts[m.layout] for m in members)]
+        rate, _ = Group.rate(master, wire)
+        got = Group.watchdog_for(asked_ms, 1.0 / rate, len(members))
+        if got[0] > best[0]:
+            best = got
+    return best
 
 
 def _run_all(run, sr, r, d, h, a, specs, run_measured) -> dict:
