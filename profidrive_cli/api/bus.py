@@ -7,9 +7,10 @@ to one station, every other opened station still gets a Data_Exchange at least e
 seconds (a hook on each drive's channel); while nobody calls, the keep-alive thread sends them.
 
 The stop on close (bus.close(), leaving the `with`): the stop command of every started drive in one
-bus cycle and one bounded wait for all together (session/group.py's Group, as `pdrive run 3,4,5`), a coast stop for each one not stopped in its time. A bus never closed is
-closed at interpreter exit (atexit; also when the script ends with an exception) or when it is
-garbage collected, with a ResourceWarning. An exception raised by on_message is recorded and
+bus cycle and one bounded wait for all together (session/group.py's Group, as `pdrive run 3,4,5`),
+a coast stop for each one not stopped in its time. A bus never closed is closed at interpreter exit
+(atexit; also when the script ends with an exception) or when it is garbage collected, with a
+ResourceWarning. An exception raised by on_message is recorded and
 raised after the call (after the stop, on close), never from inside a cycle or the stop.
 """
 
