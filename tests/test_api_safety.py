@@ -205,11 +205,11 @@ def test_leaving_the_with_sends_every_stop_command_in_the_same_cycle():
 
 
 def test_a_failure_of_the_stop_together_still_stops_every_drive_one_by_one(monkeypatch):
-    import profidrive_cli.session.multirun as multirun
+    from profidrive_cli.session.group import Group
 
     def broken(*a, **k):
         raise RuntimeError("a bug in the group stop")
-    monkeypatch.setattr(multirun, "stop_together", broken)
+    monkeypatch.setattr(Group, "stop_all", broken)
     with pytest.raises(RuntimeError, match="a bug in the group stop"):
         with pdrive.open_bus(SIM) as bus:
             d3, d4 = bus.drive(3), bus.drive(4)

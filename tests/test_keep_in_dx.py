@@ -227,7 +227,7 @@ def test_only_stations_marked_kept_get_keep_alives(kept):
     (0.0266, 80.0),       # 3 x 26.6 = 79.8 ms -> 80
 ])
 def test_the_group_watchdog_outlasts_three_rounds(round_s, expect_ms):
-    from profidrive_cli.session.groupcycle import min_watchdog_ms
+    from profidrive_cli.session.group import min_watchdog_ms
     assert min_watchdog_ms(round_s) == expect_ms
 
 
@@ -250,4 +250,57 @@ def test_run_of_five_stations_at_9600_runs_through_with_a_watchdog_raised_to_thr
     assert any(w.startswith(f"watchdog raised from {WATCHDOG_MS} ms to {run.watchdog_ms:g} ms")
                for w in run.warnings), run.warnings
     assert all(r.reached_after is not None for r in run.runs)
+    assert all(s.stats["watchdog_expired"] == 0 for s in bus.slaves.values())
+
+
+def _set_prm_watchdogs(log) -> dict[int, set[float]]:
+    """{station: the DP watchdogs (ms) its Set_Prm telegrams carried} from the simulated bus's log
+    (an Unlock_Req, the release, carries none that counts)."""
+    out: dict[int, set[float]] = {}
+    for _, who, octets in log:
+        res = F.parse(octets) if who == "M" else None
+        if not isinstance(res, tuple) or res[0].sd not in (F.SD1, F.SD2, F.SD3):
+            continue
+        fr = res[0]
+        if fr.dsap == S.SAP_SET_PRM:
+            prm = S.SetPrm.decode(fr.data)
+            if not prm.unlock and prm.wd_ms is not None:
+                out.setdefault(fr.da, set()).add(prm.wd_ms)
+    return out
+
+
+@pytest.mark.usefixtures("no_config_at_all")
+def test_checklist_together_raises_the_watchdog_to_three_rounds_of_its_group(sim, tmp_path):
+    """`checklist run` with a `together` step of five stations at 9.6k: each station is parameterised
+    with the group's watchdog (three rounds, as run 3,4,5 does: session/group.py), also on its own
+    turn before the step, and the report says so. Before, they kept the 500 ms asked for while one
+    round of the five takes 266 ms (a station may wait two rounds plus a retry)."""
+    from click.testing import CliRunner
+    from profidrive_cli.cli.main import cli
+    # one Data_Exchange of a PPO1 station (12 octets each way) at 9.6k, by hand: request and reply
+    # are SD2 frames of LE + 6 = (3 + 12) + 6 = 21 octets (reference table of start delimiters,
+    # profibus-dp-reference.md:63,71), 11 bits each: 462 bit times, + min TSDR 11 + TID1 37
+    # (reference line 350) = 510 bit times = 53.125 ms; five stations a round: 265.6 ms;
+    # three rounds 796.9 ms -> the next multiple of 10: 800 ms
+    expect_ms = 800.0
+    url = ("sim://?timing=virtual&baud=9600&stations=3:fuji-g1,4:fuji-pdp3,6:moeller,8:fuji-g1,"
+           "9:moeller&set=3:F07=0.3,F08=0.3&set=8:F07=0.3,F08=0.3&set=6:F002=0.3,F003=0.3"
+           "&set=9:F002=0.3,F003=0.3")
+    from profidrive_cli.sim import plant
+    bus = plant.build_bus(url)                     # the plant the command's port opens (the fixture)
+    bus.log = []
+    f = tmp_path / "line.yaml"
+    f.write_text(LINE)
+    report = tmp_path / "r.json"
+    r = CliRunner().invoke(cli, ["checklist", "run", str(f), "--port", url, "--baud", "9600", "--yes",
+                                 "--watchdog-ms", str(WATCHDOG_MS), "--report", str(report)])
+    assert r.exit_code == 0, r.output
+    assert list(sim.values()) == [bus]
+    wds = _set_prm_watchdogs(bus.log)
+    assert wds == dict.fromkeys([3, 4, 6, 8, 9], {expect_ms}), wds
+    import json
+    doc = json.loads(report.read_text())
+    for st in doc["stations"]:
+        assert any(f"watchdog raised from {WATCHDOG_MS} ms to {expect_ms:g} ms" in w
+                   for w in st["identity"].get("warnings", [])), st["identity"]
     assert all(s.stats["watchdog_expired"] == 0 for s in bus.slaves.values())

@@ -7,10 +7,10 @@ to one station, every other opened station still gets a Data_Exchange at least e
 seconds (a hook on each drive's channel); while nobody calls, the keep-alive thread sends them.
 
 The stop on close (bus.close(), leaving the `with`): the stop command of every started drive in one
-bus cycle and one bounded wait for all together (session/groupcycle.py and multirun.stop_together,
-as `pdrive run 3,4,5`), a coast stop for each one not stopped in its time. A bus never closed is
-closed at interpreter exit (atexit; also when the script ends with an exception) or when it is
-garbage collected, with a ResourceWarning. An exception raised by on_message is recorded and
+bus cycle and one bounded wait for all together (session/group.py's Group, as `pdrive run 3,4,5`),
+a coast stop for each one not stopped in its time. A bus never closed is closed at interpreter exit
+(atexit; also when the script ends with an exception) or when it is garbage collected, with a
+ResourceWarning. An exception raised by on_message is recorded and
 raised after the call (after the stop, on close), never from inside a cycle or the stop.
 """
 
@@ -32,7 +32,7 @@ if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.api.drive import Drive
     from profidrive_cli.dp.poller import Master
     from profidrive_cli.session import DriveSession
-    from profidrive_cli.session.groupcycle import GroupCycle
+    from profidrive_cli.session.group import Group
     from profidrive_cli.session.signals import SignalGuard
 
 #: at most this long between two Data_Exchanges of an opened station (well inside the 500 ms
@@ -156,8 +156,9 @@ class Bus:
         self._closed = False
         #: exceptions raised by on_message, raised after the call (after the stop on close)
         self._callback_errors: list[BaseException] = []
-        #: the bus cycle of the stop on close (the keep-alive hooks stand aside meanwhile)
-        self._group: "GroupCycle | None" = None
+        #: the drives' Group: its keep rule; its bus cycle for the stop on close (the keep-alive
+        #: hooks stand aside meanwhile)
+        self._group: "Group | None" = None
         self._signals = SignalGuard(handle_signals)
         self._signals.install()
         self._stop_keepalive = threading.Event()
@@ -279,8 +280,6 @@ class Bus:
         safe stop in its session's close."""
         import time
         from profidrive_cli.link.base import LinkLost
-        from profidrive_cli.session.groupcycle import GroupCycle
-        from profidrive_cli.session.multirun import attach, group_rate, stop_together
         if isinstance(exc, LinkLost):
             return None
         sessions = [d.session for d in self._drives.values() if d.session.channel is not None]
@@ -294,16 +293,18 @@ class Bus:
                 self.master.link.flush_input()
             except Exception:               # noqa: BLE001
                 pass
-        rate = min([group_rate(self.master, sessions)[0]] + [s.cycle_hz for s in sessions if s.cycle_hz])
-        self._group = group = GroupCycle(self.master, 1.0 / rate if rate > 0 else 0.0)
+        group = self._the_group()
+        rate = min([group.rate(self.master, [s.wire_hz for s in sessions])[0]]
+                   + [s.cycle_hz for s in sessions if s.cycle_hz])
+        group.period = 1.0 / rate if rate > 0 else 0.0
         for s in sessions:
-            attach(group, s)
+            group.join(s)
 
         def hurry() -> bool:
             h, self._signals.hurry = self._signals.hurry, False
             return h
         try:
-            stop_together([(s.address, s, _speed_percent(s)) for s in running], group, hurry)
+            group.stop_all([(_address(s), s, _speed_percent(s)) for s in running], hurry)
             group.finish()
         except LinkLost as e:
             for s in running:
@@ -413,6 +414,14 @@ class Bus:
         return list(self._drives.values())
 
     # -- keep-alive --------------------------------------------------------------------------------
+    def _the_group(self) -> "Group":
+        """The Group of this bus's drives: which of them a keep-alive cycles, and the bus cycle of
+        the stop on close."""
+        if self._group is None:
+            from profidrive_cli.session.group import Group
+            self._group = Group(self.master)
+        return self._group
+
     def _keep_s(self) -> float:
         wd = min((d.session.watchdog_ms for d in self._drives.values()), default=500.0)
         return min(KEEP_S, wd / 5000.0)
@@ -420,29 +429,15 @@ class Bus:
     def _exchanged(self, address: int, t: float) -> None:
         """After a Data_Exchange with `address`: the other opened stations that are due get one."""
         self._last[address] = t
-        if self._group is not None:
+        if self._group is not None and self._group.cycling:
             return                          # the stop's bus cycle exchanges every station
         self._keep_others(address)
 
     def _keep_others(self, busy: int | None) -> None:
         """A Data_Exchange (with its last outputs) for every opened station other than `busy` whose
-        last one is KEEP_S old. A station that cannot be kept is left to its own next call (which
-        then reports it); a lost link is raised."""
-        from profidrive_cli.link.base import LinkLost
-        keep = self._keep_s()
-        for a in list(self._drives):
-            if a == busy:
-                continue
-            now = self.master.link.now()
-            if now - self._last.get(a, now) >= keep:
-                self._last[a] = now
-                try:
-                    self.master.exchange(a, None)
-                except LinkLost:
-                    raise
-                except BusError:
-                    pass
-                self._last[a] = self.master.link.now()
+        last one is KEEP_S old (the Group's keep rule). A station that cannot be kept is left to its
+        own next call (which then reports it); a lost link is raised."""
+        self._the_group().keep_others(list(self._drives), busy, self._last, self._keep_s())
 
     def __repr__(self) -> str:
         return (f"<Bus {self.port} at {self.baud} bit/s, drives {sorted(self._drives)}"
@@ -477,6 +472,11 @@ def _keepalive(ref: "weakref.ref[Bus]", stop: threading.Event) -> None:
         finally:
             bus._lock.release()
             del bus
+
+
+def _address(sess: "DriveSession") -> int:
+    assert sess.address is not None                 # an opened drive's session found its station
+    return int(sess.address)
 
 
 def _speed_percent(sess: "DriveSession") -> float | None:

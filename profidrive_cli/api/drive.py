@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 from profidrive_cli import UsageError
 from profidrive_cli.api.results import Fault, Faults, Param, Status, StopResult
 from profidrive_cli.drives.base import DriveError
+from profidrive_cli.session.live import at_reference
 
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.drives.base import ParamValue
@@ -19,14 +20,6 @@ if TYPE_CHECKING:                                   # pragma: no cover
 
 #: run(wait=True) without a timeout waits at most this long for the reference
 DEFAULT_RUN_TIMEOUT_S = 60.0
-
-
-def at_reference(ref: float | None, act: float | None) -> bool:
-    """The actual speed is at the reference: within 1 % of it, or 0.05 % of fmax near zero (as
-    `pdrive run` decides 'reached')."""
-    if ref is None or act is None:
-        return False
-    return abs(act - ref) <= max(0.01 * abs(ref), 0.05)
 
 
 def fmax_readable(session: "DriveSession") -> bool:

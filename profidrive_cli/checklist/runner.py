@@ -473,17 +473,23 @@ def dry_run_port(checklist: Checklist) -> str:
 
 
 def session_opener(master, *, cycle_hz: float | None = None, watchdog_ms: float | None = None,
-                   on_message: Callable[[str], None] | None = None):
+                   on_message: Callable[[str], None] | None = None, checklist: Checklist | None = None):
     """open_station for Runner: one DriveSession per station on a shared master (the caller closes its
     link after the run). The session identifies the station, refuses a station of another family,
-    parameterises it with the watchdog armed, and on exit stops the drive safely and releases it."""
+    parameterises it with the watchdog armed, and on exit stops the drive safely and releases it.
+    checklist: a station of its `together` steps gets the watchdog of their group (three rounds)."""
+    from profidrive_cli.checklist.steps.together import group_watchdog
     from profidrive_cli.session import DEFAULT_WATCHDOG_MS, DriveSession
 
     @contextlib.contextmanager
     def open_station(spec: StationSpec):
+        wd, raised = watchdog_ms or DEFAULT_WATCHDOG_MS, None
+        if checklist is not None:
+            wd, raised = group_watchdog(checklist, spec, master, wd)
         s = DriveSession(master, spec.address, profile=spec.profile.name, layout=spec.layout,
-                         cycle_hz=cycle_hz, watchdog_ms=watchdog_ms or DEFAULT_WATCHDOG_MS,
-                         close_link=False, on_message=on_message)
+                         cycle_hz=cycle_hz, watchdog_ms=wd, close_link=False, on_message=on_message)
+        if raised is not None:
+            s.warn(f"{spec.name}: {raised}")
 
         def closed() -> dict:
             rep = s.stop_report

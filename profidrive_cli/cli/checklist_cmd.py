@@ -174,7 +174,7 @@ def run_cmd(ctx, opts: BusOptions, file, reports, dry_run, yes, variables, cycle
             _usage(ctx, str(e))
         try:
             runner = Runner(cl, session_opener(master, cycle_hz=cycle_hz, watchdog_ms=watchdog_ms,
-                                               on_message=view.message),
+                                               on_message=view.message, checklist=cl),
                             port=port, yes=yes, ask=ask, dry_run=dry_run, observer=cast("Observer", view), options=options,
                             trace_steps=any(report_format(r) == "html" for r in reports))
             try:

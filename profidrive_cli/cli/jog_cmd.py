@@ -1,8 +1,9 @@
 """pdrive jog — the card's own jog function: held key on a terminal (deadman), --duration for scripts.
 
-All protocol and safety logic lives in session/ (DriveSession.jog / release_jog / stop, and the safe
-stop on every exit in DriveSession.close); this module parses the command line, refuses a station
-whose card has no jog before anything is sent, asks before a real port, and renders (render_drive.py).
+All protocol and safety logic lives in session/ (DriveSession.jog / release_jog / stop, the safe stop
+on every exit in DriveSession.close, the loop in live.py); this module parses the command line, refuses
+a station whose card has no jog before anything is sent, asks before a real port, reads the keys and
+renders (render_drive.py).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from profidrive_cli.cli.common import bus_options
 from profidrive_cli.cli.drive_cmds import (_confirmer, _session, _terminations, drive_options,
                                           run_ending)
 from profidrive_cli.drives.base import DriveError
+from profidrive_cli.session.live import Live
 
 #: On a terminal the jog runs while a key is held: the terminal repeats a held key (after its
 #: auto-repeat delay, typically 250-600 ms); no key for this long counts as released and stops.
@@ -66,15 +68,14 @@ def jog_cmd(opts, address, reverse, duration, yes, profile_name, ppo, fmt, watch
                        before=_refuse_or_confirm(opts, yes, f"jog the drive {direction}"))
     view = R.RunView(mode)
     end: dict = {"reason": "", "stop": None}
-    jogged = False
-    exit_code = 0
+    lives: list[Live] = []
 
     def stopping(sample):
         if not view.phase.startswith("stopping"):
             view.set_phase("stopping")
         view.update(sample)
     session.on_sample = stopping
-    with run_ending(session, view, end, lambda: jogged or session.may_run):
+    with run_ending(session, view, end, lambda: (bool(lives) and lives[0].started) or session.may_run):
         with session as s:
             fmax_hz, src = s.fmax()
             speed = s.jog_speed()
@@ -87,69 +88,45 @@ def jog_cmd(opts, address, reverse, duration, yes, profile_name, ppo, fmt, watch
                         "watchdog_ms": s.watchdog_ms, "duration_s": duration, "warnings": s.warnings})
             if speed is not None and mode != "json":
                 R.err.print(f"jog speed: {speed.code} = {R.value_text(speed.value, speed.unit)}")
+            live = Live(s, lambda: s.jog(reverse), release=s.release_jog, duration=duration,
+                        on_sample=view.update, on_phase=view.set_phase)
+            lives.append(live)
             if interactive:
-                end["reason"], exit_code = _held_key(s, view, reverse)
+                _held_key(live, view, reverse)
             else:
-                view.set_phase("jog starting")
-                sample = s.jog(reverse)
-                jogged = True
-                t_start = sample.t
-                view.set_phase("jogging", sample)
-                peak = None
-                while True:
-                    sample = s.poll()
-                    view.update(sample)
-                    if sample.actual_hz is not None and (peak is None or abs(sample.actual_hz) > abs(peak)):
-                        peak = sample.actual_hz
-                    if sample.status.fault:
-                        end["reason"] = "the drive tripped" + (f" ({sample.status.fault_code})"
-                                                               if sample.status.fault_code else "")
-                        exit_code = 1
-                        break
-                    if sample.t - t_start >= duration:
-                        end["reason"] = f"duration {duration:g} s reached"
-                        break
-                end["peak_hz"] = peak
-            if s.may_run:
-                view.set_phase("stopping", s.release_jog())
-                s.stop()
-                if s.stop_report.how in ("normal", "coast"):
-                    view.set_phase("stopped", s._sample(s.final_status) if s.final_status else None)
-    if exit_code:
+                live.begin("jog starting", "jogging")
+                live.loop()
+                end["peak_hz"] = live.peak_hz
+            end["reason"] = live.reason
+            live.finish()
+    if lives and lives[0].exit_code:
         raise DriveError(f"station {session.address}: {end['reason']}; the drive is stopped")
 
 
-def _held_key(s, view, reverse: bool) -> tuple[str, int]:
+def _held_key(live: Live, view, reverse: bool) -> None:
     """Hold space to jog, release stops (DEADMAN_S without a repeated key), q quits."""
     view.hint = f"hold space to jog ({'reverse' if reverse else 'forward'}) · release stops · q quits"
     view.set_phase("ready: hold space to jog")
     keys = R.KeyReader()
     keys.__enter__()
-    jogging = False
-    last_key = 0.0
+    last_key = [0.0]
+
+    def on_cycle(live: Live) -> bool:
+        pressed = keys.keys()
+        if "q" in pressed:
+            return True
+        now = time.monotonic()
+        if "space" in pressed:
+            last_key[0] = now
+            if not live.running:
+                live.resume("jog starting", "jogging (release the key to stop)")
+                last_key[0] = time.monotonic()
+        elif live.running and now - last_key[0] > DEADMAN_S:
+            live.pause("stopping (key released)",
+                       "stopped ({how}) — hold space to jog again, q quits")
+        return False
+    live.on_cycle = on_cycle
     try:
-        while True:
-            sample = s.poll()
-            view.update(sample)
-            if sample.status.fault:
-                return ("the drive tripped" + (f" ({sample.status.fault_code})"
-                                               if sample.status.fault_code else "")), 1
-            pressed = keys.keys()
-            if "q" in pressed:
-                return "q pressed", 0
-            now = time.monotonic()
-            if "space" in pressed:
-                last_key = now
-                if not jogging:
-                    view.set_phase("jog starting")
-                    s.jog(reverse)
-                    jogging = True
-                    view.set_phase("jogging (release the key to stop)")
-                    last_key = time.monotonic()
-            elif jogging and now - last_key > DEADMAN_S:
-                view.set_phase("stopping (key released)", s.release_jog())
-                rep = s.stop()
-                jogging = False
-                view.set_phase(f"stopped ({rep.how}) — hold space to jog again, q quits")
+        live.loop()
     finally:
         keys.__exit__(None, None, None)

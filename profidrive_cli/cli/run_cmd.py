@@ -1,6 +1,7 @@
 """pdrive run: a drive at a speed (or a torque) with a live view, its monitors, and the safe stop on
-every exit. The shared drive-command plumbing (options, session, confirmation) is in drive_cmds.py;
-rendering in render_drive.py; torque checks in run_torque.py."""
+every exit. The loop itself is session/live.py (Live); here: the options, the keys and the rendering.
+The shared drive-command plumbing (options, session, confirmation) is in drive_cmds.py; rendering in
+render_drive.py; torque checks in run_torque.py."""
 
 from __future__ import annotations
 
@@ -17,13 +18,8 @@ from profidrive_cli.cli.common import bus_options
 from profidrive_cli.cli.drive_cmds import (_confirmer, _session, _terminations, drive_options,
                                           run_ending)
 from profidrive_cli.drives.base import DriveError
-from profidrive_cli.link.base import LinkLost
 from profidrive_cli.outfile import check_output_path
-from profidrive_cli.session.multirun import at_reference
-
-#: the verdict of a run whose actual speed never came within at_reference before its --duration
-#: ended: the words session/multirun.py gives a drive of several (its StationRun.problem)
-NOT_REACHED = "did not reach its reference"
+from profidrive_cli.session.live import NOT_REACHED, Live
 
 
 @click.command("run")
@@ -109,9 +105,7 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
     if plotter is not None:
         plotter.attach(view)
     end = {"reason": "", "stop": None, "failed": False, "problem": None}
-    started = False
-    exit_code = 0
-    short_of = None                          # the actual speed when the time was up, not reached
+    lives: list[Live] = []
 
     def stopping(sample):                    # every stop, also the one on any exit, stays visible
         view.monitors = None                 # no monitor reads during the stop: show none stale
@@ -119,8 +113,8 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
             view.set_phase("stopping")
         view.update(sample)
     session.on_sample = stopping
-    with run_ending(session, view, end, lambda: started,
-                     extra=lambda: _run_extra(view, mons)), run_plot.written_at_the_end(plotter, session):
+    with run_ending(session, view, end, lambda: bool(lives) and lives[0].started,
+                    extra=lambda: _run_extra(lives, mons)), run_plot.written_at_the_end(plotter, session):
         with session as s:
             s.check_torque(torque, torque_limit)          # the card's reason before anything shows
             if fmax is None:      # the config file's: used where the drive's own is not readable,
@@ -132,7 +126,6 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
             pct = percent if percent is not None else s.percent_for_hz(hz, fmax)
             if reverse:
                 pct = -abs(pct)
-            step = 100.0 / fmax_hz if hz is not None else 1.0     # keys: 1 Hz or 1 %
             view.start({"address": s.address, "ident": f"0x{s.ident:04X}", "profile": s.profile.name,
                         "family": s.profile.family, "title": s.profile.title, "layout": s.layout,
                         "fmax_hz": fmax_hz, "fmax_source": src, "reference_percent": round(pct, 4),
@@ -144,116 +137,72 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
             view.monitors = mons[0] if mons else None
             if interactive:
                 view.hint = "up/down speed · r reverse · space stop/start · q quit"
-            view.set_phase("starting")
-            if torque is not None or torque_limit is not None:
-                sample = s.start_torque(torque, torque_limit, pct)
-            else:
-                sample = s.start(pct)
-            started = True
-            t_start = sample.t
-            view.set_phase("running", sample)
-            running = True
+
+            def start():
+                if torque_limit is not None or live.torque is not None:
+                    return s.start_torque(live.torque, torque_limit, live.percent)
+                return s.start(live.percent)
+
+            def on_sample(sample):
+                if mons:
+                    mons[0].poll(sample)         # one monitor read per loop, round robin
+                    view.monitors = mons[0]      # shown again after a stop (space) and start
+                view.update(sample)
+            live = Live(s, start, duration=duration, reconnect_s=reconnect_s, judge=True,
+                        must_reach=torque is None, percent=pct, torque=torque, on_sample=on_sample,
+                        on_phase=view.set_phase)
+            lives.append(live)
+            live.begin()
             keys = R.KeyReader() if interactive else None
             if keys is not None:
                 keys.__enter__()
+                live.on_cycle = _keys(keys, 100.0 / fmax_hz if hz is not None else 1.0)  # 1 Hz or 1 %
             try:
-                while True:
-                    try:
-                        sample = s.poll()
-                    except LinkLost as e:
-                        if reconnect_s is None:
-                            raise
-                        # the link is gone: nothing can be sent; the station's watchdog stops
-                        # the drive. Wait for the port, resume data exchange, never restart.
-                        view.set_phase(f"link lost ({e}); reconnecting for up to {reconnect_s:g} s")
-                        s.master.reconnect(timeout=reconnect_s)
-                        view.set_phase("link restored: the drive was stopped by its watchdog "
-                                       "and is not restarted")
-                        rep = s.stop()
-                        running = False
-                        if keys is None:
-                            end["reason"] = f"link lost and restored; stop: {rep.how}"
-                            exit_code = 1
-                            break
-                        view.set_phase(f"stopped ({rep.how}) — space starts, q quits")
-                        continue
-                    if mons:
-                        mons[0].poll(sample)     # one monitor read per loop, round robin
-                        view.monitors = mons[0]  # shown again after a stop (space) and start
-                    view.update(sample)
-                    if running and view.reached_after is None and at_reference(sample):
-                        view.reached_after = round(sample.t - t_start, 3)
-                    if sample.status.fault:
-                        end["reason"] = "the drive tripped" + (f" ({sample.status.fault_code})"
-                                                               if sample.status.fault_code else "")
-                        end["failed"] = True
-                        end["problem"] = "tripped" + (f" ({sample.status.fault_code})"
-                                                      if sample.status.fault_code else "")
-                        exit_code = 1
-                        break
-                    if duration is not None and sample.t - t_start >= duration:
-                        end["reason"] = f"duration {duration:g} s reached"
-                        if running and view.reached_after is None and torque is None:
-                            # multirun's rule: the time is up and the actual speed never came
-                            # within at_reference (a torque run has no speed to reach: not judged)
-                            end["failed"], end["problem"] = True, NOT_REACHED
-                            short_of = sample.actual_hz
-                            exit_code = 1
-                        break
-                    if keys is None:
-                        continue
-                    quit_now = False
-                    for k in keys.keys():
-                        if k == "q":
-                            quit_now = True
-                        elif k in ("up", "down", "r") and running and torque is not None:
-                            step_t = 1.0 if k == "up" else -1.0
-                            torque = -torque if k == "r" else max(-100.0, min(100.0, torque + step_t))
-                            s.set_torque(torque)
-                        elif k in ("up", "down") and running:
-                            pct = max(-100.0, min(100.0, pct + (step if k == "up" else -step) *
-                                                  (1 if pct >= 0 else -1)))
-                            s.set_reference(pct)
-                            view.reached_after = None
-                        elif k == "r" and running:
-                            pct = -pct
-                            s.set_reference(pct)
-                            view.reached_after = None
-                        elif k == "space":
-                            if running:
-                                view.set_phase("stopping (space)")
-                                rep = s.stop()
-                                running = False
-                                view.set_phase(f"stopped ({rep.how}) — space starts, q quits")
-                            else:
-                                view.set_phase("starting")
-                                if torque is not None or torque_limit is not None:
-                                    s.start_torque(torque, torque_limit, pct)
-                                else:
-                                    s.start(pct)
-                                running = True
-                                view.set_phase("running")
-                    if quit_now:
-                        end["reason"] = "q pressed"
-                        break
+                live.loop()
             finally:
                 if keys is not None:
                     keys.__exit__(None, None, None)
-            if s.may_run:
-                view.set_phase("stopping", sample)
-                s.stop()
-                if s.stop_report.how in ("normal", "coast"):
-                    view.set_phase("stopped", s._sample(s.final_status) if s.final_status else None)
-    if exit_code:
+            end["reason"] = live.reason
+            if live.failed:
+                end["failed"], end["problem"] = True, live.problem
+            live.finish()
+    if lives and lives[0].exit_code:
+        live = lives[0]
         why = end["reason"]
         if end["problem"] == NOT_REACHED:
-            act = f"; actual {short_of:.2f} Hz at the end" if short_of is not None else ""
-            why = (f"{NOT_REACHED} ({pct * fmax_hz / 100.0:g} Hz) within {duration:g} s{act}")
+            act = f"; actual {live.short_of:.2f} Hz at the end" if live.short_of is not None else ""
+            why = (f"{NOT_REACHED} ({live.percent * fmax_hz / 100.0:g} Hz) within {duration:g} s{act}")
         raise DriveError(f"station {session.address}: {why}; the drive is stopped")
 
 
-def _run_extra(view, mons) -> dict:
-    d = {"reached_after_s": view.reached_after}
+def _keys(keys, step: float):
+    """The keys of a run on a terminal, once per cycle: up/down change the speed by `step` % (the
+    torque by 1 %), r reverses, space stops / starts, q quits (returns True)."""
+    def on_cycle(live: Live) -> bool:
+        quit_now = False
+        for k in keys.keys():
+            if k == "q":
+                quit_now = True
+            elif k in ("up", "down", "r") and live.running and live.torque is not None:
+                step_t = 1.0 if k == "up" else -1.0
+                live.set_torque(-live.torque if k == "r" else max(-100.0, min(100.0, live.torque + step_t)))
+            elif k in ("up", "down") and live.running:
+                pct = live.percent
+                live.set_reference(max(-100.0, min(100.0, pct + (step if k == "up" else -step) *
+                                                   (1 if pct >= 0 else -1))))
+            elif k == "r" and live.running:
+                live.set_reference(-live.percent)
+            elif k == "space":
+                if live.running:
+                    live.pause("stopping (space)", "stopped ({how}) — space starts, q quits")
+                else:
+                    live.resume("starting", "running")
+        return quit_now
+    return on_cycle
+
+
+def _run_extra(lives, mons) -> dict:
+    d = {"reached_after_s": lives[0].reached_after if lives else None}
     if mons:
         d["monitors"], d["monitors_dropped"] = mons[0].to_dict(), mons[0].dropped
     return d

@@ -1,5 +1,5 @@
 """Several drives in one run (pdrive run 3,4,5): one DriveSession per station on one master, all on one
-bus cycle (groupcycle.py), each drive at its own speed; the stop of every drive on every way out.
+bus cycle (group.py: the Group), each drive at its own speed; the stop of every drive on every way out.
 
 Order: identify every station (nothing written), check --sync against every station's GSD, ask once
 (confirm), bring every station to data exchange (with Sync_Req / Freeze_Req under --sync), read the
@@ -23,24 +23,15 @@ from typing import TYPE_CHECKING, Callable
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.link.base import LinkLost
-from profidrive_cli.session.cycle import default_cycle_hz, make_sample
 from profidrive_cli.session.drivesession import DriveSession
-from profidrive_cli.session.groupcycle import GroupCycle, StationOut, min_watchdog_ms
-from profidrive_cli.session.safestop import COAST_TIMEOUT_S, StopReport
+from profidrive_cli.session.group import Group, StationOut
+from profidrive_cli.session.live import NOT_REACHED, sample_at_reference
 from profidrive_cli.session.signals import SessionTerminated, SignalGuard
 
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.dp.poller import Master
 
 DEFAULT_WATCHDOG_MS = 500
-
-
-def at_reference(sample) -> bool:
-    """Actual within 1 % of the reference (at least 0.05 % of the max frequency): `run`'s rule."""
-    ref, act = sample.reference_percent, sample.actual_percent
-    if ref is None or act is None:
-        return False
-    return abs(act - ref) <= max(0.01 * abs(ref), 0.05)
 
 
 def sync_modes(sessions, gsd_for=None) -> tuple[bool, bool]:
@@ -121,7 +112,7 @@ class MultiRun:
     def __post_init__(self):
         if len(self.refs) != len(self.addresses):
             raise UsageError("one speed for all stations or one per station")
-        self.group: GroupCycle | None = None
+        self.group: Group | None = None
         self.freeze = False
         self.t0 = 0.0
         self.cycle_rate = 0.0
@@ -194,7 +185,7 @@ class MultiRun:
         if self.sync:
             _, self.freeze = sync_modes(sessions)
         # one round = one Data_Exchange per station: the wire limit of the round is the sum
-        self.cycle_rate, self.wire_hz = group_rate(self.master, sessions)
+        self.cycle_rate, self.wire_hz = Group.rate(self.master, [s.wire_hz for s in sessions])
         if self.cycle_hz is not None:
             self.cycle_rate = float(self.cycle_hz)
             if self.cycle_rate > self.wire_hz * 1.0001:
@@ -202,27 +193,23 @@ class MultiRun:
                                      f"{len(sessions)} stations ({self.wire_hz:.1f} rounds/s); on a "
                                      f"real bus the wire sets the pace")
         round_s = 1.0 / min(self.cycle_rate or self.wire_hz, self.wire_hz)
-        need = min_watchdog_ms(round_s)
-        if self.watchdog_ms < need:
-            # a slow bus (5 stations at 9.6k: 0.31 s a round): the watchdog asked for would expire
-            # between two exchanges of the group; the Set_Prm of every station carries the raised one
-            self.warnings.append(f"watchdog raised from {self.watchdog_ms:g} ms to {need:g} ms: one round "
-                                 f"of {len(sessions)} stations takes {round_s * 1000:.0f} ms, and a "
-                                 f"station may wait up to two rounds (plus a retry) for its next "
-                                 f"exchange")
+        need, raised = Group.watchdog_for(self.watchdog_ms, round_s, len(sessions))
+        if raised is not None:
+            # the Set_Prm of every station carries the raised one
+            self.warnings.append(raised)
             self.watchdog_ms = need
             for s in sessions:
                 s.watchdog_ms = need
         if self.confirm:
             self.confirm(sessions)
-        self.group = GroupCycle(self.master, 1.0 / self.cycle_rate if self.cycle_rate else 0.0,
-                                sync=self.sync, freeze=self.sync and self.freeze)
+        self.group = Group(self.master, 1.0 / self.cycle_rate if self.cycle_rate else 0.0,
+                           sync=self.sync, freeze=self.sync and self.freeze)
         for r in self.runs:
             s = r.session
             s.cycle_hz = self.cycle_rate
             s.dp_sync, s.dp_freeze = self.sync, self.sync and self.freeze
             s.open()                        # Set_Prm (+ Sync_Req / Freeze_Req), Chk_Cfg, the Drive
-            attach(self.group, s)
+            self.group.join(s)
         self.t0 = self.master.link.now()
         stations = []
         for r in self.runs:
@@ -286,7 +273,7 @@ class MultiRun:
                     self._end(f"station {r.address} dropped out of data exchange ({e.why})")
                     return
                 self._sample(r, sample, "running")
-                if r.reached_after is None and at_reference(sample):
+                if r.reached_after is None and sample_at_reference(sample):
                     r.reached_after = round(self.now() - r.t_start, 3)
                 st = sample.status
                 if st.fault:
@@ -310,7 +297,7 @@ class MultiRun:
                 return                      # the user ended it: no drive is judged on its speed
         for r in self.runs:
             if r.reached_after is None:
-                r.problem = "did not reach its reference"
+                r.problem = NOT_REACHED
                 self.failed = True
 
     def _end(self, reason: str) -> None:
@@ -343,7 +330,7 @@ class MultiRun:
             h, self.guard.hurry = self.guard.hurry, False
             return h
         assert self.group is not None       # _stop_all() checked it
-        stop_together([(r.address, r.session, r.percent) for r in runs], self.group, hurry, on_sample)
+        self.group.stop_all([(r.address, r.session, r.percent) for r in runs], hurry, on_sample)
         for r in runs:
             rep = r.session.stop_report
             if rep is None or not rep.stopped:
@@ -386,97 +373,3 @@ class MultiRun:
                 "warnings": self.warnings + [w for r in self.runs for w in r.session.warnings
                                              if w not in self.warnings]}
 
-
-def stop_together(items, group: GroupCycle, hurry: Callable[[], bool] = lambda: False,
-                  on_sample: Callable | None = None) -> None:
-    """The stop of several drives at once. items: (address, DriveSession, percent) of the drives that
-    may be running, all on `group`. The normal stop command of every drive goes in one round; then
-    rounds until each reports stopped (or in fault); a drive not stopped within its own stop time
-    (safestop.stop_timeout), or every one when hurry() says so (a second signal), gets a coast stop;
-    one still not stopped after that is reported failed. A station out of data exchange keeps its
-    stop command for when it is back. Each session's stop_report (and final_status) is set and
-    may_run cleared for each drive confirmed stopped. on_sample(address, Sample) sees every cycle."""
-    t0 = group.master.link.now()
-    pending: dict[int, list] = {}           # address -> [mode, deadline, limit, why]
-    by_addr = {a: s for a, s, _ in items}
-    for a, s, pct in items:
-        limit = s.stop_timeout(pct)
-        pending[a] = ["normal", t0 + limit, limit, ""]
-        try:
-            s.drive.stop("normal", wait=False)
-        except StationOut:
-            pass                            # the command is set; it goes when the station is back
-        except DriveError as e:
-            pending[a] = ["normal", t0, limit, f"normal stop failed: {e}"]
-    group.end_round()
-    while pending:
-        for a in list(pending):
-            s = by_addr[a]
-            try:
-                st = s.drive.cycle()
-            except StationOut:
-                continue
-            if on_sample is not None:
-                on_sample(a, make_sample(s, st))
-            if not (st.fault or st.stopped):
-                continue
-            if st.fault and st.fault_code is None:
-                try:
-                    st = s.drive.status()
-                except (DriveError, StationOut):
-                    pass
-            mode, _, _, why = pending.pop(a)
-            msg = (f"the drive is in fault{f' ({st.fault_code})' if st.fault_code else ''}: its output "
-                   f"is off" if st.fault else "stopped")
-            s.motion.confirm_stopped()
-            s.final_status = st
-            s.stop_report = StopReport(mode, True, group.master.link.now() - t0,
-                                       msg + (f"; {why}; coasted" if mode == "coast" else ""), st)
-        group.end_round()
-        now = group.master.link.now()
-        hurried = hurry() if pending else False
-        for a in list(pending):
-            mode, deadline, limit, why = pending[a]
-            s = by_addr[a]
-            if mode == "normal" and (hurried or now > deadline):
-                why = why or ("stop hurried by a second signal" if hurried else
-                              f"not stopped after {limit:g} s")
-                s.warn(f"station {a}: {why}: coasting")
-                pending[a] = ["coast", now + COAST_TIMEOUT_S, COAST_TIMEOUT_S, why]
-                try:
-                    s.drive.stop("coast", wait=False)
-                except StationOut:
-                    pass
-                except DriveError as e:
-                    pending.pop(a)
-                    s.stop_report = StopReport("failed", False, now - t0,
-                                               f"{why}; coast stop not possible: {e}", s.final_status)
-            elif mode == "coast" and now > deadline:
-                pending.pop(a)
-                out = group.out.get(a)
-                if out is not None:
-                    text = (f"station {a} out of data exchange ({out}): pdrive could not send the stop; "
-                            f"its DP watchdog ({s.watchdog_ms:g} ms) ends data exchange and the drive "
-                            f"stops by {s.comm_loss_text or 'its communication-loss setting'}")
-                else:
-                    text = f"{why}; the drive does not report stopped after a coast stop either"
-                s.stop_report = StopReport("failed", False, now - t0, text, s.final_status)
-
-
-def attach(group: GroupCycle, session) -> Callable[[], None]:
-    """Put a connected session's cyclic channel on `group`; returns the function that takes it off."""
-    metered = session.channel
-    old = metered.inner
-    metered.inner = group.channel(session.address)
-
-    def detach() -> None:
-        metered.inner = old
-        if session.address in group.addresses:
-            group.addresses.remove(session.address)
-    return detach
-
-
-def group_rate(master, sessions) -> tuple[float, float]:
-    """(default rounds per second, the wire limit of a round): one Data_Exchange per station."""
-    wire = 1.0 / sum(1.0 / s.wire_hz for s in sessions)
-    return default_cycle_hz(master.link, wire), wire

@@ -4,9 +4,11 @@ hold it for `duration`), and all of them are stopped together at the end of the 
 
 Stations run one after the other in a checklist, so the step runs on the turn of the first station of
 its list: it opens the others' sessions beside that one (run.open_station, the same master), puts every
-session on one bus cycle (session/groupcycle.py) and, on the later stations' turns, reports what it
-measured for them. A trip or a station dropping out ends the run for all (every drive stopped). Not a
-step type of its own: checklist/steps/run.py hands over to it.
+session on one bus cycle (session/group.py: the Group, its rounds and its stop of all in one round) and,
+on the later stations' turns, reports what it measured for them. A trip or a station dropping out ends
+the run for all (every drive stopped). Not a step type of its own: checklist/steps/run.py hands over
+to it. The watchdog every station of such a step holds (the Group's three rounds) is decided before
+any of them is parameterised: group_watchdog, asked by runner.session_opener.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import weakref
 from profidrive_cli import PdriveError
 from profidrive_cli.checklist.fields import fmt
 from profidrive_cli.checklist.steps.base import StepFailed, rnd
+from profidrive_cli.session.group import Group
 
 #: Runner -> {step index: {station name: (passed, message, expected, measured)}}
 _DONE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
@@ -138,23 +141,46 @@ def execute(run, sr, r, d, h, a, run_measured) -> str:
     return msg
 
 
+def group_watchdog(checklist, spec, master, asked_ms: float) -> tuple[float, str | None]:
+    """The DP watchdog (ms) for `spec`'s station: the one asked for, raised to three rounds of the
+    largest group of a `together` step it runs in (Group.watchdog_for, as run 3,4,5), with the
+    warning's words when raised. The rounds as the step paces them (Group.rate of the stations'
+    wire limits at the bus's baud rate); decided before the station is parameterised, because the
+    Set_Prm carries it (on its own turn too: the step runs on the first station's)."""
+    from profidrive_cli.session.cycle import wire_limit_hz
+    best: tuple[float, str | None] = (asked_ms, None)
+    by_name = {s.name: s for s in checklist.stations}
+    steps = {id(st): st for s in checklist.stations for st in s.steps
+             if st.type == "run" and st.args.get("together")}
+    for st in steps.values():
+        names = st.args.get("together_stations") or list(by_name)
+        if spec.name not in names or len(names) < 2:
+            continue
+        members = [by_name[n] for n in names if n in by_name]
+        wire = [wire_limit_hz(master.params.baud, lay.output_len, lay.input_len)
+                for lay in (m.profile.layouts[m.layout] for m in members)]
+        rate, _ = Group.rate(master, wire)
+        got = Group.watchdog_for(asked_ms, 1.0 / rate, len(members))
+        if got[0] > best[0]:
+            best = got
+    return best
+
+
 def _run_all(run, sr, r, d, h, a, specs, run_measured) -> dict:
-    from profidrive_cli.session.multirun import attach, group_rate
     drives = [_Drive(sr.spec.name, d, h.session, a)]
     results: dict = {}
     with contextlib.ExitStack() as stack:
         group = None
         if h.session is not None:
-            from profidrive_cli.session.groupcycle import GroupCycle
-            group = GroupCycle(h.session.master)
-            stack.callback(attach(group, h.session))
+            group = Group(h.session.master)
+            stack.callback(group.join(h.session))
         for spec in specs[1:]:
             hh = stack.enter_context(run.open_station(spec))
             if group is not None and hh.session is not None:
-                attach(group, hh.session)    # stays on the group until its session is closed
+                group.join(hh.session)       # stays on the group until its session is closed
             drives.append(_Drive(spec.name, hh.drive, hh.session, a))
         if group is not None:
-            rate, _ = group_rate(group.master, [x.session for x in drives])
+            rate, _ = Group.rate(group.master, [x.session.wire_hz for x in drives])
             group.period = 1.0 / rate if rate else 0.0
         try:
             _reach_and_hold(run, sr, r, a, drives, group)
@@ -196,10 +222,9 @@ def _reach_and_hold(run, sr, r, a, drives, group) -> None:
 
 
 def _stop_all(drives, group) -> None:
-    """Every drive stopped together (the sessions' stop_together), or one by one without sessions."""
+    """Every drive stopped together (the Group's stop of all), or one by one without sessions."""
     if group is not None and all(x.session is not None for x in drives):
-        from profidrive_cli.session.multirun import stop_together
-        stop_together([(x.session.address, x.session, None) for x in drives], group)
+        group.stop_all([(x.session.address, x.session, None) for x in drives])
         return
     for x in drives:
         try:

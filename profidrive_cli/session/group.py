@@ -1,0 +1,401 @@
+"""Group: several stations on one bus cycle -- the one coordinator of `pdrive run 3,4,5` (multirun.py),
+the checklist's `together` step and the API's drives (api/bus.py: the keep-alive and the stop on close).
+
+Its rules, each written here once:
+
+- the cycle (GroupCycle): every station of the group gets one Data_Exchange per round, whichever of
+  their drives asks for it, so a drive that waits for its own handshake (start, a parameter read, its
+  stop) never lets the others' watchdogs expire; with Sync (and Freeze) each round ends with one
+  Global_Control broadcast. A station that leaves data exchange is never waited for (StationOut).
+- the keep rule: a station put on the group is kept in data exchange by the master while the master
+  brings up or talks to another station (dp.poller.Master.keep: at least once a period, a quarter of
+  the watchdog at the latest); between calls (the API) every member other than the busy one whose last
+  Data_Exchange is `within` old gets one (Group.keep_others).
+- the pace: one round is one Data_Exchange per station, so its wire time is the sum of the stations'
+  (Group.rate); the watchdog every member needs outlasts three such rounds (min_watchdog_ms,
+  Group.watchdog_for), raised before the stations are parameterised.
+- the stop of all in one round (Group.stop_all): the normal stop command of every drive in one round,
+  a bounded wait for all together, a coast stop for each one not stopped in its time.
+
+Talks to the bus through dp.poller.Master only; no click and no rich.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Callable, Iterable, Sequence
+
+from profidrive_cli import BusError
+from profidrive_cli.dp import services as S
+from profidrive_cli.dp.station import RELEASED, StationMachine
+from profidrive_cli.drives.base import DriveError
+from profidrive_cli.link.base import LinkLost
+from profidrive_cli.session.cycle import Sample, default_cycle_hz, make_sample
+from profidrive_cli.session.safestop import COAST_TIMEOUT_S, StopReport
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.dp.poller import Master
+    from profidrive_cli.drives.base import Drive
+    from profidrive_cli.session.drivesession import DriveSession
+
+#: (address, session, the speed in % it may be running at, None: unknown) of a drive to stop
+StopItem = tuple[int, "DriveSession", "float | None"]
+
+
+def min_watchdog_ms(round_s: float) -> float:
+    """The shortest DP watchdog (ms, a multiple of 10) a station of a group can hold: a station waits
+    up to two rounds for its next Data_Exchange (exchanged early in one round; a drive that asks
+    twice completes the next round early and its own exchange opens it, so the others go last),
+    plus a third round for a retry or a keep-alive round of the bring-up in between."""
+    return float(math.ceil(3.0 * round_s * 1000.0 / 10.0 - 1e-9) * 10)
+
+
+def wire_round_s(wire_hz: Iterable[float]) -> float:
+    """The wire time of one round: one Data_Exchange per station, each at its own wire limit."""
+    return sum(1.0 / hz for hz in wire_hz)
+
+
+class StationOut(BusError):
+    """A station of the group is not in data exchange (dropped out, or not back yet)."""
+
+    def __init__(self, address: int, why: str):
+        super().__init__(f"station {address} is out of data exchange ({why})")
+        self.address = address
+        self.why = why
+
+
+class GroupCycle:
+    """The rounds. exchange(address, outputs) is lazy: the first exchange of a round waits for the
+    period and opens the round; each station is exchanged at most once per round; when a station asks
+    a second time, the round is completed first (the stations not yet exchanged get their last outputs
+    again), then the next one opens. While a station is brought up (or talks to the bus outside the
+    rounds) the master keeps the group's stations (Master.keep / keep_alive): those keep-alives are
+    exchanges like any other but no rounds: the period and the Sync/Freeze broadcasts stay the rounds'."""
+
+    def __init__(self, master: "Master", period: float = 0.0, sync: bool = False,
+                 freeze: bool = False) -> None:
+        self.master = master
+        self.period = period
+        self.command = (S.GC_SYNC if sync else 0) | (S.GC_FREEZE if freeze else 0)
+        self.addresses: list[int] = []
+        self.outputs: dict[int, bytes] = {}
+        #: stations out of data exchange now: address -> why
+        self.out: dict[int, str] = {}
+        #: every station that was out of data exchange at some time during the run: address -> why
+        self.dropped: dict[int, str] = {}
+        self.rounds = 0
+        self.global_controls = 0
+        self._done: set[int] = set()
+        self._next: float | None = None
+
+    def add(self, address: int) -> None:
+        if address not in self.addresses:
+            self.addresses.append(address)
+
+    def channel(self, address: int) -> "GroupChannel":
+        """The station's channel; from now on it is kept in the cycle (with the outputs it has), and
+        by the master while it brings up or talks to another station (Master.keep: at least once a
+        period, a quarter of the watchdog at the latest)."""
+        self.add(address)
+        st = self.master.stations.get(address)
+        if st is not None and address not in self.outputs:
+            self.outputs[address] = bytes(st.outputs)
+        if st is not None and (self.period or address not in self.master.kept):
+            self.master.keep(address, self.period)
+        return GroupChannel(self, address)
+
+    def now(self) -> float:
+        return self.master.link.now()
+
+    # -- the round ----------------------------------------------------------------------------
+    def exchange(self, address: int, outputs: bytes) -> bytes:
+        self.outputs[address] = bytes(outputs)
+        if address in self._done:
+            self.end_round()
+        if not self._done:
+            self._pace()
+        self._done.add(address)
+        return self._one(address)
+
+    def exchanged(self, address: int) -> bool:
+        """Whether the station was exchanged in the open round."""
+        return address in self._done
+
+    def end_round(self) -> None:
+        """Exchange the stations not yet exchanged in this round (with their last outputs), then the
+        Sync/Freeze broadcast. Nothing when no round is open. A station out of data exchange does not
+        stop the others (it is in `out`)."""
+        if not self._done:
+            return
+        try:
+            for a in self.addresses:
+                if a not in self._done and a in self.outputs and \
+                        self.master.stations[a].state != RELEASED:
+                    self._done.add(a)
+                    try:
+                        self._one(a)
+                    except StationOut:
+                        pass
+            if self.command:
+                self.master.global_control(self.command)
+                self.global_controls += 1
+        finally:
+            self._done.clear()
+            self.rounds += 1
+
+    def finish(self) -> None:
+        """End the open round; with Sync/Freeze in force, Unsync/Unfreeze to every station (best
+        effort: the release that follows takes the stations out of data exchange anyway)."""
+        self.end_round()
+        if self.command:
+            undo = (S.GC_UNSYNC if self.command & S.GC_SYNC else 0) | \
+                   (S.GC_UNFREEZE if self.command & S.GC_FREEZE else 0)
+            try:
+                self.master.global_control(undo)
+                self.global_controls += 1
+            except BusError:
+                pass
+            self.command = 0
+
+    def _pace(self) -> None:
+        if not self.period:
+            return
+        link = self.master.link
+        now = link.now()
+        if self._next is None:
+            self._next = now
+        if now < self._next:
+            link.sleep(self._next - now)
+        self._next = max(self._next + self.period, link.now())
+
+    def _one(self, address: int) -> bytes:
+        """One Data_Exchange; a station not in data exchange gets one start-up request instead."""
+        m = self.master
+        st = m.stations[address]
+        if st.state == RELEASED:           # let go of on purpose: never parameterised again here
+            raise StationOut(address, "released")
+        st.set_outputs(self.outputs[address])
+        if not st.in_data_exchange:
+            m.step(st)                     # one request of its start-up, never a wait
+            raise self._out(address, st)
+        st.fresh_inputs = False
+        m.step(st)
+        if st.state == "absent" or not (st.in_data_exchange or st.fresh_inputs):
+            raise self._out(address, st)
+        self.out.pop(address, None)
+        return st.inputs
+
+    def _out(self, address: int, st: StationMachine) -> StationOut:
+        why = self.out.setdefault(address, st.last_error or st.state)
+        self.dropped.setdefault(address, why)
+        return StationOut(address, why)
+
+
+class GroupChannel:
+    """The inner channel of a station's MeteredChannel inside a group (see StationChannel)."""
+
+    def __init__(self, group: GroupCycle, address: int) -> None:
+        self.group = group
+        self.address = address
+        self.master = group.master
+        self.cycles = 0
+
+    def now(self) -> float:
+        return self.group.now()
+
+    def exchange(self, outputs: bytes) -> bytes:
+        self.cycles += 1
+        return self.group.exchange(self.address, outputs)
+
+
+class Group:
+    """Several stations on one bus cycle (see the module doc). The sessions join it once connected
+    (join); the rounds are the GroupCycle's (end_round, exchanged, dropped, out, finish)."""
+
+    def __init__(self, master: "Master", period: float = 0.0, sync: bool = False,
+                 freeze: bool = False) -> None:
+        self.master = master
+        self.cycle = GroupCycle(master, period, sync=sync, freeze=freeze)
+
+    # -- pace and watchdog: decided before the stations are parameterised ------------------------
+    @staticmethod
+    def rate(master: "Master", wire_hz: Iterable[float]) -> tuple[float, float]:
+        """(default rounds per second, the wire limit of a round) of stations with these wire limits
+        (DriveSession.wire_hz): one Data_Exchange per station."""
+        wire = 1.0 / wire_round_s(wire_hz)
+        return default_cycle_hz(master.link, wire), wire
+
+    @staticmethod
+    def watchdog_for(asked_ms: float, round_s: float, stations: int) -> tuple[float, str | None]:
+        """The watchdog (ms) every station of a group of `stations` with rounds of `round_s` holds:
+        the one asked for, raised to three rounds (min_watchdog_ms) when shorter -- a slow bus (5
+        stations at 9.6k: 0.31 s a round) would let it expire between two exchanges of the group;
+        with the words of the warning when raised (else None)."""
+        need = min_watchdog_ms(round_s)
+        if asked_ms >= need:
+            return asked_ms, None
+        return need, (f"watchdog raised from {asked_ms:g} ms to {need:g} ms: one round of {stations} "
+                      f"stations takes {round_s * 1000:.0f} ms, and a station may wait up to two "
+                      f"rounds (plus a retry) for its next exchange")
+
+    # -- members ---------------------------------------------------------------------------------
+    def join(self, session: "DriveSession") -> Callable[[], None]:
+        """Put a connected session's cyclic channel on the group; returns the function that takes it
+        off (its channel back to its own)."""
+        metered = session.channel
+        address = session.address
+        assert metered is not None and address is not None      # the session is connected
+        old = metered.inner
+        metered.inner = self.cycle.channel(address)
+
+        def leave() -> None:
+            metered.inner = old
+            if address in self.cycle.addresses:
+                self.cycle.addresses.remove(address)
+        return leave
+
+    # -- the rounds (GroupCycle) -----------------------------------------------------------------
+    @property
+    def period(self) -> float:
+        return self.cycle.period
+
+    @period.setter
+    def period(self, value: float) -> None:
+        self.cycle.period = value
+
+    @property
+    def cycling(self) -> bool:
+        """Stations are on the rounds (joined): each gets its Data_Exchange there."""
+        return bool(self.cycle.addresses)
+
+    @property
+    def rounds(self) -> int:
+        return self.cycle.rounds
+
+    @property
+    def global_controls(self) -> int:
+        return self.cycle.global_controls
+
+    @property
+    def dropped(self) -> dict[int, str]:
+        return self.cycle.dropped
+
+    @property
+    def out(self) -> dict[int, str]:
+        return self.cycle.out
+
+    def end_round(self) -> None:
+        self.cycle.end_round()
+
+    def exchanged(self, address: int) -> bool:
+        return self.cycle.exchanged(address)
+
+    def finish(self) -> None:
+        self.cycle.finish()
+
+    # -- the keep rule between calls (the API) ---------------------------------------------------
+    def keep_others(self, members: Iterable[int], busy: int | None, last: dict[int, float],
+                    within: float) -> None:
+        """A Data_Exchange (with its last outputs) for every member other than `busy` whose last one
+        (`last`, updated here) is `within` old. A station that cannot be kept is left to its own next
+        call (which then reports it); a lost link is raised."""
+        for a in list(members):
+            if a == busy:
+                continue
+            now = self.master.link.now()
+            if now - last.get(a, now) >= within:
+                last[a] = now
+                try:
+                    self.master.exchange(a, None)
+                except LinkLost:
+                    raise
+                except BusError:
+                    pass
+                last[a] = self.master.link.now()
+
+    # -- the stop of all in one round --------------------------------------------------------------
+    def stop_all(self, items: Sequence[StopItem], hurry: Callable[[], bool] = lambda: False,
+                 on_sample: Callable[[int, Sample], None] | None = None) -> None:
+        """The stop of several drives at once. items: (address, DriveSession, percent) of the drives
+        that may be running, all on the group. The normal stop command of every drive goes in one
+        round; then rounds until each reports stopped (or in fault); a drive not stopped within its
+        own stop time (safestop.stop_timeout), or every one when hurry() says so (a second signal),
+        gets a coast stop; one still not stopped after that is reported failed. A station out of data
+        exchange keeps its stop command for when it is back. Each session's stop_report (and
+        final_status) is set and may_run cleared for each drive confirmed stopped. on_sample(address,
+        Sample) sees every cycle."""
+        link = self.master.link
+        t0 = link.now()
+        pending: dict[int, tuple[str, float, float, str]] = {}     # address -> mode, deadline, limit, why
+        by_addr = {a: s for a, s, _ in items}
+        for a, s, pct in items:
+            limit = s.stop_timeout(pct)
+            pending[a] = ("normal", t0 + limit, limit, "")
+            try:
+                _drive(s).stop("normal", wait=False)
+            except StationOut:
+                pass                        # the command is set; it goes when the station is back
+            except DriveError as e:
+                pending[a] = ("normal", t0, limit, f"normal stop failed: {e}")
+        self.end_round()
+        while pending:
+            for a in list(pending):
+                s = by_addr[a]
+                try:
+                    st = _drive(s).cycle()
+                except StationOut:
+                    continue
+                if on_sample is not None:
+                    on_sample(a, make_sample(s, st))
+                if not (st.fault or st.stopped):
+                    continue
+                if st.fault and st.fault_code is None:
+                    try:
+                        st = _drive(s).status()
+                    except (DriveError, StationOut):
+                        pass
+                mode, _, _, why = pending.pop(a)
+                msg = (f"the drive is in fault{f' ({st.fault_code})' if st.fault_code else ''}: its "
+                       f"output is off" if st.fault else "stopped")
+                s.motion.confirm_stopped()
+                s.final_status = st
+                s.stop_report = StopReport(mode, True, link.now() - t0,
+                                           msg + (f"; {why}; coasted" if mode == "coast" else ""), st)
+            self.end_round()
+            now = link.now()
+            hurried = hurry() if pending else False
+            for a in list(pending):
+                mode, deadline, limit, why = pending[a]
+                s = by_addr[a]
+                if mode == "normal" and (hurried or now > deadline):
+                    why = why or ("stop hurried by a second signal" if hurried else
+                                  f"not stopped after {limit:g} s")
+                    s.warn(f"station {a}: {why}: coasting")
+                    pending[a] = ("coast", now + COAST_TIMEOUT_S, COAST_TIMEOUT_S, why)
+                    try:
+                        _drive(s).stop("coast", wait=False)
+                    except StationOut:
+                        pass
+                    except DriveError as e:
+                        pending.pop(a)
+                        s.stop_report = StopReport("failed", False, now - t0,
+                                                   f"{why}; coast stop not possible: {e}", s.final_status)
+                elif mode == "coast" and now > deadline:
+                    pending.pop(a)
+                    out = self.out.get(a)
+                    if out is not None:
+                        text = (f"station {a} out of data exchange ({out}): pdrive could not send the "
+                                f"stop; its DP watchdog ({s.watchdog_ms:g} ms) ends data exchange and "
+                                f"the drive stops by {s.comm_loss_text or 'its communication-loss setting'}")
+                    else:
+                        text = f"{why}; the drive does not report stopped after a coast stop either"
+                    s.stop_report = StopReport("failed", False, now - t0, text, s.final_status)
+
+
+def _drive(s: "DriveSession") -> "Drive":
+    assert s.drive is not None                      # a member of a group is connected
+    return s.drive
+
+
+__all__ = ["Group", "GroupChannel", "GroupCycle", "StationOut", "StopItem", "min_watchdog_ms",
+           "wire_round_s"]
