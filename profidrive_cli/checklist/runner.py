@@ -472,18 +472,19 @@ def dry_run_port(checklist: Checklist) -> str:
     return "sim://?stations=" + ",".join(f"{s.address}:{s.profile.name}" for s in checklist.stations)
 
 
-def session_opener(master, *, cycle_hz: float | None = None, watchdog_ms: float | None = None,
+def session_opener(bus, *, cycle_hz: float | None = None, watchdog_ms: float | None = None,
                    on_message: Callable[[str], None] | None = None):
-    """open_station for Runner: one DriveSession per station on a shared master (the caller closes its
-    link after the run). The session identifies the station, refuses a station of another family,
-    parameterises it with the watchdog armed, and on exit stops the drive safely and releases it."""
-    from profidrive_cli.session import DEFAULT_WATCHDOG_MS, DriveSession
+    """open_station for Runner: one session per station on one bus, the front door the CLI's drive
+    commands use (api.Bus.session; the caller closes the bus after the run). The session identifies
+    the station, refuses a station of another family, parameterises it with the watchdog armed, and
+    on exit stops the drive safely and releases it."""
+    from profidrive_cli.session import DEFAULT_WATCHDOG_MS
 
     @contextlib.contextmanager
     def open_station(spec: StationSpec):
-        s = DriveSession(master, spec.address, profile=spec.profile.name, layout=spec.layout,
-                         cycle_hz=cycle_hz, watchdog_ms=watchdog_ms or DEFAULT_WATCHDOG_MS,
-                         close_link=False, on_message=on_message)
+        s = bus.session(spec.address, profile=spec.profile.name, layout=spec.layout,
+                        cycle_hz=cycle_hz, watchdog_ms=watchdog_ms or DEFAULT_WATCHDOG_MS,
+                        on_message=on_message)
 
         def closed() -> dict:
             rep = s.stop_report
