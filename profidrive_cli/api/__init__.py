@@ -19,11 +19,13 @@ refused writes), BusError / DriveError (the bus or the drive).
 """
 
 from profidrive_cli import BusError, PdriveError, UsageError
-from profidrive_cli.api.bus import Bus, open_bus
+from profidrive_cli.api.bus import Bus, make_master, open_bus
 from profidrive_cli.api.drive import Drive
 from profidrive_cli.api.results import Fault, Faults, Param, Station, Status, StopResult
 from profidrive_cli.drives.base import DriveError
+from profidrive_cli.fdl.master import format_counters
 from profidrive_cli.session.signals import SessionTerminated
 
 __all__ = ["Bus", "BusError", "Drive", "DriveError", "Fault", "Faults", "Param", "PdriveError",
-           "SessionTerminated", "Station", "Status", "StopResult", "UsageError", "open_bus"]
+           "SessionTerminated", "Station", "Status", "StopResult", "UsageError", "format_counters",
+           "make_master", "open_bus"]

@@ -22,6 +22,7 @@ import threading
 import os
 import warnings
 import weakref
+from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, Callable, Iterator, Literal, Mapping
 
@@ -427,7 +428,7 @@ class Bus:
                 stop_timeout: float | None = None, handle_signals: bool = True,
                 before_connect: Callable[["DriveSession"], None] | None = None,
                 on_message: Callable[[str], None] | None = None,
-                log_csv: str | os.PathLike[str] | None = None,
+                log_csv: str | Path | None = None,
                 own_port: bool = False) -> "DriveSession":
         """The station at the session level, for tools (the CLI's drive commands, the checklist):
         a session.DriveSession on this bus's master, not yet opened. Use it as a context manager:

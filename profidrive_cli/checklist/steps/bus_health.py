@@ -15,7 +15,6 @@ execute() runs it on the station's Drive for the Runner. Imports only the checkl
 
 from __future__ import annotations
 
-from profidrive_cli import PdriveError
 from profidrive_cli.checklist.fields import fmt
 from profidrive_cli.checklist.steps.base import StepFailed, StepType
 from profidrive_cli.session.buswatch import health_figures
@@ -48,9 +47,7 @@ class BusHealth(StepType):
 
     def execute(self, run, sr, r, d, h):
         a = r.step.args
-        sess = getattr(h, "session", None)
-        if sess is None:
-            raise PdriveError("bus_health needs the station on a bus (its master's counters)")
+        sess = h.session
         r.expected = {k: a[k] for k in LIMITS}
         before = dict(sess.counters)
         run.cycle_for(sr, r, d, float(a["seconds"]), "watching the bus counters")
