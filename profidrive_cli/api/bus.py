@@ -445,13 +445,13 @@ class Bus:
         from profidrive_cli.session import DriveSession
         with self._call():
             self._check_open()
+            if own_port and self._drives:
+                raise UsageError(f"the bus on {self.port} has drives open: own_port needs a bus of "
+                                 f"its own")
             try:
                 if station is not None and (isinstance(station, bool) or not isinstance(station, int)
                                             or not 0 <= station <= 125):
                     raise UsageError(f"station {station!r} is not a bus address 0..125")
-                if own_port and self._drives:
-                    raise UsageError(f"the bus on {self.port} has drives open; own_port needs a bus "
-                                     f"of its own")
                 sess = DriveSession(self.master, station, profile=profile, layout=layout, ppo=ppo,
                                     fmt=fmt, watchdog_ms=watchdog_ms, cycle_hz=cycle_hz,
                                     stop_timeout=stop_timeout, close_link=own_port,
