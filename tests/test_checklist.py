@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 
 from profidrive_cli.checklist.runner import FAILED, NOT_RUN, PASSED, Runner, StationHandle
+from direct_session import direct_session
 from profidrive_cli.checklist.spec import ChecklistError, load_checklist, load_checklist_text, parse_var_assignments
 from profidrive_cli.drives import make_drive
 from profidrive_cli.sim.direct import DirectChannel
@@ -167,7 +168,8 @@ def direct_opener(models: dict, trip: dict | None = None):
         d = make_drive(ch, spec.profile, spec.layout)
         # no stop on the way out here: what the tests see stopped, the runner stopped
         yield StationHandle(d, {"address": spec.address, "ident": model.ident,
-                                "profile": spec.profile.name, "layout": spec.layout, "gsd": None})
+                                "profile": spec.profile.name, "layout": spec.layout, "gsd": None},
+                            direct_session(d, spec))
     return open_station
 
 

@@ -12,6 +12,7 @@ import contextlib
 import pytest
 
 from profidrive_cli.checklist.runner import FAILED, NOT_RUN, PASSED, Runner, StationHandle
+from direct_session import direct_session
 from profidrive_cli.checklist.spec import load_checklist_text
 from profidrive_cli.drives import make_drive
 from profidrive_cli.sim.direct import DirectChannel
@@ -38,7 +39,8 @@ def run_text(text, disturb=None):
         ch = DirectChannel(model, spec.profile.layouts[spec.layout].cfg)
         d = make_drive(ch, spec.profile, spec.layout)
         yield StationHandle(d, {"address": spec.address, "ident": model.ident,
-                                "profile": spec.profile.name, "layout": spec.layout, "gsd": None})
+                                "profile": spec.profile.name, "layout": spec.layout, "gsd": None},
+                            direct_session(d, spec))
     return Runner(cl, open_station).run()
 
 

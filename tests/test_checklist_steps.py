@@ -10,6 +10,7 @@ import pytest
 
 from profidrive_cli.checklist.fields import fmt
 from profidrive_cli.checklist.runner import PASSED, Runner, StationHandle
+from direct_session import direct_session
 from profidrive_cli.checklist.spec import ChecklistError, load_checklist_text
 from profidrive_cli.checklist.steps import STEPS, StepFailed, StepType
 from profidrive_cli.drives import make_drive
@@ -62,8 +63,9 @@ class Beep(StepType):
 @contextlib.contextmanager
 def direct_station(spec):
     ch = DirectChannel(make_model(spec.profile), spec.profile.layouts[spec.layout].cfg)
-    yield StationHandle(make_drive(ch, spec.profile, spec.layout),
-                        {"address": spec.address, "profile": spec.profile.name, "layout": spec.layout})
+    d = make_drive(ch, spec.profile, spec.layout)
+    yield StationHandle(d, {"address": spec.address, "profile": spec.profile.name, "layout": spec.layout},
+                        direct_session(d, spec))
 
 
 def test_a_step_type_added_to_the_table_is_validated_and_run(monkeypatch):

@@ -17,6 +17,7 @@ import pytest
 from profidrive_cli.checklist.fields import (FieldChecker, ParamTarget, fmt, is_num, line_at,
                                              param_layouts, range_problem, tname)
 from profidrive_cli.checklist.runner import FAILED, PASSED, Runner, StationHandle
+from direct_session import direct_session
 from profidrive_cli.checklist.spec import ChecklistError, load_checklist_text
 from profidrive_cli.datafile import LineDict, LineList
 from profidrive_cli.drives import make_drive
@@ -65,7 +66,7 @@ def run_text(steps, disturb=None, trip=None, transform=None, observer=None, prep
             prepare(d)
         yield StationHandle(d, {"address": spec.address, "ident": model.ident,
                                 "profile": spec.profile.name, "layout": spec.layout, "gsd": None},
-                            session(d) if session is not None else None)
+                            session(d) if session is not None else direct_session(d, spec))
     kw = {"observer": observer, "progress_interval": 0.0} if observer is not None else {}
     return Runner(cl, open_station, **kw).run().stations[0].steps
 

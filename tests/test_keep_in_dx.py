@@ -139,12 +139,12 @@ def test_checklist_together_keeps_the_first_station_while_it_opens_the_others(si
     url = ("sim://?timing=virtual&baud=9600&stations=3:fuji-g1,4:fuji-pdp3,6:moeller,8:fuji-g1,"
            "9:moeller&set=3:F07=0.3,F08=0.3&set=8:F07=0.3,F08=0.3&set=6:F002=0.3,F003=0.3"
            "&set=9:F002=0.3,F003=0.3")
-    master = BusOptions(url, "9600", 2, None, None, False, False, 0, False).open_master()
+    front = BusOptions(url, "9600", 2, None, None, False, False, 0, False).open_bus()
     bus = next(iter(sim.values()))
     bus.log = []
-    res = Runner(load_checklist_text(LINE, "line.yaml"), session_opener(master, watchdog_ms=WATCHDOG_MS),
+    res = Runner(load_checklist_text(LINE, "line.yaml"), session_opener(front, watchdog_ms=WATCHDOG_MS),
                  yes=True).run()
-    master.link.close()
+    front.close()
     assert [s.status for s in res.stations] == [PASSED] * 5, \
         [(s.spec.name, [(r.status, r.message) for r in s.steps]) for s in res.stations]
     spans = no_dx_spans(bus.log, 9600)

@@ -361,3 +361,68 @@ def test_importing_link_loads_nothing_of_sim_and_sim_urls_still_open():
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=ROOT)
     assert "BEFORE []" in p.stdout, p.stdout + p.stderr
     assert "HANDLER profidrive_cli.sim.protocol_sim" in p.stdout, p.stdout + p.stderr
+
+
+# -- issue 25 step 7: the API is the front door ------------------------------------------------------
+
+#: the CLI's drive commands and their rendering: they get their drives through the API (an api.Bus from
+#: cli/common.py BusOptions.open_bus; Bus.drive, Bus.session), so they import nothing of fdl / link / dp
+#: and build no DriveSession and no Master themselves. Bus-level commands (scan, sniff, bus_cmds, doctor,
+#: wireshark, sim, decode) and cli/common.py (the port, --trace, --baud auto) may keep the lower imports.
+DRIVE_COMMANDS = ("drive_cmds", "commloss_cmd", "checklist_cmd", "config_cmd", "render_drive",
+                  "render_multi", "run_plot", "run_torque", "jsonout", "names")
+#: drive commands still to be moved onto the API (issue 25 step 5: session/live.py); not yet enforced
+DRIVE_COMMANDS_LATER = ("run_cmd", "jog_cmd", "run_multi")
+LOWER = ("fdl", "link", "dp")
+BUILT_BELOW = ("DriveSession", "Master")
+
+
+def _constructions(path: Path, names: tuple[str, ...]) -> list[tuple[int, str]]:
+    """(line, name) of every call `Name(...)` or `x.Name(...)` of one of `names` in the file."""
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+        if isinstance(node, ast.Call):
+            f = node.func
+            name = f.id if isinstance(f, ast.Name) else f.attr if isinstance(f, ast.Attribute) else None
+            if name in names:
+                out.append((node.lineno, name))
+    return out
+
+
+def test_the_cli_drive_commands_stand_on_the_api():
+    assert not set(DRIVE_COMMANDS) & set(DRIVE_COMMANDS_LATER)
+    bad = []
+    for name in DRIVE_COMMANDS:
+        m = f"profidrive_cli.cli.{name}"
+        assert m in MODULES, f"{m}: listed in DRIVE_COMMANDS but not in the package"
+        for line, target, text in ALL_EDGES[m]:
+            if layer_of(target) in LOWER:
+                bad.append(f"{_where(MODULES[m], line)}: {text} (a drive command reaches its drives "
+                           f"through profidrive_cli.api)")
+        for line, what in _constructions(MODULES[m], BUILT_BELOW):
+            bad.append(f"{_where(MODULES[m], line)}: builds a {what} (use api.Bus: BusOptions.open_bus, "
+                       f"Bus.drive or Bus.session)")
+    assert not bad, "drive commands below the API:\n" + "\n".join(bad)
+
+
+def test_the_checklist_stands_on_the_sessions_the_front_door_opens():
+    # every station handle has its session (api.Bus.session in pdrive): no `session is None` branch,
+    # no getattr(h, "session", None), and no DriveSession or Master built in checklist/
+    bad = []
+    for m, path in MODULES.items():
+        if layer_of(m) != "checklist":
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+            if isinstance(node, ast.Compare) and any(isinstance(op, (ast.Is, ast.IsNot)) for op in node.ops):
+                sides = [node.left, *node.comparators]
+                names = [s.attr if isinstance(s, ast.Attribute) else s.id if isinstance(s, ast.Name) else None
+                         for s in sides]
+                if "session" in names and any(isinstance(s, ast.Constant) and s.value is None for s in sides):
+                    bad.append(f"{_where(path, node.lineno)}: a branch on a missing session")
+            if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "getattr"
+                    and len(node.args) >= 2 and isinstance(node.args[1], ast.Constant)
+                    and node.args[1].value == "session"):
+                bad.append(f"{_where(path, node.lineno)}: getattr(..., 'session'): the handle always has one")
+        for line, what in _constructions(path, BUILT_BELOW):
+            bad.append(f"{_where(path, line)}: builds a {what} (the opener's bus does: Bus.session)")
+    assert not bad, "the checklist beside the front door:\n" + "\n".join(bad)

@@ -393,6 +393,7 @@ def test_steps_are_traced_only_when_a_report_will_plot_them(trace):
     import contextlib
 
     from profidrive_cli.checklist.runner import Runner, StationHandle
+    from direct_session import direct_session
     from profidrive_cli.checklist.spec import load_checklist_text
     from profidrive_cli.drives import make_drive
     from profidrive_cli.sim.direct import DirectChannel
@@ -404,7 +405,7 @@ def test_steps_are_traced_only_when_a_report_will_plot_them(trace):
         model = make_model(spec.profile)
         d = make_drive(DirectChannel(model, spec.profile.layouts[spec.layout].cfg), spec.profile, spec.layout)
         yield StationHandle(d, {"address": spec.address, "ident": model.ident, "profile": spec.profile.name,
-                                "layout": spec.layout, "gsd": None})
+                                "layout": spec.layout, "gsd": None}, direct_session(d, spec))
     steps = Runner(cl, open_station, trace_steps=trace).run().stations[0].steps
     moved = [r for r in steps if r.step.type in ("run", "stop")]
     assert len(moved) == 3 and all(r.status == "passed" for r in moved)

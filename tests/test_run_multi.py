@@ -289,7 +289,7 @@ def test_checklist_run_together_runs_the_stations_at_once_and_stops_them(sim):
     from profidrive_cli.cli.common import BusOptions
     url = ("sim://?stations=3:fuji-g1,6:moeller,7:yaskawa&set=3:F07=0.3,F08=0.3&set=6:F002=0.3,F003=0.3"
            "&set=7:C1-01=0.3,C1-02=0.3")
-    master = BusOptions(url, "19200", 2, None, None, False, False, 0, False).open_master()
+    front = BusOptions(url, "19200", 2, None, None, False, False, 0, False).open_bus()
     seen = []
 
     class Watch(Observer):
@@ -298,9 +298,9 @@ def test_checklist_run_together_runs_the_stations_at_once_and_stops_them(sim):
             # which stations' motors turn at this moment (the simulated drives' own speed)
             seen.append({a for a, s in bus.slaves.items() if abs(_turning(s)) > 0.5})
 
-    res = Runner(load_checklist_text(LINE, "line.yaml"), session_opener(master), yes=True,
+    res = Runner(load_checklist_text(LINE, "line.yaml"), session_opener(front), yes=True,
                  observer=Watch()).run()
-    master.link.close()
+    front.close()
     by = {s.spec.name: s for s in res.stations}
     assert [s.status for s in res.stations] == [PASSED, PASSED, PASSED], \
         [(s.spec.name, [(r.status, r.message) for r in s.steps]) for s in res.stations]

@@ -14,16 +14,21 @@
     # leaving the block (also by an exception): every drive this bus started is stopped safely
 
 The api layer stands on session/ and bustools/, and checklist/ and cli/ on it (PLAN in
-tests/test_layering.py): built on session/ (DriveSession), it never prompts and never prints. Errors are the CLI's: UsageError (bad input,
+tests/test_layering.py): built on session/ (DriveSession), it never prompts and never prints. It is
+pdrive's own front door too: the master is built in one place (make_master), and the CLI's drive
+commands and the checklist get their stations from a Bus (Bus.drive, or Bus.session for the session
+level; docs/api.md). Errors are the CLI's: UsageError (bad input,
 refused writes), BusError / DriveError (the bus or the drive).
 """
 
 from profidrive_cli import BusError, PdriveError, UsageError
-from profidrive_cli.api.bus import Bus, open_bus
+from profidrive_cli.api.bus import Bus, make_master, open_bus
 from profidrive_cli.api.drive import Drive
 from profidrive_cli.api.results import Fault, Faults, Param, Station, Status, StopResult
 from profidrive_cli.drives.base import DriveError
+from profidrive_cli.fdl.master import format_counters
 from profidrive_cli.session.signals import SessionTerminated
 
 __all__ = ["Bus", "BusError", "Drive", "DriveError", "Fault", "Faults", "Param", "PdriveError",
-           "SessionTerminated", "Station", "Status", "StopResult", "UsageError", "open_bus"]
+           "SessionTerminated", "Station", "Status", "StopResult", "UsageError", "format_counters",
+           "make_master", "open_bus"]

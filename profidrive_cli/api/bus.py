@@ -22,6 +22,7 @@ import threading
 import os
 import warnings
 import weakref
+from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, Callable, Iterator, Literal, Mapping
 
@@ -31,6 +32,7 @@ from profidrive_cli.api.results import Station
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.api.drive import Drive
     from profidrive_cli.dp.poller import Master
+    from profidrive_cli.link.base import Link
     from profidrive_cli.session import DriveSession
     from profidrive_cli.session.group import Group
     from profidrive_cli.session.signals import SignalGuard
@@ -85,8 +87,7 @@ def open_bus(port: str | None = None, *, baud: str | int | None = None,
 
 def _open_master(port: str, baud: str, baud_source: str, address: int, retries: int | None,
                  slot_time: int | None, rs485: bool, echo: bool) -> "Master":
-    from profidrive_cli.dp.poller import Master
-    from profidrive_cli.fdl.timing import BusParams, parse_baud
+    from profidrive_cli.fdl.timing import parse_baud
     from profidrive_cli.link import open_link
     if not 0 <= address <= 125:
         raise UsageError(f"master address {address} outside 0..125")
@@ -97,10 +98,24 @@ def _open_master(port: str, baud: str, baud_source: str, address: int, retries: 
     except ValueError as e:
         where = "" if baud_source.startswith(("option", "default")) else f"{baud_source}: "
         raise UsageError(f"{where}baud {e}") from None
-    link = open_link(port, rate, rs485=rs485, echo=echo)
+    return make_master(open_link(port, rate, rs485=rs485, echo=echo), rate, address,
+                       slot_time=slot_time, retries=retries)
+
+
+def make_master(link: "Link", baud: int, address: int, *, slot_time: int | None = None,
+                retries: int | None = None) -> "Master":
+    """The DP master on an open link: the one place pdrive builds it (open_bus, and the CLI's bus
+    options with their --trace, --baud auto and -vv links). Bus parameters for `baud`: the standard
+    slot time unless slot_time; retries after no reply: 1 on sim://, else 2; the reply timeout
+    widened for USB/OS latency except on the instant simulator. A bad parameter (slot time,
+    address): UsageError, and the link is closed (also on any other failure)."""
+    from profidrive_cli.dp.poller import Master
+    from profidrive_cli.fdl.timing import BusParams
     try:
+        # over real ports, widen the reply timeout for USB/OS latency (reference §4.3); the
+        # instant simulator needs none
         params = BusParams.for_baud(
-            rate, slot_time=slot_time,
+            baud, slot_time=slot_time,
             retries=retries if retries is not None else (1 if link.is_simulator else 2),
             link_latency=0.0 if link.instant else 0.02)
         return Master(link, params, address)
@@ -407,6 +422,57 @@ class Bus:
             channel.hooks.append(lambda t, o, i: self._exchanged(address, t))
             self._start_keepalive()
             return drive
+
+    def session(self, station: int | None = None, *, profile: str | None = None,
+                layout: str | None = None, ppo: int | None = None, fmt: str | None = None,
+                watchdog_ms: float = 500, cycle_hz: float | None = None,
+                stop_timeout: float | None = None, handle_signals: bool = True,
+                before_connect: Callable[["DriveSession"], None] | None = None,
+                on_message: Callable[[str], None] | None = None,
+                log_csv: str | Path | None = None,
+                own_port: bool = False) -> "DriveSession":
+        """The station at the session level, for tools (the CLI's drive commands, the checklist):
+        a session.DriveSession on this bus's master, not yet opened. Use it as a context manager:
+        it finds the station, brings it to data exchange (before_connect(session) runs first, once
+        the profile is known: a confirmation) and, on the way out, stops the drive safely and
+        releases the station. Beside drive(): progress callbacks, on_message, the --log CSV, the
+        checked parameter work, dump / restore; nothing of the config file is applied (the tool
+        passes profile and layout), the bus does not keep it alive and its close does not stop it
+        (the session's own exit does). The port stays the bus's: close the bus after the session.
+        handle_signals: SIGTERM raises session.SessionTerminated while it is open (the CLI's
+        sessions; False when the caller handles signals). own_port=True: the session takes the
+        port (a tool on one station: the CLI's drive commands): its exit closes it, and this bus is
+        done at once (closed; it must not have opened a drive)."""
+        from profidrive_cli.session import DriveSession
+        with self._call():
+            self._check_open()
+            if own_port and self._drives:
+                raise UsageError(f"the bus on {self.port} has drives open: own_port needs a bus of "
+                                 f"its own")
+            try:
+                if station is not None and (isinstance(station, bool) or not isinstance(station, int)
+                                            or not 0 <= station <= 125):
+                    raise UsageError(f"station {station!r} is not a bus address 0..125")
+                sess = DriveSession(self.master, station, profile=profile, layout=layout, ppo=ppo,
+                                    fmt=fmt, watchdog_ms=watchdog_ms, cycle_hz=cycle_hz,
+                                    stop_timeout=stop_timeout, close_link=own_port,
+                                    handle_signals=handle_signals, before_connect=before_connect,
+                                    on_message=on_message, log_csv=log_csv, env=self.env)
+            except BaseException:
+                if own_port:
+                    self.close()
+                raise
+            if own_port:
+                self._hand_over()
+            return sess
+
+    def _hand_over(self) -> None:
+        """The port now belongs to a session (own_port): this bus is closed without touching it."""
+        self._closed = True
+        _open_buses.discard(self)
+        _masters.pop(id(self), None)
+        self._stop_keepalive.set()
+        self._signals.restore()
 
     @property
     def drives(self) -> list["Drive"]:

@@ -1,9 +1,9 @@
 """Run a validated checklist on drives, one station after another, and collect what was measured.
 
 The runner does not open ports or sessions itself: `open_station(spec)` is a context manager that yields a
-StationHandle (a Drive plus the identity the bus reported). In pdrive that is session.DriveSession
-(see session_opener), which on exit always stops the drive safely and releases the station; tests may hand
-in a DirectChannel-backed opener. All waiting uses the drive's own clock (channel.now()), so a run on a
+StationHandle (the station's session, its Drive and the identity the bus reported). In pdrive the session
+comes from the API's front door, api.Bus.session (see session_opener), and on exit always stops the drive
+safely and releases the station; tests may hand in a DirectChannel-backed opener (a session on its Drive). All waiting uses the drive's own clock (channel.now()), so a run on a
 simulated clock takes no real time.
 
 Safety: a failed step with on_fail: stop, an exception, Ctrl-C or SIGTERM end the station's steps, the
@@ -192,14 +192,13 @@ class RunResult:
 
 @dataclass
 class StationHandle:
-    """What open_station yields: the Drive, and the identity the bus reported for the station.
-
-    session: the session.DriveSession behind it (None in tests on a bare Drive); when present its
-    checked write_param, save and safe stop are used. closed(): after the station is left, what the
-    safe stop on the way out did (dict for the report)."""
+    """What open_station yields: the Drive, the identity the bus reported for the station, and the
+    session behind them (api.Bus.session: a session.DriveSession), whose checked write_param, save,
+    safe stop, counters and master the steps use. closed(): after the station is left, what the safe
+    stop on the way out did (dict for the report)."""
     drive: Any
     identity: dict            # address, ident (int), profile (name), gsd (file name or None), layout, ...
-    session: Any = None
+    session: Any
     closed: Callable[[], dict] | None = None
 
 
@@ -398,17 +397,9 @@ class Runner:
             st = d.status()
             how = "already stopped"
             if st.running or not st.stopped:
-                if handle.session is not None:
-                    rep = handle.session.stop()
-                    how = f"{rep.how} stop: {rep.message}"
-                    st = rep.status or d.status()
-                else:
-                    try:
-                        st = d.stop("normal", wait=True, timeout=DEFAULT_SAFE_STOP_S)
-                        how = "normal stop"
-                    except PdriveError:
-                        st = d.stop("coast", wait=True, timeout=DEFAULT_SAFE_STOP_S)
-                        how = "coast stop"
+                rep = handle.session.stop()
+                how = f"{rep.how} stop: {rep.message}"
+                st = rep.status or d.status()
             sr.final_status = {**status_dict(st), "stop": how}
         except _interrupts():
             raise
@@ -436,8 +427,6 @@ class Runner:
                 self.progress(sr, r, f"{text} ({max(0.0, end - ch.now()):.1f} s left)")
         return st
 
-
-DEFAULT_SAFE_STOP_S = 30.0
 
 
 # =============================================================================================
@@ -472,22 +461,23 @@ def dry_run_port(checklist: Checklist) -> str:
     return "sim://?stations=" + ",".join(f"{s.address}:{s.profile.name}" for s in checklist.stations)
 
 
-def session_opener(master, *, cycle_hz: float | None = None, watchdog_ms: float | None = None,
+def session_opener(bus, *, cycle_hz: float | None = None, watchdog_ms: float | None = None,
                    on_message: Callable[[str], None] | None = None, checklist: Checklist | None = None):
-    """open_station for Runner: one DriveSession per station on a shared master (the caller closes its
-    link after the run). The session identifies the station, refuses a station of another family,
-    parameterises it with the watchdog armed, and on exit stops the drive safely and releases it.
+    """open_station for Runner: one session per station on one bus, the front door the CLI's drive
+    commands use (api.Bus.session; the caller closes the bus after the run). The session identifies
+    the station, refuses a station of another family, parameterises it with the watchdog armed, and
+    on exit stops the drive safely and releases it.
     checklist: a station of its `together` steps gets the watchdog of their group (three rounds)."""
     from profidrive_cli.checklist.steps.together import group_watchdog
-    from profidrive_cli.session import DEFAULT_WATCHDOG_MS, DriveSession
+    from profidrive_cli.session import DEFAULT_WATCHDOG_MS
 
     @contextlib.contextmanager
     def open_station(spec: StationSpec):
         wd, raised = watchdog_ms or DEFAULT_WATCHDOG_MS, None
         if checklist is not None:
-            wd, raised = group_watchdog(checklist, spec, master, wd)
-        s = DriveSession(master, spec.address, profile=spec.profile.name, layout=spec.layout,
-                         cycle_hz=cycle_hz, watchdog_ms=wd, close_link=False, on_message=on_message)
+            wd, raised = group_watchdog(checklist, spec, bus.master, wd)
+        s = bus.session(spec.address, profile=spec.profile.name, layout=spec.layout,
+                        cycle_hz=cycle_hz, watchdog_ms=wd, on_message=on_message)
         if raised is not None:
             s.warn(f"{spec.name}: {raised}")
 
@@ -502,7 +492,7 @@ def session_opener(master, *, cycle_hz: float | None = None, watchdog_ms: float 
                     out["state"] = rep.status.state
             return out
 
-        handle = StationHandle(None, {}, session=s, closed=closed)
+        handle = StationHandle(None, {}, s, closed=closed)
         with s:
             handle.drive = s.drive
             handle.identity = session_identity(s)

@@ -169,11 +169,11 @@ def run_cmd(ctx, opts: BusOptions, file, reports, dry_run, yes, variables, cycle
                "master_address": master_address}
     with signals_as_interrupts():
         try:
-            master = bus.open_master()
+            api_bus = bus.open_bus()
         except UsageError as e:
             _usage(ctx, str(e))
         try:
-            runner = Runner(cl, session_opener(master, cycle_hz=cycle_hz, watchdog_ms=watchdog_ms,
+            runner = Runner(cl, session_opener(api_bus, cycle_hz=cycle_hz, watchdog_ms=watchdog_ms,
                                                on_message=view.message, checklist=cl),
                             port=port, yes=yes, ask=ask, dry_run=dry_run, observer=cast("Observer", view), options=options,
                             trace_steps=any(report_format(r) == "html" for r in reports))
@@ -184,7 +184,7 @@ def run_cmd(ctx, opts: BusOptions, file, reports, dry_run, yes, variables, cycle
                 view.end()
         finally:
             try:
-                master.link.close()
+                api_bus.close()
             except Exception:
                 pass
         written, failed = [], []

@@ -14,7 +14,7 @@ import click
 from rich.console import Console
 
 from profidrive_cli import UsageError
-from profidrive_cli.fdl.timing import BusParams, parse_baud
+from profidrive_cli.fdl.timing import parse_baud
 
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.config import Effective
@@ -163,19 +163,6 @@ class BusOptions:
         self._notices_now()
         return rate
 
-    def params(self, baud: int | None = None, link=None) -> BusParams:
-        b = baud or self.baud_rate()
-        # over real ports, widen the reply timeout for USB/OS latency (reference §4.3); the
-        # instant simulator needs none
-        latency = 0.0 if (link is not None and link.instant) else 0.02
-        try:
-            return BusParams.for_baud(b, slot_time=self.slot_time,
-                                      retries=self.retries if self.retries is not None else
-                                      (1 if link is not None and link.is_simulator else 2),
-                                      link_latency=latency)
-        except ValueError as e:
-            raise UsageError(str(e)) from None
-
     def open_link(self, baud: int | None = None):
         """The link at `baud`, the given rate, or (--baud auto) the rate heard on the line; with
         -vv or --trace wrapped so that every telegram is logged / recorded."""
@@ -199,12 +186,9 @@ class BusOptions:
         return TraceLink(link, self._recorder)
 
     def _make_master(self, link, baud: int | None):
-        from profidrive_cli.dp.poller import Master
-        try:
-            return Master(link, self.params(baud, link), self.master_address)
-        except ValueError as e:
-            link.close()
-            raise UsageError(str(e)) from None
+        from profidrive_cli.api.bus import make_master     # the one place the master is built
+        return make_master(link, baud or self.baud_rate(), self.master_address,
+                           slot_time=self.slot_time, retries=self.retries)
 
     def open_master(self, baud: int | None = None, address: int | None = None):
         """A Master at `baud`, the given rate, or (--baud auto) the rate found by listening and
@@ -216,6 +200,16 @@ class BusOptions:
                                          probe=True)
             return master
         return self._make_master(self.open_link(baud), baud)
+
+    def open_bus(self, address: int | None = None, *, handle_signals: bool = False,
+                 on_message=None):
+        """The drive commands' front door: an api.Bus on open_master(address) (--trace / -vv,
+        --baud auto and its messages as for every bus command) with the settings and their
+        sources. Its stations: Bus.drive (the API's drive) or Bus.session (the session level).
+        handle_signals False: each session handles SIGTERM itself."""
+        from profidrive_cli.api import Bus
+        return Bus(self.open_master(address=address), handle_signals=handle_signals,
+                   settings=self.settings, on_message=on_message)
 
     def _make_master_traced(self, link, baud: int | None):
         return self._make_master(self._traced(link), baud)

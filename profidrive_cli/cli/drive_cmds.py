@@ -57,20 +57,18 @@ def _confirmer(opts, yes: bool, what: str):
 
 def _session(opts, address, profile_name, ppo, fmt, watchdog_ms, *, cycle_hz=0.0, before=None,
              log=None) -> DriveSession:
+    """The station at the session level through the API (Bus.session on the bus of these options),
+    not yet opened: `with` it opens the station; its exit stops the drive safely, releases the
+    station and closes the port (own_port)."""
     if address is not None:
         station_address(address)
     # the config file's defaults for this station on this port (config.py), below the options
     defaults = opts.station_defaults(address)
     profile_name = profile_name or defaults.get("profile")
     layout = defaults.get("layout") if ppo is None and fmt is None else None
-    master = opts.open_master(address=address)
-    try:
-        return DriveSession(master, address, profile=profile_name, layout=layout, ppo=ppo, fmt=fmt,
-                            watchdog_ms=watchdog_ms, cycle_hz=cycle_hz, before_connect=before,
-                            on_message=_message, log_csv=log)
-    except BaseException:
-        master.link.close()
-        raise
+    return opts.open_bus(address).session(
+        address, profile=profile_name, layout=layout, ppo=ppo, fmt=fmt, watchdog_ms=watchdog_ms,
+        cycle_hz=cycle_hz, before_connect=before, on_message=_message, log_csv=log, own_port=True)
 
 
 def _terminations(f):
@@ -148,10 +146,9 @@ def _split_address(args: tuple[str, ...], min_rest: int) -> tuple[int | None, li
 def status_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms):
     """One read of a drive's status: state, flags, speed, current fault."""
     # built on the Python API (api/): the bus, the drive and their ending; rendered from its session
-    from profidrive_cli.api import Bus
     if address is not None:
         station_address(address)
-    with Bus(opts.open_master(address=address), on_message=_message, settings=opts.settings) as bus:
+    with opts.open_bus(address, handle_signals=True, on_message=_message) as bus:
         drive = bus.drive(address, profile=profile_name, layout=fmt, ppo=ppo,
                           watchdog_ms=watchdog_ms, cycle_hz=0.0)
         s = drive.session

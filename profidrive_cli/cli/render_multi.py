@@ -12,9 +12,9 @@ from rich.markup import escape
 from rich.table import Table
 from rich.text import Text
 
+from profidrive_cli.api import format_counters
 from profidrive_cli.cli.common import emit_json, err, out
 from profidrive_cli.cli.render_drive import fmt_num, stop_json
-from profidrive_cli.fdl.master import format_counters
 
 
 def sample_dict(address: int, t_s: float, sample, phase: str) -> dict:

@@ -12,7 +12,7 @@ steps/__init__.py. It holds its schema and its execution together:
     execute(run, sr, r, d, h) -> str
         run: the Runner (dry_run, yes, ask, progress(sr, r, text), cycle_for(sr, r, d, seconds, text));
         sr / r: the StationResult and this step's StepResult (fill r.expected and r.measured); d: the
-        Drive; h: the StationHandle (h.session: the DriveSession, or None). Returns the message of a
+        Drive; h: the StationHandle (h.session: the station's session, from api.Bus.session). Returns the message of a
         pass; raises StepFailed for an unmet expectation (PdriveError: the step is an error).
 
 The runner does the rest once for every type: timing, the observer, on_fail, the safe stop, the report.

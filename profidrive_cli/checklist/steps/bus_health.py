@@ -48,9 +48,7 @@ class BusHealth(StepType):
 
     def execute(self, run, sr, r, d, h):
         a = r.step.args
-        sess = getattr(h, "session", None)
-        if sess is None:
-            raise PdriveError("bus_health needs the station on a bus (its master's counters)")
+        sess = h.session
         r.expected = {k: a[k] for k in LIMITS}
         before = dict(sess.counters)
         run.cycle_for(sr, r, d, float(a["seconds"]), "watching the bus counters")

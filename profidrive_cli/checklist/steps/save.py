@@ -18,14 +18,10 @@ class Save(StepType):
         return {}, "save parameters to non-volatile memory"
 
     def execute(self, run, sr, r, d, h):
-        if h.session is not None:
-            how = h.session.save_support()
-            msg = h.session.save()        # 'automatic' cards: every write is already stored
-            r.measured = {"saved": True, "how": how}
-            return msg
-        d.save()
-        r.measured = {"saved": True, "how": "command"}
-        return "saved to non-volatile memory"
+        how = h.session.save_support()
+        msg = h.session.save()        # 'automatic' cards: every write is already stored
+        r.measured = {"saved": True, "how": how}
+        return msg
 
 
 STEP = Save()

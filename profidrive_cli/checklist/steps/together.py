@@ -16,7 +16,6 @@ from __future__ import annotations
 import contextlib
 import weakref
 
-from profidrive_cli import PdriveError
 from profidrive_cli.checklist.fields import fmt
 from profidrive_cli.checklist.steps.base import StepFailed, rnd
 from profidrive_cli.session.group import Group
@@ -108,7 +107,7 @@ class _Drive:
                     "tolerance": self.tol, "within_s": a["within"], "hold_s": a["duration"],
                     "together_with": others}
         measured = run_measured(st, v, self.reached, self.lo, self.hi, self.unit) if st is not None else {}
-        if self.session is not None and self.session.stop_report is not None:
+        if self.session.stop_report is not None:
             measured["stop"] = self.session.stop_report.how
             measured["stopped"] = self.session.stop_report.stopped
         if self.failed:
@@ -116,8 +115,8 @@ class _Drive:
         msg = (f"within ± {fmt(self.tol)}{self.u} of {fmt(self.target)}{self.u} after {self.reached:.2f} s"
                + (f", held {fmt(a['duration'])} s at {fmt(rnd(self.lo))}..{fmt(rnd(self.hi))}{self.u}"
                   if a["duration"] else "") + f"; run together with {others}, all stopped after")
-        rep = self.session.stop_report if self.session is not None else None
-        if self.session is not None and (rep is None or not rep.stopped):
+        rep = self.session.stop_report
+        if rep is None or not rep.stopped:
             return False, msg.replace("all stopped after", "NOT confirmed stopped after"), expected, measured
         return True, msg, expected, measured
 
@@ -170,18 +169,14 @@ def _run_all(run, sr, r, d, h, a, specs, run_measured) -> dict:
     drives = [_Drive(sr.spec.name, d, h.session, a)]
     results: dict = {}
     with contextlib.ExitStack() as stack:
-        group = None
-        if h.session is not None:
-            group = Group(h.session.master)
-            stack.callback(group.join(h.session))
+        group = Group(h.session.master)
+        stack.callback(group.join(h.session))
         for spec in specs[1:]:
             hh = stack.enter_context(run.open_station(spec))
-            if group is not None and hh.session is not None:
-                group.join(hh.session)       # stays on the group until its session is closed
+            group.join(hh.session)           # stays on the group until its session is closed
             drives.append(_Drive(spec.name, hh.drive, hh.session, a))
-        if group is not None:
-            rate, _ = Group.rate(group.master, [x.session.wire_hz for x in drives])
-            group.period = 1.0 / rate if rate else 0.0
+        rate, _ = Group.rate(group.master, [x.session.wire_hz for x in drives])
+        group.period = 1.0 / rate if rate else 0.0
         try:
             _reach_and_hold(run, sr, r, a, drives, group)
         finally:
@@ -194,8 +189,7 @@ def _run_all(run, sr, r, d, h, a, specs, run_measured) -> dict:
 
 def _reach_and_hold(run, sr, r, a, drives, group) -> None:
     def end_round():
-        if group is not None:
-            group.end_round()
+        group.end_round()
     for x in drives:
         x.begin(float(a["within"]))
     ch = drives[0].d.channel
@@ -222,12 +216,5 @@ def _reach_and_hold(run, sr, r, a, drives, group) -> None:
 
 
 def _stop_all(drives, group) -> None:
-    """Every drive stopped together (the Group's stop of all), or one by one without sessions."""
-    if group is not None and all(x.session is not None for x in drives):
-        group.stop_all([(x.session.address, x.session, None) for x in drives])
-        return
-    for x in drives:
-        try:
-            x.d.stop("normal", wait=True, timeout=30.0)
-        except PdriveError:
-            x.d.stop("coast", wait=True, timeout=30.0)
+    """Every drive stopped together (the Group's stop of all)."""
+    group.stop_all([(x.session.address, x.session, None) for x in drives])

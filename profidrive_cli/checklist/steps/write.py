@@ -54,14 +54,8 @@ class Write(StepType):
         except PdriveError:
             pass                          # write-only, or unreadable before: the read-back decides
         allow = bool(a.get("allow_dangerous"))
-        if h.session is not None:
-            # writable, not dangerous unless the step allows it, exact value, stop-only while running
-            h.session.write_param(t.code, value, allow_dangerous=allow)
-        else:
-            if danger(t.param) and not allow:
-                raise StepFailed(f"{t.label} is dangerous ({danger(t.param)}); the step needs "
-                                 f"allow_dangerous: true")
-            d.write_param(t.code, value)              # the codec's own exact-value check
+        # writable, not dangerous unless the step allows it, exact value, stop-only while running
+        h.session.write_param(t.code, value, allow_dangerous=allow)
         rb = d.read_param(t.code)
         u = f" {rb.unit}" if rb.unit else ""
         r.measured = {"param": rb.code, "before": before, "written": value, "read_back": rb.value,
