@@ -379,7 +379,7 @@ class Runner:
         codes = _snapshot_targets(sr.spec)
         if not codes:
             return
-        if not getattr(drive, "has_param_channel", True):
+        if not drive.has_param_channel:
             sr.snapshot_note = f"no parameter snapshot: layout {sr.spec.layout} has no parameter channel"
             return
         for t in codes:
@@ -409,7 +409,7 @@ class Runner:
     @contextlib.contextmanager
     def _traced(self, r: StepResult, drive):
         """Record the drive's cycles during a step that moves it (for the HTML report's plots)."""
-        if not self.trace_steps or r.step.type not in steptrace.PLOTTED or not hasattr(drive, "channel"):
+        if not self.trace_steps or r.step.type not in steptrace.PLOTTED:
             yield
             return
         with steptrace.record(drive) as tr:
@@ -513,8 +513,8 @@ def session_identity(s) -> dict:
     out: dict[str, Any] = {"address": s.address, "ident": s.ident,
                            "profile": s.profile.name if s.profile else None,
                            "layout": s.layout, "gsd": gsd}
-    st = getattr(s, "station", None)
-    if st is not None and getattr(st, "state", None):
+    st = s.station
+    if st is not None and st.state:
         out["dp_state"] = st.state
     if s.warnings:
         out["warnings"] = list(s.warnings)

@@ -193,7 +193,7 @@ class Live:
         s.stop()
         rep = s.stop_report
         if rep is not None and rep.how in ("normal", "coast"):
-            self._phase("stopped", s._sample(s.final_status) if s.final_status else None)
+            self._phase("stopped", s.motion.sample(s.final_status) if s.final_status else None)
 
 
 __all__ = ["NOT_REACHED", "Live", "LinkLost", "at_reference", "sample_at_reference"]
