@@ -6,17 +6,43 @@ other stations: Master.keep). Talks to the bus through dp.poller.Master only; st
 
 from __future__ import annotations
 
+from pathlib import Path
+from typing import Any, Callable, Protocol, Sequence
+
 from profidrive_cli import BusError
+from profidrive_cli.drives.base import Drive
+from profidrive_cli.drives.profile import Profile
 from profidrive_cli.session.cycle import MeteredChannel
 from profidrive_cli.session.cyclelog import CycleLog
 
 
-def connect(sess):
+class Connecting(Protocol):
+    """What connect() reads and sets on the station being opened (session.DriveSession)."""
+    master: Any
+    address: int | None
+    ident: int | None
+    profile: Profile | None
+    layout: str | None
+    watchdog_ms: float
+    dp_sync: bool
+    dp_freeze: bool
+    cycle_hz: float
+    channel: MeteredChannel | None
+    t0: float
+    log_csv: str | Path | None
+    log_extra: tuple[Sequence[str], Callable[[], Sequence[object]]] | None
+    cyclelog: CycleLog | None
+    drive: Drive | None
+
+    def warn(self, text: str) -> None: ...
+
+
+def connect(sess: Connecting) -> Drive:
     """Set_Prm (watchdog, the GSD's User_Prm_Data), Chk_Cfg of the layout, Data_Exchange at the
     session's rate through a MeteredChannel (with the --log hook), then the family's Drive."""
     from profidrive_cli.drives import make_drive
     from profidrive_cli.dp.station import SlaveConfig
-    assert sess.profile is not None and sess.layout is not None
+    assert sess.profile is not None and sess.layout is not None and sess.ident is not None  # located
     lay = sess.profile.layouts[sess.layout]
     sc = SlaveConfig(ident=sess.ident, cfg=lay.cfg, user_prm=user_prm(sess),
                      wd_ms=sess.watchdog_ms, sync=sess.dp_sync,
@@ -36,13 +62,15 @@ def connect(sess):
     if sess.log_csv:
         sess.cyclelog = CycleLog(sess.log_csv, sess.channel, sess.t0, lambda: sess.drive, sess.warn,
                                  sess.log_extra)
-    drive = make_drive(sess.channel, sess.profile, sess.layout)
+    drive: Drive = make_drive(sess.channel, sess.profile, sess.layout)
     sess.drive = drive
     return drive
 
 
-def user_prm(sess) -> bytes:
+def user_prm(sess: Connecting) -> bytes:
     """The device's default User_Prm_Data from its GSD (library or PDRIVE_GSD_DIR), else none."""
+    if sess.ident is None:
+        return b""
     try:
         from profidrive_cli.gsd.interp import device_user_prm
         from profidrive_cli.gsd.library import find_by_ident

@@ -15,26 +15,33 @@ reaction.py); Moeller P002 (+ P001 shown); Yaskawa F6-01 + C1-02 / C1-09, b1-03;
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from profidrive_cli import UsageError
-from profidrive_cli.drives.base import DriveError, Reaction
+from profidrive_cli.drives.base import DriveError, ParamValue, Reaction
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.session.drivesession import DriveSession
 
 __all__ = ["Reaction", "read_reaction", "clear_reaction", "check_bus_control", "read_accel"]
 
 # -- reads ----------------------------------------------------------------------------------
-def _read(sess, code: str):
-    return sess.drive.read_param(code)
+def _read(sess: "DriveSession", code: str) -> ParamValue:
+    return sess.need_drive().read_param(code)
 
 
-def _readable(sess, code: str) -> bool:
+def _readable(sess: "DriveSession", code: str) -> bool:
+    assert sess.profile is not None
     p = sess.profile.param(code)
     return (p is not None and (p.pnu is not None or p.register is not None)
-            and sess.drive.has_param_channel)
+            and sess.need_drive().has_param_channel)
 
 
-def read_reaction(sess) -> Reaction:
+def read_reaction(sess: "DriveSession") -> Reaction:
     """What the drive is set to do when its master goes away, read from the drive (the family's
     Drive.comm_loss_reaction: the card manuals' rules; see the profiles' decisions)."""
-    d = sess.drive
+    d, prof = sess.need_drive(), sess.profile
+    assert prof is not None
     if not d.comm_loss_reaction_fixed and not d.has_param_channel:
         raise UsageError(f"station {sess.address}: layout {sess.layout} has no parameter channel, so "
                          f"the comm-loss setting cannot be read (choose a layout with one, e.g. --ppo 1)")
@@ -45,23 +52,23 @@ def read_reaction(sess) -> Reaction:
     if r is not None:
         return r
     raise UsageError(f"station {sess.address}: the comm-loss test knows no comm-loss reaction for "
-                     f"the {sess.profile.family} family (profile {sess.profile.name})")
+                     f"the {prof.family} family (profile {prof.name})")
 
 
-def check_bus_control(sess) -> None:
+def check_bus_control(sess: "DriveSession") -> None:
     """Refuse (DriveError, before anything moves) a drive the bus cannot run (the family's
     Drive.bus_run_refusal: Fuji y98 must be 3)."""
-    why = sess.drive.bus_run_refusal()
+    why = sess.need_drive().bus_run_refusal()
     if why:
         raise DriveError(f"station {sess.address}: {why}")
 
 
-def clear_reaction(sess) -> Reaction:
+def clear_reaction(sess: "DriveSession") -> Reaction:
     """Clear mode: the outputs go to zero (control word 0, bit 10 = 0). Fuji OPC-PDP3: o32 decides
     (Table 10.1, L6562-6584); OPC-G1-PDP and Toyo (PROFIdrive mode): bit 10 = 0 keeps the last
     command; otherwise the drive stops by its normal stop (its deceleration time where it can be
     read; Yaskawa b1-03 = 1 coasts)."""
-    d = sess.drive
+    d = sess.need_drive()
     head = "Global_Control Clear_Data: the outputs go to zero (control word 0, no run command)"
     try:
         r = d.zero_data_reaction(head)
@@ -78,9 +85,9 @@ def clear_reaction(sess) -> Reaction:
                     "ramp", decel_s=decel, warnings=extra)
 
 
-def read_accel(sess) -> tuple[float | None, str | None]:
+def read_accel(sess: "DriveSession") -> tuple[float | None, str | None]:
     """(acceleration time from 0 to the max frequency, its code) where the drive says it."""
-    code = sess.drive.ramp_param("accel")      # the profile's ramps, else the card's own
+    code = sess.need_drive().ramp_param("accel")      # the profile's ramps, else the card's own
     if not code or not _readable(sess, code):
         return None, code
     try:
