@@ -861,15 +861,20 @@ def test_write_when_the_value_before_cannot_be_read():
 
 
 class Session:
-    """The session's checked write_param, recorded (runner.StationHandle.session)."""
+    """The session's checked write (its Parameters: plan, then execute), recorded
+    (runner.StationHandle.session)."""
 
     def __init__(self, d):
         self.d = d
         self.calls = []
+        self.params = self
 
-    def write_param(self, code, value, allow_dangerous=False):
+    def plan(self, code, value, allow_dangerous=False):
         self.calls.append((code, value, allow_dangerous))
-        return self.d.write_param(code, value)
+        return code, value
+
+    def execute(self, plan, check_running=True):
+        return self.d.write_param(*plan)
 
 
 def test_write_goes_through_the_session_when_there_is_one():

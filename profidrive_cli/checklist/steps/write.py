@@ -55,8 +55,10 @@ class Write(StepType):
             pass                          # write-only, or unreadable before: the read-back decides
         allow = bool(a.get("allow_dangerous"))
         if h.session is not None:
-            # writable, not dangerous unless the step allows it, exact value, stop-only while running
-            h.session.write_param(t.code, value, allow_dangerous=allow)
+            # writable, not dangerous unless the step allows it, exact value: the code resolved and
+            # checked once (Parameters.plan); stop-only while running, write, read back (execute)
+            params = h.session.params
+            params.execute(params.plan(t.code, value, allow_dangerous=allow))
         else:
             if danger(t.param) and not allow:
                 raise StepFailed(f"{t.label} is dangerous ({danger(t.param)}); the step needs "
