@@ -15,7 +15,8 @@ Remaining sites (none compares a family with a name):
   * checklist/runner.py _traced: `hasattr(drive, "channel")` (a drive on a bus, not a family question)
 Step 2 (Parameters) turned backup.py's `hasattr(params, "line_of")` into isinstance(LineDict) and the
 getattr(drive, "fmt" / "ppo" / "last_area") dispatches of session/monitors.py into Drive hooks
-(input_words, pzd_input_count, last_pzd, param_from_word; counted below).
+(input_words, pzd_input_count, last_pzd, param_from_word; counted below), and checklist/steps/write.py's
+getattr(d, "notes") into Drive.take_notes().
 Family-keyed tables and getattr duck-typing left (not counted): safestop.read_decel / commloss_reaction.read_accel (cfg.ramps), the tables
 safestop._DECEL_CODES / _COMM_LOSS_WORDS and commloss_reaction._ACCEL_CODES.
 """
@@ -32,6 +33,7 @@ BY_NAME = re.compile(r"""\b(?:family|fam)\s*[!=]=\s*["']""")
 
 MAX_SITES = 6
 #: getattr on a Drive for what a family has (an attribute a family may lack): none in monitors.py
+#: (fmt, ppo, last_area) nor in checklist/steps/write.py (notes)
 DRIVE_GETATTR = re.compile(r"getattr\((?:getattr\()?(?:drive|d|self\.sess\.drive|sess\.drive)\b")
 
 
@@ -50,11 +52,11 @@ def test_family_branches_and_hasattr_dispatches_only_go_down():
     assert len(found) <= MAX_SITES, "new family branch / hasattr dispatch:\n" + "\n".join(found)
 
 
-def test_monitors_ask_the_drive_hooks_not_getattr():
-    f = PKG / "session" / "monitors.py"
-    text = f.read_text(encoding="utf-8")
-    assert DRIVE_GETATTR.findall(text) == []
-    assert "._param_value(" not in text and ".resolve_param(" not in text     # codec privates
+def test_monitors_and_the_write_step_ask_the_drive_hooks_not_getattr():
+    for f in (PKG / "session" / "monitors.py", PKG / "checklist" / "steps" / "write.py"):
+        text = f.read_text(encoding="utf-8")
+        assert DRIVE_GETATTR.findall(text) == [], f
+        assert "._param_value(" not in text and ".resolve_param(" not in text, f     # codec privates
 
 
 def test_no_family_is_compared_with_its_name_above_drives():

@@ -70,11 +70,8 @@ class Write(StepType):
                       "unit": rb.unit, "raw": rb.raw}
         if not close_to(rb.value, value, t.step_tolerance):
             raise StepFailed(f"{rb.code}: wrote {fmt(value)}{u}, read back {fmt(rb.value)}{u}")
-        notes = getattr(d, "notes", None)
-        extra = ""
-        if notes:
-            extra = "; " + "; ".join(dict.fromkeys(notes))
-            notes.clear()
+        notes = d.take_notes()                        # the codec's remarks since the last call
+        extra = "; " + "; ".join(dict.fromkeys(notes)) if notes else ""
         changed = "unchanged" if before is not None and close_to(before, value, t.step_tolerance) else \
             (f"was {fmt(before)}{u}" if before is not None else "")
         return f"{rb.code} = {fmt(rb.value)}{u} (read back" + (f"; {changed}" if changed else "") + ")" + extra

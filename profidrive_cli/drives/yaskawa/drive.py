@@ -17,7 +17,8 @@ from profidrive_cli.drives.values import raw_value_problem, value_problem
 from profidrive_cli.drives.yaskawa.codec import (COMMAND_BITS, FORMATS, FrequencyScale, _s16, decode_status,
                                                  mfi_bit, pack_words, unpack_words)
 from profidrive_cli.drives.yaskawa.config import family_config, parse_register_code, register_name
-from profidrive_cli.drives.yaskawa.paramaccess import ParamAccess, ParamRequest, ParamResult, error_text
+from profidrive_cli.drives.yaskawa.paramaccess import (ParamAccess, ParamRequest, ParamResult, error_text,
+                                                       refusal_words)
 
 FAMILY = "yaskawa"
 
@@ -496,7 +497,8 @@ class YaskawaDrive(Drive):
         try:
             self.write_registers(reg, [raw])
         except ParamError as e:
-            raise ParamError(self._explain(code, p, value, e), e.number) from None
+            running = self.last is not None and self.last.running
+            raise ParamError(refusal_words(code, p, value, e.number, running), e.number) from None
         if p is not None and p.code.upper() in ("E1-04", "O1-03") or reg in self._unit_registers():
             self._fmax = None
             self._o1_03 = None
@@ -515,17 +517,6 @@ class YaskawaDrive(Drive):
             if p is not None and p.register is not None:
                 regs.add(p.register)
         return regs
-
-    def _explain(self, code: str, p, value, e: ParamError) -> str:
-        what = f"{p.code} ({p.name})" if p else code
-        u = f" {p.unit}" if p is not None and p.unit else ""
-        msg = f"yaskawa: {what}: the drive refused {value:g}{u}: error {error_text(e.number or 0)}"
-        if e.number == 0x21 and p is not None and p.min is not None and p.max is not None:
-            msg += f" (profile range {p.min:g}..{p.max:g}{u})"
-        if e.number == 0x22 and self.last is not None and self.last.running and p is not None \
-                and p.access == "stop":
-            msg += f"; {p.code} can be changed only while the drive is stopped"
-        return msg
 
     def save(self) -> None:
         """Write the ENTER command register (stores the parameters in the drive's EEPROM)."""
