@@ -862,15 +862,20 @@ def test_write_when_the_value_before_cannot_be_read():
 
 
 class Session:
-    """The session's checked write_param, recorded (runner.StationHandle.session)."""
+    """The session's checked write (its Parameters: plan, then execute), recorded
+    (runner.StationHandle.session)."""
 
     def __init__(self, d):
         self.d = d
         self.calls = []
+        self.params = self
 
-    def write_param(self, code, value, allow_dangerous=False):
+    def plan(self, code, value, allow_dangerous=False):
         self.calls.append((code, value, allow_dangerous))
-        return self.d.write_param(code, value)
+        return code, value
+
+    def execute(self, plan, check_running=True):
+        return self.d.write_param(*plan)
 
 
 def test_write_goes_through_the_session_when_there_is_one():
@@ -993,7 +998,7 @@ def test_range_problem_slack_is_tiny_and_open_ends():
 
 def test_write_on_a_drive_without_notes_and_with_earlier_notes():
     def no_notes(d):
-        del d.notes                                   # a family that keeps no remarks
+        d.take_notes = lambda: []                     # a family that keeps no remarks (Drive's default)
     r = run_text("  - write: {param: F07, value: 2.5}\n", prepare=no_notes)[0]
     assert r.status == PASSED and r.message == "F07 = 2.5 s (read back; was 6 s)"
 

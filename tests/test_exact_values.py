@@ -186,15 +186,16 @@ def test_restore_skips_dangerous_rows_and_says_so(sim, pdrive, tmp_path):
 
 
 def _unplug_on_write(monkeypatch, cls, after: int):
+    # restore writes each row's plan through Drive.write_resolved (session/parameters.py execute)
     calls = {"n": 0}
-    real = cls.write_param
+    real = cls.write_resolved
 
-    def write(self, code, value):
+    def write(self, info, value):
         calls["n"] += 1
         if calls["n"] > after:
             self.channel.inner.master.link.ser.unplug()
-        return real(self, code, value)
-    monkeypatch.setattr(cls, "write_param", write)
+        return real(self, info, value)
+    monkeypatch.setattr(cls, "write_resolved", write)
 
 
 def test_link_lost_mid_restore_says_which_rows_landed(sim, pdrive, tmp_path, monkeypatch):

@@ -3,7 +3,8 @@ ask the Drive (its hooks in drives/base.py, each codec filling what differs) or 
 on the family's Drive class (drives.drive_class), instead of branching on the family's name or on
 hasattr. Counted from the source, as the layering tests read imports: the count may only go down.
 
-The grep this counts (43 lines, 47 matches before step 1; 7 after it; 5 after step 3a, Motion):
+The grep this counts (43 lines, 47 matches before step 1; 7 after it; 5 after step 3a, Motion; fewer after
+step 2, Parameters, and the checklist runner's reads):
 
     grep -rn "family ==\\|family !=\\|fam ==\\|fam !=\\|hasattr(" profidrive_cli/session profidrive_cli/checklist
 
@@ -12,18 +13,18 @@ Remaining sites (none compares a family with a name):
     prof.family` picks the OTHER profiles a foreign code belongs to, for the message (not a dispatch)
   * session/discovery.py: `hasattr(layout, "source")` asks a config value for its FILE:LINE
     provenance (config.FileText), not the family
-  * session/backup.py compare: `hasattr(params, "line_of")` asks a loaded dump for line numbers
-  * checklist/runner.py _traced: `hasattr(drive, "channel")` (a drive on a bus, not a family question)
 
 Family-keyed tables and getattr duck-typing on a session or a Drive, counted by TABLES_AND_GETATTR
-(22 matches before step 3a; 5 after it): the tables safestop._DECEL_CODES / _COMM_LOSS_WORDS and
-commloss_reaction._ACCEL_CODES became Drive.ramp_param / ramp_codes and Drive.comm_loss_words;
-cfg.ramps in safestop.read_decel / commloss_reaction.read_accel Drive.ramp_param; cycle.make_sample's
-drive._fmax Drive.speed_scale_hz; bringup's getattr(sess, "dp_sync" / "dp_freeze" / "log_extra")
-attributes DriveSession declares; safestop's callback_error / after_stop SafeStop's own; bringup's
-track_motion wrapper Drive.on_motion. Left (another slice): session/monitors.py (3: drive.fmt,
-drive.ppo, drive.last_area), checklist/runner.py (drive.has_param_channel on a bare Drive),
-checklist/steps/write.py (d.notes).
+(22 matches before step 3a; 5 after it; 0 after step 2 and the runner's reads): the tables
+safestop._DECEL_CODES / _COMM_LOSS_WORDS and commloss_reaction._ACCEL_CODES became Drive.ramp_param /
+ramp_codes and Drive.comm_loss_words; cfg.ramps in safestop.read_decel / commloss_reaction.read_accel
+Drive.ramp_param; cycle.make_sample's drive._fmax Drive.speed_scale_hz; bringup's getattr(sess,
+"dp_sync" / "dp_freeze" / "log_extra") attributes DriveSession declares; safestop's callback_error /
+after_stop SafeStop's own; bringup's track_motion wrapper Drive.on_motion. Step 2 (Parameters) turned
+backup.py's `hasattr(params, "line_of")` into isinstance(LineDict), the getattr(drive, "fmt" / "ppo" /
+"last_area") dispatches of session/monitors.py into Drive hooks (input_words, pzd_input_count,
+last_pzd, param_from_word) and checklist/steps/write.py's getattr(d, "notes") into Drive.take_notes();
+checklist/runner.py reads drive.has_param_channel and the session's station directly.
 """
 
 import re
@@ -36,12 +37,15 @@ SITES = re.compile(r"family ==|family !=|fam ==|fam !=|hasattr\(")
 #: a family compared with a literal name: none may remain
 BY_NAME = re.compile(r"""\b(?:family|fam)\s*[!=]=\s*["']""")
 
-MAX_SITES = 5
+MAX_SITES = 3
 
 #: a family-keyed table above drives/, or getattr duck-typing directly on a session or a Drive
 TABLES_AND_GETATTR = re.compile(r"_DECEL_CODES|_COMM_LOSS_WORDS|_ACCEL_CODES|"
                                 r"getattr\((?:sess|session|drive|d|sess\.drive)\s*,")
-MAX_TABLES_AND_GETATTR = 5
+MAX_TABLES_AND_GETATTR = 0
+#: getattr on a Drive for what a family has (an attribute a family may lack): none in monitors.py
+#: (fmt, ppo, last_area) nor in checklist/steps/write.py (notes)
+DRIVE_GETATTR = re.compile(r"getattr\((?:getattr\()?(?:drive|d|self\.sess\.drive|sess\.drive)\b")
 
 
 def _sites(pattern: re.Pattern, root: Path = PKG) -> list[str]:
@@ -64,6 +68,13 @@ def test_family_tables_and_getattr_dispatches_only_go_down():
     assert len(found) <= MAX_TABLES_AND_GETATTR, "new family table / getattr dispatch:\n" + "\n".join(found)
 
 
+def test_monitors_and_the_write_step_ask_the_drive_hooks_not_getattr():
+    for f in (PKG / "session" / "monitors.py", PKG / "checklist" / "steps" / "write.py"):
+        text = f.read_text(encoding="utf-8")
+        assert DRIVE_GETATTR.findall(text) == [], f
+        assert "._param_value(" not in text and ".resolve_param(" not in text, f     # codec privates
+
+
 def test_no_family_is_compared_with_its_name_above_drives():
     assert _sites(BY_NAME) == []
 
@@ -77,7 +88,9 @@ def test_the_hooks_have_a_default_in_base_and_the_codecs_answer():
              "use_max_frequency", "comm_loss_summary", "dumpable", "on_device", "not_restored",
              "pzd_assignment_param", "pzd_assigned_code", "comm_loss_reaction", "zero_data_reaction",
              "normal_stop_warnings", "bus_run_refusal", "can_read", "cycle_words", "last_seen", "start_hint",
-             "ramp_param", "speed_scale_hz", "on_motion")
+             "ramp_param", "speed_scale_hz", "on_motion",
+             "read_resolved", "write_resolved", "input_words", "pzd_input_count", "last_pzd",
+             "param_from_word")
     assert [h for h in hooks if not callable(getattr(Drive, h, None))] == []
     facts = {name: (drive_class(load_profile(name)).monitor_mapping,
                     drive_class(load_profile(name)).comm_loss_reaction_fixed,

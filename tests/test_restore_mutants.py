@@ -1,7 +1,7 @@
 """session/restore.py sans-IO: validate every row, then write only what differs, each read back.
 
-A fake session hands restore() the rows compare() would give (session/backup.ParamRow) and records
-every bus write; the profile is the real Fuji OPC-G1-PDP one (ident 0xFD01, alias fuji-g1; F08
+A fake Parameters (session/parameters.py; what restore.py uses of it: session/params.ParamView) hands
+restore() the rows compare() would give (session/backup.ParamRow) and records every bus write; the profile is the real Fuji OPC-G1-PDP one (ident 0xFD01, alias fuji-g1; F08
 deceleration time 1 in 0.1 s steps, so a read-back within half a step, 0.05 s, is the value
 written). The rule (module doc, docs/commands.md "param restore"): any problem -> RestoreRefused
 listing them all with file:line, nothing written; a failure part-way -> RestoreInterrupted whose rows
@@ -51,6 +51,9 @@ class Drive:
         self.log.append(("read", code))
         return ParamValue(code, code, 0, self.values[code], "s")
 
+    def read_resolved(self, info):
+        return self.read_param(info.code)
+
 
 class Session:
     def __init__(self, rows=(), drive=None, access=None, dangers=None):
@@ -67,28 +70,36 @@ class Session:
     def warn(self, text):
         self.warnings.append(text)
 
+    def need_drive(self):
+        return self.drive
+
     def compare(self, doc, progress, allow_dangerous=False, check_identity=True):
         self.compared.append((progress, allow_dangerous, check_identity))
         return self.rows
 
-    def param_info(self, code):
+    def info(self, code):
         return SimpleNamespace(code=code, name=code, access=self.access.get(code, "rw"))
 
     def danger_of(self, info):
         return self.dangers.get(info.code)
 
+    def execute(self, plan, check_running=True):
+        return self.drive.write_param(plan.info.code, plan.value)
+
 
 @pytest.fixture
 def checked(monkeypatch):
-    """restore's check_write, recorded (its own rules are session/params.py's, tested there)."""
+    """restore's check of a row, Parameters.plan, recorded (its own rules are session/parameters.py's,
+    tested there)."""
     calls = []
     refuse = {}
 
-    def check_write(session, info, value, allow_dangerous=False):
+    def plan(session, info, value, allow_dangerous=False):
         calls.append((info.code, value, allow_dangerous))
         if info.code in refuse:
             raise UsageError(refuse[info.code])
-    monkeypatch.setattr(rs, "check_write", check_write)
+        return SimpleNamespace(info=info, value=value)
+    monkeypatch.setattr(Session, "plan", plan, raising=False)
     return SimpleNamespace(calls=calls, refuse=refuse)
 
 

@@ -172,8 +172,7 @@ class Drive:
         """Read one parameter by its native code ("F07", "A004", "C1-01", "PNU23[1]", ...)."""
         with self._bus._call():
             self._check()
-            self.session.param_info(code)
-            return _param(self.session.read_param(code))
+            return _param(self.session.params.read(code))
 
     def set_param(self, code: str, value: float | int | str, *, allow_dangerous: bool = False
                   ) -> Param:
@@ -185,12 +184,11 @@ class Drive:
             raise UsageError(f"set_param {code}: {value!r} is not a value")
         with self._bus._call():
             self._check()
-            s = self.session
-            info = s.param_info(code)
-            v = s.parse_value(code, value, info)
-            s._check_write(info, v, allow_dangerous)
+            params = self.session.params
+            # resolved once, every check once (writable, dangerous, exact value), nothing written
+            plan = params.plan(code, value, allow_dangerous=allow_dangerous)
             self._bus._check_write(f"write {code} = {value} on station {self.station}")
-            return _param(s.write_param(code, v, allow_dangerous=allow_dangerous))
+            return _param(params.execute(plan))
 
     # -- faults ---------------------------------------------------------------------------------------
     def faults(self) -> Faults:

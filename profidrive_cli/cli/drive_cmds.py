@@ -21,7 +21,6 @@ from profidrive_cli.cli import render_drive as R
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.session import (DriveSession, RestoreInterrupted, RestoreRefused,
                                     SessionTerminated)
-from profidrive_cli.drives.values import danger, profile_value_problem
 from profidrive_cli.outfile import OutputFile, check_output_path
 
 
@@ -187,9 +186,8 @@ def param_get(opts, args, profile_name, ppo, fmt, watchdog_ms):
     if not codes:
         raise UsageError("param get: give at least one parameter code")
     with _session(opts, address, profile_name, ppo, fmt, watchdog_ms) as s:
-        for c in codes:
-            s.param_info(c)             # every code checked before the first read
-        values = [s.read_param(c) for c in codes]
+        infos = [s.params.info(c) for c in codes]     # every code checked before the first read
+        values = [s.params.read_info(i) for i in infos]
     if opts.json:
         emit_json({"station": s.address, "profile": s.profile.name,
                    "parameters": [R.param_json(v) for v in values]})
@@ -219,31 +217,23 @@ def param_set(opts, args, save, yes, allow_dangerous, profile_name, ppo, fmt, wa
     code, text = rest
 
     def before(session):
-        # the profile is known here, the drive is not connected yet: nothing has been written
-        what = danger(session.profile.param(code.strip()))
-        if what and not allow_dangerous:
-            raise UsageError(f"{code} is dangerous: writing it {what}; nothing was written "
-                             f"(add --allow-dangerous, and confirm, to write it)")
-        p = session.profile.param(code.strip())
-        if p is not None and _is_number(text):       # refused before anyone is asked
-            v = int(text, 16) if text.strip().lower().lstrip("-").startswith("0x") else float(text)
-            msg = profile_value_problem(session.profile, p, v)
-            if msg:
-                raise UsageError(msg)
+        # the profile is known here, the drive is not connected yet: nothing has been written;
+        # a dangerous entry or a value it cannot hold is refused before anyone is asked
+        what = session.params.preflight(code, text, allow_dangerous=allow_dangerous)
         words = f"write {code} = {text}" + (f" — DANGEROUS: {what}" if what else "")
         _confirmer(opts, yes, words)(session)
 
     with _session(opts, address, profile_name, ppo, fmt, watchdog_ms, before=before) as s:
-        info = s.param_info(code)
-        value = s.parse_value(code, text, info)
-        s._check_write(info, value, allow_dangerous)
+        params = s.params
+        # the code resolved once and every check made once; execute() neither resolves nor checks again
+        plan = params.plan(code, text, allow_dangerous=allow_dangerous)
         try:
-            old = s.read_param(code) if info.access != "wo" else None
+            old = params.read_info(plan.info) if plan.info.access != "wo" else None
         except DriveError:
             old = None
-        new = s.write_param(code, value, allow_dangerous=allow_dangerous)
-        saved = s.save() if save else None
-        notes = s.notes()
+        new = params.execute(plan)
+        saved = params.save() if save else None
+        notes = params.notes()
     if opts.json:
         emit_json({"station": s.address, "profile": s.profile.name, "code": new.code,
                    "old": R.param_json(old) if old else None, "new": R.param_json(new),
@@ -271,7 +261,7 @@ def param_dump(opts, address, output, profile_name, ppo, fmt, watchdog_ms):
     import yaml
     check_output_path(output, "-o")             # before the bus is opened
     with _session(opts, address, profile_name, ppo, fmt, watchdog_ms) as s:
-        doc = _with_progress(opts, "reading parameters", lambda prog: s.dump(prog))
+        doc = _with_progress(opts, "reading parameters", lambda prog: s.params.dump(prog))
     with OutputFile(output, "w") as f:
         f.write(f"# pdrive parameter dump of station {s.address} ({s.profile.title})\n"
                 f"# restore with: pdrive param restore {s.address} {output}\n"
@@ -312,9 +302,9 @@ def param_restore(opts, args, dry_run, yes, allow_dangerous, profile_name, ppo, 
     before = None if dry_run else _confirmer(opts, yes, f"restore parameters from {path}")
     try:
         with _session(opts, address, profile_name, ppo, fmt, watchdog_ms, before=before) as s:
-            rows = _with_progress(opts, "comparing", lambda prog: s.restore(
+            rows = _with_progress(opts, "comparing", lambda prog: s.params.restore(
                 doc, dry_run=dry_run, progress=prog, allow_dangerous=allow_dangerous))
-            notes = s.notes()
+            notes = s.params.notes()
     except RestoreRefused as e:
         if not opts.json:
             for line in e.problems:
@@ -345,7 +335,7 @@ def param_diff(opts, args, profile_name, ppo, fmt, watchdog_ms):
     address, path = _file_args(args, "diff")
     doc = DriveSession.load_dump(path)
     with _session(opts, address, profile_name, ppo, fmt, watchdog_ms) as s:
-        rows = _with_progress(opts, "comparing", lambda prog: s.compare(doc, prog))
+        rows = _with_progress(opts, "comparing", lambda prog: s.params.compare(doc, prog))
     _print_rows(opts, s, rows, "diff", False)
     if any(r.result in ("differs", "missing") for r in rows):
         raise SystemExit(1)             # the table (or the JSON document) is the message

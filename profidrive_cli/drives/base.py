@@ -90,6 +90,9 @@ class ParamInfo:
     unit: str
     param: Any                     # the profile's ParamDef (None for raw PNU / register access)
     access: str                    # rw / ro / stop / wo / "raw"
+    #: the codec's own resolved address (PROFIdrive ParamRef, Yaskawa register), so that
+    #: value_problem / params_at / read_resolved / write_resolved need not resolve the code again
+    ref: Any = field(default=None, repr=False, compare=False)
 
     @property
     def writable(self) -> bool:
@@ -280,6 +283,17 @@ class Drive(ABC):
         for the `dangerous:` marks of a parameter written by its raw address."""
         return []
 
+    def read_resolved(self, info: ParamInfo) -> ParamValue:
+        """Read the parameter `info` (from param_info) without resolving its code again."""
+        return self.read_param(info.code)
+
+    def write_resolved(self, info: ParamInfo, value: float | int) -> ParamValue:
+        """Write `value`, already checked by the session (session/parameters.py Parameters.plan:
+        writable, not dangerous unless allowed, value_problem), to the parameter `info` (from
+        param_info) without resolving or checking it again; returns the value read back. The
+        base writes through write_param (which checks again); the codecs write `info.ref`."""
+        return self.write_param(info.code, value)
+
     # -- family hooks for session/backup.py (dump, compare, restore) --------------------------
     def dumpable(self, p: Any) -> bool:
         """The profile entry `p` has an address this family reads parameters by (PNU here)."""
@@ -356,6 +370,29 @@ class Drive(ABC):
     def pzd_assigned_code(self, raw: int) -> str | None:
         """The profile code an assignment value read from pzd_assignment_param names (None: none)."""
         return None
+
+    def input_words(self) -> tuple[str, ...]:
+        """The names of the layout's own input words where they are not PPO words (Yaskawa's
+        fast I/O: 'status', 'speed_feedback', ...); () for a PPO layout."""
+        return ()
+
+    def pzd_input_count(self) -> int:
+        """How many PZD words the layout's input has (STW and MAV included; PZD3.. are the
+        parameter words pzd_assignment_param assigns); 0 where the layout has no PPO."""
+        return 0
+
+    def last_pzd(self) -> list[int] | None:
+        """The input PZD words of the last exchange (PZD1 first); None before the first, or where
+        the layout has no PPO."""
+        return None
+
+    def param_from_word(self, code: str, raw: int) -> ParamValue:
+        """The value of parameter `code` carried in a cyclic input word `raw`, scaled as the
+        parameter channel reads it (run --monitor)."""
+        p = self.profile.param(code)
+        if p is None:
+            raise UsageError(f"{self.profile.name}: unknown parameter {code!r}")
+        return ParamValue(p.code, p.name, raw, p.from_raw(raw), p.unit)
 
     # -- family hooks for session/commloss_reaction.py (the comm-loss test) -------------------
     #: True when the reaction to a lost master is fixed by the card (read without a parameter

@@ -1,14 +1,14 @@
-"""Dump and compare: which parameters of the profile the connected station has and which of them
-are settings (restored) or read-only / excluded (read, never restored); reading them all into a
-YAML-ready document with the station's identity (dumpfile.py: format, end marker); comparing a loaded
-file row by row against the drive (ParamRow). Reads parameters only; never writes (restore.py does).
+"""Dump and compare, for session/parameters.py (Parameters.dump_plan / dump / compare call these with
+the Parameters, through its public API: params.ParamView): which parameters of the profile the
+connected station has and which of them are settings (restored) or read-only / excluded (read, never
+restored); reading them all into a YAML-ready document with the station's identity (dumpfile.py:
+format, end marker); comparing a loaded file row by row against the drive (ParamRow). Reads
+parameters only; never writes (restore.py does).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import time
-from dataclasses import dataclass
 from typing import Any, Callable
 
 from profidrive_cli import BusError, UsageError
@@ -16,43 +16,27 @@ from profidrive_cli.drives.base import DriveError
 from profidrive_cli.drives.profile import load_profile
 from profidrive_cli.session.discovery import family_words
 from profidrive_cli.session.dumpfile import DUMP_END, DUMP_FORMAT
-from profidrive_cli.session.params import param_info
+from profidrive_cli.datafile import LineDict
+from profidrive_cli.session.params import ParamRow, ParamView
+
+__all__ = ["ParamRow", "compare", "dump", "dump_plan", "same_value"]
 
 
-@dataclass
-class ParamRow:
-    """One line of restore / diff: result applied | refused | unchanged | would apply | differs |
-    missing (in the file, not readable) | skipped."""
-    code: str
-    name: str
-    unit: str
-    file_value: Any
-    drive_value: Any
-    result: str
-    reason: str = ""
-    new_value: Any = None
-    line: int = 0                  # the row's line in the file (0: unknown)
-    why: str = ""                  # for 'skipped': unknown | read-only | not restored | dangerous
-
-    def to_dict(self) -> dict:
-        return {k: v for k, v in dataclasses.asdict(self).items()}
-
-
-def same_value(a, b, scale: float | None) -> bool:
+def same_value(a: Any, b: Any, scale: float | None) -> bool:
     try:
         fa, fb = float(a), float(b)
     except (TypeError, ValueError):
-        return a == b
+        return bool(a == b)
     tol = abs(scale) / 2.0 if scale else 1e-9
     return abs(fa - fb) <= max(tol * 0.999, 1e-9)
 
 
-def dump_plan(sess) -> list[tuple[str, Any, str]]:
+def dump_plan(params: ParamView) -> list[tuple[str, Any, str]]:
     """(code, ParamDef, kind) for every parameter of the profile that the family can read:
     kind 'setting' (restored), 'readonly', or 'excluded: why' (read, never restored)."""
-    out = []
-    d = sess.need_drive()
-    for p in sess.profile.parameters.values():
+    out: list[tuple[str, Any, str]] = []
+    d = params.need_drive()
+    for p in params.profile.parameters.values():
         if p.access == "wo":
             continue
         if not d.dumpable(p):
@@ -75,12 +59,12 @@ def dump_plan(sess) -> list[tuple[str, Any, str]]:
     return out
 
 
-def dump(sess, progress: Callable[[int, int, str], None] | None = None) -> dict:
+def dump(params: ParamView, progress: Callable[[int, int, str], None] | None = None) -> dict[str, Any]:
     """Read every readable parameter; a YAML-ready document with the station's identity."""
-    d = sess.need_drive()
+    d = params.need_drive()
     if not d.has_param_channel:
-        raise DriveError(no_channel_words(sess))
-    plan = dump_plan(sess)
+        raise DriveError(no_channel_words(params))
+    plan = dump_plan(params)
     settings: dict[str, Any] = {}
     readonly: dict[str, Any] = {}
     failed: dict[str, str] = {}
@@ -92,7 +76,7 @@ def dump(sess, progress: Callable[[int, int, str], None] | None = None) -> dict:
         except (DriveError, UsageError) as e:
             failed[code] = str(e)
             continue
-        entry = {"value": pv.value}
+        entry: dict[str, Any] = {"value": pv.value}
         if pv.unit:
             entry["unit"] = pv.unit
         entry["name"] = pv.name or p.name
@@ -104,12 +88,12 @@ def dump(sess, progress: Callable[[int, int, str], None] | None = None) -> dict:
             readonly[code] = entry
     if progress:
         progress(len(plan), len(plan), "")
-    prof = sess.profile
-    doc = {
+    prof = params.profile
+    doc: dict[str, Any] = {
         "pdrive_dump": DUMP_FORMAT,
-        "station": {"address": sess.address, "ident": f"0x{sess.ident:04X}", "profile": prof.name,
-                    "family": prof.family, "title": prof.title, "layout": sess.layout,
-                    "port": getattr(sess.master.link, "name", "")},
+        "station": {"address": params.address, "ident": f"0x{params.ident:04X}", "profile": prof.name,
+                    "family": prof.family, "title": prof.title, "layout": params.layout,
+                    "port": params.port},
         "date": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "count": len(settings),
         "parameters": settings,
@@ -121,59 +105,61 @@ def dump(sess, progress: Callable[[int, int, str], None] | None = None) -> dict:
     return doc
 
 
-def no_channel_words(sess) -> str:
-    with_pkw = [n for n, lay in sess.profile.layouts.items() if lay.pkw]
-    return (f"{sess.profile.name}: layout {sess.layout} has no parameter channel"
+def no_channel_words(params: ParamView) -> str:
+    with_pkw = [n for n, lay in params.profile.layouts.items() if lay.pkw]
+    return (f"{params.profile.name}: layout {params.layout} has no parameter channel"
             + (f" (use --ppo/--format {' | '.join(with_pkw)})" if with_pkw else ""))
 
 
-def identity_notes(sess, doc: dict) -> list[str]:
+def identity_notes(params: ParamView, doc: dict[str, Any]) -> list[str]:
     st = doc.get("station") or {}
     name = st.get("profile")
     notes = []
-    if name and name != sess.profile.name:
+    if name and name != params.profile.name:
         try:
             other = load_profile(str(name))
         except UsageError:
             other = None
-        if other is None or other.name != sess.profile.name:
+        if other is None or other.name != params.profile.name:
             raise UsageError(f"{doc.get('_path', 'the file')} was dumped from a {name} station "
-                             f"({st.get('title', '')}); station {sess.address} is "
-                             f"{family_words(sess.profile)}")
-    if st.get("address") is not None and st.get("address") != sess.address:
+                             f"({st.get('title', '')}); station {params.address} is "
+                             f"{family_words(params.profile)}")
+    if st.get("address") is not None and st.get("address") != params.address:
         notes.append(f"the file was dumped from station {st.get('address')}; writing to station "
-                     f"{sess.address}")
+                     f"{params.address}")
     return notes
 
 
-def compare(sess, doc: dict, progress: Callable[[int, int, str], None] | None = None,
+def compare(params: ParamView, doc: dict[str, Any],
+            progress: Callable[[int, int, str], None] | None = None,
             allow_dangerous: bool = False, check_identity: bool = True) -> list[ParamRow]:
     """Each parameter of the file against the drive: 'unchanged', 'differs', 'missing' (cannot
     be read), 'skipped' (unknown code / read-only / not restorable / dangerous; .why says which)."""
-    d = sess.need_drive()
+    d = params.need_drive()
     if not d.has_param_channel:
-        raise DriveError(no_channel_words(sess))
+        raise DriveError(no_channel_words(params))
     if check_identity:
-        for n in identity_notes(sess, doc):
-            sess.warn(n)
+        for n in identity_notes(params, doc):
+            params.warn(n)
     rows: list[ParamRow] = []
-    params = doc["parameters"]
-    items = list(params.items())
+    entries = doc["parameters"]
+    items = list(entries.items())
     for i, (code, v) in enumerate(items):
         if progress:
             progress(i, len(items), str(code))
         want = v.get("value") if isinstance(v, dict) else v
-        line = params.line_of(code) if hasattr(params, "line_of") else 0
+        # a loaded file knows each row's line (datafile.LineDict); a dict built in Python does not
+        line = entries.line_of(code) if isinstance(entries, LineDict) else 0
         code = str(code)
         try:
-            info = param_info(sess, code)
+            info = params.info(code)
         except UsageError as e:
             rows.append(ParamRow(code, "", "", want, None, "skipped", str(e), line=line or 0,
                                  why="unknown"))
             continue
         p = info.param
         base = code.split("[", 1)[0]
-        pdef = sess.profile.param(base) or p
+        pdef = params.profile.param(base) or p
         if pdef is not None:
             why = d.not_restored(pdef) if pdef.writable else "read-only"
             if why and not (allow_dangerous and why.startswith("dangerous")):
@@ -183,7 +169,7 @@ def compare(sess, doc: dict, progress: Callable[[int, int, str], None] | None = 
                                      line=line or 0, why=kind))
                 continue
         try:
-            pv = d.read_param(code)
+            pv = d.read_resolved(info)
         except (DriveError, UsageError) as e:
             if isinstance(e, BusError) and not isinstance(e, DriveError):
                 raise

@@ -15,17 +15,13 @@ from typing import Any, Callable, Literal, Mapping
 from profidrive_cli import PdriveError, UsageError
 from profidrive_cli.drives.base import Drive, DriveStatus, FaultRecord, ParamValue
 from profidrive_cli.drives.profile import Profile
-import profidrive_cli.session.backup as backup
 import profidrive_cli.session.bringup as bringup
-import profidrive_cli.session.dumpfile as dumpfile
-import profidrive_cli.session.params as params
-import profidrive_cli.session.restore as _restore
 from profidrive_cli.session.cycle import MeteredChannel, Sample, choose_rate
 from profidrive_cli.session.cyclelog import CycleLog
 from profidrive_cli.session.discovery import DriveStation, locate
-from profidrive_cli.session.params import ParamInfo
-from profidrive_cli.session.backup import ParamRow
 from profidrive_cli.session.motion import Motion
+from profidrive_cli.session.parameters import Parameters
+from profidrive_cli.session.params import ParamInfo, ParamRow
 from profidrive_cli.session.safestop import StopReport
 from profidrive_cli.session.signals import Guard, SignalGuard
 
@@ -89,6 +85,8 @@ class DriveSession:
         self.dp_freeze = False
         #: start / jog / torque, the safe stop and may_run (motion.py)
         self.motion = Motion(self)
+        #: parameters: plan / execute, read, save, dump / compare / restore (parameters.py)
+        self.params = Parameters(self)
 
 
     # -- messages ------------------------------------------------------------------------------
@@ -278,41 +276,40 @@ class DriveSession:
         The report is also kept in .stop_report."""
         return self.motion.stop(on_sample, timeout)
 
-    # -- parameters (params.py) -------------------------------------------------------------------
+    # -- parameters (parameters.py: Parameters) ---------------------------------------------------
     def param_info(self, code: str) -> ParamInfo:
-        return params.param_info(self, code)
+        return self.params.info(code)
 
-    def parse_value(self, code: str, text: str | float | int, info: ParamInfo | None = None):
-        return params.parse_value(self, code, text, info)
+    def parse_value(self, code: str, text: str | float | int, info: ParamInfo | None = None
+                    ) -> float | int:
+        return self.params.parse(info or code, text)
 
     def read_param(self, code: str) -> ParamValue:
-        return params.read_param(self, code)
+        return self.params.read(code)
 
     def danger_of(self, info: ParamInfo) -> str | None:
-        return params.danger_of(self, info)
+        return self.params.danger_of(info)
 
     def check_dangerous(self, info: ParamInfo, allow_dangerous: bool = False) -> None:
-        params.check_dangerous(self, info, allow_dangerous)
-
-    def _check_write(self, info: ParamInfo, value, allow_dangerous: bool = False) -> None:
-        params.check_write(self, info, value, allow_dangerous)
+        self.params.check_dangerous(info, allow_dangerous)
 
     def stopped_for(self, info: ParamInfo) -> str | None:
-        return params.stopped_for(self, info)
+        return self.params.stopped_for(info)
 
     def write_param(self, code: str, value, *, check_running: bool = True,
                     allow_dangerous: bool = False) -> ParamValue:
-        return params.write_param(self, code, value, check_running=check_running,
-                                  allow_dangerous=allow_dangerous)
+        """Parameters.write: plan (resolved and checked once), then execute (read back)."""
+        return self.params.write(code, value, check_running=check_running,
+                                 allow_dangerous=allow_dangerous)
 
     def notes(self) -> list[str]:
-        return params.notes(self)
+        return self.params.notes()
 
     def save_support(self) -> str:
-        return params.save_support(self)
+        return self.params.save_support()
 
     def save(self) -> str:
-        return params.save(self)
+        return self.params.save()
 
     # -- faults ---------------------------------------------------------------------------------
     def current_fault(self) -> Sample:
@@ -331,27 +328,27 @@ class DriveSession:
         st = self.need_drive().reset_fault(timeout=timeout)
         return self._sample(st)
 
-    # -- dump / compare / restore (backup.py, dumpfile.py, restore.py) ----------------------------
+    # -- dump / compare / restore (parameters.py: backup.py, dumpfile.py, restore.py) --------------
     def dump_plan(self) -> list[tuple[str, Any, str]]:
-        return backup.dump_plan(self)
+        return self.params.dump_plan()
 
     def dump(self, progress: Callable[[int, int, str], None] | None = None) -> dict:
-        return backup.dump(self, progress)
+        return self.params.dump(progress)
 
-    load_dump = staticmethod(dumpfile.load_dump)
+    load_dump = staticmethod(Parameters.load_dump)
 
     def compare(self, doc: dict, progress: Callable[[int, int, str], None] | None = None,
                 allow_dangerous: bool = False, check_identity: bool = True) -> list[ParamRow]:
-        return backup.compare(self, doc, progress, allow_dangerous, check_identity)
+        return self.params.compare(doc, progress, allow_dangerous, check_identity)
 
     def restore_problems(self, doc: dict, rows: list[ParamRow], allow_dangerous: bool = False
                          ) -> list[str]:
         """Every reason not to write anything, one line each (restore.py)."""
-        return _restore.restore_problems(self, doc, rows, allow_dangerous)
+        return self.params.restore_problems(doc, rows, allow_dangerous)
 
     def restore(self, doc: dict, dry_run: bool = False,
                 progress: Callable[[int, int, str], None] | None = None,
                 allow_dangerous: bool = False) -> list[ParamRow]:
         """Validate every row, then write what differs, reading each write back (restore.py):
         RestoreRefused (nothing written) / RestoreInterrupted (which rows landed)."""
-        return _restore.restore(self, doc, dry_run, progress, allow_dangerous)
+        return self.params.restore(doc, dry_run, progress, allow_dangerous)

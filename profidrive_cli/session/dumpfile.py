@@ -8,12 +8,13 @@ records the decision). Reads files through datafile.py; no bus traffic.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 DUMP_FORMAT = 2              # 2: `count:` and a final `end: pdrive_dump` line (truncation is detected)
 DUMP_END = "pdrive_dump"
 
 
-def check_complete(path, doc, params) -> list[str]:
+def check_complete(path: str | Path, doc: Any, params: dict[str, Any]) -> list[str]:
     """A format-2 dump must carry `count:` = the number of parameters and end with `end: pdrive_dump`
     (so a file cut anywhere is refused). Older files have neither: accepted with a warning."""
     from profidrive_cli.datafile import DataFileError
@@ -33,7 +34,7 @@ def check_complete(path, doc, params) -> list[str]:
     return []
 
 
-def load_dump(path: str | Path) -> dict:
+def load_dump(path: str | Path) -> dict[str, Any]:
     """Read a dump file; UsageError with file:line for anything that is not one."""
     from profidrive_cli.datafile import DataFileError, LineDict, load_yaml
     doc = load_yaml(path)

@@ -151,7 +151,7 @@ class Monitors:
             if c in self.codes:                          # a parameter the input words carry anyway
                 self.carried[c] = word
                 self.cyclic[c] = -1
-        in_words = getattr(getattr(drive, "fmt", None), "in_words", ())
+        in_words = drive.input_words()
         for c in self.codes:                             # the family's own input words
             w = self.words.get(c)
             if w is None:
@@ -161,10 +161,10 @@ class Monitors:
             else:
                 self.dropped[c] = f"layout {sess.layout} has no '{w.word}' input word"
                 sess.say(f"--monitor {c}: {self.dropped[c]}; not monitored")
-        ppo = getattr(drive, "ppo", None)
-        if ppo is None or ppo.pzd_in <= 2 or not drive.has_param_channel:
+        pzd_in = drive.pzd_input_count()
+        if pzd_in <= 2 or not drive.has_param_channel:
             return list(self.cyclic)
-        slots = list(range(1, ppo.pzd_in - 1))            # PNU 916 subindex n = input word PZD(n+2)
+        slots = list(range(1, pzd_in - 1))                # PNU 916 subindex n = input word PZD(n+2)
         if drive.monitor_mapping == "read":
             for n in slots:
                 assigned = int(sess.read_param(drive.pzd_assignment_param(n)).raw)
@@ -213,13 +213,13 @@ class Monitors:
 
     def _read_cyclic(self, sample=None) -> None:
         drive = self.sess.drive
-        area = getattr(drive, "last_area", None)
+        pzd = drive.last_pzd()
         t = self.sess.channel.now() - self.sess.t0
         for c, i in self.cyclic.items():
             if c in self.carried:
                 raw = sample.status.raw.get(self.carried[c]) if sample is not None else None
                 if raw is not None:
-                    pv = drive._param_value(drive.resolve_param(c), raw)
+                    pv = drive.param_from_word(c, raw)
                     mv = self.values[c]
                     mv.value, mv.raw, mv.t = pv.value, pv.raw, t
                 continue
@@ -231,10 +231,9 @@ class Monitors:
                     mv = self.values[c]
                     mv.value, mv.raw, mv.t = round(v * w.scale, 6), raw, t
                 continue
-            if area is None or i >= len(area.pzd):
+            if pzd is None or i >= len(pzd):
                 continue
-            ref = drive.resolve_param(c)
-            pv = drive._param_value(ref, area.pzd[i])
+            pv = drive.param_from_word(c, pzd[i])
             mv = self.values[c]
             mv.value, mv.raw, mv.t = pv.value, pv.raw, t
 

@@ -1,20 +1,26 @@
-"""Parameter services on the session's station: how the family addresses a code (with the closest
-codes, or the family a foreign code belongs to), parsing a typed value, reading, and the checked write
-(writable, not dangerous unless allowed, the exact-value check of drives/values.py, stop-only
-parameters only while stopped, read back); saving to non-volatile memory. Reads and writes only
-through drives.base.Drive.read_param / write_param / save.
+"""Parameter codes and values, for session/parameters.py (Parameters): how an unknown code is
+explained (the closest codes of the family, or the family a foreign code belongs to), parsing a value
+typed by the user, the card's own value text, the write plan (WritePlan: a code resolved once and
+every check made once, for Parameters.execute), and the two views these modules share: Host, the
+station's public attributes Parameters reads, and ParamView, the part of Parameters that backup.py
+and restore.py use, with ParamRow, one row of their tables. No bus traffic here.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import math
+from dataclasses import dataclass
+from typing import Any, Callable, Protocol
+
 from profidrive_cli import UsageError
-from profidrive_cli.drives.base import DriveError, ParamInfo, ParamValue
+from profidrive_cli.drives.base import Drive, ParamInfo, ParamValue
 from profidrive_cli.drives.formats import display_text, value_from_text
 from profidrive_cli.drives.profile import Profile, all_profiles
-from profidrive_cli.drives.values import danger
-from profidrive_cli.session.cycle import Sample
+
+__all__ = ["Host", "ParamInfo", "ParamRow", "ParamView", "WritePlan", "dangerous_words", "parse_text",
+           "profiles_with_code", "suggest_codes", "unknown_code_message", "with_text"]
 
 
 def suggest_codes(profile: Profile, code: str, n: int = 5) -> list[str]:
@@ -28,24 +34,12 @@ def profiles_with_code(code: str) -> list[Profile]:
     return [p for p in all_profiles() if any(k.lower() == c for k in p.parameters)]
 
 
-def param_info(sess, code: str) -> ParamInfo:
-    """How the station's family addresses `code` (no bus traffic). UsageError with the closest
-    codes of the family, or with the family the code belongs to."""
-    d = sess.need_drive()
-    text = code.strip()
-    if not text:
-        raise UsageError("empty parameter code")
-    try:
-        return d.param_info(text)
-    except UsageError as e:
-        raise UsageError(unknown_code_message(sess, text, str(e))) from None
-
-
-def unknown_code_message(sess, code: str, why: str) -> str:
-    prof = sess.profile
+def unknown_code_message(prof: Profile, address: int | None, code: str, why: str) -> str:
+    """The one line for a code the station's family does not address: the closest codes of the
+    family, or the family the code belongs to."""
     if any(k.lower() == code.lower() for k in prof.parameters):
         return why                         # ours, but not reachable (e.g. no published PNU)
-    where = f"station {sess.address} is {prof.name} ({prof.title}, family {prof.family})"
+    where = f"station {address} is {prof.name} ({prof.title}, family {prof.family})"
     others = [p for p in profiles_with_code(code) if p.family != prof.family]
     near = suggest_codes(prof, code)
     hint = f"; closest {prof.family} codes: {', '.join(near)}" if near else ""
@@ -58,13 +52,12 @@ def unknown_code_message(sess, code: str, why: str) -> str:
     return f"{why}" if why else f"unknown parameter '{code}' for {prof.name}"
 
 
-def parse_value(sess, code: str, text: str | float | int, info: ParamInfo | None = None):
+def parse_text(profile: Profile, info: ParamInfo, text: str | float | int) -> float | int:
     """A value typed by the user -> int/float; UsageError saying what was expected."""
-    info = info or param_info(sess, code)
     if isinstance(text, (int, float)) and not isinstance(text, bool):
         return text
     t = str(text).strip()
-    raw = value_from_text(sess.profile, info.param, t)     # the card's own notation (Fuji o40 "041A")
+    raw = value_from_text(profile, info.param, t)     # the card's own notation (Fuji o40 "041A")
     if raw is not None:
         return raw
     try:
@@ -84,97 +77,115 @@ def parse_value(sess, code: str, text: str | float | int, info: ParamInfo | None
         raise UsageError(f"{info.code}: expected {kind}{rng}{unit}, got {t!r}") from None
 
 
-def read_param(sess, code: str) -> ParamValue:
-    param_info(sess, code)                 # unknown codes: the closest ones / the right family
-    return with_text(sess.profile, sess.drive.read_param(code.strip()))
-
-
-def with_text(profile, pv: ParamValue) -> ParamValue:
+def with_text(profile: Profile, pv: ParamValue) -> ParamValue:
     """Fill ParamValue.text from the parameter's `format:` (alarm names, function codes, baud rates)."""
     if pv is not None and pv.text is None:
         pv.text = display_text(profile, profile.param(pv.code), pv.raw, pv.value)
     return pv
 
 
-def danger_of(sess, info: ParamInfo) -> str | None:
-    """What writing this parameter does, in words, when the profile marks it `dangerous: true`
-    (also when it is reached by its raw PNU/index or register); None otherwise."""
-    if info.param is not None:
-        return danger(info.param)
-    d = sess.drive
-    try:
-        hits = d.params_at(info)
-    except (UsageError, DriveError, AttributeError):
-        return None
-    return next((danger(q) for q in hits if danger(q)), None)
+def dangerous_words(info: ParamInfo, what: str) -> str:
+    """The refusal of a dangerous parameter written without allow_dangerous."""
+    return (f"{info.code} ({info.name}) is dangerous: writing it {what}; nothing was "
+            f"written (add --allow-dangerous to write it)")
 
 
-def check_dangerous(sess, info: ParamInfo, allow_dangerous: bool = False) -> None:
-    """UsageError (exit 2) for a dangerous parameter unless allow_dangerous."""
-    what = danger_of(sess, info)
-    if what and not allow_dangerous:
-        raise UsageError(f"{info.code} ({info.name}) is dangerous: writing it {what}; nothing was "
-                         f"written (add --allow-dangerous to write it)")
+@dataclass
+class ParamRow:
+    """One line of restore / diff: result applied | refused | unchanged | would apply | differs |
+    missing (in the file, not readable) | skipped."""
+    code: str
+    name: str
+    unit: str
+    file_value: Any
+    drive_value: Any
+    result: str
+    reason: str = ""
+    new_value: Any = None
+    line: int = 0                  # the row's line in the file (0: unknown)
+    why: str = ""                  # for 'skipped': unknown | read-only | not restored | dangerous
+
+    def to_dict(self) -> dict[str, Any]:
+        return {k: v for k, v in dataclasses.asdict(self).items()}
 
 
-def check_write(sess, info: ParamInfo, value, allow_dangerous: bool = False) -> None:
-    """Every check before a write, no bus traffic: writable, dangerous, exact value (resolution,
-    range, listed codes, wire width: drives/values.py)."""
-    p = info.param
-    if p is not None and not p.writable:
-        raise UsageError(f"{info.code} ({info.name}) is read-only")
-    check_dangerous(sess, info, allow_dangerous)
-    msg = sess.drive.value_problem(info, value)
-    if msg:
-        raise UsageError(msg)
+@dataclass(frozen=True)
+class WritePlan:
+    """One parameter write, resolved once and checked once (Parameters.plan): Parameters.execute
+    writes it without resolving or checking again."""
+    code: str                      # the code as given (stripped)
+    info: ParamInfo                # how the family addresses it (Drive.param_info, with its ref)
+    value: float | int             # the value to write (parsed from `text` when typed)
+    text: str                      # the value as given
+    danger: str | None             # what writing it does when the profile marks it dangerous
+    allowed: bool                  # allow_dangerous was given (a dangerous plan exists only then)
+    stop_only: bool                # may only be written while the motor is stopped
+
+    @property
+    def dangerous(self) -> bool:
+        return self.danger is not None
 
 
-def stopped_for(sess, info: ParamInfo) -> str | None:
-    """None when the parameter may be written now; else why not (stop-only while running)."""
-    if info.access != "stop":
-        return None
-    st = sess.drive.cycle()
-    if st.running or not st.stopped:
-        hz = Sample(0, st, sess.fmax_hz,
-                    0, 0, {}).actual_hz
-        return (f"{info.code} ({info.name}) can only be changed while the motor is "
-                f"stopped (the drive is {st.state}" + (f", {hz:g} Hz" if hz else "") + "); stop it first")
-    return None
+class Host(Protocol):
+    """The station Parameters works on: the public attributes of session.DriveSession it reads."""
+
+    @property
+    def profile(self) -> Profile | None: ...
+
+    @property
+    def address(self) -> int | None: ...
+
+    @property
+    def ident(self) -> int | None: ...
+
+    @property
+    def layout(self) -> str | None: ...
+
+    @property
+    def master(self) -> Any: ...
+
+    @property
+    def drive(self) -> Drive | None: ...
+
+    @property
+    def fmax_hz(self) -> float: ...
+
+    def need_drive(self) -> Drive: ...
+
+    def warn(self, text: str) -> None: ...
 
 
-def write_param(sess, code: str, value, *, check_running: bool = True,
-                allow_dangerous: bool = False) -> ParamValue:
-    """Checked write (writable, not dangerous unless allow_dangerous, exact value, stop-only
-    parameters while running); returns the value read back from the drive."""
-    info = param_info(sess, code)
-    if isinstance(value, str):
-        value = parse_value(sess, code, value, info)
-    check_write(sess, info, value, allow_dangerous)
-    if check_running:
-        why = stopped_for(sess, info)
-        if why:
-            raise DriveError(why)
-    return with_text(sess.profile, sess.drive.write_param(code.strip(), value))
+class ParamView(Protocol):
+    """What backup.py (dump, compare) and restore.py use of Parameters (session/parameters.py)."""
+
+    @property
+    def profile(self) -> Profile: ...
+
+    @property
+    def address(self) -> int | None: ...
+
+    @property
+    def ident(self) -> int | None: ...
+
+    @property
+    def layout(self) -> str | None: ...
+
+    @property
+    def port(self) -> str: ...
+
+    def need_drive(self) -> Drive: ...
+
+    def warn(self, text: str) -> None: ...
+
+    def info(self, code: str) -> ParamInfo: ...
+
+    def danger_of(self, info: ParamInfo) -> str | None: ...
+
+    def plan(self, code: str | ParamInfo, value: str | float | int, *,
+             allow_dangerous: bool = False) -> WritePlan: ...
+
+    def execute(self, plan: WritePlan, *, check_running: bool = True) -> ParamValue: ...
 
 
-def notes(sess) -> list[str]:
-    """Remarks the codec collected (e.g. Fuji: 'o30 takes effect after a power cycle'); cleared."""
-    return sess.drive.take_notes() if sess.drive is not None else []
-
-
-def save_support(sess) -> str:
-    """'command' (the card has a save command), 'automatic' (every write is stored), or
-    'unsupported'."""
-    return sess.need_drive().save_support()
-
-
-def save(sess) -> str:
-    """Store parameters in non-volatile memory; returns what happened in words."""
-    how = save_support(sess)
-    if how == "automatic":
-        return f"{sess.profile.name}: every parameter write is stored by the card itself (no separate save)"
-    if how == "unsupported":
-        raise DriveError(f"{sess.profile.name}: this card has no save command; the value is "
-                         f"written but may be lost at power-off")
-    sess.drive.save()
-    return "saved to non-volatile memory"
+    def compare(self, doc: dict[str, Any], progress: Callable[[int, int, str], None] | None = None,
+                allow_dangerous: bool = False, check_identity: bool = True) -> list[ParamRow]: ...

@@ -1,6 +1,7 @@
-"""Restoring a parameter dump as validate-all-then-write, for session.DriveSession (its restore() and
-restore_problems() call these with the session). Writes parameters only through
-drives.base.Drive.write_param, each read back; the file itself is loaded by dumpfile.py.
+"""Restoring a parameter dump as validate-all-then-write, for session/parameters.py (Parameters.restore
+and restore_problems call these with the Parameters, through its public API: params.ParamView). Each
+row to write becomes a WritePlan (Parameters.plan: resolved once, checked once); the writes are the
+plans executed (Parameters.execute), each read back; the file itself is loaded by dumpfile.py.
 
 restore(): every row is checked before the first write -- the station's profile and ident against the
 file's, the code exists and is readable, writable, the value is one the parameter holds exactly
@@ -13,18 +14,20 @@ reached.
 
 from __future__ import annotations
 
+from typing import Any, Callable
+
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.drives.base import DriveError, value_text
 from profidrive_cli.drives.profile import load_profile
 from profidrive_cli.session.backup import same_value
 from profidrive_cli.session.discovery import family_words
-from profidrive_cli.session.params import check_write
+from profidrive_cli.session.params import ParamRow, ParamView, WritePlan
 
 
 class RestoreRefused(UsageError):
     """The file has problems; nothing was written. .problems: one line each."""
 
-    def __init__(self, problems: list[str]):
+    def __init__(self, problems: list[str]) -> None:
         more = f" (and {len(problems) - 1} more problem(s))" if len(problems) > 1 else ""
         super().__init__(f"nothing was written: {problems[0]}{more}")
         self.problems = problems
@@ -33,7 +36,7 @@ class RestoreRefused(UsageError):
 class RestoreInterrupted(BusError):
     """A restore stopped part-way (link lost, a write refused). .rows say what landed."""
 
-    def __init__(self, rows: list, cause: BaseException):
+    def __init__(self, rows: list[ParamRow], cause: BaseException) -> None:
         landed = sum(r.result == "applied" for r in rows)
         left = sum(r.result in ("not written", "unknown", "refused") for r in rows)
         super().__init__(f"restore interrupted: {cause}; {landed} row(s) written and read back, "
@@ -42,30 +45,39 @@ class RestoreInterrupted(BusError):
         self.cause = cause
 
 
-def restore_problems(session, doc: dict, rows: list, allow_dangerous: bool = False) -> list[str]:
+def restore_problems(params: ParamView, doc: dict[str, Any], rows: list[ParamRow],
+                     allow_dangerous: bool = False) -> list[str]:
     """Every reason not to write anything, one line each (no bus writes; the rows from compare()).
     Marks dangerous rows 'skipped' unless allow_dangerous."""
+    return check_rows(params, doc, rows, allow_dangerous)[0]
+
+
+def check_rows(params: ParamView, doc: dict[str, Any], rows: list[ParamRow],
+               allow_dangerous: bool = False) -> tuple[list[str], list[tuple[ParamRow, WritePlan]]]:
+    """restore_problems(), and the plan of each row to write (Parameters.plan: its value parsed,
+    writable, exact), for restore() to execute."""
     problems: list[str] = []
+    plans: list[tuple[ParamRow, WritePlan]] = []
     path = doc.get("_path", "the file")
     st = doc.get("station") or {}
     name = st.get("profile")
-    if name and name != session.profile.name:
+    if name and name != params.profile.name:
         try:
-            other = load_profile(str(name)).name
+            other: str | None = load_profile(str(name)).name
         except UsageError:
             other = None
-        if other != session.profile.name:
+        if other != params.profile.name:
             problems.append(f"{path}: dumped from a {name} station ({st.get('title', '')}); station "
-                            f"{session.address} is {family_words(session.profile)}")
+                            f"{params.address} is {family_words(params.profile)}")
     ident = st.get("ident")
     if ident is not None:
         try:
-            fid = int(str(ident), 0)
+            fid: int | None = int(str(ident), 0)
         except ValueError:
             fid = None
-        if fid != session.ident:
-            problems.append(f"{path}: dumped from a station with ident {ident}; station {session.address} "
-                            f"reports 0x{session.ident:04X}")
+        if fid != params.ident:
+            problems.append(f"{path}: dumped from a station with ident {ident}; station {params.address} "
+                            f"reports 0x{params.ident:04X}")
     running = None
     for r in rows:
         where = f"{path}:{r.line}" if r.line else path
@@ -76,7 +88,7 @@ def restore_problems(session, doc: dict, rows: list, allow_dangerous: bool = Fal
             problems.append(f"{where}: {r.code}: {r.reason}")
             continue
         if r.result == "skipped" and r.why == "dangerous":
-            r.reason = (f"dangerous: writing it {session.danger_of(session.param_info(r.code)) or r.reason} "
+            r.reason = (f"dangerous: writing it {params.danger_of(params.info(r.code)) or r.reason} "
                         f"(--allow-dangerous writes it)")
             continue
         if r.result == "skipped" and r.why == "read-only":
@@ -84,52 +96,56 @@ def restore_problems(session, doc: dict, rows: list, allow_dangerous: bool = Fal
             continue
         if r.result not in ("differs", "unchanged"):
             continue
-        info = session.param_info(r.code)
-        what = session.danger_of(info)
+        info = params.info(r.code)
+        what = params.danger_of(info)
         if what and not allow_dangerous:
             r.result, r.reason, r.why = ("skipped", f"dangerous: writing it {what} "
                                          f"(--allow-dangerous writes it)", "dangerous")
             continue
         try:
-            check_write(session, info, r.file_value, allow_dangerous=True)
+            plan = params.plan(info, r.file_value, allow_dangerous=True)
         except UsageError as e:
             problems.append(f"{where}: {e}")
             continue
         if r.result == "differs" and info.access == "stop":
             if running is None:
-                stc = session.drive.cycle()
+                stc = params.need_drive().cycle()
                 running = stc.running or not stc.stopped
             if running:
                 problems.append(f"{where}: {r.code} ({r.name}) can only be changed while the motor is "
                                 f"stopped, and the drive is running; stop it first")
-    return problems
+        if r.result == "differs":
+            plans.append((r, plan))
+    return problems, plans
 
 
-def restore(session, doc: dict, dry_run: bool = False, progress=None,
-            allow_dangerous: bool = False) -> list:
+def restore(params: ParamView, doc: dict[str, Any], dry_run: bool = False,
+            progress: Callable[[int, int, str], None] | None = None,
+            allow_dangerous: bool = False) -> list[ParamRow]:
     """Validate every row first (identity, existence, exact value, writability, dangerous, drive
     stopped where needed): any problem -> RestoreRefused listing them all, nothing written. Then
-    write what differs, reading each write back. Rows: applied / unchanged / skipped / would
-    apply (dry run). A write that fails, or a link lost mid-way -> RestoreInterrupted with the
-    rows: 'applied' landed, 'unknown' was being written, 'not written' were not reached."""
+    write what differs (each row's plan), reading each write back. Rows: applied / unchanged /
+    skipped / would apply (dry run). A write that fails, or a link lost mid-way ->
+    RestoreInterrupted with the rows: 'applied' landed, 'unknown' was being written, 'not written'
+    were not reached."""
     for w in doc.get("_warnings", []):
-        session.warn(w)
-    rows = session.compare(doc, progress, allow_dangerous=allow_dangerous, check_identity=False)
-    problems = restore_problems(session, doc, rows, allow_dangerous)
+        params.warn(w)
+    rows = params.compare(doc, progress, allow_dangerous=allow_dangerous, check_identity=False)
+    problems, todo = check_rows(params, doc, rows, allow_dangerous)
     if problems:
         raise RestoreRefused(problems)
-    todo = [r for r in rows if r.result == "differs"]
     if dry_run:
-        for r in todo:
+        for r, _ in todo:
             r.result = "would apply"
         return rows
-    for r in todo:
+    for r, _ in todo:
         r.result = "not written"
-    for r in todo:
+    for r, plan in todo:
         r.result = "unknown"
         try:
-            session.drive.write_param(r.code, r.file_value)
-            back = session.drive.read_param(r.code)
+            # the row was checked with the drive stopped (check_rows): no second look per row
+            params.execute(plan, check_running=False)
+            back = params.need_drive().read_resolved(plan.info)
         except BusError as e:
             r.reason = f"the write or its read-back did not complete: {e}"
             raise RestoreInterrupted(rows, e) from e
@@ -137,7 +153,7 @@ def restore(session, doc: dict, dry_run: bool = False, progress=None,
             r.result, r.reason = "refused", str(e)
             raise RestoreInterrupted(rows, e) from e
         r.new_value = back.value
-        pdef = session.profile.param(r.code.split("[", 1)[0])
+        pdef = params.profile.param(r.code.split("[", 1)[0])
         if same_value(back.value, r.file_value, pdef.scale if pdef is not None else None):
             r.result = "applied"
         else:

@@ -54,19 +54,18 @@ class Write(StepType):
         except PdriveError:
             pass                          # write-only, or unreadable before: the read-back decides
         allow = bool(a.get("allow_dangerous"))
-        # writable, not dangerous unless the step allows it, exact value, stop-only while running
-        h.session.write_param(t.code, value, allow_dangerous=allow)
+        # writable, not dangerous unless the step allows it, exact value: the code resolved and
+        # checked once (Parameters.plan); stop-only while running, write, read back (execute)
+        params = h.session.params
+        params.execute(params.plan(t.code, value, allow_dangerous=allow))
         rb = d.read_param(t.code)
         u = f" {rb.unit}" if rb.unit else ""
         r.measured = {"param": rb.code, "before": before, "written": value, "read_back": rb.value,
                       "unit": rb.unit, "raw": rb.raw}
         if not close_to(rb.value, value, t.step_tolerance):
             raise StepFailed(f"{rb.code}: wrote {fmt(value)}{u}, read back {fmt(rb.value)}{u}")
-        notes = getattr(d, "notes", None)
-        extra = ""
-        if notes:
-            extra = "; " + "; ".join(dict.fromkeys(notes))
-            notes.clear()
+        notes = d.take_notes()                        # the codec's remarks since the last call
+        extra = "; " + "; ".join(dict.fromkeys(notes)) if notes else ""
         changed = "unchanged" if before is not None and close_to(before, value, t.step_tolerance) else \
             (f"was {fmt(before)}{u}" if before is not None else "")
         return f"{rb.code} = {fmt(rb.value)}{u} (read back" + (f"; {changed}" if changed else "") + ")" + extra

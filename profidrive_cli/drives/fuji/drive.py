@@ -84,9 +84,8 @@ class FujiDrive(pd.ProfidriveDrive):
             return f"{ref.label}: the card stayed busy (error {result.error}); try again"
         return super().write_refused_message(ref, value, result)
 
-    def write_param(self, code: str, value) -> ParamValue:
-        pv = super().write_param(code, value)
-        ref = self.resolve_param(code)
+    def _write(self, ref: pd.ParamRef, value: float | int) -> ParamValue:
+        pv = super()._write(ref, value)
         if ref.param is not None and ref.param.extra.get("power_cycle"):
             self.notes.append(f"{ref.code} takes effect after the inverter is switched off and on")
         return pv

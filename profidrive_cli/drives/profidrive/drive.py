@@ -85,17 +85,21 @@ class ProfidriveDrive(Drive):
         ref = self.resolve_param(code)
         p = ref.param
         return ParamInfo(ref.code, ref.name, p.unit if p is not None else "", p,
-                         p.access if p is not None else "raw")
+                         p.access if p is not None else "raw", ref)
+
+    def _ref(self, info: ParamInfo) -> ParamRef:
+        """The address param_info resolved (resolved again only for a ParamInfo made elsewhere)."""
+        return info.ref if isinstance(info.ref, ParamRef) else self.resolve_param(info.code)
 
     def param_label(self, code: str) -> tuple[str, Any]:
         ref = self.resolve_param(code)
         return ref.code, ref.param
 
     def value_problem(self, info: ParamInfo, value: float | int) -> str | None:
-        return self.check_value(self.resolve_param(info.code), value)
+        return self.check_value(self._ref(info), value)
 
     def params_at(self, info: ParamInfo) -> list[Any]:
-        ref = self.resolve_param(info.code)
+        ref = self._ref(info)
         return [q for q in self.profile.parameters.values()
                 if q.pnu is not None and q.pnu == ref.pnu and (q.index or 0) == (ref.subindex or 0)]
 
@@ -249,7 +253,12 @@ class ProfidriveDrive(Drive):
         return res.value
 
     def read_param(self, code: str) -> ParamValue:
-        ref = self.resolve_param(code)
+        return self._read(self.resolve_param(code))
+
+    def read_resolved(self, info: ParamInfo) -> ParamValue:
+        return self._read(self._ref(info))
+
+    def _read(self, ref: ParamRef) -> ParamValue:
         res = self.request(read_request(ref.pnu, ref.subindex, ref.array))
         if not res.ok:
             raise ParamError(f"{ref.label}: the drive refused the read: {res.describe_error()}",
@@ -270,6 +279,14 @@ class ProfidriveDrive(Drive):
         msg = self.check_value(ref, value)
         if msg:
             raise ParamError(msg, self.cfg.error_numbers.get("out_of_range"))
+        return self._write(ref, value)
+
+    def write_resolved(self, info: ParamInfo, value: float | int) -> ParamValue:
+        return self._write(self._ref(info), value)
+
+    def _write(self, ref: ParamRef, value: float | int) -> ParamValue:
+        """Write a checked value to `ref`, then read it back."""
+        p = ref.param
         raw = self.value_to_raw(ref, value)
         res = self.request(write_request(ref.pnu, raw, ref.subindex, ref.array, ref.size == 32))
         if not res.ok:
@@ -279,7 +296,7 @@ class ProfidriveDrive(Drive):
             self._fmax = None
         if p is not None and p.access == "wo":
             return self._param_value(ref, raw)
-        return self.read_param(code)
+        return self._read(ref)
 
     def save(self) -> None:
         if self.cfg.save_pnu is None:
@@ -355,6 +372,15 @@ class ProfidriveDrive(Drive):
         res = self.request(pzd_map_write(direction, slot, pnu, self.cfg))
         if not res.ok:
             raise ParamError(f"PZD{slot + 2} mapping: {res.describe_error()}", res.error)
+
+    def pzd_input_count(self) -> int:
+        return int(self.ppo.pzd_in)
+
+    def last_pzd(self) -> list[int] | None:
+        return self.last_area.pzd if self.last_area is not None else None
+
+    def param_from_word(self, code: str, raw: int) -> ParamValue:
+        return self._param_value(self.resolve_param(code), raw)
 
     # -- motion ------------------------------------------------------------------------------
     def _ensure_fmax(self) -> None:

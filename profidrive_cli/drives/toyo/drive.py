@@ -111,8 +111,7 @@ class ToyoDrive(pd.ProfidriveDrive):
     def value_to_raw(self, ref: pd.ParamRef, value) -> int:
         return wire_from_value(self.profile, ref.param, value) if ref.param is not None else int(value) & 0xFFFF
 
-    def read_param(self, code: str) -> ParamValue:
-        ref = self.resolve_param(code)
+    def _read(self, ref: pd.ParamRef) -> ParamValue:
         res = self.request(frame_for(ref))
         if not res.ok:
             raise ParamError(f"{ref.label}: the card refused the read: {res.describe_error()}", res.error)
@@ -126,6 +125,12 @@ class ToyoDrive(pd.ProfidriveDrive):
         msg = self.check_value(ref, value)
         if msg:
             raise ParamError(msg, 2)
+        return self._write(ref, value)
+
+    def _write(self, ref: pd.ParamRef, value: float | int) -> ParamValue:
+        p = ref.param
+        if ref.array:                                # traceback / fault history frames: read only
+            raise ParamError(f"{ref.label} is read-only", 1)
         raw = self.value_to_raw(ref, value)
         res = self.request(frame_for(ref, write=True, value=raw))
         if not res.ok:

@@ -17,7 +17,8 @@ from profidrive_cli.drives.values import raw_value_problem, value_problem
 from profidrive_cli.drives.yaskawa.codec import (COMMAND_BITS, FORMATS, STATUS_BITS, FrequencyScale, _s16,
                                                  decode_status, mfi_bit, pack_words, unpack_words)
 from profidrive_cli.drives.yaskawa.config import family_config, parse_register_code, register_name
-from profidrive_cli.drives.yaskawa.paramaccess import ParamAccess, ParamRequest, ParamResult, error_text
+from profidrive_cli.drives.yaskawa.paramaccess import (ParamAccess, ParamRequest, ParamResult, error_text,
+                                                       refusal_words)
 
 FAMILY = "yaskawa"
 
@@ -400,8 +401,8 @@ class YaskawaDrive(Drive):
     def param_info(self, code: str) -> ParamInfo:
         reg, p = self._resolve(code)          # MEMOBUS register
         if p is None:
-            return ParamInfo(f"REG0x{reg:04X}", "MEMOBUS register", "", None, "raw")
-        return ParamInfo(p.code, p.name, p.unit, p, p.access)
+            return ParamInfo(f"REG0x{reg:04X}", "MEMOBUS register", "", None, "raw", reg)
+        return ParamInfo(p.code, p.name, p.unit, p, p.access, reg)
 
     def param_label(self, code: str) -> tuple[str, Any]:
         if self.profile.param(code) is None:
@@ -411,11 +412,14 @@ class YaskawaDrive(Drive):
         return super().param_label(code)
 
     def params_at(self, info: ParamInfo) -> list[Any]:
-        reg, _ = self._resolve(info.code)
+        reg = info.ref if isinstance(info.ref, int) else self._resolve(info.code)[0]
         return [q for q in self.profile.parameters.values() if q.register == reg]
 
     def save_support(self) -> str:
         return "command" if self.cfg.enter_register is not None else "unsupported"
+
+    def input_words(self) -> tuple[str, ...]:
+        return tuple(self.fmt.in_words)
 
     def last_seen(self) -> DriveStatus | None:
         return self.last
@@ -465,31 +469,36 @@ class YaskawaDrive(Drive):
             raise DriveError(f"{p.code}: the profile gives no MEMOBUS register for it")
         return p.register, p
 
-    def _value(self, code: str, p, raw: int) -> ParamValue:
+    def read_param(self, code: str) -> ParamValue:
+        if self.params is None:
+            raise self._no_channel()
+        return self.read_resolved(self.param_info(code))
+
+    def read_resolved(self, info: ParamInfo) -> ParamValue:       # (read_registers: the channel)
+        reg, p = (info.ref, info.param) if isinstance(info.ref, int) else self._resolve(info.code)
+        raw = self.read_registers(reg, 1)[0]
         if p is None:
-            n = register_name(self.profile, self._resolve(code)[0])
-            reg = parse_register_code(code)
+            n = register_name(self.profile, reg)
             return ParamValue(code=f"REG0x{reg:04X}", name=f"MEMOBUS register{' (' + n + ')' if n else ''}",
                               raw=raw, value=raw)
         return ParamValue(code=p.code, name=p.name, raw=raw, value=p.from_raw(raw), unit=p.unit)
 
-    def read_param(self, code: str) -> ParamValue:
-        if self.params is None:
-            raise self._no_channel()
-        reg, p = self._resolve(code)
-        raw = self.read_registers(reg, 1)[0]
-        return self._value(code, p, raw)
-
     def write_param(self, code: str, value: float | int) -> ParamValue:
         if self.params is None:
             raise self._no_channel()
-        reg, p = self._resolve(code)
+        info = self.param_info(code)
+        p = info.param
         msg = self.check_value(p, value) if p is not None else raw_value_problem(code, value, 16)
         if msg:
             raise UsageError(msg)
+        if p is not None and not p.writable:
+            raise DriveError(f"{p.code} ({p.name}) is read-only")
+        return self.write_resolved(info, value)
+
+    def write_resolved(self, info: ParamInfo, value: float | int) -> ParamValue:
+        reg, p = (info.ref, info.param) if isinstance(info.ref, int) else self._resolve(info.code)
+        code = info.code
         if p is not None:
-            if not p.writable:
-                raise DriveError(f"{p.code} ({p.name}) is read-only")
             raw = p.to_raw(value)
             if p.signed and raw < 0:
                 raw += 0x10000
@@ -505,11 +514,12 @@ class YaskawaDrive(Drive):
         try:
             self.write_registers(reg, [raw])
         except ParamError as e:
-            raise ParamError(self._explain(code, p, value, e), e.number) from None
+            running = self.last is not None and self.last.running
+            raise ParamError(refusal_words(code, p, value, e.number, running), e.number) from None
         if p is not None and p.code.upper() in ("E1-04", "O1-03") or reg in self._unit_registers():
             self._fmax = None
             self._o1_03 = None
-        return self.read_param(code)
+        return self.read_resolved(info)
 
     def check_value(self, p, value) -> str | None:
         """The exact-value check (drives/values.py) against the profile's entry: resolution, the
@@ -524,17 +534,6 @@ class YaskawaDrive(Drive):
             if p is not None and p.register is not None:
                 regs.add(p.register)
         return regs
-
-    def _explain(self, code: str, p, value, e: ParamError) -> str:
-        what = f"{p.code} ({p.name})" if p else code
-        u = f" {p.unit}" if p is not None and p.unit else ""
-        msg = f"yaskawa: {what}: the drive refused {value:g}{u}: error {error_text(e.number or 0)}"
-        if e.number == 0x21 and p is not None and p.min is not None and p.max is not None:
-            msg += f" (profile range {p.min:g}..{p.max:g}{u})"
-        if e.number == 0x22 and self.last is not None and self.last.running and p is not None \
-                and p.access == "stop":
-            msg += f"; {p.code} can be changed only while the drive is stopped"
-        return msg
 
     def save(self) -> None:
         """Write the ENTER command register (stores the parameters in the drive's EEPROM)."""

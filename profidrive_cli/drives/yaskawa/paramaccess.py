@@ -8,6 +8,7 @@ waits. May touch: codec (AreaFormat), drives/base (errors).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 from profidrive_cli import UsageError
 from profidrive_cli.drives.base import DriveError
@@ -40,6 +41,20 @@ HS_STATUS_NAMES = {0: "idle", 1: "sending to drive", 2: "waiting for drive", 3: 
 def error_text(code: int) -> str:
     name, meaning = ERROR_CODES.get(code, (f"unknown (0x{code:02X})", "not in the manual's table"))
     return f"0x{code:02X} {name}: {meaning}"
+
+
+def refusal_words(code: str, p: Any, value: float | int, number: int | None, running: bool) -> str:
+    """The one line for a write the drive refused with error `number` (0x21 outside its range, 0x22
+    not now), naming the parameter (`p`: its profile entry, None for a raw register `code`);
+    `running`: the drive was running at the last exchange."""
+    what = f"{p.code} ({p.name})" if p else code
+    u = f" {p.unit}" if p is not None and p.unit else ""
+    msg = f"yaskawa: {what}: the drive refused {value:g}{u}: error {error_text(number or 0)}"
+    if number == 0x21 and p is not None and p.min is not None and p.max is not None:
+        msg += f" (profile range {p.min:g}..{p.max:g}{u})"
+    if number == 0x22 and running and p is not None and p.access == "stop":
+        msg += f"; {p.code} can be changed only while the drive is stopped"
+    return msg
 
 
 def decode_hs(b: int) -> tuple[int, int, int]:
