@@ -7,13 +7,13 @@ other stations: Master.keep). Talks to the bus through dp.poller.Master only; st
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Callable, Protocol, Sequence
+from typing import Any, Protocol
 
 from profidrive_cli import BusError
 from profidrive_cli.drives.base import Drive
 from profidrive_cli.drives.profile import Profile
 from profidrive_cli.session.cycle import MeteredChannel
-from profidrive_cli.session.cyclelog import CycleLog
+from profidrive_cli.session.cyclelog import CycleLog, Extra
 
 
 class Connecting(Protocol):
@@ -30,7 +30,7 @@ class Connecting(Protocol):
     channel: MeteredChannel | None
     t0: float
     log_csv: str | Path | None
-    log_extra: tuple[Sequence[str], Callable[[], Sequence[object]]] | None
+    log_extra: Extra | None
     cyclelog: CycleLog | None
     drive: Drive | None
 

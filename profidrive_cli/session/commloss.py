@@ -261,7 +261,7 @@ def run_commloss(sess: "DriveSession", hz: float, mode: str = "silence", timeout
     emit({"event": "at_speed", "t_s": round(sample.t, 3), "actual_hz": sample.actual_hz})
 
     # 2. the break
-    master, addr = sess.master, sess.address
+    master, addr = sess.master, address
     reparams_before = sess.counters.get("reparams", 0)
     inner_channel = drive.channel
     if mode == "silence":

@@ -16,6 +16,10 @@ from typing import Any, Callable, Sequence
 from profidrive_cli.outfile import OutputFile, OutputWriteError
 
 
+#: (column names, row()) of values logged beside each exchange (run --monitor)
+Extra = tuple[Sequence[str], Callable[[], Sequence[object]]]
+
+
 class CycleLog:
     """Opened at once (header row written); hooked onto `channel` (a MeteredChannel). `drive_of()`
     gives the Drive whose layout names the words (None before it exists); `warn(text)` is told when
@@ -23,7 +27,7 @@ class CycleLog:
 
     def __init__(self, path: str | Path, channel: Any, t0: float, drive_of: Callable[[], object],
                  warn: Callable[[str], None],
-                 extra: tuple[Sequence[str], Callable[[], Sequence[object]]] | None = None):
+                 extra: Extra | None = None):
         self.path = path
         #: (column names, row()) of values logged beside each exchange (run --monitor), or None
         self.extra = extra

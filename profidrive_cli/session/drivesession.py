@@ -10,14 +10,16 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any, Callable, Literal, Mapping
+from types import TracebackType
+from typing import TYPE_CHECKING, Any, Callable, Literal, Mapping
 
 from profidrive_cli import PdriveError, UsageError
+from profidrive_cli.outfile import OutputWriteError
 from profidrive_cli.drives.base import Drive, DriveStatus, FaultRecord, ParamValue
 from profidrive_cli.drives.profile import Profile
 import profidrive_cli.session.bringup as bringup
 from profidrive_cli.session.cycle import MeteredChannel, Sample, choose_rate
-from profidrive_cli.session.cyclelog import CycleLog
+from profidrive_cli.session.cyclelog import CycleLog, Extra
 from profidrive_cli.session.discovery import DriveStation, locate
 from profidrive_cli.session.motion import Motion
 from profidrive_cli.session.parameters import Parameters
@@ -25,20 +27,24 @@ from profidrive_cli.session.params import ParamInfo, ParamRow
 from profidrive_cli.session.safestop import StopReport
 from profidrive_cli.session.signals import Guard, SignalGuard
 
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.dp.poller import Master
+    from profidrive_cli.session.monitors import TripRecords
+
 DEFAULT_WATCHDOG_MS = 500
 
 
 class DriveSession:
     """See session/__init__.py for the constructor's arguments and the API."""
 
-    def __init__(self, master, address: int | None = None, *, profile: str | None = None,
+    def __init__(self, master: "Master", address: int | None = None, *, profile: str | None = None,
                  layout: str | None = None, ppo: int | None = None, fmt: str | None = None,
                  watchdog_ms: float = DEFAULT_WATCHDOG_MS, cycle_hz: float | None = None,
                  stop_timeout: float | None = None, close_link: bool = True,
                  handle_signals: bool = True,
                  before_connect: Callable[["DriveSession"], None] | None = None,
                  on_message: Callable[[str], None] | None = None,
-                 log_csv: str | Path | None = None, env: Mapping[str, str] | None = None):
+                 log_csv: str | Path | None = None, env: Mapping[str, str] | None = None) -> None:
         if address is not None and not 0 <= address <= 125:
             raise UsageError(f"station address {address} outside 0..125")
         if not 10 <= watchdog_ms <= 650000:
@@ -79,7 +85,7 @@ class DriveSession:
         #: the --log CSV once connected (cyclelog.CycleLog)
         self.cyclelog: CycleLog | None = None
         #: (column names, row()) the --log CSV writes beside each exchange (set before connecting)
-        self.log_extra: tuple[list[str], Callable[[], list[Any]]] | None = None
+        self.log_extra: Extra | None = None
         #: Sync_Req / Freeze_Req with the parameters (MultiRun --sync / --freeze sets them)
         self.dp_sync = False
         self.dp_freeze = False
@@ -110,7 +116,8 @@ class DriveSession:
             raise
         return self
 
-    def __exit__(self, exc_type, exc, tb) -> Literal[False]:
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> Literal[False]:
         self.close(exc)
         return False
 
@@ -130,7 +137,7 @@ class DriveSession:
         assert self.station is not None         # locate() found it (or raised)
         return self.station
 
-    def connect(self):
+    def connect(self) -> Drive:
         """Step 2: Set_Prm/Chk_Cfg, Data_Exchange, the family's Drive (bringup.py), watched by
         Motion for anything that may set the motor turning."""
         drive = bringup.connect(self)
@@ -160,16 +167,17 @@ class DriveSession:
             self.say(str(self.log_error))
 
     @property
-    def log_error(self):
+    def log_error(self) -> OutputWriteError | None:
         """OutputWriteError when the --log file could not be written (raised by close())."""
         return self.cyclelog.error if self.cyclelog is not None else None
 
     # -- bus figures ----------------------------------------------------------------------------
     @property
-    def counters(self) -> dict:
+    def counters(self) -> dict[str, Any]:
         if self.address is None:
             return {}
-        return self.master.fdl.counters_for(self.address).as_dict()
+        counters: dict[str, Any] = self.master.fdl.counters_for(self.address).as_dict()
+        return counters
 
     @property
     def achieved_hz(self) -> float:
@@ -219,7 +227,7 @@ class DriveSession:
         return self.motion.comm_loss_text
 
     @property
-    def after_stop(self) -> list[Callable[[bool], None]]:
+    def after_stop(self) -> list[Callable[[bool], object]]:
         """Called with link_ok after the safe stop on close, before the station is released."""
         return self.motion.after_stop
 
@@ -296,7 +304,7 @@ class DriveSession:
     def stopped_for(self, info: ParamInfo) -> str | None:
         return self.params.stopped_for(info)
 
-    def write_param(self, code: str, value, *, check_running: bool = True,
+    def write_param(self, code: str, value: str | float | int, *, check_running: bool = True,
                     allow_dangerous: bool = False) -> ParamValue:
         """Parameters.write: plan (resolved and checked once), then execute (read back)."""
         return self.params.write(code, value, check_running=check_running,
@@ -318,7 +326,7 @@ class DriveSession:
     def fault_history(self) -> list[FaultRecord]:
         return self.need_drive().fault_history()
 
-    def trip_records(self):
+    def trip_records(self) -> "TripRecords":
         """The card's trip records (session/monitors.py): TripRecords, .supported False when it keeps none."""
         from profidrive_cli.session.monitors import trip_records
         return trip_records(self)
@@ -332,21 +340,21 @@ class DriveSession:
     def dump_plan(self) -> list[tuple[str, Any, str]]:
         return self.params.dump_plan()
 
-    def dump(self, progress: Callable[[int, int, str], None] | None = None) -> dict:
+    def dump(self, progress: Callable[[int, int, str], None] | None = None) -> dict[str, Any]:
         return self.params.dump(progress)
 
     load_dump = staticmethod(Parameters.load_dump)
 
-    def compare(self, doc: dict, progress: Callable[[int, int, str], None] | None = None,
+    def compare(self, doc: dict[str, Any], progress: Callable[[int, int, str], None] | None = None,
                 allow_dangerous: bool = False, check_identity: bool = True) -> list[ParamRow]:
         return self.params.compare(doc, progress, allow_dangerous, check_identity)
 
-    def restore_problems(self, doc: dict, rows: list[ParamRow], allow_dangerous: bool = False
+    def restore_problems(self, doc: dict[str, Any], rows: list[ParamRow], allow_dangerous: bool = False
                          ) -> list[str]:
         """Every reason not to write anything, one line each (restore.py)."""
         return self.params.restore_problems(doc, rows, allow_dangerous)
 
-    def restore(self, doc: dict, dry_run: bool = False,
+    def restore(self, doc: dict[str, Any], dry_run: bool = False,
                 progress: Callable[[int, int, str], None] | None = None,
                 allow_dangerous: bool = False) -> list[ParamRow]:
         """Validate every row, then write what differs, reading each write back (restore.py):

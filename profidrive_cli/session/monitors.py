@@ -18,17 +18,38 @@ read_param on the codes the profile's `trip_records:` names (drives/monitors.py)
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Callable, Protocol
 
 from profidrive_cli import UsageError
 from profidrive_cli.drives import drive_class
-from profidrive_cli.drives.base import DriveError, ParamError
+from profidrive_cli.drives.base import Drive, DriveError, ParamError, ParamValue
+from profidrive_cli.drives.profile import Profile
+from profidrive_cli.session.cycle import MeteredChannel, Sample
+from profidrive_cli.session.cyclelog import Extra
 from profidrive_cli.drives.monitors import cyclic_monitors, monitor_config, trip_record_config
 
 NO_TRIP_RECORDS = "this card keeps no trip records"
 
 
-def monitor_codes(profile, layout: str, spec: str) -> list[str]:
+class MonitorHost(Protocol):
+    """What the monitors read of their station (session.DriveSession, or a stand-in)."""
+    profile: Profile | None
+    layout: str | None
+    drive: Drive | None
+    channel: MeteredChannel | None
+    t0: float
+    log_extra: Extra | None
+
+    @property
+    def after_stop(self) -> list[Callable[[bool], object]]: ...
+    def need_drive(self) -> Drive: ...
+    def read_param(self, code: str) -> ParamValue: ...
+    def write_param(self, code: str, value: str | float | int, *, check_running: bool = True,
+                    allow_dangerous: bool = False) -> ParamValue: ...
+    def say(self, text: str) -> None: ...
+
+
+def monitor_codes(profile: Profile, layout: str, spec: str) -> list[str]:
     """'default' or 'CODE[,CODE...]' (default may appear among codes) -> the profile's codes, in order.
     Needs only the profile, so it runs before the bus is touched. Raises UsageError (exit 2) for a
     code the profile does not have, a layout without a parameter channel, or no default set."""
@@ -81,9 +102,10 @@ def monitor_codes(profile, layout: str, spec: str) -> list[str]:
     return out
 
 
-def setup_monitors(sess, spec: str) -> "Monitors":
+def setup_monitors(sess: MonitorHost, spec: str) -> "Monitors":
     """--monitor SPEC for a session whose profile and layout are known (before it connects): the
     checked Monitors, its columns added to the --log CSV."""
+    assert sess.profile is not None and sess.layout is not None       # identified
     mons = Monitors(sess, monitor_codes(sess.profile, sess.layout, spec))
     sess.log_extra = (mons.columns(), mons.row)
     return mons
@@ -98,7 +120,7 @@ class MonitorValue:
     raw: int | None = None
     t: float | None = None
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {"value": self.value, "unit": self.unit, "raw": self.raw,
                 "t": round(self.t, 3) if self.t is not None else None}
 
@@ -107,7 +129,7 @@ class MonitorValue:
 class Monitors:
     """Round-robin reader of `codes` through `sess.read_param`."""
     #: the DriveSession (or a stand-in with its attributes; its profile and drive are set by then)
-    sess: Any
+    sess: MonitorHost
     codes: list[str]
     values: dict[str, MonitorValue] = field(default_factory=dict)
     dropped: dict[str, str] = field(default_factory=dict)
@@ -116,17 +138,21 @@ class Monitors:
     #: parameter code -> the input word carrying it (the profile's monitors.cyclic on this layout)
     carried: dict[str, str] = field(default_factory=dict)
     #: (assignment code, old value) to write back on restore()
-    saved_map: list = field(default_factory=list)
+    saved_map: list[tuple[str, int]] = field(default_factory=list)
     _i: int = 0
 
-    def __post_init__(self):
-        self.words = monitor_config(self.sess.profile).words
+    def __post_init__(self) -> None:
+        assert self.sess.profile is not None and self.sess.layout is not None      # identified
+        self.profile: Profile = self.sess.profile
+        self.layout: str = self.sess.layout
+        self.words = monitor_config(self.profile).words
         for c in self.codes:
             w = self.words.get(c)
             if w is not None:
                 self.values[c] = MonitorValue(c, w.name, unit=w.unit)
                 continue
-            p = self.sess.profile.param(c)
+            p = self.profile.param(c)
+            assert p is not None                        # monitor_codes() checked it
             self.values[c] = MonitorValue(c, p.name, unit=p.unit or "")
 
     @property
@@ -135,8 +161,8 @@ class Monitors:
 
     def question_note(self) -> str:
         """What the confirmation before a real-port run adds: the mapping map_cyclic() will write."""
-        lay = self.sess.profile.layouts.get(self.sess.layout)
-        if drive_class(self.sess.profile).monitor_mapping == "map" and lay is not None and lay.pkw \
+        lay = self.profile.layouts.get(self.layout)
+        if drive_class(self.profile).monitor_mapping == "map" and lay is not None and lay.pkw \
                 and lay.input_len > 12:
             return " (--monitor maps PNU 916 for the session and restores it after)"
         return ""
@@ -147,7 +173,7 @@ class Monitors:
         module's text). Returns the codes now carried cyclically. Call before the motor starts."""
         sess = self.sess
         drive = sess.need_drive()
-        for c, word in cyclic_monitors(sess.profile, sess.layout).items():
+        for c, word in cyclic_monitors(self.profile, self.layout).items():
             if c in self.codes:                          # a parameter the input words carry anyway
                 self.carried[c] = word
                 self.cyclic[c] = -1
@@ -174,7 +200,7 @@ class Monitors:
         elif drive.monitor_mapping == "map":
             free = list(slots)
             for c in self.codes:
-                p = sess.profile.param(c)
+                p = self.profile.param(c)
                 if not free or p is None or p.pnu is None or p.size != 16 or c in self.cyclic:
                     continue
                 n = free.pop(0)
@@ -211,10 +237,10 @@ class Monitors:
             self.sess.say(f"--monitor: {f}")
         return failed
 
-    def _read_cyclic(self, sample=None) -> None:
-        drive = self.sess.drive
+    def _read_cyclic(self, sample: Sample | None = None) -> None:
+        drive = self.sess.need_drive()
         pzd = drive.last_pzd()
-        t = self.sess.channel.now() - self.sess.t0
+        t = self._now()
         for c, i in self.cyclic.items():
             if c in self.carried:
                 raw = sample.status.raw.get(self.carried[c]) if sample is not None else None
@@ -237,7 +263,12 @@ class Monitors:
             mv = self.values[c]
             mv.value, mv.raw, mv.t = pv.value, pv.raw, t
 
-    def poll(self, sample=None) -> MonitorValue | None:
+    def _now(self) -> float:
+        """Seconds on the session's clock (connected by now)."""
+        assert self.sess.channel is not None
+        return self.sess.channel.now() - self.sess.t0
+
+    def poll(self, sample: Sample | None = None) -> MonitorValue | None:
         """Take the cyclic monitors from the last exchange (`sample`: the last Sample, for the
         family's own input words), then read the next other monitor through the parameter channel
         (a few Data_Exchanges); None when none is left. A refused read drops the code (reason in
@@ -258,12 +289,12 @@ class Monitors:
             self.sess.say(f"--monitor {code}: {e}")
             return None
         mv = self.values[code]
-        mv.value, mv.raw, mv.t = pv.value, pv.raw, self.sess.channel.now() - self.sess.t0
+        mv.value, mv.raw, mv.t = pv.value, pv.raw, self._now()
         if pv.unit:
             mv.unit = pv.unit
         return mv
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {c: {**self.values[c].to_dict(), "via": "cyclic" if c in self.cyclic else "parameter channel"}
                 for c in self.active}
 
@@ -278,9 +309,9 @@ class Monitors:
 @dataclass
 class TripRecord:
     position: str
-    fields: list[dict]            # {code, name, value, unit, raw}
+    fields: list[dict[str, Any]]            # {code, name, value, unit, raw}
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {"position": self.position, "fields": self.fields}
 
 
@@ -291,8 +322,8 @@ class TripRecords:
     latest: int | None = None
     note: str = ""
 
-    def to_dict(self) -> dict:
-        d = {"supported": self.supported, "records": [r.to_dict() for r in self.records]}
+    def to_dict(self) -> dict[str, Any]:
+        d: dict[str, Any] = {"supported": self.supported, "records": [r.to_dict() for r in self.records]}
         if self.latest is not None:
             d["latest"] = self.latest
         if self.note:
@@ -300,7 +331,7 @@ class TripRecords:
         return d
 
 
-def trip_records(sess) -> TripRecords:
+def trip_records(sess: MonitorHost) -> TripRecords:
     """The card's trip records as the profile's `trip_records:` describes them; empty records are
     left out (a first field of 0, or a refused first read, as the section's `empty:` says)."""
     cfg = trip_record_config(sess.profile)

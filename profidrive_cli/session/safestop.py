@@ -114,7 +114,7 @@ class SafeStop:
         #: the first exception a callback raised during the stop (raised after the release)
         self.callback_error: BaseException | None = None
         #: called with link_ok after the safe stop on close, before the station is released
-        self.after_stop: list[Callable[[bool], None]] = []
+        self.after_stop: list[Callable[[bool], object]] = []
 
     @property
     def may_run(self) -> bool:
