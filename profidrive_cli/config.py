@@ -68,6 +68,12 @@ class FileHz(float):
         return obj
 
 
+def source_of(value: object) -> str | None:
+    """Where a config file set `value` ("FILE:LINE": a FileText or FileHz), None for a value given
+    any other way (an option, a default)."""
+    return value.source if isinstance(value, (FileText, FileHz)) else None
+
+
 @dataclass(frozen=True)
 class Setting:
     """One effective value and where it came from: "option --port", "env PDRIVE_PORT",

@@ -234,7 +234,12 @@ def test_config_show_json_says_where_each_setting_came_from(env, tmp_path):
     assert [f["kind"] for f in d["files"]] == ["user", "project"]
 
 
-def test_config_show_text_and_path(env, tmp_path):
+def test_config_show_text_and_path(env, tmp_path, monkeypatch):
+    # wide enough for the row with the config file's path whatever tmp_path's length: the command's
+    # console is made at import, with the width of that moment (under pytest-xdist the path is
+    # longer and an 80-column table cut the words this test reads)
+    from profidrive_cli.cli import common
+    monkeypatch.setattr(common.out, "width", 1000)
     r = CliRunner().invoke(cli, ["config", "show"])
     assert r.exit_code == 0, r.output
     assert "port name line1" in r.output and "187500" in r.output

@@ -3,16 +3,14 @@ ask the Drive (its hooks in drives/base.py, each codec filling what differs) or 
 on the family's Drive class (drives.drive_class), instead of branching on the family's name or on
 hasattr. Counted from the source, as the layering tests read imports: the count may only go down.
 
-The grep this counts (43 lines, 47 matches before step 1; 7 after it; 5 after step 3a, Motion; fewer after
-step 2, Parameters, and the checklist runner's reads):
+The grep this counts (43 lines, 47 matches before step 1; 7 after it; 5 after step 3a, Motion; 0 now):
 
     grep -rn "family ==\\|family !=\\|fam ==\\|fam !=\\|hasattr(" profidrive_cli/session profidrive_cli/checklist
 
-Remaining sites (none compares a family with a name):
-  * session/params.py unknown_code_message, checklist/fields.py resolve_param: `p.family !=
-    prof.family` picks the OTHER profiles a foreign code belongs to, for the message (not a dispatch)
-  * session/discovery.py: `hasattr(layout, "source")` asks a config value for its FILE:LINE
-    provenance (config.FileText), not the family
+The last sites went: session/params.py unknown_code_message and checklist/fields.py resolve_param
+picked the OTHER profiles a foreign code belongs to with `p.family != prof.family` (now
+drives.profile.foreign_profiles_with_code); session/discovery.py and motion.py asked a config value
+for its FILE:LINE with hasattr/getattr(x, "source") (now config.source_of).
 
 Family-keyed tables and getattr duck-typing on a session or a Drive, counted by TABLES_AND_GETATTR
 (22 matches before step 3a; 5 after it; 0 after step 2 and the runner's reads): the tables
@@ -37,7 +35,7 @@ SITES = re.compile(r"family ==|family !=|fam ==|fam !=|hasattr\(")
 #: a family compared with a literal name: none may remain
 BY_NAME = re.compile(r"""\b(?:family|fam)\s*[!=]=\s*["']""")
 
-MAX_SITES = 3
+MAX_SITES = 0
 
 #: a family-keyed table above drives/, or getattr duck-typing directly on a session or a Drive
 TABLES_AND_GETATTR = re.compile(r"_DECEL_CODES|_COMM_LOSS_WORDS|_ACCEL_CODES|"

@@ -191,8 +191,9 @@ def resolve_param(profile, code: str, layout: str | None = None) -> tuple[str, A
     except UsageError as e:
         msg = str(e)
         if "unknown" in msg.lower():
-            from profidrive_cli.session import profiles_with_code, suggest_codes
-            others = sorted({p.family for p in profiles_with_code(text) if p.family != profile.family})
+            from profidrive_cli.drives.profile import foreign_profiles_with_code
+            from profidrive_cli.session import suggest_codes
+            others = sorted({p.family for p in foreign_profiles_with_code(text, profile)})
             near = suggest_codes(profile, text, 3)
             msg = f"unknown parameter '{text}' for {profile.name}"
             if others:

@@ -431,6 +431,14 @@ def load_profile(name: str) -> Profile:
     raise UsageError(f"unknown profile '{name}' (known: {known or 'none'})")
 
 
+def foreign_profiles_with_code(code: str, profile: Profile) -> list[Profile]:
+    """The profiles of families other than `profile`'s that have the parameter `code` (case-blind):
+    for the message that names the family a code belongs to."""
+    c = code.strip().lower()
+    return [p for p in all_profiles() if p.family != profile.family
+            and any(k.lower() == c for k in p.parameters)]
+
+
 def profile_for_ident(ident: int) -> Profile | None:
     """The first profile (by file name) with this PROFIBUS ident; None if none has it. Loads only
     that profile's file."""

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Mapping, Protocol
 
 from profidrive_cli import BusError, UsageError
+from profidrive_cli.config import source_of
 from profidrive_cli.drives.profile import Profile, all_profiles, load_profile, profile_for_ident
 
 if TYPE_CHECKING:                                   # pragma: no cover
@@ -89,7 +90,7 @@ def choose_profile(ident: int | None, name: str | None = None, address: int | No
     where = f"station {address}" if address is not None else "the station"
     own = profile_for_ident(ident) if ident is not None else None
     if name:
-        src = getattr(name, "source", None)          # a config file's FILE:LINE (config.FileText)
+        src = source_of(name)                        # a config file's FILE:LINE (config.FileText)
         try:
             prof = load_profile(name)
         except UsageError as e:
@@ -136,8 +137,8 @@ def resolve_layout(profile: Profile, layout: str | None = None, ppo: int | None 
         low = {n.lower(): n for n in profile.layouts}
         if name.lower() in low:
             return low[name.lower()]
-        source = getattr(layout, "source", None)
-        said = f"{source}: layout {name}" if fmt is None and hasattr(layout, "source") \
+        source = source_of(layout)
+        said = f"{source}: layout {name}" if fmt is None and source is not None \
             else f"--format {name}"               # a config file's layout names its FILE:LINE
         raise UsageError(f"{said}: {profile.name} has the layouts {names}")
     return name

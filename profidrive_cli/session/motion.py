@@ -18,6 +18,7 @@ import math
 from typing import Any, Protocol
 
 from profidrive_cli import UsageError
+from profidrive_cli.config import source_of
 from profidrive_cli.drives.base import Drive, DriveError, DriveStatus, ParamValue
 from profidrive_cli.drives.profile import Profile
 import profidrive_cli.session.jog as _jog
@@ -99,7 +100,7 @@ class Motion(SafeStop):
         pdef = prof.param(code) if code else None
         readable = pdef is not None and (pdef.pnu is not None or pdef.register is not None)
         # an fmax from a config file keeps its FILE:LINE (config.FileHz): the label names that line
-        source = getattr(override, "source", None)
+        source = source_of(override)
         given = f"fmax {override:g} Hz from {source}" if source is not None else \
             f"--fmax {override:g}" if override is not None else ""
         if d.has_param_channel and readable:

@@ -17,7 +17,7 @@ from typing import Any, Callable, Protocol
 from profidrive_cli import UsageError
 from profidrive_cli.drives.base import Drive, ParamInfo, ParamValue
 from profidrive_cli.drives.formats import display_text, value_from_text
-from profidrive_cli.drives.profile import Profile, all_profiles
+from profidrive_cli.drives.profile import Profile, all_profiles, foreign_profiles_with_code
 
 __all__ = ["Host", "ParamInfo", "ParamRow", "ParamView", "WritePlan", "dangerous_words", "parse_text",
            "profiles_with_code", "suggest_codes", "unknown_code_message", "with_text"]
@@ -40,7 +40,7 @@ def unknown_code_message(prof: Profile, address: int | None, code: str, why: str
     if any(k.lower() == code.lower() for k in prof.parameters):
         return why                         # ours, but not reachable (e.g. no published PNU)
     where = f"station {address} is {prof.name} ({prof.title}, family {prof.family})"
-    others = [p for p in profiles_with_code(code) if p.family != prof.family]
+    others = foreign_profiles_with_code(code, prof)
     near = suggest_codes(prof, code)
     hint = f"; closest {prof.family} codes: {', '.join(near)}" if near else ""
     if others:
