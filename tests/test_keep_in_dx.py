@@ -74,10 +74,11 @@ def test_run_brings_up_five_stations_at_9600_without_a_watchdog_expiring(sim, mo
     def brought_up(self, override=None):
         raise BroughtUp
     monkeypatch.setattr(DriveSession, "fmax", brought_up)
-    master = BusOptions(url, "9600", 2, None, None, False, False, 0, False).open_master()
+    front = BusOptions(url, "9600", 2, None, None, False, False, 0, False).open_bus()
+    master = front.master
     bus = next(iter(sim.values()))
     bus.log = []
-    run = MultiRun(master, [3, 4, 5, 6, 7], [("hz", 20.0)] * 5, duration=1.0,
+    run = MultiRun(front, [3, 4, 5, 6, 7], [("hz", 20.0)] * 5, duration=1.0,
                    watchdog_ms=WATCHDOG_MS)
     with pytest.raises(BroughtUp):
         run.run()
@@ -104,10 +105,11 @@ def test_run_of_several_yaskawa_stations_at_19200_passes(sim, sync):
     ramps = "&".join(f"set={a}:C1-01=0.3,C1-02=0.3" if a in yask else f"set={a}:F07=0.3,F08=0.3"
                      for a in addresses)
     url = f"sim://?timing=virtual&baud=19200&stations={plant}&{ramps}"
-    master = BusOptions(url, "19200", 2, None, None, False, False, 0, False).open_master()
+    front = BusOptions(url, "19200", 2, None, None, False, False, 0, False).open_bus()
+    master = front.master
     bus = next(iter(sim.values()))
     bus.log = []
-    run = MultiRun(master, addresses, [("hz", 20.0)] * len(addresses), duration=2.0,
+    run = MultiRun(front, addresses, [("hz", 20.0)] * len(addresses), duration=2.0,
                    watchdog_ms=WATCHDOG_MS, sync=sync)
     assert run.run() == 0, run.end_dict()
     spans = no_dx_spans(bus.log, 19200)
@@ -239,9 +241,9 @@ def test_run_of_five_stations_at_9600_runs_through_with_a_watchdog_raised_to_thr
     from profidrive_cli.cli.common import BusOptions
     from profidrive_cli.session.multirun import MultiRun
     url = "sim://?timing=virtual&baud=9600"
-    master = BusOptions(url, "9600", 2, None, None, False, False, 0, False).open_master()
+    front = BusOptions(url, "9600", 2, None, None, False, False, 0, False).open_bus()
     bus = next(iter(sim.values()))
-    run = MultiRun(master, [3, 4, 5, 6, 7], [("hz", 20.0)] * 5, duration=5.0,
+    run = MultiRun(front, [3, 4, 5, 6, 7], [("hz", 20.0)] * 5, duration=5.0,
                    watchdog_ms=WATCHDOG_MS)
     assert run.run() == 0, run.end_dict()
     round_s = 1.0 / run.wire_hz

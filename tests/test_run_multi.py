@@ -186,14 +186,14 @@ def test_sync_on_stations_whose_gsd_claims_it(sim):
     from profidrive_cli.cli.common import BusOptions
     from profidrive_cli.session.multirun import MultiRun
     url = "sim://?stations=7:yaskawa,8:yaskawa&set=7:C1-01=0.3,C1-02=0.3&set=8:C1-01=0.3,C1-02=0.3"
-    master = BusOptions(url, "19200", 2, None, None, False, False, 0, False).open_master()
+    front = BusOptions(url, "19200", 2, None, None, False, False, 0, False).open_bus()
     seen = []
 
     def on_sample(address, t, sample, phase):
         bus = next(iter(sim.values()))
         s = bus.slaves[address]
         seen.append((s.sync, s.freeze, s.synced_outputs is not None, s.frozen_inputs is not None))
-    run = MultiRun(master, [7, 8], [("hz", 20.0), ("hz", 10.0)], duration=1.0, sync=True,
+    run = MultiRun(front, [7, 8], [("hz", 20.0), ("hz", 10.0)], duration=1.0, sync=True,
                    on_sample=on_sample)
     assert run.run() == 0
     assert run.sync and run.freeze
@@ -204,6 +204,39 @@ def test_sync_on_stations_whose_gsd_claims_it(sim):
     bus = next(iter(sim.values()))
     assert bus.slaves[7].synced_outputs is None and bus.slaves[8].frozen_inputs is None
 
+
+@pytest.mark.parametrize("addresses", [[3, 4], [3, 9]])
+def test_the_run_takes_its_stations_from_the_bus_and_closes_its_port_once(sim, addresses):
+    """MultiRun on the front door (api.Bus): one Bus.session per station, in order; at the end (also
+    when a station is not on the bus: station 9 is not in the default plant, ALL above) the bus is
+    closed and its port closed exactly once; closing the bus again does not touch the port."""
+    from profidrive_cli import PdriveError
+    from profidrive_cli.cli.common import BusOptions
+    from profidrive_cli.session.multirun import MultiRun
+    front = BusOptions(SIM_FAST + "&timing=virtual", "19200", 2, None, None, False, False, 0,
+                       False).open_bus()
+    link, closes, asked = front.master.link, [], []
+    real_close, real_session = link.close, front.session
+
+    def close():
+        closes.append(1)
+        real_close()
+
+    def session(station, **kw):
+        asked.append(station)
+        return real_session(station, **kw)
+    link.close, front.session = close, session
+    run = MultiRun(front, addresses, [("hz", 20.0)] * 2, duration=0.5)
+    if 9 in addresses:
+        with pytest.raises(PdriveError):
+            run.run()
+    else:
+        assert run.run() == 0, run.end_dict()
+    assert asked == addresses[:len(run.runs)] and asked[0] == 3
+    assert front.closed and closes == [1]
+    front.close()
+    assert closes == [1]
+    assert run.end_dict()["stopped"]
 
 # -- signals over a real byte path (pdrive sim --pty) ---------------------------------------------
 
@@ -353,7 +386,7 @@ def test_with_sync_the_references_take_effect_in_the_same_instant(sim, sync):
     from profidrive_cli.cli.common import BusOptions
     from profidrive_cli.session.multirun import MultiRun
     url = "sim://?stations=7:yaskawa,8:yaskawa&set=7:C1-01=0.3,C1-02=0.3&set=8:C1-01=0.3,C1-02=0.3"
-    master = BusOptions(url, "19200", 2, None, None, False, False, 0, False).open_master()
+    front = BusOptions(url, "19200", 2, None, None, False, False, 0, False).open_bus()
     bus = next(iter(sim.values()))
     first = {}
     for a, slave in bus.slaves.items():
@@ -365,7 +398,7 @@ def test_with_sync_the_references_take_effect_in_the_same_instant(sim, sync):
                 first[_a] = now
             return res
         model.data_exchange = wrapped
-    run = MultiRun(master, [7, 8], [("hz", 20.0), ("hz", 10.0)], duration=0.5, sync=sync)
+    run = MultiRun(front, [7, 8], [("hz", 20.0), ("hz", 10.0)], duration=0.5, sync=sync)
     assert run.run() == 0
     assert set(first) == {7, 8}
     assert (first[7] == first[8]) is sync, first

@@ -125,21 +125,26 @@ def run_several(opts, addresses: tuple, *, hz, percent, reverse, duration, fmax,
         from profidrive_cli.cli.common import err
         err.print(escape(text))
 
-    master = opts.open_master()
-    run = MultiRun(master, list(addresses), refs, reverse=reverse, fmax=fmax, duration=duration,
-                   watchdog_ms=watchdog_ms, cycle_hz=cycle_hz, sync=sync, confirm=confirm,
-                   should_quit=should_quit, on_start=view.start, on_phase=view.set_phase,
-                   on_sample=view.update, on_end=view.finish, on_message=message)
-    if interactive:
-        view.hint = "q stops every drive and quits"
-        k = KeyReader()
-        k.__enter__()
-        keys.append(k)
+    # the stations through the front door: the run takes its sessions from the bus (Bus.session)
+    # and closes it at its end; the close here only covers a way out before the run (a no-op after)
+    bus = opts.open_bus()
     try:
-        code = run.run()
+        run = MultiRun(bus, list(addresses), refs, reverse=reverse, fmax=fmax, duration=duration,
+                       watchdog_ms=watchdog_ms, cycle_hz=cycle_hz, sync=sync, confirm=confirm,
+                       should_quit=should_quit, on_start=view.start, on_phase=view.set_phase,
+                       on_sample=view.update, on_end=view.finish, on_message=message)
+        if interactive:
+            view.hint = "q stops every drive and quits"
+            k = KeyReader()
+            k.__enter__()
+            keys.append(k)
+        try:
+            code = run.run()
+        finally:
+            if keys:
+                keys[0].__exit__(None, None, None)
     finally:
-        if keys:
-            keys[0].__exit__(None, None, None)
+        bus.close()
     if code:
         bad = [f"station {r.address}: {r.problem}" for r in run.runs
                if r.problem and f"station {r.address}" not in run.reason]

@@ -10,6 +10,10 @@ dropping out. Then the stop: the stop command of every drive in one cycle (with 
 in the same instant), a bounded wait for all of them together, a coast stop for each drive that does
 not stop in its time (or at once on a second signal), then Unsync/Unfreeze, release, close.
 
+The stations come from the bus (api.Bus, through the Stations protocol below: session/ does not
+import api/): Bus.session hands over one DriveSession per station on its master, not yet opened;
+the run closes the bus (so the port) once at its end, after the close of every session.
+
 Decided: a drive that trips, or a station that drops out of data exchange, ends the run for all: every
 other drive is stopped too (a line of drives runs together or not at all) and the exit code is 1.
 No click and no rich here: the cli renders through the callbacks.
@@ -18,33 +22,59 @@ No click and no rich here: the cli renders through the callbacks.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING, Any, Callable, Protocol, Sequence
 
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.link.base import LinkLost
-from profidrive_cli.session.drivesession import DriveSession
 from profidrive_cli.session.group import Group, StationOut
 from profidrive_cli.session.live import NOT_REACHED, sample_at_reference
 from profidrive_cli.session.signals import SessionTerminated, SignalGuard
 
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.dp.poller import Master
+    from profidrive_cli.gsd.model import Gsd
+    from profidrive_cli.session.cycle import Sample
+    from profidrive_cli.session.drivesession import DriveSession
 
 DEFAULT_WATCHDOG_MS = 500
 
 
-def sync_modes(sessions, gsd_for=None) -> tuple[bool, bool]:
+class Stations(Protocol):
+    """Where the run's stations come from: api.Bus (api/bus.py; session/ does not import api/)."""
+
+    @property
+    def master(self) -> "Master": ...
+
+    def session(self, station: int | None = None, *, watchdog_ms: float = 500,
+                cycle_hz: float | None = None, handle_signals: bool = True,
+                on_message: Callable[[str], None] | None = None) -> "DriveSession":
+        """A DriveSession for `station` on this bus's master, not yet opened; its close leaves the
+        port open."""
+        ...
+
+    def close(self, exc: BaseException | None = None) -> None:
+        """Close the port (once: a second close does nothing)."""
+        ...
+
+
+def _gsd_in_library(ident: int) -> "tuple[Gsd | None, str | None]":
+    from profidrive_cli.gsd.library import find_by_ident, find_path_by_ident
+    g = find_by_ident(ident)
+    path = find_path_by_ident(ident) if g is not None else None
+    return g, (path.name if path is not None else None)
+
+
+def sync_modes(sessions: Sequence["DriveSession"],
+               gsd_for: "Callable[[int], tuple[Gsd | None, str | None]] | None" = None
+               ) -> tuple[bool, bool]:
     """--sync: (Sync, Freeze) when every station's GSD claims Sync_Mode_supp (Freeze too when every
     one claims Freeze_Mode_supp); UsageError naming the first station that does not."""
     if gsd_for is None:
-        from profidrive_cli.gsd.library import find_by_ident, find_path_by_ident
-
-        def gsd_for(ident):
-            g = find_by_ident(ident)
-            return g, (find_path_by_ident(ident).name if g is not None else None)
+        gsd_for = _gsd_in_library
     freeze = True
     for s in sessions:
+        assert s.ident is not None and s.profile is not None    # identified: ident and profile known
         g, name = gsd_for(s.ident)
         who = f"station {s.address} ({s.profile.name}, ident 0x{s.ident:04X})"
         if g is None:
@@ -60,17 +90,17 @@ def sync_modes(sessions, gsd_for=None) -> tuple[bool, bool]:
 @dataclass
 class StationRun:
     """One drive of the run: its session, reference and what happened to it."""
-    session: DriveSession
+    session: "DriveSession"
     address: int
     ref: tuple[str, float]               # ("hz" | "percent", value)
     percent: float = 0.0
     started: bool = False
     t_start: float = 0.0                 # when its reference went (the run's clock)
     reached_after: float | None = None
-    last: object = None                  # the last Sample
+    last: "Sample | None" = None         # the last Sample
     problem: str = ""                    # why this drive failed (trip, dropped out, not reached ...)
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         s = self.session
         rep = s.stop_report
         fs = s.final_status
@@ -86,10 +116,11 @@ class StationRun:
 
 @dataclass
 class MultiRun:
-    """The run; callbacks (all optional): on_start(header), on_phase(phase, address or None),
+    """The run on `bus` (an api.Bus: its sessions, its master; the run closes it at the end);
+    callbacks (all optional): on_start(header), on_phase(phase, address or None),
     on_sample(address, t_s, sample, phase), on_end(end), confirm(sessions), should_quit() -> bool,
     on_message(text)."""
-    master: "Master"
+    bus: Stations
     addresses: list[int]
     refs: list[tuple[str, float]]        # one per station
     reverse: bool = False
@@ -98,18 +129,18 @@ class MultiRun:
     watchdog_ms: float = DEFAULT_WATCHDOG_MS
     cycle_hz: float | None = None
     sync: bool = False
-    confirm: Callable | None = None
+    confirm: Callable[[list["DriveSession"]], None] | None = None
     should_quit: Callable[[], bool] | None = None
-    on_start: Callable | None = None
-    on_phase: Callable | None = None
-    on_sample: Callable | None = None
-    on_end: Callable | None = None
+    on_start: Callable[[dict[str, Any]], None] | None = None
+    on_phase: Callable[[str, int | None], None] | None = None
+    on_sample: Callable[[int, float, "Sample", str], None] | None = None
+    on_end: Callable[[dict[str, Any]], None] | None = None
     on_message: Callable[[str], None] | None = None
     runs: list[StationRun] = field(default_factory=list)
     reason: str = ""
     failed: bool = False
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if len(self.refs) != len(self.addresses):
             raise UsageError("one speed for all stations or one per station")
         self.group: Group | None = None
@@ -120,6 +151,10 @@ class MultiRun:
         self.warnings: list[str] = []
         self.guard = SignalGuard(True)
         self.link_lost = False
+
+    @property
+    def master(self) -> "Master":
+        return self.bus.master
 
     # -- helpers -------------------------------------------------------------------------------
     def _say(self, text: str) -> None:
@@ -133,7 +168,7 @@ class MultiRun:
     def now(self) -> float:
         return self.master.link.now() - self.t0
 
-    def _sample(self, r: StationRun, sample, phase: str) -> None:
+    def _sample(self, r: StationRun, sample: "Sample", phase: str) -> None:
         r.last = sample
         if self.on_sample:
             self.on_sample(r.address, self.now(), sample, phase)
@@ -174,9 +209,8 @@ class MultiRun:
 
     def _open(self) -> None:
         for a, ref in zip(self.addresses, self.refs):
-            s = DriveSession(self.master, a, watchdog_ms=self.watchdog_ms, close_link=False,
-                             handle_signals=False, on_message=self.on_message,
-                             cycle_hz=self.cycle_hz)
+            s = self.bus.session(a, watchdog_ms=self.watchdog_ms, handle_signals=False,
+                                 on_message=self.on_message, cycle_hz=self.cycle_hz)
             self.runs.append(StationRun(s, a, ref))
             s.identify()                    # Slave_Diag only: nothing written yet
         sessions = [r.session for r in self.runs]
@@ -322,7 +356,7 @@ class MultiRun:
             self._phase("stopped")
 
     def _stop_together(self, runs: list[StationRun]) -> None:
-        def on_sample(address, sample):
+        def on_sample(address: int, sample: "Sample") -> None:
             r = next(x for x in runs if x.address == address)
             self._sample(r, sample, "stopping")
 
@@ -357,13 +391,13 @@ class MultiRun:
             if r.started and (rep is None or not rep.stopped):
                 self.failed = True
         try:
-            self.master.link.close()
+            self.bus.close(exc)              # the port: closed here, once
         except Exception:                   # noqa: BLE001
             pass
         if first is not None and exc is None:
             raise first
 
-    def end_dict(self) -> dict:
+    def end_dict(self) -> dict[str, Any]:
         return {"reason": self.reason, "failed": self.failed,
                 "stopped": all((r.session.stop_report.stopped if r.session.stop_report is not None
                                 else not r.started) for r in self.runs),
