@@ -1,7 +1,7 @@
 """The types are held: mypy (pyproject.toml [tool.mypy]) is clean on the whole package, and
-`mypy --strict` is clean on the public Python API (profidrive_cli/api/, docs/api.md) and on the Drive
-interface (profidrive_cli/drives/base.py): their errors are reported in those files only, the modules
-they import are followed silently.
+`mypy --strict` is clean on the public Python API (profidrive_cli/api/, docs/api.md), on the session
+package it stands on (profidrive_cli/session/) and on the Drive interface (profidrive_cli/drives/base.py):
+their errors are reported in those files only, the modules they import are followed silently.
 
 mypy is in the `test` extra (pinned in constraints.txt). Without it the two checks are skipped, except
 under CI=true, where they fail. Each run uses its own cache under pytest's tmp_path (a fresh clone works).
@@ -45,6 +45,14 @@ def test_mypy_strict_is_clean_on_the_public_api(tmp_path):
     rc, output = _mypy(tmp_path, "--strict", "profidrive_cli/api")
     assert rc == 0, output
     assert "Success: no issues found in 4 source files" in output, output
+
+
+def test_mypy_strict_is_clean_on_the_session_package(tmp_path):
+    # session/: the station, its Motion and Parameters, the Group and the live loop the API and the
+    # CLI stand on
+    rc, output = _mypy(tmp_path, "--strict", "profidrive_cli/session")
+    assert rc == 0, output
+    assert "Success: no issues found in" in output, output
 
 
 def test_mypy_strict_is_clean_on_the_drive_interface(tmp_path):
