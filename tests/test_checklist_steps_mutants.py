@@ -1034,12 +1034,20 @@ def test_resolve_param_register_bounds_in_decimal():
         resolve_param(YASK, "REG65536")                       # 16-bit register numbers only
 
 
-def test_the_validation_channel_refuses_traffic():
-    from profidrive_cli.checklist.fields import _NoChannel
-    with pytest.raises(UsageError) as e:
-        _NoChannel().exchange(b"\x00")
-    assert str(e.value) == "internal: validation tried to talk to a drive"
-    assert _NoChannel().now() == 0.0
+def test_validation_talks_to_no_drive(monkeypatch):
+    # validation once built each family's Drive on a channel that refused traffic ("internal:
+    # validation tried to talk to a drive"); now it asks the Drive class (param_label_for) and
+    # builds no Drive at all: any construction fails this test
+    import profidrive_cli.drives as drives
+    import profidrive_cli.drives.registry as registry
+
+    def no_drive(*a, **k):
+        raise AssertionError("validation built a Drive")
+    monkeypatch.setattr(drives, "make_drive", no_drive)
+    monkeypatch.setattr(registry, "make_drive", no_drive)
+    assert resolve_param(YASK, "REG0x0180")[0] == "REG0x0180"
+    for name, code in (("fuji-g1", "F07"), ("moeller", "A038"), ("toyo", "PNU918")):
+        assert resolve_param(load_profile(name), code)[0]
 
 
 def test_a_stop_mode_the_card_cannot_make_is_refused_at_the_mode():

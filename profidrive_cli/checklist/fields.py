@@ -170,24 +170,13 @@ class FieldChecker:
         return False
 
 
-class _NoChannel:
-    """A CyclicChannel that refuses traffic: builds a family's Drive only to resolve codes."""
-
-    def exchange(self, outputs: bytes) -> bytes:
-        raise UsageError("internal: validation tried to talk to a drive")
-
-    def now(self) -> float:
-        return 0.0
-
-
 def resolve_param(profile, code: str, layout: str | None = None) -> tuple[str, Any]:
     """(canonical label, ParamDef or None for a raw address) for `code` in this profile's family, the way
     the family's Drive resolves it; UsageError naming the closest codes when it is unknown."""
-    from profidrive_cli.drives import make_drive
-    drive = make_drive(_NoChannel(), profile, layout or profile.default_layout)
+    from profidrive_cli.drives import drive_class
     text = str(code).strip()
     try:
-        return drive.param_label(text)
+        return drive_class(profile).param_label_for(profile, text)     # a class fact: no Drive built
     except UsageError as e:
         msg = str(e)
         if "unknown" in msg.lower():

@@ -264,12 +264,17 @@ class Drive(ABC):
     def param_label(self, code: str) -> tuple[str, Any]:
         """(canonical label, ParamDef or None for a raw address) for a checklist's `code`, without
         a bus; UsageError ("unknown ...") when the family does not address it."""
-        p = self.profile.param(code)
+        return type(self).param_label_for(self.profile, code)
+
+    @classmethod
+    def param_label_for(cls, profile: Any, code: str) -> tuple[str, Any]:
+        """Class fact, no bus: param_label() from the profile alone (a checklist's validation)."""
+        p = profile.param(code)
         if p is not None:
             if p.register is None and p.pnu is None:
                 raise UsageError(f"{p.code}: the profile gives no address for it")
             return p.code, p
-        raise UsageError(f"unknown parameter '{code}' in profile {self.profile.name}")
+        raise UsageError(f"unknown parameter '{code}' in profile {profile.name}")
 
     def value_problem(self, info: ParamInfo, value: float | int) -> str | None:
         """The exact-value check before a write (drives/values.py): None when `value` may be

@@ -45,18 +45,26 @@ class FujiDrive(pd.ProfidriveDrive):
 
     # -- addressing ----------------------------------------------------------------------------
     def resolve_param(self, code: str) -> pd.ParamRef:
+        return self._resolve_in(self.profile, self.cfg, code)
+
+    @classmethod
+    def resolve_for(cls, profile: Any, code: str) -> pd.ParamRef:
+        return cls._resolve_in(profile, pd.config(profile), code)
+
+    @staticmethod
+    def _resolve_in(profile: Any, cfg: pd.ProfidriveConfig, code: str) -> pd.ParamRef:
         text = code.strip()
-        fcode = parse_function_code(self.profile, text)
+        fcode = parse_function_code(profile, text)
         if fcode is not None:
             canon, _, pnu, sub = fcode
-            p = self.profile.param(canon)
+            p = profile.param(canon)
             if p is not None:
                 return pd.ParamRef(p.code, p.name, p.pnu, p.index or 0, False, p.size, p)
             return pd.ParamRef(canon, "", pnu, sub, False, 16, None)
         m = re.fullmatch(r"(?i)P(?:NU)?\s*(\d+)", text)   # "PNU918" / "P918" short forms
-        if m and self.profile.param(f"PNU{int(m.group(1))}") is not None:
+        if m and profile.param(f"PNU{int(m.group(1))}") is not None:
             text = f"PNU{int(m.group(1))}"
-        return pd.resolve_code(self.profile, text, self.cfg)
+        return pd.resolve_code(profile, text, cfg)
 
     # -- PKW with the busy retry ---------------------------------------------------------------
     def request(self, frame: pd.PkwFrame, timeout: float | None = None) -> pd.PkwResult:

@@ -91,9 +91,15 @@ class ProfidriveDrive(Drive):
         """The address param_info resolved (resolved again only for a ParamInfo made elsewhere)."""
         return info.ref if isinstance(info.ref, ParamRef) else self.resolve_param(info.code)
 
-    def param_label(self, code: str) -> tuple[str, Any]:
-        ref = self.resolve_param(code)
+    @classmethod
+    def param_label_for(cls, profile: Any, code: str) -> tuple[str, Any]:
+        ref = cls.resolve_for(profile, code)
         return ref.code, ref.param
+
+    @classmethod
+    def resolve_for(cls, profile: Any, code: str) -> ParamRef:
+        """resolve_param() from the profile alone (the profile's own PROFIdrive config)."""
+        return resolve_code(profile, code, config(profile))
 
     def value_problem(self, info: ParamInfo, value: float | int) -> str | None:
         return self.check_value(self._ref(info), value)

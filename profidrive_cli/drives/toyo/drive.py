@@ -100,6 +100,10 @@ class ToyoDrive(pd.ProfidriveDrive):
         """See params.resolve_param: monitor names, console codes, TBnn[r,p], FH[n], PNU<n>[ind]."""
         return resolve_param(self.profile, self.tc, code)
 
+    @classmethod
+    def resolve_for(cls, profile: Any, code: str) -> pd.ParamRef:
+        return resolve_param(profile, toyo_config(profile), code)
+
     def raw_to_value(self, ref: pd.ParamRef, raw: int):
         return value_from_wire(self.profile, ref.param, raw) if ref.param is not None else raw & 0xFFFF
 

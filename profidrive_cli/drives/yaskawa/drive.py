@@ -404,12 +404,13 @@ class YaskawaDrive(Drive):
             return ParamInfo(f"REG0x{reg:04X}", "MEMOBUS register", "", None, "raw", reg)
         return ParamInfo(p.code, p.name, p.unit, p, p.access, reg)
 
-    def param_label(self, code: str) -> tuple[str, Any]:
-        if self.profile.param(code) is None:
+    @classmethod
+    def param_label_for(cls, profile: Any, code: str) -> tuple[str, Any]:
+        if profile.param(code) is None:
             reg = parse_register_code(code)
             if reg is not None and 0 <= reg <= 0xFFFF:
                 return f"REG0x{reg:04X}", None
-        return super().param_label(code)
+        return super().param_label_for(profile, code)
 
     def params_at(self, info: ParamInfo) -> list[Any]:
         reg = info.ref if isinstance(info.ref, int) else self._resolve(info.code)[0]
