@@ -136,8 +136,8 @@ def _presets(values: list[str]) -> dict[int, dict[str, float]]:
 
 
 def _preset_options(profile, values: dict[str, float]) -> dict:
-    """The model options that preset `values`: the Yaskawa model takes its parameters as keyword
-    options (E1_04=50), the PROFIdrive models as `defaults`."""
+    """The model options that preset `values`: `defaults` (code -> value), which every family's
+    make_model takes (the Yaskawa model turns them into its parameter options, E1_04=50)."""
     if not values:
         return {}
     from profidrive_cli.drives.values import profile_value_problem
@@ -150,8 +150,6 @@ def _preset_options(profile, values: dict[str, float]) -> dict:
         why = profile_value_problem(profile, p, v)
         if why is not None:
             raise UsageError(f"sim URL: set=: {why}")
-    if profile.family == "yaskawa":
-        return {code.replace("-", "_"): v for code, v in values.items()}
     return {"defaults": dict(values)}
 
 

@@ -529,4 +529,8 @@ class YaskawaModel(DriveModel):
 
 
 def make_model(profile, **options) -> YaskawaModel:
+    # `defaults` (code -> value: a sim URL's set=, the preset every family's model takes) become the
+    # model's parameter options (E1-04 -> E1_04)
+    for code, v in (options.pop("defaults", None) or {}).items():
+        options[code.replace("-", "_")] = v
     return YaskawaModel(profile, **options)
