@@ -18,6 +18,7 @@ from profidrive_cli import UsageError
 from profidrive_cli.drives.base import Drive, ParamInfo, ParamValue
 from profidrive_cli.drives.formats import display_text, value_from_text
 from profidrive_cli.drives.profile import Profile, all_profiles, foreign_profiles_with_code
+from profidrive_cli.session.station import StationView
 
 __all__ = ["Host", "ParamInfo", "ParamRow", "ParamView", "WritePlan", "dangerous_words", "parse_text",
            "profiles_with_code", "suggest_codes", "unknown_code_message", "with_text"]
@@ -126,33 +127,11 @@ class WritePlan:
         return self.danger is not None
 
 
-class Host(Protocol):
-    """The station Parameters works on: the public attributes of session.DriveSession it reads."""
-
-    @property
-    def profile(self) -> Profile | None: ...
-
-    @property
-    def address(self) -> int | None: ...
-
-    @property
-    def ident(self) -> int | None: ...
-
-    @property
-    def layout(self) -> str | None: ...
-
-    @property
-    def master(self) -> Any: ...
-
-    @property
-    def drive(self) -> Drive | None: ...
+class Host(StationView, Protocol):
+    """The station Parameters works on (session.DriveSession): its face and the max frequency."""
 
     @property
     def fmax_hz(self) -> float: ...
-
-    def need_drive(self) -> Drive: ...
-
-    def warn(self, text: str) -> None: ...
 
 
 class ParamView(Protocol):

@@ -23,8 +23,9 @@ from typing import Any, Callable, Protocol
 
 from profidrive_cli import PdriveError, UsageError
 from profidrive_cli.drives.base import Drive, DriveError, DriveStatus
-from profidrive_cli.session.cycle import MeteredChannel, Sample
+from profidrive_cli.session.cycle import Sample
 from profidrive_cli.session.signals import Guard
+from profidrive_cli.session.station import StationView
 
 COAST_TIMEOUT_S = 10.0
 DEFAULT_STOP_TIMEOUT_S = 30.0
@@ -46,18 +47,10 @@ class StopReport:
                 "state": self.status.state if self.status is not None else None}
 
 
-class StopStation(Protocol):
-    """What the safe stop reads of its station (DriveSession today); link_lost it also sets."""
+class StopStation(StationView, Protocol):
+    """What the safe stop reads of its station (DriveSession) beyond its face; link_lost it also sets."""
     link_lost: bool
 
-    @property
-    def drive(self) -> Drive | None: ...
-    @property
-    def address(self) -> int | None: ...
-    @property
-    def channel(self) -> MeteredChannel | None: ...
-    @property
-    def master(self) -> Any: ...
     @property
     def signals(self) -> Guard: ...
     @property
@@ -66,9 +59,6 @@ class StopStation(Protocol):
     def stop_timeout_s(self) -> float | None: ...
     @property
     def on_sample(self) -> OnSample | None: ...
-    def need_drive(self) -> Drive: ...
-    def say(self, text: str) -> None: ...
-    def warn(self, text: str) -> None: ...
 
 
 def read_decel(d: Drive, profile: Any) -> float | None:

@@ -15,7 +15,6 @@ execute() runs it on the station's Drive for the Runner. Imports only the checkl
 
 from __future__ import annotations
 
-from profidrive_cli import PdriveError
 from profidrive_cli.bustools.buswatch import health_figures
 from profidrive_cli.checklist.fields import fmt
 from profidrive_cli.checklist.steps.base import StepFailed, StepType
