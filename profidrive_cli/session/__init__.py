@@ -4,17 +4,28 @@ fdl, dp, gsd, drives, outfile and datafile -- nothing of checklist, cli, api, si
 bus-level tools without a drive session; the layer plan: tests/test_layering.py). No click and no
 rich: cli/drive_cmds.py and the checklist runner build on it.
 
-    drivesession.py  DriveSession: ties the parts below together (small; delegates)
+    drivesession.py  DriveSession: the station (discovery, bring-up, the metered channel, the Drive)
+                     composed with .motion (Motion) and .params (Parameters); its other public methods
+                     hand on to those two
+    station.py       StationView: the station's face its parts read (a Protocol: no import cycle)
     discovery.py     finding the station (scan, PDRIVE_STATION), choosing the profile and the layout
     cycle.py         the cycle rate (wire limit, cap), MeteredChannel, Sample
     bringup.py       Set_Prm / Chk_Cfg / Data_Exchange and the family's Drive
-    motion.py        max frequency, percent for Hz, reference, start, poll, status
-    safestop.py      normal stop, escalation to coast, shutdown and release on every way out
+    motion.py        Motion: the only owner of "may it turn"; max frequency, percent for Hz,
+                     reference, start, poll, status, jog (jog.py), torque runs (torque.py)
+    safestop.py      SafeStop (Motion's base): normal stop, escalation to coast, shutdown and release
     signals.py       SIGTERM -> SessionTerminated; a second signal during the stop hurries it
     cyclelog.py      the --log CSV, one row per Data_Exchange (outfile.OutputFile)
-    params.py        parameter codes, parsing, checked read/write, save
-    backup.py        dump and compare (ParamRow);  dumpfile.py: the dump file format and loading
-    restore.py       restore: validate every row, then write and read back
+    parameters.py    Parameters: plan(code, value) -> WritePlan (the code resolved and checked once),
+                     execute(plan) (stop-only, write, read back), read, save; dump / compare / restore
+    params.py        code helpers, value text, WritePlan, ParamRow
+    backup.py        dump and compare;  dumpfile.py: the dump file format and loading
+    restore.py       restore: plan every row first, then write and read back
+    group.py         Group: several stations on one bus cycle (run 3,4,5, the checklist's together, api)
+    multirun.py      MultiRun: several drives in one run on a Group
+    live.py          Live: the loop of run and jog (the CLI keeps keys and rendering); at_reference
+    monitors.py      run --monitor and the trip records of `faults`
+    commloss.py      the comm-loss acceptance test (commloss_reaction.py: its expectations)
 
 Public API (stable; everything else is internal)
 ------------------------------------------------
@@ -24,12 +35,13 @@ Public API (stable; everything else is internal)
                  handle_signals=True, before_connect=None, on_message=None, log_csv=None,
                  env=None)
 
-        with DriveSession(opts.open_master(), 5, ppo=3) as s:   # identify, Set_Prm/Chk_Cfg, Drive
+        with DriveSession(master, 5, ppo=3) as s:   # identify, Set_Prm/Chk_Cfg, Drive
+        # (the CLI and the checklist get theirs from api.Bus.session(): docs/api.md)
             s.start(percent=s.percent_for_hz(30.0))
             while ...: sample = s.poll()
         # leaving the block: normal stop (bounded wait), coast if it does not stop, release, close
 
-      master        dp.poller.Master (e.g. BusOptions.open_master()); the session closes its link on exit
+      master        dp.poller.Master (api.make_master builds it); the session closes its link on exit
                     unless close_link=False
       address       station 0..125; None -> env PDRIVE_STATION, else the only drive station on the bus
                     (FDL status + Slave_Diag scan; UsageError listing the candidates otherwise)
@@ -59,6 +71,8 @@ Public API (stable; everything else is internal)
     final_status (the last DriveStatus seen); settable: on_sample(Sample), called on every cycle
     while a stop is awaited (also the stop on exit) — live views keep updating through it.
 
+    Parts:    .motion (Motion: may_run, start, stop, jog, torque), .params (Parameters: plan / execute,
+              read, save, dump / compare / restore); the names below hand on to them
     Motion:   start(percent) / set_reference(percent) / poll() -> Sample / status() -> Sample /
               stop(on_sample=None) -> StopReport (normal, then coast; bounded) / may_run
     Speed:    fmax(override=None) -> (hz, source words);  percent_for_hz(hz, fmax_override=None)
@@ -91,14 +105,16 @@ from profidrive_cli.session.discovery import (DriveStation, choose_profile, find
                                               resolve_layout)
 from profidrive_cli.session.drivesession import DEFAULT_WATCHDOG_MS, DriveSession
 from profidrive_cli.session.dumpfile import DUMP_END, DUMP_FORMAT
-from profidrive_cli.session.params import ParamInfo, profiles_with_code, suggest_codes
+from profidrive_cli.session.motion import Motion
+from profidrive_cli.session.parameters import Parameters
+from profidrive_cli.session.params import ParamInfo, WritePlan, profiles_with_code, suggest_codes
 from profidrive_cli.session.restore import RestoreInterrupted, RestoreRefused
 from profidrive_cli.session.safestop import StopReport
 from profidrive_cli.session.signals import SessionTerminated
 
 __all__ = [
     "DEFAULT_WATCHDOG_MS", "DUMP_END", "DUMP_FORMAT", "DriveSession", "DriveStation", "MeteredChannel",
-    "ParamInfo", "ParamRow", "RestoreInterrupted", "RestoreRefused", "Sample", "SessionTerminated",
+    "Motion", "ParamInfo", "ParamRow", "Parameters", "RestoreInterrupted", "RestoreRefused", "Sample", "SessionTerminated",
     "StopReport", "choose_profile", "cycle_words", "default_cycle_hz", "find_drive_stations",
-    "profiles_with_code", "resolve_layout", "suggest_codes", "wire_limit_hz",
+    "profiles_with_code", "resolve_layout", "suggest_codes", "wire_limit_hz", "WritePlan",
 ]
