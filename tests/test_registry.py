@@ -75,6 +75,9 @@ def test_the_table_has_the_families_and_every_reference_resolves():
         if fam.sim_model is not None:
             mod, _, fn = fam.sim_model.partition(":")
             assert callable(getattr(importlib.import_module(mod), fn))
+        if fam.wire_fields is not None:
+            assert callable(registry.resolve(fam.wire_fields))
+        assert fam.sim_diag_len >= 6                       # Slave_Diag's six standard octets
 
 
 def test_every_shipped_profile_names_a_row_with_a_sim_model():

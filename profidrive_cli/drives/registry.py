@@ -15,6 +15,10 @@ is imported when a profile of the family is decoded or driven, the sim model onl
     config       the reader of the family's own profile keys: config(profile) -> its config type
     core_config  for a family on the PROFIdrive core: profile -> drives.profidrive.ProfidriveConfig
                  built from the family's own keys; None: the profile's `profidrive:` section is read
+    wire_fields  where each field of its areas sits on the wire (drives/wirefields.py, the Wireshark
+                 station table) for a family whose areas are not PROFIdrive PPO words; None: PPO words
+    sim_diag_len the Slave_Diag length its card allows (the simulator answers with it before the
+                 model is built, sim/lazy.py); 6 = no room for extended diagnosis
 
 A profile whose `family:` is not a row here is refused when it loads (drives/profile.py, file:line).
 A new family is one row here, its codec package, its sim model and its profile (docs/architecture.md).
@@ -50,6 +54,8 @@ class Family:
     sim_model: str | None
     config: str
     core_config: str | None = None
+    wire_fields: str | None = None
+    sim_diag_len: int = 6
 
 
 _PKG = "profidrive_cli.drives"
@@ -63,9 +69,10 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
     Family("profidrive", f"{_PKG}.profidrive", f"{_PKG}.profidrive.drive:ProfidriveDrive", None,
            f"{_PKG}.profidrive.config:ProfidriveConfig.from_profile"),
     Family("toyo", f"{_PKG}.toyo", f"{_PKG}.toyo.drive:ToyoDrive", f"{_SIM}.toyo:make_model",
-           f"{_PKG}.toyo.config:toyo_config", f"{_PKG}.toyo.config:profidrive_config"),
+           f"{_PKG}.toyo.config:toyo_config", f"{_PKG}.toyo.config:profidrive_config",
+           wire_fields=f"{_PKG}.wirefields:toyo_fields", sim_diag_len=15),
     Family("yaskawa", f"{_PKG}.yaskawa", f"{_PKG}.yaskawa.drive:YaskawaDrive", f"{_SIM}.yaskawa:make_model",
-           f"{_PKG}.yaskawa.config:family_config"),
+           f"{_PKG}.yaskawa.config:family_config", wire_fields=f"{_PKG}.wirefields:yaskawa_fields"),
 )}
 
 
@@ -133,6 +140,17 @@ def core_config_reader(profile: ProfileLike) -> Callable[[ProfileLike], Any] | N
         return None
     fn: Callable[[ProfileLike], Any] = resolve(fam.core_config)
     return fn
+
+
+def wire_fields_ref(profile: ProfileLike) -> str | None:
+    """The 'module:function' reference of the family's own wire-field layout; None: PPO words."""
+    return family_of(profile).wire_fields
+
+
+def sim_diag_len(family: str) -> int:
+    """The Slave_Diag length the family's card allows (6 for a family not in the table)."""
+    fam = FAMILIES.get(family)
+    return fam.sim_diag_len if fam is not None else 6
 
 
 def sim_model_ref(profile: ProfileLike) -> str | None:

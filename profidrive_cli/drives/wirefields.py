@@ -54,7 +54,7 @@ def _ppo_fields(profile, layout: str, direction: str) -> tuple[int, list[dict]]:
     return ppo.length(direction), fields
 
 
-def _yaskawa_fields(profile, layout: str, direction: str) -> tuple[int, list[dict]]:
+def yaskawa_fields(profile, layout: str, direction: str) -> tuple[int, list[dict]]:
     from profidrive_cli.drives.yaskawa.codec import (COMMAND_BITS, COMMAND_TEXT, FORMATS, MFO_BITS,
                                                      SIGNED_WORDS, STATUS_BITS, STATUS_TEXT,
                                                      FrequencyScale)
@@ -96,7 +96,7 @@ def _yaskawa_fields(profile, layout: str, direction: str) -> tuple[int, list[dic
     return fmt.size, fields
 
 
-def _toyo_fields(profile, layout: str, direction: str) -> tuple[int, list[dict]]:
+def toyo_fields(profile, layout: str, direction: str) -> tuple[int, list[dict]]:
     from profidrive_cli.drives.toyo.codec import speed_percent
     from profidrive_cli.drives.toyo.config import toyo_config
     from profidrive_cli.drives.toyo.params import value_from_wire
@@ -140,16 +140,15 @@ def _toyo_fields(profile, layout: str, direction: str) -> tuple[int, list[dict]]
     return n, fields
 
 
-_FAMILY = {"yaskawa": _yaskawa_fields, "toyo": _toyo_fields}
-
-
 def area_fields(profile, layout: str, direction: str) -> dict:
     """{"length": octets, "fields": [...]} of one direction of a layout (request = master -> drive)."""
     if direction not in DIRECTIONS:
         raise UsageError(f"direction must be request or response, got {direction!r}")
     if layout not in profile.layouts:
         raise UsageError(f"{profile.name} has no layout '{layout}' (known: {', '.join(profile.layouts)})")
-    length, fields = _FAMILY.get(profile.family, _ppo_fields)(profile, layout, direction)
+    from profidrive_cli.drives.registry import resolve, wire_fields_ref
+    ref = wire_fields_ref(profile)                 # the family's own layout, else PPO words
+    length, fields = (resolve(ref) if ref else _ppo_fields)(profile, layout, direction)
     lay = profile.layouts[layout]
     want = lay.output_len if direction == "request" else lay.input_len
     if length != want:

@@ -20,13 +20,11 @@ from __future__ import annotations
 from collections import deque
 
 from profidrive_cli import PdriveError
+from profidrive_cli.drives.registry import sim_diag_len
 
 #: tick times kept until the model is built (more than any model's standstill history: Toyo keeps 100)
 REPLAY_TICKS = 256
 
-#: Slave_Diag length the families' cards allow (sim/<family>.py); 6 = no room for extended diagnosis.
-#: tests/test_sim_lazy.py checks these against the built models of every shipped profile.
-MAX_DIAG_LEN = {"toyo": 15}
 
 
 class LazyModel:
@@ -37,7 +35,9 @@ class LazyModel:
         d["_build"] = build
         d["_real"] = None
         d["_ident"] = ident
-        d["_diag_len"] = MAX_DIAG_LEN.get(family, 6)
+        # the family table's Slave_Diag length (drives/registry.py; tests/test_sim_lazy.py checks it
+        # against the built models of every shipped profile)
+        d["_diag_len"] = sim_diag_len(family)
         d["_ticks"] = deque(maxlen=REPLAY_TICKS)
         d["_owner"] = None
         d["_label"] = label
