@@ -700,3 +700,77 @@ def test_after_stop_hook_errors_are_said_and_the_others_run():
     s.motion.shutdown(None)
     assert s.messages == ["after the stop: PZD map not restored"] and seen == [True]
     assert s.master.released == [3]
+
+
+# -- callbacks that fail during the stop (the stop goes on; the first error comes after the release) --
+
+def test_a_failing_on_sample_does_not_stop_the_stop():
+    clock = Clock()
+    d = Drive(clock, normal_after=3)
+    s = Session(d, clock, decel_s=10.0)
+    calls = []
+
+    def bad(sample):
+        calls.append(sample.status)
+        raise RuntimeError("view gone")
+    r = s.motion.stop(bad, None)
+    assert (r.how, r.stopped) == ("normal", True)          # 3 running cycles, the 4th stopped
+    assert calls == [RUNNING]                              # not called again after it raised
+    assert isinstance(s.motion.callback_error, RuntimeError)
+    assert str(s.motion.callback_error) == "view gone"
+    assert s.final_status is STOPPED
+
+
+def test_wait_stopped_passes_on_sample_and_returns_the_status():
+    clock = Clock()
+    d = Drive(clock, normal_after=2)
+    s = Session(d, clock)
+    d.stop("normal", wait=False)
+    got = []
+    st = s.motion.wait_stopped(5.0, got.append)
+    assert st is STOPPED
+    assert [smp.status for smp in got] == [RUNNING, RUNNING, STOPPED]
+
+
+def test_shutdown_raises_a_callback_error_after_the_release():
+    clock = Clock()
+    s = Session(Drive(clock, normal_after=1), clock, decel_s=10.0)
+
+    def bad(sample):
+        raise RuntimeError("view gone")
+    s.on_sample = bad
+    s.motion.stop = lambda on_sample=None, timeout=None: Motion.stop(s.motion, bad, timeout)
+    with pytest.raises(RuntimeError, match="view gone"):
+        s.motion.shutdown(None)
+    assert s.master.released == [3]                       # released before it was raised
+    assert s.motion.callback_error is None                # raised once, then forgotten
+
+
+def test_shutdown_after_an_exception_keeps_that_one_first():
+    clock = Clock()
+    s = Session(Drive(clock, normal_after=1), clock, decel_s=10.0)
+    err = RuntimeError("view gone")
+    s.motion.callback_failed(err)
+    s.motion.shutdown(KeyboardInterrupt())                 # the session's own exception goes on
+    assert s.master.released == [3] and s.motion.callback_error is err
+
+
+def test_a_message_hook_that_raises_is_kept_as_the_callback_error():
+    clock = Clock()
+    s = Session(Drive(clock), clock, may_run=False)
+    boom = OSError("terminal gone")
+
+    def say(text):
+        raise boom
+    s.say = say
+    s.motion.after_stop = [lambda ok: (_ for _ in ()).throw(RuntimeError("hook"))]
+    with pytest.raises(OSError):
+        s.motion.shutdown(None)
+    assert s.master.released == [3]
+
+
+def test_link_lost_words_without_an_exception():
+    # the link was found lost before and the session is closed without an exception: no "(None)"
+    s = Session(Drive(Clock()), family="toyo", watchdog_ms=1500)
+    assert s.motion.link_lost_words(None).startswith(
+        "link lost: pdrive cannot send a stop. The station's DP watchdog (1500 ms) takes it")
