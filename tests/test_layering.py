@@ -195,7 +195,7 @@ def test_the_plan_is_one_order():
 
 
 def test_the_plan_is_the_documented_one():
-    # the plan of issue 25 (docs/architecture.md, "Where the house is going"):
+    # the plan drawn at the top of docs/architecture.md (issue 25):
     #   link -> fdl -> dp -> gsd -> drives -> session -> api -> checklist, cli;
     #   bustools beside session (link/fdl/dp/gsd/drives, not session/api/cli); sim beside the master stack
     chain = ["link", "fdl", "dp", "gsd", "drives", "session", "api", "checklist", "cli"]
