@@ -21,13 +21,31 @@ level; docs/api.md). Errors are the CLI's: UsageError (bad input,
 refused writes), BusError / DriveError (the bus or the drive).
 """
 
+from typing import TYPE_CHECKING
+
 from profidrive_cli import BusError, PdriveError, UsageError
 from profidrive_cli.api.bus import Bus, make_master, open_bus
-from profidrive_cli.api.drive import Drive
 from profidrive_cli.api.results import Fault, Faults, Param, Station, Status, StopResult
-from profidrive_cli.drives.base import DriveError
 from profidrive_cli.fdl.master import format_counters
-from profidrive_cli.session.signals import SessionTerminated
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.api.drive import Drive
+    from profidrive_cli.drives.base import DriveError
+    from profidrive_cli.session.signals import SessionTerminated
+
+#: loaded on first use (PEP 562): `pdrive scan` builds its master with make_master and never needs the
+#: session layer these bring in (benchmarks/bench_startup.py)
+_LAZY = {"Drive": "profidrive_cli.api.drive", "DriveError": "profidrive_cli.drives.base",
+         "SessionTerminated": "profidrive_cli.session.signals"}
+
+
+def __getattr__(name: str) -> object:
+    if name in _LAZY:
+        import importlib
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 __all__ = ["Bus", "BusError", "Drive", "DriveError", "Fault", "Faults", "Param", "PdriveError",
            "SessionTerminated", "Station", "Status", "StopResult", "UsageError", "format_counters",
