@@ -774,3 +774,16 @@ def test_link_lost_words_without_an_exception():
     s = Session(Drive(Clock()), family="toyo", watchdog_ms=1500)
     assert s.motion.link_lost_words(None).startswith(
         "link lost: pdrive cannot send a stop. The station's DP watchdog (1500 ms) takes it")
+
+
+def test_the_stop_facts_are_read_once_at_the_first_start():
+    # a fresh Motion knows neither; read_stop_facts (start / jog) reads both, a second call nothing
+    clock = Clock()
+    s = Session(Drive(clock, channel=False), clock, family="toyo")
+    assert s.motion.comm_loss_text is None and s.motion.decel_s is None
+    s.motion.read_stop_facts()
+    # Toyo protection 18 (toyo-vf66-pbus66z.md): fixed, the words need no parameter channel
+    assert s.motion.comm_loss_text == "protection 18 (COMM): the inverter trips and coasts"
+    s.motion.comm_loss_text = "kept"
+    s.motion.read_stop_facts()
+    assert s.motion.comm_loss_text == "kept"

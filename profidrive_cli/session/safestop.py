@@ -145,8 +145,6 @@ class SafeStop:
         last = d.last_seen()
         pct = last.speed_percent if last is not None else None
         limit = timeout if timeout is not None else self.stop_timeout(pct)
-        st = None
-        why = ""
         try:
             d.stop("normal", wait=False)
             st, on_sample = self._wait(limit, on_sample)
