@@ -66,6 +66,7 @@ class Session:
         self.dangers = dangers or {}      # code -> what writing it does
         self.warnings: list[str] = []
         self.compared = []
+        self.executed = []
 
     def warn(self, text):
         self.warnings.append(text)
@@ -84,6 +85,7 @@ class Session:
         return self.dangers.get(info.code)
 
     def execute(self, plan, check_running=True):
+        self.executed.append((plan.info.code, check_running))
         return self.drive.write_param(plan.info.code, plan.value)
 
 
@@ -344,3 +346,14 @@ def test_a_refused_write_mid_way(checked):
     assert [r.result for r in rows] == ["refused", "not written"]
     assert rows[0].reason == "F08: out of range" and e.value.cause is cause
     assert e.value.__cause__ is cause
+
+
+def test_each_write_executes_its_plan_without_a_second_running_check(checked):
+    # the rows were checked with the drive stopped (restore_problems, before the first write): the
+    # writes themselves take no second look per row (check_running=False, exactly)
+    d = Drive()
+    rows = [row("F07", "differs", 2.5), row("F08", "differs", 6.0)]
+    s = Session(rows, drive=d)
+    rs.restore(s, doc())
+    assert s.executed == [("F07", False), ("F08", False)]
+    assert all(flag is False for _, flag in s.executed)

@@ -53,7 +53,7 @@ def restore_problems(params: ParamView, doc: dict[str, Any], rows: list[ParamRow
 
 
 def check_rows(params: ParamView, doc: dict[str, Any], rows: list[ParamRow],
-               allow_dangerous: bool = False) -> tuple[list[str], list[tuple[ParamRow, WritePlan]]]:
+               allow_dangerous: bool) -> tuple[list[str], list[tuple[ParamRow, WritePlan]]]:
     """restore_problems(), and the plan of each row to write (Parameters.plan: its value parsed,
     writable, exact), for restore() to execute."""
     problems: list[str] = []
