@@ -97,7 +97,7 @@ class FieldChecker:
 
     def param(self, st, code: str, line: int, where: str) -> ParamTarget:
         try:
-            label, p = resolve_param(st.profile, code, st.layout)
+            label, p = resolve_param(st.profile, code)
         except PdriveError as e:
             self.fail(line, f"{where}: {e} (station {st.name!r})")
         return ParamTarget(code=code, label=label, param=p, unit=(p.unit if p is not None else ""))
@@ -170,7 +170,7 @@ class FieldChecker:
         return False
 
 
-def resolve_param(profile, code: str, layout: str | None = None) -> tuple[str, Any]:
+def resolve_param(profile, code: str) -> tuple[str, Any]:
     """(canonical label, ParamDef or None for a raw address) for `code` in this profile's family, the way
     the family's Drive resolves it; UsageError naming the closest codes when it is unknown."""
     from profidrive_cli.drives import drive_class
