@@ -129,12 +129,25 @@ class Parameters:
         return None
 
     # -- the checked write: preflight, plan, then execute -----------------------------------------
+    def entry_of(self, code: str) -> Any:
+        """The profile entry `code` reaches, from the profile alone (no drive): its own code, or the
+        raw address of a listed entry the way the family resolves one (Fuji PNU264[3] is H03); None
+        for an address no entry has or a code the family does not address."""
+        p = self.profile.param(code)
+        if p is not None:
+            return p
+        from profidrive_cli.drives import drive_class
+        try:
+            return drive_class(self.profile).param_label_for(self.profile, code)[1]
+        except UsageError:
+            return None
+
     def preflight(self, code: str, text: str, *, allow_dangerous: bool = False) -> str | None:
         """The checks the profile alone allows, before the drive is connected (a question before a
         write on a real port comes after them, and nothing is written yet): a dangerous entry
         without allow_dangerous, a number the entry cannot hold (drives.values.profile_value_problem).
         Returns what writing it does when it is dangerous (for the question), else None."""
-        p = self.profile.param(code.strip())
+        p = self.entry_of(code.strip())
         what = danger(p)
         if what and not allow_dangerous:
             raise UsageError(f"{code} is dangerous: writing it {what}; nothing was written "

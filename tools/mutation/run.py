@@ -84,7 +84,7 @@ MODULES: dict[str, list[str]] = {
     "session/restore.py": ["tests/test_restore_mutants.py", "tests/test_exact_values.py", "tests/test_session.py"],
     "session/motion.py": ["tests/test_motion.py", "tests/test_safestop_mutants.py", "tests/test_session.py",
                           "tests/test_jog.py", "tests/test_torque.py"],
-    "session/parameters.py": ["tests/test_param_plan.py", "tests/test_restore_mutants.py", "tests/test_exact_values.py",
+    "session/parameters.py": ["tests/test_parameters_mutants.py", "tests/test_param_plan.py", "tests/test_restore_mutants.py", "tests/test_exact_values.py",
                               "tests/test_session.py"],
     "checklist/runner.py": ["tests/test_checklist_bands.py", "tests/test_checklist.py"],
     "checklist/fields.py": _CHECKLIST_TESTS,
