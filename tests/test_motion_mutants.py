@@ -443,6 +443,15 @@ def test_percent_for_hz_within_rounding_of_100_is_taken():
     assert s.motion.percent_for_hz(50.0 * (1 + 1e-12)) == pytest.approx(100.0)
 
 
+def test_percent_for_hz_at_the_rounding_allowance_exactly_is_taken():
+    # 100 x 50.0000000005 / 50 is 100 + 1e-9 exactly in binary (checked by hand with float
+    # arithmetic): at the allowance, not above it
+    s = station(max_hz=50.0)
+    assert 100.0 * 50.0000000005 / 50.0 == 100.0 + 1e-9
+    assert s.motion.percent_for_hz(50.0000000005) == 100.0 + 1e-9
+    assert s.motion.percent_for_hz(-50.0000000005) == -(100.0 + 1e-9)
+
+
 @pytest.mark.parametrize("hz", [50.3, -50.3, 51.0, -51.0, 100.0])
 def test_percent_for_hz_above_fmax_is_refused(hz):
     s = station(max_hz=50.0)
