@@ -18,6 +18,13 @@ from test_session import drive_model, session, short_ramps
 
 PKG = Path(__file__).resolve().parent.parent / "profidrive_cli"
 
+def standstill_hz(s):
+    """The frequency below which the drive counts as stopped: DriveStatus.stopped's 0.05 % of the
+    maximum frequency (drives/base.py). The model's own ramp may leave a few uHz after the stop it
+    confirmed (seen under load: 8.5e-06 Hz), never more than that."""
+    return 0.0005 * s.fmax_hz
+
+
 #: an assignment to may_run / _may_run (not a comparison), or a setattr naming it
 WRITES = re.compile(r"""\b_?may_run\s*(?:=(?!=)|[-+|&]=)|setattr\([^)]*["']_?may_run["']""")
 
@@ -57,7 +64,7 @@ def test_a_drive_started_directly_is_stopped_on_close(sim, address, layout):
             assert s.poll().status.running
     assert s.stop_report.how == "normal" and s.stop_report.stopped, s.stop_report
     model = drive_model(sim, address)
-    assert (model.out_hz if address == 7 else model.freq) == 0.0
+    assert abs(model.out_hz if address == 7 else model.freq) < standstill_hz(s)
 
 
 @pytest.mark.parametrize("address,layout", [(5, None), (5, "toyo"), (6, None)])
@@ -76,7 +83,7 @@ def test_a_jog_given_directly_is_stopped_on_close_even_after_its_own_stop(sim, a
         d.stop("normal", wait=True, timeout=30.0)
         assert s.may_run
     assert s.stop_report.how == "normal" and s.stop_report.stopped, s.stop_report
-    assert drive_model(sim, address).freq == 0.0
+    assert abs(drive_model(sim, address).freq) < standstill_hz(s)
 
 
 def test_a_session_that_never_commands_motion_needs_no_stop():
