@@ -29,6 +29,8 @@ from profidrive_cli.drives.base import DriveError, DriveStatus, ParamValue
 from profidrive_cli.drives.profile import load_profile
 from profidrive_cli.session.motion import Motion
 
+from test_safestop_mutants import StationLines
+
 
 def status(state="operation", running=True, speed=50.0, fault=False, fault_code=None):
     return DriveStatus(state=state, running=running, fault=fault, flags={}, speed_percent=speed,
@@ -168,7 +170,7 @@ class FakeDrive:
         return [c[0] for c in self.calls]
 
 
-class Station:
+class Station(StationLines):
     """The station Motion reads (motion.MotionStation), with its Motion as DriveSession builds it."""
 
     def __init__(self, drive=None, profile="fuji-opc-g1-pdp", layout="ppo1", clock=None):
@@ -191,14 +193,6 @@ class Station:
         if drive is not None:
             self.motion.watch(drive)
 
-    def need_drive(self):
-        return self.drive
-
-    def warn(self, text):
-        self.warnings.append(text)
-
-    def say(self, text):
-        self.messages.append(text)
 
 
 def station(profile="fuji-opc-g1-pdp", layout="ppo1", **kw):

@@ -8,11 +8,10 @@ import importlib
 import textwrap
 from pathlib import Path
 
-import pytest
-
-from profidrive_cli.cli.main import main
 from profidrive_cli.drives import registry
 from profidrive_cli.drives.profile import all_profiles
+
+from test_exit_codes import pdrive              # the in-process CLI runner
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -31,13 +30,6 @@ CUSTOM = textwrap.dedent("""\
     """)
 
 
-def pdrive(capsys, monkeypatch, *argv):
-    monkeypatch.setenv("PDRIVE_PORT", "")
-    monkeypatch.delenv("PDRIVE_STATION", raising=False)
-    with pytest.raises(SystemExit) as e:
-        main(list(argv))
-    out, err = capsys.readouterr()
-    return e.value.code, out, err
 
 
 def test_a_custom_profile_of_an_unknown_family_is_refused_on_its_line(tmp_path, capsys, monkeypatch):

@@ -163,7 +163,21 @@ class Master:
             raise self.release_error
 
 
-class Session:
+class StationLines:
+    """A fake station's message line and Drive (session.station.StationView's need_drive / warn /
+    say): warnings and messages kept in lists."""
+
+    def need_drive(self):
+        return self.drive
+
+    def warn(self, text):
+        self.warnings.append(text)
+
+    def say(self, text):
+        self.messages.append(text)
+
+
+class Session(StationLines):
     """The station Motion reads (motion.MotionStation), with its Motion as DriveSession has it.
     may_run: the drive was told to turn (Drive.on_motion, as a start or jog does). stop_result:
     None runs Motion's own stop; a StopReport / exception scripts it (the shutdown's tests)."""
@@ -212,14 +226,6 @@ class Session:
     comm_loss_text = property(lambda self: self.motion.comm_loss_text,
                               lambda self, v: setattr(self.motion, "comm_loss_text", v))
 
-    def need_drive(self):
-        return self.drive
-
-    def warn(self, text):
-        self.warnings.append(text)
-
-    def say(self, text):
-        self.messages.append(text)
 
 
 # -- the escalation time ---------------------------------------------------------------------------
