@@ -3,7 +3,8 @@ effective setting came from.
 
 Files (YAML, read with datafile.load_yaml: bounded, file:line errors, exit 2):
 
-    user     $XDG_CONFIG_HOME/pdrive/config.yaml (default ~/.config/pdrive/config.yaml)
+    user     $XDG_CONFIG_HOME/pdrive/config.yaml (default ~/.config/pdrive/config.yaml; on Windows
+             %APPDATA%\\pdrive\\config.yaml)
     project  the nearest pdrive.yaml in the current folder or one above it (the search stops at
              the first one found, and at the file-system root);
              PDRIVE_CONFIG=FILE names the file to use instead of the search (it must exist)
@@ -31,6 +32,7 @@ from __future__ import annotations
 
 import os
 import re
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -147,11 +149,20 @@ class Effective:
 # ------------------------------------------------------------------------------------------ files
 
 
-def user_config_path(env: Mapping[str, str] | None = None) -> Path:
+def user_config_path(env: Mapping[str, str] | None = None, platform: str | None = None) -> Path:
+    """The user file: $XDG_CONFIG_HOME/pdrive/config.yaml where that is set (absolute); else, on
+    Windows, %APPDATA%\\pdrive\\config.yaml (where Windows programs keep their settings), elsewhere
+    ~/.config/pdrive/config.yaml. `platform`: sys.platform (tests switch it)."""
     env = os.environ if env is None else env
+    platform = sys.platform if platform is None else platform
     base = env.get("XDG_CONFIG_HOME") or ""
-    root = Path(base) if base and Path(base).is_absolute() else Path(env.get("HOME") or Path.home()) / ".config"
-    return root / USER_FILE
+    if base and Path(base).is_absolute():
+        return Path(base) / USER_FILE
+    if platform == "win32":
+        appdata = env.get("APPDATA") or ""
+        root = Path(appdata) if appdata else Path(env.get("USERPROFILE") or Path.home()) / "AppData" / "Roaming"
+        return root / USER_FILE
+    return Path(env.get("HOME") or Path.home()) / ".config" / USER_FILE
 
 
 def project_config_path(cwd: str | Path | None = None) -> Path | None:

@@ -17,13 +17,14 @@ import select
 import socket
 import threading
 import time
-import tty
 
 from profidrive_cli.sim.bus import SimBus
 
 
 class PtyEndpoint:
     def __init__(self):
+        import tty                      # POSIX only: `sim --pty` (imported here, so that the module
+                                        # loads on Windows, where --listen and --serial work)
         self.master_fd, self.slave_fd = os.openpty()
         tty.setraw(self.slave_fd)
         self.path = os.ttyname(self.slave_fd)
