@@ -73,3 +73,88 @@ def test_the_user_config_file_on_windows_is_under_appdata():
         Path("/x/pdrive/config.yaml")
     assert user_config_path({"HOME": "/home/u", "APPDATA": str(appdata)}, platform="linux") == \
         Path("/home/u/.config/pdrive/config.yaml")
+
+
+# -- doctor on a COM port: the FTDI latency timer from the registry ---------------------------------
+
+class FakeWinreg:
+    """winreg's calls doctor uses, over a dict: key path -> {value name: value} (subkeys by path)."""
+    HKEY_LOCAL_MACHINE = "HKLM"
+
+    def __init__(self, keys):
+        self.keys = keys
+
+    def OpenKey(self, root, path):
+        if path not in self.keys:
+            raise OSError(2, "not found")
+        return path
+
+    def EnumKey(self, key, i):
+        subs = sorted({k[len(key) + 1:].split("\\")[0] for k in self.keys if k.startswith(key + "\\")})
+        if i >= len(subs):
+            raise OSError(259, "no more data")
+        return subs[i]
+
+    def QueryValueEx(self, key, name):
+        values = self.keys[key]
+        if name not in values:
+            raise OSError(2, "no value")
+        return values[name], 4
+
+
+def ftdi(port_name, latency, device="VID_0403+PID_6001+A1B2C3D4A"):
+    from profidrive_cli.dp.winports import FTDIBUS
+    return {f"{FTDIBUS}\\{device}\\0000\\Device Parameters": {"PortName": port_name, "LatencyTimer": latency}}
+
+
+def test_ftdi_latency_is_read_for_the_port_asked():
+    from profidrive_cli.dp.winports import FTDIBUS, ftdi_latency
+    keys = {FTDIBUS: {}, **ftdi("COM3", 16), **ftdi("COM7", 1, "VID_0403+PID_6015+XYZ")}
+    reg = FakeWinreg(keys)
+    key, ms = ftdi_latency("com3", reg)                       # case-blind, as Windows names ports
+    assert ms == 16 and key == f"HKLM\\{FTDIBUS}\\VID_0403+PID_6001+A1B2C3D4A\\0000\\Device Parameters"
+    assert ftdi_latency("COM7", reg)[1] == 1
+    assert ftdi_latency("COM9", reg) == (None, None)          # not an FTDI port
+    assert ftdi_latency("COM3", FakeWinreg({})) == (None, None)    # no FTDI driver installed
+
+
+def _doctor(monkeypatch, port, keys, ports=("COM1", "COM3")):
+    import profidrive_cli.dp.winports as W
+    from profidrive_cli.dp.doctor import diagnose
+    monkeypatch.setattr(W, "com_ports", lambda: list(ports))
+    rep = diagnose(port, platform="win32", winreg=FakeWinreg(keys), listen_s=0.0)
+    return {c.name: c for c in rep.checks}
+
+
+def test_doctor_names_a_high_latency_timer_and_how_to_lower_it(monkeypatch):
+    from profidrive_cli.dp.winports import FTDIBUS
+    checks = _doctor(monkeypatch, "COM3", {FTDIBUS: {}, **ftdi("COM3", 16)})
+    lt = checks["latency_timer"]
+    assert lt.status == "warn" and lt.data["ms"] == 16
+    assert "Device Manager > Ports (COM & LPT)" in lt.detail and "Latency Timer (msec): 1" in lt.detail
+    assert checks["permission"].status == "skip"
+
+
+def test_doctor_is_content_with_1_ms_and_says_when_there_is_no_ftdi(monkeypatch):
+    from profidrive_cli.dp.winports import FTDIBUS
+    assert _doctor(monkeypatch, "COM3", {FTDIBUS: {}, **ftdi("COM3", 1)})["latency_timer"].status == "ok"
+    assert _doctor(monkeypatch, "COM3", {})["latency_timer"].status == "skip"
+
+
+def test_doctor_on_a_com_port_windows_does_not_list(monkeypatch):
+    checks = _doctor(monkeypatch, "COM9", {})
+    assert checks["port"].status == "fail"
+    assert checks["port"].detail == "COM9: no such port (ports here: COM1, COM3)"
+
+
+def test_doctor_says_whether_the_port_checks_parity():
+    # a POSIX serial device marks bad-parity octets (link/parity.py); pyserial on Windows cannot,
+    # and doctor says so instead of staying silent
+    from types import SimpleNamespace
+    from profidrive_cli.dp.doctor import Report, parity_check
+    rep = Report("COM3", "serial")
+    parity_check(rep, SimpleNamespace())                        # a win32 Serial: no marks_parity
+    parity_check(rep, SimpleNamespace(marks_parity=True))        # ParityMarkingSerial on Linux
+    assert [(c.name, c.status, c.data["checked"]) for c in rep.checks] == [
+        ("parity", "warn", False), ("parity", "ok", True)]
+    assert "not checked" in rep.checks[0].detail

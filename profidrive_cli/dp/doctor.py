@@ -15,6 +15,7 @@ from __future__ import annotations
 import errno
 import os
 import struct
+import sys
 import time
 from dataclasses import dataclass, field
 
@@ -169,7 +170,9 @@ def usb_slot_bits(baud: int, latency_ms: int | None) -> int:
 # -- the whole check -----------------------------------------------------------------------------
 def diagnose(port: str, baud: int = 19200, master_address: int = 2, probe_address: int = 126,
              rs485: bool = False, listen_s: float = 0.3, sysfs: str = "/sys",
-             station: int | None = None) -> Report:
+             station: int | None = None, platform: str | None = None, winreg=None) -> Report:
+    """platform: sys.platform (tests switch it); winreg: the registry module on Windows (a stand-in
+    in tests)."""
     if not 0 <= probe_address <= 126 or probe_address == master_address:
         raise UsageError(f"probe address {probe_address} must be 0..126 and not the master's")
     if port.startswith("sim://"):
@@ -186,6 +189,8 @@ def diagnose(port: str, baud: int = 19200, master_address: int = 2, probe_addres
             ser.close()
         _recommend(rep, baud, usb=False, latency=None, url=True)
         return rep
+    if (platform or sys.platform) == "win32":
+        return _windows(port, baud, master_address, probe_address, rs485, listen_s, station, winreg)
     rep = Report(port, "serial")
     if not os.path.exists(port):
         import serial.tools.list_ports
@@ -239,6 +244,8 @@ def diagnose(port: str, baud: int = 19200, master_address: int = 2, probe_addres
     _baud_rates(rep, port, rs485)
     ser = _open_check(rep, port, baud, rs485, quiet=True)
     if ser is not None:
+        if not is_pty:
+            parity_check(rep, ser)
         fd = getattr(ser, "fd", None)
         if fd is not None:
             state, flags = rs485_state(fd)
@@ -258,6 +265,43 @@ def diagnose(port: str, baud: int = 19200, master_address: int = 2, probe_addres
         _round_trip(rep, ser, baud, master_address, station)
         ser.close()
     _recommend(rep, baud, on_usb, latency)
+    return rep
+
+
+def _windows(port: str, baud: int, master: int, probe: int, rs485: bool, listen_s: float,
+             station: int | None, winreg) -> Report:
+    """A COM port: listed by Windows (no device file, no permission bits), the FTDI latency timer
+    from the registry (dp/winports.py), then the same open / baud / echo / round-trip checks."""
+    from profidrive_cli.dp.winports import HOW_TO_LOWER, com_ports, ftdi_latency
+    rep = Report(port, "serial")
+    found = com_ports()
+    if port.strip().upper() not in {p.upper() for p in found}:
+        rep.add("port", FAIL, f"{port}: no such port" + (f" (ports here: {', '.join(found)})" if found
+                                                        else " (no serial ports found)"),
+                candidates=found)
+        return rep
+    rep.add("permission", SKIP, "Windows: no device-file permissions (a port another program holds "
+            "fails to open below)", access=True)
+    key, latency = ftdi_latency(port, winreg)
+    if latency is not None:
+        rep.add("adapter", INFO, "USB serial adapter, driver FTDI (FTDIBUS)", driver="FTDIBUS", usb=True)
+        if latency <= 1:
+            rep.add("latency_timer", OK, f"{latency} ms ({key})", path=key, ms=latency)
+        else:
+            rep.add("latency_timer", WARN, f"{latency} ms: every reply waits up to that long in the "
+                    f"adapter; set 1 ms: {HOW_TO_LOWER}", path=key, ms=latency)
+    else:
+        rep.add("latency_timer", SKIP, "no FTDI adapter on this port in the registry (another "
+                "driver's latency setting, if it has one, is in its own Advanced port settings)",
+                path=None, ms=None)
+    _baud_rates(rep, port, rs485)
+    ser = _open_check(rep, port, baud, rs485, quiet=True)
+    if ser is not None:
+        parity_check(rep, ser)
+        _echo(rep, ser, port, baud, master, probe, listen_s)
+        _round_trip(rep, ser, baud, master, station)
+        ser.close()
+    _recommend(rep, baud, latency is not None, latency)
     return rep
 
 
@@ -299,6 +343,19 @@ def _open_check(rep: Report, port: str, baud: int, rs485: bool, quiet: bool = Fa
     if not quiet:
         rep.add("open", OK, f"opened at {BAUD_NAMES.get(baud, baud)}")
     return ser
+
+
+def parity_check(rep: Report, ser) -> None:
+    """Whether the port checks parity: a POSIX serial device marks each octet that arrived with a
+    parity or framing error (link/parity.py), which makes its telegram illegal; elsewhere (Windows:
+    pyserial cannot mark single octets) a wrong parity bit passes and only the FCS can catch it."""
+    if getattr(ser, "marks_parity", False):
+        rep.add("parity", OK, "parity and framing errors are checked: an octet that arrives with one "
+                "makes its telegram illegal (termios INPCK + PARMRK)", checked=True)
+    else:
+        rep.add("parity", WARN, "parity errors are not checked on this port: an octet with a wrong "
+                "parity bit passes as good, and only the telegram's FCS can catch it (PROFIBUS loses "
+                "the Hamming distance 4 it gets from the parity bit)", checked=False)
 
 
 def _baud_rates(rep: Report, port: str, rs485: bool) -> None:
