@@ -158,3 +158,40 @@ def test_doctor_says_whether_the_port_checks_parity():
     assert [(c.name, c.status, c.data["checked"]) for c in rep.checks] == [
         ("parity", "warn", False), ("parity", "ok", True)]
     assert "not checked" in rep.checks[0].detail
+
+
+# -- Ctrl-Break and closing the console stop the drives as SIGTERM does ----------------------------
+
+def test_sigbreak_ends_an_open_session_as_sigterm_does(monkeypatch):
+    # Windows' SIGBREAK (Ctrl-Break; the C runtime also delivers the console window's close as
+    # SIGBREAK) stands in as SIGUSR1 here: with a guard open it raises SessionTerminated, so the
+    # session's close runs its safe stop; without one the handler from before is back
+    import os
+    import signal
+    from profidrive_cli.session.signals import SessionTerminated, SignalGuard
+    monkeypatch.setattr(signal, "SIGBREAK", signal.SIGUSR1, raising=False)
+    seen = []
+    previous = signal.signal(signal.SIGUSR1, lambda *a: seen.append(a[0]))   # without a guard: this
+    before = signal.getsignal(signal.SIGUSR1)
+    g = SignalGuard()
+    g.install()
+    try:
+        try:
+            os.kill(os.getpid(), signal.SIGUSR1)
+            for _ in range(1000):                 # delivered at the next bytecode boundary
+                pass
+        except SessionTerminated as e:
+            assert e.signum == signal.SIGUSR1
+        else:
+            raise AssertionError("SIGBREAK did not end the session")
+        # during the safe stop a second one hurries the stop instead of interrupting it
+        g.guard()
+        os.kill(os.getpid(), signal.SIGUSR1)
+        for _ in range(1000):
+            pass
+        assert g.hurry is True
+    finally:
+        g.restore()
+        restored = signal.getsignal(signal.SIGUSR1)
+        signal.signal(signal.SIGUSR1, previous)
+    assert restored == before and seen == []

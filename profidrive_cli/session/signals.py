@@ -9,6 +9,10 @@ order, and the handlers from before the first guard come back only when the last
 A signal that arrives while some guards stop (they are hurried) and others are still open is not
 lost: it is raised (SessionTerminated / KeyboardInterrupt) when the stopping guards are restored, so
 the open ones end through their own safe stop too.
+
+On Windows SIGBREAK counts as SIGTERM does: Ctrl-Break, and closing the console window (the C
+runtime delivers CTRL_CLOSE_EVENT as SIGBREAK; Windows then ends the process within about 5 s, so the
+safe stop starts at once). Ctrl-C is SIGINT there too.
 """
 
 from __future__ import annotations
@@ -40,6 +44,13 @@ _original: dict[int, Any] = {}
 _pending: list[int] = []
 
 
+def _terminating() -> tuple[int, ...]:
+    """The signals that end an open session as SIGTERM does: SIGTERM, and SIGBREAK where the
+    platform has it (Windows)."""
+    brk = getattr(signal, "SIGBREAK", None)
+    return (signal.SIGTERM,) if brk is None else (signal.SIGTERM, brk)
+
+
 def _dispatch(signum: int, frame: FrameType | None) -> None:
     guarding = [g for g in _active if g._guarding]
     if guarding:
@@ -48,7 +59,7 @@ def _dispatch(signum: int, frame: FrameType | None) -> None:
         if any(not g._guarding for g in _active) and not _pending:
             _pending.append(signum)
         return
-    if signum == signal.SIGTERM and _active:
+    if signum in _terminating() and _active:
         raise SessionTerminated(signum)
     _call_original(signum, frame)
 
@@ -69,7 +80,8 @@ def _sync() -> None:
     original handler back on each signal as soon as no guard needs it."""
     if not _main_thread():
         return
-    want = {signal.SIGTERM: bool(_active), signal.SIGINT: any(g._guarding for g in _active)}
+    want = {s: bool(_active) for s in _terminating()}
+    want[signal.SIGINT] = any(g._guarding for g in _active)
     for s, on in want.items():
         try:
             if on and s not in _original:
@@ -129,6 +141,6 @@ class SignalGuard:
         if _pending and _main_thread() and not any(g._guarding for g in _active):
             signum = _pending.pop()
             if _active:
-                if signum == signal.SIGTERM:
+                if signum in _terminating():
                     raise SessionTerminated(signum)
                 raise KeyboardInterrupt
