@@ -242,3 +242,33 @@ def run_main(capsys, monkeypatch, *args) -> MainResult:
         main([str(a) for a in args])
     got = capsys.readouterr()
     return MainResult(e.value.code, got.out, got.err)
+
+
+# -- ptys are POSIX-only ---------------------------------------------------------------------------
+
+#: what in a test module says it needs a pty (pdrive sim --pty, socat's ptys, os.openpty)
+PTY_MARKERS = ("--pty", "openpty", "socat_pair", "start_pty_sim", "pty_sim_process", "short_ramps_pty_sim")
+
+
+def needs_pty(source: str) -> bool:
+    """The test module uses a pseudo-terminal (see PTY_MARKERS)."""
+    return any(m in source for m in PTY_MARKERS)
+
+
+def pytest_collection_modifyitems(config, items):
+    """Where there are no ptys (Windows), the tests that need one are skipped with the reason,
+    instead of failing: `pdrive sim --listen` + socket:// covers the same paths there."""
+    if os.name == "posix":
+        return
+    skip = pytest.mark.skip(reason="ptys are POSIX-only (on Windows: pdrive sim --listen and socket://)")
+    seen: dict = {}
+    for item in items:
+        path = str(item.fspath)
+        if path not in seen:
+            try:
+                with open(path, encoding="utf-8") as f:
+                    seen[path] = needs_pty(f.read())
+            except OSError:
+                seen[path] = False
+        if seen[path]:
+            item.add_marker(skip)

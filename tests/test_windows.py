@@ -195,3 +195,13 @@ def test_sigbreak_ends_an_open_session_as_sigterm_does(monkeypatch):
         restored = signal.getsignal(signal.SIGUSR1)
         signal.signal(signal.SIGUSR1, previous)
     assert restored == before and seen == []
+
+
+def test_the_pty_tests_are_the_ones_skipped_where_there_are_no_ptys():
+    # conftest.pytest_collection_modifyitems skips a module's tests on Windows when needs_pty()
+    from conftest import needs_pty
+    here = Path(__file__).resolve().parent
+    assert needs_pty((here / "test_pty_bus.py").read_text(encoding="utf-8"))
+    assert needs_pty((here / "test_run_safety.py").read_text(encoding="utf-8"))
+    assert not needs_pty((here / "test_fdl_frames.py").read_text(encoding="utf-8"))
+    assert not needs_pty((here / "test_config.py").read_text(encoding="utf-8"))
