@@ -122,8 +122,8 @@ def _run(*args: str) -> str:
 def test_sniff_text_names_the_dpv1_octets_and_the_blocks():
     out = _run("sniff", "--from-file", str(_need(ET200S)))
     assert "DP-V1 status 40 01 00: Fail_Safe, Chk_Cfg_Mode; Alarm_Mode 0 (1 alarm of each type)" in out
-    assert out.count("ext diag: identifier-related (9 octets): modules with diagnosis: none") == 2
-    assert out.count("ext diag: device-related (20 octets): DP-V1 status block: Module_Status (0x82), "
+    assert out.count("ext diag: identifier-related: modules with diagnosis: none") == 2
+    assert out.count("ext diag: device-related: DP-V1 status block: Module_Status (0x82), "
                      "slot 0, specifier 0 (no further differentiation); 64 modules: all data valid") == 2
     assert "watchdog 300 ms (30 x 1 x 10 ms)" in out
 
@@ -268,7 +268,7 @@ def test_every_block_kind_in_one_diagnosis():
     assert ident["modules"] == [8]
     assert (chan["module"], chan["channel"], chan["direction"], chan["width"], chan["error"]) == (
         8, 1, "input", "bit", "short circuit")
-    assert "dpv1" not in vendor and vendor["text"].endswith("vendor data 10 20 30")
+    assert "dpv1" not in vendor and vendor["text"] == "device-related: 10 20 30"
     # 04 04 05 09: Plug_Alarm, slot 5, specifier 0x09 = Seq_Nr 1, bits 1..0 = 01
     assert (plug["dpv1"]["type_name"], plug["dpv1"]["slot"], plug["dpv1"]["seq_nr"]) == ("Plug_Alarm", 5, 1)
     assert dec["flags"] == ["Ext_Diag", "WD_On"]             # st1 0x08, st2 0x0C (ref 289)

@@ -48,24 +48,19 @@ def _set_prm(du: bytes) -> dict[str, Any]:
 
 
 def _block(b: S.ExtDiagBlock) -> dict[str, Any]:
+    """One extended-diagnosis block; its text is the Wireshark dissector's (profibus.diag.block)."""
     d: dict[str, Any] = {"kind": b.kind, "raw": b.raw.hex(" ")}
+    text = b.describe()
     if b.kind == "identifier":
         d["modules"] = b.modules
-        mods = ", ".join(str(m) for m in b.modules) or "none"
-        text = f"identifier-related ({len(b.raw)} octets): modules with diagnosis: {mods}"
     elif b.kind == "channel":
         d.update(module=b.module, channel=b.channel, direction=b.direction, width=b.width,
                  error=b.error)
-        text = b.describe()
     elif b.kind == "device":
         v1 = dpv1_block(b.raw)
         if v1 is not None:
             d["dpv1"] = v1.to_dict()
-            text = f"device-related ({len(b.raw)} octets): {v1.describe()}"
-        else:
-            text = f"device-related ({len(b.raw)} octets): vendor data {b.raw[1:].hex(' ') or '(empty)'}"
-    else:
-        text = b.describe()
+            text = f"device-related: {v1.describe()}"
     d["text"] = text
     return d
 
