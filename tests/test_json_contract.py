@@ -549,6 +549,35 @@ def test_sniff_stream_from_a_file(tmp_path):
     assert lines[0]["raw"] == _raw_frames()[:6].hex(" ")
 
 
+def test_sniff_decoded_objects(tmp_path):
+    """Issue 26: the `decoded` object of every DU kind sniff decodes, against the contract; one
+    Slave_Diag with every extended-diagnosis block kind (identifier, channel, device as vendor data,
+    DP-V1 alarm, DP-V1 Module_Status with bad modules, reserved)."""
+    from profidrive_cli.dp import services as S
+    from profidrive_cli.fdl import frames as F
+    srd = F.request_fc(F.SRD_HIGH, fcv=True)
+    dl = F.response_fc(0x08)
+    diag = bytes.fromhex("08 0c 00 02 12 34 44 00 01 00 88 41 21 04 10 20 30 06 04 05 0d aa bb"
+                         " 06 82 00 01 e4 00 c0")
+    frames = [
+        F.make(5, 2, srd, bytes.fromhex("b8 1e 01 00 80 6a 01 c4 01 00 11 21"), 61, 62),   # Set_Prm, DP-V1
+        F.make(5, 2, srd, bytes.fromhex("88 01 01 0b 00 0b 00 00 0a 00"), 61, 62),         # not DP-V1
+        F.make(5, 2, srd, bytes.fromhex("00 10 20"), 62, 62),                               # Chk_Cfg
+        F.make(2, 5, dl, diag, 62, 60),                                                      # Slave_Diag reply
+        F.make(127, 2, F.request_fc(F.SDN_HIGH), bytes((S.GC_CLEAR, 0)), 58, 62),          # Global_Control
+    ]
+    raw = tmp_path / "dus.raw"
+    raw.write_bytes(b"".join(F.encode(f) for f in frames))
+    lines = lines_of(pdrive("sniff", "--from-file", str(raw), "--json"))
+    assert assert_stream(lines, "sniff") == ["frame"] * 5
+    assert all("decoded" in d for d in lines)
+    kinds = [b["kind"] for b in lines[3]["decoded"]["blocks"]]
+    assert kinds == ["identifier", "channel", "device", "device", "device", "reserved"]
+    ext = TESTDATA.parent / "external" / "pyprofibus26-et200s-startup.raw"
+    if ext.exists():                                # the real ET200S start-up (../shared)
+        assert len(assert_stream(lines_of(pdrive("sniff", "--from-file", str(ext), "--json")), "sniff")) == 15
+
+
 # ---------------------------------------------------------------------------------------------
 # the commands merged with their own JSON: scan --watch, commloss-test, run 3,4,5, sniff --station /
 # --live, sim --plc, config show / path, wireshark install, the bus_health and comm_loss steps

@@ -214,6 +214,47 @@ def test_tshark_decodes_global_control_set_slave_add_and_extended_diagnosis(tsha
                                                "channel-related: module 0, channel 1 input, word: overtemperature")
 
 
+EXTERNAL = ROOT.parent / "shared" / "testdata" / "external"
+
+
+def test_tshark_names_the_dpv1_octets_and_every_block_like_sniff(tshark, tmp_path):
+    """Issue 26: the dissector names the DP-V1 Set_Prm status octets and every extended-diagnosis
+    block kind with the same words as `pdrive sniff` (the real ET200S start-up of pyprofibus #26 from
+    ../shared, and hand-built blocks: alarm, Module_Status with bad modules, vendor data, channel)."""
+    from profidrive_cli.fdl import frames as F
+    diag = bytes.fromhex("08 0c 00 02 12 34 44 00 01 00 88 41 21 04 10 20 30 06 04 05 0d aa bb"
+                         " 06 82 00 01 e4 00")
+    # Set_Prm with WD_Base_1ms (DPV1_Status_1 bit 2, reference line 209/238): 30 x 1 x 1 ms
+    prm = bytes.fromhex("88 1e 01 0b 12 34 00 84 00 00")
+    raw = (F.encode(F.make(2, 5, F.response_fc(0x08), diag, 62, 60))
+           + F.encode(F.make(5, 2, F.request_fc(F.SRD_HIGH, fcv=True), prm, 61, 62)))
+    real = EXTERNAL / "pyprofibus26-et200s-startup.raw"
+    if real.exists():
+        raw += real.read_bytes()
+    f = tmp_path / "a.raw"
+    f.write_bytes(raw)
+    pcap = tmp_path / "a.pcap"
+    assert run("sniff", "--from-file", f, "--pcap", pcap).exit_code == 0
+    sniffed = [json.loads(x) for x in run("sniff", "--from-file", f, "--json").output.splitlines()]
+    rows = _fields(tshark, pcap, ["profibus.service", "profibus.prm.dpv1_flags", "profibus.prm.alarm_mode",
+                                  "profibus.prm.watchdog_ms", "profibus.diag.block"])
+    assert len(rows) == len(sniffed) == (17 if real.exists() else 2)
+    for r, d in zip(rows, sniffed):
+        dec = d.get("decoded") or {}
+        assert r["profibus.diag.block"] == "|".join(b["text"] for b in dec.get("blocks", [])), r
+        v1 = dec.get("dpv1_status")
+        assert r["profibus.prm.dpv1_flags"] == (", ".join(v1["flags"]) if v1 else ""), r
+        if v1:
+            assert r["profibus.prm.alarm_mode"] == f"{v1['alarm_mode']} ({v1['alarm_mode_text']})"
+            assert r["profibus.prm.watchdog_ms"] == str(dec["watchdog_ms"])
+    assert rows[1]["profibus.prm.watchdog_ms"] == "30"
+    assert "Plug_Alarm (0x04), slot 5" in rows[0]["profibus.diag.block"]
+    assert "module 3: data invalid (no module)" in rows[0]["profibus.diag.block"]
+    if real.exists():
+        (p,) = [r for r in rows[2:] if r["profibus.service"] == "Set_Prm"]
+        assert p["profibus.prm.dpv1_flags"] == "Fail_Safe, Chk_Cfg_Mode"        # 40 01 00
+
+
 def test_tshark_flags_a_bad_fcs(tshark, tmp_path):
     pcap = _pcap(tmp_path / "a.pcap", [DX_BAD_FCS])
     rows = _fields(tshark, pcap, ["profibus.fcs.status", "profibus.fcs", "_ws.expert.message"])

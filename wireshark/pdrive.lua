@@ -47,6 +47,25 @@ local CHANNEL_ERROR = { [1] = "short circuit", [2] = "undervoltage", [3] = "over
                         [5] = "overtemperature", [6] = "line break", [7] = "upper limit exceeded",
                         [8] = "lower limit undershot", [9] = "error" }
 local CHANNEL_DIR = { [1] = "input", [2] = "output", [3] = "input/output" }
+-- DP-V1 (dp/dpv1.py, the same names): DPV1_Status_1..3 bits, high bit first; Alarm_Mode; the alarm and
+-- status blocks inside a device-related block
+local DPV1_BITS = {
+  { { 7, "DPV1_Enable" }, { 6, "Fail_Safe" }, { 5, "Publisher_Enable" }, { 2, "WD_Base_1ms" },
+    { 1, "Dis_Stop_Control" }, { 0, "Dis_Start_Control" } },
+  { { 7, "Enable_Pull_Plug_Alarm" }, { 6, "Enable_Process_Alarm" }, { 5, "Enable_Diagnostic_Alarm" },
+    { 4, "Enable_Manufacturer_Specific_Alarm" }, { 3, "Enable_Status_Alarm" }, { 2, "Enable_Update_Alarm" },
+    { 0, "Chk_Cfg_Mode" } },
+  { { 7, "Prm_Cmd" }, { 4, "IsoM_Req" }, { 3, "Prm_Structure" } } }
+local DPV1_RESERVED = { 0x18, 0x02, 0x60 }
+local ALARM_MODE = { [0] = "1 alarm of each type", "2 alarms in total", "4 alarms in total", "8 alarms in total",
+  "12 alarms in total", "16 alarms in total", "24 alarms in total", "32 alarms in total" }
+local ALARM_TYPES = { "Diagnostic_Alarm", "Process_Alarm", "Pull_Alarm", "Plug_Alarm", "Status_Alarm", "Update_Alarm" }
+local STATUS_TYPES = { [1] = "Status_Message", [2] = "Module_Status", [30] = "Prm_Command_Ack",
+  [31] = "H_Status_Message" }
+local ALARM_SPEC = { [0] = "no further differentiation", "error appears (slot disturbed)",
+  "error disappears (slot okay)", "error disappears, slot still disturbed" }
+local STATUS_SPEC = { [0] = "no further differentiation", "status appears", "status disappears", "reserved" }
+local MODULE_STATUS = { "data invalid (module fault)", "data invalid (wrong module)", "data invalid (no module)" }
 
 -- PROFIdrive (drives/profidrive/words.py, pkw.py)
 local CTW_NAMES = { [0] = "ON", [1] = "no OFF2", [2] = "no OFF3", [3] = "enable operation",
@@ -111,6 +130,9 @@ local F = {
   prm_ident = ProtoField.uint16("profibus.prm.ident", "Ident number", base.HEX),
   prm_group = ProtoField.uint8("profibus.prm.group", "Group_Ident", base.HEX),
   prm_user = ProtoField.bytes("profibus.prm.user_prm", "User_Prm_Data", base.SPACE),
+  prm_dpv1 = ProtoField.bytes("profibus.prm.dpv1_status", "DP-V1 status (DPV1_Status_1..3)", base.SPACE),
+  prm_dpv1_flags = ProtoField.string("profibus.prm.dpv1_flags", "DP-V1 status bits set"),
+  prm_alarm_mode = ProtoField.string("profibus.prm.alarm_mode", "Alarm_Mode"),
   -- Chk_Cfg / Get_Cfg
   cfg_id = ProtoField.uint8("profibus.cfg.identifier", "Identifier", base.HEX),
   cfg_text = ProtoField.string("profibus.cfg.text", "Module"),
@@ -123,6 +145,9 @@ local F = {
   diag_flags = ProtoField.string("profibus.diag.flags", "Flags set"),
   diag_ext = ProtoField.bytes("profibus.diag.ext", "Extended diagnosis", base.SPACE),
   diag_block = ProtoField.string("profibus.diag.block", "Diagnosis block"),
+  diag_dpv1_type = ProtoField.string("profibus.diag.dpv1_type", "DP-V1 alarm / status type"),
+  diag_dpv1_slot = ProtoField.uint8("profibus.diag.dpv1_slot", "DP-V1 slot"),
+  diag_dpv1_spec = ProtoField.string("profibus.diag.dpv1_specifier", "DP-V1 specifier"),
   -- Global_Control / Set_Slave_Add
   gc_cmd = ProtoField.uint8("profibus.gc.control", "Control command", base.HEX),
   gc_text = ProtoField.string("profibus.gc.text", "Command"),
@@ -565,16 +590,70 @@ local function dissect_set_prm(tvb, tree, off, len)
   tree:add(F.prm_wd2, tvb(off + 2, 1))
   local wd_on = band(st, 0x08) ~= 0
   local wd = f1 * f2 * 10
-  if wd_on then
-    tree:add(F.prm_wd_ms, tvb(off + 1, 2), wd):append_text(string.format(" (%d x %d x 10 ms)", f1, f2))
-  end
   tree:add(F.prm_tsdr, tvb(off + 3, 1))
   tree:add(F.prm_ident, tvb(off + 4, 2))
   tree:add(F.prm_group, tvb(off + 6, 1))
   if len > 7 then tree:add(F.prm_user, tvb(off + 7, len - 7)) end
+  local dpv1 = ""
+  if len >= 10 then
+    local o = { tvb(off + 7, 1):uint(), tvb(off + 8, 1):uint(), tvb(off + 9, 1):uint() }
+    local reserved = band(o[1], DPV1_RESERVED[1]) + band(o[2], DPV1_RESERVED[2]) + band(o[3], DPV1_RESERVED[3])
+    if reserved == 0 then
+      local flags = {}
+      for i = 1, 3 do
+        for _, e in ipairs(DPV1_BITS[i]) do
+          if band(shr(o[i], e[1]), 1) == 1 then flags[#flags + 1] = e[2] end
+        end
+      end
+      local am = band(o[3], 0x07)
+      local t = tree:add(F.prm_dpv1, tvb(off + 7, 3))
+      t:add(F.prm_dpv1_flags, tvb(off + 7, 2), table.concat(flags, ", "))
+      t:add(F.prm_alarm_mode, tvb(off + 9, 1), string.format("%d (%s)", am, ALARM_MODE[am]))
+      if band(o[1], 0x04) ~= 0 then wd = f1 * f2 end          -- WD_Base_1ms
+      dpv1 = ", DP-V1 " .. (#flags > 0 and table.concat(flags, ", ") or "no bit set")
+    end
+  end
+  if wd_on then
+    tree:add(F.prm_wd_ms, tvb(off + 1, 2), wd):append_text(string.format(" (%d x %d x %d ms)", f1, f2,
+      wd == f1 * f2 and 1 or 10))
+  end
   local lock = (band(st, 0xC0) == 0x80) and "lock" or (band(st, 0x40) ~= 0) and "unlock" or "no lock change"
-  return string.format("ident 0x%04X, %s, %s, min TSDR %d", tvb(off + 4, 2):uint(), lock,
-    wd_on and ("watchdog " .. wd .. " ms") or "watchdog off", tvb(off + 3, 1):uint())
+  return string.format("ident 0x%04X, %s, %s, min TSDR %d%s", tvb(off + 4, 2):uint(), lock,
+    wd_on and ("watchdog " .. wd .. " ms") or "watchdog off", tvb(off + 3, 1):uint(), dpv1)
+end
+
+-- a device-related block read as a DP-V1 alarm or status block (header, type, slot, specifier, data), as
+-- dp/dpv1.py reads it: nil when shorter than 4 octets or its type is not defined
+local function dpv1_block(tvb, tree, off, ln)
+  if ln < 4 then return nil end
+  local o1, slot, spec = tvb(off + 1, 1):uint(), tvb(off + 2, 1):uint(), tvb(off + 3, 1):uint()
+  local status, code = band(o1, 0x80) ~= 0, band(o1, 0x7F)
+  local name = (status and STATUS_TYPES or ALARM_TYPES)[code]
+  if name == nil and code >= 32 and code <= 126 then name = "manufacturer-specific " .. code end
+  if name == nil then return nil end
+  local s = string.format("device-related: DP-V1 %s block: %s (0x%02X), slot %d, specifier %d (%s)",
+    status and "status" or "alarm", name, o1, slot, spec, (status and STATUS_SPEC or ALARM_SPEC)[band(spec, 3)])
+  if not status then
+    s = s .. ", Seq_Nr " .. shr(spec, 3) .. (band(spec, 4) ~= 0 and ", Add_Ack" or "")
+  end
+  if status and code == 2 then
+    local bad = {}
+    for k = 4, ln - 1 do
+      local o = tvb(off + k, 1):uint()
+      for m = 0, 3 do
+        local v = band(shr(o, 2 * m), 3)
+        if v ~= 0 then bad[#bad + 1] = string.format("module %d: %s", (k - 4) * 4 + m, MODULE_STATUS[v]) end
+      end
+    end
+    s = s .. string.format("; %d modules: %s", (ln - 4) * 4, #bad > 0 and table.concat(bad, "; ") or "all data valid")
+  elseif ln > 4 then
+    s = s .. "; data " .. hexs(tvb(off + 4, ln - 4))
+  end
+  tree:add(F.diag_dpv1_type, tvb(off + 1, 1), name)
+  tree:add(F.diag_dpv1_slot, tvb(off + 2, 1))
+  tree:add(F.diag_dpv1_spec, tvb(off + 3, 1), string.format("%d (%s)", spec,
+    (status and STATUS_SPEC or ALARM_SPEC)[band(spec, 3)]))
+  return s
 end
 
 local function ext_blocks(tvb, tree, off, len)
@@ -609,7 +688,8 @@ local function ext_blocks(tvb, tree, off, len)
         text = "identifier-related: modules with diagnosis: " .. (#mods > 0 and table.concat(mods, ", ") or "none")
         used = ln
       else
-        text = "device-related: " .. (ln > 1 and hexs(tvb(off + i + 1, ln - 1)) or "(empty)")
+        text = dpv1_block(tvb, tree, off + i, ln)
+          or ("device-related: " .. (ln > 1 and hexs(tvb(off + i + 1, ln - 1)) or "(empty)"))
         used = ln
       end
     end

@@ -11,11 +11,14 @@ from typing import TYPE_CHECKING
 
 from profidrive_cli.cli.common import emit_json, out
 from profidrive_cli.dp.capture import format_line
+from profidrive_cli.dp.du_decode import decode_du
 
 if TYPE_CHECKING:                                   # pragma: no cover
     from rich.live import Live
 
 REFRESH_S = 0.5
+#: the decoded data unit's lines sit under the frame line, past its time column
+DECODED_INDENT = " " * 16
 
 
 class SniffView:
@@ -45,8 +48,12 @@ class SniffView:
                 st.drive[d["direction"]] = {k: v for k, v in d.items()
                                             if k not in ("station", "profile", "direction")}
             return
+        desc = c.describe()
+        dec = decode_du(desc["service"], c.frame.data) if c.frame is not None and "du" in desc else None
         if self.as_json:
-            obj = frame_json(c.describe())
+            obj = frame_json(desc)
+            if dec is not None:
+                obj["decoded"] = dec
             if d is not None:
                 obj["drive"] = drive_json(d)
             emit_json(obj)
@@ -56,6 +63,8 @@ class SniffView:
                 from profidrive_cli.bustools.passive import frame_suffix
                 line += frame_suffix(d)
             out.print(line, markup=False)
+            for text in (dec or {}).get("text", []):
+                out.print(DECODED_INDENT + text, markup=False)
 
     # -- the live list ---------------------------------------------------------------------------
     def tick(self, t: float) -> None:
