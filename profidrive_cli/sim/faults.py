@@ -10,6 +10,9 @@ its drive. A seeded random generator makes runs repeat. URL keys (rates are prob
     powercycle=R  the station powers off and on: back to Wait_Prm, needs Set_Prm again
     drivetrip=R   the drive trips (model.trip) and the station flags new diagnosis (DH)
     tripcode=ADDR:CODE   the alarm drivetrip uses for a station (default: a family overcurrent)
+    phantom=R     a lone noise octet 0xE5 (it reads as a short acknowledgement, SC) in the reply
+                  slot of a request to an address where no station is (issue 26: `scan` must not
+                  list it as a station)
     only=3,5      limit injection to these stations     seed=N        random seed
 
 Python API: FaultPlan(rates, seed, only, late_s, trip_codes); plan.inject_next(station, kind) queues
@@ -23,6 +26,7 @@ expected_counters() says what pdrive's master must count for them (fdl/master.py
     noise            one illegal frame, the reply behind it is taken (no retry)
     powercycle       the next Data_Exchange is answered RS: one RS + one re-parameterisation
     drivetrip        one DH reply (the master then reads the diagnosis)
+    phantom          nothing: the master takes the SC as an answer (scan asks again, dp/scan.py)
 """
 
 from __future__ import annotations
@@ -34,7 +38,10 @@ from profidrive_cli.fdl import frames as F
 
 REPLY_KINDS = ("noise", "flip", "drop", "late", "wrongsa")
 STATION_KINDS = ("powercycle", "drivetrip")
-KINDS = REPLY_KINDS + STATION_KINDS
+SILENT_KINDS = ("phantom",)
+KINDS = REPLY_KINDS + STATION_KINDS + SILENT_KINDS
+#: the lone octet a phantom injects: the short acknowledgement SC (fdl/frames.py SC)
+PHANTOM_OCTETS = bytes((F.SC,))
 URL_KEYS = KINDS + ("only", "late_ms", "tripcode")
 
 #: alarm used by drivetrip when no tripcode is given: the first of these the profile knows
@@ -121,6 +128,15 @@ class FaultPlan:
         else:
             code = self.trip_codes.get(slave.address) or default_trip_code(slave.model)
             slave.inject_trip(code, t)
+
+    def on_silence(self, bus, req, t: float) -> bytes | None:
+        """A request that needs a reply, to an address where no station is: the octets of a
+        phantom (a lone 0xE5 in the reply slot), or None (silence)."""
+        kind = self._choose(req.da, SILENT_KINDS, lambda k: True)
+        if kind is None:
+            return None
+        self._count(req.da, kind, t)
+        return PHANTOM_OCTETS
 
     def on_reply(self, bus, req, reply: bytes, t: float):
         """-> None (dropped) or (octets, extra delay in seconds)."""
