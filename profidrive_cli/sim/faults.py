@@ -38,11 +38,14 @@ from profidrive_cli.fdl import frames as F
 
 REPLY_KINDS = ("noise", "flip", "drop", "late", "wrongsa")
 STATION_KINDS = ("powercycle", "drivetrip")
+KINDS = REPLY_KINDS + STATION_KINDS
+#: injected where no station is (not on a station's traffic: KINDS above are the ones a station's
+#: requests and replies can get); counted in FaultPlan.counts once they happen
 SILENT_KINDS = ("phantom",)
-KINDS = REPLY_KINDS + STATION_KINDS + SILENT_KINDS
+ALL_KINDS = KINDS + SILENT_KINDS
 #: the lone octet a phantom injects: the short acknowledgement SC (fdl/frames.py SC)
 PHANTOM_OCTETS = bytes((F.SC,))
-URL_KEYS = KINDS + ("only", "late_ms", "tripcode")
+URL_KEYS = ALL_KINDS + ("only", "late_ms", "tripcode")
 
 #: alarm used by drivetrip when no tripcode is given: the first of these the profile knows
 DEFAULT_TRIP_CODES = ("OC1", "OC", "E01", "EF0")
@@ -65,8 +68,8 @@ class FaultPlan:
                  trip_codes: dict[int, str] | None = None):
         self.rates = {k: float(v) for k, v in (rates or {}).items()}
         for k, v in self.rates.items():
-            if k not in KINDS:
-                raise ValueError(f"unknown fault kind {k} (known: {', '.join(KINDS)})")
+            if k not in ALL_KINDS:
+                raise ValueError(f"unknown fault kind {k} (known: {', '.join(ALL_KINDS)})")
             if not 0.0 <= v <= 1.0:
                 raise ValueError(f"{k} rate {v} outside 0..1")
         if late_s <= 0:
@@ -84,8 +87,8 @@ class FaultPlan:
 
     # -- API ------------------------------------------------------------------------------------
     def inject_next(self, station: int, kind: str) -> None:
-        if kind not in KINDS:
-            raise ValueError(f"unknown fault kind {kind} (known: {', '.join(KINDS)})")
+        if kind not in ALL_KINDS:
+            raise ValueError(f"unknown fault kind {kind} (known: {', '.join(ALL_KINDS)})")
         self.queue.append((station, kind))
 
     def expected_counters(self, station: int | None = None) -> dict[str, int]:
@@ -99,9 +102,9 @@ class FaultPlan:
 
     # -- decisions ------------------------------------------------------------------------------
     def _count(self, station: int, kind: str, t: float) -> None:
-        self.counts[kind] += 1
+        self.counts[kind] = self.counts.get(kind, 0) + 1
         per = self.by_station.setdefault(station, {k: 0 for k in KINDS})
-        per[kind] += 1
+        per[kind] = per.get(kind, 0) + 1
         self.history.append((t, station, kind))
 
     def _choose(self, station: int, kinds: tuple[str, ...], applicable) -> str | None:
@@ -164,7 +167,7 @@ class FaultPlan:
 
 def plan_from_query(q: dict[str, list[str]], seed: int = 1) -> FaultPlan:
     rates = {}
-    for k in KINDS:
+    for k in ALL_KINDS:
         if k in q:
             try:
                 rates[k] = float(q[k][-1])
