@@ -49,8 +49,11 @@ def _cfg_json(cfg: bytes | None) -> list | None:
 @click.option("--duration", default=None, type=click.FloatRange(min=0, min_open=True),
               help="--watch: stop after watching this many seconds, counted after the first scan "
                    "(default: until Ctrl-C).")
+@click.option("--quick", is_flag=True,
+              help="One FDL status per address, no warm-up pass: faster on an empty bus, but a slave "
+                   "still searching the baud rate is missed.")
 @bus_options
-def scan_cmd(opts, first, last, gsd_dir, watch, interval, duration):
+def scan_cmd(opts, first, last, gsd_dir, watch, interval, duration, quick):
     """Live list: every station on the bus, its type, ident and DP state."""
     from profidrive_cli.dp.scan import scan
     if first > last:
@@ -65,12 +68,13 @@ def scan_cmd(opts, first, last, gsd_dir, watch, interval, duration):
     used_baud = opts.baud_rate()
     try:
         if opts.json or not err.is_terminal:
-            result = scan(master, first, last)
+            result = scan(master, first, last, quick=quick)
         else:
             from rich.progress import Progress      # only on a terminal: rich.progress is slow to import
             with Progress(console=err, transient=True) as prog:
                 task = prog.add_task(f"scanning at {BAUD_NAMES[used_baud]}", total=last - first + 1)
-                result = scan(master, first, last, progress=lambda a: prog.advance(task))
+                result = scan(master, first, last, progress=lambda a: prog.advance(task),
+                              quick=quick)
         # corrupt telegrams and noise runs seen while probing (every address, found or not)
         noise = sum(c.illegal for c in master.fdl.counters.values())
     finally:
@@ -80,7 +84,8 @@ def scan_cmd(opts, first, last, gsd_dir, watch, interval, duration):
             {"station": e.address, "type": e.station_type, **ident_fields(e.ident),
              "state": e.diag.state_words(opts.master_address) if e.diag else e.error,
              "device": device_name(e.ident, gsd_dir) if e.ident is not None else "",
-             "diag": _diag_json(e.diag), "counters": e.counters} for e in result]})
+             "diag": _diag_json(e.diag), "counters": e.counters,
+             "unanswered_before": e.unanswered} for e in result]})
         if not result:
             raise SystemExit(1)         # the same exit code as the table: nobody answered
         return
@@ -102,6 +107,15 @@ def scan_cmd(opts, first, last, gsd_dir, watch, interval, duration):
                   device_name(e.ident, gsd_dir) if e.ident is not None else "",
                   format_counters(e.counters))
     out.print(t)
+    for e in result:
+        if e.unanswered:
+            out.print(late_answer(e.address, e.unanswered))
+
+
+def late_answer(address: int, unanswered: int) -> str:
+    """The words for a station that answered only after `unanswered` FDL status requests."""
+    return (f"station {address} answered after {unanswered} unanswered request"
+            f"{'' if unanswered == 1 else 's'} (baud-rate search)")
 
 
 @click.command("diag")
@@ -113,7 +127,7 @@ def diag_cmd(opts, address, gsd_dir):
     station_address(address)
     master = opts.open_master(address=address)
     try:
-        d = master.slave_diag(address)
+        d = master.slave_diag(address, wake=True)
         if d is None:
             raise BusError(f"station {address} does not answer on {opts.port}")
         cfg = master.get_cfg(address)
@@ -219,7 +233,7 @@ def io_cmd(opts, address, cfg_hex, ident_hex, prm_hex, out_hex, count, wd_ms, gs
         with _terminations_raise():
             try:
                 if ident is None:
-                    d = master.slave_diag(address)
+                    d = master.slave_diag(address, wake=True)
                     if d is None:
                         raise BusError(f"station {address} does not answer on {opts.port}")
                     ident = d.ident

@@ -5,7 +5,10 @@
    SD2 or SD3 — an SD4 token or a lone SC could be line noise) settle it. A bus with a PLC on it is
    never disturbed.
 2. Probe: at each rate, FDL status requests (one attempt each) to the given station, or to every
-   address until one answers. A slave locked to the bus rate answers only at that rate.
+   address until one answers. A slave locked to the bus rate answers only at that rate. A named
+   station gets up to dp/scan.py's WARMUP_PROBES at each rate (a slave still searching the rate,
+   Baud_Search, answers only after a few: see there); every address gets one (127 addresses times
+   ten rates: the warm-up there would cost minutes at the slow rates).
 
 A line without a baud rate of its own -- a pty (`pdrive sim --pty`), a TCP connection (socket://, a
 converter or `pdrive sim --listen`), the simulator without baud= -- carries the octets whatever rate
@@ -135,13 +138,12 @@ def detect_baud(open_link: Callable[[int], Link], make_master: Callable[[Link, i
             return _on_a_rateless_line(link, what, make_master, addresses, listen=False,
                                        probe=True, progress=progress)
         try:
-            from profidrive_cli.dp.scan import probe as probe_one
             master = make_master(link, baud)
             hit = None
             for addr in targets:
                 if addr == master.address:
                     continue
-                if probe_one(master, addr) is not None:
+                if _answers(master, addr, named=addresses is not None):
                     hit = addr
                     break
         except BaseException:
@@ -173,11 +175,10 @@ def _on_a_rateless_line(link, what: str, make_master, addresses, *, listen: bool
             return None, None
         if progress:
             progress(f"probing on {what}")
-        from profidrive_cli.dp.scan import probe as probe_one
         master = make_master(link, RATELESS_BAUD)
         targets = list(addresses) if addresses is not None else list(range(0, 127))
-        hit = next((a for a in targets if a != master.address and probe_one(master, a) is not None),
-                   None)
+        hit = next((a for a in targets if a != master.address
+                    and _answers(master, a, named=addresses is not None)), None)
     except BaseException:
         link.close()
         raise
@@ -186,3 +187,12 @@ def _on_a_rateless_line(link, what: str, make_master, addresses, *, listen: bool
         return None, None
     master.fdl.counters.clear()          # the probes are not the command's traffic
     return BaudFound(RATELESS_BAUD, f"station {hit} answered; {why}"), master
+
+
+def _answers(master, addr: int, named: bool) -> bool:
+    """An FDL status answer from `addr`: a named station gets the warm-up probes (dp/scan.py wake),
+    an address of a search through all of them one probe."""
+    from profidrive_cli.dp.scan import probe, wake
+    if named:
+        return wake(master, addr)[0] is not None
+    return probe(master, addr) is not None

@@ -217,9 +217,16 @@ class Master:
         res = self.transact(da, F.FDL_STATUS, expect=6)
         return res.frame if res.kind == REPLY else None
 
-    def slave_diag(self, da: int) -> S.SlaveDiag | None:
+    def slave_diag(self, da: int, wake: bool = False) -> S.SlaveDiag | None:
+        """The station's diagnosis; None when it does not answer. wake: first contact with a
+        station (diag, io, a drive command's start-up): when it is silent, FDL status probes up to
+        dp/scan.py's WARMUP_PROBES wake a slave still searching the baud rate, then one more ask."""
         self.keep_alive(da)
         res = self.transact(da, F.SRD_HIGH, b"", S.SAP_SLAVE_DIAG, S.SAP_MASTER, 250)
+        if wake and res.kind != REPLY:
+            from profidrive_cli.dp.scan import wake as wake_up
+            if wake_up(self, da)[0] is not None:
+                res = self.transact(da, F.SRD_HIGH, b"", S.SAP_SLAVE_DIAG, S.SAP_MASTER, 250)
         f = res.frame
         if res.kind != REPLY or f is None or f.sd == F.SC:
             return None

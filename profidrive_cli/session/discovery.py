@@ -167,7 +167,7 @@ def locate(sess: Locating) -> DriveStation:
                              f"{', '.join(s.describe() for s in drives)}; give ADDRESS "
                              f"(or set PDRIVE_STATION)")
     else:
-        d = sess.master.slave_diag(addr)
+        d = sess.master.slave_diag(addr, wake=True)     # (a slave still searching the rate)
         if d is None:
             raise BusError(f"station {addr} does not answer on {port}")
         sess.station = DriveStation(addr, d.ident, profile_for_ident(d.ident),

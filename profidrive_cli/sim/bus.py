@@ -16,8 +16,9 @@ With wire timing the bus also checks the master: a request that starts less than
 the end of the last telegram counts in stats.tsyn_violations, one that starts while a reply is still
 due (before its last octet) in stats.collisions.
 
-Fault injection (a FaultPlan, sim/faults.py) corrupts, drops, delays or misaddresses replies, and
-power-cycles or trips stations; every injection is counted in the plan.
+Fault injection (a FaultPlan, sim/faults.py) corrupts, drops, delays or misaddresses replies,
+power-cycles or trips stations, and puts a lone noise octet 0xE5 (phantom) where no station answers;
+every injection is counted in the plan.
 """
 
 from __future__ import annotations
@@ -196,6 +197,13 @@ class SimBus:
                    else [self.slaves[req.da]] if req.da in self.slaves else [])
         if not targets:
             self.stats.no_station += 1
+            if self.faults is not None and req.da != F.BROADCAST and req.function in F.NEEDS_REPLY:
+                noise = self.faults.on_silence(self, req, t)
+                if noise is not None:     # a phantom: a lone noise octet where nobody answers
+                    start = t + (self.tsdr_bits / self.params.baud if self.wire else 0.0)
+                    if self.log is not None:
+                        self.log.append((start, "S", noise))
+                    return Reply(start, noise, self.char_s)
         reply = None
         answering = None
         for s in targets:

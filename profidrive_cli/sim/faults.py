@@ -10,6 +10,9 @@ its drive. A seeded random generator makes runs repeat. URL keys (rates are prob
     powercycle=R  the station powers off and on: back to Wait_Prm, needs Set_Prm again
     drivetrip=R   the drive trips (model.trip) and the station flags new diagnosis (DH)
     tripcode=ADDR:CODE   the alarm drivetrip uses for a station (default: a family overcurrent)
+    phantom=R     a lone noise octet 0xE5 (it reads as a short acknowledgement, SC) in the reply
+                  slot of a request to an address where no station is (issue 26: `scan` must not
+                  list it as a station)
     only=3,5      limit injection to these stations     seed=N        random seed
 
 Python API: FaultPlan(rates, seed, only, late_s, trip_codes); plan.inject_next(station, kind) queues
@@ -23,6 +26,7 @@ expected_counters() says what pdrive's master must count for them (fdl/master.py
     noise            one illegal frame, the reply behind it is taken (no retry)
     powercycle       the next Data_Exchange is answered RS: one RS + one re-parameterisation
     drivetrip        one DH reply (the master then reads the diagnosis)
+    phantom          nothing: the master takes the SC as an answer (scan asks again, dp/scan.py)
 """
 
 from __future__ import annotations
@@ -35,7 +39,13 @@ from profidrive_cli.fdl import frames as F
 REPLY_KINDS = ("noise", "flip", "drop", "late", "wrongsa")
 STATION_KINDS = ("powercycle", "drivetrip")
 KINDS = REPLY_KINDS + STATION_KINDS
-URL_KEYS = KINDS + ("only", "late_ms", "tripcode")
+#: injected where no station is (not on a station's traffic: KINDS above are the ones a station's
+#: requests and replies can get); counted in FaultPlan.counts once they happen
+SILENT_KINDS = ("phantom",)
+ALL_KINDS = KINDS + SILENT_KINDS
+#: the lone octet a phantom injects: the short acknowledgement SC (fdl/frames.py SC)
+PHANTOM_OCTETS = bytes((F.SC,))
+URL_KEYS = ALL_KINDS + ("only", "late_ms", "tripcode")
 
 #: alarm used by drivetrip when no tripcode is given: the first of these the profile knows
 DEFAULT_TRIP_CODES = ("OC1", "OC", "E01", "EF0")
@@ -58,8 +68,8 @@ class FaultPlan:
                  trip_codes: dict[int, str] | None = None):
         self.rates = {k: float(v) for k, v in (rates or {}).items()}
         for k, v in self.rates.items():
-            if k not in KINDS:
-                raise ValueError(f"unknown fault kind {k} (known: {', '.join(KINDS)})")
+            if k not in ALL_KINDS:
+                raise ValueError(f"unknown fault kind {k} (known: {', '.join(ALL_KINDS)})")
             if not 0.0 <= v <= 1.0:
                 raise ValueError(f"{k} rate {v} outside 0..1")
         if late_s <= 0:
@@ -77,8 +87,8 @@ class FaultPlan:
 
     # -- API ------------------------------------------------------------------------------------
     def inject_next(self, station: int, kind: str) -> None:
-        if kind not in KINDS:
-            raise ValueError(f"unknown fault kind {kind} (known: {', '.join(KINDS)})")
+        if kind not in ALL_KINDS:
+            raise ValueError(f"unknown fault kind {kind} (known: {', '.join(ALL_KINDS)})")
         self.queue.append((station, kind))
 
     def expected_counters(self, station: int | None = None) -> dict[str, int]:
@@ -92,9 +102,9 @@ class FaultPlan:
 
     # -- decisions ------------------------------------------------------------------------------
     def _count(self, station: int, kind: str, t: float) -> None:
-        self.counts[kind] += 1
+        self.counts[kind] = self.counts.get(kind, 0) + 1
         per = self.by_station.setdefault(station, {k: 0 for k in KINDS})
-        per[kind] += 1
+        per[kind] = per.get(kind, 0) + 1
         self.history.append((t, station, kind))
 
     def _choose(self, station: int, kinds: tuple[str, ...], applicable) -> str | None:
@@ -122,6 +132,15 @@ class FaultPlan:
             code = self.trip_codes.get(slave.address) or default_trip_code(slave.model)
             slave.inject_trip(code, t)
 
+    def on_silence(self, bus, req, t: float) -> bytes | None:
+        """A request that needs a reply, to an address where no station is: the octets of a
+        phantom (a lone 0xE5 in the reply slot), or None (silence)."""
+        kind = self._choose(req.da, SILENT_KINDS, lambda k: True)
+        if kind is None:
+            return None
+        self._count(req.da, kind, t)
+        return PHANTOM_OCTETS
+
     def on_reply(self, bus, req, reply: bytes, t: float):
         """-> None (dropped) or (octets, extra delay in seconds)."""
         sc = reply[:1] == b"\xE5"
@@ -148,7 +167,7 @@ class FaultPlan:
 
 def plan_from_query(q: dict[str, list[str]], seed: int = 1) -> FaultPlan:
     rates = {}
-    for k in KINDS:
+    for k in ALL_KINDS:
         if k in q:
             try:
                 rates[k] = float(q[k][-1])

@@ -13,6 +13,9 @@
     sim://?trip=3:OC1                        station 3 starts tripped with alarm OC1
     sim://?set=7:A1-02=3,C1-01=2             station 7 starts with these settings (engineering units)
     sim://?faults=6:E01,E05                  station 6's fault history pre-filled (repeat the key per station)
+    sim://?warmup=3:4,5:2                    station 3 still searches the baud rate (Baud_Search): it
+                                             ignores its first 4 telegrams and answers from the 5th
+                                             (station 5: from the 3rd); sim/slave.py SimSlave.warmup
     sim://?wd=0                              (debug) ignore the watchdog... not offered: the sim always enforces it
 
 Each station runs the family's drive model (the sim_model of its row in drives/registry.py: sim/<family>.py,
@@ -39,7 +42,9 @@ from profidrive_cli.sim.model import SlaveModel
 from profidrive_cli.sim.slave import SimSlave
 
 DEFAULT_PLANT = ((3, "fuji-g1"), (4, "fuji-pdp3"), (5, "toyo"), (6, "moeller"), (7, "yaskawa"))
-KNOWN_KEYS = {"stations", "baud", "timing", "trip", "faults", "tsdr", "seed", "set"}
+KNOWN_KEYS = {"stations", "baud", "timing", "trip", "faults", "tsdr", "seed", "set", "warmup"}
+#: the most telegrams a station of warmup= may ignore (a bound for the URL, not a device figure)
+MAX_WARMUP = 1000
 TIMINGS = ("instant", "wire", "virtual")
 
 
@@ -119,6 +124,23 @@ def _per_station(values: list[str], key: str) -> dict[int, list[str]]:
     return out
 
 
+def _warmups(values: list[str]) -> dict[int, int]:
+    """warmup=ADDR:COUNT[,ADDR:COUNT...] (the key may repeat) -> {address: telegrams ignored}."""
+    out: dict[int, int] = {}
+    for v in values:
+        for item in filter(None, (t.strip() for t in v.split(","))):
+            addr, colon, count = item.partition(":")
+            try:
+                a, n = int(addr), int(count)
+            except ValueError:
+                a, n = -1, -1
+            if not colon or not 0 <= a <= 125 or not 0 <= n <= MAX_WARMUP:
+                raise UsageError(f"sim URL: warmup={v} must be ADDRESS:COUNT[,ADDRESS:COUNT...] with "
+                                 f"address 0..125 and count 0..{MAX_WARMUP}, e.g. warmup=3:4")
+            out[a] = n
+    return out
+
+
 def _presets(values: list[str]) -> dict[int, dict[str, float]]:
     """set=ADDR:CODE=VALUE[,CODE=VALUE...] -> {address: {code: value}} (engineering units): the
     drive's settings as the plant starts (a drive commissioned before, e.g. set=7:A1-02=3)."""
@@ -174,6 +196,7 @@ def build_bus(url: str, now: float = 0.0, default_baud: int = 19200) -> SimBus:
     if timing not in TIMINGS:
         raise UsageError(f"sim URL: timing must be {', '.join(TIMINGS)}, got {timing!r}")
     trips = _per_station(q.get("trip", []), "trip")
+    warmups = _warmups(q.get("warmup", []))
     seeded = _per_station(q.get("faults", []), "faults")
     slaves = []
     presets = _presets(q.get("set", []))
@@ -198,6 +221,10 @@ def build_bus(url: str, now: float = 0.0, default_baud: int = 19200) -> SimBus:
     for a in set(trips) | set(seeded):
         if a not in addrs:
             raise UsageError(f"sim URL: no station {a} to trip or seed faults")
+    for a, n in warmups.items():
+        if a not in addrs:
+            raise UsageError(f"sim URL: warmup={a}:{n}: no station {a} on the bus")
+        addrs[a].warmup = n
     for a, codes in seeded.items():
         try:
             addrs[a].model.seed_faults(codes)

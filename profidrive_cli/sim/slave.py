@@ -35,7 +35,14 @@ class SimSlave:
         self.response_bits = response_bits
         #: counters a test can look at
         self.stats = {"requests": 0, "repeats": 0, "prm_rejected": 0, "cfg_rejected": 0,
-                      "watchdog_expired": 0, "data_exchange": 0, "power_cycles": 0, "trips": 0}
+                      "watchdog_expired": 0, "data_exchange": 0, "power_cycles": 0, "trips": 0,
+                      "ignored_warmup": 0}
+        #: Baud_Search (IEC 61158; Auto_Baud_supp = 1 in the GSD files of gsd/): the station still
+        #: searches the baud rate and ignores this many more valid telegrams addressed to it at its
+        #: rate (no answer at all), then answers (sim://?warmup=3:4; a real ET200S answered the 5th
+        #: FDL status request, ../shared/testdata/external/pyprofibus26-et200s-startup.txt). Set by
+        #: the plant once, at start: a power cycle of the fault injection does not re-arm it.
+        self.warmup = 0
         self.power_on(0.0)
 
     @property
@@ -143,6 +150,13 @@ class SimSlave:
 
     def handle(self, req: F.Frame, now: float) -> bytes | None:
         if not self.powered:
+            return None
+        if self.warmup > 0:
+            # still searching the rate: nothing is executed or answered (a broadcast is not counted:
+            # the count is of telegrams addressed to this station)
+            if req.da == self.address:
+                self.warmup -= 1
+                self.stats["ignored_warmup"] += 1
             return None
         self.tick(now)
         fn = req.function
