@@ -45,7 +45,8 @@ def test_no_v_no_log():
 def test_trace_pcap_records_the_scan_with_wall_clock_times(tmp_path):
     path = tmp_path / "scan.pcap"
     t0 = time.time()
-    p = _pdrive("scan", "--port", "sim://?stations=3:fuji-g1", "--to", "4", "--trace", str(path))
+    # --quick: one pass, one FDL status per address (the full scan's warm-up pass is checked below)
+    p = _pdrive("scan", "--port", "sim://?stations=3:fuji-g1", "--to", "4", "--quick", "--trace", str(path))
     assert p.returncode == 0, p.stderr
     linktype, pkts = read_pcap(path.read_bytes())
     assert linktype == LINKTYPE_USER0       # 147: the link type the shipped Wireshark dissector binds
@@ -58,6 +59,18 @@ def test_trace_pcap_records_the_scan_with_wall_clock_times(tmp_path):
     assert [r[1] for r in fdl_status_reqs] == [0, 1, 3, 4]
     assert all(t0 - 5 <= t <= time.time() + 5 for t, _ in pkts)
     assert sorted(os.listdir(tmp_path)) == ["scan.pcap"]
+
+
+def test_trace_pcap_records_the_scans_warm_up_pass(tmp_path):
+    # without --quick: the same first pass, then up to 4 more FDL status requests to each address
+    # that stayed silent, address by address (5 per address in all: docs/commands.md, a slave in
+    # baud-rate search; issue 26)
+    path = tmp_path / "scan.pcap"
+    p = _pdrive("scan", "--port", "sim://?stations=3:fuji-g1", "--to", "4", "--trace", str(path))
+    assert p.returncode == 0, p.stderr
+    _, pkts = read_pcap(path.read_bytes())
+    fdl_status_reqs = [r for _, r in pkts if r[0] == 0x10 and r[3] == 0x49]
+    assert [r[1] for r in fdl_status_reqs] == [0, 1, 3, 4] + [0] * 4 + [1] * 4 + [4] * 4
 
 
 def test_trace_to_missing_directory_is_one_line_exit_2(tmp_path):
