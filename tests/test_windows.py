@@ -119,9 +119,9 @@ def test_ftdi_latency_is_read_for_the_port_asked():
 
 
 def _doctor(monkeypatch, port, keys, ports=("COM1", "COM3")):
-    import profidrive_cli.dp.winports as W
+    import profidrive_cli.dp.doctor as D
     from profidrive_cli.dp.doctor import diagnose
-    monkeypatch.setattr(W, "com_ports", lambda: list(ports))
+    monkeypatch.setattr(D, "com_ports", lambda: list(ports))
     rep = diagnose(port, platform="win32", winreg=FakeWinreg(keys), listen_s=0.0)
     return {c.name: c for c in rep.checks}
 

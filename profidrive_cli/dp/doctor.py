@@ -193,12 +193,7 @@ def diagnose(port: str, baud: int = 19200, master_address: int = 2, probe_addres
         return _windows(port, baud, master_address, probe_address, rs485, listen_s, station, winreg)
     rep = Report(port, "serial")
     if not os.path.exists(port):
-        import serial.tools.list_ports
-        found = sorted(p.device for p in serial.tools.list_ports.comports())
-        rep.add("port", FAIL, f"{port}: no such port" + (f" (ports here: {', '.join(found)})" if found
-                                                        else " (no serial ports found)"),
-                candidates=found)
-        return rep
+        return _no_such_port(rep, port, com_ports())
     perm = permission(port)
     if perm["access"]:
         how = "as root" if perm["root"] else f"as {perm['user']}"
@@ -227,12 +222,7 @@ def diagnose(port: str, baud: int = 19200, master_address: int = 2, probe_addres
                 driver=None, usb=False)
     lt_path, latency = read_latency_timer(port, sysfs)
     if latency is not None:
-        if latency <= 1:
-            rep.add("latency_timer", OK, f"{latency} ms ({lt_path})", path=lt_path, ms=latency)
-        else:
-            rep.add("latency_timer", WARN, f"{latency} ms: every reply waits up to that long in the "
-                    f"adapter; set 1 ms: `echo 1 | sudo tee {lt_path}` (a udev rule makes it stick)",
-                    path=lt_path, ms=latency)
+        _latency_row(rep, latency, lt_path, f"`echo 1 | sudo tee {lt_path}` (a udev rule makes it stick)")
     elif on_usb:
         rep.add("latency_timer", INFO, f"no {lt_path}: this driver has no latency timer to tune",
                 path=lt_path, ms=None)
@@ -241,9 +231,8 @@ def diagnose(port: str, baud: int = 19200, master_address: int = 2, probe_addres
     if not perm["access"]:
         _recommend(rep, baud, on_usb, latency)
         return rep
-    _baud_rates(rep, port, rs485)
-    ser = _open_check(rep, port, baud, rs485, quiet=True)
-    if ser is not None:
+
+    def posix_checks(ser) -> None:
         if not is_pty:
             parity_check(rep, ser)
         fd = getattr(ser, "fd", None)
@@ -261,46 +250,67 @@ def diagnose(port: str, baud: int = 19200, master_address: int = 2, probe_addres
                         "with automatic direction control, as most USB-RS-485 ones)", state=state)
             else:
                 rep.add("rs485", WARN, f"TIOCGRS485: {state}", state=state)
-        _echo(rep, ser, port, baud, master_address, probe_address, listen_s)
-        _round_trip(rep, ser, baud, master_address, station)
-        ser.close()
+    _on_the_line(rep, port, baud, rs485, master_address, probe_address, listen_s, station, posix_checks)
     _recommend(rep, baud, on_usb, latency)
     return rep
+
+
+def com_ports() -> list[str]:
+    """The serial ports the system lists (pyserial's list_ports: /dev/ttyUSB0, COM3, ...)."""
+    import serial.tools.list_ports
+    return sorted(p.device for p in serial.tools.list_ports.comports())
+
+
+def _no_such_port(rep: Report, port: str, found: list[str]) -> Report:
+    rep.add("port", FAIL, f"{port}: no such port" + (f" (ports here: {', '.join(found)})" if found
+                                                    else " (no serial ports found)"),
+            candidates=found)
+    return rep
+
+
+def _latency_row(rep: Report, latency: int, where: str, how: str) -> None:
+    """The adapter's latency timer (ms, read at `where`): fine at 1 ms, else how to lower it."""
+    if latency <= 1:
+        rep.add("latency_timer", OK, f"{latency} ms ({where})", path=where, ms=latency)
+    else:
+        rep.add("latency_timer", WARN, f"{latency} ms: every reply waits up to that long in the "
+                f"adapter; set 1 ms: {how}", path=where, ms=latency)
+
+
+def _on_the_line(rep: Report, port: str, baud: int, rs485: bool, master: int, probe: int,
+                 listen_s: float, station: int | None, platform_checks) -> None:
+    """The checks that open the port: the DP baud rates, the open at `baud`, the platform's own
+    checks of the open port (platform_checks(ser)), the echo and the round trip."""
+    _baud_rates(rep, port, rs485)
+    ser = _open_check(rep, port, baud, rs485, quiet=True)
+    if ser is not None:
+        platform_checks(ser)
+        _echo(rep, ser, port, baud, master, probe, listen_s)
+        _round_trip(rep, ser, baud, master, station)
+        ser.close()
 
 
 def _windows(port: str, baud: int, master: int, probe: int, rs485: bool, listen_s: float,
              station: int | None, winreg) -> Report:
     """A COM port: listed by Windows (no device file, no permission bits), the FTDI latency timer
     from the registry (dp/winports.py), then the same open / baud / echo / round-trip checks."""
-    from profidrive_cli.dp.winports import HOW_TO_LOWER, com_ports, ftdi_latency
+    from profidrive_cli.dp.winports import HOW_TO_LOWER, ftdi_latency
     rep = Report(port, "serial")
     found = com_ports()
     if port.strip().upper() not in {p.upper() for p in found}:
-        rep.add("port", FAIL, f"{port}: no such port" + (f" (ports here: {', '.join(found)})" if found
-                                                        else " (no serial ports found)"),
-                candidates=found)
-        return rep
+        return _no_such_port(rep, port, found)
     rep.add("permission", SKIP, "Windows: no device-file permissions (a port another program holds "
             "fails to open below)", access=True)
     key, latency = ftdi_latency(port, winreg)
     if latency is not None:
         rep.add("adapter", INFO, "USB serial adapter, driver FTDI (FTDIBUS)", driver="FTDIBUS", usb=True)
-        if latency <= 1:
-            rep.add("latency_timer", OK, f"{latency} ms ({key})", path=key, ms=latency)
-        else:
-            rep.add("latency_timer", WARN, f"{latency} ms: every reply waits up to that long in the "
-                    f"adapter; set 1 ms: {HOW_TO_LOWER}", path=key, ms=latency)
+        _latency_row(rep, latency, key or "", HOW_TO_LOWER)
     else:
         rep.add("latency_timer", SKIP, "no FTDI adapter on this port in the registry (another "
                 "driver's latency setting, if it has one, is in its own Advanced port settings)",
                 path=None, ms=None)
-    _baud_rates(rep, port, rs485)
-    ser = _open_check(rep, port, baud, rs485, quiet=True)
-    if ser is not None:
-        parity_check(rep, ser)
-        _echo(rep, ser, port, baud, master, probe, listen_s)
-        _round_trip(rep, ser, baud, master, station)
-        ser.close()
+    _on_the_line(rep, port, baud, rs485, master, probe, listen_s, station,
+                 lambda ser: parity_check(rep, ser))
     _recommend(rep, baud, latency is not None, latency)
     return rep
 

@@ -54,8 +54,3 @@ def ftdi_latency(port: str, winreg: Any = None) -> tuple[str | None, int | None]
         except (OSError, ValueError, TypeError):
             continue
 
-
-def com_ports() -> list[str]:
-    """The serial ports Windows lists (pyserial's list_ports: COM1, COM3, ...)."""
-    import serial.tools.list_ports
-    return sorted(p.device for p in serial.tools.list_ports.comports())
