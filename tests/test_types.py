@@ -41,25 +41,19 @@ def test_mypy_is_clean_on_the_package(tmp_path):
     assert "Success: no issues found" in output, output
 
 
-def test_mypy_strict_is_clean_on_the_public_api(tmp_path):
-    rc, output = _mypy(tmp_path, "--strict", "profidrive_cli/api")
-    assert rc == 0, output
-    assert "Success: no issues found in 4 source files" in output, output
-
-
-def test_mypy_strict_is_clean_on_the_session_package(tmp_path):
+@pytest.mark.parametrize("target,success", [
+    # the public API (docs/api.md)
+    ("profidrive_cli/api", "Success: no issues found in 4 source files"),
     # session/: the station, its Motion and Parameters, the Group and the live loop the API and the
     # CLI stand on
-    rc, output = _mypy(tmp_path, "--strict", "profidrive_cli/session")
-    assert rc == 0, output
-    assert "Success: no issues found in" in output, output
-
-
-def test_mypy_strict_is_clean_on_the_drive_interface(tmp_path):
+    ("profidrive_cli/session", "Success: no issues found in"),
     # drives/base.py: the Drive interface and its family hooks, which session/ and checklist/ stand on
-    rc, output = _mypy(tmp_path, "--strict", "profidrive_cli/drives/base.py")
+    ("profidrive_cli/drives/base.py", "Success: no issues found in 1 source file"),
+], ids=["public_api", "session_package", "drive_interface"])
+def test_mypy_strict_is_clean_on(tmp_path, target, success):
+    rc, output = _mypy(tmp_path, "--strict", target)
     assert rc == 0, output
-    assert "Success: no issues found in 1 source file" in output, output
+    assert success in output, output
 
 
 # -- the bugs mypy found ---------------------------------------------------------------------------
