@@ -46,9 +46,11 @@ class MotionStation(StopStation, Protocol):
 class Motion(SafeStop):
     """The drive's motion on one station: DriveSession builds it as `self.motion = Motion(self)`."""
 
+    #: the station (SafeStop stores it): Motion reads more of it than the safe stop does
+    station: MotionStation
+
     def __init__(self, station: MotionStation) -> None:
         super().__init__(station)
-        self.station: MotionStation = station
         self._may_run = False
         self._fmax: tuple[float, str] | None = None
         self._fmax_override: float | None = None
