@@ -48,7 +48,7 @@ def test_the_constraints_pin_every_dependency_exactly():
             pins[name.lower().replace("_", "-")] = version
     pyproject = (ROOT / "pyproject.toml").read_text()
     deps = re.search(r"(?ms)^dependencies = \[(.*?)\]", pyproject).group(1)
-    test = re.search(r"(?m)^test = \[(.*?)\]", pyproject).group(1)
+    test = re.search(r"(?ms)^test = \[(.*?)\]", pyproject).group(1)
     backend = re.search(r"(?m)^requires = \[(.*?)\]", pyproject).group(1)
     wanted = {re.match(r"[A-Za-z0-9_.-]+", d).group(0).lower().replace("_", "-")
               for d in re.findall(r'"([^"]+)"', deps + test + backend)}
