@@ -41,3 +41,10 @@ def user_gsd_dirs(extra: str | None = None) -> list[Path]:
     if env:
         dirs.extend(Path(p) for p in env.split(os.pathsep) if p)
     return dirs
+
+
+def user_profile_dirs() -> list[Path]:
+    """Profile folders of the user's ($PDRIVE_PROFILE_PATH, os.pathsep-separated), searched after the
+    shipped profiles/ (a name there wins) and before the plug-ins' folders."""
+    env = os.environ.get("PDRIVE_PROFILE_PATH")
+    return [Path(p) for p in env.split(os.pathsep) if p] if env else []

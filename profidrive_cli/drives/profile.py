@@ -35,7 +35,7 @@ import functools
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from profidrive_cli.data import profiles_dir
+from profidrive_cli.data import profiles_dir, user_profile_dirs
 from profidrive_cli.datafile import DataFileError, LineDict, load_yaml, load_yaml_head, read_text
 from profidrive_cli.dp.cfg import CfgError, decode_cfg, io_sizes, parse_hex
 from profidrive_cli.drives.capabilities import Capabilities, parse_capabilities
@@ -374,10 +374,21 @@ def _read_entry(path: Path) -> IndexEntry:
     return IndexEntry(path, name, tuple(str(a) for a in aliases), family, ident)
 
 
-def profile_index() -> list[IndexEntry]:
-    """One entry per profiles/*.yaml file, sorted by file name."""
+def _profile_files(plugins: bool) -> list[Path]:
+    """The shipped profiles/*.yaml sorted by file name, then each $PDRIVE_PROFILE_PATH folder's, then
+    (with plugins) each family plug-in's folder's."""
+    dirs = [profiles_dir(), *user_profile_dirs()]
+    if plugins:
+        from profidrive_cli.drives.registry import plugin_profile_dirs
+        dirs += plugin_profile_dirs()
+    return [p for d in dirs for p in sorted(d.glob("*.yaml"))]
+
+
+def profile_index(plugins: bool = True) -> list[IndexEntry]:
+    """One entry per profile file: the shipped ones sorted by file name, then the user's folders'
+    ($PDRIVE_PROFILE_PATH), then (with plugins, the default) the family plug-ins' folders."""
     out = []
-    for p in sorted(profiles_dir().glob("*.yaml")):
+    for p in _profile_files(plugins):
         stamp = _stamp(p)
         hit = _index.get(p)
         if hit is None or hit[0] != stamp:
@@ -385,6 +396,17 @@ def profile_index() -> list[IndexEntry]:
             _index[p] = hit
         out.append(hit[1])
     return out
+
+
+def index_entry(name: str) -> IndexEntry | None:
+    """The index entry of a profile name or alias (the shipped and the user's profiles first, the
+    plug-ins' only when none of those answers); None when no readable entry answers."""
+    key = name.lower()
+    for plugins in (False, True):
+        hit = next((e for e in profile_index(plugins) if e.answers_to(key)), None)
+        if hit is not None:
+            return hit
+    return None
 
 
 def _load_cached(path: Path) -> Profile:
@@ -403,8 +425,16 @@ def all_profiles() -> list[Profile]:
 
 def _lookup(match) -> Profile | None:
     """The first profile (by file name) whose index entry matches and whose full load confirms it;
-    files the index cannot read are loaded only if no readable one matches (raising their error)."""
-    entries = profile_index()
+    files the index cannot read are loaded only if no readable one matches (raising their error).
+    The plug-ins' folders are read only when no shipped or user profile matches."""
+    found = _lookup_in(match, profile_index(plugins=False))
+    if found is not None:
+        return found
+    from profidrive_cli.drives.registry import plugins
+    return _lookup_in(match, profile_index()) if plugins() else None
+
+
+def _lookup_in(match, entries: list[IndexEntry]) -> Profile | None:
     for e in entries:
         if match(e):
             p = _load_cached(e.path)

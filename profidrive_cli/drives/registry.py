@@ -21,7 +21,11 @@ is imported when a profile of the family is decoded or driven, the sim model onl
                  model is built, sim/lazy.py); 6 = no room for extended diagnosis
 
 A profile whose `family:` is not a row here is refused when it loads (drives/profile.py, file:line).
-A new family is one row here, its codec package, its sim model and its profile (docs/architecture.md).
+A new family is one row here, its codec package, its sim model and its profile (docs/architecture.md) --
+or, without forking, a plug-in: a distribution with an entry point in the group `profidrive_cli.families`
+that names a Family row (or a function returning one) whose `profiles` names the folder of its
+profiles (docs/plugins.md). Plug-ins are read only when a name is not in the table above (or all
+families are listed), so a command on the shipped families never scans the installed distributions.
 """
 
 from __future__ import annotations
@@ -29,9 +33,12 @@ from __future__ import annotations
 import importlib
 from dataclasses import dataclass
 from types import ModuleType
-from typing import Any, Callable, Protocol
+from typing import TYPE_CHECKING, Any, Callable, Protocol
 
 from profidrive_cli import UsageError
+
+if TYPE_CHECKING:
+    from pathlib import Path
 
 # The table imports nothing of drives/ (drives/__init__, drives.profile and the core's config ask it;
 # drives.base -> drives.values -> drives would close an import cycle): a profile is what has a name
@@ -56,6 +63,9 @@ class Family:
     core_config: str | None = None
     wire_fields: str | None = None
     sim_diag_len: int = 6
+    #: a plug-in's profile folder: "package" (its profiles/ folder) or "package:folder"; None for the
+    #: shipped families (profiles/ of pdrive)
+    profiles: str | None = None
 
 
 _PKG = "profidrive_cli.drives"
@@ -76,24 +86,95 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
 )}
 
 
+#: the entry-point group of family plug-ins (docs/plugins.md)
+ENTRY_POINT_GROUP = "profidrive_cli.families"
+
+#: the plug-ins' rows, read once on first need: name -> Family; and why a plug-in did not load
+_plugins: dict[str, Family] | None = None
+_plugin_problems: list[str] = []
+
+
+def plugins() -> dict[str, Family]:
+    """The families installed plug-ins add (entry points of ENTRY_POINT_GROUP), read once. A plug-in
+    that does not load, or names a family pdrive already has, is left out; why is said by known()."""
+    global _plugins
+    if _plugins is None:
+        from importlib.metadata import entry_points
+        found: dict[str, Family] = {}
+        for ep in sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
+            where = f"plug-in {ep.value!r} (entry point {ep.name!r})"
+            try:
+                obj = ep.load()
+                row = obj() if callable(obj) and not isinstance(obj, Family) else obj
+            except Exception as e:                      # a broken plug-in must not break pdrive
+                _plugin_problems.append(f"{where} did not load: {type(e).__name__}: {e}")
+                continue
+            if not isinstance(row, Family):
+                _plugin_problems.append(f"{where} gives {type(row).__name__}, not a Family row")
+            elif row.name in FAMILIES or row.name in found:
+                _plugin_problems.append(f"{where}: family {row.name!r} is already known")
+            else:
+                found[row.name] = row
+        _plugins = found
+    return _plugins
+
+
+def reset_plugins() -> None:
+    """Forget the plug-ins read so far (tests, or after installing one in a running process)."""
+    global _plugins
+    _plugins = None
+    _plugin_problems.clear()
+
+
+def find(name: str) -> Family | None:
+    """The row of a family: the table first, then the plug-ins."""
+    fam = FAMILIES.get(name)
+    return fam if fam is not None else plugins().get(name)
+
+
+def all_families() -> dict[str, Family]:
+    """The table and the plug-ins' rows."""
+    return {**FAMILIES, **plugins()}
+
+
 def known() -> str:
-    """The family names, sorted, for messages: 'fuji, moeller, ...'."""
-    return ", ".join(sorted(FAMILIES))
+    """The family names, sorted, for messages: 'fuji, moeller, ...' (and why a plug-in is missing)."""
+    names = ", ".join(sorted(all_families()))
+    return names + "".join(f"; {p}" for p in _plugin_problems)
 
 
 def unknown_family(name: object) -> str | None:
-    """None for a family in the table, else the one-line complaint (the caller adds file:line)."""
-    if isinstance(name, str) and name in FAMILIES:
+    """None for a family in the table or a plug-in, else the one-line complaint (the caller adds
+    file:line)."""
+    if isinstance(name, str) and find(name) is not None:
         return None
     return f"family {name!r} unknown (known: {known()})"
 
 
 def family_of(profile: ProfileLike) -> Family:
-    fam = FAMILIES.get(profile.family)
+    fam = find(profile.family)
     if fam is None:
         raise UsageError(f"profile {profile.name}: no codec for family '{profile.family}' "
                          f"(known: {known()})")
     return fam
+
+
+def plugin_profile_dirs() -> list["Path"]:
+    """The profile folders the family plug-ins bring (their rows' `profiles`), in family order."""
+    from importlib.resources import files
+    from pathlib import Path
+    out: list[Path] = []
+    for fam in sorted(plugins().values(), key=lambda f: f.name):
+        if fam.profiles is None:
+            continue
+        pkg, _, folder = fam.profiles.partition(":")
+        try:
+            path = Path(str(files(pkg) / (folder or "profiles")))
+        except (ImportError, TypeError, ValueError) as e:
+            _plugin_problems.append(f"family {fam.name!r}: profiles {fam.profiles!r}: {e}")
+            continue
+        out.append(path)
+    return out
 
 
 def resolve(ref: str) -> Any:
@@ -135,7 +216,7 @@ def family_config(profile: ProfileLike) -> object:
 def core_config_reader(profile: ProfileLike) -> Callable[[ProfileLike], Any] | None:
     """The family's builder of the PROFIdrive core's config from its own keys; None: the profile's
     `profidrive:` section is read (or the family is not on the core)."""
-    fam = FAMILIES.get(profile.family)
+    fam = find(profile.family)
     if fam is None or fam.core_config is None:
         return None
     fn: Callable[[ProfileLike], Any] = resolve(fam.core_config)
@@ -149,7 +230,7 @@ def wire_fields_ref(profile: ProfileLike) -> str | None:
 
 def sim_diag_len(family: str) -> int:
     """The Slave_Diag length the family's card allows (6 for a family not in the table)."""
-    fam = FAMILIES.get(family)
+    fam = find(family)
     return fam.sim_diag_len if fam is not None else 6
 
 

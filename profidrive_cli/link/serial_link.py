@@ -53,6 +53,25 @@ if "profidrive_cli.sim" not in serial.protocol_handler_packages:
     serial.protocol_handler_packages.append("profidrive_cli.sim")
 
 
+#: the entry-point group of port-kind plug-ins (docs/plugins.md): the entry point's name is the URL
+#: scheme, its value the package that holds pyserial's handler module `protocol_<scheme>`
+LINK_ENTRY_POINTS = "profidrive_cli.links"
+#: the schemes pyserial and pdrive bring themselves (no plug-in lookup for these)
+_OWN_SCHEMES = {"loop", "socket", "rfc2217", "hwgrep", "spy", "alt", "cp2110", "sim"}
+
+
+def _plug_in_scheme(port: str) -> None:
+    """A URL of a scheme nobody built in: the package of the installed plug-in that names it joins
+    pyserial's protocol_handler_packages (the way sim:// is registered), before the port is opened."""
+    scheme, sep, _ = port.partition("://")
+    if not sep or scheme in _OWN_SCHEMES or not scheme.isidentifier():
+        return
+    from importlib.metadata import entry_points
+    for ep in entry_points(group=LINK_ENTRY_POINTS, name=scheme):
+        if ep.value not in serial.protocol_handler_packages:
+            serial.protocol_handler_packages.append(ep.value)
+
+
 def _is_pty(port: str) -> bool:
     return "://" not in port and os.path.realpath(port).startswith(("/dev/pts/", "/dev/pty"))
 
@@ -71,6 +90,7 @@ def open_serial(port: str, baud: int, rs485: bool = False, timeout: float = 0.0,
             ser = ParityMarkingSerial()          # not opened until .open()
             ser.port = port
         else:
+            _plug_in_scheme(port)
             ser = serial.serial_for_url(port, do_not_open=True)
         ser.baudrate = baud
         ser.bytesize = serial.EIGHTBITS

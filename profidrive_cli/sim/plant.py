@@ -33,7 +33,7 @@ import importlib
 from urllib.parse import parse_qs, urlsplit
 
 from profidrive_cli import UsageError
-from profidrive_cli.drives.profile import Profile, load_profile, profile_index
+from profidrive_cli.drives.profile import Profile, index_entry, load_profile
 from profidrive_cli.drives.registry import sim_model_ref
 from profidrive_cli.fdl.timing import parse_baud
 from profidrive_cli.sim.bus import SimBus
@@ -82,8 +82,7 @@ def _index_entry(name: str):
     or a name the index does not know (then the full load says what is wrong, at once)."""
     if name.endswith((".yaml", ".yml")) or "/" in name:
         return None
-    key = name.lower()
-    return next((e for e in profile_index() if e.answers_to(key)), None)
+    return index_entry(name)
 
 
 def _build_model(name: str, addr: int, baud: int, preset: dict | None = None) -> SlaveModel:
