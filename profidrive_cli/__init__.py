@@ -35,8 +35,11 @@ def __getattr__(name: str):
         value = getattr(api, name)
         globals()[name] = value
         return value
+    if name == "aio":                   # the asyncio face, a sub-package: `pdrive.aio.open_bus`
+        import importlib
+        return importlib.import_module("profidrive_cli.aio")
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def __dir__():
-    return sorted(set(globals()) | _API_NAMES)
+    return sorted(set(globals()) | _API_NAMES | {"aio"})

@@ -49,7 +49,10 @@ def test_mypy_is_clean_on_the_package(tmp_path):
     ("profidrive_cli/session", "Success: no issues found in"),
     # drives/base.py: the Drive interface and its family hooks, which session/ and checklist/ stand on
     ("profidrive_cli/drives/base.py", "Success: no issues found in 1 source file"),
-], ids=["public_api", "session_package", "drive_interface"])
+    # the asyncio face of the API (issue 29) and the family table plug-ins extend
+    ("profidrive_cli/aio", "Success: no issues found in 1 source file"),
+    ("profidrive_cli/drives/registry.py", "Success: no issues found in 1 source file"),
+], ids=["public_api", "session_package", "drive_interface", "asyncio_face", "family_registry"])
 def test_mypy_strict_is_clean_on(tmp_path, target, success):
     rc, output = _mypy(tmp_path, "--strict", target)
     assert rc == 0, output

@@ -16,6 +16,8 @@ from profidrive_cli.session.live import at_reference
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.drives.base import ParamValue
     from profidrive_cli.drives.profile import Profile
+    import threading
+
     from profidrive_cli.session import DriveSession, Sample
 
 #: run(wait=True) without a timeout waits at most this long for the reference
@@ -121,6 +123,12 @@ class Drive:
         reference when it already runs. wait=True: until the actual speed is at the reference
         (DriveError after `timeout` s, default 60, or when the drive trips). A speed above fmax is
         refused (UsageError), never clipped."""
+        return self._run(hz, percent, wait, timeout, None)
+
+    def _run(self, hz: float | None, percent: float | None, wait: bool, timeout: float | None,
+             cancel: "threading.Event | None") -> Status:
+        """run(); `cancel` set (by the asyncio face, profidrive_cli.aio) ends the wait early with the
+        last status: the caller then stops the drive."""
         if (hz is None) == (percent is None):
             raise UsageError("run: give hz or percent (one of them)")
         v = hz if hz is not None else percent
@@ -144,6 +152,8 @@ class Drive:
                 limit = DEFAULT_RUN_TIMEOUT_S if timeout is None else float(timeout)
                 end = sample.t + limit
                 while not at_reference(pct, sample.actual_percent):
+                    if cancel is not None and cancel.is_set():
+                        break
                     if sample.status.fault:
                         raise DriveError(f"station {self.station}: the drive tripped"
                                          + (f" ({sample.status.fault_code})"
