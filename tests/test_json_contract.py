@@ -203,7 +203,7 @@ def test_every_documented_table_is_used():
             "commloss-test event=at_speed", "commloss-test event=silence", "commloss-test event=clear",
             "commloss-test event=back", "commloss-test event=result",
             "sniff drive", "sniff event=live", "config show", "config path", "wireshark install",
-            "checklist measured bus_health"}
+            "checklist measured bus_health", "sim-ctl state"}
     assert set(CONTRACTS) == used
 
 
@@ -484,6 +484,24 @@ def test_sim_endpoint_on_a_pty():
         p.wait(timeout=10)
     assert_contract(d, "sim")
     assert [s["station"] for s in d["stations"]] == [3, 4, 5, 6, 7]
+
+
+def test_sim_with_its_control_and_sim_ctl_state():
+    p = subprocess.Popen(pdrive_cmd() + ["sim", "--pty", "--json", "--control", "127.0.0.1:0"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT,
+                         env={**os.environ, "PYTHONPATH": str(ROOT)})
+    try:
+        d = json.loads(p.stdout.readline())
+        assert_contract(d, "sim")
+        assert d["control"].startswith("http://127.0.0.1:") and d["token"] is None
+        r = pdrive("sim-ctl", "--control", d["control"].removeprefix("http://"), "state", "--json")
+        assert r.returncode == 0, r.stderr
+        state = json.loads(r.stdout)
+        assert_contract(state, "sim-ctl state")
+        assert [s["station"] for s in state["stations"]] == [3, 4, 5, 6, 7]
+    finally:
+        p.terminate()
+        p.wait(timeout=10)
 
 
 def test_scan_over_the_pty_simulator():

@@ -248,6 +248,14 @@ class Bus:
     def closed(self) -> bool:
         return self._closed
 
+    @property
+    def simulator(self) -> Any:
+        """On sim://, the plant's control (sim/control.py): trip(station, alarm=None), clear,
+        unplug, replug, set(station, code, value), faults(spec), state(), each under this bus's
+        lock, between two telegrams; None on any other port."""
+        sim = getattr(self.master.link, "bus", None)
+        return None if sim is None else sim.control(lock=self._lock, clock=self.master.link.now)
+
     def close(self, exc: BaseException | None = None) -> None:
         """Stop every drive this bus started (the stop command of all in one bus cycle, one
         bounded wait for all together, coast for each one not stopped in its time), release every

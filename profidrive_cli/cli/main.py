@@ -133,6 +133,8 @@ COMMANDS = {
              "Live list: every station, its type, ident and DP state."),
     "sim": ("profidrive_cli.cli.sim_cmd", "sim_cmd",
             "Serve a simulated PROFIBUS segment for another master."),
+    "sim-ctl": ("profidrive_cli.cli.simctl_cmd", "simctl_cmd",
+                "Steer a running simulator: trip, clear, unplug, replug, set, faults, state."),
     "sniff": ("profidrive_cli.cli.sniff_cmd", "sniff_cmd",
               "Passive capture: one line per frame, pcap output."),
     "status": ("profidrive_cli.cli.drive_cmds", "status_cmd",

@@ -11,12 +11,12 @@ from profidrive_cli import UsageError
 from profidrive_cli.cli.common import emit_json, err, out
 
 
-def _host_port(listen: str) -> tuple[str, int]:
+def _host_port(listen: str, option: str = "--listen") -> tuple[str, int]:
     """--listen HOST:PORT (HOST may be empty: 127.0.0.1; PORT 0..65535, 0 picks a free one)."""
     host, colon, p = listen.rpartition(":")
     p = p.strip()
     if not colon or not (p.isascii() and p.isdigit()) or len(p) > 5 or int(p) > 65535:
-        raise UsageError(f"--listen needs HOST:PORT with PORT 0..65535, got {listen[:80]!r}")
+        raise UsageError(f"{option} needs HOST:PORT with PORT 0..65535, got {listen[:80]!r}")
     return host or "127.0.0.1", int(p)
 
 
@@ -32,7 +32,11 @@ def _host_port(listen: str) -> tuple[str, int]:
 @click.option("--plc", is_flag=True,
               help="Also run a built-in cyclic master (a PLC) on the stations and send the whole bus "
                    "traffic to the endpoint as a tap hears it (listen-only: for `pdrive sniff`).")
-def sim_cmd(use_pty, listen, serial_port, plant, baud, as_json, plc):
+@click.option("--control", default=None, metavar="HOST:PORT",
+              help="Also serve the plant's control (JSON over HTTP: trip, clear, unplug, replug, set, "
+                   "faults, state; `pdrive sim-ctl`), on 127.0.0.1 unless a host is named (then "
+                   "with a token). PORT 0 picks a free one.")
+def sim_cmd(use_pty, listen, serial_port, plant, baud, as_json, plc, control):
     """Serve a simulated PROFIBUS segment for another master (Ctrl-C ends it).
 
     With --plc the segment has its own master: a PLC brings every station up and runs a scripted
@@ -66,15 +70,21 @@ def sim_cmd(use_pty, listen, serial_port, plant, baud, as_json, plc):
     else:
         ep = server.SerialEndpoint(serial_port, b)
         where = serial_port
+    ctl = _control_server(bus, control) if control else None
     stations = {a: s.model.family for a, s in sorted(bus.slaves.items())}
     if as_json:
         emit_json({"port": where, "stations": [{"station": a, "family": f} for a, f in stations.items()],
-                   **({"plc": True} if plc else {})})
+                   **({"plc": True} if plc else {}),
+                   **({"control": ctl.url, "token": ctl.token} if ctl is not None else {})})
     else:
         out.print(where)
         err.print("simulated stations: " + ", ".join(f"{a} {f}" for a, f in stations.items())
                   + (" with a built-in PLC (listen-only endpoint: `pdrive sniff --port "
                      f"{where}`)" if plc else "") + " — Ctrl-C ends")
+        if ctl is not None:
+            err.print(f"control: {ctl.url} (`pdrive sim-ctl --control {ctl.host}:{ctl.port} ...`)"
+                      + (f"; reachable from the network: every request needs the token {ctl.token}"
+                         if ctl.token else ""), markup=False)
     sys.stdout.flush()
     stopping = []
     signal.signal(signal.SIGTERM, lambda *a: stopping.append(1))
@@ -88,7 +98,19 @@ def sim_cmd(use_pty, listen, serial_port, plant, baud, as_json, plc):
         pass
     finally:
         ep.close()
+        if ctl is not None:
+            ctl.close()
     err.print("simulator stopped")
+
+
+def _control_server(bus, control: str):
+    """--control HOST:PORT: the plant's control over HTTP (sim/control.py), queued onto the bus."""
+    from profidrive_cli.sim.control import ControlServer, QueuedController
+    host, port = _host_port(control, "--control")
+    try:
+        return ControlServer(QueuedController(bus), host, port).start()
+    except OSError as e:
+        raise UsageError(f"--control {control}: {e.strerror or e}") from None
 
 
 def _check_plc_port(serial_port) -> None:

@@ -23,7 +23,9 @@ every injection is counted in the plan.
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, field
+from typing import Callable
 
 from profidrive_cli.fdl import frames as F
 from profidrive_cli.fdl.timing import TSYN_BITS, BusParams
@@ -87,6 +89,11 @@ class SimBus:
         self.reply_due_until = 0.0   # end of the last reply that the master must wait for
         self.outbox: list[Reply] = []
         self.log: list[tuple[float, str, bytes]] | None = None   # (time, "M"/"S", octets) if enabled
+        #: stations taken off the line by the control (sim/control.py): address -> the station
+        self.unplugged: dict[int, SimSlave] = {}
+        #: commands of the control waiting for the bus's own thread: run at the next tick/receive,
+        #: between telegrams (fn(now); sim/control.py puts them here from its HTTP thread)
+        self.pending: deque[Callable[[float], None]] = deque()
 
     @property
     def wire(self) -> bool:
@@ -100,8 +107,21 @@ class SimBus:
         return self.slaves[address]
 
     def tick(self, now: float) -> None:
+        if self.pending:
+            self.run_pending(now)
         for s in self.slaves.values():
             s.tick(now)
+
+    def run_pending(self, now: float) -> None:
+        """The control's queued commands, in order, on this (the bus's) thread."""
+        while self.pending:
+            self.pending.popleft()(now)
+
+    def control(self, lock=None, clock=None):
+        """A sim/control.py Controller of this bus (the Python API's Bus.simulator): its commands
+        run at once, under `lock` (the master's), at the time `clock()` gives."""
+        from profidrive_cli.sim.control import Controller
+        return Controller(self, clock=clock, lock=lock)
 
     # -- what the master side reads -------------------------------------------------------------
     def take(self, now: float) -> bytes:
@@ -143,6 +163,8 @@ class SimBus:
     def receive(self, data: bytes, now: float) -> list[Reply]:
         """Octets from the master written at `now` -> the replies they cause (also queued in the
         outbox for take())."""
+        if self.pending:
+            self.run_pending(now)
         out: list[Reply] = []
         if self.wire and not len(self.rx) and data:
             # a new telegram starts: check the master's idle time

@@ -104,6 +104,19 @@ class SlaveModel:
         """Pre-fill the fault history (drive models)."""
         raise ValueError(f"{self.family} station has no fault history")
 
+    # -- steering while a master runs (sim/control.py) ---------------------------------------
+    def clear_fault(self, now: float) -> None:
+        """Clear the active fault as the drive's keypad reset would (drive models)."""
+        raise ValueError(f"{self.family} station has no faults to clear")
+
+    def set_value(self, code: str, value: float) -> None:
+        """Change a setting in the drive's memory now (engineering units; drive models)."""
+        raise ValueError(f"{self.family} station has no parameters")
+
+    def snapshot(self) -> dict[str, object]:
+        """What the plant shows of the device (sim-ctl state): drive models add state, Hz, fault."""
+        return {"family": self.family, "layout": self.layout}
+
 
 class DriveModel(SlaveModel):
     """A drive's model (sim/<family>.py): built from its drive profile, which it keeps in `profile`."""

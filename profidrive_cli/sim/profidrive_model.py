@@ -387,6 +387,26 @@ class ProfidriveModel(DriveModel):
             elif ctw & Ctw.UNFREEZE_RFG:
                 self._frozen_target = None
 
+    # -- steering (sim/control.py) -------------------------------------------------------------
+    def clear_fault(self, now: float) -> None:
+        if self.fault:
+            self._acknowledge(now)
+
+    def set_value(self, code: str, value: float) -> None:
+        from profidrive_cli.drives.values import profile_value_problem
+        p = self.profile.param(code)
+        if p is None:
+            raise ValueError(f"{code} is not a parameter of {self.profile.name}")
+        why = profile_value_problem(self.profile, p, value)
+        if why is not None:
+            raise ValueError(why)
+        self.values[p.code] = self.wire_from_value(p, value)
+
+    def snapshot(self) -> dict[str, object]:
+        names = "/".join(a.code for a in self.profile.alarms_for(self.fault)) if self.fault else None
+        return {**super().snapshot(), "state": self.state.name, "hz": round(self.freq, 3),
+                "fault": (names or str(self.fault)) if self.fault else None}
+
     def _acknowledge(self, now: float) -> None:
         num = self.fault
         if num:

@@ -501,6 +501,26 @@ class YaskawaModel(DriveModel):
             return ERR_RANGE
         return 0
 
+    # -- steering (sim/control.py) -------------------------------------------------------------
+    def clear_fault(self, now: float) -> None:
+        self.fault = None
+        self.ope = None
+
+    def set_value(self, code: str, value: float) -> None:
+        from profidrive_cli.drives.values import profile_value_problem
+        p = self.profile.param(code)
+        if p is None or p.register is None:
+            raise ValueError(f"{code} is not a parameter of {self.profile.name}")
+        why = profile_value_problem(self.profile, p, value)
+        if why is not None:
+            raise ValueError(why)
+        self.regs[p.register] = p.to_raw(float(value)) & 0xFFFF
+
+    def snapshot(self) -> dict[str, object]:
+        return {**super().snapshot(), "state": "fault" if self.fault else
+                ("running" if self.out_hz or self._run_latched else "stopped"),
+                "hz": round(self.out_hz, 3), "fault": self.fault or self.ope}
+
     # -- fault injection -------------------------------------------------------------------------
     def trip(self, alarm: str, now: float) -> None:
         a = self.profile.alarm_by_code(alarm)
