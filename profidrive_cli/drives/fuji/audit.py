@@ -21,6 +21,7 @@ LINES: dict[str, dict[str, str]] = {
         "y98": "L1846-1869 (Table 5.2: y98 = 3 recommended), L2987-2988 (y98 not 3; y99, LE, LOC have priority)",
         "ramps": "L2756 (o27 forced deceleration on F08); F07 is the FRENIC's acceleration time (not in the card manual)",
         "quick": "L2243 (CTW bit 2 OFF3 stops on the deceleration time of H56)",
+        "fmax": "L1932 (F03 = 60: maximum frequency in Hz)",
     },
     "fuji-opc-pdp3": {
         "manual": "OPC-PDP3 manual (2016)",
@@ -31,6 +32,7 @@ LINES: dict[str, dict[str, str]] = {
         "ramps": "F08: the o27 forced-deceleration time (Table 9.1, L6478-6559); F07 is the FRENIC's "
                  "acceleration time (not in the card manual)",
         "quick": "L5126 (OFF3 stops on the deceleration time of H56)",
+        "fmax": "L4473 (F03 = 60: maximum frequency in Hz)",
         "y97": "L4288 (y97 communication data storage), L4325-4333 (*6: with 1 the data is deleted at "
                "power-off; 2 saves it)",
     },
@@ -59,7 +61,7 @@ def audit_rules(profile: Any) -> list[AuditRule]:
         *ramp_rules("F07", "F08", "H56", cite("ramps"), cite("quick")),
         not_applicable("max_frequency", "the card manual names F03 (maximum frequency, 100 % on the bus) "
                        "but no motor rating: the motor's rated frequency is in the FRENIC manual, not "
-                       "in the source", cite("quick")),
+                       "in the source", cite("fmax")),
     ]
     if "y97" in lines and profile.param("y97") is not None:
         rules.append(save_mode_rule(
