@@ -35,8 +35,9 @@ CHECKLIST_HZ = 20
 @drive_options
 @bus_options
 @_terminations
-def audit_cmd(opts, addresses, max_reaction, cycle_ms, checklist_path, profile_name, ppo, fmt,
-              watchdog_ms):
+def audit_cmd(opts: Any, addresses: tuple[int, ...], max_reaction: float | None,
+              cycle_ms: float | None, checklist_path: str | None, profile_name: str | None,
+              ppo: int | None, fmt: str | None, watchdog_ms: int) -> None:
     """Lint each drive's safety and commissioning settings, each finding with the manual's fix.
 
     The rules (per family, each citing its card manual's line): comm-loss reaction and delay,
@@ -94,7 +95,7 @@ def _print_result(r: Any) -> None:
         out.print(escape(f"  not applicable: {k.topic}: {k.reason} ({k.manual})"))
 
 
-def _read_step(f: Any) -> dict:
+def _read_step(f: Any) -> dict[str, Any]:
     check = dict(f.check)
     read: dict[str, Any] = {"param": check.pop("param")}
     if "min" in check and "max" in check:
@@ -103,7 +104,7 @@ def _read_step(f: Any) -> dict:
     return {"read": read}
 
 
-def checklist_yaml(results: list, port: str | None) -> str:
+def checklist_yaml(results: list[Any], port: str | None) -> str:
     """A checklist (docs/checklists.md) over the audited stations: their identity, a read step per
     finding that names a setting (it fails until the setting is fixed), a note per finding that
     does not, then the comm-loss test of every station."""
@@ -114,7 +115,7 @@ def checklist_yaml(results: list, port: str | None) -> str:
     steps: list[Any] = ["expect_identity"]
     for r in results:
         for f in r.findings:
-            step = (_read_step(f) if f.check is not None else
+            step: dict[str, Any] = (_read_step(f) if f.check is not None else
                     {"note": f"{f.code} = {f.value}: {f.why}. Fix: {f.fix} ({f.manual})"})
             step.update({"name": f"audit {f.severity}: {f.rule} ({f.code})",
                          "stations": [names[r.station]], "on_fail": "continue"})
@@ -132,4 +133,4 @@ def checklist_yaml(results: list, port: str | None) -> str:
     if port:
         doc["port"] = port
     doc.update({"stations": stations, "steps": steps})
-    return yaml.safe_dump(doc, sort_keys=False, allow_unicode=True, width=100)
+    return str(yaml.safe_dump(doc, sort_keys=False, allow_unicode=True, width=100))
