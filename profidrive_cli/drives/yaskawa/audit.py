@@ -30,7 +30,10 @@ def audit_rules(profile: Any) -> list[AuditRule]:
         source_rule("source.run", "b1-02", [3], "the run command",
                     "set b1-02 = 3 (option PCB): the run bits act only then",
                     f"{MANUAL} L274-282 (Table 1.6), L147"),
-        *ramp_rules("C1-01", "C1-02", "C1-09", f"C1-01 / C1-02: {F7}", f"C1-09 fast-stop time: {F7}"),
+        *ramp_rules("C1-01", "C1-02", "C1-09",
+                    f"C1-01 / C1-02: {F7}, profile L99-102; {MANUAL} L656, L710 (the times' unit "
+                    f"C1-10 named among the parameters others depend on)",
+                    f"C1-09 fast-stop time: {F7}, profile L103"),
         not_applicable("max_frequency", "the SI-P1 manual names no motor rating; the drive's base "
                        "frequency is not in the profile (E1-04 is the F7's maximum output frequency)",
                        f"{MANUAL} L592-596 (frequency units)"),
