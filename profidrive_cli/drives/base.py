@@ -13,15 +13,12 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Callable, ClassVar, Protocol
+from typing import Any, Callable, ClassVar, Protocol
 
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.drives.torque import no_torque_reason
 from profidrive_cli.drives.values import raw_value_problem
 from profidrive_cli.drives.values import value_problem as exact_value_problem
-
-if TYPE_CHECKING:                                   # pragma: no cover
-    from profidrive_cli.drives.audit import AuditRule
 
 
 class CyclicChannel(Protocol):
@@ -199,10 +196,11 @@ class Drive(ABC):
         return []
 
     @classmethod
-    def audit_rules(cls, profile: Any) -> list["AuditRule"]:
-        """Class fact, no bus: this family's rules for `pdrive audit` (drives/audit.py: each a check
-        of a connected drive citing its manual line, or a topic the family's manual gives no setting
-        for, with the reason). session/audit.py runs them; [] = the family has none."""
+    def audit_rules(cls, profile: Any) -> list[Any]:
+        """Class fact, no bus: this family's rules for `pdrive audit`, drives.audit.AuditRule objects
+        (each a check of a connected drive citing its manual line, or a topic the family's manual
+        gives no setting for, with the reason; drives/audit.py imports this module, so the type is
+        named here in words). session/audit.py runs them; [] = the family has none."""
         return []
 
     def jog_reference(self) -> str | None:
