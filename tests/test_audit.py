@@ -135,6 +135,8 @@ def test_a_comm_loss_delay_against_the_process_limit():
     res = audit(url, 4, max_reaction_s=1.0)
     (f,) = [f for f in res.findings if f.rule == "comm_loss.delay"]
     assert f.severity == "error" and "3 s" in f.why and "2.5" in f.value
+    # the fix: o28 at most 1.0 - 0.5 = 0.5 s (o28 in 0.1 s steps: OPC-PDP3 Table 5.1, 0.0-60.0 s)
+    assert f.check == {"param": "o28", "max": 0.5}
     res = audit(url, 4)
     (f,) = [f for f in res.findings if f.rule == "comm_loss.delay"]
     assert f.severity == "warning"

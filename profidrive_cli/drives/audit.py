@@ -11,6 +11,7 @@ through the context.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Callable, Mapping, Protocol, Sequence
 
@@ -99,8 +100,8 @@ def _text(pv: "ParamValue") -> str:
 
 
 # -- comm loss --------------------------------------------------------------------------------
-def comm_loss_rule(manual: str, fix: str, check: Check | None, needs: tuple[str, ...] = ()
-                   ) -> AuditRule:
+def comm_loss_rule(manual: str, fix: str, check: Check | None, needs: tuple[str, ...] = (),
+                   delay_code: str | None = None) -> AuditRule:
     """The drive's reaction to a lost master, read by its own Drive.comm_loss_reaction (the hook
     the comm-loss test reads): error when it keeps running; the delay before it acts against the
     process's limit (max_reaction_s); the reaction's own warnings (Fuji H81)."""
@@ -129,12 +130,18 @@ def comm_loss_rule(manual: str, fix: str, check: Check | None, needs: tuple[str,
                                    "shorten the delay to what the process allows (0 acts at the watchdog)",
                                    manual, None))
             elif total > limit:
+                most = max(0.0, limit - ctx.watchdog_s)
+                if delay_code is not None:          # whole steps of the timer, not above the limit
+                    step = _step(ctx, delay_code)
+                    most = round(math.floor(most / step + 1e-9) * step, 6)
                 out.append(Finding("error", "comm_loss.delay", code, value,
                                    f"{r.words}: the drive runs on its last command for {total:g} s "
                                    f"(watchdog {ctx.watchdog_s:g} s + delay {r.delay_s:g} s), longer "
                                    f"than the {limit:g} s the process allows",
-                                   f"shorten the delay to at most {max(0.0, limit - ctx.watchdog_s):g} s "
-                                   f"(the process's {limit:g} s less the watchdog)", manual, None))
+                                   f"shorten the delay{f' ({delay_code})' if delay_code else ''} to at "
+                                   f"most {most:g} s (the process's {limit:g} s less the watchdog)",
+                                   manual, None if delay_code is None else
+                                   {"param": delay_code, "max": most}))
         for w in r.warnings:
             out.append(Finding("warning", "comm_loss.note", code, value, w,
                                "check the setting named, then run `pdrive commloss-test`", manual, None))

@@ -50,7 +50,7 @@ def audit_rules(profile: Any) -> list[AuditRule]:
         comm_loss_rule(cite("o27"),
                        "set o27 = 0 (coast and trip er5 at once, the factory setting) or 10 "
                        "(decelerate on F08, then er5); 1/2 and 11/12 act after the o28 delay",
-                       {"param": "o27", "expect": 0}, needs=("o27", "o28")),
+                       {"param": "o27", "expect": 0}, needs=("o27", "o28"), delay_code="o28"),
         watchdog_rule(cite("watchdog")),
         source_rule("source.y98", "y98", [3], "the run command and the frequency reference",
                     "set y98 = 3 (run and frequency commands from PROFIBUS), as the manual recommends",
