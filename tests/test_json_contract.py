@@ -203,7 +203,7 @@ def test_every_documented_table_is_used():
             "commloss-test event=at_speed", "commloss-test event=silence", "commloss-test event=clear",
             "commloss-test event=back", "commloss-test event=result",
             "sniff drive", "sniff event=live", "config show", "config path", "wireshark install",
-            "checklist measured bus_health", "sim-ctl state"}
+            "checklist measured bus_health", "sim-ctl state", "audit"}
     assert set(CONTRACTS) == used
 
 
@@ -246,6 +246,19 @@ def test_scan_with_nobody_is_a_document_and_exit_1():
     d = one_doc(pdrive("scan", *SIM, "--from", "100", "--to", "101", "--json"), code=1)
     assert_contract(d, "scan")
     assert d["stations"] == []
+
+
+def test_audit(tmp_path):
+    # every finding kind of the plant: an error with a check (P002, DE6-NET-DP manual L361-363), a
+    # warning with one (y97, OPC-PDP3 L4325-4333), a note without one (Toyo ZSW bit 9), a delay
+    d = one_doc(pdrive("audit", "--port", "sim://?set=6:P002=1&set=4:y97=1,o27=11,o28=2.5"
+                       "&set=5:b-11=1,b-10=1", "--json", "--checklist", str(tmp_path / "c.yaml")),
+                code=1)
+    assert_contract(d, "audit")
+    assert d["errors"] == 2 and [s["station"] for s in d["stations"]] == [3, 4, 5, 6, 7]
+    d = one_doc(pdrive("audit", "3", "--port", "sim://", "--ppo", "3", "--json"))   # not checked
+    assert_contract(d, "audit")
+    assert d["stations"][0]["not_checked"] and d["checklist"] is None
 
 
 def test_diag():

@@ -30,6 +30,9 @@ from profidrive_cli import BusError, UsageError
 from profidrive_cli.api.results import Station
 
 if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.api.results import AuditResult
+
+if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.api.drive import Drive
     from profidrive_cli.dp.poller import Master
     from profidrive_cli.link.base import Link
@@ -430,6 +433,30 @@ class Bus:
             channel.hooks.append(lambda t, o, i: self._exchanged(address, t))
             self._start_keepalive()
             return drive
+
+    def audit(self, stations: list[int] | None = None, *, profile: str | None = None,
+              layout: str | None = None, ppo: int | None = None, watchdog_ms: float = 500,
+              cycle_s: float | None = None, max_reaction_s: float | None = None
+              ) -> list["AuditResult"]:
+        """Drive.audit() of each station (None: every station the scan finds with a known drive
+        profile), one after the other, lowest first; a drive this call opened is closed again
+        (a drive opened before stays open). BusError when there is no drive station to audit."""
+        if stations is None:
+            found = [s.station for s in self.scan(0, 125) if s.kind == "slave" and s.profile]
+            if not found:
+                raise BusError(f"audit: no drive station found on {self.port}")
+        else:
+            found = sorted(set(stations))
+        out = []
+        for st in found:
+            opened = st in self._drives
+            d = self.drive(st, profile=profile, layout=layout, ppo=ppo, watchdog_ms=watchdog_ms)
+            try:
+                out.append(d.audit(max_reaction_s=max_reaction_s, cycle_s=cycle_s))
+            finally:
+                if not opened:
+                    d.close()
+        return out
 
     def session(self, station: int | None = None, *, profile: str | None = None,
                 layout: str | None = None, ppo: int | None = None, fmt: str | None = None,

@@ -9,7 +9,8 @@ import math
 from typing import TYPE_CHECKING, Any
 
 from profidrive_cli import UsageError
-from profidrive_cli.api.results import Fault, Faults, Param, Status, StopResult
+from profidrive_cli.api.results import (AuditFinding, AuditResult, AuditSkip, Fault, Faults, Param,
+                                        Status, StopResult)
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.session.live import at_reference
 
@@ -218,6 +219,28 @@ class Drive:
             self._check()
             self._bus._check_write(f"acknowledge the fault of station {self.station}")
             return self._status(self.session.clear_fault())
+
+    # -- audit --------------------------------------------------------------------------------------
+    def audit(self, *, max_reaction_s: float | None = None, cycle_s: float | None = None,
+              watchdog_s: float | None = None) -> AuditResult:
+        """Lint the drive's safety- and commissioning-relevant settings by its family's rules
+        (session/audit.py; docs/commands.md `pdrive audit`): read only, nothing written, the drive
+        not started. max_reaction_s: how long the process allows the drive to run on without its
+        master; cycle_s: the master's bus cycle (default this bus's); watchdog_s: the watchdog the
+        master sets (default the one this drive was opened with)."""
+        from profidrive_cli.session.audit import audit_session
+        with self._bus._call():
+            self._check()
+            rep = audit_session(self.session, watchdog_s=watchdog_s, cycle_s=cycle_s,
+                                max_reaction_s=max_reaction_s)
+            return AuditResult(
+                rep.station, rep.profile, rep.layout, rep.ident, rep.watchdog_s, rep.cycle_s,
+                rep.max_reaction_s,
+                tuple(AuditFinding(f.severity, f.rule, f.code, f.value, f.why, f.fix, f.manual,
+                                   None if f.check is None else dict(f.check)) for f in rep.findings),
+                tuple(AuditSkip(k.rule, k.topic, k.reason, k.manual) for k in rep.not_applicable),
+                tuple(AuditSkip(k.rule, k.topic, k.reason, k.manual) for k in rep.not_checked),
+                tuple(rep.checked))
 
     # -- end ------------------------------------------------------------------------------------------
     def close(self) -> StopResult | None:

@@ -101,3 +101,72 @@ class StopResult:
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
+
+
+@dataclass(frozen=True)
+class AuditFinding:
+    """One thing `audit` found (drives/audit.py Finding): severity "error" | "warning" | "info"."""
+    severity: str
+    rule: str                        # the rule's id ("comm_loss.keeps_running")
+    code: str                        # the parameter code, or the figure ("watchdog")
+    value: str                       # the value as read, with its unit
+    why: str                         # why it matters
+    fix: str                         # what to do
+    manual: str                      # the card manual's line the fix stands on
+    check: Mapping[str, Any] | None  # a checklist read step showing it fixed ({"param", "expect"} ...)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["check"] = None if self.check is None else dict(self.check)
+        return d
+
+
+@dataclass(frozen=True)
+class AuditSkip:
+    """A rule that did not run: not applicable to the family, or not checked on this drive."""
+    rule: str
+    topic: str
+    reason: str
+    manual: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class AuditResult:
+    """The audit of one drive: its findings (worst first), the rules that do not apply to its
+    family and those that could not be checked, with the figures the rules used."""
+    station: int
+    profile: str
+    layout: str
+    ident: int | None
+    watchdog_s: float                # the DP watchdog the master sets
+    cycle_s: float | None            # the master's bus cycle the watchdog was checked against
+    max_reaction_s: float | None     # the process's limit for a drive without its master
+    findings: tuple[AuditFinding, ...]
+    not_applicable: tuple[AuditSkip, ...]
+    not_checked: tuple[AuditSkip, ...]
+    checked: tuple[str, ...]         # the ids of the rules that ran
+
+    @property
+    def ident_hex(self) -> str | None:
+        return _hex(self.ident)
+
+    @property
+    def errors(self) -> int:
+        return sum(1 for f in self.findings if f.severity == "error")
+
+    @property
+    def warnings(self) -> int:
+        return sum(1 for f in self.findings if f.severity == "warning")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"station": self.station, "ident": self.ident, "ident_hex": self.ident_hex,
+                "profile": self.profile, "layout": self.layout, "watchdog_s": self.watchdog_s,
+                "cycle_s": self.cycle_s, "max_reaction_s": self.max_reaction_s,
+                "errors": self.errors, "warnings": self.warnings,
+                "findings": [f.to_dict() for f in self.findings],
+                "not_applicable": [s.to_dict() for s in self.not_applicable],
+                "not_checked": [s.to_dict() for s in self.not_checked],
+                "checked": list(self.checked)}

@@ -105,6 +105,8 @@ from profidrive_cli import BusError, PdriveError, UsageError, __version__  # noq
 #: load neither rich nor yaml nor any protocol code. tests/test_cli_lazy.py checks that each help
 #: line here is the command's own.
 COMMANDS = {
+    "audit": ("profidrive_cli.cli.audit_cmd", "audit_cmd",
+              "Lint each drive's safety and commissioning settings, each finding with the manual's fix."),
     "checklist": ("profidrive_cli.cli.checklist_cmd", "checklist_group",
                   "Scripted commissioning checklists: validate, rehearse, run, report."),
     "commloss-test": ("profidrive_cli.cli.commloss_cmd", "commloss_cmd",

@@ -195,6 +195,14 @@ class Drive(ABC):
         `layout` (what a checklist's expect_status may name besides the generic ones)."""
         return []
 
+    @classmethod
+    def audit_rules(cls, profile: Any) -> list[Any]:
+        """Class fact, no bus: this family's rules for `pdrive audit`, drives.audit.AuditRule objects
+        (each a check of a connected drive citing its manual line, or a topic the family's manual
+        gives no setting for, with the reason; drives/audit.py imports this module, so the type is
+        named here in words). session/audit.py runs them; [] = the family has none."""
+        return []
+
     def jog_reference(self) -> str | None:
         """The parameter code holding the jog speed (e.g. Moeller A038), None where the card has none."""
         return None

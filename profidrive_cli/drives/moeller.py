@@ -296,6 +296,12 @@ class MoellerDrive(pd.ProfidriveDrive):
     ramp_codes = {"accel": "F002", "decel": "F003"}
     comm_loss_words = "P002 (0 = trip E70 and coast; 1 = keep running on the last command)"
 
+    @classmethod
+    def audit_rules(cls, profile: Any) -> list[Any]:
+        """The family's `pdrive audit` rules (drives/moeller_audit.py), each citing its manual line."""
+        from profidrive_cli.drives.moeller_audit import audit_rules
+        return audit_rules(profile)
+
     def __init__(self, channel, profile, layout: str | None = None):
         super().__init__(channel, profile, layout)
         self.mc = moeller_config(profile)

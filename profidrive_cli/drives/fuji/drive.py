@@ -24,6 +24,12 @@ class FujiDrive(pd.ProfidriveDrive):
     ramp_codes = {"accel": "F07", "decel": "F08"}
     comm_loss_words = "its o27/o28 setting (o27 = 3 or 13..15 ignores the loss: the motor keeps running)"
 
+    @classmethod
+    def audit_rules(cls, profile: Any) -> list[Any]:
+        """The family's `pdrive audit` rules (drives/fuji/audit.py), each citing its manual line."""
+        from profidrive_cli.drives.fuji.audit import audit_rules
+        return audit_rules(profile)
+
     def __init__(self, channel, profile, layout: str | None = None):
         self.fc = fuji_config(profile)
         super().__init__(channel, profile, layout)

@@ -46,6 +46,12 @@ class ToyoDrive(pd.ProfidriveDrive):
     family = "toyo"
     comm_loss_words = "protection 18 (COMM): the inverter trips and coasts"
 
+    @classmethod
+    def audit_rules(cls, profile: Any) -> list[Any]:
+        """The family's `pdrive audit` rules (drives/toyo/audit.py), each citing its manual line."""
+        from profidrive_cli.drives.toyo.audit import audit_rules
+        return audit_rules(profile)
+
     def __init__(self, channel, profile, layout: str | None = None):
         self.tc = toyo_config(profile)
         super().__init__(channel, profile, layout)

@@ -41,6 +41,11 @@ class YaskawaDrive(Drive):
     comm_loss_words = ("a BUS fault after the option's communication timeout (the drive stops by its BUS "
                        "fault setting)")
 
+    @classmethod
+    def audit_rules(cls, profile: Any) -> list[Any]:
+        from profidrive_cli.drives.yaskawa.audit import audit_rules      # cited rules (pdrive audit)
+        return audit_rules(profile)
+
     def jog_refusal(self) -> str:
         return self._no_jog_words(self.profile)
 
