@@ -27,10 +27,7 @@ import time
 from concurrent.futures import Future
 from concurrent.futures import TimeoutError as FutureTimeout
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
-from typing import TYPE_CHECKING, Any, Callable, ContextManager
-
-if TYPE_CHECKING:                                       # pragma: no cover
-    from profidrive_cli.sim.bus import SimBus
+from typing import Any, Callable, ContextManager
 
 #: the commands, with their arguments (name -> required?), for the HTTP face and sim-ctl
 COMMANDS: dict[str, dict[str, bool]] = {
@@ -54,10 +51,11 @@ class ControlError(ValueError):
 
 
 class Controller:
-    """The commands on one SimBus. lock: held around each command (the in-process master's);
+    """The commands on one SimBus (sim/bus.py, which builds this in SimBus.control: typed Any here,
+    for no import cycle). lock: held around each command (the in-process master's);
     clock: the plant's time for the models (default time.monotonic)."""
 
-    def __init__(self, bus: "SimBus", clock: Callable[[], float] | None = None,
+    def __init__(self, bus: Any, clock: Callable[[], float] | None = None,
                  lock: ContextManager[Any] | None = None) -> None:
         self.bus = bus
         self.clock = clock or time.monotonic
