@@ -240,13 +240,18 @@ def io_cmd(opts, address, cfg_hex, ident_hex, prm_hex, out_hex, count, wd_ms, gs
                 sc = SlaveConfig(ident=ident, cfg=cfg, user_prm=prm, wd_ms=wd_ms)
                 master.add_station(address, sc)
                 master.bring_up(address, timeout=3.0, fail_fast=True)
+                lay = _by_module(master, address, ident, gsd_file, prm, opts.json)
                 for i in range(count):
                     inputs = master.exchange(address, outputs)
                     if opts.json:
                         emit_json({"event": "cycle", "station": address, "cycle": i,
-                                   "inputs": inputs.hex(" ")})
+                                   "inputs": inputs.hex(" "),
+                                   **({} if lay is None else {"modules": _values(lay, "in", inputs)})})
                     else:
                         _row(f"{i:>5}  in: {inputs.hex(' ') or '(none)'}")
+                        if lay is not None and len(lay.split("in", inputs)) > 1:   # one: the line above
+                            for m in _values(lay, "in", inputs):
+                                _row(f"       slot {m['slot']} {m['name']}: {m['octets']}")
             except LinkLost:
                 ender.link_lost = True
                 raise
@@ -259,6 +264,31 @@ def io_cmd(opts, address, cfg_hex, ident_hex, prm_hex, out_hex, count, wd_ms, gs
         master.link.close()
     if ender.problem:
         raise BusError(f"station {address}: {ender.problem}")
+
+
+def _by_module(master, address: int, ident: int, gsd_file, prm: bytes, as_json: bool):
+    """The station's data by module (gsd/slavedata.py) from its Get_Cfg and its GSD (--gsd, else the
+    library by ident); None when either is missing. Text output: the layout once, before the cycles."""
+    from profidrive_cli.gsd.library import find_by_ident, load_gsd
+    from profidrive_cli.gsd.slavedata import layout
+    real = master.get_cfg(address)
+    g = load_gsd(gsd_file) if gsd_file else find_by_ident(ident)
+    if real is None or g is None:
+        return None
+    try:
+        lay = layout(g, real, prm or None)
+    except CfgError:
+        return None
+    if not as_json:
+        _row(f"station {address} by module ({g.title}, Get_Cfg {real.hex(' ')}):")
+        for line in lay.describe():
+            _row(f"  {line}")
+    return lay
+
+
+def _values(lay, direction: str, data: bytes) -> list[dict]:
+    from profidrive_cli.gsd.slavedata import values
+    return values(lay, direction, data)
 
 
 def _row(text: str) -> None:
