@@ -15,7 +15,7 @@ Sans-IO apart from reading GSD files: fdl frames in, the `decoded` object of doc
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Iterable
 
 from profidrive_cli.dp import services as S
 from profidrive_cli.dp.cfg import CfgError
@@ -39,7 +39,7 @@ _Cuts = tuple[str, tuple[tuple[int, str, int, int], ...], str]
 
 
 class SlaveView:
-    def __init__(self, gsd_dir: str | None = None, skip: frozenset[int] | set[int] = frozenset()):
+    def __init__(self, gsd_dir: str | None = None, skip: Iterable[int] = ()):
         from profidrive_cli.gsd.library import search_dirs
         search_dirs(gsd_dir)                          # a folder that is not there: exit 2 before listening
         self.gsd_dir = gsd_dir

@@ -38,10 +38,12 @@ class SniffView:
         self.refresh_s = refresh_s
         self._shown_at: float | None = None
         self._rich_live: Live | None = None
-        from profidrive_cli.bustools.slaveview import SlaveView      # every slave by module (issue 27)
-        ctx = click.get_current_context(silent=True)          # sniff's --gsd-dir (cli/sniff_cmd.py)
-        gsd_dir = gsd_dir or (ctx.meta.get("pdrive.gsd_dir") if ctx is not None else None)
-        self.slaves = None if live else SlaveView(gsd_dir, set(self.decoder.watched) if self.decoder else ())
+        self.slaves = None                                    # every slave by module (issue 27)
+        if not live:
+            from profidrive_cli.bustools.slaveview import SlaveView
+            ctx = click.get_current_context(silent=True)      # sniff's --gsd-dir (cli/sniff_cmd.py)
+            gsd_dir = gsd_dir or (ctx.meta.get("pdrive.gsd_dir") if ctx is not None else None)
+            self.slaves = SlaveView(gsd_dir, set(self.decoder.watched) if self.decoder else ())
 
     # -- one frame -------------------------------------------------------------------------------
     def frame(self, c) -> None:

@@ -96,7 +96,7 @@ class MatchResult:
     def to_dict(self) -> dict[str, Any]:
         return {"cfg": self.cfg.hex(" "), "complete": self.complete, "unmatched_at": self.unmatched_at,
                 "problem": self.problem, "notes": list(self.notes),
-                "fits": [[s.to_dict() for s in f.slots] for f in self.fits]}
+                "fits": [{"slots": [s.to_dict() for s in f.slots]} for f in self.fits]}
 
 
 def _ident(v: int | None) -> str:

@@ -125,7 +125,7 @@ class SlaveLayout:
 
 
 def _unit(ids: list[CfgModule]) -> tuple[str, bool]:
-    units = set()
+    units: set[str] = set()
     for c in ids:
         if c.special:
             units.update("word" if w else "byte" for w, n in ((c.out_words, c.outputs), (c.in_words, c.inputs))
@@ -179,7 +179,7 @@ def layout(gsd: Gsd | None, cfg: bytes, user_prm: bytes | None = None) -> SlaveL
 def values(lay: SlaveLayout, direction: str, data: bytes) -> list[dict[str, Any]]:
     """split() as JSON-ready rows: slot, name, offset, octets (lower-case hex)."""
     d = OUT if direction in (OUT, "request") else IN
-    return [{"slot": m.slot, "name": m.name, "offset": m.out_offset if d == OUT else m.in_offset,
+    return [{"slot": m.slot, "name": m.short, "offset": m.out_offset if d == OUT else m.in_offset,
              "octets": v.hex(" ")} for m, v in lay.split(d, data)]
 
 
