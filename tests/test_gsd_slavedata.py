@@ -287,3 +287,32 @@ def test_io_shows_the_inputs_by_module_from_get_cfg():
     # YASK00CA.GSD:67 Module = "Basic data" 0x72: in+out (bits 5-4 = 11), words, 2 + 1 = 3 words
     assert r.returncode == 0 and ev["modules"][0]["name"] == "Basic data" and ev["modules"][0]["offset"] == 0
     assert ev["modules"][0]["octets"] == ev["inputs"]
+
+
+def test_the_profirust_devices_configurations_by_identifier_without_their_gsd():
+    """profirust-examples-prm-cfg.tsv: four real devices' Chk_Cfg; their GSDs are not in the test data,
+    so each identifier is its own module. Sizes by reference §3.2 (compact format: bits 5-4 direction,
+    bit 6 words, bits 3-0 length - 1): 00 nothing; 10 1 byte in; 20 1 byte out; F1 2 words in+out."""
+    tsv = EXTERNAL / "profirust-examples-prm-cfg.tsv"
+    if not tsv.exists():
+        pytest.skip(f"{tsv} not present")
+    rows = [ln.split("\t") for ln in tsv.read_text(encoding="utf-8").splitlines()
+            if ln and not ln.startswith("#")]
+    by_ident = {r[2]: bytes.fromhex(r[4]) for r in rows}
+    wago = layout(None, by_ident["0xB757"])                # 00, ten 10, seven 20
+    assert len(wago.modules) == 18 and (wago.input_len, wago.output_len) == (10, 7)
+    assert [m.in_offset for m in wago.modules if m.in_len] == list(range(10))
+    assert [m.out_offset for m in wago.modules if m.out_len] == list(range(7))
+    mm4 = layout(None, by_ident["0x80B5"])                 # 00 F1: PPO3
+    assert (mm4.input_len, mm4.output_len) == (4, 4) and mm4.modules[1].unit == "word"
+    assert (layout(None, by_ident["0x000B"]).input_len, layout(None, by_ident["0x000B"]).output_len) == (1, 1)
+
+
+def test_sniff_goes_on_when_pdrive_gsd_dir_is_stale(monkeypatch, tmp_path):
+    from profidrive_cli.bustools.slaveview import SlaveView
+    monkeypatch.setenv("PDRIVE_GSD_DIR", str(tmp_path / "gone"))
+    fc = F.request_fc(F.SRD_HIGH, True, True)
+    raw = (F.encode(F.Frame(F.SD2, 3, 2, fc, bytes.fromhex("88 01 01 0b fd 01 00"), 61, 62))
+           + F.encode(F.Frame(F.SD2, 3, 2, fc, bytes.fromhex("F1"), 62, 62)))
+    view = SlaveView()
+    assert [view.decode(f, None) for f in _frames(raw)] == [None, None]

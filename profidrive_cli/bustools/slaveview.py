@@ -14,9 +14,11 @@ Sans-IO apart from reading GSD files: fdl frames in, the `decoded` object of doc
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from typing import Any, Iterable
 
+from profidrive_cli import UsageError
 from profidrive_cli.dp import services as S
 from profidrive_cli.dp.cfg import CfgError
 from profidrive_cli.fdl import frames as F
@@ -40,8 +42,9 @@ _Cuts = tuple[str, tuple[tuple[int, str, int, int], ...], str]
 
 class SlaveView:
     def __init__(self, gsd_dir: str | None = None, skip: Iterable[int] = ()):
-        from profidrive_cli.gsd.library import search_dirs
-        search_dirs(gsd_dir)                          # a folder that is not there: exit 2 before listening
+        if gsd_dir is not None and not os.path.isdir(gsd_dir):   # exit 2 before listening
+            why = "not a folder" if os.path.exists(gsd_dir) else "no such folder"
+            raise UsageError(f"--gsd-dir {gsd_dir}: {why}")
         self.gsd_dir = gsd_dir
         self.skip = frozenset(skip)
         self._seen: dict[int, _Seen] = {}
@@ -138,10 +141,10 @@ class SlaveView:
         key = (st.ident, st.cfg, st.user_prm)
         if key not in self._layouts:
             from profidrive_cli.gsd.library import find_by_ident
-            g = find_by_ident(st.ident, self.gsd_dir)
-            try:
+            try:                    # a $PDRIVE_GSD_DIR that is not there: no GSD (a name is a label)
+                g = find_by_ident(st.ident, self.gsd_dir)
                 self._layouts[key] = None if g is None else layout(g, st.cfg, st.user_prm)
-            except CfgError:
+            except (CfgError, UsageError):
                 self._layouts[key] = None
         return self._layouts[key]
 

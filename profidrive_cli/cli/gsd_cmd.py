@@ -1,4 +1,5 @@
-"""`pdrive gsd ...`: show a GSD, list the library, build Set_Prm / Chk_Cfg octets, match a configuration. Rendering only; the
+"""`pdrive gsd ...`: show a GSD, list the library, build Set_Prm / Chk_Cfg octets, match a configuration
+(`gsd match`: gsd/match.py; on the bus it reads Slave_Diag and Get_Cfg as `diag` does). Rendering only; the
 work is in profidrive_cli.gsd."""
 
 from __future__ import annotations
