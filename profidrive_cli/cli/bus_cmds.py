@@ -239,8 +239,9 @@ def io_cmd(opts, address, cfg_hex, ident_hex, prm_hex, out_hex, count, wd_ms, gs
                     ident = d.ident
                 sc = SlaveConfig(ident=ident, cfg=cfg, user_prm=prm, wd_ms=wd_ms)
                 master.add_station(address, sc)
+                by_module = _gsd_layout(ident, gsd_file, cfg, prm)   # GSD work before the watchdog runs
                 master.bring_up(address, timeout=3.0, fail_fast=True)
-                lay = _by_module(master, address, ident, gsd_file, prm, opts.json)
+                lay = _by_module(master, address, by_module, prm, opts.json)
                 for i in range(count):
                     inputs = master.exchange(address, outputs)
                     if opts.json:
@@ -266,19 +267,35 @@ def io_cmd(opts, address, cfg_hex, ident_hex, prm_hex, out_hex, count, wd_ms, gs
         raise BusError(f"station {address}: {ender.problem}")
 
 
-def _by_module(master, address: int, ident: int, gsd_file, prm: bytes, as_json: bool):
-    """The station's data by module (gsd/slavedata.py) from its Get_Cfg and its GSD (--gsd, else the
-    library by ident); None when either is missing. Text output: the layout once, before the cycles."""
+def _gsd_layout(ident: int, gsd_file, cfg: bytes, prm: bytes):
+    """(GSD, the layout of `cfg`) for io's by-module view: the GSD from --gsd, else the library by
+    ident; None without one. Done before bring-up, so that parsing a large GSD never delays the
+    first Data_Exchange past the watchdog."""
     from profidrive_cli.gsd.library import find_by_ident, load_gsd
     from profidrive_cli.gsd.slavedata import layout
-    real = master.get_cfg(address)
-    g = load_gsd(gsd_file) if gsd_file else find_by_ident(ident)
-    if real is None or g is None:
-        return None
     try:
-        lay = layout(g, real, prm or None)
-    except CfgError:
+        g = load_gsd(gsd_file) if gsd_file else find_by_ident(ident)
+    except UsageError:
         return None
+    return None if g is None else (g, layout(g, cfg, prm or None))
+
+
+def _by_module(master, address: int, by_module, prm: bytes, as_json: bool):
+    """The station's data by module (gsd/slavedata.py) from its Get_Cfg (read once after bring-up;
+    the layout of the configuration sent when they agree); None without a GSD or a Get_Cfg. Text
+    output: the layout once, before the cycles."""
+    if by_module is None:
+        return None
+    g, lay = by_module
+    real = master.get_cfg(address)
+    if real is None:
+        return None
+    if real != lay.cfg:
+        from profidrive_cli.gsd.slavedata import layout
+        try:
+            lay = layout(g, real, prm or None)
+        except CfgError:
+            return None
     if not as_json:
         _row(f"station {address} by module ({g.title}, Get_Cfg {real.hex(' ')}):")
         for line in lay.describe():
