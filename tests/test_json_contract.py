@@ -196,7 +196,7 @@ def test_every_documented_table_is_used():
     used = {"error", "scan", "diag", "io event=cycle", "status", "param get", "param set", "param dump",
             "param rows", "faults", "run event=start", "run event=phase", "run event=update",
             "run event=end", "sniff event=frame", "sniff event=bad_frame", "doctor", "doctor ports",
-            "decode", "gsd show", "gsd list", "gsd prm", "sim", "checklist validate", "checklist run",
+            "decode", "gsd show", "gsd list", "gsd prm", "gsd match", "sim", "checklist validate", "checklist run",
             "scan watch event=watch", "scan watch event=end",
             "run multi event=start", "run multi event=phase", "run multi event=update", "run multi event=end",
             "commloss-test event=start", "commloss-test event=reaction", "commloss-test event=started",
@@ -470,6 +470,42 @@ def test_gsd_with_user_parameters(tmp_path):
     # -2 -> FF FE; BitArea(4-6) = 3 into 0xFF keeps bits 7 and 0..3 -> 0xBF; lower case
     assert d["user_prm"] == "ff fe bf"
     assert [r["octets"] for r in d["user_prm_fields"]] == ["ff fe", "bf"]
+
+
+def test_gsd_match_offline_and_on_the_simulator():
+    """Issue 27: `gsd match` offline (a fit), with --configured (explain), on sim:// (Get_Cfg)."""
+    d = one_doc(pdrive("gsd", "match", "--cfg", "F3 F1", "--ident", "0xFD01", "--json"))
+    assert_contract(d, "gsd match")
+    assert d["station"] is None and d["fits"][0]["slots"][0]["modules"][0]["name"].startswith("PPO1")
+    d = one_doc(pdrive("gsd", "match", "3", *SIM, "--configured", "F3 F9", "--json"), code=1)
+    assert_contract(d, "gsd match")
+    assert d["cfg_from"] == "get_cfg" and len(d["explain"]) == 2
+    d = one_doc(pdrive("gsd", "match", "--cfg", "F3 F9", "--ident", "0xFD01", "--json"), code=1)
+    assert_contract(d, "gsd match")
+    assert d["fits"] == [] and d["unmatched_at"] == 0
+
+
+def test_io_stream_by_module_and_sniff_by_module(tmp_path):
+    """Issue 27: io's `modules`, sniff's `decoded.layout` / `prm` / `modules` against the contract."""
+    lines = lines_of(pdrive("io", "7", "--cfg", "72", "--count", "1", *SIM, "--json"))
+    assert assert_stream(lines, "io") == ["cycle"] and lines[0]["modules"][0]["name"] == "Basic data"
+    from profidrive_cli.fdl import frames as F
+    srd = F.request_fc(F.SRD_HIGH, fcv=True)
+    frames = [F.make(3, 2, srd, bytes.fromhex("88 01 01 0b fd 01 00"), 61, 62),      # Set_Prm 0xFD01
+              F.make(3, 2, srd, bytes.fromhex("f3 f1"), 62, 62),                      # Chk_Cfg PPO1
+              F.Frame(F.SD2, 3, 2, srd, bytes(12)), F.Frame(F.SD2, 2, 3, F.DL, bytes(12))]
+    raw = tmp_path / "de.raw"
+    raw.write_bytes(b"".join(F.encode(f) for f in frames))
+    lines = lines_of(pdrive("sniff", "--from-file", str(raw), "--json"))
+    assert assert_stream(lines, "sniff") == ["frame"] * 4
+    assert lines[1]["decoded"]["layout"][0]["cfg"] == "f3 f1"
+    assert [len(d["decoded"]["modules"]) for d in lines[2:]] == [1, 1]
+    ext = TESTDATA.parent / "external" / "pyprofibus26-et200s-startup.raw"
+    real = TESTDATA / "proview"
+    if ext.exists() and real.is_dir():              # the real ET200S with its real GSD: prm rows
+        lines = lines_of(pdrive("sniff", "--from-file", str(ext), "--gsd-dir", str(real), "--json"))
+        assert len(assert_stream(lines, "sniff")) == 15
+        assert any(d.get("decoded", {}).get("prm") for d in lines)
 
 
 TESTDATA = Path(os.environ.get("PDRIVE_GSD_TESTDATA", ROOT.parent / "shared" / "testdata" / "gsd"))

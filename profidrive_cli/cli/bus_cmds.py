@@ -239,14 +239,20 @@ def io_cmd(opts, address, cfg_hex, ident_hex, prm_hex, out_hex, count, wd_ms, gs
                     ident = d.ident
                 sc = SlaveConfig(ident=ident, cfg=cfg, user_prm=prm, wd_ms=wd_ms)
                 master.add_station(address, sc)
+                by_module = _gsd_layout(ident, gsd_file, cfg, prm)   # GSD work before the watchdog runs
                 master.bring_up(address, timeout=3.0, fail_fast=True)
+                lay = _by_module(master, address, by_module, prm, opts.json)
                 for i in range(count):
                     inputs = master.exchange(address, outputs)
                     if opts.json:
                         emit_json({"event": "cycle", "station": address, "cycle": i,
-                                   "inputs": inputs.hex(" ")})
+                                   "inputs": inputs.hex(" "),
+                                   **({} if lay is None else {"modules": _values(lay, "in", inputs)})})
                     else:
                         _row(f"{i:>5}  in: {inputs.hex(' ') or '(none)'}")
+                        if lay is not None and len(lay.split("in", inputs)) > 1:   # one: the line above
+                            for m in _values(lay, "in", inputs):
+                                _row(f"       slot {m['slot']} {m['name']}: {m['octets']}")
             except LinkLost:
                 ender.link_lost = True
                 raise
@@ -259,6 +265,47 @@ def io_cmd(opts, address, cfg_hex, ident_hex, prm_hex, out_hex, count, wd_ms, gs
         master.link.close()
     if ender.problem:
         raise BusError(f"station {address}: {ender.problem}")
+
+
+def _gsd_layout(ident: int, gsd_file, cfg: bytes, prm: bytes):
+    """(GSD, the layout of `cfg`) for io's by-module view: the GSD from --gsd, else the library by
+    ident; None without one. Done before bring-up, so that parsing a large GSD never delays the
+    first Data_Exchange past the watchdog."""
+    from profidrive_cli.gsd.library import find_by_ident, load_gsd
+    from profidrive_cli.gsd.slavedata import layout
+    try:
+        g = load_gsd(gsd_file) if gsd_file else find_by_ident(ident)
+    except UsageError:
+        return None
+    return None if g is None else (g, layout(g, cfg, prm or None))
+
+
+def _by_module(master, address: int, by_module, prm: bytes, as_json: bool):
+    """The station's data by module (gsd/slavedata.py) from its Get_Cfg (read once after bring-up;
+    the layout of the configuration sent when they agree); None without a GSD or a Get_Cfg. Text
+    output: the layout once, before the cycles."""
+    if by_module is None:
+        return None
+    g, lay = by_module
+    real = master.get_cfg(address)
+    if real is None:
+        return None
+    if real != lay.cfg:
+        from profidrive_cli.gsd.slavedata import layout
+        try:
+            lay = layout(g, real, prm or None)
+        except CfgError:
+            return None
+    if not as_json:
+        _row(f"station {address} by module ({g.title}, Get_Cfg {real.hex(' ')}):")
+        for line in lay.describe():
+            _row(f"  {line}")
+    return lay
+
+
+def _values(lay, direction: str, data: bytes) -> list[dict]:
+    from profidrive_cli.gsd.slavedata import values
+    return values(lay, direction, data)
 
 
 def _row(text: str) -> None:

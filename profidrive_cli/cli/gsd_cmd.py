@@ -1,4 +1,5 @@
-"""`pdrive gsd ...`: show a GSD, list the library, build Set_Prm / Chk_Cfg octets. Rendering only; the
+"""`pdrive gsd ...`: show a GSD, list the library, build Set_Prm / Chk_Cfg octets, match a configuration
+(`gsd match`: gsd/match.py; on the bus it reads Slave_Diag and Get_Cfg as `diag` does). Rendering only; the
 work is in profidrive_cli.gsd."""
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ from rich.table import Table
 from rich.text import Text
 
 from profidrive_cli import UsageError
-from profidrive_cli.cli.common import make_console
+from profidrive_cli.cli.common import bus_options, emit_json, hex_option, make_console, out, station_address
 from profidrive_cli.cli.jsonout import ident_fields, octets
 from profidrive_cli.gsd import build_prm, user_params
 from profidrive_cli.gsd.interp import device_user_prm
@@ -122,7 +123,8 @@ def _prm_json(d: dict) -> dict:
 
 @click.group("gsd")
 def gsd_group():
-    """GSD device description files: show one, list the library, build Set_Prm / Chk_Cfg octets."""
+    """GSD device description files: show one, list the library, build Set_Prm / Chk_Cfg octets, match a
+    slave's configuration to modules."""
 
 
 @gsd_group.command("show")
@@ -292,3 +294,89 @@ def prm_cmd(source: str, modules: tuple[str, ...], sets: tuple[str, ...], gsd_di
     con.print(ct)
     for w in res.warnings:
         con.print(Text.assemble(("warning: ", "yellow"), w))
+
+
+@gsd_group.command("match")
+@click.argument("address", type=int, required=False)
+@click.option("--cfg", "cfg_hex", default=None, metavar="HEX",
+              help="Offline: the configuration octets to match (Get_Cfg / Chk_Cfg), e.g. 'F3 F1'.")
+@click.option("--ident", "ident_text", default=None, metavar="IDENT",
+              help="Offline: the slave's ident (0x00CA), or a GSD file / library name; on the bus: "
+                   "use this GSD instead of the one for the slave's ident.")
+@click.option("--prm", "prm_hex", default=None, metavar="HEX",
+              help="The slave's Set_Prm user data (octets from 7 on): narrows modules that share octets.")
+@click.option("--configured", "configured_hex", default=None, metavar="HEX",
+              help="The Chk_Cfg your master sends: say where it parts from the slave's modules.")
+@_gsd_dir_option
+@bus_options
+def match_cmd(opts, address: int | None, cfg_hex: str | None, ident_text: str | None, prm_hex: str | None,
+              configured_hex: str | None, gsd_dir: str | None):
+    """The GSD modules that give a slave's configuration.
+
+    With ADDRESS: reads the slave's diagnosis (ident, Cfg_Fault) and Get_Cfg on the bus. Offline:
+    --cfg HEX --ident IDENT. A Cfg_Fault, or --configured, is explained: the slave has these modules;
+    you configured those. Exit 1 when no module sequence gives the configuration or the configured
+    one differs.
+    """
+    from profidrive_cli.gsd.match import MAX_FITS, explain_refusal, match_cfg
+    cfg = hex_option(cfg_hex, "--cfg")
+    prm = hex_option(prm_hex, "--prm")
+    configured = hex_option(configured_hex, "--configured")
+    ident: int | None = None
+    cfg_fault: bool | None = None
+    if address is None:
+        if cfg is None or ident_text is None:
+            raise UsageError("give a station ADDRESS (read on the bus), or --cfg HEX and --ident IDENT offline")
+    else:
+        if cfg is not None:
+            raise UsageError("--cfg is for offline use; with ADDRESS the slave's Get_Cfg is read")
+        station_address(address)
+        ident, cfg, cfg_fault = _read_slave(opts, address)
+    g = load_gsd(ident_text if ident_text is not None else ident, gsd_dir)   # type: ignore[arg-type]
+    assert cfg is not None
+    res = match_cfg(g, cfg, prm)
+    explain: list[str] = []
+    if configured is not None:
+        explain = explain_refusal(g, cfg, configured, prm)
+    elif cfg_fault:
+        explain = ["the slave reports Cfg_Fault: its master's Chk_Cfg is not these modules (give that "
+                   "Chk_Cfg with --configured HEX to compare slot by slot)"]
+    differs = configured is not None and configured != cfg
+    if opts.json:
+        emit_json({"station": address, **ident_fields(g.ident_number), "file": g.path, "device": g.title,
+                   "cfg_from": "option" if address is None else "get_cfg", "cfg_fault": cfg_fault,
+                   "configured": None if configured is None else configured.hex(" "),
+                   "max_fits": MAX_FITS, **res.to_dict(), "explain": explain})
+    else:
+        where = "offline" if address is None else f"station {address} on {opts.port}"
+        out.print(f"{where}: configuration {cfg.hex(' ') or '(empty)'}"
+                  + ("" if cfg_fault is None else f"; Cfg_Fault {'set' if cfg_fault else 'not set'}"),
+                  markup=False)
+        for line in res.describe() + explain:
+            out.print(line, markup=False)
+    if not res.fits or differs:
+        raise SystemExit(1)
+
+
+def _read_slave(opts, address: int) -> tuple[int, bytes, bool]:
+    """Ident, Get_Cfg and Cfg_Fault of a station on the port of the bus options."""
+    opts.require_port()
+    master = opts.open_master(address=address)
+    try:
+        d, cfg = read_slave(master, address, opts.port)
+    finally:
+        master.link.close()
+    return d.ident, cfg, d.has("Cfg_Fault")
+
+
+def read_slave(master, address: int, port: str = "the bus"):
+    """(Slave_Diag, Get_Cfg octets) of a station, the bus-level way `diag` reads them (BusError when
+    it does not answer)."""
+    from profidrive_cli import BusError
+    d = master.slave_diag(address, wake=True)
+    if d is None:
+        raise BusError(f"station {address} does not answer on {port}")
+    cfg = master.get_cfg(address)
+    if cfg is None:
+        raise BusError(f"station {address} does not answer Get_Cfg on {port}")
+    return d, bytes(cfg)

@@ -41,6 +41,9 @@ def _line(c) -> str:
 @click.option("--live", is_flag=True,
               help="A passive live list (stations, DP state, master cycle time, retries, errors) "
                    "refreshed in place instead of one line per frame.")
+@click.option("--gsd-dir", metavar="DIR", default=None, expose_value=False,    # read by cli/sniff_view.py
+              callback=lambda c, _, v: c.meta.update({"pdrive.gsd_dir": v}),
+              help="Your GSD files (searched before the library): every slave's data by module.")
 @bus_options
 def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, live):
     """Passive capture: one line per frame (time, SD, SA->DA, SAPs, FC in words, service, DU).

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+import click
+
 from profidrive_cli.cli.common import emit_json, out
 from profidrive_cli.dp.capture import format_line
 from profidrive_cli.dp.du_decode import decode_du
@@ -23,7 +25,7 @@ DECODED_INDENT = " " * 16
 
 class SniffView:
     def __init__(self, station_specs=(), live: bool = False, as_json: bool = False,
-                 refresh_s: float = REFRESH_S):
+                 refresh_s: float = REFRESH_S, gsd_dir: str | None = None):
         self.decoder = None
         if station_specs:
             from profidrive_cli.bustools.passive import PassiveDecoder, watch_list
@@ -36,6 +38,12 @@ class SniffView:
         self.refresh_s = refresh_s
         self._shown_at: float | None = None
         self._rich_live: Live | None = None
+        self.slaves = None                                    # every slave by module (issue 27)
+        if not live:
+            from profidrive_cli.bustools.slaveview import SlaveView
+            ctx = click.get_current_context(silent=True)      # sniff's --gsd-dir (cli/sniff_cmd.py)
+            gsd_dir = gsd_dir or (ctx.meta.get("pdrive.gsd_dir") if ctx is not None else None)
+            self.slaves = SlaveView(gsd_dir, set(self.decoder.watched) if self.decoder else ())
 
     # -- one frame -------------------------------------------------------------------------------
     def frame(self, c) -> None:
@@ -50,6 +58,8 @@ class SniffView:
             return
         desc = c.describe()
         dec = decode_du(desc["service"], c.frame.data) if c.frame is not None and "du" in desc else None
+        if self.slaves is not None and c.frame is not None:
+            dec = self.slaves.decode(c.frame, dec)
         if self.as_json:
             obj = frame_json(desc)
             if dec is not None:

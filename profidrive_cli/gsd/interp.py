@@ -37,7 +37,7 @@ from typing import Any, Iterable, Mapping, Sequence
 
 from profidrive_cli import UsageError
 from profidrive_cli.gsd.model import (
-    MAX_USER_PRM_LEN, DiagArea, ExtUserPrmData, Gsd, Module, PrmBlock, select_modules,
+    MAX_USER_PRM_LEN, DiagArea, ExtUserPrmData, Gsd, Module, PrmBlock, select_module, select_modules,
 )
 
 # ---------------------------------------------------------------- Set_Prm user data
@@ -358,6 +358,61 @@ def _build(gsd: Gsd, mods: list[Module], overrides) -> PrmResult:
 def chk_cfg(gsd: Gsd, modules: Iterable[int | str | Module] | None = None) -> bytes:
     """The Chk_Cfg octets for a module selection: the modules' identifier octets, verbatim."""
     return b"".join(m.cfg for m in select_modules(gsd, modules))
+
+
+def module_prm_template(gsd: Gsd, module: Module) -> tuple[bytes, bytes] | None:
+    """A module's own Set_Prm block (its parameters and F-parameters) with the GSD's defaults, and a mask
+    of the bits no parameter may change (0xFF: a constant octet); None when the GSD's block is broken."""
+    try:
+        res = _build(gsd, [module], None)
+    except UsageError:
+        return None
+    mine = [b for b in res.blocks if b.index == 1]
+    if not mine:
+        return b"", b""
+    start = mine[0].start
+    data = res.user_prm[start:]
+    mask = bytearray(b"\xff" * len(data))
+    for f in res.fields:
+        if f.block_index != 1:
+            continue
+        off = f.offset - start
+        if f.bits is None:
+            mask[off:off + f.size] = bytes(f.size)
+        else:
+            lo, hi = f.bits
+            mask[off] &= ~(((1 << (hi - lo + 1)) - 1) << lo) & 0xFF
+    return bytes(data), bytes(mask)
+
+
+def decode_user_prm(gsd: Gsd, modules: Iterable[int | str | Module] | None,
+                    user_prm: bytes) -> tuple[list[dict[str, Any]], list[str]]:
+    """A slave's Set_Prm user data (the octets from Set_Prm octet 7 on) read back with the GSD: one row
+    per parameter (ExtUserPrmData name, the value in the octets, its Prm_Text, the GSD's default) in the
+    layout build_prm writes for `modules`; and warnings (a length other than the GSD's)."""
+    mods = list(modules or [])
+    res = _build(gsd, [select_module(gsd, m) if not isinstance(m, Module) else m for m in mods], None)
+    data = bytes(user_prm)
+    warnings = list(res.warnings)
+    if len(data) != len(res.user_prm):
+        warnings.append(f"the user data has {len(data)} octets, the GSD's layout for these modules "
+                        f"{len(res.user_prm)}")
+    rows: list[dict[str, Any]] = []
+    for f in res.fields:
+        if f.offset + f.size > len(data) or f.param is None:
+            continue
+        d = f.param
+        if f.bits is not None:
+            lo, hi = f.bits
+            v = (data[f.offset] >> lo) & ((1 << (hi - lo + 1)) - 1)
+        else:
+            v = int.from_bytes(data[f.offset:f.offset + f.size], "big",
+                               signed=d.data_type.startswith("Signed"))
+        rows.append({"offset": f.offset, "set_prm_octet": 7 + f.offset,
+                     "octets": data[f.offset:f.offset + f.size].hex(" "), "bits": f.bits_label,
+                     "name": f.name, "value": v, "text": d.text_for(v), "default": f.value,
+                     "block": f.block, "allowed": d.is_allowed(v)})
+    return rows, warnings
 
 
 def _normalise_overrides(ov: Mapping[str, int | str] | Sequence[str] | None) -> list[tuple[str, Any]]:

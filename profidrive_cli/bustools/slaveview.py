@@ -1,0 +1,153 @@
+"""Every slave's cyclic data by module in `pdrive sniff`, from the traffic and the GSD library.
+
+SlaveView learns each station from what goes by: the ident from its Set_Prm (octets 4..5) or a
+Slave_Diag reply, the Set_Prm user data, the configuration from the Chk_Cfg the master sends (a
+Get_Cfg reply while no Chk_Cfg was seen). When it knows a station's ident and configuration it looks
+up the GSD (gsd/library.py: --gsd-dir / $PDRIVE_GSD_DIR first, then pdrive's own files) and cuts the
+configuration into modules once (gsd/slavedata.py); from then on each Data_Exchange request (outputs)
+and response (inputs) of that station is shown by module. The per-telegram cost is a dict lookup and
+slicing: the GSD work happens when a Set_Prm, Chk_Cfg or Get_Cfg reply changes what is known, and its
+result is cached per (ident, configuration, user data).
+
+Sans-IO apart from reading GSD files: fdl frames in, the `decoded` object of docs/json.md out.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import Any, Iterable
+
+from profidrive_cli import UsageError
+from profidrive_cli.dp import services as S
+from profidrive_cli.dp.cfg import CfgError
+from profidrive_cli.fdl import frames as F
+from profidrive_cli.gsd.slavedata import IN, OUT, SlaveLayout, layout
+
+#: how many parameters that differ from the GSD's default the Chk_Cfg line names
+SHOWN_PRM = 8
+
+
+@dataclass
+class _Seen:
+    ident: int | None = None
+    user_prm: bytes | None = None
+    cfg: bytes | None = None
+    cfg_is_chk: bool = False          # from a Chk_Cfg (else from a Get_Cfg reply)
+
+
+#: one direction of a station, built once: (gsd file name, ((slot, name, start, end), ...), text head)
+_Cuts = tuple[str, tuple[tuple[int, str, int, int], ...], str]
+
+
+class SlaveView:
+    def __init__(self, gsd_dir: str | None = None, skip: Iterable[int] = ()):
+        if gsd_dir is not None and not os.path.isdir(gsd_dir):   # exit 2 before listening
+            why = "not a folder" if os.path.exists(gsd_dir) else "no such folder"
+            raise UsageError(f"--gsd-dir {gsd_dir}: {why}")
+        self.gsd_dir = gsd_dir
+        self.skip = frozenset(skip)
+        self._seen: dict[int, _Seen] = {}
+        self._cuts: dict[tuple[int, str], _Cuts] = {}
+        self._layouts: dict[tuple[int, bytes, bytes | None], SlaveLayout | None] = {}
+
+    # -- per frame ------------------------------------------------------------------------------
+    def decode(self, f: F.Frame, dec: dict[str, Any] | None) -> dict[str, Any] | None:
+        """The frame's `decoded` object: `dec` (dp/du_decode.py's) with the GSD's view added, or a
+        new one for a Data_Exchange of a station whose modules are known."""
+        if f.dsap is None and f.ssap is None:
+            if f.sd in (F.SC, F.SD4):
+                return dec
+            if f.is_request:
+                if f.function not in (F.SRD_LOW, F.SRD_HIGH):
+                    return dec
+                cuts = self._cuts.get((f.da, OUT))
+            else:
+                if not f.data:
+                    return dec
+                cuts = self._cuts.get((f.sa, IN))
+            if cuts is None:
+                return dec
+            data = f.data
+            file, parts, head = cuts
+            mods = [{"slot": n, "name": name, "offset": a, "octets": data[a:b].hex(" ")}
+                    for n, name, a, b in parts if a < len(data)]
+            return {"gsd": file, "modules": mods,
+                    "text": [head + "; ".join(f"{m['slot']} {m['name']}: {m['octets']}" for m in mods)]}
+        if (f.is_request and f.dsap == S.SAP_SET_PRM and len(f.data) >= 7 and f.da not in self.skip
+                and f.data[0] & 0xC0 != 0x40):             # not a release (Unlock_Req alone)
+            st = self._seen.setdefault(f.da, _Seen())
+            st.ident = int.from_bytes(f.data[4:6], "big")
+            st.user_prm = bytes(f.data[7:])
+            return self._learnt(f.da, dec)
+        if f.is_request and f.dsap == S.SAP_CHK_CFG and f.da not in self.skip:
+            st = self._seen.setdefault(f.da, _Seen())
+            st.cfg, st.cfg_is_chk = bytes(f.data), True
+            return self._learnt(f.da, dec, show=True)
+        if not f.is_request and f.ssap == S.SAP_GET_CFG and f.data and f.sa not in self.skip:
+            st = self._seen.setdefault(f.sa, _Seen())
+            if not st.cfg_is_chk:
+                st.cfg = bytes(f.data)
+                return self._learnt(f.sa, dec, show=True)
+        if (not f.is_request and f.ssap == S.SAP_SLAVE_DIAG and len(f.data) >= 6
+                and f.sa not in self.skip):
+            st = self._seen.setdefault(f.sa, _Seen())
+            if st.ident is None:
+                st.ident = int.from_bytes(f.data[4:6], "big")
+                return self._learnt(f.sa, dec)
+        return dec
+
+    # -- when something changed -----------------------------------------------------------------
+    def _learnt(self, address: int, dec: dict[str, Any] | None, show: bool = False) -> dict[str, Any] | None:
+        st = self._seen[address]
+        lay = self.layout_of(address)
+        for d in (OUT, IN):
+            self._cuts.pop((address, d), None)
+        if lay is None:
+            return dec
+        name = (lay.gsd_path or "").replace("\\", "/").rsplit("/", 1)[-1]
+        for d, label in ((OUT, "outputs"), (IN, "inputs")):
+            parts = tuple((m.slot, m.short, m.out_offset if d == OUT else m.in_offset,
+                           (m.out_offset + m.out_len) if d == OUT else (m.in_offset + m.in_len))
+                          for m in lay.modules if (m.out_len if d == OUT else m.in_len))
+            if parts:
+                self._cuts[(address, d)] = (name, parts, f"{label} by module ({name}): ")
+        if not show:
+            return dec
+        out = dict(dec or {"text": []})
+        out["text"] = list(out.get("text", []))
+        out["gsd"] = name
+        out["layout"] = [m.to_dict() for m in lay.modules]
+        out["text"].append(f"by the GSD {name} (ident 0x{st.ident or 0:04X}, {lay.title}):")
+        out["text"] += ["  " + line for line in lay.describe()]
+        rows, warnings = lay.prm_rows()
+        if rows:
+            out["prm"] = rows
+            odd = [r for r in rows if r["value"] != r["default"]]
+            text = f"Set_Prm user data by the GSD: {len(rows)} parameters, {len(odd)} not the GSD's default"
+            if odd:
+                text += ": " + "; ".join(f"{r['name']} = {r['value']}" + (f" ({r['text'].strip()})"
+                                         if r["text"] else "") for r in odd[:SHOWN_PRM])
+                text += " ..." if len(odd) > SHOWN_PRM else ""
+            out["text"].append(text)
+        out["text"] += [f"Set_Prm: {w}" for w in warnings]
+        return out
+
+    def layout_of(self, address: int) -> SlaveLayout | None:
+        """The station's modules as learnt so far (None: ident or configuration not seen, no GSD)."""
+        st = self._seen.get(address)
+        if st is None or st.ident is None or st.cfg is None:
+            return None
+        key = (st.ident, st.cfg, st.user_prm)
+        if key not in self._layouts:
+            from profidrive_cli.gsd.library import find_by_ident
+            try:                    # a $PDRIVE_GSD_DIR that is not there: no GSD (a name is a label)
+                g = find_by_ident(st.ident, self.gsd_dir)
+                self._layouts[key] = None if g is None else layout(g, st.cfg, st.user_prm)
+            except (CfgError, UsageError):
+                self._layouts[key] = None
+        return self._layouts[key]
+
+
+__all__ = ["SlaveView"]
+
