@@ -16,6 +16,14 @@
     sim://?warmup=3:4,5:2                    station 3 still searches the baud rate (Baud_Search): it
                                              ignores its first 4 telegrams and answers from the 5th
                                              (station 5: from the 3rd); sim/slave.py SimSlave.warmup
+    sim://?firstcontact=3,5                  stations 3 and 5 keep the first-contact rule of a Siemens
+                                             CBP2 drive board (kolod/profibus): from a master they
+                                             keep no frame count for (after power-on), an SRD/SDA is
+                                             executed only when it starts a sequence, FCV=0 with FCB=1
+                                             (reference §2.3 rule 1); FCV=1 or FCV=0/FCB=0 there get no
+                                             answer at all. FDL status is answered as usual. A CBP2 as
+                                             kolod/profibus met it: firstcontact=3&warmup=3:5;
+                                             sim/slave.py SimSlave.first_contact
     sim://?wd=0                              (debug) ignore the watchdog... not offered: the sim always enforces it
 
 Each station runs the family's drive model (the sim_model of its row in drives/registry.py: sim/<family>.py,
@@ -42,7 +50,8 @@ from profidrive_cli.sim.model import SlaveModel
 from profidrive_cli.sim.slave import SimSlave
 
 DEFAULT_PLANT = ((3, "fuji-g1"), (4, "fuji-pdp3"), (5, "toyo"), (6, "moeller"), (7, "yaskawa"))
-KNOWN_KEYS = {"stations", "baud", "timing", "trip", "faults", "tsdr", "seed", "set", "warmup"}
+KNOWN_KEYS = {"stations", "baud", "timing", "trip", "faults", "tsdr", "seed", "set", "warmup",
+              "firstcontact"}
 #: the most telegrams a station of warmup= may ignore (a bound for the URL, not a device figure)
 MAX_WARMUP = 1000
 TIMINGS = ("instant", "wire", "virtual")
@@ -141,6 +150,22 @@ def _warmups(values: list[str]) -> dict[int, int]:
     return out
 
 
+def _first_contacts(values: list[str]) -> set[int]:
+    """firstcontact=ADDR[,ADDR...] (the key may repeat) -> the addresses keeping the CBP2 rule."""
+    out: set[int] = set()
+    for v in values:
+        for item in (t.strip() for t in v.split(",")):
+            try:
+                a = int(item)
+            except ValueError:
+                a = -1
+            if not 0 <= a <= 125:
+                raise UsageError(f"sim URL: firstcontact={v} must be ADDRESS[,ADDRESS...] with "
+                                 f"address 0..125, e.g. firstcontact=3")
+            out.add(a)
+    return out
+
+
 def _presets(values: list[str]) -> dict[int, dict[str, float]]:
     """set=ADDR:CODE=VALUE[,CODE=VALUE...] -> {address: {code: value}} (engineering units): the
     drive's settings as the plant starts (a drive commissioned before, e.g. set=7:A1-02=3)."""
@@ -197,6 +222,7 @@ def build_bus(url: str, now: float = 0.0, default_baud: int = 19200) -> SimBus:
         raise UsageError(f"sim URL: timing must be {', '.join(TIMINGS)}, got {timing!r}")
     trips = _per_station(q.get("trip", []), "trip")
     warmups = _warmups(q.get("warmup", []))
+    first_contacts = _first_contacts(q.get("firstcontact", []))
     seeded = _per_station(q.get("faults", []), "faults")
     slaves = []
     presets = _presets(q.get("set", []))
@@ -225,6 +251,10 @@ def build_bus(url: str, now: float = 0.0, default_baud: int = 19200) -> SimBus:
         if a not in addrs:
             raise UsageError(f"sim URL: warmup={a}:{n}: no station {a} on the bus")
         addrs[a].warmup = n
+    for a in sorted(first_contacts):
+        if a not in addrs:
+            raise UsageError(f"sim URL: firstcontact={a}: no station {a} on the bus")
+        addrs[a].first_contact = True
     for a, codes in seeded.items():
         try:
             addrs[a].model.seed_faults(codes)
