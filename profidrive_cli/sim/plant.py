@@ -2,6 +2,8 @@
 
     sim://                                   default plant: 3 fuji-g1, 4 fuji-pdp3, 5 toyo, 6 moeller, 7 yaskawa
     sim://?stations=3:fuji-g1,9:yaskawa      choose stations (profile names or aliases)
+    sim://?stations=3,4,5,6                  an address alone: the default plant's station there (here
+                                             the default plant without station 7)
     sim://?baud=187500&timing=wire           wire-timed bus (see sim/bus.py); timing=virtual: the same
                                              on a simulated clock (tests, benchmarks). With baud= the
                                              stations are locked to that rate (a running bus) and stay
@@ -108,11 +110,17 @@ def _build_model(name: str, addr: int, baud: int, preset: dict | None = None) ->
 def _station_list(text: str) -> list[tuple[int, str]]:
     out: list[tuple[int, str]] = []
     for item in filter(None, (t.strip() for t in text.split(","))):
-        addr, _, name = item.partition(":")
+        addr, colon, name = item.partition(":")
         try:
             a = int(addr)
         except ValueError:
             raise UsageError(f"sim URL: station '{item}' must be ADDRESS:PROFILE, e.g. 3:fuji-g1") from None
+        if not colon:
+            # an address alone: the default plant's station at that address
+            name = dict(DEFAULT_PLANT).get(a, "")
+            if not name:
+                raise UsageError(f"sim URL: station '{item}' must be ADDRESS:PROFILE (an address alone "
+                                 f"only for the default plant's {', '.join(str(b) for b, _ in DEFAULT_PLANT)})")
         if not 0 <= a <= 125 or not name:
             raise UsageError(f"sim URL: station '{item}' must be ADDRESS:PROFILE with address 0..125")
         if any(a == b for b, _ in out):
