@@ -35,7 +35,7 @@ def documented_step_types() -> list[str]:
 def test_the_registry_holds_the_documented_step_types_in_their_order():
     documented = documented_step_types()
     assert documented == ["expect_identity", "read", "write", "save", "run", "jog", "stop", "expect_status", "wait",
-                          "bus_health", "faults", "reset_fault", "prompt", "note", "comm_loss"]
+                          "bus_health", "faults", "reset_fault", "prompt", "note", "comm_loss", "baseline"]
     assert list(STEPS) == documented
     with pytest.raises(ChecklistError) as ei:
         load_checklist_text(HEAD + "  - name: nothing to do\n", "t.yaml")

@@ -203,7 +203,8 @@ def test_every_documented_table_is_used():
             "commloss-test event=at_speed", "commloss-test event=silence", "commloss-test event=clear",
             "commloss-test event=back", "commloss-test event=result",
             "sniff drive", "sniff event=live", "config show", "config path", "wireshark install",
-            "checklist measured bus_health", "sim-ctl state", "audit"}
+            "checklist measured bus_health", "sim-ctl state", "audit",
+            "scan save", "scan compare", "checklist measured baseline"}
     assert set(CONTRACTS) == used
 
 

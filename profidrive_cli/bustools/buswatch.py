@@ -59,6 +59,10 @@ class WatchedStation:
     counters: dict = field(default_factory=dict)
     rates: dict = field(default_factory=dict)     # counter key -> rise per second over the window ({} at first)
     seen_passes: int = 0
+    #: FDL status requests it left unanswered before its first answer in the first scan (dp/scan.py
+    #: ScanEntry.unanswered: the warm-up pass woke it, Baud_Search); 0 for a station found later by
+    #: the round-robin probe, where an empty address cannot be told from a slave still waking
+    unanswered_before: int = 0
 
 
 @dataclass
@@ -96,7 +100,8 @@ class BusWatch:
         """The first full scan of first..last."""
         found = scan(self.master, self.first, self.last)
         for e in found:
-            self.stations[e.address] = WatchedStation(e.address, e.station_type)
+            self.stations[e.address] = WatchedStation(e.address, e.station_type,
+                                                      unanswered_before=e.unanswered)
             if e.diag is not None:
                 self._update_diag(self.stations[e.address], e.diag)
         self._empty = [a for a in range(self.first, self.last + 1)

@@ -52,16 +52,29 @@ def _cfg_json(cfg: bytes | None) -> list | None:
 @click.option("--quick", is_flag=True,
               help="One FDL status per address, no warm-up pass: faster on an empty bus, but a slave "
                    "still searching the baud rate is missed.")
+@click.option("--save", "save_path", default=None, metavar="FILE",
+              help="Record the accepted network (stations, idents, Get_Cfg, counters, reply times) "
+                   "to FILE (.yaml/.yml: YAML, else JSON).")
+@click.option("--compare", "compare_path", default=None, metavar="FILE",
+              help="Scan the range of a --save FILE and report what changed; exit 1 on any difference.")
+@click.option("--junit", default=None, metavar="FILE", help="--compare: also write a JUnit XML report.")
 @bus_options
-def scan_cmd(opts, first, last, gsd_dir, watch, interval, duration, quick):
+def scan_cmd(opts, first, last, gsd_dir, watch, interval, duration, quick, save_path, compare_path,
+             junit):
     """Live list: every station on the bus, its type, ident and DP state."""
     from profidrive_cli.dp.scan import scan
     if first > last:
         raise UsageError(f"--from {first} is above --to {last}")
     if not watch and duration is not None:
         raise UsageError("--duration goes with --watch")
+    base = _baseline_options(watch, save_path, compare_path, junit)
     opts.require_port()
     master = opts.open_master()
+    if save_path is not None or base is not None:
+        from profidrive_cli.cli import scan_baseline
+        if base is None:
+            raise SystemExit(scan_baseline.save(opts, master, first, last, save_path, quick, gsd_dir))
+        raise SystemExit(scan_baseline.compare(opts, master, base, compare_path, junit, quick))
     if watch:
         from profidrive_cli.cli.scan_watch import watch as run_watch
         raise SystemExit(run_watch(opts, master, first, last, interval, duration, gsd_dir))
@@ -110,6 +123,27 @@ def scan_cmd(opts, first, last, gsd_dir, watch, interval, duration, quick):
     for e in result:
         if e.unanswered:
             out.print(late_answer(e.address, e.unanswered))
+
+
+def _baseline_options(watch, save_path, compare_path, junit):
+    """--save / --compare / --junit checked, their files too, before the port opens: the baseline of
+    --compare (None without it)."""
+    if save_path is not None and compare_path is not None:
+        raise UsageError("--save and --compare go one at a time")
+    if watch and (save_path is not None or compare_path is not None):
+        raise UsageError("--watch does not go with --save or --compare")
+    if junit is not None and compare_path is None:
+        raise UsageError("--junit goes with --compare")
+    if compare_path is not None:
+        from click.core import ParameterSource
+        ctx = click.get_current_context()
+        if any(ctx.get_parameter_source(p) == ParameterSource.COMMANDLINE for p in ("first", "last")):
+            raise UsageError("--compare scans the addresses the baseline recorded: --from / --to go "
+                             "with --save")
+    if save_path is None and compare_path is None:
+        return None
+    from profidrive_cli.cli.scan_baseline import check_paths
+    return check_paths(save_path, compare_path, junit)
 
 
 def late_answer(address: int, unanswered: int) -> str:

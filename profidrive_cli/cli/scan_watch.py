@@ -41,7 +41,16 @@ def counter_text(ws, colour: bool = True) -> str:
 
 
 def _detail(ws) -> str:
-    """The DP state in words where it says more than the category."""
+    """The DP state in words where it says more than the category, and a late first answer."""
+    words = _state_detail(ws)
+    if ws.unanswered_before:
+        n = ws.unanswered_before
+        late = f"answered after {n} unanswered request{'' if n == 1 else 's'} (baud-rate search)"
+        words = f"{words}; {late}" if words else late
+    return words
+
+
+def _state_detail(ws) -> str:
     if ws.category == "data exchange":
         return f"master {ws.master}" if ws.master is not None else ""
     if ws.category == "waiting" and ws.state == "waiting for parameters":
@@ -77,6 +86,7 @@ def view_json(view: WatchView) -> dict:
                           "ident_hex": f"0x{ws.ident:04X}" if ws.ident is not None else None,
                           "category": ws.category, "state": ws.state, "master": ws.master,
                           "counters": dict(ws.counters),
+                          "unanswered_before": ws.unanswered_before,
                           "rates_per_s": {k: round(v, 3) for k, v in ws.rates.items()}}
                          for ws in view.stations]}
 

@@ -25,6 +25,8 @@ expected_counters() says what pdrive's master must count for them (fdl/master.py
     flip, wrongsa    one illegal frame + one failed attempt
     noise            one illegal frame, the reply behind it is taken (no retry)
     powercycle       the next Data_Exchange is answered RS: one RS + one re-parameterisation
+                     (on a station of firstcontact=, sim/plant.py, the master's FCV=1 request after
+                     the power cycle is ignored first: one no_answer with its retries more, then RS)
     drivetrip        one DH reply (the master then reads the diagnosis)
     phantom          nothing: the master takes the SC as an answer (scan asks again, dp/scan.py)
 """

@@ -2,6 +2,8 @@
 
     sim://                                   default plant: 3 fuji-g1, 4 fuji-pdp3, 5 toyo, 6 moeller, 7 yaskawa
     sim://?stations=3:fuji-g1,9:yaskawa      choose stations (profile names or aliases)
+    sim://?stations=3,4,5,6                  an address alone: the default plant's station there (here
+                                             the default plant without station 7)
     sim://?baud=187500&timing=wire           wire-timed bus (see sim/bus.py); timing=virtual: the same
                                              on a simulated clock (tests, benchmarks). With baud= the
                                              stations are locked to that rate (a running bus) and stay
@@ -16,6 +18,14 @@
     sim://?warmup=3:4,5:2                    station 3 still searches the baud rate (Baud_Search): it
                                              ignores its first 4 telegrams and answers from the 5th
                                              (station 5: from the 3rd); sim/slave.py SimSlave.warmup
+    sim://?firstcontact=3,5                  stations 3 and 5 keep the first-contact rule of a Siemens
+                                             CBP2 drive board (kolod/profibus): from a master they
+                                             keep no frame count for (after power-on), an SRD/SDA is
+                                             executed only when it starts a sequence, FCV=0 with FCB=1
+                                             (reference §2.3 rule 1); FCV=1 or FCV=0/FCB=0 there get no
+                                             answer at all. FDL status is answered as usual. A CBP2 as
+                                             kolod/profibus met it: firstcontact=3&warmup=3:5;
+                                             sim/slave.py SimSlave.first_contact
     sim://?wd=0                              (debug) ignore the watchdog... not offered: the sim always enforces it
 
 Each station runs the family's drive model (the sim_model of its row in drives/registry.py: sim/<family>.py,
@@ -42,7 +52,8 @@ from profidrive_cli.sim.model import SlaveModel
 from profidrive_cli.sim.slave import SimSlave
 
 DEFAULT_PLANT = ((3, "fuji-g1"), (4, "fuji-pdp3"), (5, "toyo"), (6, "moeller"), (7, "yaskawa"))
-KNOWN_KEYS = {"stations", "baud", "timing", "trip", "faults", "tsdr", "seed", "set", "warmup"}
+KNOWN_KEYS = {"stations", "baud", "timing", "trip", "faults", "tsdr", "seed", "set", "warmup",
+              "firstcontact"}
 #: the most telegrams a station of warmup= may ignore (a bound for the URL, not a device figure)
 MAX_WARMUP = 1000
 TIMINGS = ("instant", "wire", "virtual")
@@ -98,11 +109,17 @@ def _build_model(name: str, addr: int, baud: int, preset: dict | None = None) ->
 def _station_list(text: str) -> list[tuple[int, str]]:
     out: list[tuple[int, str]] = []
     for item in filter(None, (t.strip() for t in text.split(","))):
-        addr, _, name = item.partition(":")
+        addr, colon, name = item.partition(":")
         try:
             a = int(addr)
         except ValueError:
             raise UsageError(f"sim URL: station '{item}' must be ADDRESS:PROFILE, e.g. 3:fuji-g1") from None
+        if not colon:
+            # an address alone: the default plant's station at that address
+            name = dict(DEFAULT_PLANT).get(a, "")
+            if not name:
+                raise UsageError(f"sim URL: station '{item}' must be ADDRESS:PROFILE (an address alone "
+                                 f"only for the default plant's {', '.join(str(b) for b, _ in DEFAULT_PLANT)})")
         if not 0 <= a <= 125 or not name:
             raise UsageError(f"sim URL: station '{item}' must be ADDRESS:PROFILE with address 0..125")
         if any(a == b for b, _ in out):
@@ -137,6 +154,22 @@ def _warmups(values: list[str]) -> dict[int, int]:
                 raise UsageError(f"sim URL: warmup={v} must be ADDRESS:COUNT[,ADDRESS:COUNT...] with "
                                  f"address 0..125 and count 0..{MAX_WARMUP}, e.g. warmup=3:4")
             out[a] = n
+    return out
+
+
+def _first_contacts(values: list[str]) -> set[int]:
+    """firstcontact=ADDR[,ADDR...] (the key may repeat) -> the addresses keeping the CBP2 rule."""
+    out: set[int] = set()
+    for v in values:
+        for item in (t.strip() for t in v.split(",")):
+            try:
+                a = int(item)
+            except ValueError:
+                a = -1
+            if not 0 <= a <= 125:
+                raise UsageError(f"sim URL: firstcontact={v} must be ADDRESS[,ADDRESS...] with "
+                                 f"address 0..125, e.g. firstcontact=3")
+            out.add(a)
     return out
 
 
@@ -196,6 +229,7 @@ def build_bus(url: str, now: float = 0.0, default_baud: int = 19200) -> SimBus:
         raise UsageError(f"sim URL: timing must be {', '.join(TIMINGS)}, got {timing!r}")
     trips = _per_station(q.get("trip", []), "trip")
     warmups = _warmups(q.get("warmup", []))
+    first_contacts = _first_contacts(q.get("firstcontact", []))
     seeded = _per_station(q.get("faults", []), "faults")
     slaves = []
     presets = _presets(q.get("set", []))
@@ -224,6 +258,10 @@ def build_bus(url: str, now: float = 0.0, default_baud: int = 19200) -> SimBus:
         if a not in addrs:
             raise UsageError(f"sim URL: warmup={a}:{n}: no station {a} on the bus")
         addrs[a].warmup = n
+    for a in sorted(first_contacts):
+        if a not in addrs:
+            raise UsageError(f"sim URL: firstcontact={a}: no station {a} on the bus")
+        addrs[a].first_contact = True
     for a, codes in seeded.items():
         try:
             addrs[a].model.seed_faults(codes)

@@ -36,13 +36,19 @@ class SimSlave:
         #: counters a test can look at
         self.stats = {"requests": 0, "repeats": 0, "prm_rejected": 0, "cfg_rejected": 0,
                       "watchdog_expired": 0, "data_exchange": 0, "power_cycles": 0, "trips": 0,
-                      "ignored_warmup": 0}
+                      "ignored_warmup": 0, "ignored_first_contact": 0}
         #: Baud_Search (IEC 61158; Auto_Baud_supp = 1 in the GSD files of gsd/): the station still
         #: searches the baud rate and ignores this many more valid telegrams addressed to it at its
         #: rate (no answer at all), then answers (sim://?warmup=3:4; a real ET200S answered the 5th
         #: FDL status request, ../shared/testdata/external/pyprofibus26-et200s-startup.txt). Set by
         #: the plant once, at start: a power cycle of the fault injection does not re-arm it.
         self.warmup = 0
+        #: the first-contact rule of a Siemens CBP2 drive board (sim://?firstcontact=3; kolod/profibus,
+        #: profibus_debug/diagnostics.py): an SRD/SDA from a master the station keeps no frame count
+        #: for (after power-on, or another master) is executed only when it starts a sequence, FCV=0
+        #: with FCB=1 (reference §2.3 rule 1); FCV=1 and FCV=0/FCB=0 are ignored, no answer at all.
+        #: FDL status (FCV=0/FCB=0 by rule 4) and SDN are answered as usual. Set by the plant.
+        self.first_contact = False
         self.power_on(0.0)
 
     @property
@@ -169,6 +175,9 @@ class SimSlave:
         if fn in (F.SDN_LOW, F.SDN_HIGH):
             self._sdn(req, now)
             return None
+        if self.first_contact and self._refuses_first_contact(req):
+            self.stats["ignored_first_contact"] += 1
+            return None
         self.stats["requests"] += 1
         if self.fcb.is_repeat(req.sa, req.fc):
             self.stats["repeats"] += 1
@@ -176,6 +185,13 @@ class SimSlave:
         reply = self._service(req, now)
         self.fcb.remember(reply)
         return reply
+
+    def _refuses_first_contact(self, req: F.Frame) -> bool:
+        """The CBP2 rule (first_contact): no frame count kept for this master and the request does
+        not start a sequence (FCV=0, FCB=1)."""
+        if self.fcb.master == req.sa:
+            return False
+        return bool(req.fc & F.FC_FCV) or not req.fc & F.FC_FCB
 
     def _from_own_master(self, req: F.Frame) -> bool:
         return self.master is not None and req.sa == self.master

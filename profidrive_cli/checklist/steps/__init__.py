@@ -9,12 +9,12 @@ Adding a step type: write checklist/steps/<name>.py with a StepType subclass and
 module to the table below, and document it in docs/checklists.md.
 """
 
-from profidrive_cli.checklist.steps import (bus_health, comm_loss, expect_identity, expect_status, faults, jog,
-                                            note, prompt, read, reset_fault, run, save, stop, wait, write)
+from profidrive_cli.checklist.steps import (baseline, bus_health, comm_loss, expect_identity, expect_status, faults,
+                                            jog, note, prompt, read, reset_fault, run, save, stop, wait, write)
 from profidrive_cli.checklist.steps.base import StepFailed, StepType
 
 STEPS: dict[str, StepType] = {m.STEP.name: m.STEP for m in (
     expect_identity, read, write, save, run, jog, stop, expect_status, wait, bus_health, faults, reset_fault, prompt,
-    note, comm_loss)}
+    note, comm_loss, baseline)}
 
 __all__ = ["STEPS", "StepFailed", "StepType"]
