@@ -396,6 +396,40 @@ local function generic_layout(len, direction)
            generic = true }
 end
 
+-- the generic layouts are the same for every area of a length and direction: made once
+local GENERIC = { request = {}, response = {} }
+local function generic_layout_cached(len, direction)
+  local by_len = GENERIC[direction]
+  local lay = by_len[len]
+  if lay == nil then
+    lay = generic_layout(len, direction) or false
+    by_len[len] = lay
+  end
+  return lay or nil
+end
+
+-- the texts of a bit word's lines ("bit  8 jog 1: 0"), per names table and word value: a cyclic word
+-- repeats, its 16 string.format calls need not (at most 4096 words per names table are kept)
+local BIT_LINES = setmetatable({}, { __mode = "k" })
+local function bit_lines(w, names)
+  local by_w = BIT_LINES[names]
+  if by_w == nil then by_w = { n = 0 } BIT_LINES[names] = by_w end
+  local lines = by_w[w]
+  if lines == nil then
+    lines = {}
+    for b = 0, 15 do
+      local on = math.floor(w / 2 ^ b) % 2 == 1
+      if names[b] or on then
+        lines[#lines + 1] = string.format("bit %2d %s: %s", b, names[b] or ("bit " .. b), on and "1" or "0")
+      end
+    end
+    if by_w.n >= 4096 then by_w = { n = 0 } BIT_LINES[names] = by_w end
+    by_w[w] = lines
+    by_w.n = by_w.n + 1
+  end
+  return lines
+end
+
 local function param_label(lay, pnu, sub)
   local params = lay and lay.params
   if params == nil then return nil end
@@ -468,12 +502,7 @@ local function dissect_field(tvb, tree, f, direction, lay, order, notes)
     if f.role == "control" then tree:add(P.control_set, r, table.concat(set, ", ")) end
     if f.role == "status" then tree:add(P.status_set, r, table.concat(set, ", ")) end
     if f.role ~= "control" and f.role ~= "status" then tree:add(P.field, r, f.name) end
-    for b = 0, 15 do
-      local on = math.floor(w / 2 ^ b) % 2 == 1
-      if names[b] or on then
-        t:add(r, string.format("bit %2d %s: %s", b, names[b] or ("bit " .. b), on and "1" or "0"))
-      end
-    end
+    for _, line in ipairs(bit_lines(w, names)) do t:add(r, line) end
     notes[#notes + 1] = note
     return
   end
@@ -526,7 +555,7 @@ local function dissect_area(tvb, pinfo, tree, station, direction)
     area = lay[direction]
     name = lay.profile .. " " .. lay.layout
   elseif p_pd.prefs.generic then
-    area = generic_layout(tvb:len(), direction)
+    area = generic_layout_cached(tvb:len(), direction)
     name = area and ("generic PROFIdrive " .. area.name)
   end
   if area == nil then
