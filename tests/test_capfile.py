@@ -266,3 +266,21 @@ def test_tshark_reads_the_pcapng_with_direction_comment_and_the_dissector(tmp_pa
     assert int(rows[0][0], 16) == 2 and rows[0][1] == "Set_Prm to 6" and rows[0][2] == "Set_Prm"
     assert int(rows[1][0], 16) == 1 and rows[1][2] == "Slave_Diag reply"
     assert [r[2] for r in rows[3:5]] == ["Data_Exchange", "Data_Exchange reply"]
+
+
+def test_packets_of_a_raw_file_decode_as_sniff_decodes_the_whole_file(tmp_path):
+    """What `sniff --from-file` will do with open_capture (the call the report names): feeding each
+    packet to sniff's decoder gives the frames and errors that decoding the file at once gives --
+    garbage, a bad FCS and a truncated telegram at the end included."""
+    from profidrive_cli.dp.capture import Capture, merge_errors
+    data = b"\x00\x11" + SET_PRM + DX_BAD_FCS + SC + DX_REQ + DX_RES[:5]
+    path = tmp_path / "line.bin"
+    path.write_bytes(data)
+    whole = Capture()
+    expect = [(c.raw, c.error) for c in merge_errors(whole.feed(data, 0.0))]
+    cap = Capture()
+    got = []
+    for p in open_capture(path, default_format="raw"):
+        got += [(c.raw, c.error) for c in merge_errors(cap.feed(p.raw, 0.0))]
+    assert got == expect
+    assert bytes(cap.rx.buf) == bytes(whole.rx.buf) == DX_RES[:5]       # the truncated tail, as before
