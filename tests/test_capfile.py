@@ -284,3 +284,23 @@ def test_packets_of_a_raw_file_decode_as_sniff_decodes_the_whole_file(tmp_path):
         got += [(c.raw, c.error) for c in merge_errors(cap.feed(p.raw, 0.0))]
     assert got == expect
     assert bytes(cap.rx.buf) == bytes(whole.rx.buf) == DX_RES[:5]       # the truncated tail, as before
+
+
+def test_convert_options_linktype_and_baud_carry_over(tmp_path, pd):
+    """--linktype 257 is written into the pcapng interface and carried on to a pcap; --baud 12M is
+    code 8 in the ptd header (the public layout's table) and carried on from one ptd to the next."""
+    _write(tmp_path / "a.pcap", "pcap", _packets())
+    assert pd("convert", tmp_path / "a.pcap", tmp_path / "b.pcapng", "--linktype", "257")[0] == 0
+    assert pd("convert", tmp_path / "b.pcapng", tmp_path / "c.pcap")[0] == 0
+    assert open_capture(tmp_path / "b.pcapng").linktype == 257
+    assert open_capture(tmp_path / "c.pcap").linktype == 257
+    assert pd("convert", tmp_path / "a.pcap", tmp_path / "d.ptd", "--baud", "12000000")[0] == 0
+    assert pd("convert", tmp_path / "d.ptd", tmp_path / "e.ptd")[0] == 0
+    assert (tmp_path / "e.ptd").read_bytes()[36] == 8
+    # 2 ms at 12 Mbit/s = 24 000 bit times between the first two records, to within the resolution
+    # of a time in seconds since 1970 held in a float (2^-22 s = 0.24 us = 2.9 bit times at 12M)
+    data = (tmp_path / "e.ptd").read_bytes()
+    first = struct.unpack_from("<Q", data, 1000 + 13)[0]
+    second_at = 1000 + 35 + len(SET_PRM[9:-2])
+    assert abs(struct.unpack_from("<Q", data, second_at + 13)[0] - first - 24_000) <= 3
+    assert [p.raw for p in open_capture(tmp_path / "e.ptd")] == [p.raw for p in _packets()]
