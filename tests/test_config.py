@@ -276,7 +276,7 @@ def test_shell_completion_works_and_completes_port_names(env, tmp_path):
     p = _pdrive([], cwd, {**extra, "_PDRIVE_COMPLETE": "bash_source"})
     assert p.returncode == 0 and "_pdrive_completion()" in p.stdout
     p = _pdrive([], cwd, {**extra, "_PDRIVE_COMPLETE": "bash_complete",
-                          "COMP_WORDS": "pdrive con", "COMP_CWORD": "1"})
+                          "COMP_WORDS": "pdrive conf", "COMP_CWORD": "1"})   # "con": config, convert
     assert p.stdout.split() == ["plain,config"]
     p = _pdrive([], cwd, {**extra, "_PDRIVE_COMPLETE": "bash_complete",
                           "COMP_WORDS": "pdrive status --port ", "COMP_CWORD": "3"})

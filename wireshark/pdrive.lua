@@ -279,25 +279,55 @@ end
 -- ------------------------------------------------------------------------------------------------
 -- helpers
 
+local byte = string.byte
+local HEX = {}
+for i = 0, 255 do HEX[i] = string.format("%02x", i) end
+
+-- the octets of a TvbRange as "0a 1b ..": one raw string, no object per octet
 local function hexs(range)
-  if range:len() == 0 then return "" end
-  local b = range:bytes()
+  local n = range:len()
+  if n == 0 then return "" end
+  local s = range:raw()
   local o = {}
-  for i = 0, b:len() - 1 do o[#o + 1] = string.format("%02x", b:get_index(i)) end
+  for i = 1, n do o[i] = HEX[byte(s, i)] end
   return table.concat(o, " ")
+end
+
+-- the sum of the octets i..j (1-based) of a Lua string, mod 256 (the FCS): string.byte in chunks of
+-- 64 octets, no TvbRange per octet
+local function octet_sum(s, i, j)
+  local sum = 0
+  while i <= j do
+    local k = i + 63
+    if k > j then k = j end
+    local c = { byte(s, i, k) }
+    for m = 1, #c do sum = sum + c[m] end
+    i = k + 1
+  end
+  return sum % 256
 end
 
 local function s16(w) if w >= 0x8000 then return w - 0x10000 end return w end
 
--- bit operations in plain arithmetic: Wireshark links Lua 5.2 (no & or >>) or 5.3/5.4 (no bit32)
-local function shr(x, n) return math.floor(x / 2 ^ n) end
-local function band(x, m)
-  local r, b = 0, 1
-  while x > 0 and m > 0 do
-    if x % 2 == 1 and m % 2 == 1 then r = r + b end
-    x, m, b = math.floor(x / 2), math.floor(m / 2), b * 2
+-- bit operations: Wireshark links Lua 5.2 (bit32, no & or >>) or 5.3/5.4 (& and >>, no bit32); plain
+-- arithmetic only when neither exists. The operands are octets and words (never negative).
+local band, shr
+if type(bit32) == "table" then
+  band, shr = bit32.band, bit32.rshift
+else
+  local chunk = load and load("return function(x, m) return x & m end, function(x, n) return x >> n end")
+  if chunk then band, shr = chunk() end
+end
+if band == nil then
+  shr = function(x, n) return math.floor(x / 2 ^ n) end
+  band = function(x, m)
+    local r, b = 0, 1
+    while x > 0 and m > 0 do
+      if x % 2 == 1 and m % 2 == 1 then r = r + b end
+      x, m, b = math.floor(x / 2), math.floor(m / 2), b * 2
+    end
+    return r
   end
-  return r
 end
 
 local function fmt_num(v)
@@ -364,6 +394,40 @@ local function generic_layout(len, direction)
   end
   return { name = "PPO" .. ppo .. " (by length)", word_order = "big", length = len, fields = fields,
            generic = true }
+end
+
+-- the generic layouts are the same for every area of a length and direction: made once
+local GENERIC = { request = {}, response = {} }
+local function generic_layout_cached(len, direction)
+  local by_len = GENERIC[direction]
+  local lay = by_len[len]
+  if lay == nil then
+    lay = generic_layout(len, direction) or false
+    by_len[len] = lay
+  end
+  return lay or nil
+end
+
+-- the texts of a bit word's lines ("bit  8 jog 1: 0"), per names table and word value: a cyclic word
+-- repeats, its 16 string.format calls need not (at most 4096 words per names table are kept)
+local BIT_LINES = setmetatable({}, { __mode = "k" })
+local function bit_lines(w, names)
+  local by_w = BIT_LINES[names]
+  if by_w == nil then by_w = { n = 0 } BIT_LINES[names] = by_w end
+  local lines = by_w[w]
+  if lines == nil then
+    lines = {}
+    for b = 0, 15 do
+      local on = math.floor(w / 2 ^ b) % 2 == 1
+      if names[b] or on then
+        lines[#lines + 1] = string.format("bit %2d %s: %s", b, names[b] or ("bit " .. b), on and "1" or "0")
+      end
+    end
+    if by_w.n >= 4096 then by_w = { n = 0 } BIT_LINES[names] = by_w end
+    by_w[w] = lines
+    by_w.n = by_w.n + 1
+  end
+  return lines
 end
 
 local function param_label(lay, pnu, sub)
@@ -438,12 +502,7 @@ local function dissect_field(tvb, tree, f, direction, lay, order, notes)
     if f.role == "control" then tree:add(P.control_set, r, table.concat(set, ", ")) end
     if f.role == "status" then tree:add(P.status_set, r, table.concat(set, ", ")) end
     if f.role ~= "control" and f.role ~= "status" then tree:add(P.field, r, f.name) end
-    for b = 0, 15 do
-      local on = math.floor(w / 2 ^ b) % 2 == 1
-      if names[b] or on then
-        t:add(r, string.format("bit %2d %s: %s", b, names[b] or ("bit " .. b), on and "1" or "0"))
-      end
-    end
+    for _, line in ipairs(bit_lines(w, names)) do t:add(r, line) end
     notes[#notes + 1] = note
     return
   end
@@ -484,22 +543,24 @@ local function dissect_area(tvb, pinfo, tree, station, direction)
   t:add(P.station, station):set_generated()
   t:add(P.direction, direction == "request" and "request (master -> drive outputs)"
         or "response (drive -> master inputs)"):set_generated()
+  local cacheable = true
   if lay and lay[direction] and lay[direction].length ~= tvb:len() then
     t:add_proto_expert_info(E_len, string.format("station %d %s %s is %d octets, the telegram has %d",
       station, key, direction, lay[direction].length, tvb:len()))
     lay = nil
+    cacheable = false            -- the expert info belongs to every such telegram: never from the cache
   end
   local area, name
   if lay then
     area = lay[direction]
     name = lay.profile .. " " .. lay.layout
   elseif p_pd.prefs.generic then
-    area = generic_layout(tvb:len(), direction)
+    area = generic_layout_cached(tvb:len(), direction)
     name = area and ("generic PROFIdrive " .. area.name)
   end
   if area == nil then
     t:set_text("PROFIdrive: no layout for station " .. station .. " (" .. tvb:len() .. " octets)")
-    return nil
+    return nil, cacheable
   end
   t:add(P.layout, name):set_generated()
   local order = (lay and lay.word_order) or area.word_order or "big"
@@ -509,6 +570,27 @@ local function dissect_area(tvb, pinfo, tree, station, direction)
   end
   local summary = table.concat(notes, "; ")
   t:set_text("PROFIdrive " .. name .. ", station " .. station .. ": " .. summary)
+  return summary, cacheable
+end
+
+-- Without a protocol tree (tshark's summary lines, Wireshark's packet list) an area only gives the
+-- Info column's summary. Per station and direction the last area's summary is kept: a cyclic area
+-- that repeats the station's previous one (most of them on a running line) costs one string
+-- comparison. The entry holds the layout and the preference it was decoded with.
+local area_cache = {}
+
+local function area_summary(tvb, pinfo, tree, off, len, raw, station, direction)
+  local slot = direction == "request" and station or station + 128
+  local lay = station_layout(station)
+  local generic = p_pd.prefs.generic
+  local c = area_cache[slot]
+  if c and c.raw == raw and c.lay == lay and c.generic == generic then return c.summary end
+  local summary, cacheable = dissect_area(tvb(off, len):tvb(), pinfo, tree, station, direction)
+  if cacheable then
+    area_cache[slot] = { raw = raw, lay = lay, generic = generic, summary = summary }
+  else
+    area_cache[slot] = nil
+  end
   return summary
 end
 
@@ -768,9 +850,93 @@ local function fc_words(fc)
   return string.format("%s (%s)", RESPONSE_NAMES[st] or ("reserved status " .. st), STATION_TYPES[band(shr(fc, 4), 3)])
 end
 
+local FC_WORDS = {}
+local function fc_words_cached(fc)
+  local w = FC_WORDS[fc]
+  if w == nil then w = fc_words(fc) FC_WORDS[fc] = w end
+  return w
+end
+
+-- Is a protocol tree being built? tshark's summary lines and Wireshark's packet list dissect without
+-- one (the root TreeItem has no text then); -V, -T fields, display filters and the packet details
+-- build one. Where TreeItem.text is unknown (old Wireshark) the answer is always yes.
+local tree_text_known = nil
+local function builds_tree(tree)
+  if tree_text_known == nil then tree_text_known = pcall(function() return tree.text end) end
+  if not tree_text_known then return true end
+  return tree.text ~= nil
+end
+
+-- The telegrams of a running line without a tree: token, short acknowledge, FDL status and
+-- Data_Exchange with a good FCS and end delimiter. The columns are the full path's, read from one raw
+-- string (no TvbRange per octet); the area's summary comes from area_summary. Anything else returns
+-- nil and takes the full path below.
+local function dissect_columns(tvb, pinfo, tree, len)
+  local s = tvb:raw()
+  local sd = byte(s, 1)
+  if sd == SC then
+    pinfo.cols.protocol:set("PROFIBUS")
+    pinfo.cols.info:set("SC  short acknowledge")
+    return len
+  end
+  if sd == SD4 then
+    if len < 3 then return nil end
+    local da, sa = band(byte(s, 2), 0x7F), band(byte(s, 3), 0x7F)
+    pinfo.cols.protocol:set("PROFIBUS")
+    pinfo.cols.src:set(tostring(sa))
+    pinfo.cols.dst:set(tostring(da))
+    pinfo.cols.info:set(string.format("SD4  token %d -> %d", sa, da))
+    return len
+  end
+  local body_off, body_len
+  if sd == SD1 then body_off, body_len = 1, 3
+  elseif sd == SD3 then body_off, body_len = 1, 11
+  elseif sd == SD2 and len >= 4 then
+    body_off, body_len = 4, byte(s, 2)
+    if byte(s, 3) ~= body_len or byte(s, 4) ~= SD2 or body_len < 3 then return nil end
+  else
+    return nil
+  end
+  local fcs_at = body_off + body_len                       -- 0-based, as in the tvb
+  if len < fcs_at + 2 or byte(s, fcs_at + 2) ~= ED then return nil end
+  if byte(s, fcs_at + 1) ~= octet_sum(s, body_off + 1, fcs_at) then return nil end
+  local da_raw, sa_raw, fc = byte(s, body_off + 1, body_off + 3)
+  if band(da_raw, 0x80) ~= 0 or band(sa_raw, 0x80) ~= 0 then return nil end     -- SAPs: DP services
+  local da, sa = da_raw, sa_raw
+  local is_request = band(fc, 0x40) ~= 0
+  local du_off, du_len = body_off + 3, body_len - 3
+  local service, summary
+  if is_request and band(fc, 0x0F) == 9 then
+    service = "FDL status"
+  elseif not is_request and band(fc, 0x0F) == 0 and du_len == 0 then
+    service = "FDL status reply"
+  elseif is_request then
+    service = "Data_Exchange"
+    if du_len > 0 then
+      summary = area_summary(tvb, pinfo, tree, du_off, du_len, s:sub(du_off + 1, fcs_at), da, "request")
+    end
+  else
+    service = "Data_Exchange reply"
+    if du_len > 0 then
+      summary = area_summary(tvb, pinfo, tree, du_off, du_len, s:sub(du_off + 1, fcs_at), sa, "response")
+    end
+  end
+  pinfo.cols.protocol:set("PROFIBUS")
+  pinfo.cols.src:set(tostring(sa))
+  pinfo.cols.dst:set(tostring(da))
+  local info = string.format("%s  %d -> %d  %s  %s", SD_NAMES[sd], sa, da, service, fc_words_cached(fc))
+  if summary and summary ~= "" then info = info .. "  " .. summary end
+  pinfo.cols.info:set(info)
+  return len
+end
+
 function p_fdl.dissector(tvb, pinfo, tree)
   local len = tvb:len()
   if len < 1 then return 0 end
+  if not builds_tree(tree) then
+    local done = dissect_columns(tvb, pinfo, tree, len)
+    if done then return done end
+  end
   pinfo.cols.protocol:set("PROFIBUS")
   local sd = tvb(0, 1):uint()
   local t = tree:add(p_fdl, tvb())
@@ -814,8 +980,7 @@ function p_fdl.dissector(tvb, pinfo, tree)
     t:add_proto_expert_info(E.malformed, "telegram truncated")
     return len
   end
-  local sum = 0
-  for i = body_off, body_off + body_len - 1 do sum = (sum + tvb(i, 1):uint()) % 256 end
+  local sum = octet_sum(tvb:raw(body_off, body_len), 1, body_len)
   local da_raw, sa_raw, fc = tvb(body_off, 1):uint(), tvb(body_off + 1, 1):uint(), tvb(body_off + 2, 1):uint()
   local da, sa = band(da_raw, 0x7F), band(sa_raw, 0x7F)
   local dt = t:add(F.da, tvb(body_off, 1))

@@ -113,6 +113,7 @@ COMMANDS = {
                       "Comm-loss acceptance test: break the link, measure the drive's reaction."),
     "config": ("profidrive_cli.cli.config_cmd", "config_group",
                "Config file: the effective settings and where each came from; the files that apply."),
+    "convert": ("profidrive_cli.cli.convert_cmd", "convert_cmd", "Convert a capture: raw, pcap, pcapng, ProfiTrace .ptd."),
     "decode": ("profidrive_cli.cli.decode_cmd", "decode_cmd",
                "Decode a captured area of PROFILE's layout into named fields."),
     "diag": ("profidrive_cli.cli.bus_cmds", "diag_cmd",
