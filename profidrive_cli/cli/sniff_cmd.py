@@ -41,13 +41,30 @@ def _line(c) -> str:
 @click.option("--live", is_flag=True,
               help="A passive live list (stations, DP state, master cycle time, retries, errors) "
                    "refreshed in place instead of one line per frame.")
+@click.option("--ring", type=float, default=None, metavar="SECONDS",
+              help="Black-box recorder: keep the last SECONDS of telegrams and write one pcap per "
+                   "event (--trigger) with them and --after seconds after it; runs until Ctrl-C "
+                   "unless --duration is given.")
+@click.option("--trigger", "triggers", multiple=True, metavar="EXPR",
+              help="With --ring: what makes an event, e.g. 'lost(*),fault(7),cycle>20ms' "
+                   "(docs/commands.md). Repeatable.")
+@click.option("--after", "after_s", type=float, default=None, metavar="SECONDS",
+              help="With --ring: seconds recorded after an event (default: the ring's).")
+@click.option("--out", "out_dir", default=None, metavar="DIR|PATTERN",
+              help="With --ring: a directory, or a file pattern with {n} or {time} (default: .).")
 @bus_options
-def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, live):
+def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, live, ring,
+              triggers, after_s, out_dir):
     """Passive capture: one line per frame (time, SD, SA->DA, SAPs, FC in words, service, DU).
 
     --pcap and --raw files are written beside the target and replace it only when the capture
     ended well (also by Ctrl-C); on an error an existing file stays as it was.
     """
+    if ring is not None or triggers or after_s is not None or out_dir is not None:
+        from profidrive_cli.cli.sniff_ring import run_ring
+        return run_ring(opts, ring, triggers, after_s, out_dir, stations, duration, linktype,
+                        others={"--pcap": pcap_file, "--raw": raw_out, "--from-file": raw_file,
+                                "--live": live})
     if raw_out is not None and raw_file:
         raise UsageError("--raw writes what is received from a port; with --from-file there is nothing "
                          "to receive")
