@@ -202,7 +202,7 @@ def test_every_documented_table_is_used():
             "commloss-test event=start", "commloss-test event=reaction", "commloss-test event=started",
             "commloss-test event=at_speed", "commloss-test event=silence", "commloss-test event=clear",
             "commloss-test event=back", "commloss-test event=result",
-            "sniff drive", "sniff event=live", "config show", "config path", "wireshark install",
+            "sniff drive", "sniff event=live", "sniff event=trigger", "config show", "config path", "wireshark install",
             "checklist measured bus_health"}
     assert set(CONTRACTS) == used
 

@@ -350,3 +350,45 @@ def test_recorder_refusals(capsys, monkeypatch, tmp_path, args, words):
     assert r.exit_code == 2, r.output
     assert words in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+# -- what the CLI writes for a capture: the pcap and the event (text line, JSON event) -------------
+
+def _one_done():
+    tset = TriggerSet(parse("lost(*)"))
+    rec = Recorder(tset, ring_s=0.5, after_s=1.0)
+    (done,) = rec.feed(frames(*_lost_line()))
+    return tset, done
+
+
+@pytest.mark.parametrize("as_json", [False, True])
+def test_the_writer_writes_the_pcap_and_one_event(tmp_path, capsys, as_json):
+    import json
+
+    from profidrive_cli.cli.sniff_ring import _Writer, out_pattern
+    from profidrive_cli.dp.capture import read_pcap
+    from test_json_contract import assert_contract
+    tset, done = _one_done()
+    w = _Writer(out_pattern(str(tmp_path)), 147, as_json, tset)
+    w.start = 1_000_000.0                   # wall clock of t = 0
+    capsys.readouterr()
+    w.write(done)
+    text = capsys.readouterr().out
+    (f,) = tmp_path.iterdir()
+    linktype, pkts = read_pcap(f.read_bytes())
+    # the pcap's times: the wall clock of t = 0 plus each telegram's time (0.802 .. 2.302)
+    assert linktype == 147 and len(pkts) == len(done.packets)
+    assert pkts[0][0] == pytest.approx(1_000_000.802) and pkts[-1][0] == pytest.approx(1_000_002.302)
+    assert f.name.endswith("-1-lostall.pcap")
+    if as_json:
+        obj = json.loads(text)
+        assert_contract(obj, "sniff event=trigger")
+        assert (obj["trigger"], obj["station"], obj["capture"], obj["telegrams"]) == (
+            "lost(*)", 5, str(f), len(pkts))
+        assert (obj["before_s"], obj["after_s"], obj["complete"]) == (0.5, 1.0, True)
+        assert "stopped answering while the others answer" in obj["causes"][0]["title"]
+    else:
+        assert len(text.splitlines()) == 1
+        assert (f"lost(*)  station 5 stopped answering: 4 requests in a row unanswered; last answer "
+                f"at 0.901 s; capture {f} ({len(pkts)} telegrams, 0.5 s before, 1.0 s after); likely: "
+                f"station 5 stopped answering while the others answer") in text

@@ -76,7 +76,7 @@ def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, 
     for f in files:
         check_output_path(f.path, f.what)
     cap = Capture()
-    view = _view(stations, live, opts.json)
+    view = _view(stations, live, opts.json, opts if live else None)
     # read (and check) the input before anything is written
     raw = read_input_file(raw_file, "raw capture", MAX_CAPTURE_BYTES) if raw_file else None
     # pcap times are wall clock: the capture's start (for --from-file: when the raw file was last
@@ -147,11 +147,12 @@ def _truncated(cap):
     return Captured(cap._t, raw, None, "truncated frame at end of input")
 
 
-def _view(stations, live, as_json):
+def _view(stations, live, as_json, opts=None):
     """How each frame is shown: one line / JSON object (with --station the drives' words), or the
-    --live list."""
+    --live list (its bus load figured at the baud rate `opts` give)."""
+    from profidrive_cli.cli.sniff_ring import listen_baud
     from profidrive_cli.cli.sniff_view import SniffView
-    return SniffView(stations, live, as_json)
+    return SniffView(stations, live, as_json, baud=listen_baud(opts) if opts is not None else None)
 
 
 def _listen_start(link) -> None:

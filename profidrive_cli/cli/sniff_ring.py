@@ -55,6 +55,12 @@ def name_for(pattern: str, n: int, wall: float, trigger: str, station: int | Non
     return pattern.format(n=n, time=stamp, trigger=trigger, station="bus" if station is None else station)
 
 
+def listen_baud(opts: Any) -> int | None:
+    """The line's baud rate when the options name one (None with --baud auto: not known yet): the
+    bus load and the slot time are figured with it."""
+    return None if opts.baud in (None, "", "auto") else int(opts.baud_rate())
+
+
 def _file_trigger(label: str) -> str:
     """lost(3) -> lost3, cycle(*)>20ms -> cycle-all: safe in a file name."""
     return "".join(ch for ch in label.replace("*", "all").split(">")[0] if ch.isalnum() or ch == "-")
@@ -87,11 +93,10 @@ def run_ring(opts: Any, ring_s: float | None, trigger_exprs: tuple[str, ...], af
     watched = watch_list(stations) if stations else {}
     triggers = parse_all(list(trigger_exprs), set(watched))
     pattern = out_pattern(out_opt)
-    baud = None if opts.baud in (None, "", "auto") else opts.baud_rate()
-    tset = TriggerSet(triggers, PassiveDecoder(watched) if watched else None, baud=baud)
+    tset = TriggerSet(triggers, PassiveDecoder(watched) if watched else None, baud=listen_baud(opts))
     rec = Recorder(tset, ring_s, after)
     writer = _Writer(pattern, LINKTYPES[linktype], opts.json, tset)
-    cap = Capture()
+    cap = Capture()  # type: ignore[no-untyped-call]
     link = opts.open_link()
     if link.is_simulator:
         err.print("sim:// is silent unless a master talks: start `pdrive sim --plc --pty` and "
@@ -162,8 +167,8 @@ class _Writer:
             if not f.committed:
                 f.discard()
         self.files += 1
-        for e in d.events:
-            self._say(d, e, path)
+        for ev in d.events:
+            self._say(d, ev, path)
 
     def _say(self, d: Done, e: Event, path: str) -> None:
         f = e.fired
