@@ -161,6 +161,29 @@ def test_octets_before_the_first_whole_frame_are_no_framing_error():
     assert [f.t for f in fired] == [0.02]
 
 
+def test_drive_fault_state_and_pkw_error_from_the_stations_profile():
+    # Moeller PPO1 inputs (--station 6=moeller:ppo1): PKW (4 words) then STW and HIW. STW bit 3 is
+    # "fault" (PROFIdrive status word, drives/profidrive/words.py Stw): 0x0237 -> 0x023F sets it.
+    # A PKW answer with AK 7 ("task cannot be executed") carries the error number in PWE (0:
+    # unknown parameter number): PKE 0x7154 = AK 7, PNU 0x154 = 340
+    from profidrive_cli.bustools.passive import PassiveDecoder, watch_list
+
+    def inputs(stw, pkw=bytes(8)):
+        return rep(6, F.DL, pkw + stw.to_bytes(2, "big") + bytes(2))
+    timed = [(0.0, req_dx(6)), (0.001, inputs(0x0237)),
+             (0.1, req_dx(6, True)), (0.101, inputs(0x023F)),
+             (0.2, req_dx(6)), (0.201, inputs(0x0237, bytes((0x71, 0x54, 0, 0, 0, 0, 0, 0))))]
+    dec = PassiveDecoder(watch_list(["6=moeller:ppo1"]))
+    _, fired = _fire("fault(6),state(*),pkw(6)", timed, decoder=dec)
+    assert [(f.trigger.label, f.t) for f in fired] == [
+        ("fault(6)", 0.101), ("state(*)", 0.101), ("fault(6)", 0.201), ("state(*)", 0.201),
+        ("pkw(6)", 0.201)]
+    assert fired[0].text == "drive 6 (moeller-de6-net-dp): fault on (fault)"
+    assert fired[1].text == "drive 6 (moeller-de6-net-dp): S4 operation -> fault"
+    assert fired[2].text == "drive 6 (moeller-de6-net-dp): fault cleared"
+    assert "PNU340: error 0 (unknown parameter number)" in fired[4].text
+
+
 # -- bus load, token rotation -------------------------------------------------------------------------
 
 def test_bus_load_is_busy_bit_times_over_elapsed_bit_times():
