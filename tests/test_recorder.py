@@ -184,6 +184,15 @@ def test_drive_fault_state_and_pkw_error_from_the_stations_profile():
     assert "PNU340: error 0 (unknown parameter number)" in fired[4].text
 
 
+def test_a_data_exchange_answered_with_high_priority_shows_diagnosis():
+    # passive_live.py's doc: "diagnosis: the station answered Data_Exchange with high priority
+    # (diagnosis pending)": FC status DH (fdl/frames.py RESPONSE_NAMES 10); kept when the reply
+    # status is read once for the RS/RR/NR triggers too
+    live = _live(dx_round(0.0, 5, 6) + [(0.1, req_dx(5, True)), (0.101, rep(5, F.DH))])
+    assert {s["station"]: s["state"] for s in live.snapshot(0.2)["stations"]} == {
+        5: "diagnosis", 6: "data exchange"}
+
+
 # -- bus load, token rotation -------------------------------------------------------------------------
 
 def test_bus_load_is_busy_bit_times_over_elapsed_bit_times():

@@ -13,7 +13,7 @@ What the passive data can show, and what each rule reads:
                         at most half the stations): their spur, connector or cable, not the line
     late replies        replies later than the slot time (and than passive_live.LATE_FLOOR_S: the
                         arrival times of a capture through a USB adapter or a pty are good to some
-                        ms only), at least MIN_LATE of them and 1 % of the station's replies
+                        ms only), at least MIN_LATE of them and 1 % of its Data_Exchange answers
     framing errors      corrupt telegrams spread over the line: noise, termination, baud rate
 
 Not from one passive capture (they need more): "illegal frames only at high rates" needs captures
@@ -73,9 +73,9 @@ def causes_json(live: LiveList) -> list[dict[str, Any]]:
 def _silent(sts: list[StationLive]) -> list[Cause]:
     out = []
     for s in sts:
-        if not (s.answered and s.silent >= LOST_AFTER):
+        if s.last_answer_t is None or s.silent < LOST_AFTER:
             continue
-        since = s.last_answer_t if s.last_answer_t is not None else 0.0
+        since = s.last_answer_t
         others = [o.address for o in sts if o is not s and o.last_answer_t is not None
                   and o.last_answer_t > since]
         ev = [f"station {s.address}: {s.silent} requests in a row unanswered, last answer at "
@@ -161,11 +161,12 @@ def _repeats(sts: list[StationLive]) -> list[Cause]:
 def _late(live: LiveList, sts: list[StationLive]) -> list[Cause]:
     if not live.baud:
         return []
-    late = [s for s in sts if s.late >= MIN_LATE and s.late * 100 >= s.delay.n]
+    late = [s for s in sts if s.late >= MIN_LATE and s.late * 100 >= s.exchanges]
     if not late:
         return []
-    ev = tuple(f"station {s.address}: {s.late} of {s.delay.n} replies later than "
-               f"{live.late_s * 1000:.1f} ms, up to {s.delay.hi * 1000:.1f} ms" for s in late)
+    ev = tuple(f"station {s.address}: {s.late} replies later than {live.late_s * 1000:.1f} ms "
+               f"(of {s.exchanges} Data_Exchange answered), up to {s.late_max * 1000:.1f} ms"
+               for s in late)
     ev += (f"slot time at {live.baud} bit/s: {slot_s(live.baud) * 1000:.2f} ms; judged late from "
            f"{live.late_s * 1000:.1f} ms on (a capture's arrival times are good to some ms only)",)
     return [Cause(f"late replies from station(s) {', '.join(str(s.address) for s in late)}: the "

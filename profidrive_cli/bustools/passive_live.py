@@ -39,6 +39,9 @@ SEEN = "seen"
 
 _EXPECTS_REPLY = frozenset(F.NEEDS_REPLY)
 _SRD_SDA = frozenset((F.SRD_LOW, F.SRD_HIGH, F.SDA_LOW, F.SDA_HIGH))
+#: reply statuses of a station with diagnosis pending (high priority)
+_HIGH = frozenset((F.DH, F.RDH))
+_SAP_DIAG = S.SAP_SLAVE_DIAG
 #: a station is lost when this many requests in a row went unanswered: more than a master's retries
 #: of one request (fdl/timing.py: 1 by default, at most 3 on most masters) plus one
 LOST_AFTER = 4
@@ -112,20 +115,19 @@ class StationLive:
     was_dx: bool = False
     drive: dict = field(default_factory=dict)     # the last decoded request / response (--station)
     silent: int = 0                  # requests unanswered in a row
-    answered: bool = False           # it answered at least once
     lost: bool = False               # lost (LOST_AFTER unanswered, or left data exchange), not back
     lost_in_dx: bool = False         # ... and it was in data exchange then
-    last_answer_t: float | None = None
+    last_answer_t: float | None = None   # None: it never answered
+    prev_req_t: float | None = None  # the request to it before the last one
     last_req_t: float | None = None
-    gap_s: float = 0.0               # the master's silence towards it before its last request
     wd_s: float | None = None        # the watchdog from its last Set_Prm (None: off / not seen)
     wd_expiries: list = field(default_factory=list)   # (t, silence s, watchdog s), the last few
     diag: bytes | None = None        # its last Slave_Diag answer
     diag_idents: set = field(default_factory=set)
     sets_prm_from: set = field(default_factory=set)   # masters that sent it Set_Prm
     statuses: dict = field(default_factory=dict)      # rs/rr/nr/ue answers counted
-    delay: _Cycle = field(default_factory=_Cycle)     # request -> reply (arrival times)
-    late: int = 0                    # replies later than LiveList.late_s
+    late: int = 0                    # replies later than LiveList.late_s (request -> reply)
+    late_max: float = 0.0            # the latest of them (s)
 
     def as_dict(self) -> dict:
         d = {"station": self.address, "state": self.state,
@@ -155,8 +157,7 @@ class LiveList:
         self.frames = 0
         self.tokens = 0
         self.octets = 0
-        self.first_t: float | None = None
-        self.last_t = 0.0
+        self._bad = 0                                 # framing errors, all kinds
         self.baud = baud
         self.errors: dict[str, int] = {}
         self.token_from: dict[int, int] = {}          # tokens passed by each master
@@ -164,7 +165,6 @@ class LiveList:
         self._token_t: dict[int, float] = {}
         self.notes: list[Note] | None = [] if notes else None
         self.cycle_limit_s = cycle_limit_s
-        self._valid_seen = False
         #: the likely causes in a snapshot (bustools/causes.py causes_json; None: not asked for)
         self.explain = explain
         #: a reply later than this is counted late (the slot time, at least LATE_FLOOR_S)
@@ -186,14 +186,12 @@ class LiveList:
     def feed(self, c) -> None:
         self.frames += 1
         self.octets += len(c.raw)
-        if self.first_t is None:
-            self.first_t = c.t
-        self.last_t = c.t
         f = c.frame
         if f is None:
             kind = c.error.split(":", 1)[0].strip() or "error"
             self.errors[kind] = self.errors.get(kind, 0) + 1
-            if self._valid_seen and self.notes is not None:
+            self._bad += 1
+            if self.notes is not None and self.frames > self._bad:      # a whole frame before it
                 # (octets before the first whole frame are the tail of one the capture joined)
                 self._note("fcs" if kind == F.FrameError.FCS else "framing", None, c.t,
                            f"{c.error} ({len(c.raw)} octets: {c.raw[:12].hex(' ')})")
@@ -201,7 +199,6 @@ class LiveList:
                 self._pending.station.counters["illegal"] += 1     # its reply came corrupt
                 self._pending = None
             return
-        self._valid_seen = True
         if f.sd == F.SD4:
             self.tokens += 1
             self.masters.add(f.sa)
@@ -221,23 +218,23 @@ class LiveList:
             status = f.fc & 0x0F
             if status in STATUS_KINDS:
                 self._status(c, self._pending.station, status)
-            if f.ssap == S.SAP_SLAVE_DIAG and len(f.data) >= 6:
+            if f.ssap == _SAP_DIAG and len(f.data) >= 6:
                 self._diag(c, self._pending.station, bytes(f.data))
-            self._answered(c, high=status in (F.DH, F.RDH))
+            self._answered(c, high=status in _HIGH)
         else:
             self._pending = None           # a reply nobody is waiting for (another master's?)
 
     def _status(self, c, st: StationLive, status: int) -> None:
         kind = STATUS_KINDS[status]
         st.statuses[kind] = st.statuses.get(kind, 0) + 1
-        if status == F.RS and st.wd_s is not None and st.gap_s > st.wd_s:
+        if status == F.RS and st.wd_s is not None and _gap(st) > st.wd_s:
             self._wd_expired(c.t, st)
         self._note(kind, st.address, c.t, f"station {st.address} answered "
                    f"{F.RESPONSE_NAMES.get(status, status)}")
 
     def _wd_expired(self, t: float, st: StationLive) -> None:
         assert st.wd_s is not None
-        st.wd_expiries = (st.wd_expiries + [(round(t, 6), round(st.gap_s, 6), st.wd_s)])[-5:]
+        st.wd_expiries = (st.wd_expiries + [(round(t, 6), round(_gap(st), 6), st.wd_s)])[-5:]
 
     def _diag(self, c, st: StationLive, data: bytes) -> None:
         st.diag_idents.add(data[4] << 8 | data[5])
@@ -258,7 +255,7 @@ class LiveList:
             st.state = NO_ANSWER
             st.silent += 1
             self._pending = None
-            if st.silent == LOST_AFTER and st.answered and not st.lost:
+            if st.silent == LOST_AFTER and st.last_answer_t is not None and not st.lost:
                 st.lost, st.lost_in_dx = True, st.was_dx
                 since = "" if st.last_answer_t is None else f"; last answer at {st.last_answer_t:.3f} s"
                 self._note("lost", st.address, t, f"station {st.address} stopped answering: "
@@ -271,13 +268,14 @@ class LiveList:
             return
         st = p.station
         st.silent = 0
-        st.answered = True
         st.last_answer_t = c.t
-        # request -> reply: from the request's arrival to the reply's first octet on the line
-        d = max(0.0, c.t - p.t - (len(c.raw) * BITS_PER_OCTET / self.baud if self.baud else 0.0))
-        st.delay.add(d)
+        d = c.t - p.t
         if d > self.late_s:
-            st.late += 1
+            # request -> reply: from the request's arrival to the reply's first octet on the line
+            d -= len(c.raw) * BITS_PER_OCTET / self.baud if self.baud else 0.0
+            if d > self.late_s:
+                st.late += 1
+                st.late_max = max(st.late_max, d)
         if st.lost and (p.dx or not st.lost_in_dx):
             st.lost = False
             self._note("back", st.address, c.t, f"station {st.address} is back"
@@ -296,9 +294,7 @@ class LiveList:
             return
         st = self.station(f.da)
         st.master = f.sa
-        if st.last_req_t is not None:
-            st.gap_s = c.t - st.last_req_t
-        st.last_req_t = c.t
+        st.prev_req_t, st.last_req_t = st.last_req_t, c.t
         fn = f.function
         if fn in _SRD_SDA:
             if f.fcv and st.last_fcb is not None and f.fcb == st.last_fcb:
@@ -333,7 +329,7 @@ class LiveList:
             else:
                 if st.was_dx and not retry:
                     st.counters["reparams"] += 1
-                    if st.wd_s is not None and st.gap_s > st.wd_s:
+                    if st.wd_s is not None and _gap(st) > st.wd_s:
                         self._wd_expired(c.t, st)
                     if not st.lost:
                         st.lost, st.lost_in_dx = True, True
@@ -359,11 +355,10 @@ class LiveList:
         return {"min": round(min(x.lo for x in cs), 6), "mean": round(sum(x.total for x in cs) / n, 6),
                 "max": round(max(x.hi for x in cs), 6)}
 
-    def bus_load(self, t: float | None = None) -> float | None:
-        """The bus load in percent from the capture's start to `t` (None: from its first telegram
-        to its last); None: baud rate unknown."""
-        seconds = (self.last_t - (self.first_t or 0.0)) if t is None else t
-        return bus_load_percent(self.octets, seconds, self.baud)
+    def bus_load(self, t: float) -> float | None:
+        """The bus load in percent from the capture's start to `t` (seconds since the start);
+        None: baud rate unknown."""
+        return bus_load_percent(self.octets, t, self.baud)
 
     def token_rotation(self) -> dict | None:
         """The token rotation of the master that passed the most tokens: {min, mean, max, n}."""
@@ -381,6 +376,11 @@ class LiveList:
         if self.explain is not None:
             snap["causes"] = self.explain(self)
         return snap
+
+
+def _gap(st: StationLive) -> float:
+    """The master's silence towards a station before its last request (0: no earlier request)."""
+    return 0.0 if st.prev_req_t is None or st.last_req_t is None else st.last_req_t - st.prev_req_t
 
 
 def diag_change(old: bytes, new: bytes) -> str:
