@@ -424,3 +424,29 @@ def test_the_writer_writes_the_pcap_and_one_event(tmp_path, capsys, as_json):
         assert (f"lost(*)  station 5 stopped answering: 4 requests in a row unanswered; last answer "
                 f"at 0.901 s; capture {f} ({len(pkts)} telegrams, 0.5 s before, 1.0 s after); likely: "
                 f"station 5 stopped answering while the others answer") in text
+
+
+# -- sniff --live: the caption carries bus load, token rotation and the likely causes ---------------
+
+def test_live_list_caption_shows_bus_load_and_causes(capsys):
+    from profidrive_cli.cli.sniff_view import SniffView
+    # the hand-calculated line of test_bus_load_...: 100 x (6 + 1) octets x 11 bit in 1.0 s at
+    # 19200 bit/s = 40.1 %; then station 5 of _lost_line goes silent while 6 answers
+    fdl = F.encode(F.make(5, M, F.request_fc(F.FDL_STATUS)))
+    timed = [x for i in range(100) for x in ((i * 0.01, fdl), (i * 0.01 + 0.001, b"\xE5"))]
+    view = SniffView((), live=True, baud=19200)
+    for c in frames(*timed):
+        view.frame(c)
+    capsys.readouterr()
+    view.finish(1.0)
+    text = capsys.readouterr().out
+    assert "token rotation -/-/- ms; bus load 40.1 %; framing errors: none" in text
+    assert "likely:" not in text
+    view = SniffView((), live=True, baud=19200)
+    for c in frames(*_lost_line(until=2.0)):
+        view.frame(c)
+    view.finish(2.1)
+    text = capsys.readouterr().out
+    assert ("likely: station 5 stopped answering while the others answer: its power, its bus "
+            "connector or the cable to it (station 5: 11 requests in a row unanswered, last answer "
+            "at 0.901 s; stations 6 answered after that)") in text
