@@ -362,6 +362,8 @@ def test_sim_unplug_refuses_a_bad_value(value):
     from profidrive_cli.sim.plant import build_bus
     with pytest.raises(UsageError, match="unplug=.* must be ADDRESS@SECONDS"):
         build_bus(f"sim://?unplug={value}")
+    with pytest.raises(UsageError, match="unplug=9@...: no station 9 on the bus"):
+        build_bus("sim://?unplug=9@1")
 
 
 # -- the CLI's refusals: one line, exit 2, nothing written -------------------------------------------
