@@ -12,6 +12,11 @@ no rich: cli/sniff_cmd.py, sniff_view.py, scan_watch.py and wireshark_cmd.py ren
                      (the families' offline decoders), sans-IO
     passive_live.py  `sniff --live`: DP state, ident, cycle time and counters per station from the
                      traffic alone, sans-IO
+    triggers.py      the recorder's trigger language (lost(3), fault(7), cycle>20ms, ...): parsed with
+                     the position in errors, evaluated on captured telegrams, sans-IO
+    recorder.py      the black-box recorder (`sniff --ring`): the ring of telegrams, one capture per
+                     event with the seconds before and after, bounded in seconds and telegrams, sans-IO
+    causes.py        likely causes from the live list's counters and timing, each with its evidence
     buswatch.py      `scan --watch` and the checklist step bus_health: the live list polled pass after
                      pass (Slave_Diag / FDL status through dp.poller.Master), state categories, counter
                      rates

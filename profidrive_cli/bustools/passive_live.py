@@ -9,7 +9,13 @@ by the next request or a token instead; released: Set_Prm with Unlock_Req), its 
 the master's Data_Exchange cycle time (min / mean / max between two Data_Exchange requests to it)
 and counters in the dp layer's names: retries (a request repeated with the same FCB, FCV = 1),
 no_answer, illegal (a reply that was corrupt: FCS, length, delimiter), reparams (Set_Prm again
-after data exchange). Bus-wide: frames, tokens, masters seen, and framing errors by kind.
+after data exchange). Bus-wide: frames, tokens, masters seen, and framing errors by kind; the bus
+load (busy bit times / elapsed bit times, when the baud rate is known), the token rotation per
+master, and the figures bustools/causes.py reads (watchdog expiries, reply delays, idents).
+
+With `notes=True` the list also writes down what happened (a station lost or back, an RS/RR/NR/UE
+answer, a diagnosis change, a framing error, a cycle over `cycle_limit_s`) as Note records in
+`notes`, which the recorder's triggers (bustools/triggers.py) drain after every frame.
 
 Sans-IO: dp.capture.Captured in (their arrival times), plain dicts out.
 """
@@ -17,9 +23,11 @@ Sans-IO: dp.capture.Captured in (their arrival times), plain dicts out.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any, Callable, NamedTuple
 
 from profidrive_cli.dp import services as S
 from profidrive_cli.fdl import frames as F
+from profidrive_cli.fdl.timing import CHAR_BITS, BusParams
 
 PARAMETERISING = "parameterising"
 CONFIGURING = "configuring"
@@ -31,6 +39,45 @@ SEEN = "seen"
 
 _EXPECTS_REPLY = frozenset(F.NEEDS_REPLY)
 _SRD_SDA = frozenset((F.SRD_LOW, F.SRD_HIGH, F.SDA_LOW, F.SDA_HIGH))
+#: reply statuses of a station with diagnosis pending (high priority)
+_HIGH = frozenset((F.DH, F.RDH))
+_SAP_DIAG = S.SAP_SLAVE_DIAG
+#: a station is lost when this many requests in a row went unanswered: more than a master's retries
+#: of one request (fdl/timing.py: 1 by default, at most 3 on most masters) plus one
+LOST_AFTER = 4
+#: one octet on the line: start bit, 8 data bits, even parity, stop bit (11 bit times per octet)
+BITS_PER_OCTET = CHAR_BITS
+#: a reply this late (after its own octets' wire time) is late whatever the capture's timing
+#: resolution: the arrival times of a capture through a USB adapter or a pty, on a busy machine, are
+#: good to some ms only
+LATE_FLOOR_S = 0.02
+#: the reply statuses a trigger can name (fdl/frames.py RESPONSE_NAMES)
+STATUS_KINDS = {F.RS: "rs", F.RR: "rr", F.NR: "nr", F.UE: "ue"}
+
+
+class Note(NamedTuple):
+    """Something that happened on the line (notes=True): kind (lost, back, rs, rr, nr, ue, diag,
+    fcs, framing, cycle), the station (None: bus-wide), the time, the evidence in words and a
+    figure (cycle: the interval in seconds)."""
+    kind: str
+    station: int | None
+    t: float
+    text: str
+    value: float | None = None
+
+
+def slot_s(baud: int | None) -> float:
+    try:
+        return BusParams.for_baud(baud).tsl / baud if baud else 0.0
+    except (KeyError, ValueError):             # not a PROFIBUS rate: no slot time
+        return 0.0
+
+
+def bus_load_percent(octets: int, seconds: float, baud: int | None) -> float | None:
+    """Busy bit times / elapsed bit times, in percent: octets x 11 bit / (baud x seconds)."""
+    if not baud or seconds <= 0:
+        return None
+    return round(100.0 * octets * BITS_PER_OCTET / (baud * seconds), 2)
 
 
 @dataclass
@@ -67,6 +114,20 @@ class StationLive:
     last_dx_t: float | None = None
     was_dx: bool = False
     drive: dict = field(default_factory=dict)     # the last decoded request / response (--station)
+    silent: int = 0                  # requests unanswered in a row
+    lost: bool = False               # lost (LOST_AFTER unanswered, or left data exchange), not back
+    lost_in_dx: bool = False         # ... and it was in data exchange then
+    last_answer_t: float | None = None   # None: it never answered
+    prev_req_t: float | None = None  # the request to it before the last one
+    last_req_t: float | None = None
+    wd_s: float | None = None        # the watchdog from its last Set_Prm (None: off / not seen)
+    wd_expiries: list = field(default_factory=list)   # (t, silence s, watchdog s), the last few
+    diag: bytes | None = None        # its last Slave_Diag answer
+    diag_idents: set = field(default_factory=set)
+    sets_prm_from: set = field(default_factory=set)   # masters that sent it Set_Prm
+    statuses: dict = field(default_factory=dict)      # rs/rr/nr/ue answers counted
+    late: int = 0                    # replies later than LiveList.late_s (request -> reply)
+    late_max: float = 0.0            # the latest of them (s)
 
     def as_dict(self) -> dict:
         d = {"station": self.address, "state": self.state,
@@ -88,13 +149,32 @@ class _Pending:
 class LiveList:
     """feed() every captured frame; snapshot() the list as a dict."""
 
-    def __init__(self):
+    def __init__(self, baud: int | None = None, notes: bool = False,
+                 cycle_limit_s: float = float("inf"),
+                 explain: Callable[[LiveList], list[dict[str, Any]]] | None = None):
         self.stations: dict[int, StationLive] = {}
         self.masters: set[int] = set()
         self.frames = 0
         self.tokens = 0
+        self.octets = 0
+        self._bad = 0                                 # framing errors, all kinds
+        self.baud = baud
         self.errors: dict[str, int] = {}
+        self.token_from: dict[int, int] = {}          # tokens passed by each master
+        self.rotation: dict[int, _Cycle] = {}         # token rotation per master
+        self._token_t: dict[int, float] = {}
+        self.notes: list[Note] | None = [] if notes else None
+        self.cycle_limit_s = cycle_limit_s
+        #: the likely causes in a snapshot (bustools/causes.py causes_json; None: not asked for)
+        self.explain = explain
+        #: a reply later than this is counted late (the slot time, at least LATE_FLOOR_S)
+        self.late_s = max(LATE_FLOOR_S, slot_s(baud))
         self._pending: _Pending | None = None
+
+    def _note(self, kind: str, station: int | None, t: float, text: str,
+              value: float | None = None) -> None:
+        if self.notes is not None:
+            self.notes.append(Note(kind, station, t, text, value))
 
     def station(self, address: int) -> StationLive:
         st = self.stations.get(address)
@@ -105,10 +185,16 @@ class LiveList:
     # -- feeding ---------------------------------------------------------------------------------
     def feed(self, c) -> None:
         self.frames += 1
+        self.octets += len(c.raw)
         f = c.frame
         if f is None:
             kind = c.error.split(":", 1)[0].strip() or "error"
             self.errors[kind] = self.errors.get(kind, 0) + 1
+            self._bad += 1
+            if self.notes is not None and self.frames > self._bad:      # a whole frame before it
+                # (octets before the first whole frame are the tail of one the capture joined)
+                self._note("fcs" if kind == F.FrameError.FCS else "framing", None, c.t,
+                           f"{c.error} ({len(c.raw)} octets: {c.raw[:12].hex(' ')})")
             if self._pending is not None and kind != F.FrameError.GARBAGE:
                 self._pending.station.counters["illegal"] += 1     # its reply came corrupt
                 self._pending = None
@@ -116,7 +202,12 @@ class LiveList:
         if f.sd == F.SD4:
             self.tokens += 1
             self.masters.add(f.sa)
-            self._no_answer()
+            self.token_from[f.sa] = self.token_from.get(f.sa, 0) + 1
+            last = self._token_t.get(f.sa)
+            if last is not None:
+                self.rotation.setdefault(f.sa, _Cycle()).add(c.t - last)
+            self._token_t[f.sa] = c.t
+            self._no_answer(c.t)
             return
         if f.sd == F.SC:
             self._answered(c, high=False)
@@ -124,16 +215,51 @@ class LiveList:
         if f.is_request:
             self._request(c, f)
         elif self._pending is not None and self._pending.station.address == f.sa:
-            self._answered(c, high=f.fc & 0x0F in (F.DH, F.RDH))
+            status = f.fc & 0x0F
+            if status in STATUS_KINDS:
+                self._status(c, self._pending.station, status)
+            if f.ssap == _SAP_DIAG and len(f.data) >= 6:
+                self._diag(c, self._pending.station, bytes(f.data))
+            self._answered(c, high=status in _HIGH)
         else:
             self._pending = None           # a reply nobody is waiting for (another master's?)
 
-    def _no_answer(self) -> None:
+    def _status(self, c, st: StationLive, status: int) -> None:
+        kind = STATUS_KINDS[status]
+        st.statuses[kind] = st.statuses.get(kind, 0) + 1
+        if status == F.RS and st.wd_s is not None and _gap(st) > st.wd_s:
+            self._wd_expired(c.t, st)
+        self._note(kind, st.address, c.t, f"station {st.address} answered "
+                   f"{F.RESPONSE_NAMES.get(status, status)}")
+
+    def _wd_expired(self, t: float, st: StationLive) -> None:
+        assert st.wd_s is not None
+        st.wd_expiries = (st.wd_expiries + [(round(t, 6), round(_gap(st), 6), st.wd_s)])[-5:]
+
+    def _diag(self, c, st: StationLive, data: bytes) -> None:
+        st.diag_idents.add(data[4] << 8 | data[5])
+        old, st.diag = st.diag, data
+        if old is None or self.notes is None:
+            return
+        # octet 3 is the master's address, octets 4..5 the ident: the rest is the station's state
+        key_old, key_new = old[:3] + old[6:], data[:3] + data[6:]
+        if key_old != key_new:
+            self._note("diag", st.address, c.t, f"station {st.address} diagnosis changed: "
+                       f"{diag_change(old, data)}")
+
+    def _no_answer(self, t: float) -> None:
         p = self._pending
         if p is not None:
-            p.station.counters["no_answer"] += 1
-            p.station.state = NO_ANSWER
+            st = p.station
+            st.counters["no_answer"] += 1
+            st.state = NO_ANSWER
+            st.silent += 1
             self._pending = None
+            if st.silent == LOST_AFTER and st.last_answer_t is not None and not st.lost:
+                st.lost, st.lost_in_dx = True, st.was_dx
+                since = "" if st.last_answer_t is None else f"; last answer at {st.last_answer_t:.3f} s"
+                self._note("lost", st.address, t, f"station {st.address} stopped answering: "
+                           f"{LOST_AFTER} requests in a row unanswered{since}")
 
     def _answered(self, c, high: bool) -> None:
         p = self._pending
@@ -141,6 +267,19 @@ class LiveList:
         if p is None:
             return
         st = p.station
+        st.silent = 0
+        st.last_answer_t = c.t
+        d = c.t - p.t
+        if d > self.late_s:
+            # request -> reply: from the request's arrival to the reply's first octet on the line
+            d -= len(c.raw) * BITS_PER_OCTET / self.baud if self.baud else 0.0
+            if d > self.late_s:
+                st.late += 1
+                st.late_max = max(st.late_max, d)
+        if st.lost and (p.dx or not st.lost_in_dx):
+            st.lost = False
+            self._note("back", st.address, c.t, f"station {st.address} is back"
+                       + (" in data exchange" if p.dx else " (answers again)"))
         if p.dx:
             st.exchanges += 1
             st.was_dx = True
@@ -149,12 +288,13 @@ class LiveList:
             st.state = SEEN
 
     def _request(self, c, f: F.Frame) -> None:
-        self._no_answer()
+        self._no_answer(c.t)
         self.masters.add(f.sa)
         if f.da == F.BROADCAST:
             return
         st = self.station(f.da)
         st.master = f.sa
+        st.prev_req_t, st.last_req_t = st.last_req_t, c.t
         fn = f.function
         if fn in _SRD_SDA:
             if f.fcv and st.last_fcb is not None and f.fcb == st.last_fcb:
@@ -169,19 +309,32 @@ class LiveList:
         if dx:
             if not retry:
                 if st.last_dx_t is not None:
-                    st.cycle.add(c.t - st.last_dx_t)
+                    dt = c.t - st.last_dx_t
+                    st.cycle.add(dt)
+                    if dt > self.cycle_limit_s:
+                        self._note("cycle", st.address, c.t, f"station {st.address}: "
+                                   f"{dt * 1000:.1f} ms between two Data_Exchange", dt)
                 st.last_dx_t = c.t
         elif f.dsap == S.SAP_SET_PRM:
             st.last_dx_t = None
+            st.sets_prm_from.add(f.sa)
             status = f.data[0] if f.data else 0
             if len(f.data) >= 6:
                 st.ident = f.data[4] << 8 | f.data[5]
+            if len(f.data) >= 3:
+                st.wd_s = (f.data[1] * f.data[2] * 0.01) if status & 0x08 else None
             if status & 0x40 and not status & 0x80:
                 st.state = RELEASED
                 st.was_dx = False
             else:
                 if st.was_dx and not retry:
                     st.counters["reparams"] += 1
+                    if st.wd_s is not None and _gap(st) > st.wd_s:
+                        self._wd_expired(c.t, st)
+                    if not st.lost:
+                        st.lost, st.lost_in_dx = True, True
+                        self._note("lost", st.address, c.t, f"station {st.address} left data "
+                                   f"exchange: master {f.sa} parameterises it again")
                 st.was_dx = False
                 st.state = PARAMETERISING
         elif f.dsap == S.SAP_CHK_CFG:
@@ -202,8 +355,42 @@ class LiveList:
         return {"min": round(min(x.lo for x in cs), 6), "mean": round(sum(x.total for x in cs) / n, 6),
                 "max": round(max(x.hi for x in cs), 6)}
 
+    def bus_load(self, t: float) -> float | None:
+        """The bus load in percent from the capture's start to `t` (seconds since the start);
+        None: baud rate unknown."""
+        return bus_load_percent(self.octets, t, self.baud)
+
+    def token_rotation(self) -> dict | None:
+        """The token rotation of the master that passed the most tokens: {min, mean, max, n}."""
+        if not self.rotation:
+            return None
+        m = max(self.rotation, key=lambda a: self.rotation[a].n)
+        return self.rotation[m].as_dict()
+
     def snapshot(self, t: float) -> dict:
-        return {"t_s": round(t, 3), "frames": self.frames, "tokens": self.tokens,
+        snap = {"t_s": round(t, 3), "frames": self.frames, "tokens": self.tokens,
                 "masters": sorted(self.masters), "cycle_s": self.bus_cycle(),
+                "bus_load_percent": self.bus_load(t), "token_rotation_s": self.token_rotation(),
                 "errors": dict(sorted(self.errors.items())),
                 "stations": [s.as_dict() for _, s in sorted(self.stations.items())]}
+        if self.explain is not None:
+            snap["causes"] = self.explain(self)
+        return snap
+
+
+def _gap(st: StationLive) -> float:
+    """The master's silence towards a station before its last request (0: no earlier request)."""
+    return 0.0 if st.prev_req_t is None or st.last_req_t is None else st.last_req_t - st.prev_req_t
+
+
+def diag_change(old: bytes, new: bytes) -> str:
+    """What changed between two Slave_Diag answers, in the standard's bit names."""
+    parts = []
+    for i, names in enumerate((S.ST1_BITS, S.ST2_BITS, S.ST3_BITS)):
+        for bit, name in enumerate(names):
+            was, now = old[i] >> bit & 1, new[i] >> bit & 1
+            if was != now and name not in ("always 1", "reserved"):
+                parts.append(("+" if now else "-") + name)
+    if old[6:] != new[6:]:
+        parts.append(f"extended diagnosis {old[6:].hex(' ') or '-'} -> {new[6:].hex(' ') or '-'}")
+    return ", ".join(parts) or "no change"

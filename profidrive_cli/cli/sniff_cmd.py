@@ -44,13 +44,30 @@ def _line(c) -> str:
 @click.option("--gsd-dir", metavar="DIR", default=None, expose_value=False,    # read by cli/sniff_view.py
               callback=lambda c, _, v: c.meta.update({"pdrive.gsd_dir": v}),
               help="Your GSD files (searched before the library): every slave's data by module.")
+@click.option("--ring", type=float, default=None, metavar="SECONDS",
+              help="Black-box recorder: keep the last SECONDS of telegrams and write one pcap per "
+                   "event (--trigger) with them and --after seconds after it; runs until Ctrl-C "
+                   "unless --duration is given.")
+@click.option("--trigger", "triggers", multiple=True, metavar="EXPR",
+              help="With --ring: what makes an event, e.g. 'lost(*),fault(7),cycle>20ms' "
+                   "(docs/commands.md). Repeatable.")
+@click.option("--after", "after_s", type=float, default=None, metavar="SECONDS",
+              help="With --ring: seconds recorded after an event (default: the ring's).")
+@click.option("--out", "out_dir", default=None, metavar="DIR|PATTERN",
+              help="With --ring: a directory, or a file pattern with {n} or {time} (default: .).")
 @bus_options
-def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, live):
+def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, live, ring,
+              triggers, after_s, out_dir):
     """Passive capture: one line per frame (time, SD, SA->DA, SAPs, FC in words, service, DU).
 
     --pcap and --raw files are written beside the target and replace it only when the capture
     ended well (also by Ctrl-C); on an error an existing file stays as it was.
     """
+    if ring is not None or triggers or after_s is not None or out_dir is not None:
+        from profidrive_cli.cli.sniff_ring import run_ring
+        return run_ring(opts, ring, triggers, after_s, out_dir, stations, duration, linktype,
+                        others={"--pcap": pcap_file, "--raw": raw_out, "--from-file": raw_file,
+                                "--live": live})
     if raw_out is not None and raw_file:
         raise UsageError("--raw writes what is received from a port; with --from-file there is nothing "
                          "to receive")
@@ -62,7 +79,7 @@ def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, 
     for f in files:
         check_output_path(f.path, f.what)
     cap = Capture()
-    view = _view(stations, live, opts.json)
+    view = _view(stations, live, opts.json, opts if live else None)
     # read (and check) the input before anything is written
     raw = read_input_file(raw_file, "raw capture", MAX_CAPTURE_BYTES) if raw_file else None
     # pcap times are wall clock: the capture's start (for --from-file: when the raw file was last
@@ -133,11 +150,12 @@ def _truncated(cap):
     return Captured(cap._t, raw, None, "truncated frame at end of input")
 
 
-def _view(stations, live, as_json):
+def _view(stations, live, as_json, opts=None):
     """How each frame is shown: one line / JSON object (with --station the drives' words), or the
-    --live list."""
+    --live list (its bus load figured at the baud rate `opts` give)."""
+    from profidrive_cli.cli.sniff_ring import listen_baud
     from profidrive_cli.cli.sniff_view import SniffView
-    return SniffView(stations, live, as_json)
+    return SniffView(stations, live, as_json, baud=listen_baud(opts) if opts is not None else None)
 
 
 def _listen_start(link) -> None:

@@ -25,15 +25,17 @@ DECODED_INDENT = " " * 16
 
 class SniffView:
     def __init__(self, station_specs=(), live: bool = False, as_json: bool = False,
-                 refresh_s: float = REFRESH_S, gsd_dir: str | None = None):
+                 refresh_s: float = REFRESH_S, gsd_dir: str | None = None,
+                 baud: int | None = None):
         self.decoder = None
         if station_specs:
             from profidrive_cli.bustools.passive import PassiveDecoder, watch_list
             self.decoder = PassiveDecoder(watch_list(station_specs))
         self.live = None
         if live:
+            from profidrive_cli.bustools.causes import causes_json
             from profidrive_cli.bustools.passive_live import LiveList
-            self.live = LiveList()
+            self.live = LiveList(baud=baud, explain=causes_json)
         self.as_json = as_json
         self.refresh_s = refresh_s
         self._shown_at: float | None = None
@@ -195,8 +197,14 @@ def _caption(snap: dict) -> str:
     c = snap["cycle_s"]
     errs = ", ".join(f"{k} {v}" for k, v in snap["errors"].items()) or "none"
     masters = ", ".join(map(str, snap["masters"])) or "none seen"
+    load = snap.get("bus_load_percent")
+    rot = snap.get("token_rotation_s")
+    causes = "".join(f"\nlikely: {x['title']} ({'; '.join(x['evidence'])})"
+                     for x in snap.get("causes", []))
     return (f"{snap['frames']} frames in {snap['t_s']:.1f} s; master(s) {masters}; master cycle "
-            f"min/mean/max {_ms(c, 'min')}/{_ms(c, 'mean')}/{_ms(c, 'max')} ms; framing errors: {errs}")
+            f"min/mean/max {_ms(c, 'min')}/{_ms(c, 'mean')}/{_ms(c, 'max')} ms; token rotation "
+            f"{_ms(rot, 'min')}/{_ms(rot, 'mean')}/{_ms(rot, 'max')} ms; bus load "
+            f"{'-' if load is None else f'{load:.1f} %'}; framing errors: {errs}{causes}")
 
 
 def live_table(snap: dict):

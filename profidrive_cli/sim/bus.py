@@ -212,6 +212,8 @@ class SimBus:
         if req.sd in (F.SC, F.SD4) or not req.is_request:
             return None          # tokens, replies of other stations: nothing for a slave to do
         self.stats.requests += 1
+        if self.faults is not None and self.faults.unplugs:
+            self.faults.on_telegram(self, t)
         if self.log is not None:
             self.log.append((t - (self.params.chars(len(F.encode(req))) if self.wire else 0.0),
                              "M", F.encode(req)))

@@ -14,6 +14,8 @@ its drive. A seeded random generator makes runs repeat. URL keys (rates are prob
                   slot of a request to an address where no station is (issue 26: `scan` must not
                   list it as a station)
     only=3,5      limit injection to these stations     seed=N        random seed
+    unplug=3@5[-8]       station 3 is unplugged 5 s after the bus's first telegram (and plugged
+                  in again at 8 s): it answers nothing meanwhile; repeat the key or use ',' for more
 
 Python API: FaultPlan(rates, seed, only, late_s, trip_codes); plan.inject_next(station, kind) queues
 a one-shot injection for the next reply (or Data_Exchange) of that station where it applies.
@@ -37,6 +39,7 @@ import random
 
 from profidrive_cli import UsageError
 from profidrive_cli.fdl import frames as F
+from profidrive_cli.sim.slave import DATA_EXCH
 
 REPLY_KINDS = ("noise", "flip", "drop", "late", "wrongsa")
 STATION_KINDS = ("powercycle", "drivetrip")
@@ -47,7 +50,7 @@ SILENT_KINDS = ("phantom",)
 ALL_KINDS = KINDS + SILENT_KINDS
 #: the lone octet a phantom injects: the short acknowledgement SC (fdl/frames.py SC)
 PHANTOM_OCTETS = bytes((F.SC,))
-URL_KEYS = ALL_KINDS + ("only", "late_ms", "tripcode")
+URL_KEYS = ALL_KINDS + ("only", "late_ms", "tripcode", "unplug")
 
 #: alarm used by drivetrip when no tripcode is given: the first of these the profile knows
 DEFAULT_TRIP_CODES = ("OC1", "OC", "E01", "EF0")
@@ -86,6 +89,9 @@ class FaultPlan:
         self.queue: list[tuple[int, str]] = []
         #: (time, station, kind) of every injection, for a test that wants to look closer
         self.history: list[tuple[float, int, str]] = []
+        #: timed unplugs: station -> (from, until or None), seconds after the first telegram
+        self.unplugs: dict[int, tuple[float, float | None]] = {}
+        self.t0: float | None = None
 
     # -- API ------------------------------------------------------------------------------------
     def inject_next(self, station: int, kind: str) -> None:
@@ -121,6 +127,27 @@ class FaultPlan:
             if r and self.rng.random() < r and applicable(kind):
                 return kind
         return None
+
+    def on_telegram(self, bus, t: float) -> None:
+        """Every request on the bus: unplug (power off, silent) or plug in the stations of
+        `unplugs` whose time has come (counted as kind "unplug" / "replug")."""
+        if self.t0 is None:
+            self.t0 = t
+        rel = t - self.t0
+        for a, (start, end) in self.unplugs.items():
+            s = bus.slaves.get(a)
+            if s is None or rel < start:
+                continue
+            off = end is None or rel < end
+            if off and s.powered:
+                if s.state == DATA_EXCH:
+                    s.model.on_leave_data_exchange(t, "unplugged")
+                s.powered = False
+                self._count(a, "unplug", t)
+            elif not off and not s.powered:
+                s.power_on(t)
+                s.powered = True
+                self._count(a, "replug", t)
 
     def on_request(self, bus, slave, req, t: float) -> None:
         """A new Data_Exchange request to `slave` in data exchange, before the slave handles it."""
@@ -197,6 +224,26 @@ def plan_from_query(q: dict[str, list[str]], seed: int = 1) -> FaultPlan:
         if not code.strip():
             raise UsageError(f"sim URL: tripcode={v} must be ADDRESS:CODE")
     try:
-        return FaultPlan(rates, seed=seed, only=only, late_s=late_s, trip_codes=codes)
+        plan = FaultPlan(rates, seed=seed, only=only, late_s=late_s, trip_codes=codes)
     except ValueError as e:
         raise UsageError(f"sim URL: {e}") from None
+    for v in q.get("unplug", []):
+        plan.unplugs.update(_unplugs(v))
+    return plan
+
+
+def _unplugs(v: str) -> dict[int, tuple[float, float | None]]:
+    """unplug=3@5 or 3@5-8 (seconds after the first telegram; an 's' may follow), ',' between."""
+    out: dict[int, tuple[float, float | None]] = {}
+    for item in filter(None, (x.strip() for x in v.split(","))):
+        addr, at, when = item.partition("@")
+        start, dash, end = when.replace("s", "").partition("-")
+        try:
+            a, t0, t1 = int(addr), float(start), (float(end) if dash else None)
+        except ValueError:
+            a, t0, t1 = -1, -1.0, None
+        if not at or not 0 <= a <= 125 or t0 < 0 or (t1 is not None and t1 <= t0):
+            raise UsageError(f"sim URL: unplug={v} must be ADDRESS@SECONDS[-SECONDS], e.g. "
+                             f"unplug=3@5 or unplug=3@5-8")
+        out[a] = (t0, t1)
+    return out

@@ -12,6 +12,8 @@
     sim://?tsdr=30                           stations answer 30 bit times after a request (at least
                                              the min TSDR of Set_Prm; default 11)
     sim://?drop=0.01&powercycle=0.001&...    fault injection (keys in sim/faults.py)
+    sim://?unplug=3@5-8                      station 3 unplugged 5 s after the bus's first telegram,
+                                             plugged in again at 8 s (sim/faults.py)
     sim://?trip=3:OC1                        station 3 starts tripped with alarm OC1
     sim://?set=7:A1-02=3,C1-01=2             station 7 starts with these settings (engineering units)
     sim://?faults=6:E01,E05                  station 6's fault history pre-filled (repeat the key per station)
@@ -282,6 +284,9 @@ def build_bus(url: str, now: float = 0.0, default_baud: int = 19200) -> SimBus:
     plan = faults_mod.plan_from_query(q, seed=seed) if fault_keys else None
     if plan is not None:
         _check_trip_codes(plan, addrs, faults_mod)
+        for a in plan.unplugs:
+            if a not in addrs:
+                raise UsageError(f"sim URL: unplug={a}@...: no station {a} on the bus")
     return SimBus(slaves, baud=baud, timing=timing, tsdr_bits=tsdr, faults=plan)
 
 
