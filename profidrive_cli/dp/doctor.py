@@ -298,7 +298,7 @@ def _windows(port: str, baud: int, master: int, probe: int, rs485: bool, listen_
              station: int | None, winreg) -> Report:
     """A COM port: listed by Windows (no device file, no permission bits), the FTDI latency timer
     from the registry (dp/winports.py), then the same open / baud / echo / round-trip checks."""
-    from profidrive_cli.dp.winports import HOW_TO_LOWER, ftdi_latency
+    from profidrive_cli.dp.winports import HOW_TO_LOWER, ftdi_latency, usb_adapter
     rep = Report(port, "serial")
     found = com_ports()
     if port.strip().upper() not in {p.upper() for p in found}:
@@ -306,16 +306,21 @@ def _windows(port: str, baud: int, master: int, probe: int, rs485: bool, listen_
     rep.add("permission", SKIP, "Windows: no device-file permissions (a port another program holds "
             "fails to open below)", access=True)
     key, latency = ftdi_latency(port, winreg)
+    usb = usb_adapter(port, winreg) if latency is None else None
     if latency is not None:
         rep.add("adapter", INFO, "USB serial adapter, driver FTDI (FTDIBUS)", driver="FTDIBUS", usb=True)
         _latency_row(rep, latency, key or "", HOW_TO_LOWER)
+    elif usb is not None:
+        rep.add("adapter", INFO, f"USB serial adapter {usb.chip} (VID {usb.vid}, PID {usb.pid})",
+                driver=None, usb=True)
+        rep.add("latency_timer", INFO, f"{usb.chip}: {usb.latency}", path=usb.key, ms=None)
     else:
-        rep.add("latency_timer", SKIP, "no FTDI adapter on this port in the registry (another "
-                "driver's latency setting, if it has one, is in its own Advanced port settings)",
-                path=None, ms=None)
+        rep.add("latency_timer", SKIP, "no USB adapter on this port in the registry (a native "
+                "port, or a driver that keeps its ports elsewhere: a latency setting, if it has one, "
+                "is in its own Advanced port settings)", path=None, ms=None)
     _on_the_line(rep, port, baud, rs485, master, probe, listen_s, station,
                  lambda ser: parity_check(rep, ser))
-    _recommend(rep, baud, latency is not None, latency)
+    _recommend(rep, baud, latency is not None or usb is not None, latency)
     return rep
 
 
