@@ -318,7 +318,8 @@ class SerialLink(Link):
     _pending: bytes = b""
     echo_errors: int = 0
 
-    def __init__(self, port: str, baud: int = 19200, rs485: bool = False, echo: Echo = "auto"):
+    def __init__(self, port: str, baud: int = 19200, rs485: bool = False,
+                 echo: bool | str = "auto"):
         #: the last octets read (for the message when the other end closes the connection)
         self._recent = b""
         self.name = port
