@@ -256,3 +256,28 @@ def test_scan_through_an_echoing_adapter_needs_no_echo_option(tmp_path):
         for p in (p1, p2):
             p.terminate()
             p.wait(5)
+
+
+@pytest.mark.parametrize("args,expect", [((), "auto"), (("--echo",), True), (("--echo", "on"), True),
+                                          (("--echo", "off"), False), (("--echo", "AUTO"), "auto")])
+def test_the_echo_option_reaches_the_link(monkeypatch, args, expect):
+    import profidrive_cli.link as L
+    from profidrive_cli.cli.main import cli
+    seen = []
+    real = L.open_link
+
+    def spy(port, baud=19200, rs485=False, echo="auto"):
+        seen.append(echo)
+        return real(port, baud, rs485=rs485, echo=echo)
+    monkeypatch.setattr(L, "open_link", spy)
+    r = CliRunner().invoke(cli, ["scan", "--port", "sim://", "--from", "3", "--to", "3", "--quick",
+                                 "--json", *args])
+    assert seen == [expect], r.output
+    assert SerialLink("sim://", echo=expect).echo_mode == expect
+
+
+def test_the_api_finds_out_by_default():
+    import profidrive_cli as pdrive
+    with pdrive.open_bus("sim://") as bus:
+        link = bus.master.link
+        assert link.echo_mode == "auto" and link.echo_detected is False     # sim://: no echo
