@@ -85,6 +85,9 @@ def test_quiet_pty_no_echo(socat_pair):
     assert c["echo"]["sent"] == "10 7e 02 49 c9 16"           # FDL status to 126 from 2
     assert data["recommend"]["slot_time"] == 100 and data["recommend"]["retries"] == 1
     assert "--echo" not in data["recommend"]["options"]
+    # no echo, no station: the turnaround cannot be measured, and nothing is claimed
+    assert c["turnaround"]["status"] == "info" and c["turnaround"]["method"] is None
+    assert c["request gap"]["status"] == "info" and "faster than the wire" in c["request gap"]["detail"]
 
 
 def _echoer(path, stop, busy=False):
@@ -116,9 +119,19 @@ def test_echoing_adapter_is_detected(socat_pair):
         t.join(2)
     data = json.loads(r.output)
     c = checks(data)
-    assert c["echo"]["status"] == "warn" and c["echo"]["echo"] is True
-    assert "use --echo" in c["echo"]["detail"]
+    # (was "warn": since issue 26 every bus command finds the echo itself (--echo auto): a fact, not
+    # a problem)
+    assert c["echo"]["status"] == "info" and c["echo"]["echo"] is True
+    assert "use --echo" in c["echo"]["detail"] and "--echo auto, the default" in c["echo"]["detail"]
     assert data["recommend"]["options"].endswith("--echo")
+    # the turnaround timed by the echo, the request gap back to back: a pty echoes at once and
+    # buffers, so no figure for a line and no verdict
+    assert c["turnaround"]["method"] == "echo" and c["turnaround"]["status"] == "info"
+    assert "no real line" in c["turnaround"]["detail"]
+    assert c["request gap"]["status"] == "info" and len(c["request gap"]["gap_s"]) == 8
+    assert c["request gap"]["wire_bits"] == 66 and c["request gap"]["tsyn_bits"] == 33
+    from test_json_contract import assert_contract
+    assert_contract(data, "doctor")                   # every key of the new rows is in docs/json.md
 
 
 def test_busy_line_is_not_transmitted_on(socat_pair):
@@ -145,6 +158,11 @@ def test_station_behind_the_pty_answers_the_probe(socat_pair):
         r = run("--port", b, "--json", "--listen", "0.1", "--probe-address", "5")
         c = checks(json.loads(r.output))
         assert c["echo"]["status"] == "ok" and "station 5 answered (slave)" in c["echo"]["detail"]
+        # the probe address answered: no requests back to back to it; the round trip bounds the
+        # turnaround (a pty: sooner than the wire, or the figure; never a claim about a line)
+        assert c["request gap"]["status"] == "skip"
+        assert c["turnaround"]["method"] == "round trip"
+        assert c["turnaround"]["station"] == c["round trip"]["station"]
         r = run("--port", b, "--listen", "0.1")
         # a pty: the standard slot time (100 bit at 19.2k) and 1 retry — unless the round trip
         # measured on this (loaded) machine needs more, which doctor then says with the figure

@@ -10,6 +10,8 @@ theirs (%APPDATA%)."""
 import ast
 from pathlib import Path
 
+import pytest
+
 PKG = Path(__file__).resolve().parent.parent / "profidrive_cli"
 POSIX_ONLY = {"termios", "fcntl", "pty", "tty", "resource", "grp", "pwd"}
 
@@ -205,3 +207,52 @@ def test_the_pty_tests_are_the_ones_skipped_where_there_are_no_ptys():
     assert needs_pty((here / "test_run_safety.py").read_text(encoding="utf-8"))
     assert not needs_pty((here / "test_fdl_frames.py").read_text(encoding="utf-8"))
     assert not needs_pty((here / "test_config.py").read_text(encoding="utf-8"))
+
+
+# -- adapters other than FTDI: the chip from the registry's Enum\USB, and what its driver offers ----
+
+def usb_port(port_name, vid, pid, instance="5&1a2b3c&0&2"):
+    """The registry keys of a USB serial adapter's COM port (Enum\\USB\\VID_x&PID_y\\<instance>\\
+    Device Parameters, PortName), with the parent keys the walk opens."""
+    from profidrive_cli.dp.winports import USB
+    dev = f"{USB}\\VID_{vid}&PID_{pid}"
+    return {USB: {}, dev: {}, f"{dev}\\{instance}": {},
+            f"{dev}\\{instance}\\Device Parameters": {"PortName": port_name}}
+
+
+@pytest.mark.parametrize("vid,pid,chip", [
+    # vendor IDs as in the Linux drivers' id tables (ch341.c 0x1a86/0x7523, pl2303.h 0x067b/0x2303,
+    # cp210x.c 0x10c4/0xea60)
+    ("1A86", "7523", "CH340/CH341 (WCH)"),
+    ("067B", "2303", "Prolific PL2303"),
+    ("10C4", "EA60", "Silicon Labs CP210x"),
+])
+def test_a_non_ftdi_adapter_is_named_and_has_no_latency_setting(monkeypatch, vid, pid, chip):
+    from profidrive_cli.dp.winports import USB, usb_adapter
+    keys = {**usb_port("COM4", vid, pid), **usb_port("COM5", "2341", "0043", "other")}
+    found = usb_adapter("com4", FakeWinreg(keys))
+    assert (found.vid, found.pid, found.chip) == (vid, pid, chip)
+    assert found.key == f"HKLM\\{USB}\\VID_{vid}&PID_{pid}\\5&1a2b3c&0&2\\Device Parameters"
+    checks = _doctor(monkeypatch, "COM4", keys, ports=("COM4",))
+    assert checks["adapter"].data == {"driver": None, "usb": True}
+    assert chip in checks["adapter"].detail
+    lt = checks["latency_timer"]
+    assert lt.status == "info" and lt.data["ms"] is None
+    assert lt.detail == f"{chip}: no latency setting; USB full-speed polling 1 ms"
+
+
+def test_an_unknown_usb_vendor_and_a_native_port():
+    from profidrive_cli.dp.winports import usb_adapter
+    keys = usb_port("COM5", "2341", "0043")
+    assert usb_adapter("COM5", FakeWinreg(keys)).chip == "USB VID 2341"
+    assert usb_adapter("COM1", FakeWinreg(keys)) is None          # not on USB (a native UART)
+    assert usb_adapter("COM5", FakeWinreg({})) is None             # nothing in the registry
+
+
+def test_a_usb_adapter_gets_the_usb_slot_time(monkeypatch):
+    # reference §4.3: slot times as measured for CH341/FT232R adapters, not the standard TSL
+    import profidrive_cli.dp.doctor as D
+    monkeypatch.setattr(D, "com_ports", lambda: ["COM4"])
+    rep = D.diagnose("COM4", 19200, platform="win32", winreg=FakeWinreg(usb_port("COM4", "1A86", "7523")),
+                     listen_s=0.0)
+    assert rep.recommend["slot_time"] == 576          # 30 ms at 19.2k (reference §4.3: 576 bit)

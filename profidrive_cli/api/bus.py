@@ -62,7 +62,7 @@ def _close_at_exit() -> None:
 
 def open_bus(port: str | None = None, *, baud: str | int | None = None,
              master_address: int | None = None, retries: int | None = None,
-             slot_time: int | None = None, rs485: bool = False, echo: bool = False,
+             slot_time: int | None = None, rs485: bool = False, echo: bool | str = "auto",
              allow_real_port_writes: bool = False, handle_signals: bool = True,
              on_message: Callable[[str], None] | None = None,
              env: Mapping[str, str] | None = None) -> "Bus":
@@ -74,7 +74,8 @@ def open_bus(port: str | None = None, *, baud: str | int | None = None,
     manager (or call close()): every drive it started is stopped on the way out (a bus never
     closed: at interpreter exit, with a ResourceWarning). on_message(text): warnings and what the
     safe stop did, one line each (also kept in Drive.warnings); what it raises is raised after the
-    call (after the stop), never inside it. env: the
+    call (after the stop), never inside it. echo: "auto" (a 2-wire adapter's local echo found at
+    the first transmission and dropped), True / False to force it. env: the
     environment read for PDRIVE_PORT, PDRIVE_BAUD, PDRIVE_CONFIG and PDRIVE_STATION (default
     os.environ)."""
     from profidrive_cli.config import resolve
@@ -89,7 +90,7 @@ def open_bus(port: str | None = None, *, baud: str | int | None = None,
 
 
 def _open_master(port: str, baud: str, baud_source: str, address: int, retries: int | None,
-                 slot_time: int | None, rs485: bool, echo: bool) -> "Master":
+                 slot_time: int | None, rs485: bool, echo: bool | str) -> "Master":
     from profidrive_cli.fdl.timing import parse_baud
     from profidrive_cli.link import open_link
     if not 0 <= address <= 125:

@@ -1,5 +1,6 @@
-"""pdrive doctor: check a serial setup (permission, baud rates, USB latency, echo, RS-485) and
-recommend slot time and retries. The checks live in dp/doctor.py; this is rendering only."""
+"""pdrive doctor: check a serial setup (permission, baud rates, USB latency, echo, RS-485, the
+adapter's turnaround and request gap) and recommend slot time and retries. The checks live in
+dp/doctor.py and dp/doctor_timing.py; this is rendering only."""
 
 from __future__ import annotations
 
@@ -15,8 +16,8 @@ _MARK = {"ok": "[green]ok[/green]", "warn": "[yellow]warn[/yellow]", "fail": "[r
 
 @click.command("doctor")
 @click.option("--probe-address", default=126, show_default=True, type=click.IntRange(0, 126),
-              help="Address for the one FDL status request of the echo test (sent only when the "
-                   "line is quiet; pick one no station uses).")
+              help="Address for the FDL status requests of the echo test, the turnaround and the "
+                   "request gap (sent only when the line is quiet; pick one no station uses).")
 @click.option("--station", default=None, type=click.IntRange(0, 126),
               help="Measure the round trip to this station (default: the first that answers an FDL "
                    "status request).")
@@ -25,7 +26,8 @@ _MARK = {"ok": "[green]ok[/green]", "warn": "[yellow]warn[/yellow]", "fail": "[r
 @bus_options
 def doctor_cmd(opts, probe_address, station, listen_s):
     """Check a serial setup for PROFIBUS: permission, DP baud rates, FTDI latency_timer, echo,
-    kernel RS-485; recommend --slot-time and --retries. Without --port: list the ports."""
+    kernel RS-485, the adapter's turnaround and request gap; recommend --slot-time and --retries.
+    Without --port: list the ports."""
     from profidrive_cli.dp.doctor import diagnose
     if opts.trace:
         # doctor tests the port's serial settings with raw octets at several rates, not DP

@@ -2,9 +2,9 @@
 
 diagnose(port, ...) -> Report: can we open the port (and why not: permission, the dialout group),
 which DP baud rates the adapter accepts, the USB adapter's driver and FTDI latency_timer, kernel
-RS-485 support, whether the adapter hears its own transmission (echo), and what slot time and
-retries to use. Nothing here sends more than one telegram: an FDL status request (harmless on a live
-bus) to an address given by the caller, and only when the line was quiet before.
+RS-485 support, whether the adapter hears its own transmission (echo), the adapter's turnaround
+and request-to-request gap (dp/doctor_timing.py), and what slot time and retries to use. It sends
+only FDL status requests (harmless on a live bus), and only when the line was quiet before.
 
 All file-system and ioctl access goes through small functions that take the paths as parameters, so
 the tests can point them at a fake sysfs.
@@ -61,6 +61,8 @@ class Report:
     busy: bool = False
     #: the slowest FDL status round trip measured, seconds
     round_trip_s: float | None = None
+    #: nothing but (at most) the echo came back to the echo check's request: a free address
+    probe_silent: bool = False
 
     def add(self, name: str, status: str, detail: str, **data) -> Check:
         c = Check(name, status, detail, data)
@@ -186,6 +188,7 @@ def diagnose(port: str, baud: int = 19200, master_address: int = 2, probe_addres
             rep.baud_rates[baud] = OK
             _echo(rep, ser, port, baud, master_address, probe_address, listen_s)
             _round_trip(rep, ser, baud, master_address, station)
+            _timing(rep, ser, baud, master_address, probe_address)
             ser.close()
         _recommend(rep, baud, usb=False, latency=None, url=True)
         return rep
@@ -287,6 +290,7 @@ def _on_the_line(rep: Report, port: str, baud: int, rs485: bool, master: int, pr
         platform_checks(ser)
         _echo(rep, ser, port, baud, master, probe, listen_s)
         _round_trip(rep, ser, baud, master, station)
+        _timing(rep, ser, baud, master, probe)
         ser.close()
 
 
@@ -294,7 +298,7 @@ def _windows(port: str, baud: int, master: int, probe: int, rs485: bool, listen_
              station: int | None, winreg) -> Report:
     """A COM port: listed by Windows (no device file, no permission bits), the FTDI latency timer
     from the registry (dp/winports.py), then the same open / baud / echo / round-trip checks."""
-    from profidrive_cli.dp.winports import HOW_TO_LOWER, ftdi_latency
+    from profidrive_cli.dp.winports import HOW_TO_LOWER, ftdi_latency, usb_adapter
     rep = Report(port, "serial")
     found = com_ports()
     if port.strip().upper() not in {p.upper() for p in found}:
@@ -302,16 +306,21 @@ def _windows(port: str, baud: int, master: int, probe: int, rs485: bool, listen_
     rep.add("permission", SKIP, "Windows: no device-file permissions (a port another program holds "
             "fails to open below)", access=True)
     key, latency = ftdi_latency(port, winreg)
+    usb = usb_adapter(port, winreg) if latency is None else None
     if latency is not None:
         rep.add("adapter", INFO, "USB serial adapter, driver FTDI (FTDIBUS)", driver="FTDIBUS", usb=True)
         _latency_row(rep, latency, key or "", HOW_TO_LOWER)
+    elif usb is not None:
+        rep.add("adapter", INFO, f"USB serial adapter {usb.chip} (VID {usb.vid}, PID {usb.pid})",
+                driver=None, usb=True)
+        rep.add("latency_timer", INFO, f"{usb.chip}: {usb.latency}", path=usb.key, ms=None)
     else:
-        rep.add("latency_timer", SKIP, "no FTDI adapter on this port in the registry (another "
-                "driver's latency setting, if it has one, is in its own Advanced port settings)",
-                path=None, ms=None)
+        rep.add("latency_timer", SKIP, "no USB adapter on this port in the registry (a native "
+                "port, or a driver that keeps its ports elsewhere: a latency setting, if it has one, "
+                "is in its own Advanced port settings)", path=None, ms=None)
     _on_the_line(rep, port, baud, rs485, master, probe, listen_s, station,
                  lambda ser: parity_check(rep, ser))
-    _recommend(rep, baud, latency is not None, latency)
+    _recommend(rep, baud, latency is not None or usb is not None, latency)
     return rep
 
 
@@ -439,9 +448,12 @@ def _echo(rep: Report, ser, port: str, baud: int, master: int, probe: int, liste
         if f.sd != F.SC and f.sa == probe and f.da == master and not f.is_request:
             answer = f"station {probe} answered ({F.STATION_TYPES[f.station_type]})"
     data = {"sent": req.hex(" "), "received": got.hex(" "), "echo": echo, "probe_address": probe}
+    rep.probe_silent = not rest
     if echo:
-        rep.add("echo", WARN, f"the adapter hears its own transmission (sent {req.hex(' ')}, read it "
-                f"back): use --echo" + (f"; {answer}" if answer else ""), **data)
+        rep.add("echo", INFO, f"the adapter hears its own transmission (sent {req.hex(' ')}, read it "
+                f"back): bus commands find this at their first transmission and drop the echo "
+                f"(--echo auto, the default); use --echo on to skip the check"
+                + (f"; {answer}" if answer else ""), **data)
     elif answer:
         rep.add("echo", OK, f"no echo; {answer} to an FDL status request", **data)
     elif got:
@@ -528,6 +540,16 @@ def _round_trip(rep: Report, ser, baud: int, master: int, station: int | None) -
                 "port (a simulator, or a converter that answers from a buffer)", **data)
     else:
         rep.add("round trip", OK, text, **data)
+
+
+def _timing(rep: Report, ser, baud: int, master: int, probe: int) -> None:
+    """The turnaround and request-gap rows (dp/doctor_timing.py) after the echo and round trip."""
+    from profidrive_cli.dp.doctor_timing import timing_rows
+    rt = next((c.data for c in rep.checks if c.name == "round trip" and "station" in c.data), None)
+    for name, status, detail, data in timing_rows(
+            ser, baud, master, probe, echo=bool(rep.recommend.get("echo")), busy=rep.busy,
+            probe_silent=rep.probe_silent, round_trip=rt):
+        rep.add(name, status, detail, **data)
 
 
 def _recommend(rep: Report, baud: int, usb: bool, latency: int | None, url: bool = False) -> None:

@@ -1,7 +1,18 @@
 """SerialLink: the Link over any pyserial port — device paths, pyserial URLs and sim://.
 
-8 data bits, even parity, 1 stop bit. Optional kernel RS-485 mode (pyserial RS485Settings) and
-suppression of the adapter's own echo on 2-wire adapters that hear themselves.
+8 data bits, even parity, 1 stop bit. Optional kernel RS-485 mode (pyserial RS485Settings).
+
+Local echo: a 2-wire RS-485 adapter may hear its own transmission (its receiver stays on while it
+sends). echo="auto" (the default) finds this out at the first transmission: when the octets read
+back start with exactly the octets written, the adapter echoes and from then on every write reads
+its echo back before it returns (so the master's reply timeout starts when the line is free); when
+they differ, or nothing comes back, it does not. A slave's answer is never taken for an echo: an
+answer never equals the request (reference §2.2: a request's FC has bit 6 set, a response's has
+it clear, and the FC octet lies inside the first 4 (SD1/SD3) or 7 (SD2) octets compared; an SC
+0xE5 is no start delimiter of a request; an SD1 answer swaps DA and SA, and DA != SA). Octets read
+after the echo (a fast answer in the same USB packet) are kept for the next read(). echo=True /
+False force it on / off (True still counts echoes that do not match: echo_errors). sim:// has no
+echo (decided without asking).
 
 Parity errors: on a POSIX serial device the port checks parity and marks each character that
 arrived with a parity or framing error (termios INPCK + PARMRK, link/parity.py); read() returns it
@@ -15,10 +26,11 @@ bit. Ptys carry no parity (opened without when they refuse it, and never marked)
 from __future__ import annotations
 
 import errno
+import logging
 import os
 import select
 import time
-from typing import Any
+from typing import Any, Literal, Union
 
 import serial
 import serial.rs485
@@ -46,6 +58,16 @@ _GONE = (serial.SerialException, OSError, _TermiosError)
 
 #: the most one read takes from a socket:// port (more than any telegram)
 _SOCKET_CHUNK = 4096
+
+log = logging.getLogger("profidrive_cli.dp")
+
+#: what SerialLink(echo=...) takes: True (the adapter echoes), False (it does not), "auto" (find out)
+Echo = Union[bool, Literal["auto"]]
+
+#: how long after a write its echo may take to come back, beyond the octets' own wire time: a USB
+#: adapter holds received octets up to its latency timer (FTDI: 16 ms by default, reference §4.3),
+#: a TCP converter a few ms more
+ECHO_WAIT_S = 0.05
 
 # sim:// is registered by name: pyserial imports profidrive_cli.sim.protocol_sim only when a sim://
 # URL is opened, so link/ never imports sim/ (the handler lives with the plant it builds)
@@ -290,14 +312,45 @@ def _rate_text(baud: int) -> str:
     return f"{baud / 1e6:g}M" if baud >= 1000000 else f"{baud / 1e3:g}k" if baud >= 1000 else str(baud)
 
 
+def echo_setting(value: object) -> Echo:
+    """"auto" / "on" / "off" (any case; also True / False) -> "auto" / True / False; ValueError else."""
+    if value is True or value is False:
+        return value
+    text = str(value).strip().lower()
+    if text == "auto":
+        return "auto"
+    if text in ("on", "yes", "true", "1"):
+        return True
+    if text in ("off", "no", "false", "0"):
+        return False
+    raise ValueError(f"echo {value!r}: give auto, on or off")
+
+
 class SerialLink(Link):
-    def __init__(self, port: str, baud: int = 19200, rs485: bool = False, echo: bool = False):
+    #: the adapter's echo is read back after every write (True: on, or found by echo="auto")
+    echo: bool = False
+    #: what echo="auto" found at the first transmission: True (the adapter hears itself), False
+    #: (it does not), None (not known yet, or the echo was forced on / off)
+    echo_detected: bool | None = None
+    #: echo="auto" and not decided yet: the next write looks at what comes back
+    _echo_unknown: bool = False
+    #: octets read while looking for the echo that belong to the next read() (an answer)
+    _pending: bytes = b""
+    echo_errors: int = 0
+
+    def __init__(self, port: str, baud: int = 19200, rs485: bool = False,
+                 echo: bool | str = "auto"):
         #: the last octets read (for the message when the other end closes the connection)
         self._recent = b""
         self.name = port
         self.baud = baud
         self.rs485 = rs485
-        self.echo = echo
+        #: the setting asked for: "auto", True or False
+        try:
+            self.echo_mode: Echo = echo_setting(echo)
+        except ValueError as e:
+            raise UsageError(f"{port}: {e}") from None
+        self.echo = self.echo_mode is True
         self.echo_errors = 0
         self.ser: Any = None                # a pyserial port (pyserial has no type hints)
         self._open()
@@ -324,6 +377,13 @@ class SerialLink(Link):
         # without the dispatch on the kind of port for every read
         self._fd_read = (FD_IO and type(self.ser) is serial.Serial and os.name == "posix"
                          and not isinstance(self.ser, _SocketSerial))
+        self._pending = b""
+        if self.echo_mode == "auto":
+            # found out again after a reopen (another adapter may be behind the port now); the
+            # simulator's handler has no echo
+            self.echo = False
+            self.echo_detected = False if self.is_simulator else None
+            self._echo_unknown = not self.is_simulator
 
     def now(self) -> float:
         return self._clock()
@@ -355,23 +415,72 @@ class SerialLink(Link):
                 self.ser.write(data)
             if self.echo:
                 self._swallow_echo(data)
+            elif self._echo_unknown:
+                self._detect_echo(data)
         except serial.SerialTimeoutException:
             raise LinkLost(f"{self.name}: write timed out (adapter gone?)", self.name) from None
         except _GONE as e:
             raise LinkLost(f"{self.name}: port lost while writing: {_why(e)}", self.name) from None
 
+    def _echo_deadline(self, data: bytes) -> float:
+        return self.now() + ECHO_WAIT_S + len(data) * 11 / self.baud
+
     def _swallow_echo(self, data: bytes) -> None:
-        deadline = self.now() + 0.05 + len(data) * 11 / self.baud
+        """Read the echo of `data` back; octets after it (an answer already there) are kept."""
+        deadline = self._echo_deadline(data)
         got = bytearray()
         while len(got) < len(data):
-            chunk = self.read(deadline)
+            chunk = self._read_port(deadline)
             if not chunk:
                 break
             got += chunk
         if bytes(got[:len(data)]) != data:
             self.echo_errors += 1
+        self._pending += bytes(got[len(data):])
+
+    def _detect_echo(self, data: bytes) -> None:
+        """echo="auto", the first transmission: read until what came back either is the whole of
+        `data` (an echo: dropped) or differs from it in an octet (an answer or noise: kept for
+        read()), or until the echo's time is up. Nothing at all by then: no echo. A matching
+        beginning that stops short stays undecided (kept for read(); the next write looks again)."""
+        deadline = self._echo_deadline(data)
+        got = b""
+        while True:
+            n = min(len(got), len(data))
+            if got[:n] != data[:n]:
+                self._echo_found(False, data, got)
+                self._pending += got
+                return
+            if len(got) >= len(data):
+                self._echo_found(True, data, got)
+                self._pending += got[len(data):]
+                return
+            chunk = self._read_port(deadline)
+            if not chunk:
+                if not got:
+                    self._echo_found(False, data, got)
+                self._pending += got
+                return
+            got += chunk
+
+    def _echo_found(self, echo: bool, data: bytes, got: bytes) -> None:
+        self._echo_unknown = False
+        self.echo = self.echo_detected = echo
+        if echo:
+            log.info("%s: the adapter hears its own transmission (local echo of a 2-wire adapter: "
+                     "sent %s, read it back): dropping the echo of every telegram", self.name,
+                     data.hex(" "))
+        else:
+            log.info("%s: no local echo (sent %s, read back %s)", self.name, data.hex(" "),
+                     got.hex(" ") or "nothing")
 
     def read(self, deadline: float) -> bytes:
+        if self._pending:
+            data, self._pending = self._pending, b""
+            return data
+        return self._read_port(deadline)
+
+    def _read_port(self, deadline: float) -> bytes:
         try:
             if self._fd_read:
                 data = _read_fd(self.ser, deadline - self._clock())
@@ -397,6 +506,7 @@ class SerialLink(Link):
         return ""
 
     def flush_input(self) -> None:
+        self._pending = b""
         try:
             if isinstance(self.ser, _SocketSerial):
                 # drop what is there, but remember it: a converter's last words may be in it
