@@ -21,8 +21,9 @@ from profidrive_cli.cli import render_drive as R
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.session import (DriveSession, RestoreInterrupted, RestoreRefused,
                                     SessionTerminated)
+from profidrive_cli.session.dumpfile import write_dump
 from profidrive_cli.session.restore import scope_problem
-from profidrive_cli.outfile import OutputFile, check_output_path
+from profidrive_cli.outfile import check_output_path
 
 
 # =============================================================================================
@@ -166,7 +167,20 @@ def status_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms):
 # =============================================================================================
 
 
-@click.group("param")
+class _ParamGroup(click.Group):
+    """The param group; its `fleet` subgroup (cli/fleet_cmd.py) is loaded when it is asked for."""
+
+    def get_command(self, ctx, name):
+        if name == "fleet":
+            from profidrive_cli.cli.fleet_cmd import fleet_group
+            return fleet_group
+        return super().get_command(ctx, name)
+
+    def list_commands(self, ctx):
+        return sorted([*super().list_commands(ctx), "fleet"])
+
+
+@click.group("param", cls=_ParamGroup)
 def param_group():
     """Read and write drive parameters by their native codes (F03, A004, C1-01, dc-voltage, PNU23[1],
     REG0x0180); dump, restore and compare whole parameter sets."""
@@ -261,15 +275,10 @@ def param_set(opts, args, save, yes, allow_dangerous, profile_name, ppo, fmt, wa
 def param_dump(opts, address, output, changed, profile_name, ppo, fmt, watchdog_ms):
     """Read every readable parameter into a YAML file (with the station's identity and profile).
     An existing file is replaced only when the dump is complete."""
-    import yaml
     check_output_path(output, "-o")             # before the bus is opened
     with _session(opts, address, profile_name, ppo, fmt, watchdog_ms) as s:
         doc = _with_progress(opts, "reading parameters", lambda prog: s.params.dump(prog, changed=changed))
-    with OutputFile(output, "w") as f:
-        f.write(f"# pdrive parameter dump of station {s.address} ({s.profile.title})\n"
-                f"# restore with: pdrive param restore {s.address} {output}\n"
-                f"# the last line must be 'end: pdrive_dump': a file without it is incomplete\n")
-        f.write(yaml.safe_dump(doc, sort_keys=False, allow_unicode=True, width=120))
+    write_dump(doc, output)                     # through outfile.OutputFile
     n_set, n_ro, n_bad = len(doc["parameters"]), len(doc["readonly"]), len(doc.get("unreadable", {}))
     if opts.json:
         d = {"file": output, "station": s.address, "profile": s.profile.name, "settings": n_set,
