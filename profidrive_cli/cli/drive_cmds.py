@@ -18,6 +18,7 @@ from profidrive_cli import BusError, UsageError
 from profidrive_cli.cli.common import (bus_options, confirm_real_port, emit_json, err, out,
                                        station_address)
 from profidrive_cli.cli import render_drive as R
+from profidrive_cli.cli.drive_opts import drive_options   # re-exported: run, jog, commloss-test use it
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.session import (DriveSession, RestoreInterrupted, RestoreRefused,
                                     SessionTerminated)
@@ -29,18 +30,6 @@ from profidrive_cli.outfile import check_output_path
 # =============================================================================================
 # shared options and helpers
 # =============================================================================================
-
-
-def drive_options(f):
-    """--profile, --ppo, --format, --watchdog."""
-    f = click.option("--watchdog", "watchdog_ms", default=500, show_default=True,
-                     type=click.IntRange(10, 650000), help="Slave watchdog in ms (always armed).")(f)
-    f = click.option("--format", "fmt", default=None, metavar="NAME",
-                     help="Layout by name (e.g. extended1, toyo); default: the profile's.")(f)
-    f = click.option("--ppo", type=click.IntRange(1, 5), default=None, help="PPO type N (layout ppoN).")(f)
-    f = click.option("--profile", "profile_name", default=None, metavar="NAME",
-                     help="Drive profile (default: from the station's ident).")(f)
-    return f
 
 
 def _message(text: str) -> None:

@@ -16,7 +16,7 @@ from rich.table import Table
 
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.cli.common import bus_options, emit_json, err, out
-from profidrive_cli.cli.drive_cmds import drive_options
+from profidrive_cli.cli.drive_opts import drive_options
 from profidrive_cli.cli.render_drive import value_text
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.outfile import check_output_path, write_text_atomic
