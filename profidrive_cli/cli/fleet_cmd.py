@@ -56,7 +56,7 @@ def _read_stations(opts, addresses, profile_name, ppo, fmt, watchdog_ms, each):
 @drive_options
 @bus_options
 def fleet_dump(opts, stations, directory, profile_name, ppo, fmt, watchdog_ms):
-    """Dump every station of STATIONS (e.g. 3-7,9) into DIR, one file each (as `param dump`).
+    """Dump every station of STATIONS into DIR, one file each (as `param dump`). STATIONS: 3-7,9.
     Exit 1 when a station could not be read (the others are written)."""
     addresses = fleet.parse_stations(stations)
     paths = {a: Path(directory) / fleet.dump_file_name(a) for a in addresses}
