@@ -7,8 +7,6 @@ command line, asks for confirmation before writing to a real port, and renders (
 from __future__ import annotations
 
 import contextlib
-import functools
-import sys
 
 import click
 from rich.markup import escape
@@ -18,7 +16,8 @@ from profidrive_cli import BusError, UsageError
 from profidrive_cli.cli.common import (bus_options, confirm_real_port, emit_json, err, out,
                                        station_address)
 from profidrive_cli.cli import render_drive as R
-from profidrive_cli.cli.drive_opts import drive_options   # re-exported: run, jog, commloss-test use it
+# re-exported: run, jog, commloss-test use them
+from profidrive_cli.cli.drive_opts import _terminations, drive_options
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.session import (DriveSession, RestoreInterrupted, RestoreRefused,
                                     SessionTerminated)
@@ -59,18 +58,6 @@ def _session(opts, address, profile_name, ppo, fmt, watchdog_ms, *, cycle_hz=0.0
     return opts.open_bus(address).session(
         address, profile=profile_name, layout=layout, ppo=ppo, fmt=fmt, watchdog_ms=watchdog_ms,
         cycle_hz=cycle_hz, before_connect=before, on_message=_message, log_csv=log, own_port=True)
-
-
-def _terminations(f):
-    """SIGTERM (SessionTerminated) -> one line and exit 143; the session has already stopped the drive."""
-    @functools.wraps(f)
-    def wrapper(*a, **kw):
-        try:
-            return f(*a, **kw)
-        except SessionTerminated as e:
-            err.print(f"terminated (signal {e.signum})")
-            sys.exit(128 + int(e.signum))
-    return wrapper
 
 
 @contextlib.contextmanager

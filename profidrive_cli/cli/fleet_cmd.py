@@ -16,7 +16,7 @@ from rich.table import Table
 
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.cli.common import bus_options, emit_json, err, out
-from profidrive_cli.cli.drive_opts import drive_options
+from profidrive_cli.cli.drive_opts import _terminations, drive_options
 from profidrive_cli.cli.render_drive import value_text
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.outfile import check_output_path, write_text_atomic
@@ -55,6 +55,7 @@ def _read_stations(opts, addresses, profile_name, ppo, fmt, watchdog_ms, each):
               help="The directory (it must exist) for one dump file per station (station-NNN.yaml).")
 @drive_options
 @bus_options
+@_terminations
 def fleet_dump(opts, stations, directory, profile_name, ppo, fmt, watchdog_ms):
     """Dump every station of STATIONS into DIR, one file each (as `param dump`). STATIONS: 3-7,9.
     Exit 1 when a station could not be read (the others are written)."""
@@ -92,6 +93,7 @@ def fleet_dump(opts, stations, directory, profile_name, ppo, fmt, watchdog_ms):
 @click.option("--all", "show_all", is_flag=True, help="Show every code, not only those with a finding.")
 @drive_options
 @bus_options
+@_terminations
 def fleet_diff(opts, source, golden, html_path, show_all, profile_name, ppo, fmt, watchdog_ms):
     """Compare a line of drives: the dumps in DIR, or the live STATIONS (e.g. 3-7) on --port. A
     matrix station x code with the odd values (those that differ from the majority of the same
