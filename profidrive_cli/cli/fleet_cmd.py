@@ -38,8 +38,10 @@ def _read_stations(opts, addresses, profile_name, ppo, fmt, watchdog_ms, each):
         for a in addresses:
             defaults = opts.station_defaults(a)
             try:
-                with bus.session(a, profile=profile_name or defaults.get("profile"), ppo=ppo, fmt=fmt,
-                                 watchdog_ms=watchdog_ms, handle_signals=True,
+                # the config file's profile and layout for this station, below the options
+                layout = defaults.get("layout") if ppo is None and fmt is None else None
+                with bus.session(a, profile=profile_name or defaults.get("profile"), layout=layout,
+                                 ppo=ppo, fmt=fmt, watchdog_ms=watchdog_ms, handle_signals=True,
                                  on_message=lambda t: err.print(escape(t))) as s:
                     each(a, s)
             except (BusError, DriveError) as e:
