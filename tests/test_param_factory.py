@@ -116,6 +116,19 @@ def test_groups_and_bus_settings_are_checked_with_file_and_line(tmp_path, groups
     assert words in str(e.value) and f"{path}:{n}" in str(e.value)
 
 
+def test_a_factory_default_outside_the_range_is_refused_with_file_and_line(tmp_path):
+    src = load_profile("yaskawa").path.read_text()
+    bad = src.replace("min: 0, max: 3, access: rw, default: 1, default_source: F7,",
+                      "min: 0, max: 3, access: rw, default: 4, default_source: F7,")
+    assert bad != src                                    # F6-01's entry (0..3, the F7's 1)
+    path = tmp_path / "y.yaml"
+    path.write_text(bad)
+    n = 1 + bad.splitlines().index(next(x for x in bad.splitlines() if "default: 4," in x))
+    with pytest.raises(DataFileError) as e:
+        load_profile_file(path)
+    assert str(e.value) == f"{path}:{n}: F6-01: the factory default 4 is outside 0..3"
+
+
 def test_scope_rows():
     p = load_profile("moeller")
     rows = [ParamRow(c, "", "", 1, 0, "differs") for c in ("H020", "F002", "P002", "b012")]

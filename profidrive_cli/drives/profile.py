@@ -220,6 +220,10 @@ def _param(path, node) -> ParamDef:
         raise _err(path, node, "min", f"{p.code}: min {p.min} > max {p.max}")
     if p.scale == 0:
         raise _err(path, node, "scale", f"{p.code}: scale must not be 0")
+    if p.default is not None and ((p.min is not None and p.default < p.min)
+                                  or (p.max is not None and p.default > p.max)):
+        lo, hi = ("" if v is None else f"{v:g}" for v in (p.min, p.max))
+        raise _err(path, node, "default", f"{p.code}: the factory default {p.default:g} is outside {lo}..{hi}")
     if "format" in node and node["format"] not in FORMATS:
         raise _err(path, node, "format", f"{p.code}: unknown format {node['format']!r} "
                    f"(known: {', '.join(FORMATS)})")
