@@ -62,6 +62,7 @@ def test_golden_file_with_exceptions(tmp_path):
 
 @pytest.mark.parametrize("text, where", [
     ("parameters:\n  F07: x\n", ":2: F07: the value must be a number"),
+    ("parameters:\n  F07: 1e999\n", ":2: F07: the value must be a number, got inf"),
     ("parameters: [F07]\n", ":1: not a golden file"),
     ("parameters:\n  F07: 6\nexcept:\n  200: [F07]\n", ":4: except: 200 is not a station address"),
     ("parameters:\n  F07: 6\nexcept:\n  9: {F07: 1}\n", ":4: except: station 9: give a list of codes"),
@@ -120,3 +121,19 @@ def test_fleet_bad_input_is_one_line_exit_2(capsys, monkeypatch, tmp_path):
     r = run_main(capsys, monkeypatch, "param", "fleet", "dump", "3", "-o", tmp_path / "missing",
                  "--port", FIVE)
     assert r.exit_code == 2 and "Traceback" not in r.stderr
+
+
+def test_mutated_golden_files_only_raise_one_line_errors(tmp_path):
+    # every one-character deletion and a few replacements of a valid file: a golden file or a
+    # DataFileError / UsageError (one line), never another exception
+    good = "pdrive_golden: 1\nprofile: fuji-g1\nparameters:\n  F07: 6.0\n  F08: {value: 6}\nexcept:\n  9: [F07]\n"
+    g = tmp_path / "g.yaml"
+    texts = [good[:i] + good[i + 1:] for i in range(len(good))]
+    texts += [good.replace("6.0", x) for x in ("[]", "{}", "null", "true", "'6'", "1e999")]
+    texts += [good.replace("9:", x) for x in ("-1:", "x:", "[9]:", "9.5:", "true:")]
+    for text in texts:
+        g.write_text(text)
+        try:
+            load_golden(g)
+        except (DataFileError, UsageError) as e:
+            assert "\n" not in str(e), text

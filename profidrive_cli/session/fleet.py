@@ -27,6 +27,7 @@ nothing from the bus itself: the CLI hands in the dumps (live or from files); no
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -133,7 +134,7 @@ class Golden:
 def _num(path: str, node: LineDict, key: Any) -> Number:
     v = node[key]
     val = v.get("value") if isinstance(v, Mapping) else v
-    if isinstance(val, bool) or not isinstance(val, (int, float)):
+    if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val):
         raise DataFileError(path, node.line_of(key), f"{key}: the value must be a number, got {val!r}")
     return val
 
