@@ -62,7 +62,7 @@ def test_golden_file_with_exceptions(tmp_path):
 
 @pytest.mark.parametrize("text, where", [
     ("parameters:\n  F07: x\n", ":2: F07: the value must be a number"),
-    ("parameters:\n  F07: 1e999\n", ":2: F07: the value must be a number, got inf"),
+    ("parameters:\n  F07: .inf\n", ":2: F07: the value must be a number, got inf"),
     ("parameters: [F07]\n", ":1: not a golden file"),
     ("parameters:\n  F07: 6\nexcept:\n  200: [F07]\n", ":4: except: 200 is not a station address"),
     ("parameters:\n  F07: 6\nexcept:\n  9: {F07: 1}\n", ":4: except: station 9: give a list of codes"),
