@@ -204,7 +204,8 @@ def test_every_documented_table_is_used():
             "commloss-test event=back", "commloss-test event=result",
             "sniff drive", "sniff event=live", "sniff event=trigger", "config show", "config path",
             "wireshark install", "checklist measured bus_health", "sim-ctl state", "audit",
-            "scan save", "scan compare", "checklist measured baseline"}
+            "scan save", "scan compare", "checklist measured baseline", "param fleet dump",
+            "param fleet diff"}
     assert set(CONTRACTS) == used
 
 
@@ -307,6 +308,26 @@ def test_param_get_set_dump_diff_restore(tmp_path):
     d = one_doc(pdrive("param", "restore", "3", str(dump), "--dry-run", *SIM, "--json"))
     assert_contract(d, "param rows")
     assert d["dry_run"] is True
+
+
+def test_param_defaults_changed_and_fleet(tmp_path):
+    # issue 28: diff --defaults and dump --changed keep their tables; the fleet's two documents
+    port = ["--port", "sim://?set=3:F07=5&set=6:F002=2"]
+    d = one_doc(pdrive("param", "diff", "3", "--defaults", *port, "--json"), code=1)
+    assert_contract(d, "param rows")
+    assert d["compared_with"] == "factory defaults" and d["counts"]["differs"] == 1
+    d = one_doc(pdrive("param", "dump", "3", "-o", str(tmp_path / "c.yaml"), "--changed", *port, "--json"))
+    assert_contract(d, "param dump")
+    line = tmp_path / "line"
+    line.mkdir()
+    five = ["--port", "sim://?stations=3:fuji-g1,8:fuji-g1,9:fuji-g1&set=9:F07=5"]
+    d = one_doc(pdrive("param", "fleet", "dump", "3,8,9", "-o", str(line), *five, "--json"))
+    assert_contract(d, "param fleet dump")
+    g = tmp_path / "golden.yaml"
+    g.write_text("parameters:\n  F07: 6.0\n  F08: 7.0\nexcept:\n  8: [F08]\n")     # 8 excepted, 3 and 9 not
+    d = one_doc(pdrive("param", "fleet", "diff", str(line), "--golden", str(g), "--json"), code=1)
+    assert_contract(d, "param fleet diff")
+    assert d["odd"] == [{"station": 9, "code": "F07"}]
 
 
 def test_param_restore_refused_is_one_error_object(tmp_path):

@@ -375,7 +375,7 @@ def test_importing_link_loads_nothing_of_sim_and_sim_urls_still_open():
 #: wireshark, sim, decode) and cli/common.py (the port, --trace, --baud auto) may keep the lower imports.
 DRIVE_COMMANDS = ("drive_cmds", "commloss_cmd", "checklist_cmd", "config_cmd", "render_drive",
                   "audit_cmd", "render_multi", "run_plot", "run_torque", "jsonout", "names", "run_cmd", "jog_cmd",
-                  "run_multi")
+                  "run_multi", "fleet_cmd")
 LOWER = ("fdl", "link", "dp")
 BUILT_BELOW = ("DriveSession", "Master")
 

@@ -681,6 +681,7 @@ def delegated(monkeypatch):
     monkeypatch.setattr(backup, "dump_plan", rec("dump_plan"))
     monkeypatch.setattr(backup, "dump", rec("dump"))
     monkeypatch.setattr(backup, "compare", rec("compare"))
+    monkeypatch.setattr(backup, "factory_diff", rec("factory_diff"))
     monkeypatch.setattr(restore, "restore_problems", rec("restore_problems"))
     monkeypatch.setattr(restore, "restore", rec("restore"))
     return calls
@@ -694,8 +695,11 @@ def test_delegations_with_their_defaults(delegated):
     assert p.compare(doc) == "compare"
     assert p.restore_problems(doc, rows) == "restore_problems"
     assert p.restore(doc) == "restore"
-    assert delegated == [("dump_plan", p), ("dump", p, None), ("compare", p, doc, None, False, True),
-                         ("restore_problems", p, doc, rows, False), ("restore", p, doc, False, None, False)]
+    assert p.factory_diff() == "factory_diff" and delegated.pop() == ("factory_diff", p, None)
+    # issue 28: dump's `changed` (False) and restore's scopes (only, exclude: none) are passed on too
+    assert delegated == [("dump_plan", p), ("dump", p, None, False), ("compare", p, doc, None, False, True),
+                         ("restore_problems", p, doc, rows, False),
+                         ("restore", p, doc, False, None, False, (), ())]
 
 
 def test_delegations_pass_every_argument(delegated):
@@ -710,6 +714,13 @@ def test_delegations_pass_every_argument(delegated):
     p.restore(doc, True, prog, True)
     p.compare(doc, progress=prog, allow_dangerous=True, check_identity=False)
     p.restore(doc, dry_run=True, progress=prog, allow_dangerous=True)
-    assert delegated == [("dump", p, prog), ("compare", p, doc, prog, True, False),
-                         ("restore_problems", p, doc, rows, True), ("restore", p, doc, True, prog, True),
-                         ("compare", p, doc, prog, True, False), ("restore", p, doc, True, prog, True)]
+    p.dump(prog, changed=True)                                      # issue 28: --changed, the scopes
+    p.restore(doc, True, prog, True, ("application",), ("motor",))
+    p.factory_diff(prog)
+    assert delegated == [("dump", p, prog, False), ("compare", p, doc, prog, True, False),
+                         ("restore_problems", p, doc, rows, True),
+                         ("restore", p, doc, True, prog, True, (), ()),
+                         ("compare", p, doc, prog, True, False), ("restore", p, doc, True, prog, True, (), ()),
+                         ("dump", p, prog, True),
+                         ("restore", p, doc, True, prog, True, ("application",), ("motor",)),
+                         ("factory_diff", p, prog)]

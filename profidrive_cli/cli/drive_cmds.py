@@ -7,8 +7,6 @@ command line, asks for confirmation before writing to a real port, and renders (
 from __future__ import annotations
 
 import contextlib
-import functools
-import sys
 
 import click
 from rich.markup import escape
@@ -18,27 +16,19 @@ from profidrive_cli import BusError, UsageError
 from profidrive_cli.cli.common import (bus_options, confirm_real_port, emit_json, err, out,
                                        station_address)
 from profidrive_cli.cli import render_drive as R
+# re-exported: run, jog, commloss-test use them
+from profidrive_cli.cli.drive_opts import _terminations, drive_options
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.session import (DriveSession, RestoreInterrupted, RestoreRefused,
                                     SessionTerminated)
-from profidrive_cli.outfile import OutputFile, check_output_path
+from profidrive_cli.session.dumpfile import write_dump
+from profidrive_cli.session.restore import scope_problem
+from profidrive_cli.outfile import check_output_path
 
 
 # =============================================================================================
 # shared options and helpers
 # =============================================================================================
-
-
-def drive_options(f):
-    """--profile, --ppo, --format, --watchdog."""
-    f = click.option("--watchdog", "watchdog_ms", default=500, show_default=True,
-                     type=click.IntRange(10, 650000), help="Slave watchdog in ms (always armed).")(f)
-    f = click.option("--format", "fmt", default=None, metavar="NAME",
-                     help="Layout by name (e.g. extended1, toyo); default: the profile's.")(f)
-    f = click.option("--ppo", type=click.IntRange(1, 5), default=None, help="PPO type N (layout ppoN).")(f)
-    f = click.option("--profile", "profile_name", default=None, metavar="NAME",
-                     help="Drive profile (default: from the station's ident).")(f)
-    return f
 
 
 def _message(text: str) -> None:
@@ -68,18 +58,6 @@ def _session(opts, address, profile_name, ppo, fmt, watchdog_ms, *, cycle_hz=0.0
     return opts.open_bus(address).session(
         address, profile=profile_name, layout=layout, ppo=ppo, fmt=fmt, watchdog_ms=watchdog_ms,
         cycle_hz=cycle_hz, before_connect=before, on_message=_message, log_csv=log, own_port=True)
-
-
-def _terminations(f):
-    """SIGTERM (SessionTerminated) -> one line and exit 143; the session has already stopped the drive."""
-    @functools.wraps(f)
-    def wrapper(*a, **kw):
-        try:
-            return f(*a, **kw)
-        except SessionTerminated as e:
-            err.print(f"terminated (signal {e.signum})")
-            sys.exit(128 + int(e.signum))
-    return wrapper
 
 
 @contextlib.contextmanager
@@ -165,7 +143,20 @@ def status_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms):
 # =============================================================================================
 
 
-@click.group("param")
+class _ParamGroup(click.Group):
+    """The param group; its `fleet` subgroup (cli/fleet_cmd.py) is loaded when it is asked for."""
+
+    def get_command(self, ctx, name):
+        if name == "fleet":
+            from profidrive_cli.cli.fleet_cmd import fleet_group
+            return fleet_group
+        return super().get_command(ctx, name)
+
+    def list_commands(self, ctx):
+        return sorted([*super().list_commands(ctx), "fleet"])
+
+
+@click.group("param", cls=_ParamGroup)
 def param_group():
     """Read and write drive parameters by their native codes (F03, A004, C1-01, dc-voltage, PNU23[1],
     REG0x0180); dump, restore and compare whole parameter sets."""
@@ -252,29 +243,38 @@ def param_set(opts, args, save, yes, allow_dangerous, profile_name, ppo, fmt, wa
 @param_group.command("dump")
 @click.argument("address", required=False, type=int)
 @click.option("-o", "--output", required=True, metavar="FILE.yaml", help="Where to write the YAML.")
+@click.option("--changed", is_flag=True,
+              help="Only the settings whose value differs from the factory default (the profile's).")
 @drive_options
 @bus_options
 @_terminations
-def param_dump(opts, address, output, profile_name, ppo, fmt, watchdog_ms):
+def param_dump(opts, address, output, changed, profile_name, ppo, fmt, watchdog_ms):
     """Read every readable parameter into a YAML file (with the station's identity and profile).
     An existing file is replaced only when the dump is complete."""
-    import yaml
     check_output_path(output, "-o")             # before the bus is opened
     with _session(opts, address, profile_name, ppo, fmt, watchdog_ms) as s:
-        doc = _with_progress(opts, "reading parameters", lambda prog: s.params.dump(prog))
-    with OutputFile(output, "w") as f:
-        f.write(f"# pdrive parameter dump of station {s.address} ({s.profile.title})\n"
-                f"# restore with: pdrive param restore {s.address} {output}\n"
-                f"# the last line must be 'end: pdrive_dump': a file without it is incomplete\n")
-        f.write(yaml.safe_dump(doc, sort_keys=False, allow_unicode=True, width=120))
+        doc = _with_progress(opts, "reading parameters", lambda prog: s.params.dump(prog, changed=changed))
+    write_dump(doc, output)                     # through outfile.OutputFile
     n_set, n_ro, n_bad = len(doc["parameters"]), len(doc["readonly"]), len(doc.get("unreadable", {}))
     if opts.json:
-        emit_json({"file": output, "station": s.address, "profile": s.profile.name, "settings": n_set,
-                   "readonly": n_ro, "unreadable": n_bad})
+        d = {"file": output, "station": s.address, "profile": s.profile.name, "settings": n_set,
+             "readonly": n_ro, "unreadable": n_bad}
+        if changed:
+            d["no_factory_default"] = len(doc["no_factory_default"])
+        emit_json(d)
+    elif changed:
+        out.print(f"station {s.address} ({escape(s.profile.name)}): {n_set} setting(s) changed from the "
+                  f"factory default written to {escape(output)}; {len(doc['no_factory_default'])} with "
+                  f"no factory default known (listed under 'no_factory_default')")
     else:
         out.print(f"station {s.address} ({escape(s.profile.name)}): {n_set} settings and {n_ro} read-only "
                   f"values written to {escape(output)}" + (f"; {n_bad} could not be read (listed under "
                                                             f"'unreadable')" if n_bad else ""))
+
+
+def _groups_arg(values: tuple[str, ...]) -> tuple[str, ...]:
+    """--only a --only b,c -> (a, b, c)."""
+    return tuple(g.strip() for v in values for g in v.split(",") if g.strip())
 
 
 def _file_args(args, what: str):
@@ -290,20 +290,35 @@ def _file_args(args, what: str):
 @click.option("--yes", is_flag=True, help="Do not ask before writing on a real port.")
 @click.option("--allow-dangerous", is_flag=True,
               help="Also write rows the profile marks dangerous (skipped otherwise).")
+@click.option("--only", "only", multiple=True, metavar="GROUP",
+              help="Restore only these parameter groups (the profile's groups: motor, communication, "
+                   "protection, application; repeat or separate with commas).")
+@click.option("--exclude", "exclude", multiple=True, metavar="GROUP",
+              help="Leave these parameter groups untouched (e.g. --exclude motor,communication).")
 @drive_options
 @bus_options
 @_terminations
-def param_restore(opts, args, dry_run, yes, allow_dangerous, profile_name, ppo, fmt, watchdog_ms):
+def param_restore(opts, args, dry_run, yes, allow_dangerous, only, exclude, profile_name, ppo, fmt,
+                  watchdog_ms):
     """Write back what differs from a dump. Every row is checked first (drive identity, code, exact
     value, writability, motor stopped where needed): any problem and nothing is written. Each write
-    is read back. Ends with a table."""
+    is read back. Ends with a table. --only / --exclude limit it to parameter groups."""
     address, path = _file_args(args, "restore")
     doc = DriveSession.load_dump(path)
-    before = None if dry_run else _confirmer(opts, yes, f"restore parameters from {path}")
+    only_g, excl_g = _groups_arg(only), _groups_arg(exclude)
+    confirm = None if dry_run else _confirmer(opts, yes, f"restore parameters from {path}")
+
+    def before(session):
+        bad = scope_problem(session.profile, only_g, excl_g)   # before anyone is asked
+        if bad:
+            raise UsageError(bad)
+        if confirm is not None:
+            confirm(session)
     try:
         with _session(opts, address, profile_name, ppo, fmt, watchdog_ms, before=before) as s:
             rows = _with_progress(opts, "comparing", lambda prog: s.params.restore(
-                doc, dry_run=dry_run, progress=prog, allow_dangerous=allow_dangerous))
+                doc, dry_run=dry_run, progress=prog, allow_dangerous=allow_dangerous, only=only_g,
+                exclude=excl_g))
             notes = s.params.notes()
     except RestoreRefused as e:
         if not opts.json:
@@ -325,13 +340,26 @@ def param_restore(opts, args, dry_run, yes, allow_dangerous, profile_name, ppo, 
 
 
 @param_group.command("diff")
-@click.argument("args", nargs=-1, required=True, metavar="[ADDRESS] FILE.yaml")
+@click.argument("args", nargs=-1, required=False, metavar="[ADDRESS] FILE.yaml | [ADDRESS] --defaults")
+@click.option("--defaults", is_flag=True,
+              help="Compare with the factory defaults (the profile's, from the manual) instead of a file.")
 @drive_options
 @bus_options
 @_terminations
-def param_diff(opts, args, profile_name, ppo, fmt, watchdog_ms):
-    """Compare the drive with a dump (nothing is written). Exit code as diff's: 0 when the drive
-    holds what the file says, 1 when a parameter differs or cannot be read, 2 for bad input."""
+def param_diff(opts, args, defaults, profile_name, ppo, fmt, watchdog_ms):
+    """Compare the drive with a dump, or with the factory defaults (--defaults); nothing is written.
+    Exit code as diff's: 0 when the drive holds what the file says (--defaults: nothing changed from
+    the factory), 1 when a parameter differs or cannot be read, 2 for bad input."""
+    if defaults:
+        address, rest = _split_address(tuple(args), 0)
+        if rest:
+            raise UsageError("param diff --defaults: expected [ADDRESS] only (no file)")
+        with _session(opts, address, profile_name, ppo, fmt, watchdog_ms) as s:
+            rows = _with_progress(opts, "comparing", lambda prog: s.params.factory_diff(prog))
+        _print_rows(opts, s, rows, "defaults", False)
+        if any(r.result in ("differs", "missing") for r in rows):
+            raise SystemExit(1)
+        return
     address, path = _file_args(args, "diff")
     doc = DriveSession.load_dump(path)
     with _session(opts, address, profile_name, ppo, fmt, watchdog_ms) as s:
@@ -348,6 +376,8 @@ def _print_rows(opts, s, rows, what: str, dry_run: bool, interrupted: str | None
     if opts.json:
         d = {"station": s.address, "profile": s.profile.name, "dry_run": dry_run,
              "counts": counts, "rows": [r.to_dict() for r in rows]}
+        if what == "defaults":
+            d["compared_with"] = "factory defaults"     # each row's file_value is the factory default
         if interrupted is not None:
             d["interrupted"] = interrupted
             d["landed"] = [r.code for r in rows if r.result == "applied"]
@@ -360,6 +390,11 @@ def _print_rows(opts, s, rows, what: str, dry_run: bool, interrupted: str | None
     if what == "diff":
         cols: tuple[str, ...] = ("code", "name", "file", "drive", "result", "reason")
         title = f"station {s.address}: {counts.get('differs', 0)} parameter(s) differ from the file"
+    elif what == "defaults":
+        shown = [r for r in rows if r.result == "differs" or r.result == "missing" or opts.verbose]
+        cols = ("code", "name", "factory", "drive", "result", "reason")
+        title = (f"station {s.address}: {counts.get('differs', 0)} setting(s) changed from the factory "
+                 f"default")
     else:
         cols = ("code", "name", "file", "drive", "now", "result", "reason")
         title = f"station {s.address}: restore" + (" (dry run: nothing written)" if dry_run else "")
@@ -369,6 +404,18 @@ def _print_rows(opts, s, rows, what: str, dry_run: bool, interrupted: str | None
         out.print(escape(title))
     order = ("applied", "would apply", "refused", "unknown", "not written", "differs", "unchanged", "missing",
              "skipped")
+    if what == "defaults":
+        unknown = [r.code for r in rows if r.result == "unknown"]
+        words = {"differs": "changed", "unchanged": "at the factory default",
+                 "bus setting": "at the manual's setting for the field bus", "missing": "unreadable"}
+        out.print(", ".join(f"{counts.get(k, 0)} {w}" for k, w in words.items()
+                            if counts.get(k) or k == "differs"))
+        bus = [f"{r.code} = {R.value_text(r.drive_value, r.unit)}" for r in rows if r.result == "bus setting"]
+        if bus:
+            out.print(escape(f"set for control over the field bus (the manual's commissioning): {', '.join(bus)}"))
+        if unknown:
+            out.print(escape(f"no factory default known ({len(unknown)}): {', '.join(unknown)}"))
+        return
     out.print(", ".join(f"{counts[k]} {k}" for k in order if counts.get(k)) or "nothing in the file")
 
 

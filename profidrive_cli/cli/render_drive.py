@@ -395,7 +395,7 @@ def rows_table(rows, title: str, columns=("code", "name", "file", "drive", "resu
     for r in rows:
         vals = {"code": r.code, "name": r.name, "file": value_text(r.file_value, r.unit),
                 "drive": value_text(r.drive_value, r.unit), "result": r.result, "reason": r.reason,
-                "now": value_text(r.new_value, r.unit)}
+                "now": value_text(r.new_value, r.unit), "factory": value_text(r.file_value, r.unit)}
         style = {"applied": "green", "refused": "red", "would apply": "yellow", "differs": "yellow"}.get(r.result)
         t.add_row(*(escape(str(vals[c])) for c in columns), style=style)
     return t

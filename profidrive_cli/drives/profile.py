@@ -23,6 +23,11 @@ Common schema (every family):
     capabilities:                     # what the card can do, per layout (drives/capabilities.py)
       jog: {param: A038}              # a mapping: it can (optionally `layouts:`, `needs:`, `reason:`)
       torque: "no torque reference"   # a text: it cannot, and why
+    groups:                           # parameter groups for `param restore --only/--exclude` (one place,
+      motor: [P*, A18]                #   not per parameter): code patterns (fnmatch, case-sensitive); a code
+      communication: [o*, y98]        #   belongs to the first group that matches it; [] = none listed
+    bus_settings: {y98: 3}            # the manual's settings for control over the field bus (a drive
+                                      #   holding one is not "changed from the factory" there)
     decisions: [...]                  # what we decided where the manual is ambiguous, and why
 
 Family codecs may read further keys (fault_history, handshake, ...) from Profile.raw; they validate them
@@ -31,7 +36,9 @@ with the same ProfileError(file:line).
 
 from __future__ import annotations
 
+import fnmatch
 import functools
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -130,6 +137,18 @@ class Profile:
     raw: LineDict = field(default_factory=LineDict)
     #: what the card can do (quick_stop, jog, torque, param_channel, monitor_words, ...): drives/capabilities.py
     capabilities: Capabilities | None = None
+    #: parameter groups (`groups:`): name -> code patterns, in the file's order
+    groups: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    #: the manual's settings for control over the field bus (`bus_settings:`): code -> value
+    bus_settings: dict[str, float | int] = field(default_factory=dict)
+
+    def group_of(self, code: str) -> str | None:
+        """The group a code (or an array element CODE[i]) belongs to: the first whose patterns match."""
+        base = code.split("[", 1)[0]
+        for name, pats in self.groups.items():
+            if any(fnmatch.fnmatchcase(base, pat) for pat in pats):
+                return name
+        return None
 
     def alarms_for(self, number: int) -> list[Alarm]:
         return [a for a in self.alarms if a.number == number]
@@ -201,6 +220,10 @@ def _param(path, node) -> ParamDef:
         raise _err(path, node, "min", f"{p.code}: min {p.min} > max {p.max}")
     if p.scale == 0:
         raise _err(path, node, "scale", f"{p.code}: scale must not be 0")
+    if p.default is not None and ((p.min is not None and p.default < p.min)
+                                  or (p.max is not None and p.default > p.max)):
+        lo, hi = ("" if v is None else f"{v:g}" for v in (p.min, p.max))
+        raise _err(path, node, "default", f"{p.code}: the factory default {p.default:g} is outside {lo}..{hi}")
     if "format" in node and node["format"] not in FORMATS:
         raise _err(path, node, "format", f"{p.code}: unknown format {node['format']!r} "
                    f"(known: {', '.join(FORMATS)})")
@@ -263,6 +286,7 @@ def load_profile_file(path: str | Path) -> Profile:
                             code=str(_get(path, anode, "code", (str, int))),
                             meaning=_get(path, anode, "meaning", str, False, "")))
 
+    groups = _groups(path, doc, params)
     mf = _get(path, doc, "max_frequency", LineDict, False, LineDict())
     mf_param = _get(path, mf, "param", str, False) if mf else None
     if mf_param is not None and mf_param not in params:
@@ -290,7 +314,46 @@ def load_profile_file(path: str | Path) -> Profile:
         path=path,
         raw=doc,
         capabilities=parse_capabilities(path, doc, name, layouts),
+        groups=groups,
+        bus_settings=_bus_settings(path, doc, params),
     )
+
+
+def _bus_settings(path, doc, params: dict[str, ParamDef]) -> dict[str, float | int]:
+    """`bus_settings:`: code -> the value the manual's commissioning for the field bus sets."""
+    node = _get(path, doc, "bus_settings", LineDict, False, None)
+    out: dict[str, float | int] = {}
+    for code, v in (node or {}).items():
+        if str(code) not in params:
+            raise _err(path, node, code, f"bus_settings: {code} is not a parameter of this profile")
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise _err(path, node, code, f"bus_settings: {code} must be a number, got {v!r}")
+        out[str(code)] = v
+    return out
+
+
+_GROUP_NAME = re.compile(r"[a-z][a-z0-9_-]*\Z")
+
+
+def _groups(path, doc, params: dict[str, ParamDef]) -> dict[str, tuple[str, ...]]:
+    """`groups:`: a mapping name -> list of code patterns; every pattern must match a parameter."""
+    node = _get(path, doc, "groups", LineDict, False, None)
+    if node is None:
+        return {}
+    out: dict[str, tuple[str, ...]] = {}
+    for name, pats in node.items():
+        if not isinstance(name, str) or not _GROUP_NAME.match(name):
+            raise _err(path, node, name, f"groups: {name!r} is not a group name (lower-case letters, "
+                       f"digits, - and _)")
+        if pats is None:
+            pats = []
+        if not isinstance(pats, list) or not all(isinstance(x, str) and x.strip() for x in pats):
+            raise _err(path, node, name, f"groups.{name} must be a list of parameter codes or patterns")
+        for pat in pats:
+            if not any(fnmatch.fnmatchcase(c, pat) for c in params):
+                raise _err(path, node, name, f"groups.{name}: {pat!r} matches no parameter of this profile")
+        out[name] = tuple(pats)
+    return out
 
 
 def _word_order(path, doc) -> str:

@@ -19,7 +19,12 @@ from profidrive_cli.session.dumpfile import DUMP_END, DUMP_FORMAT
 from profidrive_cli.datafile import LineDict
 from profidrive_cli.session.params import ParamRow, ParamView
 
-__all__ = ["ParamRow", "compare", "dump", "dump_plan", "same_value"]
+__all__ = ["BUS_SETTING", "NO_DEFAULT", "ParamRow", "compare", "dump", "dump_plan", "factory_diff", "same_value"]
+
+#: the reason of a factory-diff row whose parameter has no `default:` in the profile
+NO_DEFAULT = "no factory default known"
+#: the reason of a factory-diff row that holds the manual's setting for control over the bus
+BUS_SETTING = "the manual's setting for control over the field bus (bus_settings)"
 
 
 def same_value(a: Any, b: Any, scale: float | None) -> bool:
@@ -59,8 +64,57 @@ def dump_plan(params: ParamView) -> list[tuple[str, Any, str]]:
     return out
 
 
-def dump(params: ParamView, progress: Callable[[int, int, str], None] | None = None) -> dict[str, Any]:
-    """Read every readable parameter; a YAML-ready document with the station's identity."""
+def factory_default(p: Any) -> float | int | None:
+    """The factory setting the profile records for a ParamDef (`default:`, from the manual), or None."""
+    d = getattr(p, "default", None)
+    return d if isinstance(d, (int, float)) and not isinstance(d, bool) else None
+
+
+def factory_diff(params: ParamView, progress: Callable[[int, int, str], None] | None = None
+                 ) -> list[ParamRow]:
+    """Each setting of the station (dump_plan's writable rows) against its factory default from the
+    profile: 'differs' / 'unchanged', 'bus setting' (differs from the factory default but holds the
+    manual's setting for control over the bus, the profile's bus_settings: not counted as changed),
+    'unknown' (reason NO_DEFAULT: the profile records none: never counted as changed), 'missing'
+    (cannot be read). file_value is the factory default."""
+    d = params.need_drive()
+    if not d.has_param_channel:
+        raise DriveError(no_channel_words(params))
+    plan = [(c, p) for c, p, kind in dump_plan(params) if kind != "readonly"]
+    rows: list[ParamRow] = []
+    for i, (code, p) in enumerate(plan):
+        if progress:
+            progress(i, len(plan), code)
+        want = factory_default(p)
+        try:
+            pv = d.read_param(code)
+        except (DriveError, UsageError) as e:
+            if isinstance(e, BusError) and not isinstance(e, DriveError):
+                raise
+            rows.append(ParamRow(code, p.name, p.unit, want, None, "missing", str(e)))
+            continue
+        name, unit = pv.name or p.name, pv.unit or p.unit
+        if want is None:
+            rows.append(ParamRow(code, name, unit, None, pv.value, "unknown", NO_DEFAULT))
+            continue
+        if same_value(pv.value, want, p.scale):
+            rows.append(ParamRow(code, name, unit, want, pv.value, "unchanged"))
+            continue
+        bus = params.profile.bus_settings.get(code)
+        if bus is not None and same_value(pv.value, bus, p.scale):
+            rows.append(ParamRow(code, name, unit, want, pv.value, "bus setting", BUS_SETTING))
+            continue
+        rows.append(ParamRow(code, name, unit, want, pv.value, "differs"))
+    if progress:
+        progress(len(plan), len(plan), "")
+    return rows
+
+
+def dump(params: ParamView, progress: Callable[[int, int, str], None] | None = None,
+         changed: bool = False) -> dict[str, Any]:
+    """Read every readable parameter; a YAML-ready document with the station's identity. changed:
+    only the settings whose value differs from the profile's factory default (`changed_only: true`;
+    the settings without a known default listed under `no_factory_default`, no read-only values)."""
     d = params.need_drive()
     if not d.has_param_channel:
         raise DriveError(no_channel_words(params))
@@ -68,18 +122,30 @@ def dump(params: ParamView, progress: Callable[[int, int, str], None] | None = N
     settings: dict[str, Any] = {}
     readonly: dict[str, Any] = {}
     failed: dict[str, str] = {}
+    unknown: list[str] = []
     for i, (code, p, kind) in enumerate(plan):
         if progress:
             progress(i, len(plan), code)
+        if changed and kind == "readonly":
+            continue                   # a monitor has no factory setting
         try:
             pv = d.read_param(code)
         except (DriveError, UsageError) as e:
             failed[code] = str(e)
             continue
+        if changed:
+            want = factory_default(p)
+            if want is None:
+                unknown.append(code)
+                continue
+            if same_value(pv.value, want, p.scale):
+                continue
         entry: dict[str, Any] = {"value": pv.value}
         if pv.unit:
             entry["unit"] = pv.unit
         entry["name"] = pv.name or p.name
+        if changed:
+            entry["factory"] = factory_default(p)
         if kind == "setting":
             settings[code] = entry
         else:
@@ -99,6 +165,9 @@ def dump(params: ParamView, progress: Callable[[int, int, str], None] | None = N
         "parameters": settings,
         "readonly": readonly,
     }
+    if changed:
+        doc["changed_only"] = True
+        doc["no_factory_default"] = unknown
     if failed:
         doc["unreadable"] = failed
     doc["end"] = DUMP_END              # the last line: a file cut anywhere lacks it

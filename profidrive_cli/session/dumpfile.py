@@ -14,6 +14,25 @@ DUMP_FORMAT = 2              # 2: `count:` and a final `end: pdrive_dump` line (
 DUMP_END = "pdrive_dump"
 
 
+def dump_text(doc: dict[str, Any], output: str | Path) -> str:
+    """A dump document (backup.dump) as the file's text: a comment header, then the YAML; the last line
+    is `end: pdrive_dump`."""
+    import yaml
+    st = doc.get("station") or {}
+    return (f"# pdrive parameter dump of station {st.get('address')} ({st.get('title', '')})\n"
+            f"# restore with: pdrive param restore {st.get('address')} {output}\n"
+            f"# the last line must be 'end: pdrive_dump': a file without it is incomplete\n"
+            + str(yaml.safe_dump(doc, sort_keys=False, allow_unicode=True, width=120)))
+
+
+def write_dump(doc: dict[str, Any], output: str | Path) -> None:
+    """Write a dump document through outfile.OutputFile (the old file is replaced only when the
+    whole text is written)."""
+    from profidrive_cli.outfile import OutputFile
+    with OutputFile(output, "w") as f:
+        f.write(dump_text(doc, output))
+
+
 def check_complete(path: str | Path, doc: Any, params: dict[str, Any]) -> list[str]:
     """A format-2 dump must carry `count:` = the number of parameters and end with `end: pdrive_dump`
     (so a file cut anywhere is refused). Older files have neither: accepted with a warning."""

@@ -227,9 +227,14 @@ class Parameters:
         """(code, ParamDef, kind) for every parameter of the profile the family can read."""
         return backup.dump_plan(self)
 
-    def dump(self, progress: Progress | None = None) -> dict[str, Any]:
-        """Read every readable parameter; a YAML-ready document with the station's identity."""
-        return backup.dump(self, progress)
+    def dump(self, progress: Progress | None = None, changed: bool = False) -> dict[str, Any]:
+        """Read every readable parameter; a YAML-ready document with the station's identity
+        (changed: only the settings that differ from the profile's factory defaults)."""
+        return backup.dump(self, progress, changed)
+
+    def factory_diff(self, progress: Progress | None = None) -> list[ParamRow]:
+        """Each setting against the profile's factory default (backup.factory_diff; nothing written)."""
+        return backup.factory_diff(self, progress)
 
     def compare(self, doc: dict[str, Any], progress: Progress | None = None,
                 allow_dangerous: bool = False, check_identity: bool = True) -> list[ParamRow]:
@@ -242,7 +247,9 @@ class Parameters:
         return restore.restore_problems(self, doc, rows, allow_dangerous)
 
     def restore(self, doc: dict[str, Any], dry_run: bool = False, progress: Progress | None = None,
-                allow_dangerous: bool = False) -> list[ParamRow]:
+                allow_dangerous: bool = False, only: tuple[str, ...] = (),
+                exclude: tuple[str, ...] = ()) -> list[ParamRow]:
         """Validate every row into a plan, then write what differs, reading each write back
-        (restore.py): RestoreRefused (nothing written) / RestoreInterrupted (which rows landed)."""
-        return restore.restore(self, doc, dry_run, progress, allow_dangerous)
+        (restore.py): RestoreRefused (nothing written) / RestoreInterrupted (which rows landed).
+        only / exclude: the profile's parameter groups the restore is limited to / leaves alone."""
+        return restore.restore(self, doc, dry_run, progress, allow_dangerous, only, exclude)

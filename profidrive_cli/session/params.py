@@ -104,7 +104,7 @@ class ParamRow:
     reason: str = ""
     new_value: Any = None
     line: int = 0                  # the row's line in the file (0: unknown)
-    why: str = ""                  # for 'skipped': unknown | read-only | not restored | dangerous
+    why: str = ""                  # for 'skipped': unknown | read-only | not restored | dangerous | out of scope
 
     def to_dict(self) -> dict[str, Any]:
         return {k: v for k, v in dataclasses.asdict(self).items()}

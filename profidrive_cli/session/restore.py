@@ -10,6 +10,10 @@ allow_dangerous. Any problem -> RestoreRefused(.problems, one line each with fil
 written. Then only what differs is written, each write read back; a failure part-way (link lost, a
 refusal) -> RestoreInterrupted(.rows): 'applied' landed, 'unknown' was in flight, 'not written' was not
 reached.
+
+Scopes: only / exclude name the profile's parameter groups (`groups:`, drives/profile.py); the rows
+outside the scope are marked 'skipped' (why 'out of scope') before any row is planned, so they are
+neither checked nor written. An unknown group name is a UsageError listing the profile's groups.
 """
 
 from __future__ import annotations
@@ -18,7 +22,7 @@ from typing import Any, Callable
 
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.drives.base import DriveError, value_text
-from profidrive_cli.drives.profile import load_profile
+from profidrive_cli.drives.profile import Profile, load_profile
 from profidrive_cli.session.backup import same_value
 from profidrive_cli.session.discovery import family_words
 from profidrive_cli.session.params import ParamRow, ParamView, WritePlan
@@ -43,6 +47,30 @@ class RestoreInterrupted(BusError):
                          f"{left} not (see the table)")
         self.rows = rows
         self.cause = cause
+
+
+def scope_problem(profile: Profile, only: tuple[str, ...], exclude: tuple[str, ...]) -> str | None:
+    """The one line for a group name the profile does not have (--only / --exclude), or None."""
+    for name in (*only, *exclude):
+        if name not in profile.groups:
+            known = ", ".join(profile.groups) or "none"
+            return f"unknown parameter group '{name}' for {profile.name} (groups: {known})"
+    return None
+
+
+def apply_scope(profile: Profile, rows: list[ParamRow], only: tuple[str, ...],
+                exclude: tuple[str, ...]) -> None:
+    """Mark the rows outside the scope 'skipped' (why 'out of scope'): with only, the rows of no
+    group named there; every row of an excluded group (exclude wins over only)."""
+    if not only and not exclude:
+        return
+    for r in rows:
+        g = profile.group_of(r.code)
+        if g is not None and g in exclude:
+            r.result, r.why, r.reason = "skipped", "out of scope", f"group {g} excluded (--exclude)"
+        elif only and g not in only:
+            r.result, r.why = "skipped", "out of scope"
+            r.reason = f"group {g} not in --only" if g else "in no group (--only)"
 
 
 def restore_problems(params: ParamView, doc: dict[str, Any], rows: list[ParamRow],
@@ -121,16 +149,21 @@ def check_rows(params: ParamView, doc: dict[str, Any], rows: list[ParamRow],
 
 def restore(params: ParamView, doc: dict[str, Any], dry_run: bool = False,
             progress: Callable[[int, int, str], None] | None = None,
-            allow_dangerous: bool = False) -> list[ParamRow]:
+            allow_dangerous: bool = False, only: tuple[str, ...] = (),
+            exclude: tuple[str, ...] = ()) -> list[ParamRow]:
     """Validate every row first (identity, existence, exact value, writability, dangerous, drive
     stopped where needed): any problem -> RestoreRefused listing them all, nothing written. Then
     write what differs (each row's plan), reading each write back. Rows: applied / unchanged /
     skipped / would apply (dry run). A write that fails, or a link lost mid-way ->
     RestoreInterrupted with the rows: 'applied' landed, 'unknown' was being written, 'not written'
-    were not reached."""
+    were not reached. only / exclude: parameter groups (apply_scope, before any row is planned)."""
+    bad = scope_problem(params.profile, tuple(only), tuple(exclude))
+    if bad:
+        raise UsageError(bad)
     for w in doc.get("_warnings", []):
         params.warn(w)
     rows = params.compare(doc, progress, allow_dangerous=allow_dangerous, check_identity=False)
+    apply_scope(params.profile, rows, tuple(only), tuple(exclude))
     problems, todo = check_rows(params, doc, rows, allow_dangerous)
     if problems:
         raise RestoreRefused(problems)
