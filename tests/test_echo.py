@@ -248,6 +248,7 @@ def test_scan_through_an_echoing_adapter_needs_no_echo_option(tmp_path):
         # the echo is not read as a telegram: without echo handling every request's echo counted
         # as an illegal frame (a request, not a reply to us)
         assert all(s["counters"]["illegal"] == 0 for s in data["stations"]), r.output
+        assert data["echo"] is True                     # and scan says it found the echo
     finally:
         stop.append(1)
         t.join(2)

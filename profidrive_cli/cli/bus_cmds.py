@@ -93,7 +93,8 @@ def scan_cmd(opts, first, last, gsd_dir, watch, interval, duration, quick, save_
     finally:
         master.link.close()
     if opts.json:
-        emit_json({"port": opts.port, "baud": used_baud, "line_noise": noise, "stations": [
+        emit_json({"port": opts.port, "baud": used_baud, "line_noise": noise,
+                   "echo": getattr(master.link, "echo_detected", None), "stations": [
             {"station": e.address, "type": e.station_type, **ident_fields(e.ident),
              "state": e.diag.state_words(opts.master_address) if e.diag else e.error,
              "device": device_name(e.ident, gsd_dir) if e.ident is not None else "",
