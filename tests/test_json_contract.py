@@ -150,16 +150,17 @@ def assert_stream(lines: list[dict], contract: str) -> list[str]:
 
 
 def test_checker_finds_an_undocumented_key():
-    assert problems({"port": "x", "stations": [], "baud": 1, "line_noise": 0, "extra": 1}, "scan") == \
+    assert problems({"port": "x", "stations": [], "baud": 1, "line_noise": 0, "echo": None, "extra": 1},
+                    "scan") == \
         ["extra: not in docs/json.md"]
 
 
 def test_checker_finds_a_missing_key():
-    assert problems({"port": "x", "stations": [], "baud": 1}, "scan") == ["line_noise: missing"]
+    assert problems({"port": "x", "stations": [], "baud": 1, "echo": None}, "scan") == ["line_noise: missing"]
 
 
 def test_checker_finds_a_wrong_type():
-    bad = problems({"port": "x", "stations": [], "baud": "19200", "line_noise": 0}, "scan")
+    bad = problems({"port": "x", "stations": [], "baud": "19200", "line_noise": 0, "echo": False}, "scan")
     assert len(bad) == 1 and bad[0].startswith("baud: str")
 
 

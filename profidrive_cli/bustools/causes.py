@@ -130,23 +130,29 @@ def _masters(live: LiveList, sts: list[StationLive]) -> list[Cause]:
     return out
 
 
-def _repeats(sts: list[StationLive]) -> list[Cause]:
-    trouble = {s.address: s.counters["retries"] + s.counters["illegal"] for s in sts}
+def _few(trouble: dict[int, int]) -> tuple[list[int], int, int] | None:
+    """(the stations, their share, the total) when at most half the stations hold CONCENTRATED of
+    the trouble (at least MIN_REPEATS in all); None when it is spread or too little to say."""
     total = sum(trouble.values())
-    if total < MIN_REPEATS or len(sts) < 2:
-        return []
-    ranked = sorted(trouble, key=lambda a: -trouble[a])
+    if total < MIN_REPEATS or len(trouble) < 2:
+        return None
     few: list[int] = []
     got = 0
-    for a in ranked[:max(1, len(sts) // 2)]:
+    for a in sorted(trouble, key=lambda a: -trouble[a])[:max(1, len(trouble) // 2)]:
         if not trouble[a]:
             break
         few.append(a)
         got += trouble[a]
         if got >= CONCENTRATED * total:
-            break
-    if got < CONCENTRATED * total:
+            return few, got, total
+    return None
+
+
+def _repeats(sts: list[StationLive]) -> list[Cause]:
+    hit = _few({s.address: s.counters["retries"] + s.counters["illegal"] for s in sts})
+    if hit is None:
         return []
+    few, got, total = hit
     by = {s.address: s for s in sts}
     ev = [f"station {a}: {by[a].counters['retries']} retries, {by[a].counters['illegal']} corrupt "
           f"replies, {by[a].exchanges} Data_Exchange answered" for a in few]
@@ -182,3 +188,52 @@ def _framing(live: LiveList, sts: list[StationLive]) -> list[Cause]:
     return [Cause("corrupt telegrams on the line: noise, a missing or extra termination, or a "
                   "listener at the wrong baud rate", 0.4,
                   (f"{n} framing error(s) in {live.frames} telegrams ({kinds})",))]
+
+
+# -- scan --watch: the same reading of an active master's counters -------------------------------
+
+def watch_causes(stations: list[Any]) -> list[Cause]:
+    """Likely causes from `scan --watch`'s stations (bustools/buswatch.py WatchedStation: category,
+    counters requests / retries / no_answer / illegal / reparams), best first."""
+    sts = sorted((s for s in stations if s.station_type == "slave"), key=lambda s: s.address)
+    out: list[Cause] = []
+    answering = [s.address for s in sts if s.category != "no answer"]
+    for s in sts:
+        c = s.counters
+        if s.category == "no answer" and s.seen_passes:
+            ev = (f"station {s.address}: no valid reply in the last pass ({c.get('no_answer', 0)} "
+                  f"requests unanswered of {c.get('requests', 0)})",)
+            if answering:
+                out.append(Cause(f"station {s.address} stopped answering while the others answer: its "
+                                 f"power, its bus connector or the cable to it", 0.9,
+                                 ev + (f"stations {', '.join(map(str, answering))} answer",),
+                                 (s.address,)))
+            else:
+                out.append(Cause(f"no station answers any more: the line, the adapter or the baud "
+                                 f"rate", 0.6, ev, (s.address,)))
+        if c.get("reparams"):
+            out.append(Cause(f"station {s.address} left data exchange and was parameterised again "
+                             f"{c['reparams']} time(s): its watchdog expired (the master too slow or "
+                             f"silent), or it lost power", 0.7,
+                             (f"station {s.address}: {c['reparams']} re-parameterisation(s) in "
+                              f"{c.get('requests', 0)} requests",), (s.address,)))
+        if s.category == "configuration fault":
+            out.append(Cause(f"station {s.address} refuses its configuration (Cfg_Fault / Prm_Fault): "
+                             f"`pdrive gsd match {s.address}` names the modules it has", 0.8,
+                             (f"station {s.address}: {s.state}",), (s.address,)))
+    hit = _few({s.address: s.counters.get("retries", 0) + s.counters.get("illegal", 0) for s in sts})
+    if hit is not None:
+        few, got, total = hit
+        ev = [f"station {a}: {by.counters.get('retries', 0)} retries, {by.counters.get('illegal', 0)} "
+              f"corrupt replies of {by.counters.get('requests', 0)} requests"
+              for a, by in ((a, next(x for x in sts if x.address == a)) for a in few)]
+        out.append(Cause(f"repeats concentrated on station(s) {', '.join(map(str, few))} "
+                         f"({100 * got / total:.0f} % of {total}): their spur, connector or cable, not "
+                         f"the whole line", 0.7, tuple(ev), tuple(few)))
+    else:
+        corrupt = {s.address: s.counters.get("illegal", 0) for s in sts}
+        if sum(corrupt.values()) >= MIN_REPEATS and sum(1 for v in corrupt.values() if v) > len(sts) // 2:
+            out.append(Cause("corrupt replies from most stations: noise, a missing or extra "
+                             "termination, or the wrong baud rate", 0.5,
+                             tuple(f"station {a}: {n} corrupt" for a, n in corrupt.items() if n)))
+    return sorted(out, key=lambda c: -c.score)

@@ -61,10 +61,15 @@ def _state_detail(ws) -> str:
 
 
 def table(view: WatchView, title: str, gsd_dir, colour: bool = True):
+    from rich.markup import escape
     from rich.table import Table
+
+    from profidrive_cli.bustools.causes import watch_causes
+    likely = "".join(f"\nlikely: {escape(c.title)} ({'; '.join(escape(e) for e in c.evidence)})"
+                     for c in watch_causes(view.stations)[:3])
     t = Table(title=title, caption=(f"pass {view.passes}, {view.t_s:.1f} s; one pass over the bus "
                                     f"min/mean/max {_ms(view.cycle_min_s)} / {_ms(view.cycle_mean_s)} / "
-                                    f"{_ms(view.cycle_max_s)} ms"))
+                                    f"{_ms(view.cycle_max_s)} ms" + likely))
     for col in ("addr", "type", "ident", "state", "detail", "device", "counters"):
         t.add_column(col)
     for ws in view.stations:
@@ -79,7 +84,9 @@ def table(view: WatchView, title: str, gsd_dir, colour: bool = True):
 
 
 def view_json(view: WatchView) -> dict:
+    from profidrive_cli.bustools.causes import watch_causes
     return {"event": "watch", "t_s": round(view.t_s, 3), "passes": view.passes,
+            "causes": [c.as_dict() for c in watch_causes(view.stations)],
             "cycle_min_s": view.cycle_min_s, "cycle_mean_s": view.cycle_mean_s,
             "cycle_max_s": view.cycle_max_s,
             "stations": [{"station": ws.address, "type": ws.station_type, "ident": ws.ident,
