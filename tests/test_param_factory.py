@@ -183,3 +183,51 @@ def test_restore_unknown_group_is_one_line_and_writes_nothing(sim, capsys, monke
         "protection, application)")
     assert "Traceback" not in r.stderr
     assert _get(capsys, monkeypatch, port, "F002")["F002"] == pytest.approx(2.0)
+
+
+def test_restore_only_motor_leaves_every_other_group_alone(sim, capsys, monkeypatch, tmp_path):
+    """--only motor while a motor code (A003) and an application code (F002) both differ from the
+    dump: only A003 goes back; F002 keeps the drive's value (read back)."""
+    port = "sim://"
+    f = tmp_path / "s6.yaml"
+    assert pd(capsys, monkeypatch, "param", "dump", "6", "-o", f, "--port", port).exit_code == 0
+    before = _get(capsys, monkeypatch, port, "A003", "F002")
+    for code, value in (("A003", "55"), ("F002", "2")):
+        assert pd(capsys, monkeypatch, "param", "set", "6", code, value, "--port", port).exit_code == 0
+    r = pd(capsys, monkeypatch, "param", "restore", "6", f, "--only", "motor", "--json", "--port", port)
+    assert r.exit_code == 0, r.stderr
+    rows = {x["code"]: x for x in json.loads(r.stdout)["rows"]}
+    assert rows["A003"]["result"] == "applied"
+    assert rows["F002"]["result"] == "skipped" and rows["F002"]["why"] == "out of scope"
+    assert rows["F002"]["reason"] == "group application not in --only"
+    now = _get(capsys, monkeypatch, port, "A003", "F002")
+    assert now["A003"] == pytest.approx(before["A003"])
+    assert now["F002"] == pytest.approx(2.0)
+
+
+def test_the_session_level_restore_checks_the_groups_itself(tmp_path):
+    """restore() refuses an unknown group before anything (the CLI checks earlier, the session level
+    does not rely on it): one line naming the groups, nothing written."""
+    import profidrive_cli as pdrive
+    from profidrive_cli.session.dumpfile import load_dump, write_dump
+    f = tmp_path / "s6.yaml"
+    with pdrive.open_bus("sim://?timing=virtual", env={}) as bus:
+        with bus.session(6, handle_signals=False) as s:
+            write_dump(s.params.dump(), f)
+    doc = load_dump(f)
+    with pdrive.open_bus("sim://?timing=virtual", env={}) as bus:
+        with bus.session(6, handle_signals=False) as s:
+            with pytest.raises(pdrive.UsageError) as e:
+                s.params.restore(doc, exclude=("motr",))
+    assert str(e.value) == ("unknown parameter group 'motr' for moeller-de6-net-dp (groups: motor, "
+                            "communication, protection, application)")
+
+
+def test_apply_scope_says_why_a_code_in_no_group_is_left_out():
+    p = load_profile("moeller")
+    ungrouped = next(c for c in p.parameters if p.group_of(c) is None)
+    rows = [ParamRow(ungrouped, "", "", 1, 0, "differs")]
+    apply_scope(p, rows, ("motor",), ())
+    assert (rows[0].result, rows[0].why, rows[0].reason) == ("skipped", "out of scope",
+                                                             "in no group (--only)")
+    assert scope_problem(p, (), ("protection",)) is None
