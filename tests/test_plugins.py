@@ -5,8 +5,8 @@ plug-in does not break pdrive and is named where a family is missing; a command 
 never reads the installed distributions' entry points.
 
 The example plug-in (tests/data/plugin_demo: the family `demo`, a PROFIdrive PPO card with ident 0xDE01,
-and the port kind demosim://) is installed by pip into a folder of its own (`--target`), which the
-pdrive subprocesses get on PYTHONPATH: entry points are found there as in a virtualenv's site-packages."""
+and the port kind demosim://) is installed by pip into a new virtualenv's site-packages, and pdrive runs with that virtualenv's
+python."""
 
 from __future__ import annotations
 
@@ -28,57 +28,68 @@ DEMO_TITLE = "Demo PROFIdrive card (a pdrive plug-in)"
 
 
 @pytest.fixture(scope="module")
-def plugin_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def plugin_venv(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A new virtualenv (without pip of its own) that sees this environment's packages (pdrive and
+    its dependencies, through a .pth file) and has the example plug-in installed into its own
+    site-packages by pip: its python is what the tests run pdrive with."""
     pytest.importorskip("setuptools", reason="pip builds the example plug-in with setuptools")
-    target = tmp_path_factory.mktemp("plugin")
-    build = tmp_path_factory.mktemp("plugin-src")
-    src = build / "plugin_demo"
     import shutil
+    import sysconfig
+    venv = tmp_path_factory.mktemp("venv")
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=120)
+    py = venv / ("Scripts/python.exe" if os.name == "nt" else "bin/python")
+    site = Path(subprocess.run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+                               capture_output=True, text=True, check=True, timeout=60).stdout.strip())
+    here = {sysconfig.get_paths()["purelib"], sysconfig.get_paths()["platlib"], str(ROOT)}
+    (site / "outer-env.pth").write_text("\n".join(sorted(here)) + "\n")
+    src = tmp_path_factory.mktemp("plugin-src") / "plugin_demo"
     shutil.copytree(PLUGIN, src)               # the build writes egg-info beside its source
     proc = subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--no-index",
-                           "--no-build-isolation", "--target", str(target), str(src)],
+                           "--no-build-isolation", "--target", str(site), str(src)],
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
-    assert (target / "pdrive_demo" / "profiles" / "demo-card.yaml").is_file()
-    return target
+    assert (site / "pdrive_demo" / "profiles" / "demo-card.yaml").is_file()
+    return py
 
 
-def _pdrive(*args: str, path: Path | None = None, **env_extra: str) -> subprocess.CompletedProcess[str]:
+def _pdrive(*args: str, path: Path | None = None, python: Path | None = None,
+            **env_extra: str) -> subprocess.CompletedProcess[str]:
     env = {k: v for k, v in os.environ.items() if not k.startswith("PDRIVE_")}
     env["PYTHONNOUSERSITE"] = "1"
+    env.pop("PYTHONPATH", None)
     if path is not None:
         env["PYTHONPATH"] = str(path)
     env.update(env_extra)
-    return subprocess.run([sys.executable, "-m", "profidrive_cli", *args], capture_output=True,
-                          text=True, env=env, timeout=300)
+    return subprocess.run([str(python or sys.executable), "-m", "profidrive_cli", *args],
+                          capture_output=True, text=True, env=env, timeout=300)
 
 
-def test_scan_sees_the_plugin_family_on_sim(plugin_dir: Path) -> None:
-    proc = _pdrive("scan", "--port", "sim://?stations=9:demo-card", "--quick", "--json", path=plugin_dir)
+def test_scan_sees_the_plugin_family_on_sim(plugin_venv: Path) -> None:
+    proc = _pdrive("scan", "--port", "sim://?stations=9:demo-card", "--quick", "--json", python=plugin_venv)
     assert proc.returncode == 0, proc.stderr
     (st,) = json.loads(proc.stdout)["stations"]
     assert (st["station"], st["ident"], st["device"]) == (9, DEMO_IDENT, DEMO_TITLE)
 
 
-def test_decode_knows_the_plugin_profile(plugin_dir: Path) -> None:
+def test_decode_knows_the_plugin_profile(plugin_venv: Path) -> None:
     # PPO1 request: 4 PKW words, then CTW 0x047F (PZD1, octets 8-9) and the reference 0x2000
     # (PZD2): 0x2000 / 0x4000 = 50 % of FMAX's default 50 Hz = 25 Hz (PROFIdrive N2 scaling)
     area = ["00"] * 8 + ["04", "7F", "20", "00"]
-    proc = _pdrive("decode", "demo", "--ppo", "1", "--request", *area, path=plugin_dir)
+    proc = _pdrive("decode", "demo", "--ppo", "1", "--request", *area, python=plugin_venv)
     assert proc.returncode == 0, proc.stderr
     assert "CTW (control word) 0x047F" in proc.stdout
     assert "25.00 Hz" in proc.stdout
 
 
-def test_a_plugin_drive_runs_and_stops(plugin_dir: Path) -> None:
+def test_a_plugin_drive_runs_and_stops(plugin_venv: Path) -> None:
     proc = _pdrive("run", "9", "--hz", "10", "--duration", "1", "--port", "sim://?stations=9:demo",
-                   path=plugin_dir)
+                   python=plugin_venv)
     assert proc.returncode == 0, proc.stderr
     assert "stop: normal (stopped)" in proc.stderr
 
 
-def test_the_plugin_port_kind_opens(plugin_dir: Path) -> None:
-    proc = _pdrive("scan", "--port", "demosim://?stations=9:demo", "--quick", "--json", path=plugin_dir)
+def test_the_plugin_port_kind_opens(plugin_venv: Path) -> None:
+    proc = _pdrive("scan", "--port", "demosim://?stations=9:demo", "--quick", "--json", python=plugin_venv)
     assert proc.returncode == 0, proc.stderr
     assert [s["ident"] for s in json.loads(proc.stdout)["stations"]] == [DEMO_IDENT]
 
