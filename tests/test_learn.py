@@ -266,7 +266,8 @@ def test_learned_plant_scans_as_the_captured_one(plc_capture, which):
 def test_drive_stations_get_their_drive_models_the_io_station_replays(plc_capture):
     plans = load_plans(plc_capture[0])
     from profidrive_cli.sim.learn import learned_slaves
-    fam = {s.address: s.model.family for s in learned_slaves(plans)}
+    from profidrive_cli.sim.plant import make_model
+    fam = {s.address: s.model.family for s in learned_slaves(plans, make_model)}
     assert fam[IO_ADDR] == "learned"
     assert all(fam[a] != "learned" for a in PLANT_IDENTS)
     # the captured inputs of station 9: (k, A5) for its k-th Data_Exchange, k = 1, 2, ... (the

@@ -2,8 +2,8 @@
 `sim://?learn=PATH`), so a replacement PLC can be tested against "the line as it was".
 
     plans = load_plans("line.pcapng")           # dp/capfile.py: raw, pcap, pcapng, ptd by extension
-    slaves = learned_slaves(plans, baud=187500)  # SimSlaves: drive models or LearnedModels
-    bus = build_learned_bus("line.pcapng")      # or sim/plant.py build_bus("sim://?learn=line.pcapng")
+    slaves = learned_slaves(plans, make_model, baud=187500)   # drive models or LearnedModels
+    bus = build_bus("sim://?learn=line.pcapng")  # sim/plant.py: the plant with the URL's options
 
 learn(packets) pairs each request with its reply as a listener does (bustools/passive_live.py: the reply
 answers the last request that expects one; a token, an SDN or the next request ends the wait) and keeps
@@ -48,15 +48,20 @@ from __future__ import annotations
 import os
 from bisect import bisect_right
 from dataclasses import dataclass, field
-from typing import Any, Iterable
+from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 from profidrive_cli import UsageError
 from profidrive_cli.dp import services as S
 from profidrive_cli.dp.cfg import CfgError, io_sizes
 from profidrive_cli.fdl import frames as F
-from profidrive_cli.sim.bus import SimBus
 from profidrive_cli.sim.model import SlaveModel
 from profidrive_cli.sim.slave import SimSlave
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.drives.profile import Profile
+
+#: sim/plant.py make_model (passed in: plant.py reads sim://?learn= through this module)
+MakeModel = Callable[["Profile"], SlaveModel]
 
 #: answered Data_Exchanges kept per station (the first ones; a capture of hours needs no more to replay)
 MAX_EXCHANGES = 100_000
@@ -350,7 +355,7 @@ class LearnedSlave(SimSlave):
         return S.SlaveDiag(st1, d.st2, d.st3, d.master, d.ident, d.ext)
 
 
-def _drive_model(plan: StationPlan, baud: int) -> SlaveModel | None:
+def _drive_model(plan: StationPlan, baud: int, make_model: MakeModel) -> SlaveModel | None:
     """The family's drive model for a station whose ident a profile carries and whose accepted
     configuration is one of the profile's layouts (or none was seen); None otherwise."""
     from profidrive_cli.drives.profile import profile_for_ident
@@ -364,7 +369,6 @@ def _drive_model(plan: StationPlan, baud: int) -> SlaveModel | None:
         layout = next((n for n, lay in prof.layouts.items() if lay.cfg == plan.chk_cfg), None)
         if layout is None:
             return None
-    from profidrive_cli.sim.plant import make_model
     model = make_model(prof)
     if layout is not None:
         model.default_layout = layout
@@ -372,10 +376,12 @@ def _drive_model(plan: StationPlan, baud: int) -> SlaveModel | None:
     return model
 
 
-def learned_slaves(plans: dict[int, StationPlan], baud: int = 19200) -> list[SimSlave]:
+def learned_slaves(plans: dict[int, StationPlan], make_model: MakeModel,
+                   baud: int = 19200) -> list[SimSlave]:
+    """The stations of the plans: `make_model(profile)` (sim/plant.py's) builds a drive model."""
     out: list[SimSlave] = []
     for a, plan in plans.items():
-        model = _drive_model(plan, baud)
+        model = _drive_model(plan, baud, make_model)
         if model is not None:
             out.append(SimSlave(a, model))
         else:
@@ -383,10 +389,5 @@ def learned_slaves(plans: dict[int, StationPlan], baud: int = 19200) -> list[Sim
     return out
 
 
-def build_learned_bus(path: str | os.PathLike[str], baud: int = 19200, timing: str = "instant") -> SimBus:
-    """A SimBus of the stations learnt from a capture file (sim://?learn=PATH adds the URL's options)."""
-    return SimBus(learned_slaves(load_plans(path), baud), baud=baud, timing=timing)
-
-
 __all__ = ["StationPlan", "Learner", "learn", "load_plans", "InputReplay", "LearnedModel",
-           "LearnedSlave", "learned_slaves", "build_learned_bus"]
+           "LearnedSlave", "learned_slaves"]

@@ -242,7 +242,7 @@ def build_bus(url: str, now: float = 0.0, default_baud: int = 19200) -> SimBus:
             raise UsageError("sim URL: learn= and stations= exclude each other (learn= takes the "
                              "capture's stations)")
         from profidrive_cli.sim.learn import learned_slaves, load_plans
-        slaves.extend(learned_slaves(load_plans(q["learn"][-1]), baud))
+        slaves.extend(learned_slaves(load_plans(q["learn"][-1]), make_model, baud))
         stations = []
     for addr, name in stations:
         preset = presets.pop(addr, {})
