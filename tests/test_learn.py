@@ -290,19 +290,58 @@ def test_io_on_the_learned_io_station_replays_the_captured_inputs(plc_capture):
     assert all(g[1] == 0xA5 for g in got) and ks == list(range(ks[0], ks[0] + 5))
 
 
-def test_sim_learn_of_a_sniffed_pcap_with_the_plc(plc_capture, tmp_path):
-    """`pdrive sim --plc --pty`, `pdrive sniff --pcap` of it, then `pdrive sim --learn` of that pcap:
-    the PLC's drives are learnt with their idents."""
-    from conftest import start_pty_sim
-    pcap = tmp_path / "live.pcap"
-    p, port = start_pty_sim("--plc")
+def _opened(pid: int, path: str) -> bool:
+    fds = f"/proc/{pid}/fd"
     try:
-        r = subprocess.run(pdrive_cmd() + ["sniff", "--port", port, "--duration", "4", "--pcap", str(pcap)],
-                           capture_output=True, text=True, timeout=90)
-        assert r.returncode == 0, r.stderr
+        return any(os.path.realpath(os.path.join(fds, fd)) == path for fd in os.listdir(fds))
+    except OSError:
+        return False
+
+
+def test_sim_learn_of_a_pcap_sniffed_from_sim_plc(socat_pair, tmp_path):
+    """`pdrive sniff --pcap` on one end of a pty pair, then `pdrive sim --plc --port` on the other
+    (so the capture holds the PLC's bring-up), then the learned plant of that pcap: the default
+    plant's stations and idents."""
+    if not os.path.isdir("/proc/self/fd"):
+        pytest.skip("needs /proc to see when sniff has opened its port")
+    a, b = socat_pair
+    pcap = tmp_path / "live.pcap"
+    sniff = subprocess.Popen(pdrive_cmd() + ["sniff", "--port", b, "--duration", "600", "--pcap", str(pcap)],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    sim = None
+    try:
+        target = os.path.realpath(b)
+        deadline = time.monotonic() + 120
+        while not _opened(sniff.pid, target):        # sniff empties the port's buffer once opened
+            assert sniff.poll() is None and time.monotonic() < deadline, sniff.stderr.read()
+            time.sleep(0.05)
+        time.sleep(0.5)
+        sim = subprocess.Popen(pdrive_cmd() + ["sim", "--plc", "--port", a, "--json"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        assert json.loads(sim.stdout.readline())["plc"] is True
+        # the bring-up at 19.2k: per station Set_Prm, Chk_Cfg, Slave_Diag and their replies, about 90
+        # octets x 11 bit / 19200 bit/s = 52 ms, 0.26 s for five: 6 s leaves 20 times that
+        time.sleep(6.0)
     finally:
-        stop_pty_sim(p)
-    # the PLC brings every station up within the first seconds; its cycles carry on afterwards:
-    # the stations in data exchange during the 4 s are learnt (all of them on an unloaded machine)
-    got = _stations(f"sim://?learn={pcap}")
-    assert got and all(PLANT_IDENTS[a] == ident for a, ident in got.items())
+        stop_pty_sim(sniff)      # SIGINT: sniff ends well and writes its pcap
+        if sim is not None:
+            stop_pty_sim(sim)
+    assert sniff.returncode == 0, sniff.stderr.read()
+    assert _stations(f"sim://?learn={pcap}") == PLANT_IDENTS
+
+
+def test_the_builtin_plc_runs_the_learned_plant(plc_capture):
+    """`sim --learn … --plc`: the PLC (sim/plc.py) brings up the learnt drive stations and cycles
+    them; the learnt plain station it leaves alone (no drive profile), as on any plant."""
+    from profidrive_cli.sim.plant import build_bus
+    from profidrive_cli.sim.plc import Plc
+    bus = build_bus(f"sim://?learn={plc_capture[0]}")
+    plc = Plc(bus)
+    try:
+        plc.bring_up()
+        assert sorted(plc.plans) == sorted(PLANT_IDENTS)
+        for _ in range(3):
+            plc.cycle()
+        assert all(bus.slaves[a].stats["data_exchange"] >= 3 for a in PLANT_IDENTS)
+    finally:
+        plc.shutdown()

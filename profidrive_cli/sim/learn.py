@@ -218,10 +218,14 @@ def load_plans(path: str | os.PathLike[str]) -> dict[int, StationPlan]:
     for p in open_capture(path):
         r = F.parse(p.raw, 0)
         lr.feed(p.t, r[0] if isinstance(r, tuple) and r[1] == len(p.raw) else None)
-    plans = {a: st for a, st in lr.plans().items() if st.ident is not None}
+    every = lr.plans()
+    plans = {a: st for a, st in every.items() if st.ident is not None}
     if not plans:
+        blind = sorted(every)
+        why = (f"; station(s) {', '.join(map(str, blind))} answered, but the capture shows no ident "
+               f"(capture the line's start-up: Set_Prm or Slave_Diag)") if blind else ""
         raise UsageError(f"{path}: no slave answers a Slave_Diag or accepts a Set_Prm in its "
-                         f"{lr.frames} telegrams: nothing to learn")
+                         f"{lr.frames} telegrams: nothing to learn{why}")
     return plans
 
 
