@@ -242,8 +242,8 @@ class InputReplay:
         t0 = rows[0][0] if rows else 0.0
         self.times = [t - t0 for t, _, _ in rows]
         span = self.times[-1] if rows else 0.0
-        #: on the capture's clock (False: one per Data_Exchange)
-        self.timed = span > 0.0
+        #: on the capture's clock (False: one per Data_Exchange; also for times out of order)
+        self.timed = span > 0.0 and all(a <= b for a, b in zip(self.times, self.times[1:]))
         self.period = span + span / (len(rows) - 1) if self.timed else 0.0
         self.keyed = _keyed(rows)
         self._count = 0
