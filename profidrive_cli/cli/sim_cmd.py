@@ -25,8 +25,13 @@ def _host_port(listen: str, option: str = "--listen") -> tuple[str, int]:
 @click.option("--listen", default=None, metavar="HOST:PORT", help="Serve on a TCP port.")
 @click.option("--port", "serial_port", default=None, metavar="DEVICE",
               help="Serve on an existing serial device (e.g. one end of a socat pty pair).")
-@click.option("--plant", default="sim://", show_default=True,
-              help="Which stations: a sim:// URL, e.g. sim://?stations=3:fuji-g1,9:yaskawa")
+@click.option("--plant", default=None,
+              help="Which stations: a sim:// URL, e.g. sim://?stations=3:fuji-g1,9:yaskawa  "
+                   "[default: sim://]")
+@click.option("--learn", "learn", default=None, metavar="CAPTURE",
+              help="The stations of a capture file (raw, pcap, pcapng, ptd), answering as the captured "
+                   "ones did: idents, diagnosis, Get_Cfg, Chk_Cfg, inputs (drive models where a "
+                   "profile has the ident). Not with --plant.")
 @click.option("--baud", default="19200", show_default=True)
 @click.option("--json", "as_json", is_flag=True, help="Print the endpoint as JSON.")
 @click.option("--plc", is_flag=True,
@@ -36,7 +41,7 @@ def _host_port(listen: str, option: str = "--listen") -> tuple[str, int]:
               help="Also serve the plant's control (JSON over HTTP: trip, clear, unplug, replug, set, "
                    "faults, state; `pdrive sim-ctl`), on 127.0.0.1 unless a host is named (then "
                    "with a token). PORT 0 picks a free one.")
-def sim_cmd(use_pty, listen, serial_port, plant, baud, as_json, plc, control):
+def sim_cmd(use_pty, listen, serial_port, plant, learn, baud, as_json, plc, control):
     """Serve a simulated PROFIBUS segment for another master (Ctrl-C ends it).
 
     With --plc the segment has its own master: a PLC brings every station up and runs a scripted
@@ -47,6 +52,12 @@ def sim_cmd(use_pty, listen, serial_port, plant, baud, as_json, plc, control):
     from profidrive_cli.sim.plant import build_bus
     if sum(bool(x) for x in (use_pty, listen, serial_port)) != 1:
         raise UsageError("choose exactly one of --pty, --listen HOST:PORT, --port DEVICE")
+    if learn is not None:
+        if plant is not None:
+            raise UsageError("--learn and --plant exclude each other (--learn takes the capture's stations)")
+        from urllib.parse import quote
+        plant = "sim://?learn=" + quote(learn, safe="/")
+    plant = plant or "sim://"
     if not plant.startswith("sim://"):
         raise UsageError(f"--plant must be a sim:// URL, got {plant!r}")
     try:

@@ -28,6 +28,8 @@
                                              answer at all. FDL status is answered as usual. A CBP2 as
                                              kolod/profibus met it: firstcontact=3&warmup=3:5;
                                              sim/slave.py SimSlave.first_contact
+    sim://?learn=line.pcapng                 the stations of a capture, answering as the captured ones
+                                             did (sim/learn.py; not with stations=)
     sim://?wd=0                              (debug) ignore the watchdog... not offered: the sim always enforces it
 
 Each station runs the family's drive model (the sim_model of its row in drives/registry.py: sim/<family>.py,
@@ -55,7 +57,7 @@ from profidrive_cli.sim.slave import SimSlave
 
 DEFAULT_PLANT = ((3, "fuji-g1"), (4, "fuji-pdp3"), (5, "toyo"), (6, "moeller"), (7, "yaskawa"))
 KNOWN_KEYS = {"stations", "baud", "timing", "trip", "faults", "tsdr", "seed", "set", "warmup",
-              "firstcontact"}
+              "firstcontact", "learn"}
 #: the most telegrams a station of warmup= may ignore (a bound for the URL, not a device figure)
 MAX_WARMUP = 1000
 TIMINGS = ("instant", "wire", "virtual")
@@ -235,6 +237,13 @@ def build_bus(url: str, now: float = 0.0, default_baud: int = 19200) -> SimBus:
     seeded = _per_station(q.get("faults", []), "faults")
     slaves = []
     presets = _presets(q.get("set", []))
+    if "learn" in q:
+        if "stations" in q:
+            raise UsageError("sim URL: learn= and stations= exclude each other (learn= takes the "
+                             "capture's stations)")
+        from profidrive_cli.sim.learn import learned_slaves, load_plans
+        slaves.extend(learned_slaves(load_plans(q["learn"][-1]), make_model, baud))
+        stations = []
     for addr, name in stations:
         preset = presets.pop(addr, {})
         entry = None if preset else _index_entry(name)
