@@ -231,3 +231,11 @@ def test_apply_scope_says_why_a_code_in_no_group_is_left_out():
     assert (rows[0].result, rows[0].why, rows[0].reason) == ("skipped", "out of scope",
                                                              "in no group (--only)")
     assert scope_problem(p, (), ("protection",)) is None
+
+
+def test_a_profile_without_groups_says_so(tmp_path):
+    f = tmp_path / "g.yaml"
+    f.write_text("profile: no-groups\nfamily: profidrive\ntitle: t\nidentity: {ident: 0x1234}\n"
+                 "layouts:\n  ppo1: {cfg: \"F3 F1\", pkw: true}\ndefault_layout: ppo1\n")
+    p = load_profile_file(f)
+    assert scope_problem(p, ("motor",), ()) == "unknown parameter group 'motor' for no-groups (groups: none)"
