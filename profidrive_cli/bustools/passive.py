@@ -15,7 +15,7 @@ the profile's max-frequency parameter goes by on the wire; from then on that val
 from __future__ import annotations
 
 import inspect
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from profidrive_cli import UsageError
@@ -34,6 +34,8 @@ class Watched:
     layout: str | None = None        # as given; None: inferred
     seen_cfg: bytes | None = None    # the last Chk_Cfg the master sent it
     fmax: float | None = None        # learnt from a PKW answer of the max-frequency parameter
+    #: the family's (decode_area, takes max_hz), looked up at the first area
+    decoder: tuple | None = field(default=None, repr=False, compare=False)
 
     @property
     def name(self) -> str:
@@ -153,19 +155,27 @@ def _decode_new(st: Watched, direction: str, data: bytes, layout: str | None) ->
     return {**base, **d}
 
 
-#: decode_area function -> whether it takes max_hz (inspect.signature once per family, not per frame)
-_TAKES_MAX_HZ: dict = {}
+#: family codec -> (its decode_area, whether that takes max_hz): looked up (inspect.signature) once
+#: per codec, not per frame
+_DECODERS: dict = {}
+
+
+def _decoder(profile):
+    from profidrive_cli.drives import codec_module
+    mod = codec_module(profile)
+    hit = _DECODERS.get(mod)
+    if hit is None:
+        fn = mod.decode_area
+        hit = _DECODERS[mod] = (fn, "max_hz" in inspect.signature(fn).parameters)
+    return hit
 
 
 def _decode(st: Watched, layout: str, direction: str, data: bytes) -> dict:
-    from profidrive_cli.drives import codec_module
-    fn = codec_module(st.profile).decode_area
-    if st.fmax is not None:
-        takes = _TAKES_MAX_HZ.get(fn)
-        if takes is None:
-            takes = _TAKES_MAX_HZ[fn] = "max_hz" in inspect.signature(fn).parameters
-        if takes:
-            return fn(st.profile, layout, direction, data, max_hz=st.fmax)
+    if st.decoder is None:
+        st.decoder = _decoder(st.profile)
+    fn, takes_max_hz = st.decoder
+    if st.fmax is not None and takes_max_hz:
+        return fn(st.profile, layout, direction, data, max_hz=st.fmax)
     return fn(st.profile, layout, direction, data)
 
 

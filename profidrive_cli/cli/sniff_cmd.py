@@ -11,14 +11,14 @@ from profidrive_cli import UsageError
 from profidrive_cli.bustools.listen import listen
 from profidrive_cli.cli.common import bus_options, out
 from profidrive_cli.datafile import DataFileError, open_input_file
-from profidrive_cli.dp.capture import LINKTYPES, Capture, ErrorMerger, PcapWriter, format_line
+from profidrive_cli.dp.capture import HOLD, LINKTYPES, Capture, ErrorMerger, PcapWriter, format_line
 from profidrive_cli.outfile import OutputFile, check_output_path
 
 
 # a raw capture file: 16 MiB is ~14 s of a saturated bus at 12 Mbit/s, ~2 h at 19.2 kbit/s
 MAX_CAPTURE_BYTES = 16 * 1024 * 1024
 #: --from-file is read and shown this many octets at a time: the memory stays flat in the file's size
-CHUNK_BYTES = 64 * 1024
+CHUNK_BYTES = 16 * 1024
 
 
 def _line(c) -> str:
@@ -88,10 +88,12 @@ def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, 
             view.flush()
 
         if src is not None:
-            # a garbage run that goes on in the next chunk stays one entry (end_of_chunk=False)
+            # shown as if decoded in one piece: a telegram that starts in the chunk's last octets
+            # waits for the next (HOLD), a garbage run that goes on in it stays one entry
             for chunk in _chunks(src, raw_file):
-                show(cap.feed(chunk, 0.0), end_of_chunk=False)
-            show([_truncated(cap)] if len(cap.rx) else [])
+                show(cap.feed(chunk, 0.0, hold=HOLD), end_of_chunk=False)
+            rest = cap.feed(b"", 0.0)
+            show(rest + [_truncated(cap)] if len(cap.rx) else rest)
             view.finish(cap._t)
         else:
             link = opts.open_link()

@@ -39,6 +39,8 @@ class SniffView:
         self.refresh_s = refresh_s
         self._shown_at: float | None = None
         self._rich_live: Live | None = None
+        #: frame lines not yet written (flush())
+        self._lines: list[str] = []
 
     # -- one frame -------------------------------------------------------------------------------
     def frame(self, c) -> None:
@@ -54,14 +56,14 @@ class SniffView:
         f = c.frame
         fields = frame_fields(c) if f is not None else None
         dec = decode_du(fields["service"], f.data) if fields is not None and "du" in fields else None
-        write = sys.stdout.write
+        write = self._lines.append
         if self.as_json:
             obj = frame_json(c.describe())
             if dec is not None:
                 obj["decoded"] = dec
             if d is not None:
                 obj["drive"] = drive_json(d)
-            write(json.dumps(obj) + "\n")           # emit_json's text; flushed by flush()
+            write(json.dumps(obj) + "\n")           # emit_json's text, written by flush()
         else:
             # a plain write, not rich's print (8x dearer per line): the same text, no markup
             line = format_line(c)
@@ -73,8 +75,10 @@ class SniffView:
                     write(DECODED_INDENT + text + "\n")
 
     def flush(self) -> None:
-        """The frames shown so far out to the reader (after each chunk of a capture)."""
-        if self.live is None:
+        """The frames shown so far out to the reader: once per chunk of the capture, not per line."""
+        if self._lines:
+            sys.stdout.write("".join(self._lines))
+            self._lines.clear()
             sys.stdout.flush()
 
     # -- the live list ---------------------------------------------------------------------------
@@ -96,7 +100,8 @@ class SniffView:
             self._rich_live.update(table, refresh=True)
 
     def finish(self, t: float) -> None:
-        """The end of the capture: the live list's last state."""
+        """The end of the capture: the frames not yet written, or the live list's last state."""
+        self.flush()
         if self.live is None:
             return
         snap = self.live.snapshot(t)

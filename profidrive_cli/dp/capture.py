@@ -21,6 +21,9 @@ LINKTYPES = {"147": LINKTYPE_USER0, "257": LINKTYPE_PROFIBUS_DL}
 
 #: octets that can start a telegram
 _STARTS = frozenset((F.SD1, F.SD2, F.SD3, F.SD4, F.SC))
+#: Capture.feed(hold=HOLD): fdl.frames.parse() needs at most 4 octets of a telegram (SD2's SD LE
+#: LEr SD) to judge its start; from then on its answer is final or NEED_MORE
+HOLD = 3
 
 
 #: the start delimiters' names
@@ -111,17 +114,23 @@ class Capture:
         self.rx = F.Receiver()
         self._t = 0.0
 
-    def feed(self, data: bytes, t: float) -> list[Captured]:
+    def feed(self, data: bytes, t: float, hold: int = 0) -> list[Captured]:
         """Frames and framing errors completed by `data`. Linear in the input: the buffer is parsed
         by position and its consumed prefix dropped once per call (a 10 MiB capture decodes in
-        one pass, not one copy of the rest per frame)."""
+        one pass, not one copy of the rest per frame).
+
+        hold=HOLD leaves what starts in the last HOLD octets for the next call: parse() judges the
+        start of a telegram by the octets at hand (three octets of an SD2 header with LE != LEr are
+        "LE != LEr", four "LE 5 != LEr 6"), so a file decoded in chunks with hold=HOLD, then a
+        last feed(b"", t), gives the entries of one piece (with ErrorMerger for garbage runs)."""
         if not len(self.rx):
             self._t = t
         self.rx.feed(data)
         buf = self.rx.buf
         out = []
         pos = 0
-        while True:
+        stop = len(buf) - hold
+        while pos < stop:
             r = F.parse(buf, pos)
             if r is None:
                 break
@@ -220,5 +229,5 @@ def read_pcap(data: bytes) -> tuple[int, list[tuple[float, bytes]]]:
     return linktype, pkts
 
 
-__all__ = ["Capture", "Captured", "ErrorMerger", "PcapWriter", "read_pcap", "merge_errors", "frame_fields",
+__all__ = ["Capture", "Captured", "ErrorMerger", "HOLD", "PcapWriter", "read_pcap", "merge_errors", "frame_fields",
            "LINKTYPE_USER0", "LINKTYPE_PROFIBUS_DL", "LINKTYPES"]
