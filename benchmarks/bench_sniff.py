@@ -8,7 +8,7 @@ The capture: the built-in PLC (sim/plc.py, what `pdrive sim --plc` runs) on the 
 plant at 12 Mbit/s with the wire's timing, unpaced (cycle_s 0): bring-up (Set_Prm, Chk_Cfg,
 Slave_Diag), then Data_Exchange with every drive while each runs its script through its family's
 codec (start, ramp, hold with PKW / MEMOBUS reads of the max frequency, acceleration time and a
-read-only parameter, stop, pause), the release at the end; `--seconds` of it (about 9 000
+read-only parameter, stop, pause), the release at the end; `--seconds` of it (about 8 500
 telegrams per second here), kept in `--keep FILE` and reused when that file exists. The small size
 is that capture, the large one `--repeat` copies of it back to back (each copy a new start-up).
 
@@ -24,10 +24,12 @@ Each mode runs as `python -m profidrive_cli sniff --from-file FILE [mode options
 a process of its own (the CLI's whole path: click, reading, decoding, formatting, writing). Its CPU
 time (user + system, from wait4) less that of the same command on an empty file (start-up) gives
 the decoding rate; CPU time rather than wall time because the machine is shared (the wall time is
-printed too). Peak RSS is the process's ru_maxrss. `--against DIR` runs the same commands from
+printed too). Peak RSS is the process's VmHWM at its exit (Linux; ru_maxrss would count the pages
+it had from this process until its exec). `--against DIR` runs the same commands from
 another checkout (e.g. `git archive main | tar -x -C DIR`) for a before/after in one run.
 `--sc-mib N` adds the worst case the size limit accepts: a file of N MiB of 0xE5 (one short
-acknowledge per octet) in the default text mode.
+acknowledge per octet) in the default text mode (this checkout only: before issue 27 16 MiB took
+about 40 minutes).
 """
 
 from __future__ import annotations
@@ -99,19 +101,38 @@ def line_figures(raw: bytes) -> tuple[int, float, dict[str, int]]:
     return n, bits / BAUD, kinds
 
 
+#: `pdrive ARGS` (profidrive_cli/__main__.py's main) that writes its peak RSS (VmHWM, KiB) to argv[1]
+#: at exit: ru_maxrss would also count the pages of this process, which the child had until exec
+PDRIVE_WITH_PEAK = """
+import atexit, sys
+out = sys.argv[1]
+sys.argv = ["pdrive"] + sys.argv[2:]
+def peak():
+    with open("/proc/self/status") as fh:
+        kib = next(line.split()[1] for line in fh if line.startswith("VmHWM:"))
+    with open(out, "w") as fh:
+        fh.write(kib)
+atexit.register(peak)
+from profidrive_cli.cli.main import main
+main()
+"""
+
+
 def run_one(root: str, path: str, extra: list[str]) -> tuple[float, float, float, int]:
     """(cpu s, wall s, peak RSS MB, exit code) of `pdrive sniff --from-file path extra` from `root`."""
     env = dict(os.environ)
     env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
     env.pop("PYTHONDONTWRITEBYTECODE", None)
-    cmd = [sys.executable, "-m", "profidrive_cli", "sniff", "--from-file", path, *extra]
-    t = time.perf_counter()
-    p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env,
-                         cwd=root)
-    _, status, ru = os.wait4(p.pid, 0)
-    wall = time.perf_counter() - t
-    p.returncode = os.waitstatus_to_exitcode(status)
-    return ru.ru_utime + ru.ru_stime, wall, ru.ru_maxrss / 1024, p.returncode
+    with tempfile.NamedTemporaryFile("r", suffix=".peak") as peak:
+        cmd = [sys.executable, "-c", PDRIVE_WITH_PEAK, peak.name, "sniff", "--from-file", path, *extra]
+        t = time.perf_counter()
+        p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env,
+                             cwd=root)
+        _, status, ru = os.wait4(p.pid, 0)
+        wall = time.perf_counter() - t
+        p.returncode = os.waitstatus_to_exitcode(status)
+        kib = peak.read().strip()
+    return ru.ru_utime + ru.ru_stime, wall, int(kib or 0) / 1024, p.returncode
 
 
 def main() -> None:
@@ -163,10 +184,9 @@ def main() -> None:
             sc = os.path.join(d, "sc.raw")
             with open(sc, "wb") as fh:
                 fh.write(b"\xE5" * int(a.sc_mib * 1024 * 1024))
-            for tag, root in trees:
-                cpu, wall, rss, rc = run_one(root, sc, [])
-                print(f"{a.sc_mib:g} MiB of 0xE5, text ({tag or 'this'}): cpu {cpu:.1f} s, wall "
-                      f"{wall:.1f} s, peak RSS {rss:.0f} MB, exit {rc}", flush=True)
+            cpu, wall, rss, rc = run_one(HERE, sc, [])
+            print(f"{a.sc_mib:g} MiB of 0xE5, text: cpu {cpu:.1f} s, wall {wall:.1f} s, peak RSS "
+                  f"{rss:.0f} MB, exit {rc}", flush=True)
 
 
 if __name__ == "__main__":

@@ -3,6 +3,11 @@ which the shipped Wireshark dissector binds; LINKTYPE_PROFIBUS_DL = 257 on reque
 
 In dp/ because it names each telegram's DP service (dp/services.py: SAP -> Set_Prm, Slave_Diag, ...);
 it touches fdl.frames and dp.services only and is sans-IO (octets and times in, records out).
+
+Streaming: Capture.feed gives the records a chunk completed and keeps only an unfinished telegram;
+ErrorMerger joins a garbage run across chunks; with feed(hold=HOLD) a file read in chunks decodes as
+in one piece. A frame's fields and line are kept per octets (bounded caches): a bus repeats its
+telegrams, so `pdrive sniff` formats most of them once (benchmarks/bench_sniff.py).
 """
 
 from __future__ import annotations
