@@ -62,9 +62,12 @@ def frame_fields(c: Captured) -> dict:
     per octets: do not change the dict)."""
     d = _FIELDS.get(c.raw)
     if d is None:
+        f = c.frame
+        if f is None:
+            raise ValueError(f"not a frame: {c.error}")
         if len(_FIELDS) >= _CACHE_MAX:
             _FIELDS.clear()
-        d = _FIELDS[c.raw] = _fields(c.raw, c.frame)
+        d = _FIELDS[c.raw] = _fields(c.raw, f)
     return d
 
 
