@@ -114,11 +114,15 @@ def open_input_file(path: str | Path, what: str = "file", max_bytes: int = MAX_Y
         # O_NONBLOCK: if the path was swapped for a FIFO since the stat, opening must not block
         fd = os.open(p, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
         fh = os.fdopen(fd, "rb")
-        if not stat.S_ISREG(os.fstat(fh.fileno()).st_mode):
-            fh.close()
-            raise DataFileError(p, None, f"is not a regular file ({what} expected)")
     except OSError as e:
         raise DataFileError(p, None, f"cannot read {what}: {e.strerror or e}") from None
+    try:
+        regular = stat.S_ISREG(os.fstat(fh.fileno()).st_mode)
+    except OSError:
+        regular = False
+    if not regular:
+        fh.close()
+        raise DataFileError(p, None, f"is not a regular file ({what} expected)")
     return fh
 
 
