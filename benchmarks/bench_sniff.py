@@ -8,8 +8,8 @@ The capture: the built-in PLC (sim/plc.py, what `pdrive sim --plc` runs) on the 
 plant at 12 Mbit/s with the wire's timing, unpaced (cycle_s 0): bring-up (Set_Prm, Chk_Cfg,
 Slave_Diag), then Data_Exchange with every drive while each runs its script through its family's
 codec (start, ramp, hold with PKW / MEMOBUS reads of the max frequency, acceleration time and a
-read-only parameter, stop, pause), the release at the end; `--seconds` of it (about 8 500
-telegrams per second here), kept in `--keep FILE` and reused when that file exists. The small size
+read-only parameter, stop, pause), the release at the end; `--seconds` of it (4 700 to 8 400
+telegrams per second of real time here, by the machine's load), kept in `--keep FILE` and reused when that file exists. The small size
 is that capture, the large one `--repeat` copies of it back to back (each copy a new start-up).
 
 The line rate (bus reference ../shared/spec/profibus-dp-reference.md): a telegram of k octets
