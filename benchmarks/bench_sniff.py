@@ -9,8 +9,9 @@ plant at 12 Mbit/s with the wire's timing, unpaced (cycle_s 0): bring-up (Set_Pr
 Slave_Diag), then Data_Exchange with every drive while each runs its script through its family's
 codec (start, ramp, hold with PKW / MEMOBUS reads of the max frequency, acceleration time and a
 read-only parameter, stop, pause), the release at the end; `--seconds` of it (4 700 to 8 400
-telegrams per second of real time here, by the machine's load), kept in `--keep FILE` and reused when that file exists. The small size
-is that capture, the large one `--repeat` copies of it back to back (each copy a new start-up).
+telegrams per second of real time here, by the machine's load), kept in `--keep FILE` and reused
+when that file exists. The small size is that capture, the large one `--repeat` copies of it back
+to back (each copy a new start-up).
 
 The line rate (bus reference ../shared/spec/profibus-dp-reference.md): a telegram of k octets
 lasts 11·k bit (§1 "character | 11 bits"); a saturated line leaves only the idle times a master and
