@@ -80,6 +80,20 @@ def read_input_file(path: str | Path, what: str = "file", max_bytes: int = MAX_Y
     expected, why not) for a missing or unreadable path, a folder, a device, a FIFO or socket (never
     opened: a FIFO would block), or a file that is too large."""
     p = Path(path)
+    with open_input_file(p, what, max_bytes) as fh:
+        try:
+            data = fh.read(max_bytes + 1)
+        except OSError as e:
+            raise DataFileError(p, None, f"cannot read {what}: {e.strerror or e}") from None
+    if len(data) > max_bytes:
+        raise DataFileError(p, None, f"too large for a {what}: more than {max_bytes} bytes")
+    return data
+
+
+def open_input_file(path: str | Path, what: str = "file", max_bytes: int = MAX_YAML_BYTES):
+    """read_input_file's checks, then the file open for reading (binary; the caller closes it):
+    for reading a large input in chunks."""
+    p = Path(path)
     try:
         st = os.stat(p)
     except FileNotFoundError:
@@ -99,15 +113,17 @@ def read_input_file(path: str | Path, what: str = "file", max_bytes: int = MAX_Y
     try:
         # O_NONBLOCK: if the path was swapped for a FIFO since the stat, opening must not block
         fd = os.open(p, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
-        with os.fdopen(fd, "rb") as fh:
-            if not stat.S_ISREG(os.fstat(fh.fileno()).st_mode):
-                raise DataFileError(p, None, f"is not a regular file ({what} expected)")
-            data = fh.read(max_bytes + 1)
+        fh = os.fdopen(fd, "rb")
     except OSError as e:
         raise DataFileError(p, None, f"cannot read {what}: {e.strerror or e}") from None
-    if len(data) > max_bytes:
-        raise DataFileError(p, None, f"too large for a {what}: more than {max_bytes} bytes")
-    return data
+    try:
+        regular = stat.S_ISREG(os.fstat(fh.fileno()).st_mode)
+    except OSError:
+        regular = False
+    if not regular:
+        fh.close()
+        raise DataFileError(p, None, f"is not a regular file ({what} expected)")
+    return fh
 
 
 def read_text(path: str | Path, what: str = "data file", max_bytes: int = MAX_YAML_BYTES) -> str:

@@ -15,7 +15,7 @@ the profile's max-frequency parameter goes by on the wire; from then on that val
 from __future__ import annotations
 
 import inspect
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from profidrive_cli import UsageError
@@ -34,6 +34,8 @@ class Watched:
     layout: str | None = None        # as given; None: inferred
     seen_cfg: bytes | None = None    # the last Chk_Cfg the master sent it
     fmax: float | None = None        # learnt from a PKW answer of the max-frequency parameter
+    #: the family's (decode_area, takes max_hz), looked up at the first area
+    decoder: tuple | None = field(default=None, repr=False, compare=False)
 
     @property
     def name(self) -> str:
@@ -95,11 +97,19 @@ def is_data_exchange(f: F.Frame) -> bool:
     return bool(f.data)
 
 
+#: decoded areas kept per decoder: a station's area mostly repeats its previous one (the same
+#: command, reference and PKW request cycle after cycle); cleared when this many are kept
+AREA_CACHE_MAX = 1024
+
+
 class PassiveDecoder:
-    """Feed captured frames; decode() gives the `drive` object of a watched station's frame."""
+    """Feed captured frames; decode() gives the `drive` object of a watched station's frame (the
+    same object for the same station, direction, octets, layout and max frequency: do not change
+    it)."""
 
     def __init__(self, watched: dict[int, Watched]):
         self.watched = watched
+        self._areas: dict[tuple, dict] = {}
 
     def decode(self, c) -> dict | None:
         f = c.frame
@@ -117,29 +127,54 @@ class PassiveDecoder:
         return self._decode_area(st, direction, bytes(f.data))
 
     def _decode_area(self, st: Watched, direction: str, data: bytes) -> dict:
-        base = {"station": st.address, "profile": st.name, "direction": direction}
         layout = st.layout_for(direction, len(data))
-        if layout is None:
-            base["error"] = (f"{len(data)} octets fit no layout of {st.name} "
-                             f"({', '.join(st.profile.layouts)})")
-            return base
-        base["layout"] = layout
-        try:
-            area = _decode(st, layout, direction, data)
-        except (UsageError, ValueError) as e:
-            base["error"] = str(e)
-            return base
-        d = normalise(st.profile, direction, area)
-        d = {**base, **d}
+        key = (st.address, direction, data, layout, st.fmax)
+        d = self._areas.get(key)
+        if d is None:
+            if len(self._areas) >= AREA_CACHE_MAX:
+                self._areas.clear()
+            d = self._areas[key] = _decode_new(st, direction, data, layout)
         if d.get("param") and direction == "response":
             _learn_fmax(st, d["param"])
         return d
 
 
-def _decode(st: Watched, layout: str, direction: str, data: bytes) -> dict:
+def _decode_new(st: Watched, direction: str, data: bytes, layout: str | None) -> dict:
+    base = {"station": st.address, "profile": st.name, "direction": direction}
+    if layout is None:
+        base["error"] = (f"{len(data)} octets fit no layout of {st.name} "
+                         f"({', '.join(st.profile.layouts)})")
+        return base
+    base["layout"] = layout
+    try:
+        area = _decode(st, layout, direction, data)
+    except (UsageError, ValueError) as e:
+        base["error"] = str(e)
+        return base
+    d = normalise(st.profile, direction, area)
+    return {**base, **d}
+
+
+#: family codec -> (its decode_area, whether that takes max_hz): looked up (inspect.signature) once
+#: per codec, not per frame
+_DECODERS: dict = {}
+
+
+def _decoder(profile):
     from profidrive_cli.drives import codec_module
-    fn = codec_module(st.profile).decode_area
-    if st.fmax is not None and "max_hz" in inspect.signature(fn).parameters:
+    mod = codec_module(profile)
+    hit = _DECODERS.get(mod)
+    if hit is None:
+        fn = mod.decode_area
+        hit = _DECODERS[mod] = (fn, "max_hz" in inspect.signature(fn).parameters)
+    return hit
+
+
+def _decode(st: Watched, layout: str, direction: str, data: bytes) -> dict:
+    if st.decoder is None:
+        st.decoder = _decoder(st.profile)
+    fn, takes_max_hz = st.decoder
+    if st.fmax is not None and takes_max_hz:
         return fn(st.profile, layout, direction, data, max_hz=st.fmax)
     return fn(st.profile, layout, direction, data)
 

@@ -10,13 +10,15 @@ import click
 from profidrive_cli import UsageError
 from profidrive_cli.bustools.listen import listen
 from profidrive_cli.cli.common import bus_options, out
-from profidrive_cli.datafile import read_input_file
-from profidrive_cli.dp.capture import LINKTYPES, Capture, PcapWriter, format_line, merge_errors
+from profidrive_cli.datafile import DataFileError, open_input_file
+from profidrive_cli.dp.capture import HOLD, LINKTYPES, Capture, ErrorMerger, PcapWriter, format_line
 from profidrive_cli.outfile import OutputFile, check_output_path
 
 
 # a raw capture file: 16 MiB is ~14 s of a saturated bus at 12 Mbit/s, ~2 h at 19.2 kbit/s
 MAX_CAPTURE_BYTES = 16 * 1024 * 1024
+#: --from-file is read and shown this many octets at a time: the memory stays flat in the file's size
+CHUNK_BYTES = 16 * 1024
 
 
 def _line(c) -> str:
@@ -79,9 +81,10 @@ def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, 
     for f in files:
         check_output_path(f.path, f.what)
     cap = Capture()
+    merger = ErrorMerger()
     view = _view(stations, live, opts.json, opts if live else None)
-    # read (and check) the input before anything is written
-    raw = read_input_file(raw_file, "raw capture", MAX_CAPTURE_BYTES) if raw_file else None
+    # check the input before anything is written; it is read in chunks and shown as it is read
+    src = open_input_file(raw_file, "raw capture", MAX_CAPTURE_BYTES) if raw_file else None
     # pcap times are wall clock: the capture's start (for --from-file: when the raw file was last
     # written, the end of its capture) plus the monotonic offset of each frame
     start_wall = _mtime(raw_file) if raw_file else time.time()
@@ -92,18 +95,25 @@ def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, 
         writer = PcapWriter(files[0], LINKTYPES[linktype], start_wall) if pcap_file else None
         raw_fh = files[-1] if raw_out else None
 
-        def show(items):
+        def show(items, end_of_chunk: bool = True):
             nonlocal count
-            for c in merge_errors(items):
+            merged = merger.feed(items)
+            if end_of_chunk:
+                merged += merger.flush()
+            for c in merged:
                 count += 1
                 if writer and c.frame is not None:
                     writer.write(c.t, c.raw)
                 view.frame(c)
+            view.flush()
 
-        if raw is not None:
-            show(cap.feed(raw, 0.0))
-            if len(cap.rx):
-                show([_truncated(cap)])
+        if src is not None:
+            # shown as if decoded in one piece: a telegram that starts in the chunk's last octets
+            # waits for the next (HOLD), a garbage run that goes on in it stays one entry
+            for chunk in _chunks(src, raw_file):
+                show(cap.feed(chunk, 0.0, hold=HOLD), end_of_chunk=False)
+            rest = cap.feed(b"", 0.0)
+            show(rest + [_truncated(cap)] if len(cap.rx) else rest)
             view.finish(cap._t)
         else:
             link = opts.open_link()
@@ -127,6 +137,8 @@ def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, 
         for f in files:
             f.commit()
     finally:
+        if src is not None:
+            src.close()
         for f in files:
             if not f.committed:
                 f.discard()
@@ -134,6 +146,24 @@ def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, 
         return
     if not opts.json and not live:
         out.print(f"{count} frame(s)")
+
+
+def _chunks(fh, path):
+    """The file's octets, CHUNK_BYTES at a time; DataFileError when it grew past the size limit or
+    cannot be read."""
+    total = 0
+    while True:
+        try:
+            chunk = fh.read(CHUNK_BYTES)
+        except OSError as e:
+            raise DataFileError(path, None, f"cannot read raw capture: {e.strerror or e}") from None
+        if not chunk:
+            return
+        total += len(chunk)
+        if total > MAX_CAPTURE_BYTES:
+            raise DataFileError(path, None, f"too large for a raw capture: more than "
+                                            f"{MAX_CAPTURE_BYTES} bytes")
+        yield chunk
 
 
 def _mtime(path) -> float:

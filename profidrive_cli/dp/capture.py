@@ -3,6 +3,11 @@ which the shipped Wireshark dissector binds; LINKTYPE_PROFIBUS_DL = 257 on reque
 
 In dp/ because it names each telegram's DP service (dp/services.py: SAP -> Set_Prm, Slave_Diag, ...);
 it touches fdl.frames and dp.services only and is sans-IO (octets and times in, records out).
+
+Streaming: Capture.feed gives the records a chunk completed and keeps only an unfinished telegram;
+ErrorMerger joins a garbage run across chunks; with feed(hold=HOLD) a file read in chunks decodes as
+in one piece. A frame's fields and line are kept per octets (bounded caches): a bus repeats its
+telegrams, so `pdrive sniff` formats most of them once (benchmarks/bench_sniff.py).
 """
 
 from __future__ import annotations
@@ -21,9 +26,22 @@ LINKTYPES = {"147": LINKTYPE_USER0, "257": LINKTYPE_PROFIBUS_DL}
 
 #: octets that can start a telegram
 _STARTS = frozenset((F.SD1, F.SD2, F.SD3, F.SD4, F.SC))
+#: Capture.feed(hold=HOLD): fdl.frames.parse() needs at most 4 octets of a telegram (SD2's SD LE
+#: LEr SD) to judge its start; from then on its answer is final or NEED_MORE
+HOLD = 3
 
 
-@dataclass
+#: the start delimiters' names
+_SD_NAMES = {F.SD1: "SD1", F.SD2: "SD2", F.SD3: "SD3", F.SD4: "SD4", F.SC: "SC"}
+#: a frame's description and line are functions of its octets alone: both are kept for the octets
+#: seen last (a bus repeats its telegrams cycle after cycle); cleared when this many are kept, so the
+#: memory stays bounded whatever the capture's length
+_CACHE_MAX = 4096
+_FIELDS: dict[bytes, dict] = {}
+_BODIES: dict[bytes, str] = {}
+
+
+@dataclass(slots=True)
 class Captured:
     t: float
     raw: bytes
@@ -34,40 +52,67 @@ class Captured:
         f = self.frame
         if f is None:
             return {"t": round(self.t, 6), "error": self.error, "raw": self.raw.hex(" ")}
-        d = {"t": round(self.t, 6), "sd": {F.SD1: "SD1", F.SD2: "SD2", F.SD3: "SD3", F.SD4: "SD4",
-                                            F.SC: "SC"}[f.sd], "raw": self.raw.hex(" ")}
-        if f.sd == F.SC:
-            d["service"] = "short acknowledge"
-            return d
-        d.update(da=f.da, sa=f.sa)
-        if f.sd == F.SD4:
-            d["service"] = "token"
-            return d
-        d.update(dsap=f.dsap, ssap=f.ssap, fc=f"0x{f.fc:02X}", fc_text=F.describe_fc(f.fc),
-                 du=f.data.hex(" "))
-        if f.is_request and f.function == F.FDL_STATUS:
-            d["service"] = "FDL status"
-        elif not f.is_request and f.dsap is None and f.ssap is None and f.fc & 0x0F == F.OK and not f.data:
-            d["service"] = "FDL status reply"
-        else:
-            d["service"] = service_name(f.dsap, f.ssap, f.is_request) + ("" if f.is_request else " reply")
+        d = {"t": round(self.t, 6)}
+        d.update(frame_fields(self))
         return d
+
+
+def frame_fields(c: Captured) -> dict:
+    """describe() of a frame without its time: sd, raw, service, da/sa, SAPs, fc, fc_text, du (kept
+    per octets: do not change the dict)."""
+    d = _FIELDS.get(c.raw)
+    if d is None:
+        f = c.frame
+        if f is None:
+            raise ValueError(f"not a frame: {c.error}")
+        if len(_FIELDS) >= _CACHE_MAX:
+            _FIELDS.clear()
+        d = _FIELDS[c.raw] = _fields(c.raw, f)
+    return d
+
+
+def _fields(raw: bytes, f: F.Frame) -> dict:
+    d: dict = {"sd": _SD_NAMES[f.sd], "raw": raw.hex(" ")}
+    if f.sd == F.SC:
+        d["service"] = "short acknowledge"
+        return d
+    d.update(da=f.da, sa=f.sa)
+    if f.sd == F.SD4:
+        d["service"] = "token"
+        return d
+    d.update(dsap=f.dsap, ssap=f.ssap, fc=f"0x{f.fc:02X}", fc_text=F.describe_fc(f.fc),
+             du=f.data.hex(" "))
+    if f.is_request and f.function == F.FDL_STATUS:
+        d["service"] = "FDL status"
+    elif not f.is_request and f.dsap is None and f.ssap is None and f.fc & 0x0F == F.OK and not f.data:
+        d["service"] = "FDL status reply"
+    else:
+        d["service"] = service_name(f.dsap, f.ssap, f.is_request) + ("" if f.is_request else " reply")
+    return d
 
 
 def format_line(c: Captured, arrow: str = "") -> str:
     """One line per frame, as `pdrive sniff` and the -vv trace print it: time, SD, SA -> DA, SAPs,
     FC in words, service, DU."""
-    d = c.describe()
     a = f"{arrow} " if arrow else ""
-    if "error" in d:
-        return f"{d['t']:>12.6f}  {a}!! {d['error']}: {d['raw']}"
+    if c.frame is None:
+        return f"{round(c.t, 6):>12.6f}  {a}!! {c.error}: {c.raw.hex(' ')}"
+    body = _BODIES.get(c.raw)
+    if body is None:
+        if len(_BODIES) >= _CACHE_MAX:
+            _BODIES.clear()
+        body = _BODIES[c.raw] = _body(frame_fields(c))
+    return f"{round(c.t, 6):>12.6f}  {a}{body}"
+
+
+def _body(d: dict) -> str:
+    """A frame's line after its time column (and arrow)."""
     if d["sd"] == "SC":
-        return f"{d['t']:>12.6f}  {a}SC   short acknowledge"
+        return "SC   short acknowledge"
     if d["sd"] == "SD4":
-        return f"{d['t']:>12.6f}  {a}SD4  token {d['sa']} -> {d['da']}"
+        return f"SD4  token {d['sa']} -> {d['da']}"
     saps = "" if d["dsap"] is None else f" [{d['ssap']}->{d['dsap']}]"
-    return (f"{d['t']:>12.6f}  {a}{d['sd']}  {d['sa']:>3} -> {d['da']:<3}{saps}  {d['fc_text']}  "
-            f"{d['service']}  {d['du']}")
+    return f"{d['sd']}  {d['sa']:>3} -> {d['da']:<3}{saps}  {d['fc_text']}  {d['service']}  {d['du']}"
 
 
 class Capture:
@@ -77,17 +122,23 @@ class Capture:
         self.rx = F.Receiver()
         self._t = 0.0
 
-    def feed(self, data: bytes, t: float) -> list[Captured]:
+    def feed(self, data: bytes, t: float, hold: int = 0) -> list[Captured]:
         """Frames and framing errors completed by `data`. Linear in the input: the buffer is parsed
         by position and its consumed prefix dropped once per call (a 10 MiB capture decodes in
-        one pass, not one copy of the rest per frame)."""
+        one pass, not one copy of the rest per frame).
+
+        hold=HOLD leaves what starts in the last HOLD octets for the next call: parse() judges the
+        start of a telegram by the octets at hand (three octets of an SD2 header with LE != LEr are
+        "LE != LEr", four "LE 5 != LEr 6"), so a file decoded in chunks with hold=HOLD, then a
+        last feed(b"", t), gives the entries of one piece (with ErrorMerger for garbage runs)."""
         if not len(self.rx):
             self._t = t
         self.rx.feed(data)
         buf = self.rx.buf
         out = []
         pos = 0
-        while True:
+        stop = len(buf) - hold
+        while pos < stop:
             r = F.parse(buf, pos)
             if r is None:
                 break
@@ -117,23 +168,39 @@ class Capture:
 def merge_errors(items: list[Captured]) -> list[Captured]:
     """Collapse runs of garbage errors into one entry (readable sniff output). Linear: a run's
     octets are joined once."""
-    out: list[Captured] = []
-    run: list[Captured] = []
+    m = ErrorMerger()
+    return m.feed(items) + m.flush()
 
-    def flush():
-        if run:
-            out.append(run[0] if len(run) == 1 else
-                       Captured(run[0].t, b"".join(c.raw for c in run), None, "garbage"))
-            run.clear()
 
-    for c in items:
-        if c.frame is None and c.error.startswith("garbage"):
-            run.append(c)
-        else:
-            flush()
-            out.append(c)
-    flush()
-    return out
+class ErrorMerger:
+    """merge_errors over a stream of chunks: feed() each chunk's items, flush() at the end; a run
+    of garbage that goes on in the next chunk stays one entry (a file read in chunks is shown as if
+    it had been decoded in one piece)."""
+
+    def __init__(self) -> None:
+        self._run: list[Captured] = []
+
+    def feed(self, items: list[Captured]) -> list[Captured]:
+        out: list[Captured] = []
+        run = self._run
+        for c in items:
+            if c.frame is None and c.error.startswith("garbage"):
+                run.append(c)
+            else:
+                if run:
+                    out += self.flush()
+                out.append(c)
+        return out
+
+    def flush(self) -> list[Captured]:
+        """The pending run of garbage as one entry (nothing if there is none)."""
+        run = self._run
+        if not run:
+            return []
+        c = run[0] if len(run) == 1 else Captured(run[0].t, b"".join(c.raw for c in run), None,
+                                                  "garbage")
+        run.clear()
+        return [c]
 
 
 class PcapWriter:
@@ -170,5 +237,5 @@ def read_pcap(data: bytes) -> tuple[int, list[tuple[float, bytes]]]:
     return linktype, pkts
 
 
-__all__ = ["Capture", "Captured", "PcapWriter", "read_pcap", "merge_errors", "LINKTYPE_USER0",
-           "LINKTYPE_PROFIBUS_DL", "LINKTYPES"]
+__all__ = ["Capture", "Captured", "ErrorMerger", "HOLD", "PcapWriter", "read_pcap", "merge_errors", "frame_fields",
+           "LINKTYPE_USER0", "LINKTYPE_PROFIBUS_DL", "LINKTYPES"]
