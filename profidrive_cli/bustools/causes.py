@@ -224,12 +224,12 @@ def watch_causes(stations: list[Any]) -> list[Cause]:
     hit = _few({s.address: s.counters.get("retries", 0) + s.counters.get("illegal", 0) for s in sts})
     if hit is not None:
         few, got, total = hit
-        ev = [f"station {a}: {by.counters.get('retries', 0)} retries, {by.counters.get('illegal', 0)} "
-              f"corrupt replies of {by.counters.get('requests', 0)} requests"
-              for a, by in ((a, next(x for x in sts if x.address == a)) for a in few)]
+        by = {s.address: s.counters for s in sts}
+        lines = tuple(f"station {a}: {by[a].get('retries', 0)} retries, {by[a].get('illegal', 0)} "
+                      f"corrupt replies of {by[a].get('requests', 0)} requests" for a in few)
         out.append(Cause(f"repeats concentrated on station(s) {', '.join(map(str, few))} "
                          f"({100 * got / total:.0f} % of {total}): their spur, connector or cable, not "
-                         f"the whole line", 0.7, tuple(ev), tuple(few)))
+                         f"the whole line", 0.7, lines, tuple(few)))
     else:
         corrupt = {s.address: s.counters.get("illegal", 0) for s in sts}
         if sum(corrupt.values()) >= MIN_REPEATS and sum(1 for v in corrupt.values() if v) > len(sts) // 2:
