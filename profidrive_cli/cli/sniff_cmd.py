@@ -36,7 +36,8 @@ def _line(c) -> str:
 @click.option("--raw", "raw_out", default=None, metavar="FILE",
               help="Also write the received octets as they came (decode later with --from-file).")
 @click.option("--from-file", "raw_file", default=None, metavar="FILE",
-              help="Decode a raw byte capture (a regular file up to 16 MiB) offline instead of listening.")
+              help="Decode a capture file offline instead of listening: pcap, pcapng or ProfiTrace .ptd "
+                   "by extension, any other as raw octets (a regular file up to 16 MiB).")
 @click.option("--station", "stations", multiple=True, metavar="ADDR=PROFILE[:LAYOUT]",
               help="Decode this station's Data_Exchange as its drive sees it (command, state, Hz, "
                    "parameter requests), e.g. 3=fuji-g1 or 6=moeller:ppo1. Repeatable.")
@@ -83,8 +84,11 @@ def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, 
     cap = Capture()
     merger = ErrorMerger()
     view = _view(stations, live, opts.json, opts if live else None)
-    # check the input before anything is written; it is read in chunks and shown as it is read
-    src = open_input_file(raw_file, "raw capture", MAX_CAPTURE_BYTES) if raw_file else None
+    # check the input before anything is written; it is read in chunks and shown as it is read.
+    # pcap, pcapng and ProfiTrace .ptd files by their extension (dp/capfile.py), any other as raw
+    packets = _packet_file(raw_file) if raw_file else None
+    src = (open_input_file(raw_file, "raw capture", MAX_CAPTURE_BYTES)
+           if raw_file and packets is None else None)
     # pcap times are wall clock: the capture's start (for --from-file: when the raw file was last
     # written, the end of its capture) plus the monotonic offset of each frame
     start_wall = _mtime(raw_file) if raw_file else time.time()
@@ -107,7 +111,22 @@ def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, 
                 view.frame(c)
             view.flush()
 
-        if src is not None:
+        if packets is not None:
+            t0 = None
+            batch: list = []
+            for p in packets:
+                if t0 is None:
+                    t0 = p.t                         # the file's own clock: its first telegram
+                    if writer is not None:
+                        writer.start = t0
+                batch += cap.feed(p.raw, p.t - t0)
+                if len(batch) >= PACKETS_PER_SHOW:
+                    show(batch, end_of_chunk=False)
+                    batch = []
+            rest = cap.feed(b"", cap._t)
+            show(batch + rest + [_truncated(cap)] if len(cap.rx) else batch + rest)
+            view.finish(cap._t)
+        elif src is not None:
             # shown as if decoded in one piece: a telegram that starts in the chunk's last octets
             # waits for the next (HOLD), a garbage run that goes on in it stays one entry
             for chunk in _chunks(src, raw_file):
@@ -139,6 +158,8 @@ def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, 
     finally:
         if src is not None:
             src.close()
+        if packets is not None:
+            packets.close()
         for f in files:
             if not f.committed:
                 f.discard()
@@ -146,6 +167,18 @@ def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, 
         return
     if not opts.json and not live:
         out.print(f"{count} frame(s)")
+
+
+#: packets of a pcap / pcapng / .ptd file decoded before their lines are written
+PACKETS_PER_SHOW = 1024
+
+
+def _packet_file(path):
+    """The open packet reader of a pcap, pcapng or ProfiTrace .ptd file (by extension; its header
+    checked now, before anything is written); None for a raw octet file (any other extension)."""
+    from profidrive_cli.dp.capfile import capture_format, open_capture
+    fmt = capture_format(path, "raw")
+    return None if fmt == "raw" else open_capture(path, fmt)
 
 
 def _chunks(fh, path):
