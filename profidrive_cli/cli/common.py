@@ -387,10 +387,9 @@ def bus_options(f):
     @click.option("--retries", default=None, type=click.IntRange(0, 15),
                   help="Retries after no reply (default 2 on real ports, 1 on sim://).")
     @click.option("--rs485", is_flag=True, help="Kernel RS-485 mode (RTS direction control).")
-    @click.option("--echo", type=click.Choice(["auto", "on", "off"], case_sensitive=False),
-                  default="auto", is_flag=False, flag_value="on", show_default=True,
-                  help="Local echo of a 2-wire adapter: auto = found at the first transmission "
-                       "and dropped; on (also a bare --echo) / off force it.")
+    @click.option("--echo/--no-echo", default=None,
+                  help="Local echo of a 2-wire adapter: by default found at the first transmission "
+                       "and dropped; --echo / --no-echo force it on / off.")
     @click.option("-v", "--verbose", count=True,
                   help="-v: DP service steps (start-up, diagnosis, retries); -vv: every telegram. "
                        "On stderr.")
@@ -407,7 +406,7 @@ def bus_options(f):
         from profidrive_cli.config import resolve
         eff = resolve(port, baud, master_address)
         opts = BusOptions(eff.port.value, str(eff.baud.value), eff.master_address.value, slot_time,
-                          retries, rs485, {"on": True, "off": False}.get(echo.lower(), "auto"),
+                          retries, rs485, "auto" if echo is None else echo,
                           verbose, as_json, trace, settings=eff)
         return f(opts, **kw)
     return wrapper
