@@ -80,6 +80,31 @@ class SlaveModel:
     def tick(self, now: float) -> None:
         """Advance internal dynamics (ramps, timers) to `now`."""
 
+    def next_due(self, now: float) -> float | None:
+        """When the model must next be ticked although its station is not addressed, given that it
+        was last ticked at `now` (sim/bus.py ticks a station only when a request addresses it or
+        when this time, or its watchdog's expiry, has come; then at the bus's next tick at or after
+        it). None: nothing of its own (ticks would change nothing but the time of the last tick);
+        `now` or earlier: at every tick of the bus (ramping, running). Drive models override it.
+
+        A model written before this hook (its own tick(), no next_due) is ticked at every tick of the
+        bus, as it always was."""
+        if type(self).tick is not SlaveModel.tick and type(self).next_due is SlaveModel.next_due:
+            return now
+        return None
+
+    def catch_up(self, times: list[float], then: float | None = None) -> None:
+        """The bus ticked at `times` (in order, the latest 256 at most) while this model's station
+        was neither addressed nor due: what those ticks would have done. `then`: a tick at that
+        time follows at once. Default: one tick at the last of them, none when a tick follows (next_due
+        said None: ticks change nothing but the time of the last one, which that tick sets). A model
+        that records something at every tick overrides this (sim/toyo.py)."""
+        if type(self).tick is not SlaveModel.tick and type(self).next_due is SlaveModel.next_due:
+            for t in times:                  # (a model without next_due: tick by tick, as then)
+                self.tick(t)
+        elif times and then is None:
+            self.tick(times[-1])
+
     def on_leave_data_exchange(self, now: float, reason: str) -> None:
         """The station left Data_Exchange (watchdog expired, new Set_Prm, power cycle, Clear).
 

@@ -308,6 +308,16 @@ class ProfidriveModel(PkwServer, DriveModel):
         hz = self.ref_pct * fmax / 100.0
         return max(-fmax, min(fmax, hz))
 
+    def moving(self) -> bool:
+        """Whether a tick changes the drive: in operation or stopping (the ramp), or an output
+        frequency left over. Otherwise ticks change nothing but the time of the last one."""
+        return self.state in (State.S4, State.S5) or self.freq != 0.0
+
+    def next_due(self, now: float) -> float | None:
+        """At every tick of the bus while moving (the ramp, the motor), as before; nothing of its own
+        at standstill (sim/bus.py then ticks it only when its station is addressed)."""
+        return now if self.moving() else None
+
     def tick(self, now: float) -> None:
         last, self._last_tick = self._last_tick, now
         if last is None or now <= last:
