@@ -151,9 +151,11 @@ class SimBus:
         woken = []
         while q and q[0][0] <= now:
             t, _, s = heapq.heappop(q)
-            if s.queued != t or not s.plugged:
-                continue                      # superseded by an earlier entry, or off the line
+            if s.queued != t:
+                continue                      # superseded by an earlier entry
             s.queued = None
+            if not s.plugged:
+                continue                      # off the line
             due = s.next_due()
             if due is None:
                 continue
@@ -190,6 +192,7 @@ class SimBus:
                 s.plugged = True
                 s.ticks = self.ticks
                 s.ticked_at = max(s.ticked_at, last)
+                s.queued = None               # (an entry from before it left is not its own now)
             self.schedule(s)
         self._members = current
         self._synced = len(current)
