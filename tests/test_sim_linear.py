@@ -252,3 +252,24 @@ def test_a_station_plugged_back_in_does_not_replay_the_time_it_was_out():
         t = 0.01 * i
         bus.tick(t)
     assert model.times == [0.01 * i for i in list(range(1, 11)) + list(range(21, 31))]
+
+
+def test_which_models_are_ticked_at_every_tick():
+    """The shipped families say next_due where they say tick; a subclass that changes tick() and
+    not next_due() (a plug-in family on top of a shipped model) keeps the old clock."""
+    from profidrive_cli.sim.fuji import FujiModel
+    from profidrive_cli.sim.plant import make_model
+    from profidrive_cli.sim.slave import ticks_always
+    for name in ("fuji-g1", "fuji-pdp3", "toyo", "moeller", "yaskawa"):
+        assert not ticks_always(make_model(load_profile(name))), name
+    assert not ticks_always(SlaveModel(1))
+
+    class Plugin(FujiModel):
+        def tick(self, now):
+            super().tick(now)
+
+    class Declared(Plugin):
+        def next_due(self, now):
+            return None
+    assert ticks_always(Plugin(load_profile("fuji-g1")))
+    assert not ticks_always(Declared(load_profile("fuji-g1")))

@@ -61,12 +61,7 @@ class LazyModel:
             raise PdriveError(f"simulated station {self._label}: the profile index says ident "
                               f"0x{self._ident:04X}, the profile 0x{real.ident:04X}")
         if self._ticks:
-            catch_up = getattr(real, "catch_up", None)
-            if catch_up is not None:
-                catch_up(list(self._ticks))
-            else:
-                for t in self._ticks:
-                    real.tick(t)
+            _catch_up(real, list(self._ticks), None)
         self.__dict__["_real"] = real
         self._ticks.clear()
         owner = self._owner
@@ -105,7 +100,7 @@ class LazyModel:
         if real is None:
             self._ticks.extend(times)
         else:
-            real.catch_up(times, then)
+            _catch_up(real, times, then)
 
     # -- everything else builds it --------------------------------------------------------------
     def __getattr__(self, name: str):
@@ -119,3 +114,13 @@ class LazyModel:
     def __repr__(self) -> str:
         real = self._real
         return f"<LazyModel {self._label} {'built: ' + repr(real) if real is not None else 'not built'}>"
+
+
+def _catch_up(model, times: list[float], then: float | None) -> None:
+    """The built model makes up for the ticks it missed (tick by tick when it predates catch_up)."""
+    from profidrive_cli.sim.slave import ticks_always
+    if ticks_always(model):
+        for t in times:
+            model.tick(t)
+    else:
+        model.catch_up(times, then)

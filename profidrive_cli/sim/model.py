@@ -87,10 +87,9 @@ class SlaveModel:
         it). None: nothing of its own (ticks would change nothing but the time of the last tick);
         `now` or earlier: at every tick of the bus (ramping, running). Drive models override it.
 
-        A model written before this hook (its own tick(), no next_due) is ticked at every tick of the
-        bus, as it always was."""
-        if type(self).tick is not SlaveModel.tick and type(self).next_due is SlaveModel.next_due:
-            return now
+        A class that overrides tick() below the class that defines next_due() (a model written
+        before this hook, e.g. a plug-in family's) is ticked at every tick of the bus, as it always
+        was (sim/slave.py ticks_always)."""
         return None
 
     def catch_up(self, times: list[float], then: float | None = None) -> None:
@@ -99,10 +98,7 @@ class SlaveModel:
         time follows at once. Default: one tick at the last of them, none when a tick follows (next_due
         said None: ticks change nothing but the time of the last one, which that tick sets). A model
         that records something at every tick overrides this (sim/toyo.py)."""
-        if type(self).tick is not SlaveModel.tick and type(self).next_due is SlaveModel.next_due:
-            for t in times:                  # (a model without next_due: tick by tick, as then)
-                self.tick(t)
-        elif times and then is None:
+        if times and then is None:
             self.tick(times[-1])
 
     def on_leave_data_exchange(self, now: float, reason: str) -> None:

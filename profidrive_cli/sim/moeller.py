@@ -122,6 +122,11 @@ class MoellerModel(ProfidriveModel):
         return super().pkw_answer(req)
 
     # -- dynamics ----------------------------------------------------------------------------
+    def next_due(self, now: float) -> float | None:
+        """As the generic drive: the run-time counter and the monitors of tick() stand still with
+        the motor."""
+        return super().next_due(now)
+
     def tick(self, now: float) -> None:
         last = self._last_tick
         super().tick(now)

@@ -55,6 +55,24 @@ class TickLog:
         return times[max(lo, hi - self.KEEP):hi]
 
 
+_TICKS_ALWAYS: dict[type, bool] = {}
+
+
+def ticks_always(model: object) -> bool:
+    """Whether the model's class overrides tick() below the class that says next_due() (or has no
+    next_due at all): a model written before next_due (a plug-in family's, say), ticked at every
+    tick of the bus and tick by tick when it makes up for ticks, as before."""
+    cls = type(model)
+    v = _TICKS_ALWAYS.get(cls)
+    if v is None:
+        tick_owner = next((c for c in cls.__mro__ if "tick" in vars(c)), None)
+        due_owner = next((c for c in cls.__mro__ if "next_due" in vars(c)), None)
+        v = due_owner is None or (tick_owner is not None and tick_owner is not due_owner
+                                  and issubclass(tick_owner, due_owner))
+        _TICKS_ALWAYS[cls] = v
+    return v
+
+
 class SimSlave:
     def __init__(self, address: int, model: SlaveModel | LazyModel, set_slave_add_supported: bool = False,
                  response_bits: int | None = None):
@@ -155,7 +173,8 @@ class SimSlave:
         when addressed): its watchdog's expiry, or what its model asks (SlaveModel.next_due). A time
         at or before the last run means: at the next tick of the bus."""
         wd = self.watchdog_deadline()
-        own = self.model.next_due(self.ticked_at)
+        model = self.model
+        own = self.ticked_at if ticks_always(model) else model.next_due(self.ticked_at)
         if own is None:
             return wd
         return own if wd is None or own < wd else wd
@@ -177,7 +196,12 @@ class SimSlave:
             for t in missed:
                 self._tick(t)
             return
-        self.model.catch_up(missed, None if inclusive else upto)
+        model = self.model
+        if ticks_always(model):
+            for t in missed:
+                model.tick(t)
+        else:
+            model.catch_up(missed, None if inclusive else upto)
         self.ticked_at = missed[-1]
 
     def tick(self, now: float) -> None:

@@ -217,6 +217,11 @@ class ToyoModel(ProfidriveModel):
     def moving(self) -> bool:
         return super().moving() or self.jogging
 
+    def next_due(self, now: float) -> float | None:
+        """Every tick while moving (jogging included), else nothing of its own: the traceback
+        samples of the ticks in between are made up by catch_up."""
+        return super().next_due(now)
+
     def catch_up(self, times: list[float], then: float | None = None) -> None:
         """Ticks missed at standstill: each would take a traceback sample (the last 100 make the
         next trip's recording), all the same one (nothing moves; the sample holds no time). So: the
