@@ -81,11 +81,13 @@ def test_model_ticks_per_exchange_do_not_grow_with_the_stations(baud):
 
 
 URL = ("sim://?stations=3:fuji-g1,4:fuji-pdp3,5:toyo,6:moeller,7:yaskawa,8:fuji-g1,9:toyo,10:fuji-g1,"
-       "11:toyo&timing=virtual&baud={baud}&set=8:o27=1,o28=0.5")
+       "11:toyo,12:moeller,13:toyo&timing=virtual&baud={baud}&set=8:o27=1,o28=0.5")
 
 
 def _scenario(baud, reference):
-    """Five families running, stopping and standing still unaddressed; a watchdog running out on a
+    """Five families running, stopping and standing still unaddressed; drives left alone while
+    running at a steady speed, then tripped through the control (Moeller trip record, Toyo
+    traceback) or faulted by their own timer (Yaskawa comm_timeout: BUS); a watchdog running out on a
     running drive (o27 = 1: Er5 after o28) and on a stopped one; a y97 save at standstill without
     traffic to its station; trips at standstill through the control; an unplugged and replugged
     station; a station built on first use after standing by. What the master saw, the wire log,
@@ -101,7 +103,8 @@ def _scenario(baud, reference):
     d = {3: drive_on_bus(m, 3, P["fuji-g1"], "ppo1", 5000), 4: drive_on_bus(m, 4, P["fuji-pdp3"], "ppo1", 5000),
          5: drive_on_bus(m, 5, P["toyo"], "ppo1", 5000), 6: drive_on_bus(m, 6, P["moeller"], "ppo1", 5000),
          7: drive_on_bus(m, 7, P["yaskawa"], "extended1", 5000), 8: drive_on_bus(m, 8, P["fuji-g1"], "ppo1", 300),
-         10: drive_on_bus(m, 10, P["fuji-g1"], "ppo1", 200)}
+         10: drive_on_bus(m, 10, P["fuji-g1"], "ppo1", 200), 12: drive_on_bus(m, 12, P["moeller"], "ppo1", 9000),
+         13: drive_on_bus(m, 13, P["toyo"], "ppo1", 9000)}
     seen: list = [m.slave_diag(9).encode()]
 
     def poll(addrs, seconds):
@@ -109,11 +112,15 @@ def _scenario(baud, reference):
         while link.now() < end:
             for a in addrs:
                 seen.append((a, repr(d[a].status())))
-    for a, hz in ((3, 20.0), (5, 15.0), (6, 25.0), (7, 30.0), (8, 10.0)):
+    for a, hz in ((3, 20.0), (5, 15.0), (6, 25.0), (7, 30.0), (8, 10.0), (12, 12.0), (13, 6.0)):
         d[a].set_speed_hz(hz)
         d[a].start()
     poll([3, 4, 5, 6, 7, 8], 1.0)
     poll([3, 4, 5, 6, 7], 1.5)            # 8 (300 ms) and 10 (200 ms) are left alone: watchdogs
+    poll([3, 4, 5, 6], 1.5)               # 7, 12, 13 left alone, running (at a steady speed)
+    seen.append(ctl.trip(12))
+    seen.append(ctl.trip(13, "OC"))
+    poll([12, 13], 0.2)
     for a in (3, 5, 6):
         d[a].stop(wait=False)
     poll([3, 5, 6, 7], 4.0)
@@ -166,6 +173,9 @@ def test_the_plant_behaves_as_when_every_station_ticked(baud):
     assert state[8]["alarm_log"][0][1].lower() == "er5"      # o27 = 1: Er5 after o28
     assert len(state[5]["recordings"]) == 1 and len(state[5]["recordings"][0]) == 100
     assert state[6]["values"]["d080"] == 1                   # the Moeller trip counter
+    assert state[12]["values"]["d080"] == 1 and state[12]["run_seconds"] > 1.0
+    assert state[13]["recordings"][0][-2][8] != 0            # tripped while turning: speed word
+    assert state[7]["fault"] == "BUS"                        # comm_timeout while running
 
 
 def test_a_toyo_makes_up_for_ticks_at_standstill_as_if_ticked():

@@ -309,13 +309,28 @@ class ProfidriveModel(PkwServer, DriveModel):
         return max(-fmax, min(fmax, hz))
 
     def moving(self) -> bool:
-        """Whether a tick changes the drive: in operation or stopping (the ramp), or an output
-        frequency left over. Otherwise ticks change nothing but the time of the last one."""
-        return self.state in (State.S4, State.S5) or self.freq != 0.0
+        """Whether a tick changes the drive: stopping (S5), ramping in operation (the output not at
+        its target yet), an output frequency left outside operation, or the motor (sim/motor.py)
+        not yet settled on the output (its acceleration of the last tick). Otherwise -- standstill,
+        or in operation at a steady speed -- ticks change nothing but the time of the last one."""
+        st = self.state
+        if st is State.S5:
+            return True
+        if st is State.S4:
+            if not self.ctw_eff & Ctw.ENABLE_RFG and not self.ctw_eff & Ctw.JOG1:
+                if self.freq != 0.0:
+                    return True
+            elif self.freq != self._target_hz():
+                return True
+        elif self.freq != 0.0:
+            return True
+        m = getattr(self, "motor", None)
+        return m is not None and (m.freq != self.freq or m.accel != 0.0
+                                  or m.on != (st is State.S4 or self.freq != 0.0))
 
     def next_due(self, now: float) -> float | None:
         """At every tick of the bus while moving (the ramp, the motor), as before; nothing of its own
-        at standstill (sim/bus.py then ticks it only when its station is addressed)."""
+        at standstill or at a steady speed (sim/bus.py then ticks it only when addressed)."""
         return now if self.moving() else None
 
     def tick(self, now: float) -> None:

@@ -215,7 +215,17 @@ class ToyoModel(ProfidriveModel):
         return i07 in (1, 2, 3) or (i07 == 4 and bool(self.mf_input2 & 0x2))
 
     def moving(self) -> bool:
-        return super().moving() or self.jogging
+        st = self.state
+        if st is State.S4 and self.torque_controlled():
+            return True                          # the axis (sim/torque_axis.py) settles slowly
+        if st in (State.S3, State.S4):
+            jog = self._jog_target()
+            if jog is not None:
+                if self.freq != jog:
+                    return True                  # the jog ramp (tick)
+            elif st is State.S3 and self.freq != 0.0:
+                return True                      # the jog's ramp down
+        return super().moving()
 
     def next_due(self, now: float) -> float | None:
         """Every tick while moving (jogging included), else nothing of its own: the traceback
@@ -238,7 +248,7 @@ class ToyoModel(ProfidriveModel):
         self.samples.extend(repeat(self.samples[-1], min(rest, self.samples.maxlen or rest)))
         t = times[-1]
         self._last_tick = t
-        self.motor.update(t, self.freq, False)
+        self.motor.update(t, self.freq, self.state in (State.S4, State.S5) or self.freq != 0.0)
 
     def tick(self, now: float) -> None:
         last = self._last_tick
