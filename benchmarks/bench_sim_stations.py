@@ -56,9 +56,11 @@ def run(n: int, baud: int, exchanges: int, out: bytes = bytes(12)) -> tuple[floa
             m.exchange(a, first)      # ON = 0 first, S1 -> S2, then ON: S4)
     if out != bytes(12):              # running: on to the set speed before the timing starts
         for i in range(200000):
-            if all(s.model.next_due(0.0) is None for s in link.bus.slaves.values()):
+            if i % n == 0 and all(s.model.at_setpoint() for s in link.bus.slaves.values()):
                 break
             m.exchange(addrs[i % n], out)
+        for a in addrs:               # (and once more: the motor model settles at that speed)
+            m.exchange(a, out)
     t0, v0 = time.process_time(), link.now()
     for i in range(exchanges):
         m.exchange(addrs[i % n], out)
