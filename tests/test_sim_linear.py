@@ -269,7 +269,7 @@ def test_which_models_are_ticked_at_every_tick():
     not next_due() (a plug-in family on top of a shipped model) keeps the old clock."""
     from profidrive_cli.sim.fuji import FujiModel
     from profidrive_cli.sim.plant import make_model
-    from profidrive_cli.sim.slave import ticks_always
+    from profidrive_cli.sim.model import ticks_always
     for name in ("fuji-g1", "fuji-pdp3", "toyo", "moeller", "yaskawa"):
         assert not ticks_always(make_model(load_profile(name))), name
     assert not ticks_always(SlaveModel(1))

@@ -22,6 +22,7 @@ from collections import deque
 
 from profidrive_cli import PdriveError
 from profidrive_cli.drives.registry import sim_diag_len
+from profidrive_cli.sim.model import ticks_always
 
 #: tick times kept until the model is built (more than any model's standstill history: Toyo keeps 100)
 REPLAY_TICKS = 256
@@ -118,7 +119,6 @@ class LazyModel:
 
 def _catch_up(model, times: list[float], then: float | None) -> None:
     """The built model makes up for the ticks it missed (tick by tick when it predates catch_up)."""
-    from profidrive_cli.sim.slave import ticks_always
     if ticks_always(model):
         for t in times:
             model.tick(t)

@@ -16,6 +16,24 @@ if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.drives.profile import Profile
 
 
+_TICKS_ALWAYS: dict[type, bool] = {}
+
+
+def ticks_always(model: object) -> bool:
+    """Whether the model's class overrides tick() below the class that says next_due() (or has no
+    next_due at all): a model written before next_due (a plug-in family's, say), ticked at every
+    tick of the bus and tick by tick when it makes up for ticks, as before."""
+    cls = type(model)
+    v = _TICKS_ALWAYS.get(cls)
+    if v is None:
+        tick_owner = next((c for c in cls.__mro__ if "tick" in vars(c)), None)
+        due_owner = next((c for c in cls.__mro__ if "next_due" in vars(c)), None)
+        v = due_owner is None or (tick_owner is not None and tick_owner is not due_owner
+                                  and issubclass(tick_owner, due_owner))
+        _TICKS_ALWAYS[cls] = v
+    return v
+
+
 class SlaveModel:
     """A plain DP-V0 slave: fixed ident, a set of accepted configurations, zero inputs.
 
@@ -89,7 +107,7 @@ class SlaveModel:
 
         A class that overrides tick() below the class that defines next_due() (a model written
         before this hook, e.g. a plug-in family's) is ticked at every tick of the bus, as it always
-        was (sim/slave.py ticks_always)."""
+        was (ticks_always above)."""
         return None
 
     def catch_up(self, times: list[float], then: float | None = None) -> None:

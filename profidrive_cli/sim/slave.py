@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 from profidrive_cli.dp import services as S
 from profidrive_cli.fdl import frames as F
 from profidrive_cli.fdl.fcb import SlaveFcb
-from profidrive_cli.sim.model import SlaveModel
+from profidrive_cli.sim.model import SlaveModel, ticks_always
 
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.sim.lazy import LazyModel
@@ -53,24 +53,6 @@ class TickLog:
         lo = bisect_right(times, after)
         hi = bisect_right(times, upto, lo) if inclusive else bisect_left(times, upto, lo)
         return times[max(lo, hi - self.KEEP):hi]
-
-
-_TICKS_ALWAYS: dict[type, bool] = {}
-
-
-def ticks_always(model: object) -> bool:
-    """Whether the model's class overrides tick() below the class that says next_due() (or has no
-    next_due at all): a model written before next_due (a plug-in family's, say), ticked at every
-    tick of the bus and tick by tick when it makes up for ticks, as before."""
-    cls = type(model)
-    v = _TICKS_ALWAYS.get(cls)
-    if v is None:
-        tick_owner = next((c for c in cls.__mro__ if "tick" in vars(c)), None)
-        due_owner = next((c for c in cls.__mro__ if "next_due" in vars(c)), None)
-        v = due_owner is None or (tick_owner is not None and tick_owner is not due_owner
-                                  and issubclass(tick_owner, due_owner))
-        _TICKS_ALWAYS[cls] = v
-    return v
 
 
 class SimSlave:
