@@ -19,19 +19,32 @@ due (before its last octet) in stats.collisions.
 Fault injection (a FaultPlan, sim/faults.py) corrupts, drops, delays or misaddresses replies,
 power-cycles or trips stations, and puts a lone noise octet 0xE5 (phantom) where no station answers;
 every injection is counted in the plan.
+
+A station's clock (its watchdog, its drive model's ramps and timers) runs when a request addresses it
+and when it is due, not at every tick: the bus keeps the stations in a queue by the time each is next
+due (SimSlave.next_due: the watchdog's expiry, the model's own SlaveModel.next_due), so a tick costs
+what the due stations cost, whatever the number of stations. A station that was not run at some
+ticks makes up for them when it next runs (SimSlave.tick, from the bus's TickLog), so it ends where a
+station run at every tick would be. The queue is built again when the stations change (bus.slaves =
+..., a command of sim/control.py, a different number of stations) and every RESYNC_S of bus time.
 """
 
 from __future__ import annotations
 
+import heapq
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Callable
+from itertools import count
+from typing import Any, Callable
 
 from profidrive_cli.fdl import frames as F
 from profidrive_cli.fdl.timing import TSYN_BITS, BusParams
-from profidrive_cli.sim.slave import DATA_EXCH, SimSlave
+from profidrive_cli.sim.slave import DATA_EXCH, SimSlave, TickLog
 
 TIMINGS = ("instant", "wire", "virtual")
+#: seconds of bus time after which every station's next due time is asked again (a safety net for a
+#: station changed from outside the bus, e.g. a watchdog armed by hand)
+RESYNC_S = 1.0
 
 
 @dataclass
@@ -75,6 +88,13 @@ class SimBus:
                  tsdr_bits: int = 11, faults=None):
         if timing not in TIMINGS:
             raise ValueError(f"timing must be one of {', '.join(TIMINGS)}, got {timing!r}")
+        #: the bus's clock ticks (what a station not run at some of them makes up for)
+        self.ticks = TickLog()
+        self._queue: list[tuple[float, int, SimSlave]] = []     # (due, order, station)
+        self._order = count()
+        self._members: list[SimSlave] = []
+        self._synced = -1               # len(slaves) the queue was built for (-1: at the first tick)
+        self._resync_at = float("-inf")
         self.slaves = {s.address: s for s in slaves}
         self.params = BusParams.for_baud(baud)
         self.timing = timing
@@ -103,25 +123,99 @@ class SimBus:
     def char_s(self) -> float:
         return self.params.chars(1) if self.wire else 0.0
 
-    def slave(self, address: int) -> SimSlave:
-        return self.slaves[address]
+    @property
+    def slaves(self) -> dict[int, SimSlave]:
+        """The stations on the line: address -> station."""
+        return self._slaves
 
+    @slaves.setter
+    def slaves(self, stations: dict[int, SimSlave]) -> None:
+        self._slaves = stations
+        self._synced = -1
+
+    def slave(self, address: int) -> SimSlave:
+        return self._slaves[address]
+
+    # -- the stations' clocks -------------------------------------------------------------------
     def tick(self, now: float) -> None:
+        """The bus's clock: runs the stations that are due; the others make up for this tick when
+        they next run."""
         if self.pending:
             self.run_pending(now)
-        for s in self.slaves.values():
+        if len(self._slaves) != self._synced or now >= self._resync_at:
+            self.resync(now)
+        self.ticks.add(now)
+        q = self._queue
+        if not q or q[0][0] > now:
+            return
+        woken = []
+        while q and q[0][0] <= now:
+            t, _, s = heapq.heappop(q)
+            if s.queued != t:
+                continue                      # superseded by an earlier entry
+            s.queued = None
+            if not s.plugged:
+                continue                      # off the line
+            due = s.next_due()
+            if due is None:
+                continue
+            if due > now:
+                self._enqueue(s, due)         # its entry was early (a watchdog fed since)
+                continue
             s.tick(now)
+            woken.append(s)
+        for s in woken:
+            self.schedule(s)
+
+    def schedule(self, s: SimSlave) -> None:
+        """Queue station `s` for the time it is next due (after it ran or something acted on it)."""
+        due = s.next_due()
+        if due is not None and (s.queued is None or due < s.queued):
+            self._enqueue(s, due)
+
+    def _enqueue(self, s: SimSlave, due: float) -> None:
+        s.queued = due
+        heapq.heappush(self._queue, (due, next(self._order), s))
+
+    def resync(self, now: float | None = None) -> None:
+        """Queue every station on the line anew: stations that joined start from the bus's last
+        tick (a station plugged back in did not run while it was off the line), stations that left
+        are dropped."""
+        current = list(self._slaves.values())
+        here = {id(s) for s in current}
+        for s in self._members:
+            if id(s) not in here:
+                s.plugged = False
+        last = self.ticks.last
+        for s in current:
+            if not s.plugged:
+                s.plugged = True
+                s.ticks = self.ticks
+                s.ticked_at = max(s.ticked_at, last)
+                s.queued = None               # (an entry from before it left is not its own now)
+            self.schedule(s)
+        self._members = current
+        self._synced = len(current)
+        self._resync_at = (last if now is None else now) + RESYNC_S
+
+    def settle(self) -> None:
+        """Every station made up to the bus's last tick (before a command acts on the plant)."""
+        last = self.ticks.last
+        for s in self._slaves.values():
+            s.settle(last)
 
     def run_pending(self, now: float) -> None:
         """The control's queued commands, in order, on this (the bus's) thread."""
+        self.settle()
         while self.pending:
             self.pending.popleft()(now)
+        self.resync(now)
 
     def control(self, lock=None, clock=None):
         """A sim/control.py Controller of this bus (the Python API's Bus.simulator): its commands
         run at once, under `lock` (the master's), at the time `clock()` gives."""
         from profidrive_cli.sim.control import Controller
-        return Controller(self, clock=clock, lock=lock)
+        return Controller(self, clock=clock, lock=_Settled(self, lock))
 
     # -- what the master side reads -------------------------------------------------------------
     def take(self, now: float) -> bytes:
@@ -157,7 +251,8 @@ class SimBus:
         self.outbox.clear()
 
     def power_cycle(self, address: int, now: float) -> None:
-        self.slaves[address].power_cycle(now)
+        self._slaves[address].power_cycle(now)
+        self.schedule(self._slaves[address])
 
     # -- what the master sends ------------------------------------------------------------------
     def receive(self, data: bytes, now: float) -> list[Reply]:
@@ -165,6 +260,8 @@ class SimBus:
         outbox for take())."""
         if self.pending:
             self.run_pending(now)
+        if len(self._slaves) != self._synced:
+            self.resync(now)
         out: list[Reply] = []
         if self.wire and not len(self.rx) and data:
             # a new telegram starts: check the master's idle time
@@ -213,12 +310,17 @@ class SimBus:
             return None          # tokens, replies of other stations: nothing for a slave to do
         self.stats.requests += 1
         if self.faults is not None and self.faults.unplugs:
+            touched = [s for a in self.faults.unplugs if (s := self._slaves.get(a)) is not None]
+            for s in touched:
+                s.settle(t)
             self.faults.on_telegram(self, t)
+            for s in touched:
+                self.schedule(s)
         if self.log is not None:
             self.log.append((t - (self.params.chars(len(F.encode(req))) if self.wire else 0.0),
                              "M", F.encode(req)))
-        targets = (list(self.slaves.values()) if req.da == F.BROADCAST
-                   else [self.slaves[req.da]] if req.da in self.slaves else [])
+        targets = (list(self._slaves.values()) if req.da == F.BROADCAST
+                   else [self._slaves[req.da]] if req.da in self._slaves else [])
         if not targets:
             self.stats.no_station += 1
             if self.faults is not None and req.da != F.BROADCAST and req.function in F.NEEDS_REPLY:
@@ -234,6 +336,7 @@ class SimBus:
             if self.faults is not None and req.da != F.BROADCAST and _is_new_data_exchange(s, req):
                 self.faults.on_request(self, s, req, t)
             r = s.handle(req, t)
+            self.schedule(s)
             if req.da != F.BROADCAST:
                 reply, answering = r, s
         if reply is None:
@@ -253,6 +356,34 @@ class SimBus:
         if self.log is not None:
             self.log.append((start, "S", reply))
         return Reply(start, reply, self.char_s, late)
+
+
+class _Settled:
+    """The lock around a command of the in-process control (sim/control.py): the stations are made
+    up to the bus's last tick before the command and queued anew after it (it may have started,
+    stopped, tripped, unplugged or replugged one)."""
+
+    def __init__(self, bus: SimBus, lock: Any = None):
+        self.bus = bus
+        self.lock = lock
+
+    def __enter__(self) -> _Settled:
+        if self.lock is not None:
+            self.lock.__enter__()
+        try:
+            self.bus.settle()
+        except BaseException:
+            if self.lock is not None:
+                self.lock.__exit__(None, None, None)
+            raise
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        try:
+            self.bus.resync()
+        finally:
+            if self.lock is not None:
+                self.lock.__exit__(*exc)
 
 
 def _is_new_data_exchange(s: SimSlave, req: F.Frame) -> bool:

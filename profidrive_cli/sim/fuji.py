@@ -300,6 +300,20 @@ class FujiModel(ProfidriveModel):
             self._tick_to(due)          # a delayed reaction starts when o28 ends, not at the next tick
         self._tick_to(now)
 
+    def next_due(self, now: float) -> float | None:
+        """Moving: every tick (the ramp, the motor, the o27 ramp stop); at standstill the end of a
+        y97 save and of the o28 delay of a communication loss, nothing else."""
+        if self.moving() or self._forced_stop:
+            return now
+        due = self._save_until
+        if self._loss_action is not None:
+            loss = self._loss_due()
+            if loss is None:
+                return now
+            loss -= 1e-6                # _comm_loss_tick allows 1e-9: never a tick too late
+            due = loss if due is None or loss < due else due
+        return due
+
     def _loss_due(self) -> float | None:
         act = self._loss_action
         if act is None or not act.delayed or self.comm_lost_at is None or self._forced_stop:

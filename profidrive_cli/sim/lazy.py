@@ -6,9 +6,10 @@ master asks more of a station than an untouched drive can answer, LazyModel answ
 
   * `ident` (from the profile index, pdrive's cheap read of each profile's first keys),
   * `ext_diag()` = b"" (an untouched drive has no trip to report) and `max_diag_len`,
-  * `tick(now)`: remembered; the model, once built, runs the last REPLAY_TICKS of them in order, so
-    what it records at standstill (the Toyo card's traceback samples) is what an eagerly built
-    model would hold.
+  * `tick(now)` and `catch_up(times)` (sim/bus.py: the ticks of the bus an unaddressed station
+    makes up for): remembered; the model, once built, catches up with the last REPLAY_TICKS of them
+    in order, so what it records at standstill (the Toyo card's traceback samples) is what an
+    eagerly built model would hold; `next_due` None (an untouched drive has no timer of its own).
 
 Anything else (Set_Prm, Chk_Cfg, Get_Cfg, a trip, reading or setting an attribute) builds the model
 and hands over: the owning SimSlave's `model` is replaced by the built one, and this object forwards
@@ -21,6 +22,7 @@ from collections import deque
 
 from profidrive_cli import PdriveError
 from profidrive_cli.drives.registry import sim_diag_len
+from profidrive_cli.sim.model import ticks_always
 
 #: tick times kept until the model is built (more than any model's standstill history: Toyo keeps 100)
 REPLAY_TICKS = 256
@@ -59,8 +61,8 @@ class LazyModel:
         if real.ident != self._ident:
             raise PdriveError(f"simulated station {self._label}: the profile index says ident "
                               f"0x{self._ident:04X}, the profile 0x{real.ident:04X}")
-        for t in self._ticks:
-            real.tick(t)
+        if self._ticks:
+            _catch_up(real, list(self._ticks), None)
         self.__dict__["_real"] = real
         self._ticks.clear()
         owner = self._owner
@@ -90,6 +92,17 @@ class LazyModel:
         else:
             real.tick(now)
 
+    def next_due(self, now: float) -> float | None:
+        real = self._real
+        return None if real is None else real.next_due(now)
+
+    def catch_up(self, times: list[float], then: float | None = None) -> None:
+        real = self._real
+        if real is None:
+            self._ticks.extend(times)
+        else:
+            _catch_up(real, times, then)
+
     # -- everything else builds it --------------------------------------------------------------
     def __getattr__(self, name: str):
         if name.startswith("__"):
@@ -102,3 +115,12 @@ class LazyModel:
     def __repr__(self) -> str:
         real = self._real
         return f"<LazyModel {self._label} {'built: ' + repr(real) if real is not None else 'not built'}>"
+
+
+def _catch_up(model, times: list[float], then: float | None) -> None:
+    """The built model makes up for the ticks it missed (tick by tick when it predates catch_up)."""
+    if ticks_always(model):
+        for t in times:
+            model.tick(t)
+    else:
+        model.catch_up(times, then)

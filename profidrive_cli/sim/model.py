@@ -16,6 +16,24 @@ if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.drives.profile import Profile
 
 
+_TICKS_ALWAYS: dict[type, bool] = {}
+
+
+def ticks_always(model: object) -> bool:
+    """Whether the model's class overrides tick() below the class that says next_due() (or has no
+    next_due at all): a model written before next_due (a plug-in family's, say), ticked at every
+    tick of the bus and tick by tick when it makes up for ticks, as before."""
+    cls = type(model)
+    v = _TICKS_ALWAYS.get(cls)
+    if v is None:
+        tick_owner = next((c for c in cls.__mro__ if "tick" in vars(c)), None)
+        due_owner = next((c for c in cls.__mro__ if "next_due" in vars(c)), None)
+        v = due_owner is None or (tick_owner is not None and tick_owner is not due_owner
+                                  and issubclass(tick_owner, due_owner))
+        _TICKS_ALWAYS[cls] = v
+    return v
+
+
 class SlaveModel:
     """A plain DP-V0 slave: fixed ident, a set of accepted configurations, zero inputs.
 
@@ -79,6 +97,27 @@ class SlaveModel:
 
     def tick(self, now: float) -> None:
         """Advance internal dynamics (ramps, timers) to `now`."""
+
+    def next_due(self, now: float) -> float | None:
+        """When the model must next be ticked although its station is not addressed, given that it
+        was last ticked at `now` (sim/bus.py ticks a station only when a request addresses it or
+        when this time, or its watchdog's expiry, has come; then at the bus's next tick at or after
+        it). None: nothing of its own (ticks would change nothing but the time of the last tick);
+        `now` or earlier: at every tick of the bus (ramping, running). Drive models override it.
+
+        A class that overrides tick() below the class that defines next_due() (a model written
+        before this hook, e.g. a plug-in family's) is ticked at every tick of the bus, as it always
+        was (ticks_always above)."""
+        return None
+
+    def catch_up(self, times: list[float], then: float | None = None) -> None:
+        """The bus ticked at `times` (in order, the latest 256 at most) while this model's station
+        was neither addressed nor due: what those ticks would have done. `then`: a tick at that
+        time follows at once. Default: one tick at the last of them, none when a tick follows (next_due
+        said None: ticks change nothing but the time of the last one, which that tick sets). A model
+        that records something at every tick overrides this (sim/toyo.py)."""
+        if times and then is None:
+            self.tick(times[-1])
 
     def on_leave_data_exchange(self, now: float, reason: str) -> None:
         """The station left Data_Exchange (watchdog expired, new Set_Prm, power cycle, Clear).

@@ -122,6 +122,28 @@ class MoellerModel(ProfidriveModel):
         return super().pkw_answer(req)
 
     # -- dynamics ----------------------------------------------------------------------------
+    def next_due(self, now: float) -> float | None:
+        """As the generic drive: the monitors of tick() stand still with the motor; the run-time
+        counter is made up by catch_up."""
+        return super().next_due(now)
+
+    def catch_up(self, times: list[float], then: float | None = None) -> None:
+        """Ticks missed at standstill or at a steady speed: only the run-time counter moves (in
+        operation), by each tick's step as tick() adds them."""
+        if self.moving() or self._last_tick is None:
+            for t in times:
+                self.tick(t)
+            return
+        last = self._last_tick
+        running = self.state in (State.S4, State.S5)
+        for t in times:
+            if t > last:
+                if running:
+                    self.run_seconds += t - last
+                last = t
+        self._last_tick = last
+        self.motor.update(last, self.freq, running)
+
     def tick(self, now: float) -> None:
         last = self._last_tick
         super().tick(now)

@@ -308,6 +308,31 @@ class ProfidriveModel(PkwServer, DriveModel):
         hz = self.ref_pct * fmax / 100.0
         return max(-fmax, min(fmax, hz))
 
+    def moving(self) -> bool:
+        """Whether a tick changes the drive: stopping (S5), ramping in operation (the output not at
+        its target yet), an output frequency left outside operation, or the motor (sim/motor.py)
+        not yet settled on the output (its acceleration of the last tick). Otherwise -- standstill,
+        or in operation at a steady speed -- ticks change nothing but the time of the last one."""
+        st = self.state
+        if st is State.S5:
+            return True
+        if st is State.S4:
+            if not self.ctw_eff & Ctw.ENABLE_RFG and not self.ctw_eff & Ctw.JOG1:
+                if self.freq != 0.0:
+                    return True
+            elif self.freq != self._target_hz():
+                return True
+        elif self.freq != 0.0:
+            return True
+        m = getattr(self, "motor", None)
+        return m is not None and (m.freq != self.freq or m.accel != 0.0
+                                  or m.on != (st is State.S4 or self.freq != 0.0))
+
+    def next_due(self, now: float) -> float | None:
+        """At every tick of the bus while moving (the ramp, the motor), as before; nothing of its own
+        at standstill or at a steady speed (sim/bus.py then ticks it only when addressed)."""
+        return now if self.moving() else None
+
     def tick(self, now: float) -> None:
         last, self._last_tick = self._last_tick, now
         if last is None or now <= last:

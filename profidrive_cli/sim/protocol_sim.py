@@ -136,8 +136,9 @@ class Serial(SerialBase):
         del self._rxbuf[:size]
         return data
 
-    #: the stations that are not addressed run their clocks (watchdog, drive ramps) at least this
-    #: often; the addressed one always runs up to the request first
+    #: the bus's clock ticks at least this often: the stations due then run their clocks (watchdog,
+    #: drive ramps; sim/bus.py), the others make up for it when next run; the addressed one always
+    #: runs up to the request first
     TICK_S = 0.01
 
     def write(self, data):

@@ -233,7 +233,8 @@ class SerialEndpoint:
             self.ser.close()
 
 
-#: how often every station's timers run (watchdogs, the models' ramps) while the bus is served
+#: how often the bus's clock ticks while it is served (the stations due then run their watchdogs and
+#: ramps: sim/bus.py SimBus.tick)
 TICK_S = 0.005
 
 
@@ -241,9 +242,9 @@ def serve(bus: SimBus, endpoint, stop=lambda: False, poll: float = 0.005, clock=
           tick_s: float = TICK_S) -> None:
     """Run until stop() is true. Reply octets go out at the times the bus gives.
 
-    Every station's timers run every `tick_s` (and a station a request addresses runs its own
-    first, sim/slave.py handle), not on every pass of the loop: with several stations, ticking
-    them all for each chunk of octets read cost more than answering the master.
+    The bus's clock ticks every `tick_s` (and a station a request addresses runs its own first,
+    sim/slave.py handle), not on every pass of the loop; at a tick only the stations that are due
+    run (sim/bus.py), so a tick costs what they cost, not what the whole plant does.
 
     Stations built on first use (sim/lazy.py) are built here, before the first request: building
     one (its profile, its model) takes milliseconds, which a master waiting for a reply must not see."""

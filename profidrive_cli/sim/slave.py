@@ -8,18 +8,51 @@ next diagnosis for rejected Set_Prm / Chk_Cfg, the cached reply for an FCB repet
 
 from __future__ import annotations
 
+from bisect import bisect_left, bisect_right
 from typing import TYPE_CHECKING
 
 from profidrive_cli.dp import services as S
 from profidrive_cli.fdl import frames as F
 from profidrive_cli.fdl.fcb import SlaveFcb
-from profidrive_cli.sim.model import SlaveModel
+from profidrive_cli.sim.model import SlaveModel, ticks_always
 
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.sim.lazy import LazyModel
 
 WAIT_PRM, WAIT_CFG, DATA_EXCH = "Wait_Prm", "Wait_Cfg", "Data_Exch"
 DEFAULT_MIN_TSDR = 11        # bit times, until a Set_Prm says otherwise
+
+
+class TickLog:
+    """The times the bus ran its clock (SimBus.tick), the latest KEEP of them at least.
+
+    sim/bus.py runs a station's clock only when a request addresses it or when it is due (its
+    watchdog, its model's next_due); a station that was not run at some of these ticks makes up for
+    them from here when it next runs (SimSlave.tick), so that it ends where a station run at every
+    tick would be."""
+
+    #: kept: at least what a model replays (sim/lazy.py REPLAY_TICKS, Toyo's 100 traceback points)
+    KEEP = 256
+
+    def __init__(self) -> None:
+        self.times: list[float] = []
+        self.last = float("-inf")
+
+    def add(self, t: float) -> None:
+        if t <= self.last:
+            return                  # the same tick again (or a clock that went back): nothing new
+        times = self.times
+        times.append(t)
+        self.last = t
+        if len(times) > 2 * self.KEEP:
+            del times[:-self.KEEP]
+
+    def between(self, after: float, upto: float, inclusive: bool = True) -> list[float]:
+        """The ticks after `after` up to `upto` (the latest KEEP of them, in order)."""
+        times = self.times
+        lo = bisect_right(times, after)
+        hi = bisect_right(times, upto, lo) if inclusive else bisect_left(times, upto, lo)
+        return times[max(lo, hi - self.KEEP):hi]
 
 
 class SimSlave:
@@ -49,6 +82,13 @@ class SimSlave:
         #: with FCB=1 (reference §2.3 rule 1); FCV=1 and FCV=0/FCB=0 are ignored, no answer at all.
         #: FDL status (FCV=0/FCB=0 by rule 4) and SDN are answered as usual. Set by the plant.
         self.first_contact = False
+        #: the bus's tick times (set by sim/bus.py; None: a station on its own, run only by tick())
+        self.ticks: TickLog | None = None
+        #: when the station's clock last ran (watchdog and model)
+        self.ticked_at = float("-inf")
+        #: the bus's bookkeeping: the time this station is queued for, on the bus or not
+        self.queued: float | None = None
+        self.plugged = False
         self.power_on(0.0)
 
     @property
@@ -76,6 +116,7 @@ class SimSlave:
 
     def power_cycle(self, now: float) -> None:
         """Power off and on: back to Wait_Prm, needs a new Set_Prm (fault injection)."""
+        self.settle(now)
         self.stats["power_cycles"] += 1
         if self.state == DATA_EXCH:
             self.model.on_leave_data_exchange(now, "power cycle")
@@ -84,6 +125,7 @@ class SimSlave:
     def inject_trip(self, alarm: str, now: float) -> None:
         """The drive trips (model.trip) and the station flags new diagnosis: the next
         Data_Exchange reply is DH, so the master reads Slave_Diag (fault injection)."""
+        self.settle(now)
         self.stats["trips"] += 1
         self.model.trip(alarm, now)
         self.diag_pending = True
@@ -101,8 +143,60 @@ class SimSlave:
         #: inputs sampled by the last Freeze (None: no Freeze in force: live inputs)
         self.frozen_inputs: bytes | None = None
 
+    # -- the station's clock -----------------------------------------------------------------
+    def watchdog_deadline(self) -> float | None:
+        """When the watchdog runs out (expired at the first tick after it), None: not armed."""
+        if self.wd_s is not None and self.state in (WAIT_CFG, DATA_EXCH):
+            return self.last_seen + self.wd_s
+        return None
+
+    def next_due(self) -> float | None:
+        """When the bus must next run this station's clock although nobody addresses it (None: only
+        when addressed): its watchdog's expiry, or what its model asks (SlaveModel.next_due). A time
+        at or before the last run means: at the next tick of the bus."""
+        wd = self.watchdog_deadline()
+        model = self.model
+        own = self.ticked_at if ticks_always(model) else model.next_due(self.ticked_at)
+        if own is None:
+            return wd
+        return own if wd is None or own < wd else wd
+
+    def settle(self, upto: float) -> None:
+        """Make up for the bus ticks up to `upto` this station was not run at (before something from
+        outside acts on it: a trip, a power cycle, a command of sim/control.py)."""
+        log = self.ticks
+        if log is not None and log.last > self.ticked_at:
+            self._catch_up(upto, True)
+
+    def _catch_up(self, upto: float, inclusive: bool) -> None:
+        missed = self.ticks.between(self.ticked_at, upto, inclusive)   # type: ignore[union-attr]
+        if not missed:
+            return
+        wd = self.watchdog_deadline()
+        if wd is not None and wd < missed[-1]:
+            # the watchdog ran out at one of them (armed from outside the bus): tick by tick, as then
+            for t in missed:
+                self._tick(t)
+            return
+        model = self.model
+        if ticks_always(model):
+            for t in missed:
+                model.tick(t)
+        else:
+            model.catch_up(missed, None if inclusive else upto)
+        self.ticked_at = missed[-1]
+
     def tick(self, now: float) -> None:
+        """Run the station's clock to `now`: the bus ticks it missed since it last ran (sim/bus.py
+        runs it only when addressed or due), then the watchdog and the model at `now`."""
+        log = self.ticks
+        if log is not None and log.last > self.ticked_at:
+            self._catch_up(now, False)
+        self._tick(now)
+
+    def _tick(self, now: float) -> None:
         """Watchdog: no telegram from our master within the watchdog time -> Wait_Prm."""
+        self.ticked_at = now
         if (self.wd_s is not None and self.state in (WAIT_CFG, DATA_EXCH)
                 and now - self.last_seen > self.wd_s):
             # the moment it expired, also when the clock is ticked late (a silent master on the

@@ -41,6 +41,7 @@
 from __future__ import annotations
 
 from collections import deque
+from itertools import repeat
 
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives import toyo as ty
@@ -212,6 +213,42 @@ class ToyoModel(ProfidriveModel):
             return False
         i07 = self._v("i-07")
         return i07 in (1, 2, 3) or (i07 == 4 and bool(self.mf_input2 & 0x2))
+
+    def moving(self) -> bool:
+        st = self.state
+        if st is State.S4 and self.torque_controlled():
+            return True                          # the axis (sim/torque_axis.py) settles slowly
+        if st in (State.S3, State.S4):
+            jog = self._jog_target()
+            if jog is not None:
+                if self.freq != jog:
+                    return True                  # the jog ramp (tick)
+            elif st is State.S3 and self.freq != 0.0:
+                return True                      # the jog's ramp down
+        return super().moving()
+
+    def next_due(self, now: float) -> float | None:
+        """Every tick while moving (jogging included), else nothing of its own: the traceback
+        samples of the ticks in between are made up by catch_up."""
+        return super().next_due(now)
+
+    def catch_up(self, times: list[float], then: float | None = None) -> None:
+        """Ticks missed at standstill: each would take a traceback sample (the last 100 make the
+        next trip's recording), all the same one (nothing moves; the sample holds no time). So: the
+        first tick for real, then copies of its sample, and the clocks set to the last."""
+        if times and self._last_tick is None:
+            self.tick(times[0])                  # a model never ticked: this one takes no sample
+            times = times[1:]
+        if len(times) < 3 or self.moving() or self._last_tick is None or times[0] <= self._last_tick:
+            for t in times:
+                self.tick(t)
+            return
+        self.tick(times[0])
+        rest = len(times) - 1
+        self.samples.extend(repeat(self.samples[-1], min(rest, self.samples.maxlen or rest)))
+        t = times[-1]
+        self._last_tick = t
+        self.motor.update(t, self.freq, self.state in (State.S4, State.S5) or self.freq != 0.0)
 
     def tick(self, now: float) -> None:
         last = self._last_tick

@@ -234,6 +234,26 @@ class YaskawaModel(DriveModel):
         return int(self._get("F6-01", 1)) if p is not None and p.register is not None else 1
 
     # -- dynamics -----------------------------------------------------------------------------
+    def next_due(self, now: float) -> float | None:
+        """Every tick while running, ramping or about to (a run command waiting for the next tick);
+        otherwise the end of comm_timeout without a Data_Exchange (the BUS fault), nothing else."""
+        alarm = self.alarm
+        target, run = self._target()
+        self.alarm = alarm                  # (_target sets it: that is the tick's business)
+        if self._loss_stop is not None:
+            return now
+        if run or self._run_latched or self.out_hz != 0.0:
+            lim = self._torque_limit_hz()
+            if lim is not None and abs(target) > lim:
+                target = lim if target > 0 else -lim
+            steady = (run and self._run_latched and not self.torque_controlled()
+                      and not self.accelerating and self.out_hz == target)
+            if not steady:
+                return now                  # ramping, stopping, or about to start
+        if self._comm and self.comm_timeout > 0:
+            return self._last_rx + self.comm_timeout
+        return None
+
     def tick(self, now: float) -> None:
         if self._last_tick is None:
             self._last_tick = now
