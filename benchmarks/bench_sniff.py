@@ -41,6 +41,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from pathlib import Path
 
 HERE = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, HERE)
@@ -102,21 +103,8 @@ def line_figures(raw: bytes) -> tuple[int, float, dict[str, int]]:
     return n, bits / BAUD, kinds
 
 
-#: `pdrive ARGS` (profidrive_cli/__main__.py's main) that writes its peak RSS (VmHWM, KiB) to argv[1]
-#: at exit: ru_maxrss would also count the pages of this process, which the child had until exec
-PDRIVE_WITH_PEAK = """
-import atexit, sys
-out = sys.argv[1]
-sys.argv = ["pdrive"] + sys.argv[2:]
-def peak():
-    with open("/proc/self/status") as fh:
-        kib = next(line.split()[1] for line in fh if line.startswith("VmHWM:"))
-    with open(out, "w") as fh:
-        fh.write(kib)
-atexit.register(peak)
-from profidrive_cli.cli.main import main
-main()
-"""
+#: runs `pdrive ARGS` and writes its peak RSS to OUT (benchmarks/peak_rss.py)
+PEAK_RSS = str(Path(__file__).resolve().parents[1] / "benchmarks" / "peak_rss.py")
 
 
 def run_one(root: str, path: str, extra: list[str]) -> tuple[float, float, float, int]:
@@ -125,7 +113,7 @@ def run_one(root: str, path: str, extra: list[str]) -> tuple[float, float, float
     env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
     env.pop("PYTHONDONTWRITEBYTECODE", None)
     with tempfile.NamedTemporaryFile("r", suffix=".peak") as peak:
-        cmd = [sys.executable, "-c", PDRIVE_WITH_PEAK, peak.name, "sniff", "--from-file", path, *extra]
+        cmd = [sys.executable, PEAK_RSS, peak.name, "sniff", "--from-file", path, *extra]
         t = time.perf_counter()
         p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env,
                              cwd=root)

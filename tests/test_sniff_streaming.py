@@ -13,7 +13,13 @@ import pytest
 from click.testing import CliRunner
 
 from profidrive_cli.bustools import passive as P
-from profidrive_cli.dp.capture import HOLD, Capture, ErrorMerger, format_line, merge_errors
+from profidrive_cli.dp.capture import (
+    HOLD,
+    Capture,
+    ErrorMerger,
+    format_line,
+    merge_errors,
+)
 from profidrive_cli.fdl import frames as F
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -139,26 +145,13 @@ def test_inspect_signature_once_per_codec_not_per_frame(monkeypatch):
 
 # -- memory flat in the capture's length ------------------------------------------------------------
 
-#: `pdrive ARGS` that writes its peak RSS (VmHWM, KiB) to argv[1] at exit: the process's own peak
-#: (ru_maxrss would also count the pytest pages the child had until its exec)
-PDRIVE_WITH_PEAK = """
-import atexit, sys
-out = sys.argv[1]
-sys.argv = ["pdrive"] + sys.argv[2:]
-def peak():
-    with open("/proc/self/status") as fh:
-        kib = next(line.split()[1] for line in fh if line.startswith("VmHWM:"))
-    with open(out, "w") as fh:
-        fh.write(kib)
-atexit.register(peak)
-from profidrive_cli.cli.main import main
-main()
-"""
+#: runs `pdrive ARGS` and writes its peak RSS to OUT (benchmarks/peak_rss.py)
+PEAK_RSS = str(Path(__file__).resolve().parents[1] / "benchmarks" / "peak_rss.py")
 
 
 def _peak_rss_kib(path: Path, tmp_path: Path) -> int:
     out = tmp_path / "peak"
-    r = subprocess.run([sys.executable, "-c", PDRIVE_WITH_PEAK, str(out), "sniff", "--from-file",
+    r = subprocess.run([sys.executable, PEAK_RSS, str(out), "sniff", "--from-file",
                         str(path)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=ROOT,
                        timeout=600)
     assert r.returncode == 0, r.stderr

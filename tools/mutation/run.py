@@ -88,6 +88,8 @@ MODULES: dict[str, list[str]] = {
     "session/parameters.py": ["tests/test_parameters_mutants.py", "tests/test_param_plan.py", "tests/test_restore_mutants.py",
                               "tests/test_exact_values.py",
                               "tests/test_session.py"],
+    # the asyncio face: a cancelled run must stop its drive (issue 29)
+    "aio/__init__.py": ["tests/test_aio.py"],
     "checklist/runner.py": ["tests/test_checklist_bands.py", "tests/test_checklist.py"],
     "checklist/fields.py": _CHECKLIST_TESTS,
     "checklist/steps/run.py": _CHECKLIST_TESTS,
