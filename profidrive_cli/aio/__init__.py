@@ -41,7 +41,7 @@ T = TypeVar("T")
 
 def open_bus(port: str | None = None, *, baud: str | int | None = None,
              master_address: int | None = None, retries: int | None = None,
-             slot_time: int | None = None, rs485: bool = False, echo: bool = False,
+             slot_time: int | None = None, rs485: bool = False, echo: bool | str = "auto",
              allow_real_port_writes: bool = False, handle_signals: bool = True,
              on_message: Callable[[str], None] | None = None,
              env: Mapping[str, str] | None = None) -> "AsyncBus":
@@ -66,6 +66,8 @@ class AsyncBus:
         self._bus: "Bus | None" = None
         self._drives: dict[int, AsyncDrive] = {}
         self._sigterm_task: asyncio.Task[Any] | None = None
+        #: the SIGTERM handler before ours, put back on close (the loop's removal sets SIG_DFL)
+        self._sigterm_before: Any = None
         self._loop: asyncio.AbstractEventLoop | None = None
 
     # -- opening and closing ------------------------------------------------------------------------
@@ -95,11 +97,13 @@ class AsyncBus:
                 or threading.current_thread() is not threading.main_thread()):
             return
         assert self._loop is not None
+        before = signal.getsignal(signal.SIGTERM)
         try:
             self._loop.add_signal_handler(signal.SIGTERM, task.cancel)
         except (NotImplementedError, RuntimeError, ValueError):
             return                                   # a loop without signal support
         self._sigterm_task = task
+        self._sigterm_before = before
 
     async def close(self, exc: BaseException | None = None) -> None:
         """Stop every drive this bus started (together), release the stations, close the port. It
@@ -107,6 +111,10 @@ class AsyncBus:
         afterwards). Idempotent."""
         if self._sigterm_task is not None and self._loop is not None:
             self._loop.remove_signal_handler(signal.SIGTERM)
+            # the handler from before (the loop's removal would leave SIG_DFL: a SIGTERM after the
+            # bus closed would then end a program that handles it itself)
+            signal.signal(signal.SIGTERM, self._sigterm_before if self._sigterm_before is not None
+                          else signal.SIG_DFL)
             self._sigterm_task = None
         bus, self._bus = self._bus, None
         try:

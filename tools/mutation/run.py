@@ -89,7 +89,7 @@ MODULES: dict[str, list[str]] = {
                               "tests/test_exact_values.py",
                               "tests/test_session.py"],
     # the asyncio face: a cancelled run must stop its drive (issue 29)
-    "aio/__init__.py": ["tests/test_aio.py"],
+    "aio/__init__.py": ["tests/test_aio.py", "tests/test_aio_mutants.py"],
     "checklist/runner.py": ["tests/test_checklist_bands.py", "tests/test_checklist.py"],
     "checklist/fields.py": _CHECKLIST_TESTS,
     "checklist/steps/run.py": _CHECKLIST_TESTS,
