@@ -30,18 +30,7 @@ T0 = 1_700_000_000.0          # 2023-11-14 22:13:20 UTC
 FRAMES = [SET_PRM, SLAVE_DIAG, CHK_CFG, DX_REQ, DX_RES, GC, FDL_STATUS, TOKEN, SC]
 
 
-@pytest.fixture
-def pd(capsys):
-    """pdrive's own entry point in this process: (exit code, stdout + stderr)."""
-    from profidrive_cli.cli.main import main
-
-    def call(*args):
-        capsys.readouterr()
-        with pytest.raises(SystemExit) as e:
-            main([str(a) for a in args])
-        got = capsys.readouterr()
-        return e.value.code, got.out + got.err
-    return call
+from test_wireshark import pd  # noqa: E402,F401  (pdrive in this process: the same fixture)
 
 
 def _packets():

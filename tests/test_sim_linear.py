@@ -221,16 +221,20 @@ def test_next_due_of_the_families():
     assert y.next_due(4.5) is None                      # bus_fault=running keeps it quiet)
 
 
+class _TickRecorder(SlaveModel):
+    """A model written before next_due: its own tick(), which records when it ran."""
+
+    def __init__(self):
+        super().__init__(0x4711, {"x": bytes([0x31])})
+        self.times = []
+
+    def tick(self, now):
+        self.times.append(now)
+
+
 def test_a_model_without_next_due_is_ticked_at_every_tick_as_before():
     """A model written before next_due (its own tick, e.g. a plug-in family's) keeps its clock."""
-    class Old(SlaveModel):
-        def __init__(self):
-            super().__init__(0x4711, {"x": bytes([0x31])})
-            self.times = []
-
-        def tick(self, now):
-            self.times.append(now)
-    old = Old()
+    old = _TickRecorder()
     bus = SimBus([SimSlave(9, old)], timing="virtual")
     for i in range(1, 51):
         bus.tick(0.01 * i)
@@ -239,14 +243,7 @@ def test_a_model_without_next_due_is_ticked_at_every_tick_as_before():
 
 def test_a_station_plugged_back_in_does_not_replay_the_time_it_was_out():
     """The old bus did not run unplugged stations; a station plugged back in starts from there."""
-    class Old(SlaveModel):
-        def __init__(self):
-            super().__init__(0x4711, {"x": bytes([0x31])})
-            self.times = []
-
-        def tick(self, now):
-            self.times.append(now)
-    model = Old()
+    model = _TickRecorder()
     bus = SimBus([SimSlave(9, model)], timing="virtual")
     ctl = bus.control(clock=lambda: t)
     t = 0.0
