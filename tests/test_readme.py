@@ -19,12 +19,22 @@ def test_ci_runs_exactly_the_readme_pinned_test_command():
     assert any(line.strip() == PINNED for line in ci.splitlines())
 
 
-def test_the_readme_documents_the_run_against_the_newest_releases():
-    """Unpinned: the command that shows whether constraints.txt can be moved on; never CI's."""
+def test_the_run_against_the_newest_releases_is_documented_apart():
+    """Unpinned: the command that shows whether constraints.txt can be moved on; never CI's, and
+    not among the README's commands (a newcomer runs those two: install and scan, the pinned
+    tests). docs/dependencies.md has it, with how constraints.txt is updated."""
     readme = (ROOT / "README.md").read_text()
-    assert _blocks(readme)[2] == NEWEST
+    doc = (ROOT / "docs" / "dependencies.md").read_text()
+    assert _blocks(doc)[1] == NEWEST and _blocks(doc)[0] == PINNED
+    assert NEWEST not in readme and "docs/dependencies.md" in readme
     assert "constraints" not in NEWEST and NEWEST not in (ROOT / ".ci" / "run").read_text()
-    assert "pip freeze --exclude profidrive-cli" in readme      # how constraints.txt is updated
+    assert "pip freeze --exclude profidrive-cli" in doc        # how constraints.txt is updated
+
+
+def test_the_readme_has_two_commands_before_its_first_section():
+    readme = (ROOT / "README.md").read_text()
+    head = readme.split("\n## ", 1)[0]
+    assert len(_blocks(head)) == 2
 
 
 def test_ci_installs_nothing_unpinned():
