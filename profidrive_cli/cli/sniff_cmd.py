@@ -44,8 +44,7 @@ def _line(c) -> str:
 @click.option("--live", is_flag=True,
               help="A passive live list (stations, DP state, master cycle time, retries, errors) "
                    "refreshed in place instead of one line per frame.")
-@click.option("--gsd-dir", metavar="DIR", default=None, expose_value=False,    # read by cli/sniff_view.py
-              callback=lambda c, _, v: c.meta.update({"pdrive.gsd_dir": v}),
+@click.option("--gsd-dir", metavar="DIR", default=None,
               help="Your GSD files (searched before the library): every slave's data by module.")
 @click.option("--ring", type=float, default=None, metavar="SECONDS",
               help="Black-box recorder: keep the last SECONDS of telegrams and write one pcap per "
@@ -59,7 +58,7 @@ def _line(c) -> str:
 @click.option("--out", "out_dir", default=None, metavar="DIR|PATTERN",
               help="With --ring: a directory, or a file pattern with {n} or {time} (default: .).")
 @bus_options
-def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, live, ring,
+def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, live, gsd_dir, ring,
               triggers, after_s, out_dir):
     """Passive capture: one line per frame (time, SD, SA->DA, SAPs, FC in words, service, DU).
 
@@ -83,7 +82,7 @@ def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, 
         check_output_path(f.path, f.what)
     cap = Capture()
     merger = ErrorMerger()
-    view = _view(stations, live, opts.json, opts if live else None)
+    view = _view(stations, live, opts.json, opts if live else None, gsd_dir)
     # check the input before anything is written; it is read in chunks and shown as it is read.
     # pcap, pcapng and ProfiTrace .ptd files by their extension (dp/capfile.py), any other as raw
     packets = _packet_file(raw_file) if raw_file else None
@@ -213,12 +212,14 @@ def _truncated(cap):
     return Captured(cap._t, raw, None, "truncated frame at end of input")
 
 
-def _view(stations, live, as_json, opts=None):
-    """How each frame is shown: one line / JSON object (with --station the drives' words), or the
-    --live list (its bus load figured at the baud rate `opts` give)."""
+def _view(stations, live, as_json, opts=None, gsd_dir=None):
+    """How each frame is shown: one line / JSON object (with --station the drives' words, every other
+    slave by its GSD's modules, `gsd_dir` searched first), or the --live list (its bus load figured
+    at the baud rate `opts` give)."""
     from profidrive_cli.cli.sniff_ring import listen_baud
     from profidrive_cli.cli.sniff_view import SniffView
-    return SniffView(stations, live, as_json, baud=listen_baud(opts) if opts is not None else None)
+    return SniffView(stations, live, as_json, gsd_dir=gsd_dir,
+                     baud=listen_baud(opts) if opts is not None else None)
 
 
 def _listen_start(link) -> None:

@@ -11,8 +11,6 @@ import json
 import sys
 from typing import TYPE_CHECKING
 
-import click
-
 from profidrive_cli.bustools.passive import frame_suffix
 from profidrive_cli.cli.common import emit_json, out
 from profidrive_cli.dp.capture import format_line, frame_fields
@@ -46,8 +44,6 @@ class SniffView:
         self.slaves = None                                    # every slave by module (issue 27)
         if not live:
             from profidrive_cli.bustools.slaveview import SlaveView
-            ctx = click.get_current_context(silent=True)      # sniff's --gsd-dir (cli/sniff_cmd.py)
-            gsd_dir = gsd_dir or (ctx.meta.get("pdrive.gsd_dir") if ctx is not None else None)
             self.slaves = SlaveView(gsd_dir, set(self.decoder.watched) if self.decoder else ())
         #: frame lines not yet written (flush())
         self._lines: list[str] = []
