@@ -32,9 +32,17 @@ from profidrive_cli import PdriveError, UsageError
 class OutputPathError(UsageError):
     """The target cannot be written (missing directory, not a directory, no permission): exit 2."""
 
+    #: the operating system's errno and its words, when an OSError was the cause (a caller that
+    #: goes on after a failed write -- the recorder -- tells a full disk from the rest by it)
+    errno: int | None = None
+    reason: str | None = None
+
 
 class OutputWriteError(PdriveError):
     """Writing failed part-way (disk full, I/O error); the previous file is untouched: exit 1."""
+
+    errno: int | None = None
+    reason: str | None = None
 
 
 def _reason(e: OSError) -> str:
@@ -115,7 +123,9 @@ class OutputFile:
                                                  dir=parent)
                 self.file = os.fdopen(fd, self.mode, encoding=self.encoding, newline=self.newline)
         except OSError as e:
-            raise OutputPathError(f"{self.what} {self.path}: {_reason(e)}") from None
+            error = OutputPathError(f"{self.what} {self.path}: {_reason(e)}")
+            error.errno, error.reason = e.errno, _reason(e)
+            raise error from None
         return self.file
 
     def write(self, data) -> None:
@@ -185,6 +195,7 @@ class OutputFile:
         kept = ("; the previous file is untouched" if self.path.exists() and not
                 _is_special(self.path) else "")
         self.error = OutputWriteError(f"{self.what} {self.path}: write failed: {_reason(e)}{kept}")
+        self.error.errno, self.error.reason = e.errno, _reason(e)
         raise self.error from None
 
     def __enter__(self):
