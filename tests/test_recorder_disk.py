@@ -40,6 +40,8 @@ class FakeDisk(Disk):
         return [(name, size, mtime) for name, (size, mtime) in self.files_.items()]
 
     def remove(self, path):
+        if self.read_only:
+            raise OSError(errno.EROFS, os.strerror(errno.EROFS))
         self.removed.append(Path(path).name)
         del self.files_[Path(path).name]
 
@@ -61,7 +63,7 @@ class FakeDisk(Disk):
         return self.clock
 
     def free(self, directory):
-        return None if self.capacity is None else self.capacity - self.other - self.used()
+        return None if self.capacity is None else max(0, self.capacity - self.other - self.used())
 
 
 class _Counter:

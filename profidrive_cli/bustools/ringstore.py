@@ -12,8 +12,11 @@ keeps recording whatever the disk does.
   are older than `keep_s`; each removal is an event (`Removed`, counted). A capture larger than the
   bound alone is not written (`Failed`).
 - A capture that cannot be written (disk full, read-only, directory gone, I/O error) is an event
-  (`Failed`: the path and the operating system's words) and the recording goes on; a full disk
-  (ENOSPC, EDQUOT) is a state, reported when it starts and when a write succeeds again (`DiskState`).
+  (`Failed`: the path and the operating system's words) and the recording goes on. On a full file
+  system (ENOSPC, EDQUOT) the oldest own captures make room for the new one when they can (the
+  free space and their sizes say so; each removal an event) and the write is tried once more;
+  when they cannot, the disk is full: a state, reported when it starts and when a write succeeds
+  again (`DiskState`), the own captures kept.
 
 The file system is reached only through `Disk` (list, remove, write through outfile.OutputFile, the
 wall clock); a test or the soak gives one of its own that fills, frees and fails.
@@ -331,6 +334,8 @@ class Store:
         # on a full disk only what the new capture lacks: nothing when the space is there (the
         # ENOSPC came from elsewhere -- inodes, a quota -- and removing would not help)
         freed = 0 if full is None else self._free(d)
+        if full is not None and freed + used < size:
+            return []                              # all of them would not make room: keep them
         out: list[Removed] = []
         for name, fsize, mtime in own:
             old = self.keep_s is not None and now - mtime > self.keep_s
@@ -355,7 +360,7 @@ class Store:
 
     def _free(self, d: Path) -> int:
         try:
-            return self.disk.free(d) or 0
+            return max(0, self.disk.free(d) or 0)
         except OSError:
             return 0
 
