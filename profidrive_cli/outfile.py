@@ -67,22 +67,29 @@ def check_output_path(path: str | os.PathLike, what: str = "output file") -> Pat
     if str(path) == "":
         raise OutputPathError(f"{what}: empty path")
     if p.is_dir():
-        raise OutputPathError(f"{what} {p}: is a directory")
+        raise _path_error(what, p, "is a directory")
     if _is_special(p):
         if not os.access(p, os.W_OK):
-            raise OutputPathError(f"{what} {p}: permission denied")
+            raise _path_error(what, p, "permission denied")
         return p
     parent = p.parent if str(p.parent) else Path(".")
     if not parent.exists():
-        raise OutputPathError(f"{what} {p}: directory {parent} does not exist "
-                              f"(pdrive creates no directories)")
+        raise _path_error(what, p, f"directory {parent} does not exist (pdrive creates no "
+                                   f"directories)")
     if not parent.is_dir():
-        raise OutputPathError(f"{what} {p}: {parent} is not a directory")
+        raise _path_error(what, p, f"{parent} is not a directory")
     if not os.access(parent, os.W_OK | os.X_OK):
-        raise OutputPathError(f"{what} {p}: no permission to write in {parent}")
+        raise _path_error(what, p, f"no permission to write in {parent}")
     if p.exists() and not os.access(p, os.W_OK):
-        raise OutputPathError(f"{what} {p}: permission denied")
+        raise _path_error(what, p, "permission denied")
     return p
+
+
+def _path_error(what: str, p: Path | str, reason: str, code: int | None = None) -> OutputPathError:
+    """`{what} {path}: {reason}`, the reason (and errno) kept apart for a caller that goes on."""
+    e = OutputPathError(f"{what} {p}: {reason}")
+    e.errno, e.reason = code, reason
+    return e
 
 
 class OutputFile:
@@ -123,9 +130,7 @@ class OutputFile:
                                                  dir=parent)
                 self.file = os.fdopen(fd, self.mode, encoding=self.encoding, newline=self.newline)
         except OSError as e:
-            error = OutputPathError(f"{self.what} {self.path}: {_reason(e)}")
-            error.errno, error.reason = e.errno, _reason(e)
-            raise error from None
+            raise _path_error(self.what, self.path, _reason(e), e.errno) from None
         return self.file
 
     def write(self, data) -> None:

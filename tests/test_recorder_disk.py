@@ -362,3 +362,26 @@ def test_the_writer_says_each_removal_in_the_stream(tmp_path, capsys):
     assert lines[1]["path"] == lines[0]["capture"] and lines[1]["count"] == 1
     assert lines[1]["bytes"] == size and lines[1]["why"].startswith("--max-disk ")
     assert [p.name for p in tmp_path.iterdir()] == [Path(lines[2]["capture"]).name]
+
+
+def test_a_directory_gone_mid_run_is_an_error_for_that_capture(tmp_path, capsys):
+    # the real disk: the directory removed between two captures (a mount that went away); the
+    # error names the capture, its path and the reason once (not "--out PATH: --out PATH: ...")
+    from test_recorder import _one_done
+
+    from profidrive_cli.cli.sniff_ring import _Writer
+    d = tmp_path / "ev"
+    d.mkdir()
+    tset, done = _one_done()
+    w = _Writer(out_pattern(str(d)), 147, False, tset)
+    assert w.write(done)
+    for f in d.iterdir():
+        f.unlink()
+    d.rmdir()
+    done.n = 2
+    capsys.readouterr()
+    assert w.write(done) is False
+    (error, trigger) = capsys.readouterr().out.splitlines()
+    assert error.count("--out ") == 1 and f"directory {d} does not exist" in error
+    assert "error: capture 2 not written: --out " in error and "NOT WRITTEN" in trigger
+    assert w.store.failed == 1 and w.store.first_failure.reason.startswith(f"directory {d}")
