@@ -385,3 +385,25 @@ def test_a_directory_gone_mid_run_is_an_error_for_that_capture(tmp_path, capsys)
     assert error.count("--out ") == 1 and f"directory {d} does not exist" in error
     assert "error: capture 2 not written: --out " in error and "NOT WRITTEN" in trigger
     assert w.store.failed == 1 and w.store.first_failure.reason.startswith(f"directory {d}")
+
+
+def test_a_restart_numbers_on_after_an_earlier_runs_captures(tmp_path):
+    # an earlier run left ev-7 and ev-12 (and ev-12-13: a second capture named ev-12); the next
+    # run's first capture is 13, so ev-{n}.pcap never writes over one of them. Other files and
+    # patterns without a plain {n} give no number
+    for name in ("ev-7.pcap", "ev-12.pcap", "ev-12-13.pcap", "ev-99.txt", "notes.pcap"):
+        (tmp_path / name).write_bytes(b"")
+    assert Store(check_pattern(str(tmp_path / "ev-{n}.pcap"))).last_number() == 12
+    assert Store(check_pattern(str(tmp_path / "ev-{n:03d}.pcap"))).last_number() == 0
+    assert Store(check_pattern(str(tmp_path / "x-{n}.pcap"))).last_number() == 0
+    p = out_pattern(str(tmp_path))
+    assert p.number("pdrive-20261126-140556-41-fcs-42.pcap") == 41
+
+
+def test_the_recorder_numbers_from_first_n():
+    from profidrive_cli.bustools.recorder import Recorder
+    from profidrive_cli.bustools.triggers import TriggerSet, parse
+    from test_recorder import _lost_line, frames
+    rec = Recorder(TriggerSet(parse("lost(*)")), ring_s=0.5, after_s=1.0, first_n=13)
+    (done,) = rec.feed(frames(*_lost_line()))
+    assert done.n == 13 and rec.captures == 13

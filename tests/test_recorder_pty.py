@@ -120,6 +120,10 @@ def test_recorder_runs_its_whole_duration_through_captures_it_cannot_write(
     a, b = socat_pair
     events = tmp_path / "events"
     events.mkdir()
+    # an earlier run's capture 41 (the unit restarted it): this run numbers on from 42, and its
+    # file stays as it was
+    earlier = events / "pdrive-20261204-031208-41-lostall.pcap"
+    earlier.write_bytes(b"earlier")
     sim = subprocess.Popen(pdrive_cmd() + ["sim", "--plc", "--port", a, "--json"],
                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
@@ -147,5 +151,7 @@ def test_recorder_runs_its_whole_duration_through_captures_it_cannot_write(
     assert sorted(e["path"] for e in errors) == lost
     assert {e["reason"] for e in errors} == {os.strerror(code)}
     assert [d["full"] for d in lines if d["event"] == "disk"] == ([True] if fault == "full" else [])
-    assert sorted(str(p) for p in events.iterdir()) == written     # nothing half-written
+    assert min(e["capture"] for e in errors) > 41 + good
+    assert sorted(str(p) for p in events.iterdir() if p != earlier) == written   # nothing half-written
+    assert earlier.read_bytes() == b"earlier"
     assert f"{len(lost)} capture(s) could not be written" in r.stderr

@@ -108,14 +108,23 @@ class Pattern:
         return self.text.format(n=n, time=stamp, trigger=file_trigger(trigger_label),
                                 station="bus" if station is None else station)
 
+    def _match(self, name: str) -> re.Match[str] | None:
+        m = self.name_rx.fullmatch(name)
+        if m is None:                              # the -N of a second capture of the same name
+            stem, dot, ext = name.rpartition(".")
+            bare = re.sub(r"-[0-9]+$", "", stem if dot else name)
+            m = self.name_rx.fullmatch(f"{bare}.{ext}" if dot else bare)
+        return m
+
     def owns(self, name: str) -> bool:
         """A file name the pattern gives (also with the `-N` a second capture of the same name gets
         before its extension)."""
-        if self.name_rx.fullmatch(name):
-            return True
-        stem, dot, ext = name.rpartition(".")
-        bare = re.sub(r"-[0-9]+$", "", stem if dot else name)
-        return self.name_rx.fullmatch(f"{bare}.{ext}" if dot else bare) is not None
+        return self._match(name) is not None
+
+    def number(self, name: str) -> int | None:
+        """The capture number in one of its file names (a pattern with a plain {n}), else None."""
+        m = self._match(name)
+        return int(m.group("n")) if m is not None and "n" in self.name_rx.groupindex else None
 
 
 def unique(path: str, n: int) -> str:
@@ -161,11 +170,13 @@ def check_pattern(pattern: str, shown: str | None = None) -> Pattern:
     if "n" not in names and "time" not in names:
         raise UsageError(f"{where}: not a directory, and as a file pattern it needs {{n}} or {{time}} "
                          f"(one file per event), e.g. events/ev-{{time}}-{{n}}.pcap")
-    rx = []
+    rx: list[str] = []
     for literal, name, spec, conv in string.Formatter().parse(tail):
         rx.append(re.escape(literal))
         if name is not None:
-            rx.append(_PLAIN[name] if name in _PLAIN and not spec and not conv else ".+?")
+            plain = name in _PLAIN and not spec and not conv
+            first_n = plain and name == "n" and "(?P<n>" not in "".join(rx)
+            rx.append(f"(?P<n>{_PLAIN[name]})" if first_n else _PLAIN[name] if plain else ".+?")
     check_output_path(pattern.format(**_SAMPLE), "--out")
     directory = "".join(lit for lit, _, _, _ in string.Formatter().parse(head)) if head else "."
     return Pattern(pattern, Path(directory), re.compile("".join(rx)))
@@ -313,6 +324,16 @@ class Store:
         except (OSError, PdriveError) as e:
             return _why(e)
         return None
+
+    def last_number(self) -> int:
+        """The highest capture number of the own files already there (an earlier run's; 0: none,
+        or a pattern without a plain {n}): the recorder numbers on from it, so that a restart
+        (systemd, a reboot) never writes over an earlier capture of the same number."""
+        try:
+            files = self.disk.files(self.pattern.directory)
+        except OSError:
+            return 0
+        return max((n for n in (self.pattern.number(f[0]) for f in files) if n is not None), default=0)
 
     def _failed(self, f: Failed) -> Failed:
         self.failed += 1

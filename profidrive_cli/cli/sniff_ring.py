@@ -71,8 +71,9 @@ def run_ring(opts: Any, ring_s: float | None, trigger_exprs: tuple[str, ...], af
     triggers = parse_all(list(trigger_exprs), set(watched))
     pattern = out_pattern(out_opt)
     tset = TriggerSet(triggers, PassiveDecoder(watched) if watched else None, baud=listen_baud(opts))
-    rec = Recorder(tset, ring_s, after)
     store = Store(pattern, max_bytes, None if keep_days is None else keep_days * 86400.0)
+    # numbered on after an earlier run's captures: a restart never writes over one of them
+    rec = Recorder(tset, ring_s, after, first_n=store.last_number() + 1)
     writer = _Writer(pattern, LINKTYPES[linktype], opts.json, tset, store)
     cap = Capture()  # type: ignore[no-untyped-call]
     link = opts.open_link()
@@ -83,7 +84,9 @@ def run_ring(opts: Any, ring_s: float | None, trigger_exprs: tuple[str, ...], af
         keep = "" if keep_days is None else f", none older than {keep_days:g} days (--keep)"
         err.print(f"recording: ring {ring_s:g} s, {after:g} s after each event, triggers "
                   f"{', '.join(t.label for t in triggers)}; captures {pattern.text}, at most "
-                  f"{size_text(max_bytes)} of them (--max-disk){keep}", markup=False)
+                  f"{size_text(max_bytes)} of them (--max-disk){keep}"
+                  + (f"; numbered on from {rec.captures + 1} (an earlier run's are there)"
+                     if rec.captures else ""), markup=False)
     old = signal.getsignal(signal.SIGTERM)
 
     def on_term(*_a: object) -> None:
