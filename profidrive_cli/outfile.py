@@ -20,6 +20,7 @@ This module imports nothing of pdrive but the error base classes: every layer ma
 
 from __future__ import annotations
 
+import errno
 import os
 import stat
 import tempfile
@@ -79,10 +80,20 @@ def check_output_path(path: str | os.PathLike, what: str = "output file") -> Pat
     if not parent.is_dir():
         raise _path_error(what, p, f"{parent} is not a directory")
     if not os.access(parent, os.W_OK | os.X_OK):
+        if _read_only(parent):
+            raise _path_error(what, p, os.strerror(errno.EROFS), errno.EROFS)
         raise _path_error(what, p, f"no permission to write in {parent}")
     if p.exists() and not os.access(p, os.W_OK):
         raise _path_error(what, p, "permission denied")
     return p
+
+
+def _read_only(directory: Path) -> bool:
+    """The directory's file system is mounted read-only (POSIX statvfs; False where unknown)."""
+    try:
+        return bool(os.statvfs(directory).f_flag & os.ST_RDONLY)
+    except (OSError, AttributeError):
+        return False
 
 
 def _path_error(what: str, p: Path | str, reason: str, code: int | None = None) -> OutputPathError:

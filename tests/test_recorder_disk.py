@@ -407,3 +407,28 @@ def test_the_recorder_numbers_from_first_n():
     rec = Recorder(TriggerSet(parse("lost(*)")), ring_s=0.5, after_s=1.0, first_n=13)
     (done,) = rec.feed(frames(*_lost_line()))
     assert done.n == 13 and rec.captures == 13
+
+
+def test_a_real_file_system_remounted_read_only_mid_run(tmp_path):
+    """Root writes through chmod, not through a read-only mount: a tmpfs remounted ro after two
+    captures refuses the next two (EROFS, one Failed each, no disk-full state), rw again the rest."""
+    import subprocess
+    mnt = tmp_path / "mnt"
+    mnt.mkdir()
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(mnt)],
+                      capture_output=True).returncode != 0:
+        pytest.skip("cannot mount a tmpfs here")
+    try:
+        store = Store(check_pattern(str(mnt / "ev-{n}.pcap")))
+        got = []
+        for n in range(1, 7):
+            if n in (3, 5):
+                opt = "remount,ro" if n == 3 else "remount,rw"
+                assert subprocess.run(["mount", "-o", opt, str(mnt)], capture_output=True).returncode == 0
+            got.append(store.save(n, str(mnt / f"ev-{n}.pcap"), 100, _fill(100)))
+        assert [ok for ok, _ in got] == [True, True, False, False, True, True]
+        assert [(e.n, e.reason, e.full) for _, ev in got for e in ev] == [
+            (3, os.strerror(errno.EROFS), False), (4, os.strerror(errno.EROFS), False)]
+        assert sorted(os.listdir(mnt)) == [f"ev-{n}.pcap" for n in (1, 2, 5, 6)]
+    finally:
+        subprocess.run(["umount", str(mnt)], capture_output=True)
