@@ -432,3 +432,16 @@ def test_a_real_file_system_remounted_read_only_mid_run(tmp_path):
         assert sorted(os.listdir(mnt)) == [f"ev-{n}.pcap" for n in (1, 2, 5, 6)]
     finally:
         subprocess.run(["umount", str(mnt)], capture_output=True)
+
+
+def test_removals_a_read_only_disk_refuses_are_said_once_per_write(tmp_path):
+    # 5 own files of 100 over a bound of 250: on a read-only file system the first removal fails
+    # and is said (not counted); the other four are not tried for this write
+    disk = FakeDisk()
+    store = _store(tmp_path, disk, max_bytes=250)
+    for n in range(1, 6):
+        disk.files_[f"ev-{n}.pcap"] = (100, float(n))
+    disk.read_only = True
+    ok, events = store.save(6, str(tmp_path / "ev-6.pcap"), 100, _fill(100))
+    assert not ok and [type(e) for e in events] == [Removed, Failed]
+    assert events[0].error == "Read-only file system" and store.removed == 0

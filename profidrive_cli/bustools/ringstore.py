@@ -370,9 +370,9 @@ class Store:
             path = str(d / name)
             try:
                 self.disk.remove(Path(path))
-            except OSError as e:
+            except OSError as e:                   # the next ones would fail alike (read-only)
                 out.append(Removed(path, fsize, why, self.removed, e.strerror or str(e)))
-                continue
+                break
             used -= fsize
             freed += fsize
             self.removed += 1
