@@ -9,9 +9,11 @@ file system (a small tmpfs) where one can be mounted, skipped otherwise."""
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import json
 import os
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -304,16 +306,25 @@ def test_the_writer_reports_a_capture_it_cannot_write_and_goes_on(tmp_path, caps
         assert "-2-lostall.pcap NOT WRITTEN (" in lines[3]
 
 
-def test_a_real_full_file_system_when_a_tmpfs_can_be_mounted(tmp_path):
-    """A 32 KiB tmpfs (8 pages of 4 KiB): captures of 5000 octets take 2 pages each, so 4 fit; the
-    5th meets ENOSPC and the oldest own capture makes room for it."""
-    import subprocess
+@contextlib.contextmanager
+def tmpfs(tmp_path, size):
+    """A tmpfs of `size` mounted at tmp_path/mnt for the with-block (unmounted after, whatever
+    happens: no fault left for the next test); skips where it cannot be mounted."""
     mnt = tmp_path / "mnt"
     mnt.mkdir()
-    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=32k", "tmpfs", str(mnt)],
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(mnt)],
                       capture_output=True).returncode != 0:
         pytest.skip("cannot mount a tmpfs here")
     try:
+        yield mnt
+    finally:
+        subprocess.run(["umount", str(mnt)], capture_output=True)
+
+
+def test_a_real_full_file_system_when_a_tmpfs_can_be_mounted(tmp_path):
+    """A 32 KiB tmpfs (8 pages of 4 KiB): captures of 5000 octets take 2 pages each, so 4 fit; the
+    5th meets ENOSPC and the oldest own capture makes room for it."""
+    with tmpfs(tmp_path, "32k") as mnt:
         store = Store(check_pattern(str(mnt / "ev-{n}.pcap")), max_bytes=1 << 20)
         got = []
         for n in range(1, 7):
@@ -339,8 +350,6 @@ def test_a_real_full_file_system_when_a_tmpfs_can_be_mounted(tmp_path):
         assert not ok and isinstance(events[0], DiskState) and events[0].full
         assert isinstance(events[-1], Failed) and events[-1].reason == os.strerror(errno.ENOSPC)
         assert not [n for n in os.listdir(mnt) if n.endswith(".tmp")]      # nothing half-written
-    finally:
-        subprocess.run(["umount", str(mnt)], capture_output=True)
 
 
 def test_the_writer_says_each_removal_in_the_stream(tmp_path, capsys):
@@ -412,13 +421,7 @@ def test_the_recorder_numbers_from_first_n():
 def test_a_real_file_system_remounted_read_only_mid_run(tmp_path):
     """Root writes through chmod, not through a read-only mount: a tmpfs remounted ro after two
     captures refuses the next two (EROFS, one Failed each, no disk-full state), rw again the rest."""
-    import subprocess
-    mnt = tmp_path / "mnt"
-    mnt.mkdir()
-    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(mnt)],
-                      capture_output=True).returncode != 0:
-        pytest.skip("cannot mount a tmpfs here")
-    try:
+    with tmpfs(tmp_path, "1m") as mnt:
         store = Store(check_pattern(str(mnt / "ev-{n}.pcap")))
         got = []
         for n in range(1, 7):
@@ -430,8 +433,6 @@ def test_a_real_file_system_remounted_read_only_mid_run(tmp_path):
         assert [(e.n, e.reason, e.full) for _, ev in got for e in ev] == [
             (3, os.strerror(errno.EROFS), False), (4, os.strerror(errno.EROFS), False)]
         assert sorted(os.listdir(mnt)) == [f"ev-{n}.pcap" for n in (1, 2, 5, 6)]
-    finally:
-        subprocess.run(["umount", str(mnt)], capture_output=True)
 
 
 def test_removals_a_read_only_disk_refuses_are_said_once_per_write(tmp_path):
