@@ -20,6 +20,7 @@ This module imports nothing of pdrive but the error base classes: every layer ma
 
 from __future__ import annotations
 
+import errno
 import os
 import stat
 import tempfile
@@ -32,9 +33,17 @@ from profidrive_cli import PdriveError, UsageError
 class OutputPathError(UsageError):
     """The target cannot be written (missing directory, not a directory, no permission): exit 2."""
 
+    #: the operating system's errno and its words, when an OSError was the cause (a caller that
+    #: goes on after a failed write -- the recorder -- tells a full disk from the rest by it)
+    errno: int | None = None
+    reason: str | None = None
+
 
 class OutputWriteError(PdriveError):
     """Writing failed part-way (disk full, I/O error); the previous file is untouched: exit 1."""
+
+    errno: int | None = None
+    reason: str | None = None
 
 
 def _reason(e: OSError) -> str:
@@ -59,22 +68,39 @@ def check_output_path(path: str | os.PathLike, what: str = "output file") -> Pat
     if str(path) == "":
         raise OutputPathError(f"{what}: empty path")
     if p.is_dir():
-        raise OutputPathError(f"{what} {p}: is a directory")
+        raise _path_error(what, p, "is a directory")
     if _is_special(p):
         if not os.access(p, os.W_OK):
-            raise OutputPathError(f"{what} {p}: permission denied")
+            raise _path_error(what, p, "permission denied")
         return p
     parent = p.parent if str(p.parent) else Path(".")
     if not parent.exists():
-        raise OutputPathError(f"{what} {p}: directory {parent} does not exist "
-                              f"(pdrive creates no directories)")
+        raise _path_error(what, p, f"directory {parent} does not exist (pdrive creates no "
+                                   f"directories)")
     if not parent.is_dir():
-        raise OutputPathError(f"{what} {p}: {parent} is not a directory")
+        raise _path_error(what, p, f"{parent} is not a directory")
     if not os.access(parent, os.W_OK | os.X_OK):
-        raise OutputPathError(f"{what} {p}: no permission to write in {parent}")
+        if _read_only(parent):
+            raise _path_error(what, p, os.strerror(errno.EROFS), errno.EROFS)
+        raise _path_error(what, p, f"no permission to write in {parent}")
     if p.exists() and not os.access(p, os.W_OK):
-        raise OutputPathError(f"{what} {p}: permission denied")
+        raise _path_error(what, p, "permission denied")
     return p
+
+
+def _read_only(directory: Path) -> bool:
+    """The directory's file system is mounted read-only (POSIX statvfs; False where unknown)."""
+    try:
+        return bool(os.statvfs(directory).f_flag & os.ST_RDONLY)
+    except (OSError, AttributeError):
+        return False
+
+
+def _path_error(what: str, p: Path | str, reason: str, code: int | None = None) -> OutputPathError:
+    """`{what} {path}: {reason}`, the reason (and errno) kept apart for a caller that goes on."""
+    e = OutputPathError(f"{what} {p}: {reason}")
+    e.errno, e.reason = code, reason
+    return e
 
 
 class OutputFile:
@@ -115,7 +141,7 @@ class OutputFile:
                                                  dir=parent)
                 self.file = os.fdopen(fd, self.mode, encoding=self.encoding, newline=self.newline)
         except OSError as e:
-            raise OutputPathError(f"{self.what} {self.path}: {_reason(e)}") from None
+            raise _path_error(self.what, self.path, _reason(e), e.errno) from None
         return self.file
 
     def write(self, data) -> None:
@@ -185,6 +211,7 @@ class OutputFile:
         kept = ("; the previous file is untouched" if self.path.exists() and not
                 _is_special(self.path) else "")
         self.error = OutputWriteError(f"{self.what} {self.path}: write failed: {_reason(e)}{kept}")
+        self.error.errno, self.error.reason = e.errno, _reason(e)
         raise self.error from None
 
     def __enter__(self):

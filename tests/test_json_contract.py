@@ -203,7 +203,8 @@ def test_every_documented_table_is_used():
             "commloss-test event=start", "commloss-test event=reaction", "commloss-test event=started",
             "commloss-test event=at_speed", "commloss-test event=silence", "commloss-test event=clear",
             "commloss-test event=back", "commloss-test event=result",
-            "sniff drive", "sniff event=live", "sniff event=trigger", "config show", "config path",
+            "sniff drive", "sniff event=live", "sniff event=trigger", "sniff event=removed",
+            "sniff event=disk", "config show", "config path",
             "wireshark install", "checklist measured bus_health", "sim-ctl state", "audit",
             "scan save", "scan compare", "checklist measured baseline", "param fleet dump",
             "param fleet diff"}

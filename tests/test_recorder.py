@@ -399,7 +399,8 @@ def _one_done():
 def test_the_writer_writes_the_pcap_and_one_event(tmp_path, capsys, as_json):
     import json
 
-    from profidrive_cli.cli.sniff_ring import _Writer, out_pattern
+    from profidrive_cli.bustools.ringstore import out_pattern
+    from profidrive_cli.cli.sniff_ring import _Writer
     from profidrive_cli.dp.capture import read_pcap
     from test_json_contract import assert_contract
     tset, done = _one_done()

@@ -72,7 +72,7 @@ class _Open:
 
 class Recorder:
     def __init__(self, triggers: TriggerSet, ring_s: float, after_s: float,
-                 max_ring: int = MAX_RING):
+                 max_ring: int = MAX_RING, first_n: int = 1):
         if ring_s <= 0 or after_s < 0 or max_ring < 1:
             raise ValueError("ring_s > 0, after_s >= 0 and max_ring >= 1")
         self.triggers = triggers
@@ -81,7 +81,7 @@ class Recorder:
         self.max_ring = max_ring
         self.ring: deque[tuple[float, bytes]] = deque(maxlen=max_ring)
         self.open: _Open | None = None
-        self.captures = 0
+        self.captures = first_n - 1         # the number of the newest capture (from first_n on)
         self.events = 0
         self.telegrams = 0
 

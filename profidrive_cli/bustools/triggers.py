@@ -208,6 +208,19 @@ def parse_all(exprs: list[str] | tuple[str, ...], watched: set[int] | None = Non
     return out
 
 
+def every_label() -> list[str]:
+    """A label of every form a trigger can take -- each kind, for one station, for every station
+    (`*`) and at the address limits, with a limit where the kind needs one: the recorder's file
+    pattern ({trigger}) is checked against each before it records."""
+    out: list[str] = []
+    for kind, (takes, _, needs_limit) in KINDS.items():
+        for station in ((None, 0, MAX_STATION) if takes else (None,)):
+            label = Trigger(kind, station, 0.02 if needs_limit else None).label
+            if label not in out:
+                out.append(label)
+    return out
+
+
 # -- evaluation ------------------------------------------------------------------------------------
 
 def is_fault(d: dict[str, Any]) -> bool:

@@ -57,19 +57,26 @@ def _line(c) -> str:
               help="With --ring: seconds recorded after an event (default: the ring's).")
 @click.option("--out", "out_dir", default=None, metavar="DIR|PATTERN",
               help="With --ring: a directory, or a file pattern with {n} or {time} (default: .).")
+@click.option("--max-disk", "max_disk", default=None, metavar="SIZE",
+              help="With --ring: the most disk its captures take, e.g. 100M or 2G; the oldest are "
+                   "removed first (default: 1G).")
+@click.option("--keep", "keep_days", type=float, default=None, metavar="DAYS",
+              help="With --ring: remove its captures older than DAYS (default: kept while within "
+                   "--max-disk).")
 @bus_options
 def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, live, gsd_dir, ring,
-              triggers, after_s, out_dir):
+              triggers, after_s, out_dir, max_disk, keep_days):
     """Passive capture: one line per frame (time, SD, SA->DA, SAPs, FC in words, service, DU).
 
     --pcap and --raw files are written beside the target and replace it only when the capture
     ended well (also by Ctrl-C); on an error an existing file stays as it was.
     """
-    if ring is not None or triggers or after_s is not None or out_dir is not None:
+    if (ring is not None or triggers or after_s is not None or out_dir is not None
+            or max_disk is not None or keep_days is not None):
         from profidrive_cli.cli.sniff_ring import run_ring
         return run_ring(opts, ring, triggers, after_s, out_dir, stations, duration, linktype,
                         others={"--pcap": pcap_file, "--raw": raw_out, "--from-file": raw_file,
-                                "--live": live})
+                                "--live": live}, max_disk=max_disk, keep_days=keep_days)
     if raw_out is not None and raw_file:
         raise UsageError("--raw writes what is received from a port; with --from-file there is nothing "
                          "to receive")
