@@ -118,11 +118,11 @@ def silence_causes(recs: list[Record], unit: str) -> list[Cause]:
             alone.append(s)
     if alone:
         t = min(s.silent_since or 0.0 for s in alone)
-        ev = tuple(f"station {s.address}: {s.silent} {unit} in a row unanswered since "
-                   f"{s.silent_since:.3f} s" for s in alone)
+        line = tuple(f"station {s.address}: {s.silent} {unit} in a row unanswered since "
+                     f"{s.silent_since:.3f} s" for s in alone)
         out.append(Cause(f"no station answered since {t:.3f} s: the line, the master's adapter, the "
                          f"baud rate or the listener, not one station", 0.6,
-                         ev + ("no other station answered after that",)))
+                         line + ("no other station answered after that",)))
     return out
 
 
@@ -149,12 +149,12 @@ def loss_causes(recs: list[Record]) -> list[Cause]:
     if 2 * hit_n <= len(recs):
         return []                  # on a few stations, but not more than chance: too little to say
     top = max(trouble, key=lambda a: trouble[a])
-    ev = tuple(_losses(s) for s in recs) + (
+    spread = tuple(_losses(s) for s in recs) + (
         f"{total} repeats on {hit_n} of {len(recs)} stations, the most on station {top}: "
         f"{trouble[top]} ({100 * trouble[top] / total:.0f} %)",)
     return [Cause(f"repeats spread over the line ({total} on {hit_n} of {len(recs)} stations): "
                   f"noise, a missing or extra termination, the cable or the baud rate, not one "
-                  f"station", 0.5, ev)]
+                  f"station", 0.5, spread)]
 
 
 def _losses(s: Record) -> str:
