@@ -112,18 +112,20 @@ def _fire(expr, timed, **kw):
 
 
 def test_lost_after_unanswered_requests_and_back_in_data_exchange():
-    # station 5 answers a Data_Exchange, then LOST_AFTER (4) requests go unanswered; the 4th
-    # unanswered one is known when the next request goes out (t = 0.5): lost fires then. Its next
-    # answered Data_Exchange (t = 0.61) is "back"
+    # station 5 answers a Data_Exchange, then LOST_AFTER (4) rounds go unanswered (a request to 5,
+    # a new FCB each, and one to 6 answered); the 4th unanswered one is known when the next request
+    # goes out (t = 0.402): lost fires then. Its next answered Data_Exchange (t = 0.61) is "back"
     timed = dx_round(0.0, 5, 6)
-    timed += [(0.1 * i, req_dx(5, fcb=True)) for i in range(1, LOST_AFTER + 1)]
-    timed += [(0.5, req_dx(6)), (0.501, rep(6)), (0.6, req_dx(5)), (0.61, rep(5))]
+    for i in range(1, LOST_AFTER + 1):
+        timed += [(0.1 * i, req_dx(5, fcb=i % 2 == 1)), (0.1 * i + 0.002, req_dx(6, i % 2 == 1)),
+                  (0.1 * i + 0.003, rep(6))]
+    timed += [(0.6, req_dx(5)), (0.61, rep(5))]
     ts, fired = _fire("lost(*),back(5),lost(6)", timed)
-    assert [(f.trigger.label, f.station, f.t) for f in fired] == [("lost(*)", 5, 0.5),
+    assert [(f.trigger.label, f.station, f.t) for f in fired] == [("lost(*)", 5, 0.402),
                                                                  ("back(5)", 5, 0.61)]
-    assert "4 requests in a row unanswered; last answer at 0.001 s" in fired[0].text
+    assert "4 rounds in a row unanswered; last answer at 0.001 s" in fired[0].text
     assert "back in data exchange" in fired[1].text
-    # three unanswered requests are retries, not a loss
+    # a request and its three retries (the same FCB, FCV = 1) unanswered are one round, not a loss
     _, fired = _fire("lost(*)", dx_round(0.0, 5) + [(0.1 * i, req_dx(5, True)) for i in range(1, 4)]
                      + [(0.4, req_dx(6))])
     assert fired == []
@@ -304,7 +306,7 @@ def test_cause_a_silent_station_while_the_others_answer():
     assert causes[0].stations == (5,)
     assert "station 5 stopped answering while the others answer" in causes[0].title
     assert "last answer at 0.901 s" in causes[0].evidence[0]
-    assert causes[0].evidence[1] == "stations 6 answered after that"
+    assert causes[0].evidence[1] == "stations 6 answered after its silence began"
 
 
 def test_cause_watchdog_expired_with_the_silence_and_the_watchdog():
@@ -328,13 +330,15 @@ def test_cause_duplicate_address_and_second_master():
 
 
 def test_cause_repeats_concentrated_on_one_station():
-    # station 5: 6 retries (the same FCB again, FCV = 1), stations 6 and 7: none -> 6 of 6 (100 %)
+    # station 5: 8 retries (the same FCB again, FCV = 1), stations 6 and 7: none -> 8 of 8 (100 %);
+    # a line dropping at random puts all 8 on one given station of 3 with P = (1/3)^8 = 1.5e-4,
+    # x 3 stations = 4.6e-4 < causes.BY_CHANCE (0.001)
     timed = dx_round(0.0, 5, 6, 7)
-    for i in range(6):
+    for i in range(8):
         timed += [(0.1 + 0.01 * i, req_dx(5)), (0.105 + 0.01 * i, rep(5))]
     c = [c for c in likely_causes(_live(timed)) if "repeats" in c.title]
-    assert c and c[0].stations == (5,) and "(100 % of 6)" in c[0].title
-    assert c[0].evidence[0].startswith("station 5: 6 retries, 0 corrupt replies")
+    assert c and c[0].stations == (5,) and "(100 % of 8)" in c[0].title
+    assert c[0].evidence[0].startswith("station 5: 8 retries, 0 corrupt replies")
 
 
 def test_no_cause_on_a_clean_line():
@@ -424,7 +428,7 @@ def test_the_writer_writes_the_pcap_and_one_event(tmp_path, capsys, as_json):
         assert "stopped answering while the others answer" in obj["causes"][0]["title"]
     else:
         assert len(text.splitlines()) == 1
-        assert (f"lost(*)  station 5 stopped answering: 4 requests in a row unanswered; last answer "
+        assert (f"lost(*)  station 5 stopped answering: 4 rounds in a row unanswered; last answer "
                 f"at 0.901 s; capture {f} ({len(pkts)} telegrams, 0.5 s before, 1.0 s after); likely: "
                 f"station 5 stopped answering while the others answer") in text
 
@@ -451,5 +455,5 @@ def test_live_list_caption_shows_bus_load_and_causes(capsys):
     view.finish(2.1)
     text = capsys.readouterr().out
     assert ("likely: station 5 stopped answering while the others answer: its power, its bus "
-            "connector or the cable to it (station 5: 11 requests in a row unanswered, last answer "
-            "at 0.901 s; stations 6 answered after that)") in text
+            "connector or the cable to it (station 5: 11 rounds in a row unanswered since 1.000 s "
+            "(last answer at 0.901 s); stations 6 answered after its silence began)") in text

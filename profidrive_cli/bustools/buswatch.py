@@ -63,6 +63,12 @@ class WatchedStation:
     #: ScanEntry.unanswered: the warm-up pass woke it, Baud_Search); 0 for a station found later by
     #: the round-robin probe, where an empty address cannot be told from a slave still waking
     unanswered_before: int = 0
+    #: its answering record (bustools/causes.py Record): passes in a row without an answer up to
+    #: now, when the first of them asked it (seconds of watching; None: it answers), and its last
+    #: answer (None: none while watched)
+    silent_passes: int = 0
+    silent_since_s: float | None = None
+    last_answer_s: float | None = None
 
 
 @dataclass
@@ -107,6 +113,8 @@ class BusWatch:
         self._empty = [a for a in range(self.first, self.last + 1)
                        if a not in self.stations and a != self.master.address]
         self.t0 = self.master.link.now()       # watching starts now: times count from here
+        for ws in self.stations.values():
+            ws.last_answer_s = 0.0     # the scan found it: it answered (at the latest) just before
         self._snapshot()
 
     def step(self) -> None:
@@ -116,11 +124,13 @@ class BusWatch:
         for ws in self.stations.values():
             if ws.station_type != "slave":
                 continue
+            t_ask = self.now()
             try:
                 diag = self.master.slave_diag(ws.address)
             except BusError:
                 diag = None
             self._update_diag(ws, diag)
+            self._answering(ws, t_ask)
         self._probe_some()
         self.passes += 1
         self._cycles.append(link.now() - t_start)
@@ -159,6 +169,16 @@ class BusWatch:
         ws.state = diag.state_words(self.master.address)
         ws.master = None if diag.master == 0xFF else diag.master
 
+    def _answering(self, ws: WatchedStation, t_ask: float) -> None:
+        """The pass's entry in its answering record (t_ask: when this pass asked it)."""
+        if ws.category == "no answer":
+            if not ws.silent_passes:
+                ws.silent_since_s = t_ask
+            ws.silent_passes += 1
+        else:
+            ws.silent_passes, ws.silent_since_s = 0, None
+            ws.last_answer_s = self.now()
+
     def _probe_some(self) -> None:
         if not self._empty:
             return
@@ -175,10 +195,12 @@ class BusWatch:
             self._empty.remove(addr)
             ws = self.stations[addr] = WatchedStation(addr, st)
             if st == "slave":
+                t_ask = self.now()
                 try:
                     self._update_diag(ws, self.master.slave_diag(addr))
                 except BusError:
                     self._update_diag(ws, None)
+                self._answering(ws, t_ask)
             if not self._empty:
                 return
 

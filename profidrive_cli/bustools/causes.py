@@ -3,14 +3,20 @@ from what a passive listener counted and timed (bustools/passive_live.py LiveLis
 
 What the passive data can show, and what each rule reads:
 
-    silent station      a station that answered stopped answering (LOST_AFTER requests in a row)
-                        while the others still answer: its power, its connector or its spur
+    silent station      a station that answered stopped answering for SILENT_AFTER rounds in a row
+                        (requests to it, a repeat of one not counted) while other stations answered
+                        after its silence began: its power, its connector or its spur
+    silent line         stations stopped answering and no station answered after the silence
+                        began: the line, the master's adapter or the listener -- no station named
     watchdog expired    a station answered RS, or was parameterised again, after the master had
                         been silent towards it longer than the watchdog of its Set_Prm
     duplicate address   Slave_Diag answers from one address carry two ident numbers
     second master       tokens or Set_Prm from more than one master address
     repeats             retries and corrupt replies concentrated on a few stations (80 % or more on
-                        at most half the stations): their spur, connector or cable, not the line
+                        at most half the stations, more than a line that drops at random would put on
+                        them: BY_CHANCE): their spur, connector or cable
+    losses on the line  repeats on most stations, none concentrated: the line (noise, termination,
+                        the cable), with the repeats and losses per station
     late replies        replies later than the slot time (and than passive_live.LATE_FLOOR_S: the
                         arrival times of a capture through a USB adapter or a pty are good to some
                         ms only), at least MIN_LATE of them and 1 % of its Data_Exchange answers
@@ -21,20 +27,35 @@ Not from one passive capture (they need more): "illegal frames only at high rate
 line's reflection measurement; a station that answers late because its own cycle is slow needs its
 response time from the GSD (Max_Tsdr) to compare with.
 
+The rules on answers and losses are written once, on Record (a station's answering record, the
+same whether a passive listener or `scan --watch` counted it): silence_causes and loss_causes.
+likely_causes (sniff --live, the recorder) and watch_causes (scan --watch) build the records from
+their own counters and add what only their source can show.
+
 Sans-IO and pure: likely_causes(live) -> [Cause], best first.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from math import comb
 from typing import Any
 
 from profidrive_cli.bustools.passive_live import LOST_AFTER, LiveList, StationLive, slot_s
 
-#: the least retries + corrupt replies before "concentrated" is worth saying
+#: rounds in a row without an answer before one station is blamed: passes of `scan --watch`, rounds
+#: of the master's requests to it in a capture (passive_live.LOST_AFTER, the lost() trigger's
+#: number). One number for every source: one pass or one request and its retry lost is what a line
+#: that drops at random does to every station now and then
+SILENT_AFTER = LOST_AFTER
+#: the least repeats (retries + corrupt replies) before "concentrated" or "spread" is worth saying
 MIN_REPEATS = 5
 #: share of the repeats on the few stations that makes them "concentrated"
 CONCENTRATED = 0.8
+#: ... and only when a line that drops at random would put that many on them this rarely: the
+#: binomial tail P(X >= their repeats | all repeats, their share of the stations), times the ways to
+#: choose that many stations (a random line picks *some* stations to be unlucky)
+BY_CHANCE = 0.001
 #: late replies worth naming: at least this many, and at least 1 % of the station's replies
 MIN_LATE = 3
 
@@ -51,15 +72,143 @@ class Cause:
                 "evidence": list(self.evidence)}
 
 
+@dataclass(frozen=True)
+class Record:
+    """One station's answering record, as either source counted it. Only stations that answered at
+    least once have one (an empty address the master polls is no station that "answers").
+
+    silent: rounds in a row without an answer up to now (SILENT_AFTER blames it); silent_since: when
+    that run began (the time of its first unanswered request or pass; None: it answers);
+    last_answer: the time of its last answer; retries, corrupt, no_answer, requests: its counters
+    (requests 0: not counted by the source)."""
+    address: int
+    silent: int
+    silent_since: float | None
+    last_answer: float
+    retries: int = 0
+    corrupt: int = 0
+    no_answer: int = 0
+    requests: int = 0
+
+    @property
+    def repeats(self) -> int:
+        return self.retries + self.corrupt
+
+
+def silence_causes(recs: list[Record], unit: str) -> list[Cause]:
+    """The silent-station rule: a station silent for SILENT_AFTER `unit` (passes, rounds) in a row
+    is named when another station answered *after* its silence began (an answer before that, even
+    in the same round, shows nothing about the span); when no station answered since, the line,
+    the master's adapter or the listener went silent, and no single station is named."""
+    out: list[Cause] = []
+    alone: list[Record] = []
+    for s in recs:
+        if s.silent < SILENT_AFTER or s.silent_since is None:
+            continue
+        since = s.silent_since
+        others = [o.address for o in recs if o is not s and o.last_answer > since]
+        ev = [f"station {s.address}: {s.silent} {unit} in a row unanswered since {since:.3f} s "
+              f"(last answer at {s.last_answer:.3f} s)"]
+        if others:
+            ev.append(f"stations {', '.join(map(str, others))} answered after its silence began")
+            out.append(Cause(f"station {s.address} stopped answering while the others answer: its "
+                             f"power, its bus connector or the cable to it", 0.9, tuple(ev),
+                             (s.address,)))
+        else:
+            alone.append(s)
+    if alone:
+        t = min(s.silent_since or 0.0 for s in alone)
+        line = tuple(f"station {s.address}: {s.silent} {unit} in a row unanswered since "
+                     f"{s.silent_since:.3f} s" for s in alone)
+        out.append(Cause(f"no station answered since {t:.3f} s: the line, the master's adapter, the "
+                         f"baud rate or the listener, not one station", 0.6,
+                         line + ("no other station answered after that",)))
+    return out
+
+
+def loss_causes(recs: list[Record]) -> list[Cause]:
+    """Repeats (retries + corrupt replies) concentrated on a few stations name them; spread over the
+    stations they are the line's, with the figures per station. A station silent for SILENT_AFTER
+    rounds is left out (its silence is its own cause, its losses would only repeat it)."""
+    recs = [s for s in recs if s.silent < SILENT_AFTER]
+    trouble = {s.address: s.repeats for s in recs}
+    total = sum(trouble.values())
+    if total < MIN_REPEATS or len(trouble) < 2:
+        return []
+    by = {s.address: s for s in recs}
+    hit = _few(trouble)
+    if hit is not None:
+        few, got = hit
+        ev = [_losses(by[a]) for a in few]
+        rest = [s for s in recs if s.address not in few]
+        ev.append(f"the other {len(rest)} station(s): {total - got} retries and corrupt replies")
+        return [Cause(f"repeats concentrated on station(s) {', '.join(map(str, few))} "
+                      f"({100 * got / total:.0f} % of {total}): their spur, connector or cable, not "
+                      f"the whole line", 0.7, tuple(ev), tuple(few))]
+    hit_n = sum(1 for v in trouble.values() if v)
+    if 2 * hit_n <= len(recs):
+        return []                  # on a few stations, but not more than chance: too little to say
+    top = max(trouble, key=lambda a: trouble[a])
+    spread = tuple(_losses(s) for s in recs) + (
+        f"{total} repeats on {hit_n} of {len(recs)} stations, the most on station {top}: "
+        f"{trouble[top]} ({100 * trouble[top] / total:.0f} %)",)
+    return [Cause(f"repeats spread over the line ({total} on {hit_n} of {len(recs)} stations): "
+                  f"noise, a missing or extra termination, the cable or the baud rate, not one "
+                  f"station", 0.5, spread)]
+
+
+def _losses(s: Record) -> str:
+    of = f" of {s.requests} requests" if s.requests else ""
+    return (f"station {s.address}: {s.retries} retries, {s.corrupt} corrupt replies, "
+            f"{s.no_answer} unanswered{of}")
+
+
+def _few(trouble: dict[int, int]) -> tuple[list[int], int] | None:
+    """(the stations, their repeats) when at most half the stations hold CONCENTRATED of the
+    repeats and a line that drops at random would put that many on them less often than BY_CHANCE;
+    None otherwise."""
+    total = sum(trouble.values())
+    few: list[int] = []
+    got = 0
+    for a in sorted(trouble, key=lambda a: -trouble[a])[:max(1, len(trouble) // 2)]:
+        if not trouble[a]:
+            break
+        few.append(a)
+        got += trouble[a]
+        if got >= CONCENTRATED * total:
+            k, n = len(few), len(trouble)
+            return (few, got) if comb(n, k) * _tail(got, total, k / n) < BY_CHANCE else None
+    return None
+
+
+def _tail(x: int, n: int, p: float) -> float:
+    """P(X >= x) for X binomial(n, p)."""
+    return sum(comb(n, i) * p ** i * (1 - p) ** (n - i) for i in range(x, n + 1))
+
+
+# -- sniff --live and the recorder: a passive listener's counters ---------------------------------
+
+def live_records(live: LiveList) -> list[Record]:
+    """The records of the stations that answered at least once in the capture."""
+    return [Record(s.address, s.silent, s.silent_since, s.last_answer_t,
+                   retries=s.counters["retries"], corrupt=s.counters["illegal"],
+                   no_answer=s.counters["no_answer"])
+            for s in sorted(live.stations.values(), key=lambda s: s.address)
+            if s.last_answer_t is not None]
+
+
 def likely_causes(live: LiveList) -> list[Cause]:
     """The causes the counters and timing of `live` show, best first."""
+    recs = live_records(live)
+    answered = {r.address for r in recs}
+    sts = [s for s in sorted(live.stations.values(), key=lambda s: s.address)
+           if s.address in answered]
     out: list[Cause] = []
-    sts = sorted(live.stations.values(), key=lambda s: s.address)
-    out += _silent(sts)
+    out += silence_causes(recs, "rounds")
     out += _watchdog(sts)
     out += _duplicate(sts)
     out += _masters(live, sts)
-    out += _repeats(sts)
+    out += loss_causes(recs)
     out += _late(live, sts)
     out += _framing(live, sts)
     return sorted(out, key=lambda c: -c.score)
@@ -68,28 +217,6 @@ def likely_causes(live: LiveList) -> list[Cause]:
 def causes_json(live: LiveList) -> list[dict[str, Any]]:
     """likely_causes as the JSON contract's objects (`causes` in sniff's live event)."""
     return [c.as_dict() for c in likely_causes(live)]
-
-
-def _silent(sts: list[StationLive]) -> list[Cause]:
-    out = []
-    for s in sts:
-        if s.last_answer_t is None or s.silent < LOST_AFTER:
-            continue
-        since = s.last_answer_t
-        others = [o.address for o in sts if o is not s and o.last_answer_t is not None
-                  and o.last_answer_t > since]
-        ev = [f"station {s.address}: {s.silent} requests in a row unanswered, last answer at "
-              f"{since:.3f} s"]
-        if others:
-            ev.append(f"stations {', '.join(map(str, others))} answered after that")
-            out.append(Cause(f"station {s.address} stopped answering while the others answer: its "
-                             f"power, its bus connector or the cable to it", 0.9, tuple(ev),
-                             (s.address,)))
-        else:
-            out.append(Cause(f"station {s.address} stopped answering (no other station answered "
-                             f"since either: the line or the listener)", 0.5, tuple(ev),
-                             (s.address,)))
-    return out
 
 
 def _watchdog(sts: list[StationLive]) -> list[Cause]:
@@ -130,40 +257,6 @@ def _masters(live: LiveList, sts: list[StationLive]) -> list[Cause]:
     return out
 
 
-def _few(trouble: dict[int, int]) -> tuple[list[int], int, int] | None:
-    """(the stations, their share, the total) when at most half the stations hold CONCENTRATED of
-    the trouble (at least MIN_REPEATS in all); None when it is spread or too little to say."""
-    total = sum(trouble.values())
-    if total < MIN_REPEATS or len(trouble) < 2:
-        return None
-    few: list[int] = []
-    got = 0
-    for a in sorted(trouble, key=lambda a: -trouble[a])[:max(1, len(trouble) // 2)]:
-        if not trouble[a]:
-            break
-        few.append(a)
-        got += trouble[a]
-        if got >= CONCENTRATED * total:
-            return few, got, total
-    return None
-
-
-def _repeats(sts: list[StationLive]) -> list[Cause]:
-    hit = _few({s.address: s.counters["retries"] + s.counters["illegal"] for s in sts})
-    if hit is None:
-        return []
-    few, got, total = hit
-    by = {s.address: s for s in sts}
-    ev = [f"station {a}: {by[a].counters['retries']} retries, {by[a].counters['illegal']} corrupt "
-          f"replies, {by[a].exchanges} Data_Exchange answered" for a in few]
-    rest = [s for s in sts if s.address not in few]
-    ev.append(f"the other {len(rest)} station(s): {total - got} retries and corrupt replies, "
-              f"{sum(s.exchanges for s in rest)} Data_Exchange answered")
-    return [Cause(f"repeats concentrated on station(s) {', '.join(map(str, few))} "
-                  f"({100 * got / total:.0f} % of {total}): their spur, connector or cable, not the "
-                  f"whole line", 0.7, tuple(ev), tuple(few))]
-
-
 def _late(live: LiveList, sts: list[StationLive]) -> list[Cause]:
     if not live.baud:
         return []
@@ -190,27 +283,25 @@ def _framing(live: LiveList, sts: list[StationLive]) -> list[Cause]:
                   (f"{n} framing error(s) in {live.frames} telegrams ({kinds})",))]
 
 
-# -- scan --watch: the same reading of an active master's counters -------------------------------
+# -- scan --watch: the same rules on an active master's counters -----------------------------------
+
+def watch_records(stations: list[Any]) -> list[Record]:
+    """The records of `scan --watch`'s slaves (bustools/buswatch.py WatchedStation) that answered at
+    least once while watched."""
+    return [Record(s.address, s.silent_passes, s.silent_since_s, s.last_answer_s,
+                   retries=s.counters.get("retries", 0), corrupt=s.counters.get("illegal", 0),
+                   no_answer=s.counters.get("no_answer", 0), requests=s.counters.get("requests", 0))
+            for s in stations if s.station_type == "slave" and s.last_answer_s is not None]
+
 
 def watch_causes(stations: list[Any]) -> list[Cause]:
     """Likely causes from `scan --watch`'s stations (bustools/buswatch.py WatchedStation: category,
-    counters requests / retries / no_answer / illegal / reparams), best first."""
+    the answering record, counters requests / retries / no_answer / illegal / reparams), best first."""
     sts = sorted((s for s in stations if s.station_type == "slave"), key=lambda s: s.address)
-    out: list[Cause] = []
-    answering = [s.address for s in sts if s.category != "no answer"]
+    recs = watch_records(sts)
+    out = silence_causes(recs, "passes") + loss_causes(recs)
     for s in sts:
         c = s.counters
-        if s.category == "no answer" and s.seen_passes:
-            ev = (f"station {s.address}: no valid reply in the last pass ({c.get('no_answer', 0)} "
-                  f"requests unanswered of {c.get('requests', 0)})",)
-            if answering:
-                out.append(Cause(f"station {s.address} stopped answering while the others answer: its "
-                                 f"power, its bus connector or the cable to it", 0.9,
-                                 ev + (f"stations {', '.join(map(str, answering))} answer",),
-                                 (s.address,)))
-            else:
-                out.append(Cause(f"no station answers any more: the line, the adapter or the baud "
-                                 f"rate", 0.6, ev, (s.address,)))
         if c.get("reparams"):
             out.append(Cause(f"station {s.address} left data exchange and was parameterised again "
                              f"{c['reparams']} time(s): its watchdog expired (the master too slow or "
@@ -221,19 +312,4 @@ def watch_causes(stations: list[Any]) -> list[Cause]:
             out.append(Cause(f"station {s.address} refuses its configuration (Cfg_Fault / Prm_Fault): "
                              f"`pdrive gsd match {s.address}` names the modules it has", 0.8,
                              (f"station {s.address}: {s.state}",), (s.address,)))
-    hit = _few({s.address: s.counters.get("retries", 0) + s.counters.get("illegal", 0) for s in sts})
-    if hit is not None:
-        few, got, total = hit
-        by = {s.address: s.counters for s in sts}
-        lines = tuple(f"station {a}: {by[a].get('retries', 0)} retries, {by[a].get('illegal', 0)} "
-                      f"corrupt replies of {by[a].get('requests', 0)} requests" for a in few)
-        out.append(Cause(f"repeats concentrated on station(s) {', '.join(map(str, few))} "
-                         f"({100 * got / total:.0f} % of {total}): their spur, connector or cable, not "
-                         f"the whole line", 0.7, lines, tuple(few)))
-    else:
-        corrupt = {s.address: s.counters.get("illegal", 0) for s in sts}
-        if sum(corrupt.values()) >= MIN_REPEATS and sum(1 for v in corrupt.values() if v) > len(sts) // 2:
-            out.append(Cause("corrupt replies from most stations: noise, a missing or extra "
-                             "termination, or the wrong baud rate", 0.5,
-                             tuple(f"station {a}: {n} corrupt" for a, n in corrupt.items() if n)))
     return sorted(out, key=lambda c: -c.score)

@@ -42,8 +42,11 @@ _SRD_SDA = frozenset((F.SRD_LOW, F.SRD_HIGH, F.SDA_LOW, F.SDA_HIGH))
 #: reply statuses of a station with diagnosis pending (high priority)
 _HIGH = frozenset((F.DH, F.RDH))
 _SAP_DIAG = S.SAP_SLAVE_DIAG
-#: a station is lost when this many requests in a row went unanswered: more than a master's retries
-#: of one request (fdl/timing.py: 1 by default, at most 3 on most masters) plus one
+#: a station is lost when this many rounds in a row went unanswered: requests to it, a repeat of
+#: the request before (a retry: the same FCB with FCV = 1, or the same telegram again right after
+#: it went unanswered) not counted. One request and its retries lost is what a line that drops at
+#: random does to every station now and then; bustools/causes.py blames a station after as many
+#: (SILENT_AFTER), and `scan --watch` counts its passes against the same number
 LOST_AFTER = 4
 #: one octet on the line: start bit, 8 data bits, even parity, stop bit (11 bit times per octet)
 BITS_PER_OCTET = CHAR_BITS
@@ -74,10 +77,13 @@ def slot_s(baud: int | None) -> float:
 
 
 def bus_load_percent(octets: int, seconds: float, baud: int | None) -> float | None:
-    """Busy bit times / elapsed bit times, in percent: octets x 11 bit / (baud x seconds)."""
+    """Busy bit times / elapsed bit times, in percent: octets x 11 bit / (baud x seconds). None when
+    it cannot be told: no baud rate, no time, or a figure over 100 % (more octets than the line
+    carries in that time at `baud`: the capture's line ran faster than the rate assumed)."""
     if not baud or seconds <= 0:
         return None
-    return round(100.0 * octets * BITS_PER_OCTET / (baud * seconds), 2)
+    load = 100.0 * octets * BITS_PER_OCTET / (baud * seconds)
+    return round(load, 2) if load <= 100.0 else None
 
 
 @dataclass
@@ -114,7 +120,8 @@ class StationLive:
     last_dx_t: float | None = None
     was_dx: bool = False
     drive: dict = field(default_factory=dict)     # the last decoded request / response (--station)
-    silent: int = 0                  # requests unanswered in a row
+    silent: int = 0                  # rounds unanswered in a row (LOST_AFTER)
+    silent_since: float | None = None    # when they began: the first unanswered request's time
     lost: bool = False               # lost (LOST_AFTER unanswered, or left data exchange), not back
     lost_in_dx: bool = False         # ... and it was in data exchange then
     last_answer_t: float | None = None   # None: it never answered
@@ -144,6 +151,8 @@ class _Pending:
     station: StationLive
     dx: bool
     t: float
+    repeat: bool = False             # a retry of the request before it (one round with it)
+    raw: bytes = b""
 
 
 class LiveList:
@@ -170,6 +179,9 @@ class LiveList:
         #: a reply later than this is counted late (the slot time, at least LATE_FLOOR_S)
         self.late_s = max(LATE_FLOOR_S, slot_s(baud))
         self._pending: _Pending | None = None
+        #: the last request that went unanswered, while nothing else came after it (a repeat of it
+        #: is the same round)
+        self._unanswered: _Pending | None = None
 
     def _note(self, kind: str, station: int | None, t: float, text: str,
               value: float | None = None) -> None:
@@ -253,13 +265,17 @@ class LiveList:
             st = p.station
             st.counters["no_answer"] += 1
             st.state = NO_ANSWER
-            st.silent += 1
+            if not p.repeat:
+                if not st.silent:
+                    st.silent_since = p.t
+                st.silent += 1
             self._pending = None
+            self._unanswered = p
             if st.silent == LOST_AFTER and st.last_answer_t is not None and not st.lost:
                 st.lost, st.lost_in_dx = True, st.was_dx
                 since = "" if st.last_answer_t is None else f"; last answer at {st.last_answer_t:.3f} s"
                 self._note("lost", st.address, t, f"station {st.address} stopped answering: "
-                           f"{LOST_AFTER} requests in a row unanswered{since}")
+                           f"{LOST_AFTER} rounds in a row unanswered{since}")
 
     def _answered(self, c, high: bool) -> None:
         p = self._pending
@@ -267,7 +283,7 @@ class LiveList:
         if p is None:
             return
         st = p.station
-        st.silent = 0
+        st.silent, st.silent_since = 0, None
         st.last_answer_t = c.t
         d = c.t - p.t
         if d > self.late_s:
@@ -288,7 +304,9 @@ class LiveList:
             st.state = SEEN
 
     def _request(self, c, f: F.Frame) -> None:
+        self._unanswered = None
         self._no_answer(c.t)
+        before, self._unanswered = self._unanswered, None
         self.masters.add(f.sa)
         if f.da == F.BROADCAST:
             return
@@ -342,7 +360,8 @@ class LiveList:
         elif f.dsap == S.SAP_SLAVE_DIAG and st.state == DATA_EXCHANGE:
             st.state = DIAGNOSIS
         if fn in _EXPECTS_REPLY:
-            self._pending = _Pending(st, dx, c.t)
+            same = before is not None and before.station is st and before.raw == c.raw
+            self._pending = _Pending(st, dx, c.t, retry or same, c.raw)
 
     # -- reading ---------------------------------------------------------------------------------
     def bus_cycle(self) -> dict | None:

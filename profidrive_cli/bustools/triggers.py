@@ -5,7 +5,7 @@ makes an event, parsed with the text's position in errors, and evaluated on capt
     TRIGGER  := NAME ["(" STATION ")"] [">" NUMBER UNIT]
     STATION  := 0..126 | "*"                     "*" (or no parentheses): every station
 
-    lost(3)       station 3 stops answering (LOST_AFTER requests in a row unanswered) or leaves
+    lost(3)       station 3 stops answering (LOST_AFTER rounds in a row unanswered) or leaves
                   data exchange (its master sends it Set_Prm again)
     back(3)       a lost station answers again (is back in data exchange, when it was in it)
     rs(3) rr(3) nr(3) ue(3)   the station answered RS (SAP not enabled), RR (no resources),

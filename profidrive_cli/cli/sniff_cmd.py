@@ -89,7 +89,7 @@ def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, 
         check_output_path(f.path, f.what)
     cap = Capture()
     merger = ErrorMerger()
-    view = _view(stations, live, opts.json, opts if live else None, gsd_dir)
+    view = _view(stations, live, opts.json, opts if live else None, gsd_dir, bool(raw_file))
     # check the input before anything is written; it is read in chunks and shown as it is read.
     # pcap, pcapng and ProfiTrace .ptd files by their extension (dp/capfile.py), any other as raw
     packets = _packet_file(raw_file) if raw_file else None
@@ -219,14 +219,17 @@ def _truncated(cap):
     return Captured(cap._t, raw, None, "truncated frame at end of input")
 
 
-def _view(stations, live, as_json, opts=None, gsd_dir=None):
+def _view(stations, live, as_json, opts=None, gsd_dir=None, from_file=False):
     """How each frame is shown: one line / JSON object (with --station the drives' words, every other
     slave by its GSD's modules, `gsd_dir` searched first), or the --live list (its bus load figured
-    at the baud rate `opts` give)."""
+    at the baud rate `opts` give; for a file only a rate given by --baud or PDRIVE_BAUD: the default
+    and a port's configured rate say nothing about the line a file was captured on)."""
     from profidrive_cli.cli.sniff_ring import listen_baud
     from profidrive_cli.cli.sniff_view import SniffView
     return SniffView(stations, live, as_json, gsd_dir=gsd_dir,
-                     baud=listen_baud(opts) if opts is not None else None)
+                     baud=listen_baud(opts) if opts is not None and (
+                         not from_file or opts.source_of("baud").startswith(("option", "env")))
+                     else None)
 
 
 def _listen_start(link) -> None:

@@ -216,7 +216,8 @@ def _caption(snap: dict) -> str:
     return (f"{snap['frames']} frames in {snap['t_s']:.1f} s; master(s) {masters}; master cycle "
             f"min/mean/max {_ms(c, 'min')}/{_ms(c, 'mean')}/{_ms(c, 'max')} ms; token rotation "
             f"{_ms(rot, 'min')}/{_ms(rot, 'mean')}/{_ms(rot, 'max')} ms; bus load "
-            f"{'-' if load is None else f'{load:.1f} %'}; framing errors: {errs}{causes}")
+            f"{'unknown (no baud rate: --baud)' if load is None else f'{load:.1f} %'}; "
+            f"framing errors: {errs}{causes}")
 
 
 def live_table(snap: dict):
