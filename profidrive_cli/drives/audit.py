@@ -119,35 +119,49 @@ def comm_loss_rule(manual: str, fix: str, check: Check | None, needs: tuple[str,
                                f"{r.words}: when the master (PLC) stops or its cable is cut, the drive "
                                f"goes on turning on its last command and nobody can stop it over the bus",
                                fix, manual, check))
-        elif r.delay_s > 0:
-            total = ctx.watchdog_s + r.delay_s
-            limit = ctx.max_reaction_s
-            if limit is None:
-                out.append(Finding("warning", "comm_loss.delay", code, value,
-                                   f"{r.words}: the drive runs on its last command for {total:g} s "
-                                   f"(watchdog {ctx.watchdog_s:g} s + delay {r.delay_s:g} s) after the "
-                                   f"master is lost; give --max-reaction to check it against the process",
-                                   "shorten the delay to what the process allows (0 acts at the watchdog)",
-                                   manual, None))
-            elif total > limit:
-                most = max(0.0, limit - ctx.watchdog_s)
-                if delay_code is not None:          # whole steps of the timer, not above the limit
-                    step = _step(ctx, delay_code)
-                    most = round(math.floor(most / step + 1e-9) * step, 6)
-                out.append(Finding("error", "comm_loss.delay", code, value,
-                                   f"{r.words}: the drive runs on its last command for {total:g} s "
-                                   f"(watchdog {ctx.watchdog_s:g} s + delay {r.delay_s:g} s), longer "
-                                   f"than the {limit:g} s the process allows",
-                                   f"shorten the delay{f' ({delay_code})' if delay_code else ''} to at "
-                                   f"most {most:g} s (the process's {limit:g} s less the watchdog)",
-                                   manual, None if delay_code is None else
-                                   {"param": delay_code, "max": most}))
+        else:
+            out.extend(_reaction_time(ctx, r.words, r.delay_s, code, value, fix, manual, delay_code))
         for w in r.warnings:
             out.append(Finding("warning", "comm_loss.note", code, value, w,
                                "check the setting named, then run `pdrive commloss-test`", manual, None))
         return out
     return AuditRule("comm_loss.reaction", "comm_loss", "reaction to a lost master", manual, run,
                      needs=needs)
+
+
+def _reaction_time(ctx: AuditContext, words: str, delay_s: float, code: str, value: str, fix: str,
+                   manual: str, delay_code: str | None) -> list[Finding]:
+    """How long the drive runs on its last command after the master is lost: the DP watchdog the
+    master sets (the station notices nothing before it expires) plus the card's own delay; against
+    the process's limit (max_reaction_s). A reaction at the watchdog (no delay) is measured too: a
+    watchdog alone above the limit is an error as well."""
+    wd, limit = ctx.watchdog_s, ctx.max_reaction_s
+    total = wd + delay_s
+    sums = f"watchdog {wd:g} s + delay {delay_s:g} s" if delay_s > 0 else f"the watchdog {wd:g} s"
+    if limit is None:
+        if delay_s <= 0:
+            return []
+        return [Finding("warning", "comm_loss.delay", code, value,
+                        f"{words}: the drive runs on its last command for {total:g} s ({sums}) "
+                        f"after the master is lost; give --max-reaction to check it against the process",
+                        "shorten the delay to what the process allows (0 acts at the watchdog)",
+                        manual, None)]
+    if total <= limit:
+        return []
+    why = (f"{words}: the drive runs on its last command for {total:g} s ({sums}), longer than the "
+           f"{limit:g} s the process allows")
+    if wd >= limit:                 # no delay can help: the master's watchdog alone is too long
+        return [Finding("error", "comm_loss.delay", "watchdog", f"{wd * 1000:g} ms ({value})", why,
+                        f"set the master's watchdog for this station below {limit:g} s (the process's "
+                        f"limit){' and ' + fix if delay_s > 0 else ''}", manual, None)]
+    most = max(0.0, limit - wd)
+    if delay_code is not None:          # whole steps of the timer, not above the limit
+        step = _step(ctx, delay_code)
+        most = round(math.floor(most / step + 1e-9) * step, 6)
+    return [Finding("error", "comm_loss.delay", code, value, why,
+                    f"shorten the delay{f' ({delay_code})' if delay_code else ''} to at most {most:g} s "
+                    f"(the process's {limit:g} s less the watchdog)", manual,
+                    None if delay_code is None else {"param": delay_code, "max": most})]
 
 
 # -- watchdog ---------------------------------------------------------------------------------
