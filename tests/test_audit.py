@@ -90,7 +90,7 @@ def test_the_factory_plant_exits_0_with_only_explained_warnings():
     (5, "b-11=1,b-10=1", "source.control_requested", "ZSW bit 9"),
     # DE6-NET-DP manual L361-363: P002 = 1 continues on the last command
     (6, "P002=1", "comm_loss.keeps_running", "P002"),
-    # F6-01 = 3 "alarm only (keeps running)" (the F7's parameter; SI-P1 manual L343 BUS fault)
+    # F6-01 = 3 "alarm only (keeps running)" (the F7's parameter; SI-P1 manual L341 BUS fault)
     (7, "F6-01=3", "comm_loss.keeps_running", "F6-01"),
     # OPC-G1-PDP manual L1846-1869, L2987: y98 must be 3 for run and frequency from PROFIBUS
     (3, "y98=1", "source.y98", "y98"),

@@ -51,3 +51,68 @@ def test_o28_2_5_against_2_8_is_an_error_the_watchdog_counted():
     res = audit("sim://?timing=virtual&set=3:o27=11,o28=2.5", 3, max_reaction_s=2.8)
     (f,) = [f for f in res.findings if f.rule == "comm_loss.delay"]
     assert f.severity == "error" and f.check == {"param": "o28", "max": 2.3}
+
+
+# -- parameter groups as the manuals list them ----------------------------------------------------
+
+def test_moeller_groups_follow_the_manuals_lists():
+    from profidrive_cli.drives.profile import load_profile
+    m = load_profile("moeller")
+    # DE6-NET-DP manual L872-874: "Level of 1st / 2nd / 3rd electronic thermal protection" (b012,
+    # b212, b312) listed together; L1007-1009 their characteristic (b013, b213, b313)
+    for code in ("b012", "b212", "b312", "b013", "b213", "b313"):
+        assert m.group_of(code) == "protection", code
+    # L828-830: "1st / 2nd / 3rd Base frequency" (A003, A203, A303): the motor's
+    for code in ("A003", "A203", "A303"):
+        assert m.group_of(code) == "motor", code
+    # not protection: L1015 "Selection of display" (b037), L1014 software lock (b031), L903 display
+    # time of warning (b034), L822 frequency matching (b007), L1024 reduced-voltage start (b036),
+    # L1033 action at stop (b091), L1034 cooling fan (b092)
+    for code in ("b037", "b031", "b034", "b007", "b036", "b091", "b092"):
+        assert m.group_of(code) == "application", code
+
+
+def test_yaskawa_communication_group_holds_the_option_specific_b1_settings():
+    from profidrive_cli.drives.profile import load_profile
+    # SI-P1 manual L147 (installation step 12): "Set parameters b1-01 and b1-02 to their appropriate
+    # values. Refer to Table 1.4 - Option Specific Parameter Settings"; L263-282: 3 = Option PCB
+    y = load_profile("yaskawa")
+    assert y.group_of("b1-01") == "communication" and y.group_of("b1-02") == "communication"
+    assert y.group_of("F6-01") == "communication" and y.group_of("b1-03") == "application"
+
+
+def test_restore_only_protection_leaves_the_moeller_display_selection(sim, capsys, monkeypatch, tmp_path):
+    # b037 "Selection of display" (L1015) is no protection setting: `--only protection` must not
+    # restore it; b212 (L873, the 2nd motor's thermal level) is one and is restored
+    import json
+    from conftest import run_main
+    port, dump = "sim://", tmp_path / "d.yaml"
+    assert run_main(capsys, monkeypatch, "param", "dump", "6", "-o", dump, "--port", port).exit_code == 0
+    for code, value in (("b037", "1"), ("b212", "50")):       # changed after the dump
+        r = run_main(capsys, monkeypatch, "param", "set", "6", code, value, "--port", port)
+        assert r.exit_code == 0, r.stderr
+    r = run_main(capsys, monkeypatch, "param", "restore", "6", dump, "--only", "protection", "--json",
+                 "--port", port)
+    assert r.exit_code == 0, r.stderr
+    rows = {x["code"]: x for x in json.loads(r.stdout)["rows"]}
+    assert rows["b212"]["result"] == "applied", rows["b212"]
+    assert rows["b037"]["result"] == "skipped" and rows["b037"]["why"] == "out of scope"
+
+
+# -- the lines the rules cite -----------------------------------------------------------------------
+
+def _rules(name):
+    from profidrive_cli.drives import drive_class
+    from profidrive_cli.drives.profile import load_profile
+    prof = load_profile(name)
+    return {r.id: r for r in drive_class(prof).audit_rules(prof)}
+
+
+def test_yaskawa_rules_cite_the_bus_fault_line_not_ope05_or_cpf23():
+    # SI-P1 manual L341: "| BUS | Option PCB communications error | Communication is not established
+    # between PROFIBUS-DP Master and the drive"; L343 is OPE05 (command selection fault), L348
+    # CPF23 (the option card's own watchdog timer fault, not the master's DP watchdog)
+    rules = _rules("yaskawa-si-p1")
+    for rid in ("comm_loss.reaction", "watchdog.cycle"):
+        m = rules[rid].manual
+        assert "L341" in m and "L343" not in m and "L348" not in m and "CPF23" not in m, m

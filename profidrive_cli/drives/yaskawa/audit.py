@@ -17,13 +17,14 @@ F7 = "the F7 drive's parameter (profiles/yaskawa-si-p1.yaml, default_source F7; 
 
 def audit_rules(profile: Any) -> list[AuditRule]:
     return [
-        comm_loss_rule(f"{MANUAL} L343 (Table 1.8: BUS, option PCB communications error); F6-01 is "
+        comm_loss_rule(f"{MANUAL} L341 (BUS, option PCB communications error: communication is not "
+                       f"established between the master and the drive); F6-01 is "
                        f"{F7}: 3 = alarm only, the drive keeps running",
                        "set F6-01 = 0 (ramp to stop on C1-02), 1 (coast to stop, the factory setting) "
                        "or 2 (fast stop on C1-09)", {"param": "F6-01", "min": 0, "max": 2},
                        needs=("F6-01",)),
-        watchdog_rule(f"{MANUAL} L343 (BUS fault when communication with the master is lost), L348 "
-                      f"(CPF23 watchdog timer fault)"),
+        watchdog_rule(f"{MANUAL} L341 (BUS fault: communication with the master not established, "
+                      f"which the master's DP watchdog detects; the manual gives no time of its own)"),
         source_rule("source.reference", "b1-01", [3], "the frequency reference",
                     "set b1-01 = 3 (option PCB: the PROFIBUS-DP option)",
                     f"{MANUAL} L263-272 (Table 1.5), L147 (installation step 12: set b1-01 and b1-02)"),
