@@ -116,3 +116,36 @@ def test_yaskawa_rules_cite_the_bus_fault_line_not_ope05_or_cpf23():
     for rid in ("comm_loss.reaction", "watchdog.cycle"):
         m = rules[rid].manual
         assert "L341" in m and "L343" not in m and "L348" not in m and "CPF23" not in m, m
+
+
+def test_toyo_c00_note_cites_table_3_5_and_c00_and_no_commloss_test():
+    # PBUS66-Z manual L2769 / L2773 (Table 3.5 notes 1, 2): "c-00 が 0 ... の場合 ... 通常の停止と同じ
+    # 動作となります" (with c-00 = 0 OFF2 / OFF3 act as the normal stop); L612-620: C-00 multi-function
+    # input location, 0 terminal block (factory), 1 digital communication option. L4059-4062 is
+    # protection 18 (communication timeout), which the comm-loss test exercises: not OFF2 / OFF3
+    res = audit("sim://?timing=virtual", 5)
+    (f,) = [f for f in res.findings if f.rule == "comm_loss.note"]
+    assert "C-00" in f.why
+    assert "L2769-2773" in f.manual and "L612-620" in f.manual and "L4059" not in f.manual
+    assert "run `pdrive commloss-test`" not in f.fix and "C-00 = 1" in f.fix
+
+
+# -- where each factory default comes from --------------------------------------------------------
+
+@pytest.mark.parametrize("new,words", [
+    ("default: 0.0, default_source: ''}", "'default_source' must be a text"),
+    ("default_source: F7}", "'default_source' needs a 'default:'"),
+])
+def test_a_bad_default_source_is_refused_with_file_and_line(tmp_path, new, words):
+    from profidrive_cli.datafile import DataFileError
+    from profidrive_cli.drives.profile import load_profile, load_profile_file
+    src = load_profile("yaskawa").path.read_text(encoding="utf-8")
+    old = "default: 0.0, default_source: F7}"           # d1-01's entry (the F7's 0.0 Hz)
+    assert src.count(old) == 1
+    bad = src.replace(old, new)
+    path = tmp_path / "y.yaml"
+    path.write_text(bad, encoding="utf-8")
+    n = 1 + src.splitlines().index(next(x for x in src.splitlines() if old in x))
+    with pytest.raises(DataFileError) as e:
+        load_profile_file(path)
+    assert words in str(e.value) and f"{path}:{n}" in str(e.value)
