@@ -100,11 +100,19 @@ def _text(pv: "ParamValue") -> str:
 
 
 # -- comm loss --------------------------------------------------------------------------------
+#: the fix and citation of a reaction's own warnings (Fuji H81), unless the family names its own
+NOTE_FIX = "check the setting named, then run `pdrive commloss-test`"
+
+
 def comm_loss_rule(manual: str, fix: str, check: Check | None, needs: tuple[str, ...] = (),
-                   delay_code: str | None = None) -> AuditRule:
+                   delay_code: str | None = None, note: tuple[str, str] | None = None) -> AuditRule:
     """The drive's reaction to a lost master, read by its own Drive.comm_loss_reaction (the hook
-    the comm-loss test reads): error when it keeps running; the delay before it acts against the
-    process's limit (max_reaction_s); the reaction's own warnings (Fuji H81)."""
+    the comm-loss test reads): error when it keeps running; the reaction time (the watchdog plus
+    the card's delay) against the process's limit (max_reaction_s); the reaction's own warnings
+    (Fuji H81), with `note` = (fix, manual line) where the family's warning stands on other lines
+    than the reaction (default: NOTE_FIX and `manual`)."""
+    note_fix, note_manual = note or (NOTE_FIX, manual)
+
     def run(ctx: AuditContext) -> list[Finding]:
         r = ctx.drive.comm_loss_reaction()
         if r is None:
@@ -122,8 +130,8 @@ def comm_loss_rule(manual: str, fix: str, check: Check | None, needs: tuple[str,
         else:
             out.extend(_reaction_time(ctx, r.words, r.delay_s, code, value, fix, manual, delay_code))
         for w in r.warnings:
-            out.append(Finding("warning", "comm_loss.note", code, value, w,
-                               "check the setting named, then run `pdrive commloss-test`", manual, None))
+            out.append(Finding("warning", "comm_loss.note", code, value, w, note_fix, note_manual,
+                               None))
         return out
     return AuditRule("comm_loss.reaction", "comm_loss", "reaction to a lost master", manual, run,
                      needs=needs)
