@@ -149,3 +149,39 @@ def test_a_bad_default_source_is_refused_with_file_and_line(tmp_path, new, words
     with pytest.raises(DataFileError) as e:
         load_profile_file(path)
     assert words in str(e.value) and f"{path}:{n}" in str(e.value)
+
+
+def _main(capsys, monkeypatch, *args):
+    from conftest import run_main
+    return run_main(capsys, monkeypatch, *args)
+
+
+def test_toyo_diff_defaults_says_nothing_was_compared_and_exits_1(capsys, monkeypatch):
+    # PBUS66-Z manual L4201: "注１：ＶＦ６６インバータの設定データ番号については別途お問い合わせください"
+    # (the VF66's setting-data numbers: ask Toyo): no setting can be read, so none is compared with
+    # a factory value; "0 changed" with exit 0 would claim the drive is at its defaults
+    r = _main(capsys, monkeypatch, "param", "diff", "5", "--defaults", "--port", "sim://")
+    assert r.exit_code == 1, r.stdout + r.stderr
+    assert "nothing compared with the factory defaults" in r.stdout and "0 changed" not in r.stdout
+    r = _main(capsys, monkeypatch, "param", "diff", "5", "--defaults", "--port", "sim://", "--json")
+    import json
+    d = json.loads(r.stdout)
+    assert r.exit_code == 1 and d["compared"] == 0 and d["nothing_compared"]
+
+
+def test_diff_defaults_names_each_factory_values_source(capsys, monkeypatch):
+    # OPC-PDP3 function-code table (fuji-opc-pdp3.md L825-829: o32 0, y97 0, y98 0) gives the card's
+    # own codes; E31 and F07 are the FRENIC's (not in the card manual: the profile's default_source)
+    import json
+    r = _main(capsys, monkeypatch, "param", "diff", "4", "--defaults", "--port", "sim://?set=4:E31=40",
+              "--json")
+    d = json.loads(r.stdout)
+    src = {x["code"]: x["default_source"] for x in d["rows"]}
+    assert src["E31"] == "FRENIC" and src["F07"] == "FRENIC" and src["o32"] == "card manual"
+    assert src["S01"] is None                                   # a command: no factory value
+    assert d["compared"] >= 1 and d["nothing_compared"] is None
+    r = _main(capsys, monkeypatch, "param", "diff", "4", "--defaults", "--port", "sim://?set=4:E31=40")
+    assert "factory value not from the card manual (FRENIC): F03, F07, F08" in r.stdout
+    # Yaskawa: every default is the F7 drive's (SI-P1 manual: none published)
+    r = _main(capsys, monkeypatch, "param", "diff", "7", "--defaults", "--port", "sim://", "--json")
+    assert {x["default_source"] for x in json.loads(r.stdout)["rows"]} <= {"F7", None}
