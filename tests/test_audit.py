@@ -140,7 +140,8 @@ def test_a_comm_loss_delay_against_the_process_limit():
     res = audit(url, 4)
     (f,) = [f for f in res.findings if f.rule == "comm_loss.delay"]
     assert f.severity == "warning"
-    assert audit(url, 4, max_reaction_s=3.5).findings == ()        # 3.0 s within 3.5 s
+    # 3.0 s within 3.5 s (the o32 = 0 warning, Table 10.1, is another rule's)
+    assert [f for f in audit(url, 4, max_reaction_s=3.5).findings if f.rule == "comm_loss.delay"] == []
 
 
 def test_the_watchdog_against_the_masters_cycle():

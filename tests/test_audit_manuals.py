@@ -185,3 +185,18 @@ def test_diff_defaults_names_each_factory_values_source(capsys, monkeypatch):
     # Yaskawa: every default is the F7 drive's (SI-P1 manual: none published)
     r = _main(capsys, monkeypatch, "param", "diff", "7", "--defaults", "--port", "sim://", "--json")
     assert {x["default_source"] for x in json.loads(r.stdout)["rows"]} <= {"F7", None}
+
+
+# -- a stopped PLC's all-zero data (OPC-PDP3 o32) ----------------------------------------------------
+
+def test_pdp3_o32_factory_zero_is_a_warning_and_1_is_not():
+    # OPC-PDP3 manual L6566-6578 (Table 10.1): "Some master node equipment sends all-zero data to all
+    # slaves if a PLC application error occurs or the application program stops"; "0 Keep the
+    # current operation, ignoring all-zero data. Factory default"; "1 Coast to a stop and shift to
+    # S1 state"
+    res = audit("sim://?timing=virtual", 4)                  # o32 = 0, the factory default
+    (f,) = [f for f in res.findings if f.rule == "comm_loss.zero_data"]
+    assert (f.severity, f.code, f.value) == ("warning", "o32", "0")
+    assert "L6566-6578" in f.manual and f.check == {"param": "o32", "min": 1, "max": 2}
+    res = audit("sim://?timing=virtual&set=4:o32=1", 4)
+    assert not [f for f in res.findings if f.rule == "comm_loss.zero_data"]

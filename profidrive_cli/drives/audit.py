@@ -172,6 +172,24 @@ def _reaction_time(ctx: AuditContext, words: str, delay_s: float, code: str, val
                     None if delay_code is None else {"param": delay_code, "max": most})]
 
 
+def zero_data_rule(code: str, manual: str, fix: str, check: Check | None) -> AuditRule:
+    """The drive's reaction to all-zero output data, read by its own Drive.zero_data_reaction (the
+    hook `commloss-test --mode clear` reads): some masters send all-zero data to every slave when
+    the PLC program stops or fails, and the watchdog never expires; a warning when the drive then
+    keeps running (it depends on the master: not every one sends zeros)."""
+    def run(ctx: AuditContext) -> list[Finding]:
+        r = ctx.drive.zero_data_reaction("all-zero output data from the master")
+        if r is None or r.stop != "none":
+            return []
+        value = _num(r.settings[code]) if code in r.settings else "not read"
+        return [Finding("warning", "comm_loss.zero_data", code, value,
+                        f"{r.words}: a master that sends all-zero data when its PLC stops (the link "
+                        f"stays up, no watchdog expires) leaves the drive turning on its last command",
+                        fix, manual, check)]
+    return AuditRule("comm_loss.zero_data", "comm_loss", "reaction to all-zero data from a stopped PLC",
+                     manual, run, needs=(code,))
+
+
 # -- watchdog ---------------------------------------------------------------------------------
 #: a watchdog shorter than this many master cycles drops the station on one late cycle or retry
 WATCHDOG_CYCLES = 3

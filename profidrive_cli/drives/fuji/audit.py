@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 from profidrive_cli.drives.audit import (AuditRule, comm_loss_rule, not_applicable, ramp_rules,
-                                         save_mode_rule, source_rule, watchdog_rule)
+                                         save_mode_rule, source_rule, watchdog_rule, zero_data_rule)
 
 #: the manual lines per card (profile name -> what -> citation)
 LINES: dict[str, dict[str, str]] = {
@@ -35,6 +35,9 @@ LINES: dict[str, dict[str, str]] = {
         "fmax": "L4473 (F03 = 60: maximum frequency in Hz)",
         "y97": "L4288 (y97 communication data storage), L4325-4333 (*6: with 1 the data is deleted at "
                "power-off; 2 saves it)",
+        "o32": "L6566-6578 (Chapter 10, Table 10.1: o32 = 0, the factory default, keeps the current "
+               "operation ignoring all-zero data, which some masters send when the PLC stops; 1 coasts "
+               "to a stop, state S1)",
     },
 }
 
@@ -63,6 +66,11 @@ def audit_rules(profile: Any) -> list[AuditRule]:
                        "but no motor rating: the motor's rated frequency is in the FRENIC manual, not "
                        "in the source", cite("fmax")),
     ]
+    if "o32" in lines and profile.param("o32") is not None:
+        rules.append(zero_data_rule(
+            "o32", cite("o32"), "set o32 = 1 (coast to a stop and shift to S1 on all-zero data), or 2 "
+            "(the same when the last control word had bit 10 = 1); then "
+            "`pdrive commloss-test --mode clear`", {"param": "o32", "min": 1, "max": 2}))
     if "y97" in lines and profile.param("y97") is not None:
         rules.append(save_mode_rule(
             "y97", [1], 0, "y97 = 1: what the bus writes goes to RAM only and is lost when the "
