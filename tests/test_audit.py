@@ -92,12 +92,15 @@ def test_the_factory_plant_exits_0_with_only_explained_warnings():
     (6, "P002=1", "comm_loss.keeps_running", "P002"),
     # F6-01 = 3 "alarm only (keeps running)" (the F7's parameter; SI-P1 manual L341 BUS fault)
     (7, "F6-01=3", "comm_loss.keeps_running", "F6-01"),
-    # OPC-G1-PDP manual L1846-1869, L2987: y98 must be 3 for run and frequency from PROFIBUS
-    (3, "y98=1", "source.y98", "y98"),
-    # DE6-NET-DP manual L294-307: A001 = 2 (operator) for the bus reference
-    (6, "A001=1", "source.frequency", "A001"),
-    # SI-P1 manual L274-282 Table 1.6: b1-02 = 3 (option PCB) for the run command
-    (7, "b1-02=1", "source.run", "b1-02"),
+    # OPC-G1-PDP manual L1846-1869, L2987: y98 must be 3 for run and frequency from PROFIBUS; 0 gives
+    # the bus neither (1 and 2, one of the two, are split control: test_audit_manuals.py)
+    (3, "y98=0", "source.y98", "y98"),
+    # DE6-NET-DP manual L294-307: A001 = 2 (operator) for the bus reference; with A002 not 1 either
+    # the card "has no control"
+    (6, "A001=1,A002=2", "source.frequency", "A001"),
+    # SI-P1 manual L274-282 Table 1.6: b1-02 = 3 (option PCB) for the run command; b1-01 = 1 too:
+    # nothing from the bus
+    (7, "b1-02=1,b1-01=1", "source.run", "b1-02"),
     # deceleration time 0 s (F08: OPC-G1-PDP manual L2756)
     (3, "F08=0", "ramps.deceleration_zero", "F08"),
 ])

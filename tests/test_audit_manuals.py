@@ -200,3 +200,25 @@ def test_pdp3_o32_factory_zero_is_a_warning_and_1_is_not():
     assert "L6566-6578" in f.manual and f.check == {"param": "o32", "min": 1, "max": 2}
     res = audit("sim://?timing=virtual&set=4:o32=1", 4)
     assert not [f for f in res.findings if f.rule == "comm_loss.zero_data"]
+
+
+# -- split control is a set-up the manuals offer -----------------------------------------------------
+
+@pytest.mark.parametrize("station,preset,code", [
+    # OPC-PDP3 manual L4183-4206 (y98: "1 PROFIBUS Inverter", "2 Inverter PROFIBUS": frequency /
+    # run command source); OPC-G1-PDP Table 5.2 (L1846-1869) the same
+    (3, "y98=1", "y98"),
+    (4, "y98=2", "y98"),
+    # DE6-NET-DP manual L294-307: "controls frequency only: A001 = 2, A002 not equal to 1";
+    # "controls commands only: A001 not equal to 2, A002 = 1"
+    (6, "A002=2", "A002"),
+    (6, "A001=1", "A001"),
+    # SI-P1 manual L265: "the run/stop command may be set to External Terminals (b1-02 = 1) while the
+    # Frequency Reference may be set to Option PCB (PROFIBUS-DP Option) (b1-01 = 3)"
+    (7, "b1-02=1", "b1-02"),
+])
+def test_split_control_is_a_warning_that_names_the_split(station, preset, code):
+    res = audit(f"sim://?timing=virtual&set={station}:{preset}", station)
+    assert res.errors == 0, res.findings
+    (f,) = [f for f in res.findings if f.rule == "source.split"]
+    assert f.severity == "warning" and f.code == code and "split control" in f.why

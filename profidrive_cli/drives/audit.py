@@ -222,16 +222,34 @@ def watchdog_rule(manual: str) -> AuditRule:
 
 # -- sources ----------------------------------------------------------------------------------
 def source_rule(rule_id: str, code: str, want: Sequence[int], what: str, fix: str, manual: str,
-                severity: str = "error") -> AuditRule:
-    """`code` must hold one of `want` for the bus to give `what` (run command, reference)."""
+                severity: str = "error", split: Mapping[int, str] | None = None,
+                partner: tuple[str, Sequence[int], str] | None = None) -> AuditRule:
+    """`code` must hold one of `want` for the bus to give `what` (run command, reference). Split
+    control, the bus giving one of the two and another place the other, is a set-up the manuals
+    offer: a warning naming the split ("source.split"), not an error. split: values of `code` that
+    are such a split, with their words (Fuji y98 = 1, 2); partner: (code, want, what) of the other
+    source setting: when it gives the bus its part, `code` not giving its own is a split (Moeller
+    A001 / A002, Yaskawa b1-01 / b1-02)."""
     def run(ctx: AuditContext) -> list[Finding]:
         if not ctx.can_read(code):
             return []
         pv = ctx.read(code)
-        if int(pv.raw) in want:
+        v = int(pv.raw)
+        if v in want:
             return []
         check: Check = ({"param": code, "expect": want[0]} if len(want) == 1 else
                         {"param": code, "min": min(want), "max": max(want)})
+        words = split.get(v) if split else None
+        if words is None and partner is not None and ctx.can_read(partner[0]):
+            pv2 = ctx.read(partner[0])
+            if int(pv2.raw) in partner[1]:
+                words = (f"{partner[2]} from PROFIBUS ({partner[0]} = {_text(pv2)}), {what} from "
+                         f"another place")
+        if words is not None:
+            return [Finding("warning", "source.split", code, _text(pv),
+                            f"split control: {words}. The manual offers it, but the master alone "
+                            f"cannot run the drive: check the other place is meant to give it",
+                            f"if the bus is to give both: {fix}", manual, None)]
         return [Finding(severity, rule_id, code, _text(pv),
                         f"{what} does not come from PROFIBUS: the master's commands are ignored "
                         f"(or the drive runs from another place)", fix, manual, check)]

@@ -28,7 +28,8 @@ LINES: dict[str, dict[str, str]] = {
         "o27": "L6478-6559 (Table 9.1: o27 = 3, 13-15 keep the current operation, no er5; o28 delay), "
                "L6557-6559 (light alarm)",
         "watchdog": "L6883 (er5 right after start: the master's watchdog time too short)",
-        "y98": "L4206 (y98 = 3 recommended), L6894 (y98 not 3)",
+        "y98": "L4183-4206 (y98: 1 frequency from PROFIBUS, 2 run command from PROFIBUS, 3 both; "
+               "3 recommended), L6894 (y98 not 3)",
         "ramps": "F08: the o27 forced-deceleration time (Table 9.1, L6478-6559); F07 is the FRENIC's "
                  "acceleration time (not in the card manual)",
         "quick": "L5126 (OFF3 stops on the deceleration time of H56)",
@@ -57,7 +58,9 @@ def audit_rules(profile: Any) -> list[AuditRule]:
         watchdog_rule(cite("watchdog")),
         source_rule("source.y98", "y98", [3], "the run command and the frequency reference",
                     "set y98 = 3 (run and frequency commands from PROFIBUS), as the manual recommends",
-                    cite("y98")),
+                    cite("y98"), split={1: "y98 = 1, the frequency from PROFIBUS, the run command from "
+                                           "the inverter", 2: "y98 = 2, the run command from PROFIBUS, "
+                                           "the frequency from the inverter"}),
         source_rule("source.y99", "y99", [0], "with y99 set, the loader's link has priority: the run "
                     "command or the reference", "set y99 = 0 (the loader link takes nothing over)",
                     cite("y98"), severity="warning"),

@@ -27,10 +27,14 @@ def audit_rules(profile: Any) -> list[AuditRule]:
                       f"which the master's DP watchdog detects; the manual gives no time of its own)"),
         source_rule("source.reference", "b1-01", [3], "the frequency reference",
                     "set b1-01 = 3 (option PCB: the PROFIBUS-DP option)",
-                    f"{MANUAL} L263-272 (Table 1.5), L147 (installation step 12: set b1-01 and b1-02)"),
+                    f"{MANUAL} L263-272 (Table 1.5), L147 (installation step 12: set b1-01 and b1-02), "
+                    f"L265 (different origins: e.g. b1-02 = 1 terminals with b1-01 = 3)",
+                    partner=("b1-02", [3], "the run command")),
         source_rule("source.run", "b1-02", [3], "the run command",
                     "set b1-02 = 3 (option PCB): the run bits act only then",
-                    f"{MANUAL} L274-282 (Table 1.6), L147"),
+                    f"{MANUAL} L274-282 (Table 1.6), L147, L265 (\"The run/stop and frequency "
+                    f"reference commands may have different origins\": b1-02 = 1 with b1-01 = 3)",
+                    partner=("b1-01", [3], "the frequency reference")),
         *ramp_rules("C1-01", "C1-02", "C1-09",
                     f"C1-01 / C1-02: {F7}, profile L99-102; {MANUAL} L656, L710 (the times' unit "
                     f"C1-10 named among the parameters others depend on)",
