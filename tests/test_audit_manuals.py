@@ -222,3 +222,30 @@ def test_split_control_is_a_warning_that_names_the_split(station, preset, code):
     assert res.errors == 0, res.findings
     (f,) = [f for f in res.findings if f.rule == "source.split"]
     assert f.severity == "warning" and f.code == code and "split control" in f.why
+
+
+# -- PKW error numbers: the PROFIdrive V2 meanings ---------------------------------------------------
+
+@pytest.mark.parametrize("number,words", [
+    # PROFIdrive V2 meanings of the numbers V3 reserves, as the Lenze EDS82ZAFPC201 manual (8.2.3
+    # "Error codes (PROFIdrive)") and SEW's PROFIBUS manuals print them
+    (8, "PPO-Write requested in IR not available"),
+    (10, "access group wrong"),
+    (13, "text cannot be read in cyclic data transfer"),
+    (14, "name cannot be read in cyclic data transfer"),
+    (16, "no PPO-Write"),
+    (19, "data cannot be read in cyclic interchange"),
+])
+def test_the_generic_pkw_table_has_the_v2_meanings(number, words):
+    from profidrive_cli.drives import profidrive as pd
+    assert words in pd.GENERIC_ERRORS[number]
+
+
+def test_a_cards_own_pkw_error_table_still_wins():
+    # DE6-NET-DP manual (spec 5.4): its own table names 17 "not possible in the present operating
+    # state (writable only while stopped)" and has no 8; the generic V2 text fills 8 in
+    from profidrive_cli.drives import profidrive as pd
+    from profidrive_cli.drives.profile import load_profile
+    c = pd.ProfidriveConfig.from_profile(load_profile("moeller"))
+    assert c.error_text(17) == "not possible in the present operating state (writable only while stopped)"
+    assert "PPO-Write requested in IR not available" in c.error_text(8)
