@@ -204,9 +204,8 @@ def test_the_checklist_fails_until_fixed_and_passes_after(tmp_path):
     only_reads = tmp_path / "reads.yaml"
     only_reads.write_text(yaml.safe_dump(doc, sort_keys=False), encoding="utf-8")
     bad = pdrive_run("checklist", "run", str(only_reads), "--port", "sim://?set=6:P002=1", "--yes")
-    # fixed: P002 = 0 (the factory plant's) and, for the warning, the fix it names: A004 set to the
-    # base frequency A003 (30 Hz on the simulated plant, the value the audit read)
-    good = pdrive_run("checklist", "run", str(only_reads), "--port", "sim://?set=6:A004=30", "--yes")
+    # fixed: P002 = 0 (the factory plant's)
+    good = pdrive_run("checklist", "run", str(only_reads), "--port", "sim://", "--yes")
     assert bad.returncode == 1, bad.stdout + bad.stderr
     assert good.returncode == 0, good.stdout + good.stderr
 

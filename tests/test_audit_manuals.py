@@ -249,3 +249,18 @@ def test_a_cards_own_pkw_error_table_still_wins():
     c = pd.ProfidriveConfig.from_profile(load_profile("moeller"))
     assert c.error_text(17) == "not possible in the present operating state (writable only while stopped)"
     assert "PPO-Write requested in IR not available" in c.error_text(8)
+
+
+# -- the simulated drives start as commissioned drives, not at range minimums ------------------------
+
+def test_the_plain_simulated_moeller_has_no_maximum_frequency_warning():
+    # DE6-NET-DP manual L828 / L832: A003 1st base frequency, A004 1st maximum frequency (30..400 Hz);
+    # the manual publishes no factory setting, and a simulator at the range minimum (A003 = 30 Hz)
+    # under A004 = 50 Hz made every plain audit warn. A 50 Hz motor: A003 = A004 = 50 Hz
+    res = audit("sim://?timing=virtual", 6)
+    assert not [f for f in res.findings if f.rule == "max_frequency.above_rating"], res.findings
+    with pdrive.open_bus("sim://?timing=virtual") as bus:
+        d = bus.drive(6)
+        # L872 b012 "Level of 1st electronic thermal protection" 20.0..120.0 and L1028 b083
+        # carrier frequency 0.5..15.0 kHz: not at their minimums
+        assert d.param("A003").value == 50 and d.param("b012").value > 20.0 and d.param("b083").value > 0.5
