@@ -70,6 +70,9 @@ def test_moeller_groups_follow_the_manuals_lists():
     # L1033 action at stop (b091), L1034 cooling fan (b092)
     for code in ("b037", "b031", "b034", "b007", "b036", "b091", "b092"):
         assert m.group_of(code) == "application", code
+    # L294-307: A001 = 2 and A002 = 1 make the card control frequency and commands: the bus settings,
+    # restored with `--only communication` as Fuji's y98 and Yaskawa's b1-01 / b1-02
+    assert m.group_of("A001") == "communication" and m.group_of("A002") == "communication"
 
 
 def test_yaskawa_communication_group_holds_the_option_specific_b1_settings():
