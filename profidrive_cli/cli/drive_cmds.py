@@ -21,6 +21,7 @@ from profidrive_cli.cli.drive_opts import _terminations, drive_options
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.session import (DriveSession, RestoreInterrupted, RestoreRefused,
                                     SessionTerminated)
+from profidrive_cli.session.backup import CARD_MANUAL, default_source, nothing_compared
 from profidrive_cli.session.dumpfile import write_dump
 from profidrive_cli.session.restore import scope_problem
 from profidrive_cli.outfile import check_output_path
@@ -342,14 +343,16 @@ def param_restore(opts, args, dry_run, yes, allow_dangerous, only, exclude, prof
 @param_group.command("diff")
 @click.argument("args", nargs=-1, required=False, metavar="[ADDRESS] FILE.yaml | [ADDRESS] --defaults")
 @click.option("--defaults", is_flag=True,
-              help="Compare with the factory defaults (the profile's, from the manual) instead of a file.")
+              help="Compare with the factory defaults (the profile's; each value's source shown: the "
+                   "card manual or the host drive's) instead of a file.")
 @drive_options
 @bus_options
 @_terminations
 def param_diff(opts, args, defaults, profile_name, ppo, fmt, watchdog_ms):
     """Compare the drive with a dump, or with the factory defaults (--defaults); nothing is written.
     Exit code as diff's: 0 when the drive holds what the file says (--defaults: nothing changed from
-    the factory), 1 when a parameter differs or cannot be read, 2 for bad input."""
+    the factory), 1 when a parameter differs or cannot be read (--defaults: or when no setting could
+    be compared with a factory value: nothing verified), 2 for bad input."""
     if defaults:
         address, rest = _split_address(tuple(args), 0)
         if rest:
@@ -357,8 +360,8 @@ def param_diff(opts, args, defaults, profile_name, ppo, fmt, watchdog_ms):
         with _session(opts, address, profile_name, ppo, fmt, watchdog_ms) as s:
             rows = _with_progress(opts, "comparing", lambda prog: s.params.factory_diff(prog))
         _print_rows(opts, s, rows, "defaults", False)
-        if any(r.result in ("differs", "missing") for r in rows):
-            raise SystemExit(1)
+        if any(r.result in ("differs", "missing") for r in rows) or nothing_compared(rows):
+            raise SystemExit(1)             # nothing compared: no verdict (docs/commands.md)
         return
     address, path = _file_args(args, "diff")
     doc = DriveSession.load_dump(path)
@@ -378,6 +381,10 @@ def _print_rows(opts, s, rows, what: str, dry_run: bool, interrupted: str | None
              "counts": counts, "rows": [r.to_dict() for r in rows]}
         if what == "defaults":
             d["compared_with"] = "factory defaults"     # each row's file_value is the factory default
+            d["compared"] = sum(counts.get(k, 0) for k in ("differs", "unchanged", "bus setting"))
+            d["nothing_compared"] = nothing_compared(rows)
+            d["rows"] = [{**r.to_dict(), "default_source": default_source(s.profile, r.code)}
+                         for r in rows]
         if interrupted is not None:
             d["interrupted"] = interrupted
             d["landed"] = [r.code for r in rows if r.result == "applied"]
@@ -392,14 +399,17 @@ def _print_rows(opts, s, rows, what: str, dry_run: bool, interrupted: str | None
         title = f"station {s.address}: {counts.get('differs', 0)} parameter(s) differ from the file"
     elif what == "defaults":
         shown = [r for r in rows if r.result == "differs" or r.result == "missing" or opts.verbose]
-        cols = ("code", "name", "factory", "drive", "result", "reason")
-        title = (f"station {s.address}: {counts.get('differs', 0)} setting(s) changed from the factory "
+        cols = ("code", "name", "factory", "source", "drive", "result", "reason")
+        none = nothing_compared(rows)
+        title = (f"station {s.address}: nothing compared with the factory defaults: {none}" if none else
+                 f"station {s.address}: {counts.get('differs', 0)} setting(s) changed from the factory "
                  f"default")
     else:
         cols = ("code", "name", "file", "drive", "now", "result", "reason")
         title = f"station {s.address}: restore" + (" (dry run: nothing written)" if dry_run else "")
     if shown:
-        out.print(R.rows_table(shown, title, cols))
+        out.print(R.rows_table(shown, title, cols, {r.code: default_source(s.profile, r.code) or ""
+                                                    for r in shown} if what == "defaults" else None))
     else:
         out.print(escape(title))
     order = ("applied", "would apply", "refused", "unknown", "not written", "differs", "unchanged", "missing",
@@ -408,8 +418,16 @@ def _print_rows(opts, s, rows, what: str, dry_run: bool, interrupted: str | None
         unknown = [r.code for r in rows if r.result == "unknown"]
         words = {"differs": "changed", "unchanged": "at the factory default",
                  "bus setting": "at the manual's setting for the field bus", "missing": "unreadable"}
-        out.print(", ".join(f"{counts.get(k, 0)} {w}" for k, w in words.items()
-                            if counts.get(k) or k == "differs"))
+        if not none:
+            out.print(", ".join(f"{counts.get(k, 0)} {w}" for k, w in words.items()
+                                if counts.get(k) or k == "differs"))
+        elsewhere: dict[str, list[str]] = {}
+        for r in rows:
+            src = default_source(s.profile, r.code) if r.result != "unknown" else None
+            if src and src != CARD_MANUAL:
+                elsewhere.setdefault(src, []).append(r.code)
+        for src, codes in elsewhere.items():
+            out.print(escape(f"factory value not from the card manual ({src}): {', '.join(codes)}"))
         bus = [f"{r.code} = {R.value_text(r.drive_value, r.unit)}" for r in rows if r.result == "bus setting"]
         if bus:
             out.print(escape(f"set for control over the field bus (the manual's commissioning): {', '.join(bus)}"))

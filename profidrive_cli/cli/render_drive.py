@@ -388,14 +388,17 @@ def param_json(pv) -> dict:
     return d
 
 
-def rows_table(rows, title: str, columns=("code", "name", "file", "drive", "result", "reason")) -> Table:
+def rows_table(rows, title: str, columns=("code", "name", "file", "drive", "result", "reason"),
+               sources: dict[str, str] | None = None) -> Table:
+    """sources: code -> where its factory value comes from (the `source` column of diff --defaults)."""
     t = Table(title=title, show_header=True)
     for c in columns:
         t.add_column(c)
     for r in rows:
         vals = {"code": r.code, "name": r.name, "file": value_text(r.file_value, r.unit),
                 "drive": value_text(r.drive_value, r.unit), "result": r.result, "reason": r.reason,
-                "now": value_text(r.new_value, r.unit), "factory": value_text(r.file_value, r.unit)}
+                "now": value_text(r.new_value, r.unit), "factory": value_text(r.file_value, r.unit),
+                "source": (sources or {}).get(r.code, "")}
         style = {"applied": "green", "refused": "red", "would apply": "yellow", "differs": "yellow"}.get(r.result)
         t.add_row(*(escape(str(vals[c])) for c in columns), style=style)
     return t

@@ -100,11 +100,19 @@ def _text(pv: "ParamValue") -> str:
 
 
 # -- comm loss --------------------------------------------------------------------------------
+#: the fix and citation of a reaction's own warnings (Fuji H81), unless the family names its own
+NOTE_FIX = "check the setting named, then run `pdrive commloss-test`"
+
+
 def comm_loss_rule(manual: str, fix: str, check: Check | None, needs: tuple[str, ...] = (),
-                   delay_code: str | None = None) -> AuditRule:
+                   delay_code: str | None = None, note: tuple[str, str] | None = None) -> AuditRule:
     """The drive's reaction to a lost master, read by its own Drive.comm_loss_reaction (the hook
-    the comm-loss test reads): error when it keeps running; the delay before it acts against the
-    process's limit (max_reaction_s); the reaction's own warnings (Fuji H81)."""
+    the comm-loss test reads): error when it keeps running; the reaction time (the watchdog plus
+    the card's delay) against the process's limit (max_reaction_s); the reaction's own warnings
+    (Fuji H81), with `note` = (fix, manual line) where the family's warning stands on other lines
+    than the reaction (default: NOTE_FIX and `manual`)."""
+    note_fix, note_manual = note or (NOTE_FIX, manual)
+
     def run(ctx: AuditContext) -> list[Finding]:
         r = ctx.drive.comm_loss_reaction()
         if r is None:
@@ -119,35 +127,67 @@ def comm_loss_rule(manual: str, fix: str, check: Check | None, needs: tuple[str,
                                f"{r.words}: when the master (PLC) stops or its cable is cut, the drive "
                                f"goes on turning on its last command and nobody can stop it over the bus",
                                fix, manual, check))
-        elif r.delay_s > 0:
-            total = ctx.watchdog_s + r.delay_s
-            limit = ctx.max_reaction_s
-            if limit is None:
-                out.append(Finding("warning", "comm_loss.delay", code, value,
-                                   f"{r.words}: the drive runs on its last command for {total:g} s "
-                                   f"(watchdog {ctx.watchdog_s:g} s + delay {r.delay_s:g} s) after the "
-                                   f"master is lost; give --max-reaction to check it against the process",
-                                   "shorten the delay to what the process allows (0 acts at the watchdog)",
-                                   manual, None))
-            elif total > limit:
-                most = max(0.0, limit - ctx.watchdog_s)
-                if delay_code is not None:          # whole steps of the timer, not above the limit
-                    step = _step(ctx, delay_code)
-                    most = round(math.floor(most / step + 1e-9) * step, 6)
-                out.append(Finding("error", "comm_loss.delay", code, value,
-                                   f"{r.words}: the drive runs on its last command for {total:g} s "
-                                   f"(watchdog {ctx.watchdog_s:g} s + delay {r.delay_s:g} s), longer "
-                                   f"than the {limit:g} s the process allows",
-                                   f"shorten the delay{f' ({delay_code})' if delay_code else ''} to at "
-                                   f"most {most:g} s (the process's {limit:g} s less the watchdog)",
-                                   manual, None if delay_code is None else
-                                   {"param": delay_code, "max": most}))
+        else:
+            out.extend(_reaction_time(ctx, r.words, r.delay_s, code, value, fix, manual, delay_code))
         for w in r.warnings:
-            out.append(Finding("warning", "comm_loss.note", code, value, w,
-                               "check the setting named, then run `pdrive commloss-test`", manual, None))
+            out.append(Finding("warning", "comm_loss.note", code, value, w, note_fix, note_manual,
+                               None))
         return out
     return AuditRule("comm_loss.reaction", "comm_loss", "reaction to a lost master", manual, run,
                      needs=needs)
+
+
+def _reaction_time(ctx: AuditContext, words: str, delay_s: float, code: str, value: str, fix: str,
+                   manual: str, delay_code: str | None) -> list[Finding]:
+    """How long the drive runs on its last command after the master is lost: the DP watchdog the
+    master sets (the station notices nothing before it expires) plus the card's own delay; against
+    the process's limit (max_reaction_s). A reaction at the watchdog (no delay) is measured too: a
+    watchdog alone above the limit is an error as well."""
+    wd, limit = ctx.watchdog_s, ctx.max_reaction_s
+    total = wd + delay_s
+    sums = f"watchdog {wd:g} s + delay {delay_s:g} s" if delay_s > 0 else f"the watchdog {wd:g} s"
+    if limit is None:
+        if delay_s <= 0:
+            return []
+        return [Finding("warning", "comm_loss.delay", code, value,
+                        f"{words}: the drive runs on its last command for {total:g} s ({sums}) "
+                        f"after the master is lost; give --max-reaction to check it against the process",
+                        "shorten the delay to what the process allows (0 acts at the watchdog)",
+                        manual, None)]
+    if total <= limit:
+        return []
+    why = (f"{words}: the drive runs on its last command for {total:g} s ({sums}), longer than the "
+           f"{limit:g} s the process allows")
+    if wd >= limit:                 # no delay can help: the master's watchdog alone is too long
+        return [Finding("error", "comm_loss.delay", "watchdog", f"{wd * 1000:g} ms ({value})", why,
+                        f"set the master's watchdog for this station below {limit:g} s (the process's "
+                        f"limit){' and ' + fix if delay_s > 0 else ''}", manual, None)]
+    most = max(0.0, limit - wd)
+    if delay_code is not None:          # whole steps of the timer, not above the limit
+        step = _step(ctx, delay_code)
+        most = round(math.floor(most / step + 1e-9) * step, 6)
+    return [Finding("error", "comm_loss.delay", code, value, why,
+                    f"shorten the delay{f' ({delay_code})' if delay_code else ''} to at most {most:g} s "
+                    f"(the process's {limit:g} s less the watchdog)", manual,
+                    None if delay_code is None else {"param": delay_code, "max": most})]
+
+
+def zero_data_rule(code: str, manual: str, fix: str, check: Check | None) -> AuditRule:
+    """The drive's reaction to all-zero output data, read by its own Drive.zero_data_reaction (the
+    hook `commloss-test --mode clear` reads): some masters send all-zero data to every slave when
+    the PLC program stops or fails, and the watchdog never expires; a warning when the drive then
+    keeps running (it depends on the master: not every one sends zeros)."""
+    def run(ctx: AuditContext) -> list[Finding]:
+        r = ctx.drive.zero_data_reaction("all-zero output data from the master")
+        if r is None or r.stop != "none":
+            return []
+        value = _num(r.settings[code]) if code in r.settings else "not read"
+        return [Finding("warning", "comm_loss.zero_data", code, value,
+                        f"{r.words}: a master that sends all-zero data when its PLC stops (the link "
+                        f"stays up, no watchdog expires) leaves the drive turning on its last command",
+                        fix, manual, check)]
+    return AuditRule("comm_loss.zero_data", "comm_loss", "reaction to all-zero data from a stopped PLC",
+                     manual, run, needs=(code,))
 
 
 # -- watchdog ---------------------------------------------------------------------------------
@@ -182,16 +222,34 @@ def watchdog_rule(manual: str) -> AuditRule:
 
 # -- sources ----------------------------------------------------------------------------------
 def source_rule(rule_id: str, code: str, want: Sequence[int], what: str, fix: str, manual: str,
-                severity: str = "error") -> AuditRule:
-    """`code` must hold one of `want` for the bus to give `what` (run command, reference)."""
+                severity: str = "error", split: Mapping[int, str] | None = None,
+                partner: tuple[str, Sequence[int], str] | None = None) -> AuditRule:
+    """`code` must hold one of `want` for the bus to give `what` (run command, reference). Split
+    control, the bus giving one of the two and another place the other, is a set-up the manuals
+    offer: a warning naming the split ("source.split"), not an error. split: values of `code` that
+    are such a split, with their words (Fuji y98 = 1, 2); partner: (code, want, what) of the other
+    source setting: when it gives the bus its part, `code` not giving its own is a split (Moeller
+    A001 / A002, Yaskawa b1-01 / b1-02)."""
     def run(ctx: AuditContext) -> list[Finding]:
         if not ctx.can_read(code):
             return []
         pv = ctx.read(code)
-        if int(pv.raw) in want:
+        v = int(pv.raw)
+        if v in want:
             return []
         check: Check = ({"param": code, "expect": want[0]} if len(want) == 1 else
                         {"param": code, "min": min(want), "max": max(want)})
+        words = split.get(v) if split else None
+        if words is None and partner is not None and ctx.can_read(partner[0]):
+            pv2 = ctx.read(partner[0])
+            if int(pv2.raw) in partner[1]:
+                words = (f"{partner[2]} from PROFIBUS ({partner[0]} = {_text(pv2)}), {what} from "
+                         f"another place")
+        if words is not None:
+            return [Finding("warning", "source.split", code, _text(pv),
+                            f"split control: {words}. The manual offers it, but the master alone "
+                            f"cannot run the drive: check the other place is meant to give it",
+                            f"if the bus is to give both: {fix}", manual, None)]
         return [Finding(severity, rule_id, code, _text(pv),
                         f"{what} does not come from PROFIBUS: the master's commands are ignored "
                         f"(or the drive runs from another place)", fix, manual, check)]

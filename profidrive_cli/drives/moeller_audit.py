@@ -24,10 +24,14 @@ def audit_rules(profile: Any) -> list[AuditRule]:
                       f"master's DP watchdog detects; the manual gives no time of its own)"),
         source_rule("source.frequency", "A001", [2], "the frequency reference",
                     "set A001 = 2 (operator): the card gives the reference as the operator source",
-                    f"{MANUAL} L294-307 (A001 = 2, A002 = 1 for frequency and commands), L958"),
+                    f"{MANUAL} L294-307 (A001 = 2, A002 = 1 for frequency and commands; the card "
+                    f"controls frequency only or commands only with one of them), L958",
+                    partner=("A002", [1], "the run command")),
         source_rule("source.commands", "A002", [1], "the run command",
                     "set A002 = 1 (terminal): the card gives the run commands as the terminal source",
-                    f"{MANUAL} L294-307, L959"),
+                    f"{MANUAL} L294-307 (frequency only: A001 = 2, A002 not 1; commands only: A002 = "
+                    f"1, A001 not 2; with frequency only the direction comes from the command source, "
+                    f"note 1), L959", partner=("A001", [2], "the frequency reference")),
         *ramp_rules("F002", "F003", "F203",
                     f"{MANUAL} L523-527 (OFF1 stops on F003), L794, L797 (F002, F003)",
                     f"{MANUAL} L531 (OFF3: quick stop on the 2nd deceleration time F203), L798"),

@@ -185,7 +185,9 @@ def _get(path, node: LineDict, key: str, types, required=True, default=None):
 
 #: keys every family accepts in a parameter (kept in ParamDef.extra): `dangerous: true` + `danger:` text
 #: (what writing it does, in words) -- written only on an explicit --allow-dangerous (drives/values.py)
-COMMON_EXTRA_KEYS = {"dangerous", "danger"}
+#: `default_source:` where the factory `default:` comes from when not from the card's own manual (a
+#: short name: "F7", "FRENIC"); `param diff --defaults` shows it beside the value
+COMMON_EXTRA_KEYS = {"dangerous", "danger", "default_source"}
 
 _PARAM_KEYS = {"code", "name", "unit", "scale", "min", "max", "access", "default", "pnu", "index",
                "register", "signed", "size"}
@@ -227,6 +229,12 @@ def _param(path, node) -> ParamDef:
     if "format" in node and node["format"] not in FORMATS:
         raise _err(path, node, "format", f"{p.code}: unknown format {node['format']!r} "
                    f"(known: {', '.join(FORMATS)})")
+    if "default_source" in node:
+        if not isinstance(node["default_source"], str) or not node["default_source"].strip():
+            raise _err(path, node, "default_source", f"{p.code}: 'default_source' must be a text naming "
+                       f"where the factory default comes from")
+        if p.default is None:
+            raise _err(path, node, "default_source", f"{p.code}: 'default_source' needs a 'default:'")
     if "dangerous" in node and not isinstance(node["dangerous"], bool):
         raise _err(path, node, "dangerous", f"{p.code}: 'dangerous' must be true or false")
     if "danger" in node:

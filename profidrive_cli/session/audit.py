@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 
 from profidrive_cli import UsageError
 from profidrive_cli.drives.audit import SEVERITIES, TOPICS, AuditRule, Finding
+from profidrive_cli.dp.services import watchdog_factors
 from profidrive_cli.drives.base import DriveError, ParamValue
 
 if TYPE_CHECKING:                                   # pragma: no cover
@@ -83,6 +84,16 @@ class _Context:
         return self.sess.params.read(code)
 
 
+def watchdog_as_set(ms: float) -> float:
+    """The watchdog (s) a Set_Prm asking for `ms` gives the station: WD_Fact_1 x WD_Fact_2 x 10 ms,
+    rounded up to what the factors hold (dp/services.py; e.g. 2561 ms -> 129 x 2 x 10 ms = 2580 ms)."""
+    try:
+        f1, f2 = watchdog_factors(ms)
+    except ValueError as e:
+        raise UsageError(f"audit: {e}") from None
+    return f1 * f2 * 10 / 1000.0
+
+
 def _order(f: Finding) -> tuple[int, int]:
     topic = f.rule.split(".")[0]
     return (SEVERITIES.index(f.severity) if f.severity in SEVERITIES else len(SEVERITIES),
@@ -92,14 +103,14 @@ def _order(f: Finding) -> tuple[int, int]:
 def audit_session(sess: "DriveSession", *, watchdog_s: float | None = None,
                   cycle_s: float | None = None, max_reaction_s: float | None = None) -> AuditReport:
     """Run the family's rules on the open session `sess`. watchdog_s: the DP watchdog the master
-    sets (default: the session's); cycle_s: the master's bus cycle (default: the session's own
+    sets (default: the session's; either as the Set_Prm's factors give it); cycle_s: the master's bus cycle (default: the session's own
     cycle); max_reaction_s: how long the process allows the drive to run on without its master."""
     for name, v in (("watchdog", watchdog_s), ("cycle", cycle_s), ("max reaction", max_reaction_s)):
         if v is not None and not v > 0:
             raise UsageError(f"audit: {name} {v!r} must be above 0 s")
     d, prof = sess.need_drive(), sess.profile
     assert prof is not None and sess.address is not None      # the session is open
-    wd = watchdog_s if watchdog_s is not None else sess.watchdog_ms / 1000.0
+    wd = watchdog_as_set(watchdog_s * 1000.0 if watchdog_s is not None else sess.watchdog_ms)
     if cycle_s is None and sess.cycle_hz:
         cycle_s = 1.0 / float(sess.cycle_hz)
     rep = AuditReport(int(sess.address), prof.name, str(sess.layout), sess.ident, wd, cycle_s,

@@ -19,7 +19,8 @@ from profidrive_cli.session.dumpfile import DUMP_END, DUMP_FORMAT
 from profidrive_cli.datafile import LineDict
 from profidrive_cli.session.params import ParamRow, ParamView
 
-__all__ = ["BUS_SETTING", "NO_DEFAULT", "ParamRow", "compare", "dump", "dump_plan", "factory_diff", "same_value"]
+__all__ = ["BUS_SETTING", "CARD_MANUAL", "NO_DEFAULT", "ParamRow", "compare", "default_source", "dump",
+           "dump_plan", "factory_diff", "nothing_compared", "same_value"]
 
 #: the reason of a factory-diff row whose parameter has no `default:` in the profile
 NO_DEFAULT = "no factory default known"
@@ -68,6 +69,33 @@ def factory_default(p: Any) -> float | int | None:
     """The factory setting the profile records for a ParamDef (`default:`, from the manual), or None."""
     d = getattr(p, "default", None)
     return d if isinstance(d, (int, float)) and not isinstance(d, bool) else None
+
+
+#: the source of a factory default the profile gives without `default_source:` (the card's manual)
+CARD_MANUAL = "card manual"
+
+
+def default_source(profile: Any, code: str) -> str | None:
+    """Where the factory default of `code` (or CODE[i]) comes from: the profile's `default_source:`
+    (e.g. "F7", "FRENIC": the host drive's manual, not the card's), else CARD_MANUAL; None when the
+    profile records no default."""
+    p = profile.param(code.split("[", 1)[0])
+    if p is None or factory_default(p) is None:
+        return None
+    return str(p.extra.get("default_source") or CARD_MANUAL)
+
+
+def nothing_compared(rows: list[ParamRow]) -> str | None:
+    """Why factory_diff's rows compared no setting with a factory value (None: some were): then no
+    verdict is possible, neither "changed" nor "at the factory defaults"."""
+    if any(r.result in ("differs", "unchanged", "bus setting") for r in rows):
+        return None
+    if not rows:
+        return "the bus reads none of this drive's settings (the profile gives none a parameter number)"
+    unknown = sum(1 for r in rows if r.result == "unknown")
+    if unknown:
+        return f"no factory default known for any of its {unknown} readable settings"
+    return "none of its settings could be read"
 
 
 def factory_diff(params: ParamView, progress: Callable[[int, int, str], None] | None = None

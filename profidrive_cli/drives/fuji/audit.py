@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 from profidrive_cli.drives.audit import (AuditRule, comm_loss_rule, not_applicable, ramp_rules,
-                                         save_mode_rule, source_rule, watchdog_rule)
+                                         save_mode_rule, source_rule, watchdog_rule, zero_data_rule)
 
 #: the manual lines per card (profile name -> what -> citation)
 LINES: dict[str, dict[str, str]] = {
@@ -28,13 +28,17 @@ LINES: dict[str, dict[str, str]] = {
         "o27": "L6478-6559 (Table 9.1: o27 = 3, 13-15 keep the current operation, no er5; o28 delay), "
                "L6557-6559 (light alarm)",
         "watchdog": "L6883 (er5 right after start: the master's watchdog time too short)",
-        "y98": "L4206 (y98 = 3 recommended), L6894 (y98 not 3)",
+        "y98": "L4183-4206 (y98: 1 frequency from PROFIBUS, 2 run command from PROFIBUS, 3 both; "
+               "3 recommended), L6894 (y98 not 3)",
         "ramps": "F08: the o27 forced-deceleration time (Table 9.1, L6478-6559); F07 is the FRENIC's "
                  "acceleration time (not in the card manual)",
         "quick": "L5126 (OFF3 stops on the deceleration time of H56)",
         "fmax": "L4473 (F03 = 60: maximum frequency in Hz)",
         "y97": "L4288 (y97 communication data storage), L4325-4333 (*6: with 1 the data is deleted at "
                "power-off; 2 saves it)",
+        "o32": "L6566-6578 (Chapter 10, Table 10.1: o32 = 0, the factory default, keeps the current "
+               "operation ignoring all-zero data, which some masters send when the PLC stops; 1 coasts "
+               "to a stop, state S1)",
     },
 }
 
@@ -54,7 +58,9 @@ def audit_rules(profile: Any) -> list[AuditRule]:
         watchdog_rule(cite("watchdog")),
         source_rule("source.y98", "y98", [3], "the run command and the frequency reference",
                     "set y98 = 3 (run and frequency commands from PROFIBUS), as the manual recommends",
-                    cite("y98")),
+                    cite("y98"), split={1: "y98 = 1, the frequency from PROFIBUS, the run command from "
+                                           "the inverter", 2: "y98 = 2, the run command from PROFIBUS, "
+                                           "the frequency from the inverter"}),
         source_rule("source.y99", "y99", [0], "with y99 set, the loader's link has priority: the run "
                     "command or the reference", "set y99 = 0 (the loader link takes nothing over)",
                     cite("y98"), severity="warning"),
@@ -63,6 +69,11 @@ def audit_rules(profile: Any) -> list[AuditRule]:
                        "but no motor rating: the motor's rated frequency is in the FRENIC manual, not "
                        "in the source", cite("fmax")),
     ]
+    if "o32" in lines and profile.param("o32") is not None:
+        rules.append(zero_data_rule(
+            "o32", cite("o32"), "set o32 = 1 (coast to a stop and shift to S1 on all-zero data), or 2 "
+            "(the same when the last control word had bit 10 = 1); then "
+            "`pdrive commloss-test --mode clear`", {"param": "o32", "min": 1, "max": 2}))
     if "y97" in lines and profile.param("y97") is not None:
         rules.append(save_mode_rule(
             "y97", [1], 0, "y97 = 1: what the bus writes goes to RAM only and is lost when the "

@@ -52,6 +52,9 @@ ERROR_RESPONSES = frozenset({7, 8})
 ARRAY_REQUESTS = frozenset({6, 7, 8, 9, 11, 12})
 WRITE_REQUESTS = frozenset({2, 3, 5, 7, 8, 11, 12, 13, 14})
 
+#: PKW error numbers (AK 7, PWE) of the PROFIdrive profile; 8, 10, 13, 14, 16, 19 are reserved in
+#: V3 and carry their PROFIdrive V2 meanings (as SEW's and Lenze's PROFIBUS manuals print them, e.g.
+#: Lenze EDS82ZAFPC201 8.2.3). A card's own table (the profile's pkw.errors) wins over these.
 GENERIC_ERRORS: dict[int, str] = {
     0: "parameter number does not exist",
     1: "parameter is read-only",
@@ -61,12 +64,18 @@ GENERIC_ERRORS: dict[int, str] = {
     5: "wrong data type",
     6: "only 0 may be written",
     7: "description element is read-only",
+    8: "PPO-Write requested in IR not available (PROFIdrive V2)",
     9: "description data not available",
+    10: "access group wrong (PROFIdrive V2)",
     11: "no parameter change rights",
     12: "key word missing",
+    13: "text cannot be read in cyclic data transfer (PROFIdrive V2)",
+    14: "name cannot be read in cyclic data transfer (PROFIdrive V2)",
     15: "no text array",
+    16: "no PPO-Write (PROFIdrive V2)",
     17: "not possible in the current operating state",
     18: "other error",
+    19: "data cannot be read in cyclic interchange (PROFIdrive V2)",
     20: "value not allowed",
     21: "response too long",
     22: "parameter address not allowed",

@@ -58,7 +58,15 @@ def audit_rules(profile: Any) -> list[AuditRule]:
     return [
         comm_loss_rule(f"{MANUAL} L4059-4062 (protection 18, communication timeout error: trips); "
                        f"the manual names no setting for it",
-                       "nothing to set: the card trips protection 18", None),
+                       "nothing to set: the card trips protection 18", None,
+                       note=("C-00 has no PNU: check on the VF66's own keypad that C-00 = 1 (multi-"
+                             "function input from the communication option). No pdrive command "
+                             "proves it: `pdrive commloss-test` checks protection 18, not the "
+                             "master's coast (OFF2) and quick stop (OFF3) the note is about",
+                             f"{MANUAL} L2769-2773 (Table 3.5 notes 1, 2: with c-00 = 0 OFF2 and OFF3 "
+                             f"act as the normal stop), L612-620 (C-00 multi-function input location: "
+                             f"0 terminal block, the factory setting; 1 digital communication "
+                             f"option)")),
         watchdog_rule(f"{MANUAL} L4059-4062 (protection 18 trips on a communication timeout with the "
                       f"master)"),
         AuditRule("source.control_requested", "source", "the master's commands valid (ZSW bit 9)",
