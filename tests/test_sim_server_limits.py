@@ -21,7 +21,7 @@ import pytest
 
 from profidrive_cli.sim import control_http
 from profidrive_cli.sim.control import Controller, QueuedController
-from profidrive_cli.sim.server import NO_FDS_LINE, AcceptGuard, TcpEndpoint
+from profidrive_cli.sim.server import NO_FDS_LINE, AcceptGuard, Reports, TcpEndpoint
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -177,6 +177,19 @@ def test_accept_guard_refuses_backs_off_and_reports_once() -> None:
         assert len(lines) == 2 and "free again (6 client(s) refused" in lines[1]
     finally:
         guard.close()
+
+
+def test_a_recurring_report_is_one_line_a_minute_with_a_count() -> None:
+    clock, lines = _Clock(), []
+    report = Reports(lines.append, 60.0, clock)
+    for _ in range(1000):                      # a client churning at a limit, every 10 ms
+        report("control: 12 clients at once")
+        clock.t += 0.01
+    # 10 s of it: the first line only; a minute on, one line that counts the 999 held back
+    assert lines == ["control: 12 clients at once"]
+    clock.t += 60
+    report("control: 12 clients at once")
+    assert lines[1] == "control: 12 clients at once (and 999 more like it before)"
 
 
 def test_the_bus_port_does_not_look_at_its_socket_while_backing_off(monkeypatch) -> None:

@@ -198,7 +198,7 @@ def soak(seconds: float, seed: int = 1) -> dict[str, Any]:
                         s.sendall(bytes((b,)))
                     count("slow")
             except OSError:
-                pass
+                stop.wait(0.5)           # (refused: the control is full)
 
     def hostile() -> None:               # bad bodies, early leavers, faults, trips
         bad = [("POST", "/trip", "[" * 60000), ("POST", "/trip", "{" * 5000 + "x"),
@@ -227,7 +227,7 @@ def soak(seconds: float, seed: int = 1) -> dict[str, Any]:
             stop.wait(0.02)
 
     threads = [threading.Thread(target=f, daemon=True)
-               for f in [master, hostile, hostile] + [idle] * 20 + [slow] * 4]
+               for f in [master, hostile, hostile] + [idle] * 40 + [slow] * 4]
     try:
         t0 = time.monotonic()
         for t in threads:

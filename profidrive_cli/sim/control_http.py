@@ -11,7 +11,7 @@ browser) can take the simulated plant down or steer it:
   AcceptGuard), never a spin, never an exit;
 - a body of at most MAX_BODY octets, JSON nested at most MAX_DEPTH deep: else 400 with a JSON error;
 - a client gone before its answer is forgotten silently; any other fault in a request is one line
-  through `log`, never a traceback;
+  through `log` (at most one a minute, with a count: sim/server.py Reports), never a traceback;
 - a request whose Host is not a name of this server, or whose Origin is not the server itself (or
   that a browser marks cross-site: Sec-Fetch-Site), is refused 403 (CSRF, DNS rebinding);
 - on a non-loopback address (needs_token) every request carries the token printed at start
@@ -34,7 +34,7 @@ from typing import Any, Callable
 from urllib.parse import urlsplit
 
 from profidrive_cli.sim.control import ControlBusy, ControlError, Controller
-from profidrive_cli.sim.server import AcceptGuard, refuse_now, stderr_line
+from profidrive_cli.sim.server import AcceptGuard, Reports, refuse_now, stderr_line
 
 #: the largest request body read
 MAX_BODY = 64 * 1024
@@ -157,11 +157,10 @@ class _Httpd(ThreadingHTTPServer):
                 self.conns[request] = time.monotonic()
         if full:
             self.owner.refused_busy += 1
-            self.owner.report("busy", f"control: {self.owner.max_clients} clients at once; "
-                                      f"refusing more (503) until one leaves")
             refuse_now(request, TOO_MANY)
+            self.owner.report_busy(f"control: {self.owner.max_clients} clients at once; refusing "
+                                   f"more (503) until one leaves")
             return
-        self.owner.report_over("busy")
         try:
             super().process_request(request, client_address)
         except RuntimeError:                 # (no thread to be had: refused as one too many)
@@ -197,7 +196,7 @@ class _Httpd(ThreadingHTTPServer):
         if isinstance(e, (ConnectionError, TimeoutError)):
             return
         self.owner.errors += 1
-        self.owner.log(f"control: a request failed: {type(e).__name__}: {str(e)[:200]}")
+        self.owner.report_error(f"control: a request failed: {type(e).__name__}: {str(e)[:200]}")
 
 
 class ControlServer:
@@ -219,7 +218,7 @@ class ControlServer:
         self.guard = AcceptGuard("control", log)
         #: counters: refused for too many clients, shut down for taking too long, failed requests
         self.refused_busy = self.cut = self.errors = 0
-        self._reported: set[str] = set()
+        self.report_busy, self.report_error = Reports(log), Reports(log)
         self.httpd = _Httpd(self, (host, port), _handler(self))
         self.host, self.port = host, int(self.httpd.server_address[1])
         self._names = {"localhost", host.lower().strip("[]")}
@@ -249,15 +248,6 @@ class ControlServer:
             self.httpd.shutdown()
         self.httpd.server_close()
         self.guard.close()
-
-    def report(self, what: str, line: str) -> None:
-        """Report an episode once (until report_over)."""
-        if what not in self._reported:
-            self._reported.add(what)
-            self.log(line)
-
-    def report_over(self, what: str) -> None:
-        self._reported.discard(what)
 
     def own_host(self, host: str) -> bool:
         """A Host (or an Origin's host) that names this server: an address, localhost, the name it
@@ -338,7 +328,7 @@ def _handler(server: ControlServer) -> type[BaseHTTPRequestHandler]:
                 status, body = 404 if str(e).startswith("unknown command") else 400, {"error": str(e)}
             except Exception as e:                   # noqa: BLE001  (a fault of the plant: one line)
                 server.errors += 1
-                server.log(f"control: {command[:40]!r} failed: {type(e).__name__}: {str(e)[:200]}")
+                server.report_error(f"control: {command[:40]!r} failed: {type(e).__name__}: {str(e)[:200]}")
                 status, body = 500, {"error": f"{command[:40]} failed in the simulator: {type(e).__name__}"}
             self._answer(status, body)
 

@@ -72,6 +72,29 @@ def stderr_line(line: str) -> None:
         pass                         # stderr gone (a closed terminal): nothing to tell it
 
 
+class Reports:
+    """A recurring event's report: the first at once, then at most one each `every_s` (with how many
+    were held back), so that a client churning at a limit for days cannot fill the log."""
+
+    def __init__(self, log: Callable[[str], None], every_s: float = 60.0,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.log, self.every_s, self.clock = log, every_s, clock
+        self._last = float("-inf")
+        self._held = 0
+
+    def __call__(self, line: str) -> None:
+        now = self.clock()
+        if now - self._last < self.every_s:
+            self._held += 1
+            return
+        more = f" (and {self._held} more like it before)" if self._held else ""
+        self._last, self._held = now, 0
+        try:
+            self.log(line + more)
+        except Exception:               # noqa: BLE001  (out of descriptors, a report may fail too)
+            pass
+
+
 def refuse_now(sock: socket.socket, line: bytes) -> None:
     """Say `line` to a client without waiting for it, and close: no thread, no blocking (what it sent
     so far is read away first, so that the close does not reset the line away)."""
@@ -97,13 +120,14 @@ class AcceptGuard:
     descriptor; when accept fails for want of one, the spare is closed, the waiting client accepted
     with it, told `line` and closed (one refused client), the spare taken again, and the socket left
     alone for BACKOFF_S (`ready()` is false). An episode is reported once through `log`, and its end
-    (with the count) when a client is accepted again."""
+    (with the count) when a client is accepted again (at most one of each a minute: Reports)."""
 
     BACKOFF_S = 0.25
 
     def __init__(self, name: str, log: Callable[[str], None] = stderr_line,
                  clock: Callable[[], float] = time.monotonic) -> None:
-        self.name, self.log, self.clock = name, log, clock
+        self.name, self.clock = name, clock
+        self._report_out, self._report_back = Reports(log, clock=clock), Reports(log, clock=clock)
         #: clients refused for want of a descriptor (over the server's life)
         self.refused = 0
         self._episode = 0            # refused in the episode running now (0: none)
@@ -133,7 +157,7 @@ class AcceptGuard:
                 self._out_of_descriptors(srv, line, e)
             return None                 # (EAGAIN: another look found nobody; ECONNABORTED ...)
         if self._episode:
-            self._report(f"{self.name}: descriptors free again ({self._episode} client(s) refused "
+            self._report_back(f"{self.name}: descriptors free again ({self._episode} client(s) refused "
                      f"meanwhile)")
             self._episode = 0
         return got
@@ -153,14 +177,8 @@ class AcceptGuard:
                 refuse_now(conn, line)
             self._spare = self._take_spare()
         if self._episode == 1:
-            self._report(f"{self.name}: out of file descriptors ({e.strerror or e}): refusing "
-                         f"clients until some are free")
-
-    def _report(self, line: str) -> None:
-        try:
-            self.log(line)
-        except Exception:               # noqa: BLE001  (out of descriptors, a report may fail too)
-            pass
+            self._report_out(f"{self.name}: out of file descriptors ({e.strerror or e}): refusing "
+                             f"clients until some are free")
 
     def close(self) -> None:
         if self._spare is not None:
