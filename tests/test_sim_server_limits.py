@@ -359,3 +359,45 @@ def test_sim_ctl_with_a_wrong_or_right_token(token_server, capsys, monkeypatch) 
                              "state", "--json")
     assert code == 0, err
     assert [row["station"] for row in json.loads(out)["stations"]] == [3, 4, 5, 6, 7]
+
+
+# -- the bus never waits for the control ------------------------------------------------------------
+
+def test_a_hung_control_does_not_stall_the_bus_port() -> None:
+    """Every control connection stuck in a command that never ends (a hung control): the bus port
+    still answers a master. (A guard: the bus loop shares nothing with the control but the queue of
+    commands, which it only empties.)"""
+    import threading
+
+    from profidrive_cli.sim import server
+    from profidrive_cli.sim.plant import build_bus
+
+    release = threading.Event()
+
+    class Hung(Controller):
+        def call(self, command, args=None):
+            release.wait(120)
+            return {}
+
+    bus = build_bus("sim://")
+    ep = TcpEndpoint("127.0.0.1", 0, log=lambda line: None)
+    stop = threading.Event()
+    loop = threading.Thread(target=server.serve, args=(bus, ep), kwargs={"stop": stop.is_set}, daemon=True)
+    ctl = control_http.ControlServer(Hung(bus), log=lambda line: None, max_clients=4).start()
+    stuck: list[socket.socket] = []
+    try:
+        loop.start()
+        for _ in range(6):                         # 4 held in the hung command, 2 answered 503
+            s = socket.create_connection(("127.0.0.1", ctl.port), timeout=30)
+            s.sendall(b"GET /state HTTP/1.0\r\n\r\n")
+            stuck.append(s)
+        assert _until(lambda: ctl.refused_busy >= 2)
+        assert S.fdl_status(ep.address) == S.FDL_STATUS_3_REPLY
+    finally:
+        release.set()
+        for s in stuck:
+            s.close()
+        ctl.close()
+        stop.set()
+        loop.join(30)
+        ep.close()
