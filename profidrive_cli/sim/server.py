@@ -97,19 +97,9 @@ class Reports:
 
 def refuse_now(sock: socket.socket, line: bytes) -> None:
     """Say `line` to a client without waiting for it, and close: no thread, no blocking (what it sent
-    so far is read away first, so that the close does not reset the line away)."""
-    try:
-        sock.setblocking(False)
-        try:
-            sock.recv(65536)
-        except OSError:
-            pass
-        sock.send(line)
-        sock.shutdown(socket.SHUT_WR)
-    except OSError:
-        pass
-    finally:
-        sock.close()
+    so far is read away first, so that the close does not reset the line away): _send_and_close
+    without lingering."""
+    _send_and_close(sock, line, linger_s=0.0)
 
 
 class AcceptGuard:
@@ -190,7 +180,8 @@ def _send_and_close(sock: socket.socket, line: bytes, linger_s: float = 1.0) -> 
     """Tell a refused client why, then close gracefully. The line goes out after the client's
     first request (or after `linger_s` of silence): a port that empties its input right after
     connecting (pyserial's socket:// does) would otherwise throw it away. Closing with unread input
-    would reset the connection and could discard the line too, so the input is drained first."""
+    would reset the connection and could discard the line too, so the input is drained first.
+    linger_s 0: nothing waited for (the socket non-blocking; what has come is read away)."""
     try:
         sock.settimeout(linger_s)
         try:
