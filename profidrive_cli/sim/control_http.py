@@ -27,6 +27,7 @@ import ipaddress
 import json
 import secrets
 import socket
+import sys
 import threading
 import time
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
@@ -191,7 +192,6 @@ class _Httpd(ThreadingHTTPServer):
 
     def handle_error(self, request: Any, client_address: Any) -> None:
         """The last resort: a client gone is nothing; anything else one line, never a traceback."""
-        import sys
         e = sys.exc_info()[1]
         if isinstance(e, (ConnectionError, TimeoutError)):
             return
