@@ -67,11 +67,15 @@ def test_set_a_value_is_checked_and_read_back() -> None:
 
 def test_faults_are_injected_and_cleared() -> None:
     with pdrive.open_bus("sim://?timing=virtual") as bus:
-        assert bus.simulator.faults("drop=1,only=4") == {"faults": {"drop": 1.0}}
+        assert bus.simulator.faults("drop=1,only=4") == {"faults": {"drop": 1.0}, "faults_only": [4],
+                                                         "faults_spec": "drop=1,only=4"}
         assert [s.station for s in bus.scan(3, 5)] == [3, 5]       # every reply of 4 dropped
-        assert bus.simulator.faults("drop=1,only=3,4") == {"faults": {"drop": 1.0}}
+        assert bus.simulator.faults("only=4,3,drop=1") == {"faults": {"drop": 1.0}, "faults_only": [3, 4],
+                                                           "faults_spec": "drop=1,only=3,4"}
         assert [s.station for s in bus.scan(3, 5)] == [5]
-        assert bus.simulator.faults("") == {"faults": {}}
+        assert bus.simulator.faults("late=0.5,late_ms=50,tripcode=3:OC2,unplug=6@5-8")["faults_spec"] \
+            == "late=0.5,late_ms=50,tripcode=3:OC2,unplug=6@5-8"
+        assert bus.simulator.faults("") == {"faults": {}, "faults_only": None, "faults_spec": ""}
         assert [s.station for s in bus.scan(3, 5)] == [3, 4, 5]
         with pytest.raises(ControlError, match="unknown option 'bogus'"):
             bus.simulator.faults("bogus=1")
@@ -157,17 +161,7 @@ def test_a_trip_through_sim_ctl_is_reported_by_a_running_pdrive_run(served) -> N
     assert "the drive tripped (OC1)" in err, err
 
 
-@pytest.mark.skipif(os.name != "posix", reason="pdrive sim --pty")
-@pytest.mark.parametrize("served", ["0.0.0.0"], indirect=True)
-def test_a_control_off_loopback_needs_its_token(served) -> None:
-    assert served["token"]
-    refused = _pdrive("sim-ctl", "--control", f"127.0.0.1:{_where(served).rsplit(':', 1)[1]}", "state")
-    assert refused.returncode == 1
-    assert "needs its token" in refused.stderr and "Traceback" not in refused.stderr
-    ok = _pdrive("sim-ctl", "--control", f"127.0.0.1:{_where(served).rsplit(':', 1)[1]}",
-                 "--token", served["token"], "state", "--json")
-    assert ok.returncode == 0, ok.stderr
-    assert [r["station"] for r in json.loads(ok.stdout)["stations"]] == [3, 4, 5, 6, 7]
+# (a control off loopback and its token: tests/test_sim_server_limits.py, bound to loopback only)
 
 
 @pytest.mark.skipif(os.name != "posix", reason="pdrive sim --pty")
@@ -179,9 +173,28 @@ def test_sim_ctl_bad_input_is_one_line(served) -> None:
             (("--control", where, "trip", "x3"), 2, "station 'x3' is not an address"),
             (("--control", where, "trip", "42"), 2, "no station 42"),
             (("--control", where, "set", "3", "F07", "fast"), 2, "'fast' is not a number"),
-            (("--control", "127.0.0.1:1", "state"), 1, "no simulator control at 127.0.0.1:1")):
+            (("--control", "127.0.0.1:1", "state"), 1, "no simulator control at 127.0.0.1:1"),
+            # a --control that is no HOST:PORT is bad input, as for `pdrive sim --control` (issue 34)
+            (("--control", "nonsense", "state"), 2, "--control needs HOST:PORT"),
+            (("--control", "127.0.0.1:0", "state"), 2, "PORT 1..65535"),
+            (("--control", "127.0.0.1:99999", "state"), 2, "--control needs HOST:PORT")):
         p = _pdrive("sim-ctl", *args)
         assert p.returncode == code, (args, p.stderr)
         assert p.stderr.count("\n") == 1 and words in p.stderr and "Traceback" not in p.stderr, p.stderr
     bad = _pdrive("sim", "--pty", "--control", "nowhere")
     assert bad.returncode == 2 and "--control needs HOST:PORT" in bad.stderr
+
+
+@pytest.mark.skipif(os.name != "posix", reason="pdrive sim --pty")
+def test_sim_ctl_faults_says_what_it_applied_in_the_words_it_takes(served) -> None:
+    """issue 34: `sim-ctl faults` echoed a Python dict ({'drop': 0.1}) and left out only=."""
+    where = _where(served)
+    p = _pdrive("sim-ctl", "--control", where, "faults", "drop=0.1,only=3,4")
+    assert p.returncode == 0, p.stderr
+    assert p.stdout == "faults drop=0.1,only=3,4\n"
+    st = _pdrive("sim-ctl", "--control", where, "state")
+    assert st.stdout.splitlines()[-1] == "faults: drop=0.1,only=3,4"
+    js = json.loads(_pdrive("sim-ctl", "--control", where, "state", "--json").stdout)
+    assert (js["faults"], js["faults_only"], js["faults_spec"]) == ({"drop": 0.1}, [3, 4], "drop=0.1,only=3,4")
+    p = _pdrive("sim-ctl", "--control", where, "faults", "")
+    assert p.returncode == 0 and p.stdout == "faults none\n", p.stderr

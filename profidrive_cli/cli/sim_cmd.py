@@ -11,12 +11,16 @@ from profidrive_cli import UsageError
 from profidrive_cli.cli.common import emit_json, err, out
 
 
-def _host_port(listen: str, option: str = "--listen") -> tuple[str, int]:
-    """--listen HOST:PORT (HOST may be empty: 127.0.0.1; PORT 0..65535, 0 picks a free one)."""
+def _host_port(listen: str, option: str = "--listen", lowest: int = 0) -> tuple[str, int]:
+    """--listen HOST:PORT (HOST may be empty: 127.0.0.1; an IPv6 address in brackets or not;
+    PORT lowest..65535, 0 picks a free one)."""
     host, colon, p = listen.rpartition(":")
     p = p.strip()
-    if not colon or not (p.isascii() and p.isdigit()) or len(p) > 5 or int(p) > 65535:
-        raise UsageError(f"{option} needs HOST:PORT with PORT 0..65535, got {listen[:80]!r}")
+    if not colon or not (p.isascii() and p.isdigit()) or len(p) > 5 or not lowest <= int(p) <= 65535:
+        raise UsageError(f"{option} needs HOST:PORT with PORT {lowest}..65535, got {listen[:80]!r}")
+    host = host.strip()
+    if host.startswith("[") and host.endswith("]"):
+        host = host[1:-1]
     return host or "127.0.0.1", int(p)
 
 
@@ -74,7 +78,7 @@ def sim_cmd(use_pty, listen, serial_port, plant, learn, baud, as_json, plc, cont
     elif listen:
         host, port = _host_port(listen)
         try:
-            ep = server.TcpEndpoint(host, port)
+            ep = server.TcpEndpoint(host, port)      # (its events: one line on stderr each)
         except OSError as e:
             raise UsageError(f"--listen {listen}: {e.strerror or e}") from None
         where = f"socket://{ep.address[0]}:{ep.address[1]}"
@@ -116,7 +120,8 @@ def sim_cmd(use_pty, listen, serial_port, plant, learn, baud, as_json, plc, cont
 
 def _control_server(bus, control: str):
     """--control HOST:PORT: the plant's control over HTTP (sim/control.py), queued onto the bus."""
-    from profidrive_cli.sim.control import ControlServer, QueuedController
+    from profidrive_cli.sim.control import QueuedController
+    from profidrive_cli.sim.control_http import ControlServer
     host, port = _host_port(control, "--control")
     try:
         return ControlServer(QueuedController(bus), host, port).start()

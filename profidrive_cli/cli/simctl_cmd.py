@@ -33,9 +33,11 @@ def simctl_cmd(control, token, as_json, command, args):
     control = control or os.environ.get("PDRIVE_SIM_CONTROL")
     if not control:
         raise UsageError("sim-ctl: no --control HOST:PORT (the address `pdrive sim --control` printed)")
+    from profidrive_cli.cli.sim_cmd import _host_port
+    host, port = _host_port(control, "--control", lowest=1)
     token = token or os.environ.get("PDRIVE_SIM_TOKEN")
     body = _arguments(command, args)
-    url = f"http://{control}/{command}"
+    url = f"http://{f'[{host}]' if ':' in host else host}:{port}/{command}"
     req = urllib.request.Request(url, data=None if command == "state" else json.dumps(body).encode(),
                                  method="GET" if command == "state" else "POST",
                                  headers={"Content-Type": "application/json",
@@ -60,9 +62,19 @@ def simctl_cmd(control, token, as_json, command, args):
         for st in answer.get("stations", []):
             bits = [f"{k} {v}" for k, v in st.items() if k not in ("station",) and v is not None]
             out.print(f"station {st['station']}: " + ", ".join(bits), markup=False)
-        out.print(f"faults: {answer.get('faults') or 'none'}", markup=False)
+        out.print(f"faults: {_faults_words(answer)}", markup=False)
+    elif command == "faults":
+        out.print(f"faults {_faults_words(answer)}", markup=False)
     else:
         out.print(", ".join(f"{k} {v}" for k, v in answer.items()), markup=False)
+
+
+def _faults_words(answer: dict) -> str:
+    """The injected faults as `sim-ctl faults` takes them (`faults_spec`: sim/control.py faults_answer), or none."""
+    spec = answer.get("faults_spec")
+    if spec is None:                    # (a simulator before faults_spec: the rates alone)
+        spec = ",".join(f"{k}={v:g}" for k, v in (answer.get("faults") or {}).items())
+    return spec or "none"
 
 
 def _arguments(command: str, args: tuple[str, ...]) -> dict[str, object]:

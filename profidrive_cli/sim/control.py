@@ -6,27 +6,18 @@ Every command runs on the bus's own thread between two telegrams: the in-process
 the master's lock (it is that thread), the HTTP server's by queueing it on SimBus.pending, which the
 bus runs at its next tick or request (the served bus ticks every 5 ms), and waiting for the result.
 
-The HTTP face is JSON: `GET /state`; `POST /<command>` with a JSON object of arguments, e.g.
-`POST /trip {"station": 3, "alarm": "OC1"}`; the answer is a JSON object, `{"error": "..."}` with
-status 400 for a command the plant refuses. How it is secured: it listens on 127.0.0.1 unless a
-host is named; on any other address every request must carry the token printed when the simulator
-starts (`Authorization: Bearer TOKEN`), and the simulator says that the plant can be steered from
-the network. There is no TLS: a plant is a test fixture, not a drive.
+The HTTP face (sim/control_http.py: ControlServer) is JSON: `GET /state`;
+`POST /<command>` with a JSON object of arguments, e.g. `POST /trip {"station": 3, "alarm": "OC1"}`;
+the answer is a JSON object, `{"error": "..."}` with status 400 for a command the plant refuses.
 """
 
 from __future__ import annotations
 
 import contextlib
-import hmac
-import ipaddress
-import json
 import re
-import secrets
-import threading
 import time
 from concurrent.futures import Future
 from concurrent.futures import TimeoutError as FutureTimeout
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any, Callable, ContextManager
 
 #: the commands, with their arguments (name -> required?), for the HTTP face and sim-ctl
@@ -42,8 +33,8 @@ COMMANDS: dict[str, dict[str, bool]] = {
 
 #: how long an HTTP command waits for the bus's thread to take it (the served bus ticks every 5 ms)
 TAKE_TIMEOUT_S = 5.0
-#: the largest request body the HTTP face reads
-MAX_BODY = 64 * 1024
+#: commands queued for the bus at most (more: 503)
+MAX_PENDING = 64
 
 
 class ControlError(ValueError):
@@ -131,9 +122,7 @@ class Controller:
             if built:
                 row.update(model.snapshot())
             rows.append(row)
-        faults = self.bus.faults
-        return {"stations": rows, "faults": dict(faults.rates) if faults is not None else {},
-                "requests": self.bus.stats.requests}
+        return {"stations": rows, **faults_answer(self.bus.faults), "requests": self.bus.stats.requests}
 
     def _trip(self, now: float, station: Any, alarm: Any = None) -> dict[str, Any]:
         s = self._station(station)
@@ -195,118 +184,60 @@ class Controller:
         except UsageError as e:
             raise ControlError(f"faults: {str(e).removeprefix('sim URL: ')}") from None
         self.bus.faults = plan
-        return {"faults": dict(plan.rates) if plan is not None else {}}
+        return faults_answer(plan)
+
+
+def faults_answer(plan: Any) -> dict[str, Any]:
+    """The injected faults (a sim/faults.py FaultPlan or None) as the control reports them: `faults`
+    (the rates), `faults_only` (the stations they are limited to, null: all) and `faults_spec` (the
+    whole plan as `sim-ctl faults` takes it, "" for none)."""
+    if plan is None:
+        return {"faults": {}, "faults_only": None, "faults_spec": ""}
+    only = sorted(plan.only) if plan.only is not None else None
+    words = [f"{k}={v:g}" for k, v in plan.rates.items()]
+    if only is not None:
+        words.append("only=" + ",".join(map(str, only)))
+    if "late" in plan.rates or plan.late_s != 0.2:
+        words.append(f"late_ms={plan.late_s * 1000:g}")
+    words += [f"tripcode={a}:{c}" for a, c in sorted(plan.trip_codes.items())]
+    words += [f"unplug={a}@{t0:g}" + (f"-{t1:g}" if t1 is not None else "")
+              for a, (t0, t1) in sorted(plan.unplugs.items())]
+    return {"faults": dict(plan.rates), "faults_only": only, "faults_spec": ",".join(words)}
+
+
+class ControlBusy(ControlError):
+    """The simulator cannot take a command now (HTTP 503): its queue is full, or it did not take it."""
 
 
 class QueuedController(Controller):
-    """For another thread (the HTTP face): a command is queued on the bus and run by its thread."""
+    """For another thread (the HTTP face): a command is queued on the bus and run by its thread.
+
+    A command the bus did not take within TAKE_TIMEOUT_S is withdrawn (the caller is told so, and the
+    bus skips it: a plant must not trip later on a command its user was told had failed), and at
+    most MAX_PENDING wait at a time."""
 
     def call(self, command: str, args: dict[str, Any] | None = None) -> dict[str, Any]:
         fn = self._checked(command, args or {})
         done: Future[dict[str, Any]] = Future()
 
         def run(now: float) -> None:
+            if not done.set_running_or_notify_cancel():
+                return                               # withdrawn: its caller has been answered
             try:
                 done.set_result(fn(now))
             except Exception as e:               # noqa: BLE001  (handed to the asking thread)
                 done.set_exception(e)
+        if len(self.bus.pending) >= MAX_PENDING:
+            raise ControlBusy(f"the simulator has {MAX_PENDING} commands waiting; try again")
         self.bus.pending.append(run)
         try:
             return done.result(timeout=TAKE_TIMEOUT_S)
         except FutureTimeout:
-            raise ControlError(f"the simulator did not take {command!r} within {TAKE_TIMEOUT_S:g} s") \
-                from None
-
-
-# -- the HTTP face ------------------------------------------------------------------------------------
-
-def is_loopback(host: str) -> bool:
-    if host in ("localhost", ""):
-        return host == "localhost"
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
-
-
-class ControlServer:
-    """`pdrive sim --control HOST:PORT`: the controller over HTTP, in a thread of its own."""
-
-    def __init__(self, controller: Controller, host: str = "127.0.0.1", port: int = 0) -> None:
-        self.controller = controller
-        #: None on loopback; else the token every request must carry
-        self.token: str | None = None if is_loopback(host) else secrets.token_urlsafe(18)
-        self.httpd = ThreadingHTTPServer((host, port), _handler(self))
-        self.httpd.daemon_threads = True
-        self.host, self.port = host, int(self.httpd.server_address[1])
-        self._thread = threading.Thread(target=self.httpd.serve_forever, name="pdrive-sim-control",
-                                        daemon=True)
-
-    @property
-    def url(self) -> str:
-        return f"http://{self.host}:{self.port}"
-
-    def start(self) -> "ControlServer":
-        self._thread.start()
-        return self
-
-    def close(self) -> None:
-        self.httpd.shutdown()
-        self.httpd.server_close()
-
-
-def _handler(server: ControlServer) -> type[BaseHTTPRequestHandler]:
-    class Handler(BaseHTTPRequestHandler):
-        server_version = "pdrive-sim-control"
-
-        def log_message(self, format: str, *args: Any) -> None:     # noqa: A002  (quiet)
-            pass
-
-        def _answer(self, status: int, body: dict[str, Any]) -> None:
-            data = json.dumps(body).encode()
-            self.send_response(status)
-            self.send_header("Content-Type", "application/json")
-            self.send_header("Content-Length", str(len(data)))
-            self.end_headers()
-            self.wfile.write(data)
-
-        def _allowed(self) -> bool:
-            if server.token is None:
-                return True
-            got = self.headers.get("Authorization", "")
-            if hmac.compare_digest(got, f"Bearer {server.token}"):
-                return True
-            self._answer(401, {"error": "this plant needs its token (Authorization: Bearer TOKEN)"})
-            return False
-
-        def _run(self, command: str, args: dict[str, Any]) -> None:
-            try:
-                self._answer(200, server.controller.call(command, args))
-            except ControlError as e:
-                self._answer(404 if str(e).startswith("unknown command") else 400, {"error": str(e)})
-
-        def do_GET(self) -> None:                                    # noqa: N802
-            if self._allowed():
-                self._run(self.path.strip("/") or "state", {})
-
-        def do_POST(self) -> None:                                   # noqa: N802
-            if not self._allowed():
-                return
-            try:
-                n = int(self.headers.get("Content-Length") or 0)
-            except ValueError:
-                n = -1
-            if not 0 <= n <= MAX_BODY:
-                self._answer(400, {"error": f"the request body must be 0..{MAX_BODY} octets"})
-                return
-            raw = self.rfile.read(n) if n else b"{}"
-            try:
-                args = json.loads(raw or b"{}")
-            except ValueError as e:
-                self._answer(400, {"error": f"the body is not JSON: {e}"})
-                return
-            if not isinstance(args, dict):
-                self._answer(400, {"error": "the body must be a JSON object of arguments"})
-                return
-            self._run(self.path.strip("/"), args)
-    return Handler
+            if done.cancel():
+                raise ControlBusy(f"the simulator did not take {command!r} within "
+                                  f"{TAKE_TIMEOUT_S:g} s; it was withdrawn") from None
+        try:                                         # taken just now: its result
+            return done.result(timeout=TAKE_TIMEOUT_S)
+        except FutureTimeout:
+            raise ControlBusy(f"the simulator took {command!r} but did not finish it within "
+                              f"{TAKE_TIMEOUT_S:g} s") from None

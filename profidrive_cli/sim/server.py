@@ -12,11 +12,14 @@ device that disappears (USB pulled, the socat of a pty pair ended) is reopened w
 
 from __future__ import annotations
 
+import errno
 import os
 import select
 import socket
+import sys
 import threading
 import time
+from typing import Callable
 
 from profidrive_cli.sim.bus import SimBus
 
@@ -52,13 +55,133 @@ class PtyEndpoint:
 #: what a second client hears before its connection is closed (one client at a time, like a
 #: converter; a silent bus would send its user looking for a wiring fault)
 BUSY_LINE = b"pdrive sim: busy - another client is connected; try again when it has gone\r\n"
+#: what a client hears when the process has no descriptor left to serve it with
+NO_FDS_LINE = b"pdrive sim: out of file descriptors - try again later\r\n"
+
+#: accept() errors that mean "no descriptor (or kernel memory) for the connection": the connection
+#: stays queued, so the listening socket stays readable -- answered by AcceptGuard, not retried
+FD_ERRNOS = frozenset({errno.EMFILE, errno.ENFILE, errno.ENOBUFS, errno.ENOMEM})
+
+
+def stderr_line(line: str) -> None:
+    """The default report of a server running in the foreground: one line on stderr (written
+    straight to the stream: a report out of descriptors cannot import or open anything)."""
+    try:
+        print(f"pdrive sim: {line}", file=sys.stderr, flush=True)
+    except (OSError, ValueError):
+        pass                         # stderr gone (a closed terminal): nothing to tell it
+
+
+class Reports:
+    """A recurring event's report: the first at once, then at most one each `every_s` (with how many
+    were held back), so that a client churning at a limit for days cannot fill the log."""
+
+    def __init__(self, log: Callable[[str], None], every_s: float = 60.0,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.log, self.every_s, self.clock = log, every_s, clock
+        self._last = float("-inf")
+        self._held = 0
+
+    def __call__(self, line: str) -> None:
+        now = self.clock()
+        if now - self._last < self.every_s:
+            self._held += 1
+            return
+        more = f" (and {self._held} more like it before)" if self._held else ""
+        self._last, self._held = now, 0
+        try:
+            self.log(line + more)
+        except Exception:               # noqa: BLE001  (out of descriptors, a report may fail too)
+            pass
+
+
+def refuse_now(sock: socket.socket, line: bytes) -> None:
+    """Say `line` to a client without waiting for it, and close: no thread, no blocking (what it sent
+    so far is read away first, so that the close does not reset the line away): _send_and_close
+    without lingering."""
+    _send_and_close(sock, line, linger_s=0.0)
+
+
+class AcceptGuard:
+    """accept() on a listening socket that survives running out of descriptors (EMFILE, ENFILE).
+
+    The kernel keeps a connection it could not give a descriptor queued, so the socket stays
+    readable: retried at once, accept would spin at 100 % CPU. Instead the guard holds one spare
+    descriptor; when accept fails for want of one, the spare is closed, the waiting client accepted
+    with it, told `line` and closed (one refused client), the spare taken again, and the socket left
+    alone for BACKOFF_S (`ready()` is false). An episode is reported once through `log`, and its end
+    (with the count) when a client is accepted again (at most one of each a minute: Reports)."""
+
+    BACKOFF_S = 0.25
+
+    def __init__(self, name: str, log: Callable[[str], None] = stderr_line,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.name, self.clock = name, clock
+        self._report_out, self._report_back = Reports(log, clock=clock), Reports(log, clock=clock)
+        #: clients refused for want of a descriptor (over the server's life)
+        self.refused = 0
+        self._episode = 0            # refused in the episode running now (0: none)
+        self._until = float("-inf")
+        self._spare = self._take_spare()
+
+    @staticmethod
+    def _take_spare() -> int | None:
+        try:
+            return os.open(os.devnull, os.O_RDONLY)
+        except OSError:
+            return None
+
+    def ready(self) -> bool:
+        """False while backing off after running out of descriptors."""
+        return self.clock() >= self._until
+
+    def backoff_left(self) -> float:
+        return max(0.0, self._until - self.clock())
+
+    def accept(self, srv: socket.socket, line: bytes) -> tuple[socket.socket, object] | None:
+        """(connection, address), or None: nobody waiting, or a client refused (told `line`)."""
+        try:
+            got = srv.accept()
+        except OSError as e:
+            if e.errno in FD_ERRNOS:
+                self._out_of_descriptors(srv, line, e)
+            return None                 # (EAGAIN: another look found nobody; ECONNABORTED ...)
+        if self._episode:
+            self._report_back(f"{self.name}: descriptors free again ({self._episode} client(s) refused "
+                     f"meanwhile)")
+            self._episode = 0
+        return got
+
+    def _out_of_descriptors(self, srv: socket.socket, line: bytes, e: OSError) -> None:
+        self.refused += 1
+        self._episode += 1
+        self._until = self.clock() + self.BACKOFF_S
+        if self._spare is not None:
+            os.close(self._spare)
+            self._spare = None
+            try:
+                conn, _ = srv.accept()
+            except OSError:
+                conn = None             # (another thread took the spare: the back-off covers it)
+            if conn is not None:
+                refuse_now(conn, line)
+            self._spare = self._take_spare()
+        if self._episode == 1:
+            self._report_out(f"{self.name}: out of file descriptors ({e.strerror or e}): refusing "
+                             f"clients until some are free")
+
+    def close(self) -> None:
+        if self._spare is not None:
+            os.close(self._spare)
+            self._spare = None
 
 
 def _send_and_close(sock: socket.socket, line: bytes, linger_s: float = 1.0) -> None:
     """Tell a refused client why, then close gracefully. The line goes out after the client's
     first request (or after `linger_s` of silence): a port that empties its input right after
     connecting (pyserial's socket:// does) would otherwise throw it away. Closing with unread input
-    would reset the connection and could discard the line too, so the input is drained first."""
+    would reset the connection and could discard the line too, so the input is drained first.
+    linger_s 0: nothing waited for (the socket non-blocking; what has come is read away)."""
     try:
         sock.settimeout(linger_s)
         try:
@@ -78,14 +201,23 @@ def _send_and_close(sock: socket.socket, line: bytes, linger_s: float = 1.0) -> 
 
 class TcpEndpoint:
     """One client at a time (like an RS-485-over-TCP converter). A second client that connects
-    while one is served is told so (BUSY_LINE) and closed at once."""
+    while one is served is told so (BUSY_LINE) and closed at once (at most MAX_REFUSING of them
+    are told at a time, the others closed at once). Out of descriptors, a client is refused
+    (AcceptGuard), the loop goes on."""
 
-    def __init__(self, host: str, port: int):
+    #: refused clients being told BUSY_LINE at once (each a short-lived thread)
+    MAX_REFUSING = 4
+
+    def __init__(self, host: str, port: int, log: Callable[[str], None] = stderr_line,
+                 clock: Callable[[], float] = time.monotonic):
         self.srv = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         self.srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         self.srv.bind((host, port))
         self.srv.listen(1)
+        self.srv.setblocking(False)      # accept only after select; nobody there is no wait
         self.address = self.srv.getsockname()
+        self.guard = AcceptGuard("bus port", log, clock)
+        self._refusing = threading.BoundedSemaphore(self.MAX_REFUSING)
         self.conn: socket.socket | None = None
         #: clients accepted so far
         self.accepted = 0
@@ -102,7 +234,12 @@ class TcpEndpoint:
         if self._drop_requested:
             self._drop_requested = False
             self.drop()
-        socks = [self.conn, self.srv] if self.conn else [self.srv]
+        socks = [self.conn] if self.conn else []
+        if self.guard.ready():
+            socks.append(self.srv)
+        if not socks:                    # backing off, out of descriptors, and nobody served
+            time.sleep(min(timeout, self.guard.backoff_left()))
+            return b""
         r, _, _ = select.select(socks, [], [], timeout)
         if not r:
             return b""
@@ -121,7 +258,11 @@ class TcpEndpoint:
                     return b""
         if self.conn is None:
             self._waited = False
-            self.conn, _ = self.srv.accept()
+            got = self.guard.accept(self.srv, NO_FDS_LINE)
+            if got is None:
+                return b""
+            self.conn = got[0]
+            self.conn.setblocking(True)
             self.conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             self.accepted += 1
             return b""
@@ -144,15 +285,25 @@ class TcpEndpoint:
             return True
 
     def _refuse(self) -> None:
-        try:
-            extra, _ = self.srv.accept()
-        except OSError:
+        got = self.guard.accept(self.srv, NO_FDS_LINE)
+        if got is None:
             return
+        extra = got[0]
         self.refused += 1
         self._waited = False
+        if not self._refusing.acquire(blocking=False):
+            refuse_now(extra, BUSY_LINE)         # enough threads telling others already
+            return
         # say why, then close gracefully: a socket closed with unread input (the client's first
         # request) is reset, and a reset can discard the line before the client reads it
-        threading.Thread(target=_send_and_close, args=(extra, BUSY_LINE), daemon=True).start()
+        extra.setblocking(True)
+
+        def tell() -> None:
+            try:
+                _send_and_close(extra, BUSY_LINE)
+            finally:
+                self._refusing.release()
+        threading.Thread(target=tell, daemon=True).start()
 
     def write(self, data: bytes) -> None:
         if self.conn is not None:
@@ -173,6 +324,7 @@ class TcpEndpoint:
     def close(self) -> None:
         self.drop()
         self.srv.close()
+        self.guard.close()
 
 
 class SerialEndpoint:
