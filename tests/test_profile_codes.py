@@ -58,7 +58,8 @@ CASES = [
     ("fuji-opc-g1-pdp", "ppo_select: {param: o30, power_cycle: true}", "ppo_select: {param: o0, power_cycle: true}",
      "ppo_select.param: o0 is not a parameter of this profile"),
     # a family key read only when it was used (the comm-loss test): now on load
-    ("fuji-opc-pdp3", "  action_param: o27\n", "  action_param: o99\n", "comm_loss.action_param: o99 is not a parameter"),
+    ("fuji-opc-pdp3", "  action_param: o27\n", "  action_param: o99\n",
+     "comm_loss.action_param: o99 is not a parameter"),
     # monitors and trip records: the codes were never checked against the parameters
     ("fuji-opc-g1-pdp", "  default: [M09, M11, M12, M07]", "  default: [M09, M11, M99, M07]",
      "monitors.default: M99 is not a parameter of this profile"),

@@ -269,5 +269,5 @@ def read_pcap(data: bytes) -> tuple[int, list[tuple[float, bytes]]]:
     return linktype, pkts
 
 
-__all__ = ["Capture", "Captured", "ErrorMerger", "HOLD", "PcapWriter", "TimeRangeError", "check_time", "T_MAX", "read_pcap", "merge_errors", "frame_fields",
-           "LINKTYPE_USER0", "LINKTYPE_PROFIBUS_DL", "LINKTYPES"]
+__all__ = ["Capture", "Captured", "ErrorMerger", "HOLD", "PcapWriter", "read_pcap", "merge_errors", "frame_fields",
+           "LINKTYPE_USER0", "LINKTYPE_PROFIBUS_DL", "LINKTYPES", "TimeRangeError", "check_time", "T_MAX"]
