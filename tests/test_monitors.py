@@ -75,14 +75,13 @@ def _variant(tmp_path, text):
 
 
 def test_a_bad_monitors_section_names_file_and_line(tmp_path):
-    prof = _variant(tmp_path, "monitors:\n  default: d002\n")
+    """Refused when the profile loads (the section is read then; issue 35), file:line."""
     with pytest.raises(DataFileError) as e:
-        monitor_config(prof)
-    line = prof.path.read_text().splitlines().index("  default: d002") + 1
+        _variant(tmp_path, "monitors:\n  default: d002\n")
+    line = (tmp_path / "m.yaml").read_text().splitlines().index("  default: d002") + 1
     assert f"m.yaml:{line}:" in str(e.value) and "list of codes" in str(e.value)
-    prof = _variant(tmp_path, "monitors:\n  defaults: [d002]\n")
     with pytest.raises(DataFileError, match="unknown key 'defaults'"):
-        monitor_config(prof)
+        _variant(tmp_path, "monitors:\n  defaults: [d002]\n")
 
 
 def test_monitor_codes_expands_default_and_refuses_what_cannot_be_read():

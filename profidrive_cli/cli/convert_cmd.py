@@ -21,11 +21,13 @@ def convert_cmd(src: str, dst: str, linktype: str | None, baud: int | None) -> N
     """Convert a capture between raw, pcap, pcapng and ProfiTrace .ptd, by the files' extensions.
 
     What a format cannot hold is dropped: raw keeps only the octets, pcap no direction and no
-    comment, ptd keeps a telegram's fields (its FCS is computed again). OUT is replaced only when
-    the whole file converted; on any error the old OUT stays as it was.
+    comment, ptd keeps a telegram's fields (its FCS is computed again). A time OUT cannot hold
+    (pcap: until 2106-02-07; ptd: not before the first packet's second) is an error. OUT is
+    replaced only when the whole file converted; on any error the old OUT stays as it was.
     """
     from profidrive_cli.cli.common import out
     from profidrive_cli.dp.capfile import PTD_BAUDS, capture_format, open_capture, open_writer
+    from profidrive_cli.dp.capture import TimeRangeError
     from profidrive_cli.outfile import OutputFile, OutputWriteError, check_output_path
 
     fin, fout = capture_format(src), capture_format(dst)
@@ -45,6 +47,8 @@ def convert_cmd(src: str, dst: str, linktype: str | None, baud: int | None) -> N
                 for p in reader:
                     writer.write(p)
                 writer.close()
+            except TimeRangeError as e:             # a time OUT's format cannot hold: IN's packet
+                raise UsageError(f"{src}: {e}") from None
             except OSError as e:
                 raise OutputWriteError(f"output capture {dst}: write failed: {e.strerror or e}") from None
             target.commit()

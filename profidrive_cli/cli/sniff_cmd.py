@@ -11,7 +11,7 @@ from profidrive_cli import UsageError
 from profidrive_cli.bustools.listen import listen
 from profidrive_cli.cli.common import bus_options, out
 from profidrive_cli.datafile import DataFileError, open_input_file
-from profidrive_cli.dp.capture import HOLD, LINKTYPES, Capture, ErrorMerger, PcapWriter, format_line
+from profidrive_cli.dp.capture import HOLD, LINKTYPES, Capture, ErrorMerger, PcapWriter, TimeRangeError, format_line
 from profidrive_cli.outfile import OutputFile, check_output_path
 
 
@@ -161,6 +161,8 @@ def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, 
                 view.finish(time.monotonic() - start)
         for f in files:
             f.commit()
+    except TimeRangeError as e:                      # a time the --pcap file cannot hold
+        raise UsageError(f"{raw_file + ': ' if raw_file else ''}--pcap {pcap_file}: {e}") from None
     finally:
         if src is not None:
             src.close()

@@ -27,11 +27,25 @@ Formats (what each keeps):
           What is unverified is listed in docs/commands.md ("pdrive convert").
 
 Errors in a file are one line naming the file and the octet offset (CaptureFileError, exit 2).
+
+Time ranges. A Packet's time is a date from 1970-01-01 to 9999-12-31 UTC (0 <= t < T_MAX, the
+range of Python's dates: what every part of pdrive can show and the .ptd header can hold); a reader
+refuses a packet outside it ("FILE: octet M: packet N: time ... is out of range"), and a pcap
+fraction that is not below one second. What each format holds beyond that is its writer's check
+(dp.capture.TimeRangeError, "packet N: time T s is out of range for FORMAT (...)"):
+  pcap    u32 seconds + microseconds: 0 <= t < 2^32 s (2106-02-07 06:28:16 UTC)
+  pcapng  u64 ticks of if_tsresol (pdrive writes 10^-6): 0 <= t < 2^64 us (never binding under T_MAX);
+          read: ticks x if_tsresol + if_tsoffset (a signed count of seconds)
+  ptd     the header's date (u16 year; pdrive reads and writes 1970..9999) and u64 bit times since
+          the first packet's whole second: a packet before that second cannot be held
+A pcapng block shorter than its type's fixed part is "FILE: not a valid pcapng: ... block at offset
+N is too short".
 """
 
 from __future__ import annotations
 
 import calendar
+import math
 import os
 import stat
 import struct
@@ -40,7 +54,8 @@ from pathlib import Path
 from typing import IO, Any, BinaryIO, Callable, Iterator, NamedTuple
 
 from profidrive_cli import UsageError
-from profidrive_cli.dp.capture import LINKTYPE_PROFIBUS_DL, LINKTYPE_USER0, Capture, PcapWriter, merge_errors
+from profidrive_cli.dp.capture import (LINKTYPE_PROFIBUS_DL, LINKTYPE_USER0, T_MAX, Capture, PcapWriter,
+                                       TimeRangeError, check_time, merge_errors)
 from profidrive_cli.fdl import frames as F
 
 FORMATS = ("raw", "pcap", "pcapng", "ptd")
@@ -50,6 +65,9 @@ LINKTYPES = (LINKTYPE_USER0, LINKTYPE_PROFIBUS_DL)
 _CAPTURE: Any = Capture
 CHUNK = 1 << 20                 # raw files are read in chunks of this many octets
 MAX_PACKET = 1 << 18            # a pcap / pcapng record longer than this is a broken file
+#: pcapng block types -> (name, the fixed part's octets: header, fixed fields and trailer)
+PCAPNG_FIXED = {0x0A0D0D0A: ("section header", 28), 1: ("interface description", 20), 3: ("simple packet", 16),
+                6: ("enhanced packet", 32)}
 
 
 class Packet(NamedTuple):
@@ -93,9 +111,12 @@ class CaptureReader:
         self.baud: int | None = None
         self._fh = _open_input(self.path)
         self._pos = 0
+        self._at = 0                    # where the packet being read starts (octet)
+        #: packets read so far (the next one is number packets + 1)
+        self.packets = 0
         try:
-            self._it: Iterator[Packet] = {"raw": self._raw, "pcap": self._pcap, "pcapng": self._pcapng,
-                                          "ptd": self._ptd}[fmt]()
+            self._it: Iterator[Packet] = self._checked({"raw": self._raw, "pcap": self._pcap,
+                                                        "pcapng": self._pcapng, "ptd": self._ptd}[fmt]())
             self._first = next(self._it, None)
         except BaseException:
             self._fh.close()
@@ -116,6 +137,15 @@ class CaptureReader:
     # -- helpers ----------------------------------------------------------------------------------
     def _fail(self, offset: int | None, message: str) -> CaptureFileError:
         return CaptureFileError(self.path, offset, message)
+
+    def _checked(self, packets: Iterator[Packet]) -> Iterator[Packet]:
+        """The format's packets, counted, each time inside 0 <= t < T_MAX (the module doc)."""
+        for p in packets:
+            self.packets += 1
+            if not 0.0 <= p.t < T_MAX:
+                raise self._fail(self._at, f"packet {self.packets}: time {p.t:.6f} s is out of range "
+                                           f"(a date from 1970-01-01 to 9999-12-31 UTC)")
+            yield p
 
     def _read(self, n: int, what: str, eof_ok: bool = False) -> bytes:
         """Exactly n octets (b"" at a clean end of file when eof_ok)."""
@@ -154,15 +184,19 @@ class CaptureReader:
         if magic not in forms:
             raise self._fail(0, "not a pcap file (magic " + magic.hex(" ") + ")")
         order, unit = forms[magic]
+        per_second = round(1 / unit)
         self.linktype = struct.unpack(order + "I", head[20:24])[0] & 0x0FFFFFFF
         self._check_linktype(self.linktype, 20)
         rec = struct.Struct(order + "IIII")
         while True:
-            at = self._pos
+            at = self._at = self._pos
             h = self._read(16, "a packet header", eof_ok=True)
             if not h:
                 return
             sec, frac, incl, _ = rec.unpack(h)
+            if frac >= per_second:
+                raise self._fail(at + 4, f"packet {self.packets + 1}: time fraction {frac} is out of range "
+                                         f"(0 to {per_second - 1} {'us' if per_second == 10**6 else 'ns'})")
             if incl > MAX_PACKET:
                 raise self._fail(at, f"packet of {incl} octets: not a PROFIBUS telegram (broken file?)")
             yield Packet(sec + frac * unit, self._read(incl, "a packet"))
@@ -175,10 +209,10 @@ class CaptureReader:
     # -- pcapng -----------------------------------------------------------------------------------
     def _pcapng(self) -> Iterator[Packet]:
         order = "<"
-        ifaces: list[tuple[int, float]] = []        # (link type, seconds per timestamp unit)
+        ifaces: list[tuple[int, float, int]] = []   # (link type, seconds per tick, if_tsoffset)
         first = True
         while True:
-            at = self._pos
+            at = self._at = self._pos
             h = self._read(8, "a block header", eof_ok=True)
             if not h:
                 if first:
@@ -196,22 +230,21 @@ class CaptureReader:
                     order = ">"
                 else:
                     raise self._fail(at + 8, "bad pcapng byte-order magic " + bom.hex(" "))
-                total = struct.unpack(order + "I", h[4:])[0]
-                if total < 28 or total % 4:
-                    raise self._fail(at + 4, f"bad section header length {total}")
+                total = self._block_length(btype, struct.unpack(order + "I", h[4:])[0], at)
                 self._read(total - 12, "the section header")
                 ifaces = []
                 continue
-            total = struct.unpack(order + "I", h[4:])[0]
-            if total < 12 or total % 4 or total > MAX_PACKET + 64:
-                raise self._fail(at + 4, f"bad block length {total}")
+            total = self._block_length(btype, struct.unpack(order + "I", h[4:])[0], at)
             body = self._read(total - 8, "a block")[:-4]
             if btype == 1:                                          # Interface Description
                 lt = struct.unpack(order + "H", body[:2])[0]
                 self._check_linktype(lt, at + 8)
                 if self.linktype is None:
                     self.linktype = lt
-                ifaces.append((lt, _tsresol(_options(body[8:], order).get(9, []))))
+                opts = _options(body[8:], order)
+                offset = opts.get(14, [b""])[0]                     # if_tsoffset: s64 seconds
+                ifaces.append((lt, _tsresol(opts.get(9, [])),
+                               struct.unpack(order + "q", offset)[0] if len(offset) == 8 else 0))
             elif btype == 6:                                        # Enhanced Packet
                 iface, hi, lo, caplen, _ = struct.unpack(order + "IIIII", body[:20])
                 if iface >= len(ifaces):
@@ -225,13 +258,24 @@ class CaptureReader:
                     d = struct.unpack(order + "I", opts[2][0])[0] & 3
                     direction = {1: "in", 2: "out"}.get(d)
                 comment = opts[1][0].decode("utf-8", "replace") if 1 in opts else None
-                yield Packet(((hi << 32) | lo) * ifaces[iface][1], data, direction, comment)
+                _, resol, offset = ifaces[iface]
+                yield Packet(((hi << 32) | lo) * resol + offset, data, direction, comment)
             elif btype == 3:                                        # Simple Packet: no time
                 if not ifaces:
                     raise self._fail(at + 8, "simple packet before any interface description")
                 (orig,) = struct.unpack(order + "I", body[:4])
                 yield Packet(0.0, body[4:4 + orig])
             # other blocks (name resolution, statistics, custom ...) say nothing about telegrams
+
+    def _block_length(self, btype: int, total: int, at: int) -> int:
+        """A block's total length, checked: at least its type's fixed part, a multiple of 4, bounded."""
+        name, need = PCAPNG_FIXED.get(btype, ("a", 12))
+        if total < need:
+            raise CaptureFileError(self.path, None, f"not a valid pcapng: {name} block at offset {at} is "
+                                   f"too short ({total} octets; its fixed part is {need})")
+        if total % 4 or total > MAX_PACKET + 64:
+            raise self._fail(at + 4, f"bad block length {total}")
+        return total
 
     # -- ProfiTrace .ptd --------------------------------------------------------------------------
     def _ptd(self) -> Iterator[Packet]:
@@ -242,7 +286,7 @@ class CaptureReader:
         self.baud = baud = PTD_BAUDS[code]
         start = _ptd_date(head, 65)
         while True:
-            at = self._pos
+            at = self._at = self._pos
             h = self._read(4, "a record", eof_ok=True)
             if not h:
                 return
@@ -398,7 +442,10 @@ class PcapngWriter(CaptureWriter):
         fh.write(_block(1, struct.pack("<HHI", linktype, 0, 0) + idb_opts))
 
     def write(self, p: Packet) -> None:
+        check_time(self.count + 1, p.t, 0.0, PCAPNG_T_MAX, "pcapng", PCAPNG_RANGE)
         ts = int(round(p.t * 1e6))
+        if ts >= 1 << 64:                       # rounded up past the last tick
+            raise TimeRangeError(self.count + 1, p.t, "pcapng", PCAPNG_RANGE)
         n = len(p.raw)
         opts = b""
         if p.direction in ("in", "out"):
@@ -426,6 +473,14 @@ def _block(btype: int, body: bytes) -> bytes:
     return struct.pack("<II", btype, total) + body + struct.pack("<I", total)
 
 
+#: pcapng as pdrive writes it: u64 microseconds since 1970
+PCAPNG_T_MAX = 2.0 ** 64 / 1e6
+PCAPNG_RANGE = "0 to 2^64 us: u64 microseconds since 1970"
+#: ProfiTrace: the header's date (pdrive: the years 1970..9999), u64 bit times since the first packet
+PTD_RANGE = ("a date from 1970-01-01 to 9999-12-31 UTC, not before the first packet's whole second "
+             "{start:.0f}: u64 bit times from there")
+
+
 class PtdWriter(CaptureWriter):
     """ProfiTrace .ptd: the header (written again with the counts at close: the file must be
     seekable), one record per packet with its time in bit times since the first packet's whole
@@ -441,6 +496,7 @@ class PtdWriter(CaptureWriter):
         self.note = note
         self.start: float | None = None
         self.last = 0.0
+        self.packets = 0                        # packets given (count: records written)
         self.size = PTD_HEADER
         fh.write(self._header())
 
@@ -463,10 +519,17 @@ class PtdWriter(CaptureWriter):
         return bytes(h)
 
     def write(self, p: Packet) -> None:
-        if self.start is None:
-            self.start = float(int(p.t))
+        self.packets += 1
+        start = self.start
+        if start is None:
+            start = float(math.floor(p.t)) if math.isfinite(p.t) else 0.0
+        limits = PTD_RANGE.format(start=start)
+        check_time(self.packets, p.t, max(start, 0.0), T_MAX, "ptd", limits)
+        bits = int(round((p.t - start) * self.baud))
+        if bits >= 1 << 64:                     # never under T_MAX (2^64 bit times at 12M: 48 700 years)
+            raise TimeRangeError(self.packets, p.t, "ptd", limits)
+        self.start = start
         self.last = p.t
-        bits = max(0, int(round((p.t - self.start) * self.baud)))
         for fields in _ptd_fields(p.raw):
             self.count += 1
             self._record(bits, fields)

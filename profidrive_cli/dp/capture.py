@@ -12,9 +12,11 @@ telegrams, so `pdrive sniff` formats most of them once (benchmarks/bench_sniff.p
 
 from __future__ import annotations
 
+import math
 import struct
 from dataclasses import dataclass
 
+from profidrive_cli import UsageError
 from profidrive_cli.dp.services import service_name
 from profidrive_cli.fdl import frames as F
 
@@ -203,23 +205,53 @@ class ErrorMerger:
         return [c]
 
 
+#: the end of the times a capture packet may carry: 10000-01-01 00:00:00 UTC (Python's dates end with
+#: 9999; dp/capfile.py's readers refuse a packet time outside 0 <= t < T_MAX)
+T_MAX = 253_402_300_800.0
+#: pcap: u32 seconds since 1970 (and a fraction below one second)
+PCAP_T_MAX = float(1 << 32)
+PCAP_RANGE = "0 to 4294967295.999999 s: 1970-01-01 to 2106-02-07 06:28:15 UTC, u32 seconds"
+
+
+class TimeRangeError(UsageError):
+    """A packet time a capture format cannot hold: "packet N: time T s is out of range for FORMAT
+    (its range)"; the caller adds the file (exit 2). `index` is the writer's packet number (from 1)."""
+
+    def __init__(self, index: int, t: float, fmt: str, limits: str):
+        self.index, self.t, self.format = index, t, fmt
+        super().__init__(f"packet {index}: time {t:.6f} s is out of range for {fmt} ({limits})")
+
+
+def check_time(index: int, t: float, lo: float, hi: float, fmt: str, limits: str) -> None:
+    """TimeRangeError unless lo <= t < hi (a NaN or an infinity is never inside)."""
+    if not (math.isfinite(t) and lo <= t < hi):
+        raise TimeRangeError(index, t, fmt, limits)
+
+
 class PcapWriter:
     """A classic pcap file (microsecond timestamps, little-endian). `start` is the wall-clock time
     (time.time()) of t = 0: write(t, raw) stamps start + t, so a capture timed on a monotonic clock
-    from its start carries real dates. The header is written at once (also to a fifo: extcap)."""
+    from its start carries real dates. The header is written at once (also to a fifo: extcap).
+    A time pcap cannot hold (before 1970, from 2106-02-07 06:28:16 UTC on: u32 seconds) is a
+    TimeRangeError, and nothing of that packet is written."""
 
     def __init__(self, fh, linktype: int = LINKTYPE_USER0, start: float = 0.0):
         self.fh = fh
         self.start = start
         self.linktype = linktype
+        self.count = 0
         fh.write(struct.pack("<IHHiIII", 0xA1B2C3D4, 2, 4, 0, 0, 65535, linktype))
 
     def write(self, t: float, raw: bytes) -> None:
+        self.count += 1
         t = self.start + t
+        check_time(self.count, t, 0.0, PCAP_T_MAX, "pcap", PCAP_RANGE)
         sec = int(t)
         usec = int(round((t - sec) * 1e6))
         if usec >= 1000000:
             sec, usec = sec + 1, usec - 1000000
+        if sec >= 1 << 32:                       # rounded up into the second after the last
+            raise TimeRangeError(self.count, t, "pcap", PCAP_RANGE)
         self.fh.write(struct.pack("<IIII", sec, usec, len(raw), len(raw)) + raw)
 
 
@@ -238,4 +270,4 @@ def read_pcap(data: bytes) -> tuple[int, list[tuple[float, bytes]]]:
 
 
 __all__ = ["Capture", "Captured", "ErrorMerger", "HOLD", "PcapWriter", "read_pcap", "merge_errors", "frame_fields",
-           "LINKTYPE_USER0", "LINKTYPE_PROFIBUS_DL", "LINKTYPES"]
+           "LINKTYPE_USER0", "LINKTYPE_PROFIBUS_DL", "LINKTYPES", "TimeRangeError", "check_time", "T_MAX"]

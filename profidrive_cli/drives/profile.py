@@ -245,7 +245,10 @@ def _param(path, node) -> ParamDef:
     return p
 
 
-def load_profile_file(path: str | Path) -> Profile:
+def load_profile_file(path: str | Path, *, check_sections: bool = True) -> Profile:
+    """A profile file, validated (file:line). check_sections=False leaves the family's keys, monitors
+    and trip records to be read when they are used (a test of one section reader's own messages);
+    every command loads with the check (_check_sections)."""
     path = Path(path)
     doc = load_yaml(path)
     if not isinstance(doc, LineDict):
@@ -304,7 +307,7 @@ def load_profile_file(path: str | Path) -> Profile:
     unknown = unknown_family(family)
     if unknown is not None:
         raise _err(path, doc, "family", unknown)
-    return Profile(
+    profile = Profile(
         name=name,
         family=family,
         title=_get(path, doc, "title", str),
@@ -325,6 +328,51 @@ def load_profile_file(path: str | Path) -> Profile:
         groups=groups,
         bus_settings=_bus_settings(path, doc, params),
     )
+    if check_sections:
+        _check_sections(profile)
+    return profile
+
+
+def _check_sections(profile: Profile) -> None:
+    """The sections read when they are used, read now (a profile that loads is one every command can
+    use): the family's own keys (drives/registry.py `config`: ppo_select, comm_loss, ... -- every
+    code they name checked against the parameters), `monitors:` and `trip_records:`, whose codes
+    must be parameters of the profile (or CODE[i] of one, a raw PNU<n>[i], a monitors.words name,
+    or an address form the family's codec declares in ADDRESS_FORMS). DataFileError, file:line."""
+    from profidrive_cli.drives.monitors import monitor_config, trip_record_config
+    from profidrive_cli.drives.registry import find, resolve
+    fam = find(profile.family)
+    if fam is not None:
+        resolve(fam.config)(profile)
+    mon = monitor_config(profile)
+    trips = trip_record_config(profile)
+    forms = getattr(resolve(fam.codec), "ADDRESS_FORMS", None) if fam is not None else None
+    raw = profile.raw
+    named: list[tuple[object, object, str, str]] = []        # (node, key, where, code)
+    node = raw.get("monitors")
+    if isinstance(node, LineDict) and isinstance(node.get("default"), list):
+        named += [(node, "default", "monitors.default", c) for c in mon.default]
+    node = raw.get("trip_records")
+    if trips is not None and isinstance(node, LineDict):
+        named += [(node, "latest", "trip_records.latest", trips.latest)] if trips.latest else []
+        for rec, spec in zip(node.get("records") or [], trips.records):
+            named += [(rec, "fields", "trip_records.records.fields", c) for c in spec.fields]
+    for where_node, key_, where, code in named:
+        if not _addressable(profile, code, mon.words, forms):
+            raise _err(profile.path, where_node, key_, f"{where}: {code} is not a parameter of this profile")
+
+
+_RAW_PNU = re.compile(r"PNU\s*(0x[0-9a-f]+|\d+)(\s*\[\s*(0x[0-9a-f]+|\d+)\s*\])?", re.I)
+
+
+def _addressable(profile: Profile, code: str, words: object, forms: object) -> bool:
+    """A code a monitor or trip record may name: see _check_sections."""
+    base = code.split("[", 1)[0].strip()
+    if profile.param(code) is not None or profile.param(base) is not None or code in words:  # type: ignore[operator]
+        return True
+    if any(c.lower() == code.lower() for c in profile.parameters) or _RAW_PNU.fullmatch(code):
+        return True
+    return isinstance(forms, re.Pattern) and forms.fullmatch(code) is not None
 
 
 def _bus_settings(path, doc, params: dict[str, ParamDef]) -> dict[str, float | int]:

@@ -13,14 +13,16 @@ mapping read the same way; `section(...)` reads one from its parent (missing / n
 
 Kinds: "number" (int or float, not bool; read as float), "int", "bool", "text", "mapping" (a dict,
 kept as is), "list", "texts" (a list of texts), "ints" (a list of integers, each in lo..hi), "section"
-(nested declaration), "any" (not checked: kept as it is); `choices=` narrows a value to a set,
+(nested declaration), "code" (a parameter code, text or number, kept as text: checked against the
+profile's parameters when read() is given `codes`, with `code_msg`), "any" (not checked: kept as it
+is); `choices=` narrows a value to a set,
 `nonblank=True` a text to a non-blank one. Messages are str.format templates with {key}, {value}
 (use {value!r}), {lo}, {hi}, {gt}, {choices}, {where} (the section's dotted path). What the
 declaration cannot say key by key, one key against another, is a rule of the declaration: a class attribute
 `RULES: ClassVar[tuple[tuple[Callable[[Decl], bool], str], ...]]`, each (holds, message) checked on the
 read instance and reported on the section's line. What needs the rest of the profile (a key naming
 one of its parameters) stays in the family's builder, which reads the instance and, for its own
-complaints, `key_line(instance, name)`.
+complaints, `key_line(instance, name)`; a key that names one parameter is of kind "code".
 
 May touch: datafile. Reads the profile's nodes only.
 """
@@ -36,10 +38,13 @@ from profidrive_cli.datafile import DataFileError, LineDict
 
 T = TypeVar("T")
 
-KINDS = ("number", "int", "bool", "text", "mapping", "list", "texts", "ints", "section", "any")
+KINDS = ("number", "int", "bool", "text", "mapping", "list", "texts", "ints", "section", "code", "any")
 _KIND_TEXT = {"number": "a number", "int": "an integer", "bool": "true or false", "text": "a text",
               "mapping": "a mapping", "list": "a list", "texts": "a list of texts",
-              "ints": "a list of integers", "section": "a mapping", "any": "a value"}
+              "ints": "a list of integers", "section": "a mapping", "code": "a parameter code",
+              "any": "a value"}
+#: read(codes=...): does the profile have this parameter code
+Codes = Callable[[str], bool]
 
 
 @dataclass(frozen=True)
@@ -61,6 +66,7 @@ class Key:
     name: str | None = None                 # the YAML key, when it differs from the field's name
     section: type | None = None             # kind "section": the nested declaration
     unknown_msg: str | None = None          # kind "section": complain about keys it does not declare
+    code_msg: str = "{where_dot}{key}: {value} is not a parameter of this profile"   # kind "code"
 
 
 def key(kind: str, default: Any = None, **rules: Any) -> Any:
@@ -108,7 +114,7 @@ def node_line(instance: object) -> int | None:
 
 def section(decl: type[T], path: str | Path, parent: LineDict, name: str, *, required: bool = False,
             missing_msg: str = "missing section '{key}'", mapping_msg: str = "'{key}' must be a mapping",
-            unknown_msg: str | None = None, where: str | None = None) -> T:
+            unknown_msg: str | None = None, where: str | None = None, codes: Codes | None = None) -> T:
     """The section `name` of `parent` read as `decl`; an absent one is the declaration's defaults
     (or, if required, `missing_msg` at the parent's line; `name: null` counts as absent then). A
     section inside another declaration is a field of kind "section" instead."""
@@ -119,13 +125,14 @@ def section(decl: type[T], path: str | Path, parent: LineDict, name: str, *, req
     node = parent[name]
     if not isinstance(node, dict):
         raise DataFileError(path, line_of(parent, name), mapping_msg.format(key=name))
-    return read(decl, path, line_dict(node), where=where or name, unknown_msg=unknown_msg)
+    return read(decl, path, line_dict(node), where=where or name, unknown_msg=unknown_msg, codes=codes)
 
 
 def read(decl: type[T], path: str | Path, node: LineDict, *, where: str = "",
-         unknown_msg: str | None = None) -> T:
+         unknown_msg: str | None = None, codes: Codes | None = None) -> T:
     """`node` read as the frozen dataclass `decl`: every declared key checked, file:line on a fault.
-    unknown_msg (with {key}, {known}, {where}): keys `decl` does not declare are refused."""
+    unknown_msg (with {key}, {known}, {where}): keys `decl` does not declare are refused. codes: the
+    profile's parameter codes (a predicate), for the keys of kind "code" (unchecked without it)."""
     fields = [f for f in dataclasses.fields(decl) if "key" in f.metadata]   # type: ignore[arg-type]
     if unknown_msg is not None:
         known = {f.metadata["key"].name or f.name for f in fields}
@@ -133,7 +140,7 @@ def read(decl: type[T], path: str | Path, node: LineDict, *, where: str = "",
             if k not in known:
                 raise DataFileError(path, line_of(node, k), unknown_msg.format(
                     key=k, known=", ".join(sorted(known)), where=where))
-    values = {f.name: _value(path, node, f.metadata["key"], f.metadata["key"].name or f.name, where)
+    values = {f.name: _value(path, node, f.metadata["key"], f.metadata["key"].name or f.name, where, codes)
               for f in fields if (f.metadata["key"].name or f.name) in node or f.metadata["key"].required}
     out = decl(**values)
     object.__setattr__(out, "_node", node)          # for key_line(): the builder's own complaints
@@ -143,9 +150,10 @@ def read(decl: type[T], path: str | Path, node: LineDict, *, where: str = "",
     return out
 
 
-def _value(path: str | Path, node: LineDict, spec: Key, name: str, where: str) -> Any:
+def _value(path: str | Path, node: LineDict, spec: Key, name: str, where: str, codes: Codes | None) -> Any:
     words = {"key": name, "kind_text": _KIND_TEXT[spec.kind], "lo": spec.lo, "hi": spec.hi,
-             "gt": spec.gt, "where": where, "choices": ", ".join(str(c) for c in spec.choices)}
+             "gt": spec.gt, "where": where, "where_dot": f"{where}." if where else "",
+             "choices": ", ".join(str(c) for c in spec.choices)}
     if name not in node or (node[name] is None and spec.null_is_missing):
         raise DataFileError(path, node.line or None, spec.missing_msg.format(**words))
     v = node[name]
@@ -157,11 +165,15 @@ def _value(path: str | Path, node: LineDict, spec: Key, name: str, where: str) -
             raise DataFileError(path, line, spec.type_msg.format(value=v, **words))
         assert spec.section is not None
         return read(spec.section, path, line_dict(v, line or 0), where=f"{where}.{name}" if where else name,
-                    unknown_msg=spec.unknown_msg)
+                    unknown_msg=spec.unknown_msg, codes=codes)
     if not _is_kind(v, spec.kind):
         raise DataFileError(path, line, spec.type_msg.format(value=v, **words))
     if not _allowed(v, spec):
         raise DataFileError(path, line, (spec.range_msg or spec.type_msg).format(value=v, **words))
+    if spec.kind == "code":
+        if codes is not None and not codes(str(v)):
+            raise DataFileError(path, line, spec.code_msg.format(value=v, **words))
+        return str(v)
     return float(v) if spec.kind == "number" else v
 
 
@@ -197,6 +209,7 @@ _IS_KIND: dict[str, Callable[[object], bool]] = {
     "list": lambda v: isinstance(v, list),
     "texts": lambda v: isinstance(v, list) and all(isinstance(x, str) for x in v),
     "ints": lambda v: isinstance(v, list) and all(_integer(x) for x in v),
+    "code": lambda v: isinstance(v, str) or _integer(v),
     "any": lambda v: True,
 }
 

@@ -97,7 +97,7 @@ class FunctionCodeKeys:
 
 @dataclass(frozen=True)
 class PpoSelectKeys:
-    param: Any = key("any", "o30")
+    param: str = key("code", "o30")
 
 
 @dataclass(frozen=True)
@@ -139,7 +139,7 @@ def _build_config(profile) -> FujiConfig:
     doc = profile.raw if isinstance(profile.raw, LineDict) else LineDict()
     path = profile.path or "<profile>"
     _check_params(path, profile)
-    k = read(FujiKeys, path, doc)
+    k = read(FujiKeys, path, doc, codes=lambda c: profile.param(c) is not None)
     c = FujiConfig(pnu_base=k.function_codes.pnu_base, ppo_param=str(k.ppo_select.param),
                    busy_error=k.parameter_channel.busy_error, storage=k.storage, zero_data=k.zero_data,
                    history_pnu=k.fault_history.pnu, history_elements=k.fault_history.elements)

@@ -35,14 +35,18 @@ from profidrive_cli.drives.toyo.config import ToyoConfig, ToyoLayout, input_word
 from profidrive_cli.drives.toyo.describe import decode_area, decode_diag, describe_pkw, describe_word
 from profidrive_cli.drives.toyo.drive import ToyoDrive, make_drive
 from profidrive_cli.drives.toyo.formats import FORMATTERS
-from profidrive_cli.drives.toyo.params import (_toyo_frame, effective_scale, param_at, param_value,
+from profidrive_cli.drives.toyo.params import (_TB_RE, _toyo_frame, effective_scale, param_at, param_value,
                                                value_from_wire, wire_from_value)
 
 # _toyo_frame (a PKW frame with the card's 16-bit IND) stays reachable here for the tests that build raw frames
+
+#: codes a profile may name besides its parameters (drives/profile.py checks monitors and trip records
+#: with it): the traceback points TBcc[r,p]
+ADDRESS_FORMS = _TB_RE
 
 __all__ = ["ToyoConfig", "ToyoDrive", "make_drive", "decode_area", "param_value", "profidrive_config",
            "toyo_config", "speed_word", "speed_percent", "history_word", "decode_history_word",
            "traceback_ind", "decode_traceback_ind", "decode_diag", "protection", "describe_pkw",
            "ctw_command", "run_cmd_fields", "value_from_wire", "wire_from_value", "ToyoLayout",
            "RECORDING_TEXT", "bit_names", "describe_word", "effective_scale", "param_at", "_toyo_frame",
-           "FORMATTERS", "input_words"]
+           "FORMATTERS", "input_words", "ADDRESS_FORMS"]
