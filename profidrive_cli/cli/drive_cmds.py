@@ -272,9 +272,17 @@ def param_dump(opts, address, output, changed, profile_name, ppo, fmt, watchdog_
                                                             f"'unreadable')" if n_bad else ""))
 
 
-def _groups_arg(values: tuple[str, ...]) -> tuple[str, ...]:
-    """--only a --only b,c -> (a, b, c)."""
-    return tuple(g.strip() for v in values for g in v.split(",") if g.strip())
+def _groups_arg(values: tuple[str, ...], option: str) -> tuple[str, ...]:
+    """--only a --only b,c -> (a, b, c). An empty name (--only '', --only ',', --only 'a,,b') is bad
+    input: read as "no scope" it would restore every group, the opposite of what was asked."""
+    out = []
+    for v in values:
+        names = [g.strip() for g in v.split(",")]
+        if not all(names):
+            raise UsageError(f"{option} {v!r}: an empty group name; give group names such as "
+                             f"{option} motor,communication")
+        out += names
+    return tuple(out)
 
 
 def _file_args(args, what: str):
@@ -305,7 +313,7 @@ def param_restore(opts, args, dry_run, yes, allow_dangerous, only, exclude, prof
     is read back. Ends with a table. --only / --exclude limit it to parameter groups."""
     address, path = _file_args(args, "restore")
     doc = DriveSession.load_dump(path)
-    only_g, excl_g = _groups_arg(only), _groups_arg(exclude)
+    only_g, excl_g = _groups_arg(only, "--only"), _groups_arg(exclude, "--exclude")
     confirm = None if dry_run else _confirmer(opts, yes, f"restore parameters from {path}")
 
     def before(session):
