@@ -158,11 +158,38 @@ class BusOptions:
     def baud_rate(self, default: int = 19200) -> int:
         if self.found_baud is not None:
             return self.found_baud
-        rate = default if self.baud in (None, "", "auto") else baud_from(self.baud,
-                                                                         self.source_of("baud"))
+        given = self.baud not in (None, "", "auto") and not self.source_of("baud").startswith("default")
+        rate = baud_from(self.baud, self.source_of("baud")) if given else None
+        sim = self._sim_baud()
+        if sim is not None and rate is not None and rate != sim:
+            from profidrive_cli import BusError
+            from profidrive_cli.fdl.timing import BAUD_NAMES
+            raise BusError(f"the simulated bus {self.port} runs at {BAUD_NAMES[sim]} (baud=), the master at "
+                           f"{BAUD_NAMES[rate]} ({self.source_of('baud')}): its stations would hear only "
+                           f"garbage; give --baud {BAUD_NAMES[sim]}, or a sim:// URL without baud=")
+        if rate is None and sim is not None:
+            rate = sim          # pdrive built that bus from the URL: the master follows its baud=
+        elif rate is None:
+            rate = default if self.baud in (None, "", "auto") else baud_from(self.baud,
+                                                                             self.source_of("baud"))
         self._announce("port", "baud", "master_address")
         self._notices_now()
         return rate
+
+    def silence_hint(self, link, baud_auto: bool = False) -> str:
+        """What to try when nobody answered, fitting the cause: a forced --echo the port never gave
+        back (every write waited for an echo that did not come; link.echo_errors) is that; else,
+        with baud_auto, --baud auto (the rate may be wrong) unless it was already given."""
+        if self.echo is True and getattr(link, "echo_errors", 0):
+            return " (--echo was forced but the port does not echo: drop --echo, or give --no-echo)"
+        return " (try --baud auto)" if baud_auto and self.baud != "auto" else ""
+
+    def _sim_baud(self) -> int | None:
+        """The rate of a sim://?baud=R port (its stations answer only at R), else None."""
+        if not is_sim_port(self.port):
+            return None
+        from profidrive_cli.sim.plant import url_baud
+        return url_baud(str(self.port))
 
     def open_link(self, baud: int | None = None):
         """The link at `baud`, the given rate, or (--baud auto) the rate heard on the line; with
