@@ -189,3 +189,23 @@ def test_doctor_lists_the_ports_under_headers(run, monkeypatch):
     head = next(ln for ln in r.stdout.splitlines() if "port" in ln and "description" in ln)
     assert "hardware id" in head
     assert "/dev/ttyUSB0" in r.stdout and "FT232R USB UART" in r.stdout
+
+
+# -- faults: empty history slots are no rows --------------------------------------------------------
+
+@pytest.mark.parametrize("address", [3, 6])
+def test_faults_of_a_fresh_drive_list_no_empty_slots(run, address):
+    # Fuji: PNU947 "0000" / M16-M19 "0" is "no alarm" (OPC-G1-PDP manual Table 10.1, seed 001 L2797);
+    # Moeller: PNU 947 "0 No fault" (DE6-NET-DP manual Table 8, seed 003 L735): a slot holding no alarm
+    r = run("faults", str(address), "--json", "--port", "sim://")
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["history"] == []
+    r = run("faults", str(address), "--port", "sim://")
+    assert "fault history: empty" in r.stdout and "no alarm" not in r.stdout and "no fault │" not in r.stdout
+
+
+def test_faults_keep_the_slot_positions(run):
+    # one alarm, in the newest slot: its position stays "latest" (the slot it was read from)
+    r = run("faults", "3", "--json", "--port", "sim://?stations=3:fuji-g1&trip=3:OC1")
+    hist = json.loads(r.stdout)["history"]
+    assert [(h["position"], h["codes"]) for h in hist] == [("latest", ["OC1"])]

@@ -130,6 +130,13 @@ class FaultRecord:
     codes: list[str]     # alarm names; several when one number maps to several alarms
     meanings: list[str]
 
+    @property
+    def empty(self) -> bool:
+        """A slot that holds no alarm: code 0 and no alarm named (Fuji PNU947 0000 / M16-M19 0 "no
+        alarm", Moeller PNU 947 0 "No fault"); Drive.fault_history leaves such slots out, each
+        record keeping its own position."""
+        return self.raw == 0 and not self.codes
+
 
 class Drive(ABC):
     """Common operations. Every blocking call keeps exchanging cyclic data while it waits."""
