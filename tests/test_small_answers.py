@@ -209,3 +209,32 @@ def test_faults_keep_the_slot_positions(run):
     r = run("faults", "3", "--json", "--port", "sim://?stations=3:fuji-g1&trip=3:OC1")
     hist = json.loads(r.stdout)["history"]
     assert [(h["position"], h["codes"]) for h in hist] == [("latest", ["OC1"])]
+
+
+# -- the Toyo dump says why it holds no settings ----------------------------------------------------
+
+def test_toyo_dump_says_why_it_has_no_settings(run, tmp_path):
+    # PBUS66-Z manual note 1 (seed 002 L4201): "ＶＦ６６インバータの設定データ番号については別途お問い合わせください"
+    # (ask Toyo for the VF66 setting-data numbers): no setting has an address, the dump holds none
+    from profidrive_cli.drives.profile import load_profile
+    prof = load_profile("toyo")
+    settings = [c for c, p in prof.parameters.items() if p.writable and p.access != "wo"]
+    assert settings and all(prof.param(c).pnu is None for c in settings)
+    f = tmp_path / "d5.yaml"
+    r = run("param", "dump", "5", "-o", f, "--port", "sim://")
+    assert r.exit_code == 0, r.output
+    assert "no VF66 setting-data numbers" in " ".join(r.stderr.split())
+    text = f.read_text()
+    header = [ln for ln in text.splitlines() if ln.startswith("#")]
+    assert any(f"{len(settings)} setting(s) of the profile are not in this dump" in ln
+               and "ask Toyo" in ln for ln in header)
+    import yaml
+    doc = yaml.safe_load(text)
+    assert doc["count"] == 0 and doc["not_dumped"]["codes"] == settings
+    r = run("param", "dump", "5", "-o", f, "--json", "--port", "sim://")
+    d = json.loads(r.stdout)
+    assert d["settings"] == 0 and d["not_dumped"]["count"] == len(settings)
+    assert "ask Toyo" in d["not_dumped"]["why"]
+    # a drive whose every setting has an address says nothing of the kind
+    r = run("param", "dump", "3", "-o", tmp_path / "d3.yaml", "--json", "--port", "sim://")
+    assert "not_dumped" not in json.loads(r.stdout)

@@ -21,7 +21,7 @@ from profidrive_cli.cli.drive_opts import _terminations, drive_options
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.session import (DriveSession, RestoreInterrupted, RestoreRefused,
                                     SessionTerminated)
-from profidrive_cli.session.dumpfile import write_dump
+from profidrive_cli.session.dumpfile import not_dumped_words, write_dump
 from profidrive_cli.session.restore import scope_problem
 from profidrive_cli.outfile import check_output_path
 
@@ -256,13 +256,19 @@ def param_dump(opts, address, output, changed, profile_name, ppo, fmt, watchdog_
         doc = _with_progress(opts, "reading parameters", lambda prog: s.params.dump(prog, changed=changed))
     write_dump(doc, output)                     # through outfile.OutputFile
     n_set, n_ro, n_bad = len(doc["parameters"]), len(doc["readonly"]), len(doc.get("unreadable", {}))
+    absent = doc.get("not_dumped")
     if opts.json:
         d = {"file": output, "station": s.address, "profile": s.profile.name, "settings": n_set,
              "readonly": n_ro, "unreadable": n_bad}
         if changed:
             d["no_factory_default"] = len(doc["no_factory_default"])
+        if absent:
+            d["not_dumped"] = {"count": len(absent["codes"]), "why": absent["why"]}
         emit_json(d)
-    elif changed:
+        return
+    if absent:
+        err.print(escape(f"note: {not_dumped_words(absent)}"))
+    if changed:
         out.print(f"station {s.address} ({escape(s.profile.name)}): {n_set} setting(s) changed from the "
                   f"factory default written to {escape(output)}; {len(doc['no_factory_default'])} with "
                   f"no factory default known (listed under 'no_factory_default')")

@@ -319,6 +319,11 @@ class Drive(ABC):
         """The profile entry `p` has an address this family reads parameters by (PNU here)."""
         return p.pnu is not None
 
+    def not_dumpable_why(self) -> str:
+        """Why the profile's settings without such an address (dumpable() False) are not in a dump:
+        one line for the dump file's header, stderr and --json (session/backup.py)."""
+        return "the profile gives them no address this family reads parameters by"
+
     def on_device(self, p: Any) -> bool:
         """False for entries the connected device variant does not have, and for fault memories
         (`pdrive faults` reads those)."""
