@@ -180,7 +180,8 @@ class BusOptions:
         """What to try when nobody answered, fitting the cause: a forced --echo the port never gave
         back (every write waited for an echo that did not come; link.echo_errors) is that; else,
         with baud_auto, --baud auto (the rate may be wrong) unless it was already given."""
-        if self.echo is True and getattr(link, "echo_errors", 0):
+        errors = getattr(link, "echo_errors", None)
+        if self.echo is True and errors:
             return " (--echo was forced but the port does not echo: drop --echo, or give --no-echo)"
         return " (try --baud auto)" if baud_auto and self.baud != "auto" else ""
 

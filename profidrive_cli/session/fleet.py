@@ -309,8 +309,8 @@ def compare(sets: list[StationSettings], golden: Golden | None = None) -> FleetD
     if golden is not None and golden.profile is None:
         for name, prof in profiles.items():
             if prof is not None:
-                held = [str(s.station) for s in sets if s.profile == name]
-                golden.check_codes(prof, f"station(s) {', '.join(held)} ({prof.name})")
+                who = ", ".join(str(s.station) for s in sets if s.profile == name)
+                golden.check_codes(prof, f"station(s) {who} ({prof.name})")
     if golden is not None:
         gname = golden.profile
         for s in sets:
