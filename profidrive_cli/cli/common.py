@@ -158,20 +158,18 @@ class BusOptions:
     def baud_rate(self, default: int = 19200) -> int:
         if self.found_baud is not None:
             return self.found_baud
-        given = self.baud not in (None, "", "auto") and not self.source_of("baud").startswith("default")
-        rate = baud_from(self.baud, self.source_of("baud")) if given else None
+        src = self.source_of("baud")
+        named = self.baud not in (None, "", "auto")
+        rate = baud_from(self.baud, src) if named else default
         sim = self._sim_baud()
-        if sim is not None and rate is not None and rate != sim:
-            from profidrive_cli import BusError
-            from profidrive_cli.fdl.timing import BAUD_NAMES
-            raise BusError(f"the simulated bus {self.port} runs at {BAUD_NAMES[sim]} (baud=), the master at "
-                           f"{BAUD_NAMES[rate]} ({self.source_of('baud')}): its stations would hear only "
-                           f"garbage; give --baud {BAUD_NAMES[sim]}, or a sim:// URL without baud=")
-        if rate is None and sim is not None:
+        if sim is not None and sim != rate:
+            if named and not src.startswith("default"):
+                from profidrive_cli import BusError
+                from profidrive_cli.fdl.timing import BAUD_NAMES
+                raise BusError(f"the simulated bus {self.port} runs at {BAUD_NAMES[sim]} (baud=), the master "
+                               f"at {BAUD_NAMES[rate]} ({src}): its stations would hear only garbage; give "
+                               f"--baud {BAUD_NAMES[sim]}, or a sim:// URL without baud=")
             rate = sim          # pdrive built that bus from the URL: the master follows its baud=
-        elif rate is None:
-            rate = default if self.baud in (None, "", "auto") else baud_from(self.baud,
-                                                                             self.source_of("baud"))
         self._announce("port", "baud", "master_address")
         self._notices_now()
         return rate
