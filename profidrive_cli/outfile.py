@@ -59,6 +59,19 @@ def _is_special(p: Path) -> bool:
     return not stat.S_ISREG(st.st_mode) and not stat.S_ISDIR(st.st_mode)
 
 
+def format_by_suffix(path: str | os.PathLike, formats: dict[str, str], what: str,
+                     named: str) -> str:
+    """The format a report option writes, by the file name's extension (`formats`: suffix -> format,
+    lower case); OutputPathError (exit 2, before anything is written) for another extension, so a
+    page never lands in a file whose name says something else. named: the extensions in words
+    (".svg or .png")."""
+    fmt = formats.get(Path(str(path)).suffix.lower())
+    if fmt is None:
+        raise OutputPathError(f"{what} {path}: the file name must end in {named} (the format follows "
+                              f"the extension)")
+    return fmt
+
+
 def check_output_path(path: str | os.PathLike, what: str = "output file") -> Path:
     """Check, before anything is sent or written, that `path` can be written; creates nothing.
 

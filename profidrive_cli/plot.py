@@ -49,12 +49,8 @@ def require_matplotlib(what: str = "--plot") -> None:
 
 
 def plot_format(path, what: str = "--plot") -> str:
-    from pathlib import Path
-    suf = Path(str(path)).suffix.lower()
-    if suf not in FORMATS:
-        raise UsageError(f"{what} {path}: the file name must end in .svg or .png (the format follows the "
-                         f"extension)")
-    return FORMATS[suf]
+    from profidrive_cli.outfile import format_by_suffix
+    return format_by_suffix(path, FORMATS, what, ".svg or .png")
 
 
 @dataclass

@@ -220,11 +220,11 @@ def test_fault_history_candidates(prof):
     drive.reset_fault()
     model.seed_faults(["1"])
     hist = drive.fault_history()
-    assert [(r.position, r.codes) for r in hist] == [
-        ("current", []), ("last", ["OC"]), ("2nd last", ["OV", "OV2"]), ("3rd last", [])]
-    assert hist[2].meanings == ["Overvoltage", "Overvoltage while braking"]
+    # the slots reading 0 (no fault: nothing acknowledged pending, 3rd last never used) left out
+    assert [(r.position, r.codes) for r in hist] == [("last", ["OC"]), ("2nd last", ["OV", "OV2"])]
+    assert hist[1].meanings == ["Overvoltage", "Overvoltage while braking"]
     model.seed_faults([42])
-    assert drive.fault_history()[1].codes == ["?42"]
+    assert drive.fault_history()[0].codes == ["?42"]
 
 
 def test_trip_while_running_coasts(prof):

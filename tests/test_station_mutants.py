@@ -272,17 +272,35 @@ def test_positive_sd2_answer_to_set_prm_is_accepted():
     assert [(e.kind, e.text, e.data) for e in ev] == [("state", "sending configuration", CFG)]
 
 
-@pytest.mark.parametrize("service_index", [0, 1])
-def test_negative_answer_to_set_prm_or_chk_cfg_starts_over(service_index):
+@pytest.mark.parametrize("service_index, status", [(0, F.RS), (0, F.UE), (1, F.UE)])
+def test_negative_answer_to_set_prm_or_chk_cfg_starts_over(service_index, status):
     sm = machine()
     sm.on_outcome(sm.next_request(0.0), diag(*NOT_PARAMETERISED), 0.0)
     if service_index:
         sm.on_outcome(sm.next_request(0.0), sc(), 0.0)
     req = sm.next_request(0.0)
-    fc = F.response_fc(F.RS)
-    sm.on_outcome(req, reply(b"", status=F.RS), 0.0)
+    fc = F.response_fc(status)
+    sm.on_outcome(req, reply(b"", status=status), 0.0)
     assert sm.state == START
     assert sm.last_error == f"{req.service} refused: {F.describe_fc(fc)}"
+
+
+def test_chk_cfg_refused_rs_reads_the_diagnosis_which_names_the_parameter_fault():
+    # a slave that found its acknowledged Set_Prm faulty stays in Wait_Prm, where the Chk_Cfg SAP is
+    # not enabled: RS (reference §3.3; the learned ET200S, tests/test_small_answers.py). The next
+    # request is a Slave_Diag, and its Prm_Fault (st1 bit 6) is the reason given, not the Chk_Cfg.
+    sm = machine()
+    sm.on_outcome(sm.next_request(0.0), diag(*NOT_PARAMETERISED), 0.0)
+    sm.on_outcome(sm.next_request(0.0), sc(), 0.0)                        # Set_Prm acknowledged
+    req = sm.next_request(0.0)
+    assert req.service == "Chk_Cfg"
+    sm.on_outcome(req, reply(b"", status=F.RS), 0.0)
+    assert sm.state == CHECK
+    assert sm.last_error == f"Chk_Cfg refused: {F.describe_fc(F.response_fc(F.RS))}"
+    assert sm.next_request(0.0).service == "Slave_Diag"
+    sm.on_outcome(sm.next_request(0.0), diag(0x42, 0x05, 0xFF), 0.0)     # Prm_Fault + Not_Ready, Prm_Req
+    assert sm.state == PRM_FAULT
+    assert sm.last_error == "parameter fault: the station refuses Set_Prm"
 
 
 # -- no answer ------------------------------------------------------------------------------------

@@ -11,23 +11,18 @@ import json
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from profidrive_cli import UsageError
 from profidrive_cli.checklist.runner import ERROR, FAILED, NOT_RUN, PASSED, SKIPPED, RunResult, StationResult
 from profidrive_cli.checklist.report_words import hexv as _hexv
 from profidrive_cli.checklist.report_words import snap as _snap
 from profidrive_cli.checklist.report_words import val as _val
-from profidrive_cli.outfile import write_text_atomic
+from profidrive_cli.outfile import format_by_suffix, write_text_atomic
 
 FORMATS = {".json": "json", ".md": "markdown", ".markdown": "markdown", ".xml": "junit", ".html": "html",
            ".htm": "html"}
 
 
 def report_format(path: str | Path) -> str:
-    suf = Path(path).suffix.lower()
-    if suf not in FORMATS:
-        raise UsageError(f"--report {path}: the file name must end in .json, .md, .xml or .html (the format "
-                         f"follows the extension)")
-    return FORMATS[suf]
+    return format_by_suffix(path, FORMATS, "--report", ".json, .md, .xml or .html")
 
 
 def render(result: RunResult, fmt: str) -> str:

@@ -8,6 +8,7 @@ import sys
 import threading
 
 import click
+from rich.markup import escape
 from rich.table import Table
 
 from profidrive_cli import BusError, UsageError
@@ -23,9 +24,17 @@ from profidrive_cli.link.base import LinkLost
 def _diag_json(d) -> dict | None:
     if d is None:
         return None
+    blocks = _ext_blocks(d)
     return {"st1": d.st1, "st2": d.st2, "st3": d.st3, "master": None if d.master == 0xFF else d.master,
             **ident_fields(d.ident), "flags": d.flags(), "ready": d.ready,
-            "ext": d.ext.hex(" "), "ext_blocks": [b.describe() for b in d.ext_blocks()]}
+            "ext": d.ext.hex(" "), "ext_blocks": [b["text"] for b in blocks], "ext_decoded": blocks}
+
+
+def _ext_blocks(d) -> list[dict]:
+    """The extended diagnosis block by block, decoded as sniff decodes it (dp/du_decode.ext_block:
+    the DP-V1 status / alarm blocks included)."""
+    from profidrive_cli.dp.du_decode import ext_block
+    return [ext_block(b) for b in d.ext_blocks()]
 
 
 def _cfg_json(cfg: bytes | None) -> list | None:
@@ -108,7 +117,7 @@ def scan_cmd(opts, first, last, gsd_dir, watch, interval, duration, quick, save_
                   f"(check termination, shielding, the baud rate and other masters)")
     if not result:
         out.print(f"no station answered on {opts.port} at {BAUD_NAMES[used_baud]}"
-                  + ("" if opts.baud == "auto" else " (try --baud auto)"))
+                  + opts.silence_hint(master.link, baud_auto=True))
         raise SystemExit(1)
     t = Table(title=f"{opts.port} at {BAUD_NAMES[used_baud]}: {len(result)} station(s)")
     from profidrive_cli.fdl.master import format_counters
@@ -164,7 +173,8 @@ def diag_cmd(opts, address, gsd_dir):
     try:
         d = master.slave_diag(address, wake=True)
         if d is None:
-            raise BusError(f"station {address} does not answer on {opts.port}")
+            raise BusError(f"station {address} does not answer on {opts.port}"
+                           f"{opts.silence_hint(master.link)}")
         cfg = master.get_cfg(address)
         counters = master.fdl.counters_for(address).as_dict()
     finally:
@@ -181,8 +191,8 @@ def diag_cmd(opts, address, gsd_dir):
     out.print(f"raw: {d.encode().hex(' ')}")
     for line in d.explain():
         out.print(f"  {line}")
-    for b in d.ext_blocks():
-        out.print(f"  ext: {b.describe()}")
+    for b in _ext_blocks(d):
+        out.print(f"  ext: {escape(b['text'])}")
     for line in unit:
         out.print(f"  unit diag: {line}")
     if cfg is not None:
@@ -214,7 +224,8 @@ def _unit_diag_texts(d, gsd_dir) -> list[str]:
 @click.option("--watchdog", "wd_ms", default=500, show_default=True, type=click.IntRange(10, 650000),
               help="Slave watchdog in ms (always armed).")
 @click.option("--gsd", "gsd_file", default=None, help="GSD file or ident for --module.")
-@click.option("--module", "modules", multiple=True, help="GSD module name (with --gsd).")
+@click.option("--module", "modules", multiple=True, metavar="NAME",
+              help="GSD module name (with --gsd); repeat it for each slot, in slot order.")
 @click.option("--yes", is_flag=True, help="Do not ask before sending --out on a real port.")
 @click.option("--stop-timeout", "stop_timeout", default=30.0, show_default=True,
               type=click.FloatRange(0.0, 3600.0), metavar="S",
@@ -270,12 +281,16 @@ def io_cmd(opts, address, cfg_hex, ident_hex, prm_hex, out_hex, count, wd_ms, gs
                 if ident is None:
                     d = master.slave_diag(address, wake=True)
                     if d is None:
-                        raise BusError(f"station {address} does not answer on {opts.port}")
+                        raise BusError(f"station {address} does not answer on {opts.port}"
+                                       f"{opts.silence_hint(master.link)}")
                     ident = d.ident
                 sc = SlaveConfig(ident=ident, cfg=cfg, user_prm=prm, wd_ms=wd_ms)
                 master.add_station(address, sc)
                 by_module = _gsd_layout(ident, gsd_file, cfg, prm)   # GSD work before the watchdog runs
-                master.bring_up(address, timeout=3.0, fail_fast=True)
+                try:
+                    master.bring_up(address, timeout=3.0, fail_fast=True)
+                except BusError as e:
+                    raise BusError(f"{e}{_prm_hint(master.stations[address].state, prm)}") from None
                 lay = _by_module(master, address, by_module, prm, opts.json)
                 for i in range(count):
                     inputs = master.exchange(address, outputs)
@@ -300,6 +315,16 @@ def io_cmd(opts, address, cfg_hex, ident_hex, prm_hex, out_hex, count, wd_ms, gs
         master.link.close()
     if ender.problem:
         raise BusError(f"station {address}: {ender.problem}")
+
+
+def _prm_hint(state: str, prm: bytes) -> str:
+    """After a start-up that ended in a parameter fault: what io sent, and how to give the station's
+    own user parameters (a slave checks their length and content; reference §3.1)."""
+    from profidrive_cli.dp.station import PRM_FAULT
+    if state != PRM_FAULT:
+        return ""
+    return (f"; the Set_Prm carried {len(prm)} octet(s) of user parameters: give the station's with "
+            f"--prm HEX (or --gsd FILE --module NAME)")
 
 
 def _gsd_layout(ident: int, gsd_file, cfg: bytes, prm: bytes):

@@ -158,11 +158,37 @@ class BusOptions:
     def baud_rate(self, default: int = 19200) -> int:
         if self.found_baud is not None:
             return self.found_baud
-        rate = default if self.baud in (None, "", "auto") else baud_from(self.baud,
-                                                                         self.source_of("baud"))
+        src = self.source_of("baud")
+        named = self.baud not in (None, "", "auto")
+        rate = baud_from(self.baud, src) if named else default
+        sim = self._sim_baud()
+        if sim is not None and sim != rate:
+            if named and not src.startswith("default"):
+                from profidrive_cli import BusError
+                from profidrive_cli.fdl.timing import BAUD_NAMES
+                raise BusError(f"the simulated bus {self.port} runs at {BAUD_NAMES[sim]} (baud=), the master "
+                               f"at {BAUD_NAMES[rate]} ({src}): its stations would hear only garbage; give "
+                               f"--baud {BAUD_NAMES[sim]}, or a sim:// URL without baud=")
+            rate = sim          # pdrive built that bus from the URL: the master follows its baud=
         self._announce("port", "baud", "master_address")
         self._notices_now()
         return rate
+
+    def silence_hint(self, link, baud_auto: bool = False) -> str:
+        """What to try when nobody answered, fitting the cause: a forced --echo the port never gave
+        back (every write waited for an echo that did not come; link.echo_errors) is that; else,
+        with baud_auto, --baud auto (the rate may be wrong) unless it was already given."""
+        errors = getattr(link, "echo_errors", None)
+        if self.echo is True and errors:
+            return " (--echo was forced but the port does not echo: drop --echo, or give --no-echo)"
+        return " (try --baud auto)" if baud_auto and self.baud != "auto" else ""
+
+    def _sim_baud(self) -> int | None:
+        """The rate of a sim://?baud=R port (its stations answer only at R), else None."""
+        if not is_sim_port(self.port):
+            return None
+        from profidrive_cli.sim.plant import url_baud
+        return url_baud(str(self.port))
 
     def open_link(self, baud: int | None = None):
         """The link at `baud`, the given rate, or (--baud auto) the rate heard on the line; with

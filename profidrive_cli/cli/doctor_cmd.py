@@ -5,6 +5,7 @@ dp/doctor.py and dp/doctor_timing.py; this is rendering only."""
 from __future__ import annotations
 
 import click
+from rich.markup import escape
 from rich.table import Table
 
 from profidrive_cli import UsageError
@@ -70,8 +71,12 @@ def _list_ports(opts) -> None:
     if not rows:
         out.print("no serial ports found; pdrive doctor --port PORT checks one (sim:// is the simulator)")
         return
+    t = Table(title=f"serial ports: {len(rows)}", show_header=True)
+    for col in ("port", "description", "hardware id"):
+        t.add_column(col, overflow="fold")
     for r in rows:
-        out.print(f"{r['port']}  {r['description']}  {r['hwid']}", markup=False)
+        t.add_row(escape(r["port"]), escape(r["description"]), escape(r["hwid"]))
+    out.print(t)
     out.print("pdrive doctor --port PORT checks one of them")
 
 

@@ -22,7 +22,7 @@ from profidrive_cli.drives.base import DriveError
 from profidrive_cli.session import (DriveSession, RestoreInterrupted, RestoreRefused,
                                     SessionTerminated)
 from profidrive_cli.session.backup import CARD_MANUAL, default_source, nothing_compared
-from profidrive_cli.session.dumpfile import write_dump
+from profidrive_cli.session.dumpfile import not_dumped_words, write_dump
 from profidrive_cli.session.restore import scope_problem
 from profidrive_cli.outfile import check_output_path
 
@@ -257,13 +257,19 @@ def param_dump(opts, address, output, changed, profile_name, ppo, fmt, watchdog_
         doc = _with_progress(opts, "reading parameters", lambda prog: s.params.dump(prog, changed=changed))
     write_dump(doc, output)                     # through outfile.OutputFile
     n_set, n_ro, n_bad = len(doc["parameters"]), len(doc["readonly"]), len(doc.get("unreadable", {}))
+    absent = doc.get("not_dumped")
     if opts.json:
         d = {"file": output, "station": s.address, "profile": s.profile.name, "settings": n_set,
              "readonly": n_ro, "unreadable": n_bad}
         if changed:
             d["no_factory_default"] = len(doc["no_factory_default"])
+        if absent:
+            d["not_dumped"] = {"count": len(absent["codes"]), "why": absent["why"]}
         emit_json(d)
-    elif changed:
+        return
+    if absent:
+        err.print(escape(f"note: {not_dumped_words(absent)}"))
+    if changed:
         out.print(f"station {s.address} ({escape(s.profile.name)}): {n_set} setting(s) changed from the "
                   f"factory default written to {escape(output)}; {len(doc['no_factory_default'])} with "
                   f"no factory default known (listed under 'no_factory_default')")
@@ -273,9 +279,17 @@ def param_dump(opts, address, output, changed, profile_name, ppo, fmt, watchdog_
                                                             f"'unreadable')" if n_bad else ""))
 
 
-def _groups_arg(values: tuple[str, ...]) -> tuple[str, ...]:
-    """--only a --only b,c -> (a, b, c)."""
-    return tuple(g.strip() for v in values for g in v.split(",") if g.strip())
+def _groups_arg(values: tuple[str, ...], option: str) -> tuple[str, ...]:
+    """--only a --only b,c -> (a, b, c). An empty name (--only '', --only ',', --only 'a,,b') is bad
+    input: read as "no scope" it would restore every group, the opposite of what was asked."""
+    out = []
+    for v in values:
+        names = [g.strip() for g in v.split(",")]
+        if not all(names):
+            raise UsageError(f"{option} {v!r}: an empty group name; give group names such as "
+                             f"{option} motor,communication")
+        out += names
+    return tuple(out)
 
 
 def _file_args(args, what: str):
@@ -306,7 +320,7 @@ def param_restore(opts, args, dry_run, yes, allow_dangerous, only, exclude, prof
     is read back. Ends with a table. --only / --exclude limit it to parameter groups."""
     address, path = _file_args(args, "restore")
     doc = DriveSession.load_dump(path)
-    only_g, excl_g = _groups_arg(only), _groups_arg(exclude)
+    only_g, excl_g = _groups_arg(only, "--only"), _groups_arg(exclude, "--exclude")
     confirm = None if dry_run else _confirmer(opts, yes, f"restore parameters from {path}")
 
     def before(session):

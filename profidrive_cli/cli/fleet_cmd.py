@@ -19,9 +19,12 @@ from profidrive_cli.cli.common import bus_options, emit_json, err, out
 from profidrive_cli.cli.drive_opts import _terminations, drive_options
 from profidrive_cli.cli.render_drive import value_text
 from profidrive_cli.drives.base import DriveError
-from profidrive_cli.outfile import check_output_path, write_text_atomic
+from profidrive_cli.outfile import check_output_path, format_by_suffix, write_text_atomic
 from profidrive_cli.session import fleet
 from profidrive_cli.session.dumpfile import write_dump
+
+#: --html writes a page: the file name says so (as checklist run --report, run --plot)
+HTML_SUFFIXES = {".html": "html", ".htm": "html"}
 
 
 @click.group("fleet")
@@ -103,6 +106,7 @@ def fleet_diff(opts, source, golden, html_path, show_all, profile_name, ppo, fmt
     without a golden file, when a value is odd."""
     gold = fleet.load_golden(golden) if golden else None
     if html_path:
+        format_by_suffix(html_path, HTML_SUFFIXES, "--html", ".html or .htm")
         check_output_path(html_path, "--html")
     if Path(source).is_dir():
         sets = fleet.load_dir(source)

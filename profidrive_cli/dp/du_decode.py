@@ -47,8 +47,10 @@ def _set_prm(du: bytes) -> dict[str, Any]:
     return d
 
 
-def _block(b: S.ExtDiagBlock) -> dict[str, Any]:
-    """One extended-diagnosis block; its text is the Wireshark dissector's (profibus.diag.block)."""
+def ext_block(b: S.ExtDiagBlock) -> dict[str, Any]:
+    """One extended-diagnosis block in words: sniff's `decoded.blocks[]` and `pdrive diag`'s ext lines
+    (one decoder for both); its text is the Wireshark dissector's (profibus.diag.block), a DP-V1
+    alarm / status block decoded by dp/dpv1.py."""
     d: dict[str, Any] = {"kind": b.kind, "raw": b.raw.hex(" ")}
     text = b.describe()
     if b.kind == "identifier":
@@ -67,7 +69,7 @@ def _block(b: S.ExtDiagBlock) -> dict[str, Any]:
 
 def _slave_diag(du: bytes) -> dict[str, Any]:
     g = S.SlaveDiag.decode(du)
-    blocks = [_block(b) for b in g.ext_blocks()]
+    blocks = [ext_block(b) for b in g.ext_blocks()]
     master = None if g.master == 0xFF else g.master
     text = [f"Slave_Diag: st1 0x{g.st1:02X} st2 0x{g.st2:02X} st3 0x{g.st3:02X} "
             f"[{', '.join(g.flags()) or 'no flag'}]; master "
@@ -107,4 +109,4 @@ def decode_du(service: str, du: bytes) -> dict[str, Any] | None:
     return None
 
 
-__all__ = ["decode_du"]
+__all__ = ["decode_du", "ext_block"]

@@ -186,6 +186,14 @@ class StationMachine:
                 else:
                     self._checks = 0
                     self._goto(CHECK, ev)
+            elif req.service == "Chk_Cfg" and (f.fc & 0x0F) == F.RS:
+                # a slave that found a fault in the Set_Prm it acknowledged stays in Wait_Prm, where
+                # the Chk_Cfg SAP is not enabled (RS): the diagnosis says why (Prm_Fault or
+                # Cfg_Fault, reference §3.3), so read it (CHECK) rather than blame the Chk_Cfg
+                self.last_error = f"Chk_Cfg refused: {F.describe_fc(f.fc)}"
+                ev.append(Event("error", self.last_error))
+                self._checks = 0
+                self._goto(CHECK, ev)
             else:
                 self.restart(ev, f"{req.service} refused: {F.describe_fc(f.fc)}", now)
             return ev

@@ -130,6 +130,13 @@ class FaultRecord:
     codes: list[str]     # alarm names; several when one number maps to several alarms
     meanings: list[str]
 
+    @property
+    def empty(self) -> bool:
+        """A slot that holds no alarm: code 0 and no alarm named (Fuji PNU947 0000 / M16-M19 0 "no
+        alarm", Moeller PNU 947 0 "No fault"); Drive.fault_history leaves such slots out, each
+        record keeping its own position."""
+        return self.raw == 0 and not self.codes
+
 
 class Drive(ABC):
     """Common operations. Every blocking call keeps exchanging cyclic data while it waits."""
@@ -311,6 +318,11 @@ class Drive(ABC):
     def dumpable(self, p: Any) -> bool:
         """The profile entry `p` has an address this family reads parameters by (PNU here)."""
         return p.pnu is not None
+
+    def not_dumpable_why(self) -> str:
+        """Why the profile's settings without such an address (dumpable() False) are not in a dump:
+        one line for the dump file's header, stderr and --json (session/backup.py)."""
+        return "the profile gives them no address this family reads parameters by"
 
     def on_device(self, p: Any) -> bool:
         """False for entries the connected device variant does not have, and for fault memories

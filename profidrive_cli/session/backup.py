@@ -65,6 +65,16 @@ def dump_plan(params: ParamView) -> list[tuple[str, Any, str]]:
     return out
 
 
+def not_dumped(params: ParamView) -> dict[str, Any] | None:
+    """The profile's settings no dump can hold, because the family has no address to read them by
+    (Drive.dumpable), and why (Drive.not_dumpable_why): {"why": ..., "codes": [...]}, or None. A dump
+    without them says so, so that `count: 0` is not read as a drive without settings."""
+    d = params.need_drive()
+    codes = [p.code for p in params.profile.parameters.values()
+             if p.writable and p.access != "wo" and not d.dumpable(p)]
+    return {"why": d.not_dumpable_why(), "codes": codes} if codes else None
+
+
 def factory_default(p: Any) -> float | int | None:
     """The factory setting the profile records for a ParamDef (`default:`, from the manual), or None."""
     d = getattr(p, "default", None)
@@ -198,6 +208,9 @@ def dump(params: ParamView, progress: Callable[[int, int, str], None] | None = N
         doc["no_factory_default"] = unknown
     if failed:
         doc["unreadable"] = failed
+    absent = not_dumped(params)
+    if absent:
+        doc["not_dumped"] = absent
     doc["end"] = DUMP_END              # the last line: a file cut anywhere lacks it
     return doc
 

@@ -19,10 +19,19 @@ def dump_text(doc: dict[str, Any], output: str | Path) -> str:
     is `end: pdrive_dump`."""
     import yaml
     st = doc.get("station") or {}
+    absent = doc.get("not_dumped")
     return (f"# pdrive parameter dump of station {st.get('address')} ({st.get('title', '')})\n"
             f"# restore with: pdrive param restore {st.get('address')} {output}\n"
             f"# the last line must be 'end: pdrive_dump': a file without it is incomplete\n"
+            + (f"# {not_dumped_words(absent)}\n" if absent else "")
             + str(yaml.safe_dump(doc, sort_keys=False, allow_unicode=True, width=120)))
+
+
+def not_dumped_words(absent: dict[str, Any]) -> str:
+    """The line for the settings a dump cannot hold (backup.not_dumped): the header's and stderr's."""
+    n = len(absent["codes"])
+    return (f"{n} setting(s) of the profile are not in this dump (listed under 'not_dumped'): "
+            f"{absent['why']}")
 
 
 def write_dump(doc: dict[str, Any], output: str | Path) -> None:

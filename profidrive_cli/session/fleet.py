@@ -38,6 +38,7 @@ from profidrive_cli.datafile import DataFileError, LineDict, load_yaml
 from profidrive_cli.drives.profile import Profile, load_profile
 from profidrive_cli.session.backup import same_value
 from profidrive_cli.session.dumpfile import load_dump
+from profidrive_cli.session.params import suggest_codes
 
 __all__ = ["Cell", "FleetDiff", "Golden", "StationSettings", "Violation", "compare", "dump_file_name",
            "from_dump", "load_dir", "load_golden", "parse_stations"]
@@ -129,6 +130,25 @@ class Golden:
     values: dict[str, Number]
     exceptions: dict[int, frozenset[str]]
     profile: str | None = None
+    #: code -> its line in the file (for the file:line of a code no profile of the line knows)
+    lines: dict[str, int] = field(default_factory=dict)
+
+    def check_codes(self, profile: Profile, held: str) -> None:
+        """DataFileError (file:line) for a code `profile` has no setting of (unknown, or a read-only
+        value, which a dump keeps outside `parameters:`): held to it, every station would show it
+        'missing' and the line fail for a typing slip in the file. held: which stations, in words."""
+        for code in self.values:
+            p = profile.param(code.split("[", 1)[0])
+            if p is not None and p.writable:
+                continue
+            if p is None:
+                near = suggest_codes(profile, code)
+                why = (f"{code}: {profile.name} has no parameter {code}"
+                       + (f" (closest: {', '.join(near)})" if near else ""))
+            else:
+                why = f"{code} ({p.name}) is a read-only value of {profile.name}, not a setting"
+            raise DataFileError(self.path, self.lines.get(code), f"{why}; the golden file holds {held} "
+                                f"to it (fix the code, or name the profile with 'profile:')")
 
 
 def _num(path: str, node: LineDict, key: Any) -> Number:
@@ -175,7 +195,10 @@ def load_golden(path: str | Path) -> Golden:
             if not isinstance(codes, list) or not all(isinstance(c, str) for c in codes):
                 raise DataFileError(p, line, f"except: station {st}: give a list of codes")
             exc[st] = frozenset(codes)
-    return Golden(p, values, exc, profile)
+    gold = Golden(p, values, exc, profile, {str(c): params.line_of(c) for c in params})
+    if profile is not None:
+        gold.check_codes(load_profile(profile), f"every {profile} station")
+    return gold
 
 
 @dataclass
@@ -283,6 +306,11 @@ def compare(sets: list[StationSettings], golden: Golden | None = None) -> FleetD
             else:
                 split.append((name, c))
     violations: list[Violation] = []
+    if golden is not None and golden.profile is None:
+        for name, prof in profiles.items():
+            if prof is not None:
+                who = ", ".join(str(s.station) for s in sets if s.profile == name)
+                golden.check_codes(prof, f"station(s) {who} ({prof.name})")
     if golden is not None:
         gname = golden.profile
         for s in sets:

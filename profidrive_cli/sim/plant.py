@@ -211,6 +211,21 @@ def _preset_options(profile, values: dict[str, float]) -> dict:
     return {"defaults": dict(values)}
 
 
+def url_baud(url: str) -> int | None:
+    """The rate a sim:// URL locks its stations to (`baud=`), or None (no baud=: they answer at any
+    rate; not a sim URL). UsageError for a baud= that is no DP rate, as build_bus says it."""
+    parts = urlsplit(url)
+    if parts.scheme != "sim":
+        return None
+    q = parse_qs(parts.query, keep_blank_values=True)
+    if "baud" not in q:
+        return None
+    try:
+        return parse_baud(q["baud"][-1])
+    except ValueError as e:
+        raise UsageError(f"sim URL: {e}") from None
+
+
 def build_bus(url: str, now: float = 0.0, default_baud: int = 19200) -> SimBus:
     parts = urlsplit(url)
     if parts.scheme != "sim":
@@ -225,7 +240,7 @@ def build_bus(url: str, now: float = 0.0, default_baud: int = 19200) -> SimBus:
                          f"(known: {', '.join(sorted(KNOWN_KEYS | set(faults_mod.URL_KEYS)))})")
     stations = _station_list(q["stations"][-1]) if "stations" in q else list(DEFAULT_PLANT)
     try:
-        baud = parse_baud(q["baud"][-1]) if "baud" in q else parse_baud(default_baud)
+        baud = url_baud(url) or parse_baud(default_baud)
     except ValueError as e:
         raise UsageError(f"sim URL: {e}") from None
     timing = q.get("timing", ["instant"])[-1]

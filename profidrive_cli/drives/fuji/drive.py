@@ -156,7 +156,9 @@ class FujiDrive(pd.ProfidriveDrive):
             if not res.ok:
                 raise ParamError(f"fault memory PNU {self.fc.history_pnu}[{ind}]: {res.describe_error()}",
                                  res.error)
-            out.append(self.fault_record(pos, res.value & 0xFFFF, self._mcode(mparam)))
+            rec = self.fault_record(pos, res.value & 0xFFFF, self._mcode(mparam))
+            if not rec.empty:            # 0000 / 0: no alarm in the slot (OPC-G1-PDP Table 10.1)
+                out.append(rec)
         return out
 
     def current_alarm(self) -> FaultRecord | None:

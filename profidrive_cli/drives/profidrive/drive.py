@@ -328,7 +328,9 @@ class ProfidriveDrive(Drive):
             if not res.ok:
                 raise ParamError(f"fault memory PNU {frame.pnu}[{frame.subindex}]: "
                                  f"{res.describe_error()}", res.error)
-            out.append(self.alarm_record(pos, res.value & 0xFFFF))
+            rec = self.alarm_record(pos, res.value & 0xFFFF)
+            if not rec.empty:            # 0 = no fault in the slot (Moeller manual Table 8, L735)
+                out.append(rec)
         return out
 
     def max_frequency(self) -> float:

@@ -101,6 +101,12 @@ class ToyoDrive(pd.ProfidriveDrive):
     def on_device(self, p: Any) -> bool:
         return p.pnu != self.tc.history_pnu      # the fault history: `pdrive faults` reads it
 
+    def not_dumpable_why(self) -> str:
+        # PBUS66-Z manual, note 1 (seed 002 L4201): "ＶＦ６６インバータの設定データ番号については別途お問い
+        # 合わせください" -- the VF66 setting-data numbers are to be asked of Toyo
+        return ("the PBUS66-Z manual publishes no VF66 setting-data numbers (note 1: ask Toyo for them); "
+                "add `pnu:` to the profile to reach a setting")
+
     # -- addressing ----------------------------------------------------------------------------
     def resolve_param(self, code: str) -> pd.ParamRef:
         """See params.resolve_param: monitor names, console codes, TBnn[r,p], FH[n], PNU<n>[ind]."""
