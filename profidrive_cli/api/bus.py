@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import atexit
 import contextlib
+import logging
 import threading
 import os
 import warnings
@@ -37,12 +38,24 @@ if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.dp.poller import Master
     from profidrive_cli.link.base import Link
     from profidrive_cli.session import DriveSession
-    from profidrive_cli.session.group import Group
+    from profidrive_cli.session.group import Group, KeepMiss
+    from profidrive_cli.session.safestop import StopReport
     from profidrive_cli.session.signals import SignalGuard
 
-#: at most this long between two Data_Exchanges of an opened station (well inside the 500 ms
-#: default DP watchdog; a shorter watchdog shortens it to a fifth of the watchdog)
+#: at most this long between two Data_Exchanges of an opened station (a shorter watchdog shortens
+#: it to a fifth of the watchdog)
 KEEP_S = 0.1
+
+#: the DP watchdog of a drive opened with Bus.drive() unless given (ms). Between calls the station
+#: is held by the keep-alive thread alone, and that thread must get the CPU and the GIL to send: with
+#: 1 / 2 / 4 / 8 busy Python threads beside it in the process, the largest gap between two of its
+#: Data_Exchanges was 0.17 / 0.22 / 0.39 / 0.59 s (sim://, 8 s each, a 2-core machine at load 2-7;
+#: 0.15 s at rest: KEEP_S plus half of it, the thread's wake-up period) -- past a 500 ms watchdog
+#: with 8, and the drive tripped. 1000 ms holds a thread late by 0.85 s; a program with more busy
+#: threads (or processes at a higher priority) needs a longer one, or its work in another process.
+API_WATCHDOG_MS = 1000.0
+
+log = logging.getLogger("profidrive_cli.api")
 
 #: every bus not yet closed (weakly: a closed or dropped bus is not kept alive by this)
 _open_buses: "weakref.WeakSet[Bus]" = weakref.WeakSet()
@@ -182,6 +195,9 @@ class Bus:
         self._signals.install()
         self._stop_keepalive = threading.Event()
         self._keepalive_error: BaseException | None = None
+        #: stations the keep-alive did not hold: address -> what happened (raised by the drive's
+        #: next call, once)
+        self._missed: dict[int, str] = {}
         self._thread: threading.Thread | None = None
         _open_buses.add(self)
         _masters[id(self)] = master
@@ -341,23 +357,27 @@ class Bus:
             self._message(f"stop: {e}; each drive not yet stopped gets its own stop")
         for s in running:
             r = s.stop_report
-            if r is None or not r.stopped:
-                continue
-            if r.how == "normal":
-                s.say(f"station {s.address}: stopped (normal stop, {r.seconds:.1f} s)"
-                       if not (r.status and r.status.fault) else f"station {s.address}: {r.message}")
-            else:
-                s.say(f"station {s.address}: stopped by a coast stop after {r.seconds:.1f} s "
-                       f"({r.message})")
+            if r is not None and r.stopped:
+                s.say(stop_words(_address(s), r))
         return None
 
+    def _hurry(self) -> None:
+        """A second signal arrived (the asyncio face's aio.run: its signal handler, not this bus's):
+        the stop under way, or the next, coasts at once, as on a second signal here."""
+        self._signals.hurry = True
+
     # -- checks ------------------------------------------------------------------------------------
-    def _check_open(self) -> None:
+    def _check_open(self, station: int | None = None) -> None:
+        """The bus is open and its keep-alive thread did not fail; `station` (a drive's call): the
+        keep-alive held it since the drive's last call (DriveError once, when it did not)."""
         if self._closed:
             raise UsageError(f"the bus on {self.port} is closed")
         if self._keepalive_error is not None:
             e, self._keepalive_error = self._keepalive_error, None
             raise BusError(f"{self.port}: keeping the drives in data exchange failed: {e}") from e
+        if station is not None and station in self._missed:
+            from profidrive_cli.drives.base import DriveError
+            raise DriveError(self._missed.pop(station))
 
     def _check_write(self, what: str) -> None:
         if self.is_simulator or self.allow_real_port_writes:
@@ -392,14 +412,15 @@ class Bus:
 
     def drive(self, station: int | None = None, *, profile: str | None = None,
               layout: str | None = None, ppo: int | None = None, fmax: float | None = None,
-              watchdog_ms: float = 500,
+              watchdog_ms: float = API_WATCHDOG_MS,
               cycle_hz: float | None = None, stop_timeout: float | None = None) -> "Drive":
         """The drive at `station` (None: PDRIVE_STATION, else the only drive station on the bus),
         brought to data exchange and kept there until the bus is closed. profile: a profile name or
         alias (default: the config file's for this station, else from the station's ident);
         layout: a layout name (e.g. "ppo3", "toyo") or ppo=N (default: the config file's, else the
         profile's); fmax: the frequency 100 % stands for when the drive's own value cannot be read.
-        The same station twice: the same Drive."""
+        watchdog_ms: the DP watchdog (default API_WATCHDOG_MS: generous, as only the keep-alive
+        thread holds the station between calls). The same station twice: the same Drive."""
         from profidrive_cli.api.drive import Drive
         from profidrive_cli.session import DriveSession
         with self._call():
@@ -538,8 +559,23 @@ class Bus:
     def _keep_others(self, busy: int | None) -> None:
         """A Data_Exchange (with its last outputs) for every opened station other than `busy` whose
         last one is KEEP_S old (the Group's keep rule). A station that cannot be kept is left to its
-        own next call (which then reports it); a lost link is raised."""
-        self._the_group().keep_others(list(self._drives), busy, self._last, self._keep_s())
+        own next call (which then reports it); a lost link is raised. A station not held (late
+        past its watchdog, or brought up again) is reported: _kept_late."""
+        for miss in self._the_group().keep_others(list(self._drives), busy, self._last,
+                                                  self._keep_s()):
+            self._kept_late(miss)
+
+    def _kept_late(self, miss: "KeepMiss") -> None:
+        """A station the keep-alive did not hold: a warning now (logging, on_message, the drive's
+        warnings), and its drive's next call raises DriveError with the same words."""
+        text = miss.words()
+        self._missed[miss.address] = text
+        log.warning("%s", text)
+        drive = self._drives.get(miss.address)
+        if drive is not None:
+            drive.session.warn(text)
+        else:
+            self._message(f"warning: {text}")
 
     def __repr__(self) -> str:
         return (f"<Bus {self.port} at {self.baud} bit/s, drives {sorted(self._drives)}"
@@ -568,12 +604,27 @@ def _keepalive(ref: "weakref.ref[Bus]", stop: threading.Event) -> None:
                 return
             period = bus._keep_s() / 2
             bus._keep_others(None)
-        except BaseException as e:          # noqa: BLE001  (reported at the next call)
+        except BaseException as e:          # noqa: BLE001  (said now, raised at the next call)
             bus._keepalive_error = e
+            text = (f"{bus.port}: keeping the drives in data exchange failed: {e}; their DP "
+                    f"watchdogs end data exchange and each drive reacts as to a lost master")
+            log.warning("%s", text)
+            bus._message(f"warning: {text}")
             return
         finally:
             bus._lock.release()
             del bus
+
+
+def stop_words(address: int, r: "StopReport") -> str:
+    """The on_message line of a drive's stop: the stop on close, and a run the asyncio face
+    cancelled (aio)."""
+    if r.how == "normal":
+        return (f"station {address}: stopped (normal stop, {r.seconds:.1f} s)"
+                if not (r.status and r.status.fault) else f"station {address}: {r.message}")
+    if r.how == "coast":
+        return f"station {address}: stopped by a coast stop after {r.seconds:.1f} s ({r.message})"
+    return f"station {address}: could not confirm the stop: {r.message}"
 
 
 def _address(sess: "DriveSession") -> int:
