@@ -4,7 +4,10 @@ every opened drive in data exchange between calls, and the safe stop of every dr
 Thread model: every public call holds the bus lock for its whole duration; the keep-alive thread
 takes the same lock, so the master is only ever used by one thread at a time. While a call talks
 to one station, every other opened station still gets a Data_Exchange at least every KEEP_S
-seconds (a hook on each drive's channel); while nobody calls, the keep-alive thread sends them.
+seconds (a hook on each drive's channel); while nobody calls, the keep-alive thread sends them. A
+station it did not hold -- its last Data_Exchange older than its DP watchdog (the thread got no CPU
+or GIL in time), or found out of data exchange and brought up again -- is warned about at once
+(logging, on_message) and raised by its drive's next call (DriveError).
 
 The stop on close (bus.close(), leaving the `with`): the stop command of every started drive in one
 bus cycle and one bounded wait for all together (session/group.py's Group, as `pdrive run 3,4,5`),
