@@ -4,10 +4,8 @@ every opened drive in data exchange between calls, and the safe stop of every dr
 Thread model: every public call holds the bus lock for its whole duration; the keep-alive thread
 takes the same lock, so the master is only ever used by one thread at a time. While a call talks
 to one station, every other opened station still gets a Data_Exchange at least every KEEP_S
-seconds (a hook on each drive's channel); while nobody calls, the keep-alive thread sends them. A
-station it did not hold -- its last Data_Exchange older than its DP watchdog (the thread got no CPU
-or GIL in time), or found out of data exchange and brought up again -- is warned about at once
-(logging, on_message) and raised by its drive's next call (DriveError).
+seconds (a hook on each drive's channel); while nobody calls, the keep-alive thread sends them
+(api/keepalive.py: also what a station it did not hold gives).
 
 The stop on close (bus.close(), leaving the `with`): the stop command of every started drive in one
 bus cycle and one bounded wait for all together (session/group.py's Group, as `pdrive run 3,4,5`),
@@ -21,7 +19,6 @@ from __future__ import annotations
 
 import atexit
 import contextlib
-import logging
 import threading
 import os
 import warnings
@@ -31,6 +28,8 @@ from types import TracebackType
 from typing import TYPE_CHECKING, Any, Callable, Iterator, Literal, Mapping
 
 from profidrive_cli import BusError, UsageError
+from profidrive_cli.api import keepalive
+from profidrive_cli.api.keepalive import API_WATCHDOG_MS, KEEP_S
 from profidrive_cli.api.results import Station
 
 if TYPE_CHECKING:                                   # pragma: no cover
@@ -41,24 +40,9 @@ if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.dp.poller import Master
     from profidrive_cli.link.base import Link
     from profidrive_cli.session import DriveSession
-    from profidrive_cli.session.group import Group, KeepMiss
+    from profidrive_cli.session.group import Group
     from profidrive_cli.session.safestop import StopReport
     from profidrive_cli.session.signals import SignalGuard
-
-#: at most this long between two Data_Exchanges of an opened station (a shorter watchdog shortens
-#: it to a fifth of the watchdog)
-KEEP_S = 0.1
-
-#: the DP watchdog of a drive opened with Bus.drive() unless given (ms). Between calls the station
-#: is held by the keep-alive thread alone, and that thread must get the CPU and the GIL to send: with
-#: 1 / 2 / 4 / 8 busy Python threads beside it in the process, the largest gap between two of its
-#: Data_Exchanges was 0.17 / 0.22 / 0.39 / 0.59 s (sim://, 8 s each, a 2-core machine at load 2-7;
-#: 0.15 s at rest: KEEP_S plus half of it, the thread's wake-up period) -- past a 500 ms watchdog
-#: with 8, and the drive tripped. 1000 ms holds a thread late by 0.85 s; a program with more busy
-#: threads (or processes at a higher priority) needs a longer one, or its work in another process.
-API_WATCHDOG_MS = 1000.0
-
-log = logging.getLogger("profidrive_cli.api")
 
 #: every bus not yet closed (weakly: a closed or dropped bus is not kept alive by this)
 _open_buses: "weakref.WeakSet[Bus]" = weakref.WeakSet()
@@ -198,9 +182,8 @@ class Bus:
         self._signals.install()
         self._stop_keepalive = threading.Event()
         self._keepalive_error: BaseException | None = None
-        #: stations the keep-alive did not hold: address -> what happened (raised by the drive's
-        #: next call, once)
-        self._missed: dict[int, str] = {}
+        #: the stations the keep-alive did not hold (each raised by its drive's next call)
+        self._missed = keepalive.Missed()
         self._thread: threading.Thread | None = None
         _open_buses.add(self)
         _masters[id(self)] = master
@@ -378,9 +361,8 @@ class Bus:
         if self._keepalive_error is not None:
             e, self._keepalive_error = self._keepalive_error, None
             raise BusError(f"{self.port}: keeping the drives in data exchange failed: {e}") from e
-        if station is not None and station in self._missed:
-            from profidrive_cli.drives.base import DriveError
-            raise DriveError(self._missed.pop(station))
+        if station is not None:
+            self._missed.check(station)
 
     def _check_write(self, what: str) -> None:
         if self.is_simulator or self.allow_real_port_writes:
@@ -456,7 +438,8 @@ class Bus:
             self._drives[address] = drive
             self._last[address] = self.master.link.now()
             channel.hooks.append(lambda t, o, i: self._exchanged(address, t))
-            self._start_keepalive()
+            if self._thread is None:
+                self._thread = keepalive.start(self, self._stop_keepalive)
             return drive
 
     def audit(self, stations: list[int] | None = None, *, profile: str | None = None,
@@ -563,60 +546,32 @@ class Bus:
         """A Data_Exchange (with its last outputs) for every opened station other than `busy` whose
         last one is KEEP_S old (the Group's keep rule). A station that cannot be kept is left to its
         own next call (which then reports it); a lost link is raised. A station not held (late
-        past its watchdog, or brought up again) is reported: _kept_late."""
+        past its watchdog, or brought up again) is reported at once (keepalive.Missed)."""
         for miss in self._the_group().keep_others(list(self._drives), busy, self._last,
                                                   self._keep_s()):
-            self._kept_late(miss)
+            drive = self._drives.get(miss.address)
+            self._missed.note(miss, drive.session.warn if drive is not None else self._message)
 
-    def _kept_late(self, miss: "KeepMiss") -> None:
-        """A station the keep-alive did not hold: a warning now (logging, on_message, the drive's
-        warnings), and its drive's next call raises DriveError with the same words."""
-        text = miss.words()
-        self._missed[miss.address] = text
-        log.warning("%s", text)
-        drive = self._drives.get(miss.address)
-        if drive is not None:
-            drive.session.warn(text)
-        else:
-            self._message(f"warning: {text}")
+    def _keep_once(self) -> float | None:
+        """One pass of the keep-alive thread (api/keepalive.py): the seconds to its next pass, None
+        when it is done (the bus closed, or keeping failed: said now, raised at the next call)."""
+        if not self._lock.acquire(timeout=0.05):
+            return KEEP_S / 2                # a call is talking to the bus (and keeps the others)
+        try:
+            if self._closed:
+                return None
+            self._keep_others(None)
+            return self._keep_s() / 2
+        except BaseException as e:          # noqa: BLE001  (said now, raised at the next call)
+            self._keepalive_error = e
+            keepalive.failed(self.port, e, self._message)
+            return None
+        finally:
+            self._lock.release()
 
     def __repr__(self) -> str:
         return (f"<Bus {self.port} at {self.baud} bit/s, drives {sorted(self._drives)}"
                 f"{' (closed)' if self._closed else ''}>")
-
-    def _start_keepalive(self) -> None:
-        if self._thread is not None:
-            return
-        # the thread holds the bus weakly: a bus the script drops is closed (and warned about)
-        self._thread = threading.Thread(target=_keepalive, args=(weakref.ref(self),
-                                                                  self._stop_keepalive),
-                                        name="pdrive-keepalive", daemon=True)
-        self._thread.start()
-
-
-def _keepalive(ref: "weakref.ref[Bus]", stop: threading.Event) -> None:
-    period = KEEP_S / 2
-    while not stop.wait(period):
-        bus = ref()
-        if bus is None:
-            return
-        if not bus._lock.acquire(timeout=0.05):
-            continue                         # a call is talking to the bus (and keeps the others)
-        try:
-            if bus._closed:
-                return
-            period = bus._keep_s() / 2
-            bus._keep_others(None)
-        except BaseException as e:          # noqa: BLE001  (said now, raised at the next call)
-            bus._keepalive_error = e
-            text = (f"{bus.port}: keeping the drives in data exchange failed: {e}; their DP "
-                    f"watchdogs end data exchange and each drive reacts as to a lost master")
-            log.warning("%s", text)
-            bus._message(f"warning: {text}")
-            return
-        finally:
-            bus._lock.release()
-            del bus
 
 
 def stop_words(address: int, r: "StopReport") -> str:
