@@ -8,6 +8,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import os
+import queue
 import re
 import signal
 import subprocess
@@ -239,3 +240,78 @@ def test_under_aio_run_a_second_signal_turns_the_stop_into_a_coast_stop() -> Non
                             m) for m in seen), seen
     finally:
         signal.signal(signal.SIGTERM, before)
+
+
+STALLED = """\
+import asyncio, sys
+import profidrive_cli as pdrive
+
+
+async def main():
+    async with pdrive.aio.open_bus("sim://", on_message=lambda t: print(t, flush=True)) as bus:
+        drive = await bus.drive(3)
+        await drive.run(hz=10, wait=True, timeout=60)
+        print("running", flush=True)
+        await asyncio.to_thread(sys.stdin.readline)      # the test's go, after the stall
+        try:
+            await drive.status()
+            print("no error", flush=True)
+        except pdrive.DriveError as e:
+            print("raised:", e, flush=True)
+        print("fault:", (await drive.status()).fault_code, flush=True)
+
+pdrive.aio.run(main())
+"""
+
+
+@pytest.mark.skipif(not hasattr(signal, "SIGSTOP"), reason="SIGSTOP")
+def test_a_process_stopped_past_the_watchdog_is_told_when_it_goes_on(tmp_path: Path) -> None:
+    """A real stall: the whole asyncio process stopped (SIGSTOP) for 3 s, three times its station's
+    1 s watchdog (API default), the simulated plant in it included -- whose clock (monotonic) goes
+    on, so its station 3 finds its watchdog run out at the next request: Er5 (o27 = 0, factory:
+    coast and trip). Continued, the keep-alive's next pass says so at once; the sleeping script's
+    next call raises."""
+    script = tmp_path / "stalled.py"
+    script.write_text(STALLED)
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PDRIVE_")}
+    env["PYTHONPATH"] = str(ROOT)
+    p = subprocess.Popen([sys.executable, str(script)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
+    lines: list[str] = []
+    try:
+        assert p.stdout is not None and p.stdin is not None
+        for line in p.stdout:
+            lines.append(line)
+            if line.strip() == "running":
+                break
+        assert lines and lines[-1].strip() == "running", "".join(lines)
+        p.send_signal(signal.SIGSTOP)
+        time.sleep(3.0)
+        p.send_signal(signal.SIGCONT)
+        # the warning comes before any go (a reader thread: without the warning, go after a bound)
+        got: queue.Queue[str] = queue.Queue()
+        reader = threading.Thread(target=lambda: [got.put(x) for x in p.stdout or ()], daemon=True)
+        reader.start()
+        end = time.monotonic() + 60
+        while time.monotonic() < end and not any("fell behind" in x for x in lines):
+            try:
+                lines.append(got.get(timeout=0.5))
+            except queue.Empty:
+                pass
+        p.stdin.write("go\n")
+        p.stdin.flush()
+        p.stdin.close()
+        p.wait(timeout=CHILD_S)
+        err = p.stderr.read() if p.stderr else ""
+        reader.join(timeout=CHILD_S)
+        out = "".join(got.queue)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.communicate()
+    text = "".join(lines) + out
+    m = re.search(r"^warning: station 3: the keep-alive fell behind by ([0-9.]+) s against a "
+                  r"watchdog of 1 s; the station had left data exchange", text, re.M)
+    assert m and float(m.group(1)) >= 3.0, text + err
+    assert re.search(r"^raised: station 3: the keep-alive fell behind by [0-9.]+ s", text, re.M), text
+    assert "fault: Er5" in text and p.returncode == 0 and "Traceback" not in err, text + err
