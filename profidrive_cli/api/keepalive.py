@@ -28,10 +28,11 @@ KEEP_S = 0.1
 #: the DP watchdog of a drive opened with Bus.drive() unless given (ms). Between calls the station
 #: is held by the keep-alive thread alone, and that thread must get the CPU and the GIL to send: with
 #: 1 / 2 / 4 / 8 busy Python threads beside it in the process, the largest gap between two of its
-#: Data_Exchanges was 0.17 / 0.22 / 0.39 / 0.59 s (sim://, 8 s each, a 2-core machine at load 2-7;
-#: 0.15 s at rest: KEEP_S plus half of it, the thread's wake-up period) -- past a 500 ms watchdog
-#: with 8, and the drive tripped. 1000 ms holds a thread late by 0.85 s; a program with more busy
-#: threads (or processes at a higher priority) needs a longer one, or its work in another process.
+#: Data_Exchanges was 0.17 / 0.22 / 0.39 / 0.59 s (once 0.86 s with 8; sim://, 8 s each, a 2-core
+#: machine at load 2-7; 0.10 s at rest, 0.15 s by design: KEEP_S plus half of it, the thread's
+#: wake-up period) -- past a 500 ms watchdog with 8, and the drive tripped. 1000 ms holds a thread
+#: late by 0.85 s: a few busy threads; more (or processes at a higher priority) need a longer one,
+#: or the work in another process.
 API_WATCHDOG_MS = 1000.0
 
 
