@@ -215,6 +215,44 @@ def test_the_master_keeping_a_station_while_it_brings_up_others_is_no_miss() -> 
     assert not [m for m in seen if "keep-alive" in m], seen
 
 
+
+@pytest.mark.skipif(os.name != "posix", reason="SIGTERM")
+def test_under_aio_run_a_second_signal_turns_the_stop_into_a_coast_stop() -> None:
+    """Station 3 at 20 Hz with F08 = 60 s (deceleration time 1, fuji-opc-g1-pdp.yaml; 0.1 s steps):
+    its normal stop would take 20 s. A second SIGTERM once the bus's stop began (the sync bus is
+    closing) hurries it: a coast stop, said through on_message; exit 143 all the same."""
+    assert threading.current_thread() is threading.main_thread()
+    seen: list[str] = []
+    late: list[int] = []
+    # a safety net: a signal after aio.run put the handlers back must not end the test run
+    before = signal.signal(signal.SIGTERM, lambda signum, frame: late.append(signum))
+    try:
+        async def main() -> None:
+            async with aio.open_bus("sim://", on_message=seen.append) as bus:
+                drive = await bus.drive(3)
+                await drive.set_param("F07", 0.5)
+                await drive.set_param("F08", 60.0)
+                await drive.run(hz=20, wait=True, timeout=60)
+                sync = bus.sync
+
+                def second() -> None:
+                    end = time.monotonic() + 60
+                    while not sync.closed and time.monotonic() < end:
+                        time.sleep(0.005)
+                    os.kill(os.getpid(), signal.SIGTERM)
+                threading.Thread(target=second, daemon=True).start()
+                os.kill(os.getpid(), signal.SIGTERM)
+                await asyncio.sleep(60)
+        with pytest.raises(SystemExit) as e:
+            aio.run(main())
+        assert e.value.code == 143
+        assert any(re.match(r"station 3: stopped by a coast stop after [0-9.]+ s \(.*second signal",
+                            m) for m in seen), seen
+        assert late == []
+    finally:
+        signal.signal(signal.SIGTERM, before)
+
+
 STALLED = """\
 import asyncio, sys
 import profidrive_cli as pdrive
