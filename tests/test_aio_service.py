@@ -215,7 +215,6 @@ def test_the_master_keeping_a_station_while_it_brings_up_others_is_no_miss() -> 
     assert not [m for m in seen if "keep-alive" in m], seen
 
 
-
 @pytest.mark.skipif(os.name != "posix", reason="SIGTERM")
 def test_under_aio_run_a_second_signal_turns_the_stop_into_a_coast_stop() -> None:
     """Station 3 at 20 Hz with F08 = 60 s (deceleration time 1, fuji-opc-g1-pdp.yaml; 0.1 s steps):
