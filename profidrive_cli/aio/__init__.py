@@ -16,27 +16,105 @@ Cancellation is a safe stop:
   cancels the main task) -- stops every drive the bus started, together, and closes the port;
 - handle_signals=True (the default, POSIX, in the main thread): SIGTERM cancels the task that opened
   the bus, so it ends through the same stop.
+
+A program that runs until it is stopped (a service under systemd) runs its main coroutine with
+`aio.run(main())` instead of asyncio.run: SIGTERM and SIGINT (SIGBREAK on Windows) cancel the main
+task, so every bus ends through its safe stop; a second signal hurries that stop (coast, as in the
+sync API); then the program exits 128 + the signal (143, 130), as the CLI does, with no traceback.
+The buses inside leave the signals to it.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextvars
 import functools
 import signal
 import sys
 import threading
+import weakref
 from concurrent.futures import ThreadPoolExecutor
-from types import TracebackType
-from typing import TYPE_CHECKING, Any, Callable, Mapping, TypeVar
+from types import FrameType, TracebackType
+from typing import TYPE_CHECKING, Any, Callable, Coroutine, Mapping, TypeVar
 
 from profidrive_cli.api import open_bus as _open_bus
+from profidrive_cli.api.bus import stop_words
 
 if TYPE_CHECKING:                                       # pragma: no cover
     from profidrive_cli.api import Bus, Drive, Faults, Param, Station, Status, StopResult
 
-__all__ = ["AsyncBus", "AsyncDrive", "open_bus"]
+__all__ = ["AsyncBus", "AsyncDrive", "open_bus", "run"]
 
 T = TypeVar("T")
+
+#: inside aio.run(): the signals are its own (a bus opened there installs no handler)
+_under_run: contextvars.ContextVar[bool] = contextvars.ContextVar("pdrive_aio_run", default=False)
+#: every AsyncBus open now (a second signal under aio.run hurries their stops)
+_open_buses: "weakref.WeakSet[AsyncBus]" = weakref.WeakSet()
+
+
+def _stopping_signals() -> tuple[int, ...]:
+    brk = getattr(signal, "SIGBREAK", None)
+    return (signal.SIGTERM, signal.SIGINT) + (() if brk is None else (brk,))
+
+
+class _Stop:
+    """aio.run's state: the main task, its loop, the first signal."""
+
+    def __init__(self) -> None:
+        self.loop: asyncio.AbstractEventLoop | None = None
+        self.task: "asyncio.Task[Any] | None" = None
+        self.signum: int | None = None
+
+    def on_signal(self, signum: int, frame: FrameType | None) -> None:
+        """The first signal cancels the main task; a further one hurries every bus's stop."""
+        if self.signum is None:
+            self.signum = signum
+            if self.loop is not None and self.task is not None and not self.loop.is_closed():
+                self.loop.call_soon_threadsafe(self.task.cancel)
+            return
+        for bus in list(_open_buses):
+            bus._hurry()
+
+
+def run(main: Coroutine[Any, Any, T], *, debug: bool | None = None) -> T:
+    """asyncio.run(main) for a program that runs until it is stopped (docs/api.md, "A service"):
+    SIGTERM and SIGINT (SIGBREAK on Windows) cancel the main task, so each `async with
+    aio.open_bus(...)` ends through its safe stop (a second signal: the stop coasts at once); once
+    main has ended, SystemExit(128 + the signal): 143 after SIGTERM, 130 after SIGINT, whether
+    main let the CancelledError through or not -- no traceback. Without a signal: main's result,
+    or its exception. Outside the main thread the signals cannot be taken: asyncio.run alone."""
+    if not asyncio.iscoroutine(main):
+        raise TypeError(f"aio.run: a coroutine was expected, got {main!r}")
+    stop = _Stop()
+
+    async def serve() -> T:
+        stop.loop, stop.task = asyncio.get_running_loop(), asyncio.current_task()
+        _under_run.set(True)
+        if stop.signum is not None:                  # a signal before the loop ran
+            raise asyncio.CancelledError()
+        return await main
+
+    before: dict[int, Any] = {}
+    if threading.current_thread() is threading.main_thread():
+        for s in _stopping_signals():
+            try:
+                before[s] = signal.signal(s, stop.on_signal)
+            except (OSError, ValueError):
+                pass
+    try:
+        result = asyncio.run(serve(), debug=debug)
+    except asyncio.CancelledError:
+        if stop.signum is None:
+            raise
+        raise SystemExit(128 + stop.signum) from None
+    finally:
+        main.close()                                 # never awaited when a signal came first
+        for s, h in before.items():
+            signal.signal(s, h if h is not None else signal.SIG_DFL)
+    if stop.signum is not None:
+        raise SystemExit(128 + stop.signum)          # main caught the cancellation itself
+    return result
 
 
 def open_bus(port: str | None = None, *, baud: str | int | None = None,
@@ -64,6 +142,8 @@ class AsyncBus:
         self._handle_signals = handle_signals
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="pdrive-aio")
         self._bus: "Bus | None" = None
+        #: the sync bus while close() stops it (a second signal under run() hurries that stop)
+        self._closing: "Bus | None" = None
         self._drives: dict[int, AsyncDrive] = {}
         self._sigterm_task: asyncio.Task[Any] | None = None
         #: the SIGTERM handler before ours, put back on close (the loop's removal sets SIG_DFL)
@@ -87,13 +167,14 @@ class AsyncBus:
             self._bus = await self._run(functools.partial(_open_bus, self._port, handle_signals=False,
                                                           **self._kwargs))
             self._loop = asyncio.get_running_loop()
+            _open_buses.add(self)
             self._watch_sigterm()
         return self
 
     def _watch_sigterm(self) -> None:
         """SIGTERM cancels the task that opened the bus (POSIX, main thread, handle_signals)."""
         task = asyncio.current_task()
-        if (not self._handle_signals or task is None or sys.platform == "win32"
+        if (not self._handle_signals or task is None or _under_run.get() or sys.platform == "win32"
                 or threading.current_thread() is not threading.main_thread()):
             return
         assert self._loop is not None
@@ -117,11 +198,20 @@ class AsyncBus:
                           else signal.SIG_DFL)
             self._sigterm_task = None
         bus, self._bus = self._bus, None
+        self._closing = bus
         try:
             if bus is not None:
                 await self._run(functools.partial(bus.close, exc))
         finally:
+            self._closing = None
+            _open_buses.discard(self)
             self._pool.shutdown(wait=False)
+
+    def _hurry(self) -> None:
+        """A second signal under run(): the stop under way (or the next) coasts at once."""
+        bus = self._bus or self._closing
+        if bus is not None:
+            bus._hurry()
 
     @property
     def sync(self) -> "Bus":
@@ -226,7 +316,7 @@ class AsyncDrive:
                 await fut
             except Exception:                        # noqa: BLE001  (the stop below is what matters)
                 pass
-            await self._bus._run(self.sync.stop)
+            await self._bus._run(self._stop_and_say)
         task = asyncio.ensure_future(settle())
         while not task.done():
             try:
@@ -234,6 +324,14 @@ class AsyncDrive:
             except asyncio.CancelledError:
                 continue
         task.result()
+
+    def _stop_and_say(self) -> None:
+        """The stop after a cancelled run, and its line through on_message (the caller gets a
+        CancelledError, not the StopResult): the words of the stop on close."""
+        self.sync.stop()
+        r = self.sync.session.stop_report
+        if r is not None:
+            self.sync.session.say(stop_words(self.station, r))
 
     async def stop(self, *, timeout: float | None = None) -> "StopResult":
         return await self._bus._run(functools.partial(self.sync.stop, timeout=timeout))

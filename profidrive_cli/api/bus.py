@@ -4,7 +4,8 @@ every opened drive in data exchange between calls, and the safe stop of every dr
 Thread model: every public call holds the bus lock for its whole duration; the keep-alive thread
 takes the same lock, so the master is only ever used by one thread at a time. While a call talks
 to one station, every other opened station still gets a Data_Exchange at least every KEEP_S
-seconds (a hook on each drive's channel); while nobody calls, the keep-alive thread sends them.
+seconds (a hook on each drive's channel); while nobody calls, the keep-alive thread sends them
+(api/keepalive.py: also what a station it did not hold gives).
 
 The stop on close (bus.close(), leaving the `with`): the stop command of every started drive in one
 bus cycle and one bounded wait for all together (session/group.py's Group, as `pdrive run 3,4,5`),
@@ -27,6 +28,8 @@ from types import TracebackType
 from typing import TYPE_CHECKING, Any, Callable, Iterator, Literal, Mapping
 
 from profidrive_cli import BusError, UsageError
+from profidrive_cli.api import keepalive
+from profidrive_cli.api.keepalive import API_WATCHDOG_MS, KEEP_S
 from profidrive_cli.api.results import Station
 
 if TYPE_CHECKING:                                   # pragma: no cover
@@ -38,11 +41,8 @@ if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.link.base import Link
     from profidrive_cli.session import DriveSession
     from profidrive_cli.session.group import Group
+    from profidrive_cli.session.safestop import StopReport
     from profidrive_cli.session.signals import SignalGuard
-
-#: at most this long between two Data_Exchanges of an opened station (well inside the 500 ms
-#: default DP watchdog; a shorter watchdog shortens it to a fifth of the watchdog)
-KEEP_S = 0.1
 
 #: every bus not yet closed (weakly: a closed or dropped bus is not kept alive by this)
 _open_buses: "weakref.WeakSet[Bus]" = weakref.WeakSet()
@@ -182,6 +182,8 @@ class Bus:
         self._signals.install()
         self._stop_keepalive = threading.Event()
         self._keepalive_error: BaseException | None = None
+        #: the stations the keep-alive did not hold (each raised by its drive's next call)
+        self._missed = keepalive.Missed()
         self._thread: threading.Thread | None = None
         _open_buses.add(self)
         _masters[id(self)] = master
@@ -341,23 +343,26 @@ class Bus:
             self._message(f"stop: {e}; each drive not yet stopped gets its own stop")
         for s in running:
             r = s.stop_report
-            if r is None or not r.stopped:
-                continue
-            if r.how == "normal":
-                s.say(f"station {s.address}: stopped (normal stop, {r.seconds:.1f} s)"
-                       if not (r.status and r.status.fault) else f"station {s.address}: {r.message}")
-            else:
-                s.say(f"station {s.address}: stopped by a coast stop after {r.seconds:.1f} s "
-                       f"({r.message})")
+            if r is not None and r.stopped:
+                s.say(stop_words(_address(s), r))
         return None
 
+    def _hurry(self) -> None:
+        """A second signal arrived (the asyncio face's aio.run: its signal handler, not this bus's):
+        the stop under way, or the next, coasts at once, as on a second signal here."""
+        self._signals.hurry = True
+
     # -- checks ------------------------------------------------------------------------------------
-    def _check_open(self) -> None:
+    def _check_open(self, station: int | None = None) -> None:
+        """The bus is open and its keep-alive thread did not fail; `station` (a drive's call): the
+        keep-alive held it since the drive's last call (DriveError once, when it did not)."""
         if self._closed:
             raise UsageError(f"the bus on {self.port} is closed")
         if self._keepalive_error is not None:
             e, self._keepalive_error = self._keepalive_error, None
             raise BusError(f"{self.port}: keeping the drives in data exchange failed: {e}") from e
+        if station is not None:
+            self._missed.check(station)
 
     def _check_write(self, what: str) -> None:
         if self.is_simulator or self.allow_real_port_writes:
@@ -392,14 +397,15 @@ class Bus:
 
     def drive(self, station: int | None = None, *, profile: str | None = None,
               layout: str | None = None, ppo: int | None = None, fmax: float | None = None,
-              watchdog_ms: float = 500,
+              watchdog_ms: float = API_WATCHDOG_MS,
               cycle_hz: float | None = None, stop_timeout: float | None = None) -> "Drive":
         """The drive at `station` (None: PDRIVE_STATION, else the only drive station on the bus),
         brought to data exchange and kept there until the bus is closed. profile: a profile name or
         alias (default: the config file's for this station, else from the station's ident);
         layout: a layout name (e.g. "ppo3", "toyo") or ppo=N (default: the config file's, else the
         profile's); fmax: the frequency 100 % stands for when the drive's own value cannot be read.
-        The same station twice: the same Drive."""
+        watchdog_ms: the DP watchdog (default API_WATCHDOG_MS: generous, as only the keep-alive
+        thread holds the station between calls). The same station twice: the same Drive."""
         from profidrive_cli.api.drive import Drive
         from profidrive_cli.session import DriveSession
         with self._call():
@@ -432,7 +438,8 @@ class Bus:
             self._drives[address] = drive
             self._last[address] = self.master.link.now()
             channel.hooks.append(lambda t, o, i: self._exchanged(address, t))
-            self._start_keepalive()
+            if self._thread is None:
+                self._thread = keepalive.start(self, self._stop_keepalive)
             return drive
 
     def audit(self, stations: list[int] | None = None, *, profile: str | None = None,
@@ -538,42 +545,44 @@ class Bus:
     def _keep_others(self, busy: int | None) -> None:
         """A Data_Exchange (with its last outputs) for every opened station other than `busy` whose
         last one is KEEP_S old (the Group's keep rule). A station that cannot be kept is left to its
-        own next call (which then reports it); a lost link is raised."""
-        self._the_group().keep_others(list(self._drives), busy, self._last, self._keep_s())
+        own next call (which then reports it); a lost link is raised. A station not held (late
+        past its watchdog, or brought up again) is reported at once (keepalive.Missed)."""
+        for miss in self._the_group().keep_others(list(self._drives), busy, self._last,
+                                                  self._keep_s()):
+            drive = self._drives.get(miss.address)
+            self._missed.note(miss, drive.session.warn if drive is not None else self._message)
+
+    def _keep_once(self) -> float | None:
+        """One pass of the keep-alive thread (api/keepalive.py): the seconds to its next pass, None
+        when it is done (the bus closed, or keeping failed: said now, raised at the next call)."""
+        if not self._lock.acquire(timeout=0.05):
+            return KEEP_S / 2                # a call is talking to the bus (and keeps the others)
+        try:
+            if self._closed:
+                return None
+            self._keep_others(None)
+            return self._keep_s() / 2
+        except BaseException as e:          # noqa: BLE001  (said now, raised at the next call)
+            self._keepalive_error = e
+            keepalive.failed(self.port, e, self._message)
+            return None
+        finally:
+            self._lock.release()
 
     def __repr__(self) -> str:
         return (f"<Bus {self.port} at {self.baud} bit/s, drives {sorted(self._drives)}"
                 f"{' (closed)' if self._closed else ''}>")
 
-    def _start_keepalive(self) -> None:
-        if self._thread is not None:
-            return
-        # the thread holds the bus weakly: a bus the script drops is closed (and warned about)
-        self._thread = threading.Thread(target=_keepalive, args=(weakref.ref(self),
-                                                                  self._stop_keepalive),
-                                        name="pdrive-keepalive", daemon=True)
-        self._thread.start()
 
-
-def _keepalive(ref: "weakref.ref[Bus]", stop: threading.Event) -> None:
-    period = KEEP_S / 2
-    while not stop.wait(period):
-        bus = ref()
-        if bus is None:
-            return
-        if not bus._lock.acquire(timeout=0.05):
-            continue                         # a call is talking to the bus (and keeps the others)
-        try:
-            if bus._closed:
-                return
-            period = bus._keep_s() / 2
-            bus._keep_others(None)
-        except BaseException as e:          # noqa: BLE001  (reported at the next call)
-            bus._keepalive_error = e
-            return
-        finally:
-            bus._lock.release()
-            del bus
+def stop_words(address: int, r: "StopReport") -> str:
+    """The on_message line of a drive's stop: the stop on close, and a run the asyncio face
+    cancelled (aio)."""
+    if r.how == "normal":
+        return (f"station {address}: stopped (normal stop, {r.seconds:.1f} s)"
+                if not (r.status and r.status.fault) else f"station {address}: {r.message}")
+    if r.how == "coast":
+        return f"station {address}: stopped by a coast stop after {r.seconds:.1f} s ({r.message})"
+    return f"station {address}: could not confirm the stop: {r.message}"
 
 
 def _address(sess: "DriveSession") -> int:

@@ -100,7 +100,7 @@ class Drive:
     def _check(self) -> None:
         if self._closed:
             raise UsageError(f"station {self.station}: this drive was closed")
-        self._bus._check_open()
+        self._bus._check_open(self.station)
 
     def _status(self, sample: "Sample") -> Status:
         st = sample.status

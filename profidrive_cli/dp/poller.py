@@ -334,6 +334,11 @@ class Master:
     def unkeep(self, address: int) -> None:
         self.kept.pop(address, None)
 
+    def last_request(self, address: int) -> float | None:
+        """When the last request to `address` went (the link's clock; what restarts its DP
+        watchdog), None: none yet."""
+        return self._last_req.get(address)
+
     def keep_alive(self, busy: int | None = None) -> int:
         """When a kept station in data exchange (other than `busy`) is due -- its last request is
         its keep_within() old -- a keep round: one Data_Exchange (its last outputs) for every kept

@@ -10,7 +10,9 @@ Its rules, each written here once:
 - the keep rule: a station put on the group is kept in data exchange by the master while the master
   brings up or talks to another station (dp.poller.Master.keep: at least once a period, a quarter of
   the watchdog at the latest); between calls (the API) every member other than the busy one whose last
-  Data_Exchange is `within` old gets one (Group.keep_others).
+  Data_Exchange is `within` old gets one (Group.keep_others); a member not held -- its last
+  Data_Exchange older than its DP watchdog, or found out of data exchange and brought up again -- is
+  returned (KeepMiss), for the caller to report.
 - the pace: one round is one Data_Exchange per station, so its wire time is the sum of the stations'
   (Group.rate); the watchdog every member needs outlasts three such rounds (min_watchdog_ms,
   Group.watchdog_for), raised before the stations are parameterised.
@@ -23,6 +25,7 @@ Talks to the bus through dp.poller.Master only; no click and no rich.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable, Iterable, Sequence
 
 from profidrive_cli import BusError
@@ -40,6 +43,31 @@ if TYPE_CHECKING:                                   # pragma: no cover
 
 #: (address, session, the speed in % it may be running at, None: unknown) of a drive to stop
 StopItem = tuple[int, "DriveSession", "float | None"]
+
+
+@dataclass(frozen=True)
+class KeepMiss:
+    """A station the keep rule between calls did not hold (Group.keep_others)."""
+
+    address: int
+    #: seconds since its Data_Exchange before, when the keep-alive came to it
+    gap_s: float
+    #: its DP watchdog in seconds (0: none armed)
+    watchdog_s: float
+    #: it had left data exchange (its watchdog ran out) and was brought up again
+    restarted: bool = False
+
+    def words(self) -> str:
+        """One line: what happened, in figures."""
+        text = (f"station {self.address}: the keep-alive fell behind by {self.gap_s:.2f} s against "
+                f"a watchdog of {self.watchdog_s:g} s" if self.watchdog_s and
+                self.gap_s > self.watchdog_s else
+                f"station {self.address}: {self.gap_s:.2f} s without a Data_Exchange "
+                f"(watchdog {self.watchdog_s:g} s)")
+        if self.restarted:
+            text += ("; the station had left data exchange and was brought up again: the drive "
+                     "reacted as to a lost master (see its faults)")
+        return text
 
 
 def min_watchdog_ms(round_s: float) -> float:
@@ -295,16 +323,27 @@ class Group:
 
     # -- the keep rule between calls (the API) ---------------------------------------------------
     def keep_others(self, members: Iterable[int], busy: int | None, last: dict[int, float],
-                    within: float) -> None:
+                    within: float) -> list["KeepMiss"]:
         """A Data_Exchange (with its last outputs) for every member other than `busy` whose last one
-        (`last`, updated here) is `within` old. A station that cannot be kept is left to its own next
-        call (which then reports it); a lost link is raised."""
+        (`last`, updated here) is `within` old. Returns the members the keep-alive did not hold: the
+        time since their last Data_Exchange outlasted their DP watchdog (the caller was late: a
+        thread that did not get the CPU or the GIL), or the station had left data exchange and was
+        brought up again (its watchdog ran out; the drive then reacts as to a lost master). A
+        station that cannot be kept is left to its own next call (which then reports it); a lost
+        link is raised."""
+        missed: list[KeepMiss] = []
         for a in list(members):
             if a == busy:
                 continue
             now = self.master.link.now()
-            if now - last.get(a, now) >= within:
+            # the last request to it, whoever sent it (a call's own cycle, the master's keep-alive
+            # while it brings up another station): what restarted its watchdog
+            sent = self.master.last_request(a)
+            gap = now - max(last.get(a, now), sent if sent is not None else float("-inf"))
+            if gap >= within:
                 last[a] = now
+                st = self.master.stations.get(a)
+                reparams = st.counters.reparams if st is not None else 0
                 try:
                     self.master.exchange(a, None)
                 except LinkLost:
@@ -312,6 +351,13 @@ class Group:
                 except BusError:
                     pass
                 last[a] = self.master.link.now()
+                if st is None:
+                    continue
+                wd_s = (st.config.wd_ms or 0.0) / 1000.0
+                restarted = st.counters.reparams > reparams
+                if restarted or (wd_s > 0 and gap > wd_s):
+                    missed.append(KeepMiss(a, gap, wd_s, restarted))
+        return missed
 
     # -- the stop of all in one round --------------------------------------------------------------
     def stop_all(self, items: Sequence[StopItem], hurry: Callable[[], bool] = lambda: False,
@@ -397,5 +443,5 @@ def _drive(s: "DriveSession") -> "Drive":
     return s.drive
 
 
-__all__ = ["Group", "GroupChannel", "GroupCycle", "StationOut", "StopItem", "min_watchdog_ms",
+__all__ = ["Group", "GroupChannel", "GroupCycle", "KeepMiss", "StationOut", "StopItem", "min_watchdog_ms",
            "wire_round_s"]
