@@ -15,7 +15,9 @@ from __future__ import annotations
 import gc
 import os
 
-from test_recorder import dx_round, frames, req_dx, rep
+from profidrive_cli.fdl import frames as F
+
+from test_recorder import M, dx_round, frames, req_dx, rep
 from test_recorder_disk import FakeDisk
 
 from profidrive_cli.bustools.recorder import Recorder
@@ -45,12 +47,18 @@ class _Counting(_Writer):
 
 
 def _templates():
-    """The round's Captured telegrams, decoded once (each round reuses them at its own times)."""
-    good = frames(*dx_round(0.0, 5, 6))
-    silent = frames((0.0, req_dx(5)), (0.002, req_dx(6)), (0.003, rep(6)))
+    """The round's Captured telegrams, decoded once (each round reuses them at its own times), as a
+    master sends them (fdl/fcb.py, reference §2.3): the FCB toggles after every answered request (a
+    template per FCB, by the round's parity); a request to a station that did not answer the one
+    before restarts the sequence (FCV = 0, FCB = 1), so a listener counts each silent round as a
+    round of its own and not as a retry of the one before."""
+    good = [frames(*dx_round(0.0, 5, 6, fcb=b)) for b in (False, True)]
+    restart = F.encode(F.make(5, M, F.request_fc(F.SRD_HIGH, True, False), b"\x00\x00"))
+    silent = [frames((0.0, restart), (0.002, req_dx(6, b)), (0.003, rep(6))) for b in (False, True)]
     bad = bytearray(rep(6))
     bad[-2] ^= 0x01
-    fcs = frames((0.0, req_dx(5)), (0.001, rep(5)), (0.002, req_dx(6)), (0.003, bytes(bad)))
+    fcs = [frames((0.0, req_dx(5, b)), (0.001, rep(5)), (0.002, req_dx(6, b)), (0.003, bytes(bad)))
+           for b in (False, True)]
     return good, silent, fcs
 
 
@@ -69,7 +77,7 @@ def _disk_state(disk, t):
 def test_days_of_traffic_with_a_disk_that_fills_frees_and_fails(tmp_path):
     from dataclasses import replace
     good, silent, fcs = _templates()
-    one_capture = pcap_size([(0.0, c.raw) for c in good] * int((RING_S + AFTER_S) / ROUND_S + 2))
+    one_capture = pcap_size([(0.0, c.raw) for c in good[0]] * int((RING_S + AFTER_S) / ROUND_S + 2))
     max_bytes = 40 * one_capture                    # room for about 40 captures
     disk = FakeDisk(capacity=3 * max_bytes)
     pattern = check_pattern(str(tmp_path / "ev-{n}-{station}-{trigger}.pcap"))
@@ -99,7 +107,7 @@ def test_days_of_traffic_with_a_disk_that_fills_frees_and_fails(tmp_path):
         disk.clock = start + t
         _disk_state(disk, t)
         phase = t % EVENT_EVERY_S
-        batch = (silent if 300 <= phase < 306 else fcs if t % FCS_EVERY_S == 30 else good)
+        batch = (silent if 300 <= phase < 306 else fcs if t % FCS_EVERY_S == 30 else good)[i % 2]
         write(rec.feed([replace(c, t=t + c.t) for c in batch]))
         write(rec.tick(t + ROUND_S - 0.001))
         if t % CHECK_EVERY_S == 0:

@@ -228,6 +228,7 @@ def soak(seconds: float, seed: int = 1) -> dict[str, Any]:
 
     threads = [threading.Thread(target=f, daemon=True)
                for f in [master, hostile, hostile] + [idle] * 40 + [slow] * 4]
+    alive = False
     try:
         t0 = time.monotonic()
         for t in threads:
@@ -238,11 +239,21 @@ def soak(seconds: float, seed: int = 1) -> dict[str, Any]:
         time.sleep(max(0.0, seconds - warm))
         rss1 = sim.rss_kib()
         alive = sim.alive()
-        final = http(sim.control, "GET", "/state", timeout=60)[0] if alive else None
     finally:
         stop.set()
         for t in threads:
             t.join(timeout=30)
+        # once the clients are gone the control answers again: a client still counted full while
+        # its connection winds down gets 503, so ask for 30 s at most (the read timeout is 10 s)
+        final = None
+        end = time.monotonic() + 30
+        while alive and final != 200 and time.monotonic() < end:
+            try:
+                final = http(sim.control, "GET", "/state", timeout=60)[0]
+            except OSError:
+                final = None
+            if final != 200:
+                time.sleep(0.5)
         stderr = sim.stop()
     times = [t0] + answers + [t0 + seconds]
     return {"seconds": seconds, "alive": alive, "rss_kib": [rss0, rss1], "answers": len(answers),
