@@ -132,7 +132,8 @@ def scratch_copy(module: str, tests: list[str], workdir: Path) -> Path:
         f'only_mutate = ["*{PKG}/{module}"]',
         'also_copy = ["profiles/", "gsd/", "tools/", "examples/", "docs/"]',   # tests run tools/gen_moeller_profile.py; the checklist tests read examples/ and docs/
         "pytest_add_cli_args_test_selection = [" + ", ".join(f'"{t}"' for t in tests) + "]",
-        'pytest_add_cli_args = ["-p", "no:cacheprovider", "-x", "-q"'
+        # "-n", "0": one process (pyproject's addopts run the suite in 4 xdist workers)
+        'pytest_add_cli_args = ["-p", "no:cacheprovider", "-n", "0", "-x", "-q"'
         + "".join(f', "--deselect", "{t}"' for t in DESELECT) + "]",
         "use_git_change_detection = false",
         "",
