@@ -19,7 +19,7 @@ from profidrive_cli.cli.drive_cmds import (_confirmer, _session, _terminations, 
                                           run_ending)
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.outfile import check_output_path
-from profidrive_cli.session.live import NOT_REACHED, Live, fault_name
+from profidrive_cli.session.live import NOT_REACHED, Live, end_status, fault_name
 
 
 @click.command("run")
@@ -208,8 +208,7 @@ def _run_extra(lives, mons) -> dict:
     if lives:
         # the fault the run ended with, named as `pdrive faults` names it (the stop reads the code)
         s = lives[0].session
-        rep = s.stop_report
-        fs = rep.status if rep is not None and rep.status is not None else s.final_status
+        fs = end_status(s)
         code = fs.fault_code if fs is not None and fs.fault else None
         d["fault_code"], d["fault_name"] = code, fault_name(s.profile, code)
     if mons:

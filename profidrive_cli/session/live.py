@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Callable
 from profidrive_cli.link.base import LinkLost
 
 if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.drives.base import DriveStatus
     from profidrive_cli.drives.profile import Profile
     from profidrive_cli.session.cycle import Sample
     from profidrive_cli.session.drivesession import DriveSession
@@ -45,6 +46,13 @@ def default_tolerance(ref: float) -> float:
     """run's band around a reference, both in % of the max frequency: 1 % of the reference, at least
     0.05 % of the max frequency (near zero)."""
     return max(0.01 * abs(ref), 0.05)
+
+
+def end_status(session: "DriveSession") -> "DriveStatus | None":
+    """The drive's last status: the stop's own where it has one (a fault's code is read there, the
+    cycle's words may not carry it), else the last one seen."""
+    rep = session.stop_report
+    return rep.status if rep is not None and rep.status is not None else session.final_status
 
 
 def fault_name(profile: "Profile | None", code: str | None) -> str | None:
@@ -100,10 +108,11 @@ class Reach:
     def reached(self) -> bool:
         return self.reached_after is not None
 
-    @property
-    def entered_at(self) -> float | None:
-        """When the actual entered the band it is inside now (None: outside)."""
-        return self._entered
+    def missed(self, now: float, deadline: float) -> bool:
+        """Not reached by `deadline`: it has passed, and the actual is not inside a band it entered by
+        then (one that did may still settle)."""
+        return (self.reached_after is None and now > deadline
+                and (self._entered is None or self._entered > deadline))
 
     def feed(self, t: float, actual: float | None) -> None:
         """One sample: time (s) and the actual speed (None: not known, skipped)."""
@@ -314,9 +323,7 @@ class Live:
         self._phase("stopping", self.release() if self.release is not None else self.last)
         s.stop()
         rep = s.stop_report
-        # the stop's own status where it has one: a fault's code is read there (the cycle's words
-        # may not carry it), so the last line names it
-        st = rep.status if rep is not None and rep.status is not None else s.final_status
+        st = end_status(s)                 # with a fault's code, so the last line names it
         if self.tripped and self.fault_code is None and st is not None and st.fault_code:
             self.fault_code = st.fault_code
             self._name_trip()
@@ -329,4 +336,4 @@ class Live:
 
 
 __all__ = ["NOT_REACHED", "SETTLE_S", "SETTLE_SAMPLES", "Live", "LinkLost", "Reach",
-           "default_tolerance", "fault_name", "trip_words"]
+           "default_tolerance", "end_status", "fault_name", "trip_words"]

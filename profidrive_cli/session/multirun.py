@@ -28,7 +28,7 @@ from profidrive_cli import BusError, UsageError
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.link.base import LinkLost
 from profidrive_cli.session.group import Group, StationOut
-from profidrive_cli.session.live import NOT_REACHED, Reach, fault_name, trip_words
+from profidrive_cli.session.live import NOT_REACHED, Reach, end_status, fault_name, trip_words
 from profidrive_cli.session.signals import SessionTerminated, SignalGuard
 
 if TYPE_CHECKING:                                   # pragma: no cover
@@ -105,8 +105,7 @@ class StationRun:
     def to_dict(self) -> dict[str, Any]:
         s = self.session
         rep = s.stop_report
-        # the stop's own status where it has one: a fault's code is read there
-        fs = rep.status if rep is not None and rep.status is not None else s.final_status
+        fs = end_status(s)                  # with a fault's code where the stop read it
         return {"station": self.address, "profile": s.profile.name if s.profile else None,
                 "started": self.started, "reached_after_s": self.reached_after,
                 "stop": rep.to_dict() if rep is not None else None,
@@ -380,7 +379,8 @@ class MultiRun:
         self.group.stop_all([(r.address, r.session, r.percent) for r in runs], hurry, on_sample)
         for r in runs:
             rep = r.session.stop_report
-            code = rep.status.fault_code if rep is not None and rep.status is not None else None
+            st = end_status(r.session)
+            code = st.fault_code if st is not None else None
             if r.tripped and code and f"({code})" not in r.problem:
                 # the cycle's words had no code: the stop read it
                 r.problem = trip_words(r.session.profile, code)

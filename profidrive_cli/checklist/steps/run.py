@@ -121,8 +121,7 @@ class Run(StepType):
                 raise StepFailed(reach.overshoot_words())
             if reach.reached_after is not None:
                 break
-            entered = reach.entered_at
-            if ch.now() > deadline and (entered is None or entered > deadline):
+            if reach.missed(ch.now(), deadline):
                 r.measured = run_measured(st, v, None, None, None, unit)
                 raise StepFailed(f"actual {fmt(rnd(v))}{u} after {fmt(a['within'])} s, expected "
                                  f"{fmt(target)}{u} ± {fmt(tol)}")

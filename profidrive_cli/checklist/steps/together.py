@@ -91,8 +91,7 @@ class _Drive:
             self.reached = reach.reached_after
             self.lo = self.hi = v
             return True
-        entered = reach.entered_at
-        if now > self.deadline and (entered is None or entered > self.deadline):
+        if reach.missed(now, self.deadline):
             self.failed = (f"actual {fmt(rnd(v))}{self.u} after {fmt(now - self.t_start)} s, expected "
                            f"{fmt(self.target)}{self.u} ± {fmt(self.tol)}")
             return True
