@@ -73,3 +73,40 @@ def test_reversal_counts_the_target_only_after_standstill_at_a_low_cycle_rate():
     # settled (session/live.py Reach: 3 samples in a row in the band) at t=10: -9.9, -10.0, -10.0
     assert r.measured["actual_hz"] == pytest.approx(-10.0)
     assert "after 8.00 s" in msg
+
+
+class Accelerating(ScriptedDrive):
+    """Standing at 0 Hz; after set_speed_hz(+10) it reports the scripted speeds."""
+
+    def __init__(self, script):
+        super().__init__()
+        self.script = list(script)
+
+    def status(self):
+        return self._st(0.0) if not self.commanded else self.cycle()
+
+    def set_speed_hz(self, hz):
+        self.commanded = True
+
+
+def _run_step(d):
+    from profidrive_cli.checklist.steps.base import StepFailed
+    step = SimpleNamespace(args={"unit": "hz", "speed": 10.0, "direction": "forward", "duration": 0.0,
+                                 "tolerance": 0.5, "within": 30.0})
+    r = SimpleNamespace(step=step, expected={}, measured={})
+    with pytest.raises(StepFailed) as e:
+        RUN.execute(SimpleNamespace(progress=lambda *a: None), None, r, d, None)
+    return str(e.value), r
+
+
+def test_the_run_step_fails_an_overshoot_with_its_figures():
+    # issue 34, the one rule (session/live.py Reach): 10 Hz +- 0.5 Hz; 9.8 is inside, 10.7 beyond it
+    msg, r = _run_step(Accelerating([5.0, 9.8, 10.7, 10.0, 10.0, 10.0]))
+    assert msg == "overshoot: reference 10 Hz, peak actual 10.7 Hz, tolerance ± 0.5 Hz"
+    assert r.measured["reached_after_s"] is None
+
+
+def test_the_run_step_does_not_take_a_pass_through_for_reached():
+    # 9.9 and 10.2 inside the band on the way to 20 Hz: two samples, not settled -- and beyond it
+    msg, r = _run_step(Accelerating([5.0, 9.9, 10.2, 15.0, 20.0]))
+    assert msg.startswith("overshoot: reference 10 Hz, peak actual 15 Hz")

@@ -230,6 +230,20 @@ def test_sim_url_d5_01_takes_0_or_1_only():
     assert r.stderr.strip() == "pdrive: sim URL: set=: d5-01 = 2: the simulated yaskawa-si-p1 takes 0 or 1"
 
 
+def test_sim_ctl_switches_the_si_p1_to_torque_control_and_back():
+    import profidrive_cli as pdrive
+    from profidrive_cli.sim.control import ControlError
+    model, ch, d = yaskawa(A1_02=3)
+    model.set_value("d5-01", 1)                                  # what `sim-ctl set 7 d5-01 1` calls
+    assert model.torque_controlled()
+    model.set_value("d5-01", 0)
+    assert not model.torque_controlled()
+    with pdrive.open_bus("sim://?timing=virtual") as bus:
+        bus.simulator.set(7, "d5-01", 1)
+        with pytest.raises(ControlError, match="d5-01 must be 0 .speed control. or 1 .torque control."):
+            bus.simulator.set(7, "d5-01", 3)
+
+
 def test_yaskawa_torque_limit_holds_the_speed():
     model, ch, d = yaskawa(A1_02=3, d5_01=0)                      # flux vector, speed control
     d.set_speed(100.0)
