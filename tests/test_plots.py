@@ -12,6 +12,7 @@ import struct
 import sys
 import xml.etree.ElementTree as ET
 from html.parser import HTMLParser
+from types import SimpleNamespace
 
 import pytest
 from click.testing import CliRunner
@@ -186,6 +187,66 @@ def test_run_plot_records_every_sample_the_run_shows(tmp_path, monkeypatch):
     assert set(v for v in tr.reference if v is not None) == {30.0}
     assert [m[1] for m in tr.marks] == ["running", "stopping", "stopped"]
     assert tr.t == sorted(tr.t)
+    # issue 34: the reference ends where the stop begins (the drive is asked to stop, whatever its
+    # reference word still holds): every point after the "stopping" mark has none (the mark's own
+    # point is the run's last sample again, drawn without it)
+    t_stop = next(t for t, word in tr.marks if word == "stopping")
+    after = [ref for t, ref in zip(tr.t, tr.reference) if t > t_stop]
+    assert after and all(ref is None for ref in after)
+    assert [ref for t, ref in zip(tr.t, tr.reference) if t < t_stop][-1] == 30.0
+
+
+def test_run_plot_after_a_trip_draws_no_reference_from_the_trip_on():
+    # the data handed to the plotter: a view fed running samples, a tripped one, then the stop
+    from profidrive_cli.cli.run_plot import RunPlot
+    view = SimpleNamespace(header={"address": 6, "profile": "moeller", "reference_hz": 20.0},
+                           monitors=None, update=lambda *a, **kw: None, set_phase=lambda *a, **kw: None)
+    plot = RunPlot("x.svg")
+    plot.attach(view)
+
+    def smp(t, hz, fault=False):
+        return SimpleNamespace(t=t, reference_hz=20.0, actual_hz=hz, status=SimpleNamespace(fault=fault))
+    view.set_phase("running", smp(0.0, 0.0))
+    view.update(smp(0.5, 10.0))
+    view.update(smp(1.0, 0.0, fault=True))             # tripped: the output is off
+    view.set_phase("stopping", smp(1.0, 0.0, fault=True))
+    view.set_phase("stopped", smp(1.2, 0.0, fault=True))
+    assert plot.trace.reference == [20.0, 20.0, None, None, None]
+
+
+def test_step_traces_end_the_reference_at_the_stop():
+    # a checklist step's rows (the HTML report's plot): from the drive's stop() on, and in fault,
+    # no reference; a start() draws it again
+    from profidrive_cli.checklist.steptrace import record, to_plot_trace
+
+    class St:
+        def __init__(self, pct, fault=False):
+            self.speed_hz, self.speed_percent, self.reference_percent = pct * 0.6, pct, 50.0
+            self.fault = fault
+
+    class D:
+        channel = SimpleNamespace(now=lambda: 0.0)
+        seq = [St(25.0), St(50.0), St(40.0), St(0.0), St(20.0), St(0.0, fault=True)]
+
+        def cycle(self):
+            return self.seq.pop(0)
+
+        def stop(self, mode="normal", wait=True):
+            return self.cycle()
+
+        def start(self, timeout=None):
+            return self.cycle()
+    d = D()
+    with record(d) as tr:
+        d.cycle()
+        d.cycle()
+        d.stop()                                        # the stop's own cycles: no reference
+        d.cycle()
+        d.start()
+        d.cycle()                                       # in fault: none either
+    pt = to_plot_trace(tr, "t")
+    assert [r[3] for r in tr.rows] == [50.0, 50.0, None, None, 50.0, None]
+    assert pt.reference == [pytest.approx(30.0), pytest.approx(30.0), None, None, pytest.approx(30.0), None]
 
 
 def test_without_matplotlib_run_plot_says_how_to_get_it_and_nothing_moves(tmp_path, monkeypatch, sim):

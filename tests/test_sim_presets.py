@@ -44,7 +44,7 @@ def test_bad_presets_are_one_line_exit_2(url, words):
 
 def test_yaskawa_torque_run_on_sim_with_flux_vector():
     p = _pdrive("run", "7", "--torque", "20", "--hz", "30", "--duration", "3", "--json",
-                "--port", "sim://?set=7:A1-02=3")
+                "--port", "sim://?set=7:A1-02=3,d5-01=1")        # d5-01 = 1: torque control
     assert p.returncode == 0, p.stderr
     events = [json.loads(line) for line in p.stdout.splitlines()]
     updates = [e for e in events if e["event"] == "update" and e["phase"] == "running"]

@@ -14,6 +14,7 @@ Expected values from the specs and hand calculation:
 
 import json
 import math
+from pathlib import Path
 
 import pytest
 
@@ -26,7 +27,7 @@ from profidrive_cli.sim import torque_axis
 from profidrive_cli.sim.direct import DirectChannel
 from profidrive_cli.sim.toyo import make_model as toyo_model
 from profidrive_cli.sim.yaskawa import make_model as yaskawa_model
-from conftest import start_pty_sim, stop_pty_sim
+from conftest import SHARED, start_pty_sim, stop_pty_sim
 from test_run_safety import _status, pdrive
 
 
@@ -143,7 +144,7 @@ def test_toyo_speed_run_still_speed_controlled():
 # -- Yaskawa ---------------------------------------------------------------------------------
 
 def test_yaskawa_torque_reference_on_the_wire_and_axis():
-    model, ch, d = yaskawa(A1_02=3)
+    model, ch, d = yaskawa(A1_02=3, d5_01=1)                      # flux vector, torque control
     d.set_speed(0.0)
     d.set_torque(-20.0)
     out = ch.outs[-1]
@@ -162,6 +163,85 @@ def test_yaskawa_torque_refused_unless_flux_vector():
     with pytest.raises(DriveError, match=r"A1-02 = 3\); the drive has A1-02 = 2"):
         d.set_torque(20.0)
     assert ch.outs[-1][4:6] == b"\0\0"
+
+
+MANUAL_TORQUE_WORD = "| 4   | Torque Reference/Limit  | Torque Reference/Limit MSB  |"
+
+
+def test_the_simulated_si_p1_starts_in_speed_control_where_the_word_is_a_limit():
+    # issue 34: the sim used to start with d5-01 = 1 (torque control), so `run --hz 30
+    # --torque-limit 50` ran the motor to 60 Hz. The drive's factory setting is speed control (d5-01
+    # = 0). The option manual, output bytes 4-5 (../shared/seeds/004, L594; spec §2.4 "Torque
+    # reference / torque limit | 0.1 %; flux-vector control mode only"): "Torque Reference/Limit
+    # ... 0.1% Flux Vector mode only" -- in speed control the word limits the torque and the speed
+    # follows the reference. By hand (sim/torque_axis.py): the load at 30 of 60 Hz is 10 + 20 x 0.5
+    # = 20 % < the 50 % limit, so the limit does not bind: 30 Hz, the load's 20 % reported.
+    seeds = Path(SHARED) / "seeds"
+    manual = sorted(seeds.glob("004_*.txt")) if seeds.is_dir() else []
+    if manual:
+        line = manual[0].read_text(encoding="utf-8").splitlines()[593]      # L594
+        assert line.startswith(MANUAL_TORQUE_WORD) and "Flux Vector mode only" in line
+    model, ch, d = yaskawa(A1_02=3)
+    assert model.d5_01 == 0 and not model.torque_controlled()
+    d.set_speed(50.0)                                             # 30 Hz of E1-04 60 Hz
+    d.set_torque_limit(50.0)
+    assert ch.outs[-1][4:6] == bytes([0x01, 0xF4])                # 500 x 0.1 %, big-endian
+    d.start()
+    st = run_for(d, 20.0)
+    assert st.speed_hz == pytest.approx(30.0, abs=0.15)
+    assert st.torque_percent == pytest.approx(20.0, abs=0.1)
+    assert d.stop().stopped
+
+
+def test_the_issue_34_run_stays_at_its_reference_and_is_reached():
+    # the issue's command: exit 0, every running sample at or below 30 Hz + its 1 % band (0.3 Hz),
+    # "reached the reference" said once settled there
+    r = pdrive("run", "7", "--hz", "30", "--torque-limit", "50", "--duration", "6", "--json",
+               "--port", "sim://?timing=virtual&set=7:A1-02=3", timeout=300)
+    assert r.returncode == 0, r.stderr
+    events = [json.loads(line) for line in r.stdout.splitlines()]
+    updates = [e for e in events if e["event"] == "update"]
+    # the updates are paced by the wall clock (a few on the virtual one); the stop's first shows the
+    # last sample of the run
+    last_run = next(e for e in updates if e["phase"] == "stopping")
+    assert last_run["actual_hz"] == pytest.approx(30.0, abs=0.3)
+    assert max(e["actual_hz"] for e in updates) <= 30.3
+    end = events[-1]
+    assert end["event"] == "end" and not end["failed"] and end["reached_after_s"] is not None
+
+
+def test_the_issue_34_run_in_torque_control_is_an_overshoot():
+    # the sim's torque control kept by its option (set=7:d5-01=1): the 50 % word is then a torque
+    # reference and the axis runs past 30 Hz: exit 1, one line naming reference, peak, tolerance
+    r = pdrive("run", "7", "--hz", "30", "--torque-limit", "50", "--duration", "6",
+               "--port", "sim://?timing=virtual&set=7:A1-02=3,d5-01=1", timeout=300)
+    assert r.returncode == 1, (r.stdout, r.stderr)
+    last = r.stderr.strip().splitlines()[-1]
+    assert last.startswith("pdrive: station 7: overshoot: reference 30 Hz, peak actual ")
+    assert last.endswith(" Hz, tolerance ± 0.3 Hz; the drive is stopped") and "Traceback" not in r.stderr
+    peak = float(last.split("peak actual ")[1].split(" Hz")[0])
+    assert peak > 30.3
+    assert "reached the reference" not in r.stderr
+
+
+def test_sim_url_d5_01_takes_0_or_1_only():
+    r = pdrive("status", "7", "--port", "sim://?set=7:d5-01=2")
+    assert r.returncode == 2
+    assert r.stderr.strip() == "pdrive: sim URL: set=: d5-01 = 2: the simulated yaskawa-si-p1 takes 0 or 1"
+
+
+def test_sim_ctl_switches_the_si_p1_to_torque_control_and_back():
+    import profidrive_cli as pdrive
+    from profidrive_cli.sim.control import ControlError
+    model, ch, d = yaskawa(A1_02=3)
+    model.set_value("d5-01", 1)                                  # what `sim-ctl set 7 d5-01 1` calls
+    assert model.torque_controlled()
+    model.set_value("d5-01", 0)
+    assert not model.torque_controlled()
+    with pdrive.open_bus("sim://?timing=virtual") as bus:
+        bus.simulator.set(7, "d5-01", 1)
+        with pytest.raises(ControlError, match="d5-01 must be 0 .speed control. or 1 .torque control."):
+            bus.simulator.set(7, "d5-01", 3)
 
 
 def test_yaskawa_torque_limit_holds_the_speed():
@@ -232,7 +312,7 @@ def test_cli_toyo_torque_run_on_sim_json():
 # -- through a real byte path: `pdrive sim --pty` (the plant keeps A1-02 between commands) ----
 
 def test_over_a_pty_yaskawa_torque_run_then_stopped():
-    sim, port = start_pty_sim()
+    sim, port = start_pty_sim("--plant", "sim://?set=7:d5-01=1")    # the SI-P1 in torque control
     try:
         # a card without a torque word is refused before the real-port question (no --yes here)
         r = pdrive("run", "6", "--torque", "20", "--port", port)

@@ -12,7 +12,7 @@ from profidrive_cli import UsageError
 from profidrive_cli.api.results import (AuditFinding, AuditResult, AuditSkip, Fault, Faults, Param,
                                         Status, StopResult)
 from profidrive_cli.drives.base import DriveError
-from profidrive_cli.session.live import at_reference
+from profidrive_cli.session.live import Reach
 
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.drives.base import ParamValue
@@ -121,8 +121,10 @@ class Drive:
     def run(self, hz: float | None = None, *, percent: float | None = None, wait: bool = False,
             timeout: float | None = None) -> Status:
         """Run at `hz` (or `percent` of fmax; negative = reverse): start the drive, or change the
-        reference when it already runs. wait=True: until the actual speed is at the reference
-        (DriveError after `timeout` s, default 60, or when the drive trips). A speed above fmax is
+        reference when it already runs. wait=True: until the actual speed has settled at the
+        reference (the rule of `pdrive run`, docs/commands.md; DriveError after `timeout` s, default
+        60, when the drive trips, or when the actual goes beyond the reference by more than the
+        tolerance: an overshoot). A speed above fmax is
         refused (UsageError), never clipped."""
         return self._run(hz, percent, wait, timeout, None)
 
@@ -152,7 +154,10 @@ class Drive:
             if wait:
                 limit = DEFAULT_RUN_TIMEOUT_S if timeout is None else float(timeout)
                 end = sample.t + limit
-                while not at_reference(pct, sample.actual_percent):
+                # the one "reached" rule of run (session/live.py Reach): settled in the band, an
+                # overshoot beyond it is an error
+                reach = Reach.of_run(pct, sample)
+                while not reach.reached:
                     if cancel is not None and cancel.is_set():
                         break
                     if sample.status.fault:
@@ -160,6 +165,8 @@ class Drive:
                                          + (f" ({sample.status.fault_code})"
                                             if sample.status.fault_code else "")
                                          + " while accelerating")
+                    if reach.overshoot:
+                        raise DriveError(f"station {self.station}: {reach.overshoot_words()}")
                     if sample.t > end:
                         act = sample.actual_hz
                         raise DriveError(f"station {self.station}: reference "
@@ -168,6 +175,8 @@ class Drive:
                                          f"reached within {limit:g} s (actual "
                                          f"{'-' if act is None else f'{act:g} Hz'})")
                     sample = s.poll()
+                    if not sample.status.fault:
+                        reach.feed(sample.t, sample.actual_percent)
             return self._status(sample)
 
     def stop(self, *, timeout: float | None = None) -> StopResult:

@@ -2,7 +2,8 @@
 
 record(drive) shadows the Drive's cycle() for the length of a step (every status a step sees comes
 through it: start, status, the run and stop loops) and keeps (time, actual Hz, actual %, reference
-%) per cycle, bounded. to_plot_trace() turns it into a plot.Trace in Hz where the drive reports Hz
+%) per cycle, bounded; the reference only while the drive is asked to turn (its stop() and start()
+are shadowed too: from a stop, or in fault, the row has none, so the plot's reference ends there). to_plot_trace() turns it into a plot.Trace in Hz where the drive reports Hz
 (the max frequency derived from its own Hz/% pair, no parameter read), else in %. With the step's
 `expected` (StepResult.expected) the plot also shows what the step asked for: the tolerance band
 around the speed it was to reach and the deadline (`within`), so a failed step's picture shows why.
@@ -25,11 +26,14 @@ class StepTrace:
         self._stride = 1
         self._n = 0
 
-    def add(self, t, st) -> None:
+    def add(self, t, st, stopping: bool = False) -> None:
+        """One cycle's status; stopping: the drive is being stopped (no reference is kept from the
+        stop's start, nor while it is in fault: the plot shows what the drive was asked)."""
         self._n += 1
         if (self._n - 1) % self._stride:
             return
-        self.rows.append((t, st.speed_hz, st.speed_percent, st.reference_percent))
+        ref = None if stopping or getattr(st, "fault", False) else st.reference_percent
+        self.rows.append((t, st.speed_hz, st.speed_percent, ref))
         if len(self.rows) >= MAX_CYCLES:
             self.rows = self.rows[::2]
             self._stride *= 2
@@ -45,20 +49,34 @@ def record(drive):
     inner = drive.cycle
     ch = drive.channel
     t0 = ch.now()
+    stopping = [False]                 # a stop was asked (until the next start)
 
     def cycle():
         st = inner()
-        tr.add(ch.now() - t0, st)
+        tr.add(ch.now() - t0, st, stopping[0])
         return st
 
-    drive.cycle = cycle
+    def marking(own, asked_to_stop: bool):
+        def call(*a, **kw):
+            stopping[0] = asked_to_stop
+            return own(*a, **kw)
+        return call
+
+    shadowed = {"cycle": (inner, cycle)}
+    for name, asked_to_stop in (("stop", True), ("start", False)):
+        own = getattr(drive, name, None)
+        if own is not None:
+            shadowed[name] = (own, marking(own, asked_to_stop))
+    for name, (_, mine) in shadowed.items():
+        setattr(drive, name, mine)
     try:
         yield tr
     finally:
-        try:
-            del drive.cycle            # the class's own method again
-        except AttributeError:
-            drive.cycle = inner
+        for name, (own, _) in shadowed.items():
+            try:
+                delattr(drive, name)       # the class's own method again
+            except AttributeError:
+                setattr(drive, name, own)
 
 
 def to_plot_trace(tr: StepTrace, title: str, expected: dict | None = None):

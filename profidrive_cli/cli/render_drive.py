@@ -96,6 +96,8 @@ class RunView:
         self.peak_hz = None
         #: session.monitors.Monitors of run --monitor, or None
         self.monitors = None
+        #: a fault code -> its name (session.live.fault_name on the station's profile), or None
+        self.fault_name = None
 
     # -- lifecycle ---------------------------------------------------------------------------
     def start(self, header: dict) -> None:
@@ -148,13 +150,20 @@ class RunView:
 
     def _text_line(self, s) -> str:
         st = s.status
-        fault = f"  FAULT {st.fault_code or ''}" if st.fault else ""
+        fault = f"  FAULT {self._fault_words(st.fault_code)}" if st.fault else ""
         mon = f"  {monitor_words(self.monitors)}" if self.monitors is not None else ""
         return (f"{s.t:7.2f} s  {st.state:<28} ref {fmt_num(s.reference_hz, 2, 'Hz')} "
                 f"({fmt_num(s.reference_percent, 1, '%')})  actual {fmt_num(s.actual_hz, 2, 'Hz')} "
                 f"({fmt_num(s.actual_percent, 1, '%')})  {s.cycle_hz:5.1f} cycles/s  "
                 f"retries {s.counters.get('retries', 0)} errors "
                 f"{s.counters.get('no_answer', 0) + s.counters.get('illegal', 0)}{torque_words(st)}{fault}{mon}")
+
+    def _fault_words(self, code) -> str:
+        """'EF0 (External fault ...)' as `pdrive faults` names it; 'code not read' without a code."""
+        if not code:
+            return "(code not read)"
+        name = self.fault_name(code) if self.fault_name is not None else None
+        return f"{code} ({name})" if name else str(code)
 
     def finish(self, end: dict) -> None:
         if self._live is not None:
@@ -186,8 +195,8 @@ class RunView:
         t.add_column(style="bold")
         t.add_column()
         state = Text(st.state, style="bold red" if st.fault else ("bold green" if st.running else "bold"))
-        if st.fault and st.fault_code:
-            state.append(f"  fault {st.fault_code}", style="red")
+        if st.fault:
+            state.append(f"  fault {self._fault_words(st.fault_code)}", style="red")
         t.add_row("phase", Text(self.phase))
         t.add_row("state", state)
         t.add_row("status bits", Text(flag_words(st.flags)))

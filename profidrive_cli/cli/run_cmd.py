@@ -19,7 +19,7 @@ from profidrive_cli.cli.drive_cmds import (_confirmer, _session, _terminations, 
                                           run_ending)
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.outfile import check_output_path
-from profidrive_cli.session.live import NOT_REACHED, Live
+from profidrive_cli.session.live import NOT_REACHED, Live, end_status, fault_name
 
 
 @click.command("run")
@@ -135,6 +135,7 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
                         **run_torque.header(torque, torque_limit),
                         **({"monitors": R.monitor_header(mons[0])} if mons else {})})
             view.monitors = mons[0] if mons else None
+            view.fault_name = lambda code: fault_name(s.profile, code)
             if interactive:
                 view.hint = "up/down speed · r reverse · space stop/start · q quit"
 
@@ -148,7 +149,7 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
                     mons[0].poll(sample)         # one monitor read per loop, round robin
                     view.monitors = mons[0]      # shown again after a stop (space) and start
                 view.update(sample)
-            live = Live(s, start, duration=duration, reconnect_s=reconnect_s, judge=True,
+            live = Live(s, start, duration=duration, reconnect_s=reconnect_s, judge=torque is None,
                         must_reach=torque is None, percent=pct, torque=torque, on_sample=on_sample,
                         on_phase=view.set_phase)
             lives.append(live)
@@ -166,6 +167,7 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
             if live.failed:
                 end["failed"], end["problem"] = True, live.problem
             live.finish()
+            end["reason"], end["problem"] = live.reason, end["problem"] and live.problem  # a trip's code, read at the stop
     if lives and lives[0].exit_code:
         live = lives[0]
         why = end["reason"]
@@ -203,6 +205,12 @@ def _keys(keys, step: float):
 
 def _run_extra(lives, mons) -> dict:
     d = {"reached_after_s": lives[0].reached_after if lives else None}
+    if lives:
+        # the fault the run ended with, named as `pdrive faults` names it (the stop reads the code)
+        s = lives[0].session
+        fs = end_status(s)
+        code = fs.fault_code if fs is not None and fs.fault else None
+        d["fault_code"], d["fault_name"] = code, fault_name(s.profile, code)
     if mons:
         d["monitors"], d["monitors_dropped"] = mons[0].to_dict(), mons[0].dropped
     return d

@@ -1,5 +1,5 @@
 """run --plot FILE.svg|png: every sample the run's view shows (also those of the stop) goes into a
-plot.Trace; the file is written when the run ends, whatever way it ends (the plot of a trip or a
+plot.Trace, the reference only while the drive is asked to turn (none from the stop's start or a trip); the file is written when the run ends, whatever way it ends (the plot of a trip or a
 Ctrl-C is the one wanted), through a temporary file renamed into place. Checked before the bus is
 opened: matplotlib installed, the suffix, the path writable — nothing moves for a plot that cannot
 be drawn."""
@@ -62,7 +62,14 @@ class RunPlot:
                 if isinstance(v.value, (int, float)):
                     label = f"{c} {v.name}" if v.name else c
                     values[f"{label} [{v.unit}]" if v.unit else label] = v.value
-        self.trace.add(sample.t, sample.reference_hz, sample.actual_hz, values)
+        self.trace.add(sample.t, None if self.stopping(sample) else sample.reference_hz,
+                       sample.actual_hz, values)
+
+    def stopping(self, sample) -> bool:
+        """The drive is no longer asked to turn: the stop has begun (phase stopping / stopped, also
+        a pause by space) or it tripped. Its reference word may still hold the speed; the plot
+        draws no reference from here, so the figure shows what the drive was asked."""
+        return self._phase in ("stopping", "stopped") or bool(getattr(sample.status, "fault", False))
 
     def write(self):
         from profidrive_cli.plot import write_plot

@@ -23,7 +23,7 @@ rich: cli/drive_cmds.py and the checklist runner build on it.
     restore.py       restore: plan every row first, then write and read back
     group.py         Group: several stations on one bus cycle (run 3,4,5, the checklist's together, api)
     multirun.py      MultiRun: several drives in one run on a Group
-    live.py          Live: the loop of run and jog (the CLI keeps keys and rendering); at_reference
+    live.py          Live: the loop of run and jog (keys, rendering: the CLI); Reach, the "reached" rule
     monitors.py      run --monitor and the trip records of `faults`
     commloss.py      the comm-loss acceptance test (commloss_reaction.py: its expectations)
 

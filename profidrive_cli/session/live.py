@@ -5,8 +5,9 @@ it sees the loop through callbacks: on_sample(sample) every cycle, on_phase(word
 each change of phase, on_cycle(live) -> quit after each sample (the CLI reads its keys there and calls
 set_reference / set_torque / pause / resume), on_end(live) when the loop ends by itself.
 
-Also here: at_reference, the one rule of "the drive is at its reference" (run's `reached`, each drive
-of run 3,4,5, the API's Drive.run(wait=True)).
+Also here: Reach, the one rule of "the drive reached its reference" (settled inside the band, not
+passed through; beyond it on the far side is an overshoot): run's `reached`, each drive of run 3,4,5,
+the API's Drive.run(wait=True) and the checklist's run step all feed it.
 
 No click and no rich here. An exception leaving the loop (Ctrl-C, SIGTERM, a bus error) leaves the
 drive to the session's own safe stop on exit (DriveSession.close).
@@ -20,26 +21,140 @@ from typing import TYPE_CHECKING, Callable
 from profidrive_cli.link.base import LinkLost
 
 if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.drives.base import DriveStatus
+    from profidrive_cli.drives.profile import Profile
     from profidrive_cli.session.cycle import Sample
     from profidrive_cli.session.drivesession import DriveSession
     from profidrive_cli.session.safestop import StopReport
 
-#: the verdict of a run whose actual speed never came within at_reference before its --duration ended
-#: (also each drive's of run 3,4,5: multirun.StationRun.problem)
+#: the verdict of a run whose actual speed never settled at its reference (Reach) before its --duration
+#: ended (also each drive's of run 3,4,5: multirun.StationRun.problem)
 NOT_REACHED = "did not reach its reference"
 
+#: "settled": the actual stays inside the band for at least SETTLE_SAMPLES samples in a row spanning at
+#: least SETTLE_S seconds. Three samples: one or two samples inside the band can be a single pass
+#: through it between cycles; three in a row mean it stayed for two whole cycle periods. 0.1 s: three
+#: times the longest pass through the default band of the simulated drives (the torque axis passing
+#: 30 Hz of 60 at 18 Hz/s crosses the +-0.3 Hz band in 0.6 / 18 = 0.033 s) and three cycles at 30/s.
+#: A slower pass (a ramp of minutes) can look settled: the overshoot half of the rule catches it as
+#: soon as the actual leaves the band on the far side.
+SETTLE_SAMPLES = 3
+SETTLE_S = 0.1
 
-def at_reference(ref: float | None, act: float | None) -> bool:
-    """The actual speed is at the reference (both in % of the max frequency): within 1 % of it, or
-    0.05 % of the max frequency near zero."""
-    if ref is None or act is None:
-        return False
-    return abs(act - ref) <= max(0.01 * abs(ref), 0.05)
+
+def default_tolerance(ref: float) -> float:
+    """run's band around a reference, both in % of the max frequency: 1 % of the reference, at least
+    0.05 % of the max frequency (near zero)."""
+    return max(0.01 * abs(ref), 0.05)
 
 
-def sample_at_reference(sample: "Sample") -> bool:
-    """at_reference of a Sample's reference and actual speed."""
-    return at_reference(sample.reference_percent, sample.actual_percent)
+def end_status(session: "DriveSession") -> "DriveStatus | None":
+    """The drive's last status: the stop's own where it has one (a fault's code is read there, the
+    cycle's words may not carry it), else the last one seen."""
+    rep = session.stop_report
+    return rep.status if rep is not None and rep.status is not None else session.final_status
+
+
+def fault_name(profile: "Profile | None", code: str | None) -> str | None:
+    """A fault code's name as `pdrive faults` gives it (the meaning in the profile's alarm table);
+    None where the table has none or there is no code."""
+    alarm = profile.alarm_by_code(code) if profile is not None and code else None
+    return alarm.meaning if alarm is not None and alarm.meaning else None
+
+
+def trip_words(profile: "Profile | None", code: str | None) -> str:
+    """'tripped (EF0): External fault ...' (the code and its name where known), or 'tripped'."""
+    name = fault_name(profile, code)
+    return "tripped" + (f" ({code})" if code else "") + (f": {name}" if name else "")
+
+
+@dataclass
+class Reach:
+    """The one "reached" rule (run, each drive of run 3,4,5, the API's Drive.run(wait=True), the
+    checklist's run step): feed it the actual speed sample by sample, in the unit of `reference` and
+    `tolerance` (the band is reference +- tolerance).
+
+    reached: the actual has settled inside the band, SETTLE_SAMPLES samples in a row over at least
+    SETTLE_S; reached_after = when it entered the band that last time, counted from t0 (the time the
+    reference was given; default the first sample fed). Passing through the band is not reaching it.
+    overshoot: the actual went beyond the reference by more than the tolerance on the far side (the
+    side away from where it came: `start`, else the first sample fed; a start inside the band counts
+    as coming from zero; reference 0 from inside has no far side). `peak` is the actual furthest
+    beyond. A verdict once given stays. unit / scale only shape the words (value x scale, unit)."""
+    reference: float
+    tolerance: float
+    start: float | None = None
+    t0: float | None = None
+    unit: str = "%"
+    scale: float = 1.0
+    reached_after: float | None = None
+    overshoot: bool = False
+    peak: float | None = None
+    _side: int | None = None
+    _entered: float | None = None
+    _count: int = 0
+
+    def __post_init__(self) -> None:
+        if self.start is not None:
+            self._side = self._side_of(self.start)
+
+    def _side_of(self, act: float) -> int:
+        d = act - self.reference
+        if abs(d) > self.tolerance:
+            return 1 if d > 0 else -1
+        return -1 if self.reference > 0 else (1 if self.reference < 0 else 0)
+
+    @property
+    def reached(self) -> bool:
+        return self.reached_after is not None
+
+    def missed(self, now: float, deadline: float) -> bool:
+        """Not reached by `deadline`: it has passed, and the actual is not inside a band it entered by
+        then (one that did may still settle)."""
+        return (self.reached_after is None and now > deadline
+                and (self._entered is None or self._entered > deadline))
+
+    def feed(self, t: float, actual: float | None) -> None:
+        """One sample: time (s) and the actual speed (None: not known, skipped)."""
+        if actual is None:
+            return
+        if self.t0 is None:
+            self.t0 = t
+        if self._side is None:
+            self._side = self._side_of(actual)
+        d = actual - self.reference
+        if abs(d) <= self.tolerance:
+            if self._entered is None:
+                self._entered, self._count = t, 0
+            self._count += 1
+            if (self.reached_after is None and self._count >= SETTLE_SAMPLES
+                    and t - self._entered >= SETTLE_S - 1e-9):
+                self.reached_after = round(self._entered - self.t0, 3)
+            return
+        self._entered, self._count = None, 0
+        if self._side and d * self._side < 0:          # beyond the reference, on the far side
+            self.overshoot = True
+            if self.peak is None or abs(d) > abs(self.peak - self.reference):
+                self.peak = actual
+
+    @classmethod
+    def of_run(cls, percent: float, sample: "Sample | None" = None) -> "Reach":
+        """run's rule for a speed reference in % of the max frequency: its default band, words in
+        Hz (the sample's max frequency); the sample (the one the reference went with) gives the
+        start and t0."""
+        fmax = float(sample.fmax_hz) if sample is not None and getattr(sample, "fmax_hz", None) else 0.0
+        return cls(percent, default_tolerance(percent),
+                   start=sample.actual_percent if sample is not None else None,
+                   t0=sample.t if sample is not None else None,
+                   unit="Hz" if fmax else "%", scale=fmax / 100.0 if fmax else 1.0)
+
+    def overshoot_words(self) -> str:
+        """'overshoot: reference 30 Hz, peak actual 31.2 Hz, tolerance +- 0.3 Hz'."""
+        def f(v: float) -> str:
+            return f"{round(v * self.scale, 3):g}{'' if self.unit == '%' else ' '}{self.unit}"
+        return (f"overshoot: reference {f(self.reference)}, peak actual "
+                f"{f(self.peak if self.peak is not None else self.reference)}, tolerance ± "
+                f"{f(self.tolerance)}")
 
 
 @dataclass
@@ -48,8 +163,9 @@ class Live:
     card's jog), release() (jog) ends the jog before its stop. duration: seconds from the start to the
     end (None: until on_cycle quits). reconnect_s: on a lost link, wait this long for the port and
     resume data exchange (the drive, stopped by its watchdog meanwhile, is not restarted). judge:
-    remember when the actual speed first reached the reference (reached_after); must_reach: the
-    --duration ending before that is a failure (NOT_REACHED)."""
+    feed the speed to Reach and remember when it reached the reference (reached_after); must_reach:
+    an overshoot ends the loop as a failure (its words in problem), and so does the --duration
+    ending before the reference was reached (NOT_REACHED)."""
     session: "DriveSession"
     start: Callable[[], "Sample"]
     release: Callable[[], "Sample"] | None = None
@@ -75,6 +191,9 @@ class Live:
     short_of: float | None = None         # the actual speed (Hz) when the time was up, not reached
     exit_code: int = 0
     last: "Sample | None" = None
+    reach: Reach | None = None            # the rule of the reference in force (judge)
+    tripped: bool = False                 # the loop ended in a trip
+    fault_code: str | None = None         # its code (read at the stop where the cycle had none)
 
     def _phase(self, words: str, sample: "Sample | None" = None) -> None:
         if self.on_phase is not None:
@@ -88,14 +207,16 @@ class Live:
         self.started = self.running = True
         self.t_start = sample.t
         self.last = sample
+        self.reach = Reach.of_run(self.percent, sample)
         self._phase(running, sample)
         return sample
 
     def resume(self, starting: str, running: str) -> None:
         """Start it again after pause() (the keys: space)."""
         self._phase(starting)
-        self.start()
+        sample = self.start()
         self.running = True
+        self.reach = Reach.of_run(self.percent, sample)
         self._phase(running)
 
     def pause(self, stopping: str, stopped: str) -> "StopReport":
@@ -111,6 +232,7 @@ class Live:
         self.percent = percent
         self.session.set_reference(percent)
         self.reached_after = None
+        self.reach = Reach.of_run(percent, self.last)
 
     def set_torque(self, percent: float) -> None:
         self.torque = percent
@@ -162,22 +284,31 @@ class Live:
 
     def _judged(self, sample: "Sample") -> bool:
         """The figures of one cycle; True when they end the loop (a trip, the duration)."""
-        if self.judge and self.running and self.reached_after is None and sample_at_reference(sample):
-            self.reached_after = round(sample.t - self.t_start, 3)
+        reach = self.reach
+        if self.judge and self.running and reach is not None:
+            reach.feed(sample.t, sample.actual_percent)
+            if self.reached_after is None and reach.reached_after is not None:
+                self.reached_after = round(reach.reached_after + (reach.t0 or 0.0) - self.t_start, 3)
         act = sample.actual_hz
         if act is not None and (self.peak_hz is None or abs(act) > abs(self.peak_hz)):
             self.peak_hz = act
         st = sample.status
         if st.fault:
-            code = f" ({st.fault_code})" if st.fault_code else ""
-            self.reason = "the drive tripped" + code
-            self.failed, self.problem, self.exit_code = True, "tripped" + code, 1
+            self.tripped, self.fault_code = True, st.fault_code
+            self._name_trip()
+            self.failed, self.exit_code = True, 1
+            return True
+        if self.must_reach and self.running and reach is not None and reach.overshoot:
+            # beyond the reference on the far side: not reached, whatever came before; the run
+            # ends at once (the drive does what it was not asked)
+            self.reason = reach.overshoot_words()
+            self.failed, self.problem, self.exit_code = True, self.reason, 1
             return True
         if self.duration is not None and sample.t - self.t_start >= self.duration:
             self.reason = f"duration {self.duration:g} s reached"
             if self.must_reach and self.running and self.reached_after is None:
-                # the time is up and the actual speed never came within at_reference (multirun's
-                # rule; a torque run has no speed to reach: not judged)
+                # the time is up and the actual speed never settled at the reference (Reach; a
+                # torque run has no speed to reach: not judged)
                 self.failed, self.problem, self.exit_code = True, NOT_REACHED, 1
                 self.short_of = sample.actual_hz
             return True
@@ -192,8 +323,17 @@ class Live:
         self._phase("stopping", self.release() if self.release is not None else self.last)
         s.stop()
         rep = s.stop_report
+        st = end_status(s)                 # with a fault's code, so the last line names it
+        if self.tripped and self.fault_code is None and st is not None and st.fault_code:
+            self.fault_code = st.fault_code
+            self._name_trip()
         if rep is not None and rep.how in ("normal", "coast"):
-            self._phase("stopped", s.motion.sample(s.final_status) if s.final_status else None)
+            self._phase("stopped", s.motion.sample(st) if st else None)
+
+    def _name_trip(self) -> None:
+        self.problem = trip_words(self.session.profile, self.fault_code)
+        self.reason = "the drive " + self.problem
 
 
-__all__ = ["NOT_REACHED", "Live", "LinkLost", "at_reference", "sample_at_reference"]
+__all__ = ["NOT_REACHED", "SETTLE_S", "SETTLE_SAMPLES", "Live", "LinkLost", "Reach",
+           "default_tolerance", "end_status", "fault_name", "trip_words"]

@@ -28,7 +28,7 @@ from profidrive_cli import BusError, UsageError
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.link.base import LinkLost
 from profidrive_cli.session.group import Group, StationOut
-from profidrive_cli.session.live import NOT_REACHED, sample_at_reference
+from profidrive_cli.session.live import NOT_REACHED, Reach, end_status, fault_name, trip_words
 from profidrive_cli.session.signals import SessionTerminated, SignalGuard
 
 if TYPE_CHECKING:                                   # pragma: no cover
@@ -97,13 +97,15 @@ class StationRun:
     started: bool = False
     t_start: float = 0.0                 # when its reference went (the run's clock)
     reached_after: float | None = None
+    reach: Reach | None = None           # the one "reached" rule, from the reference's round
     last: "Sample | None" = None         # the last Sample
     problem: str = ""                    # why this drive failed (trip, dropped out, not reached ...)
+    tripped: bool = False
 
     def to_dict(self) -> dict[str, Any]:
         s = self.session
         rep = s.stop_report
-        fs = s.final_status
+        fs = end_status(s)                  # with a fault's code where the stop read it
         return {"station": self.address, "profile": s.profile.name if s.profile else None,
                 "started": self.started, "reached_after_s": self.reached_after,
                 "stop": rep.to_dict() if rep is not None else None,
@@ -111,6 +113,7 @@ class StationRun:
                 "state": fs.state if fs is not None else None,
                 "fault": fs.fault if fs is not None else None,
                 "fault_code": fs.fault_code if fs is not None else None,
+                "fault_name": fault_name(s.profile, fs.fault_code) if fs is not None else None,
                 "problem": self.problem or None, "counters": s.counters}
 
 
@@ -288,6 +291,8 @@ class MultiRun:
         for r in self.runs:
             r.session.set_reference(r.percent)
             r.t_start = t
+            r.reach = Reach.of_run(r.percent, r.last)
+            r.reach.t0 = t
         for r in self.runs:                 # a codec that sets its words without an exchange
             if not group.exchanged(r.address):
                 self._sample(r, r.session.poll(), "running")
@@ -307,13 +312,20 @@ class MultiRun:
                     self._end(f"station {r.address} dropped out of data exchange ({e.why})")
                     return
                 self._sample(r, sample, "running")
-                if r.reached_after is None and sample_at_reference(sample):
-                    r.reached_after = round(self.now() - r.t_start, 3)
                 st = sample.status
+                reach = r.reach
+                if reach is not None and not st.fault:
+                    reach.feed(self.now(), sample.actual_percent)
+                    r.reached_after = reach.reached_after
                 if st.fault:
-                    r.problem = "tripped" + (f" ({st.fault_code})" if st.fault_code else "")
-                    self._end(f"station {r.address} tripped" + (f" ({st.fault_code})" if st.fault_code
-                                                                 else ""))
+                    r.tripped = True
+                    r.problem = trip_words(r.session.profile, st.fault_code)
+                    self._end(f"station {r.address} {r.problem}")
+                    return
+                if reach is not None and reach.overshoot:
+                    # beyond its reference on the far side: the run ends for all, as on a trip
+                    r.problem = reach.overshoot_words()
+                    self._end(f"station {r.address}: {r.problem}")
                     return
             group.end_round()
             if group.dropped:
@@ -367,6 +379,12 @@ class MultiRun:
         self.group.stop_all([(r.address, r.session, r.percent) for r in runs], hurry, on_sample)
         for r in runs:
             rep = r.session.stop_report
+            st = end_status(r.session)
+            code = st.fault_code if st is not None else None
+            if r.tripped and code and f"({code})" not in r.problem:
+                # the cycle's words had no code: the stop read it
+                r.problem = trip_words(r.session.profile, code)
+                self.reason = f"station {r.address} {r.problem}"
             if rep is None or not rep.stopped:
                 self.failed = True
                 r.problem = r.problem or "not confirmed stopped"

@@ -15,7 +15,9 @@
     sim://?unplug=3@5-8                      station 3 unplugged 5 s after the bus's first telegram,
                                              plugged in again at 8 s (sim/faults.py)
     sim://?trip=3:OC1                        station 3 starts tripped with alarm OC1
-    sim://?set=7:A1-02=3,C1-01=2             station 7 starts with these settings (engineering units)
+    sim://?set=7:A1-02=3,C1-01=2             station 7 starts with these settings (engineering units); also
+                                             a model's own settings (SETTINGS of sim/<family>.py), e.g.
+                                             set=7:d5-01=1: the simulated SI-P1 in torque control
     sim://?faults=6:E01,E05                  station 6's fault history pre-filled (repeat the key per station)
     sim://?warmup=3:4,5:2                    station 3 still searches the baud rate (Baud_Search): it
                                              ignores its first 4 telegrams and answers from the 5th
@@ -199,16 +201,37 @@ def _preset_options(profile, values: dict[str, float]) -> dict:
     if not values:
         return {}
     from profidrive_cli.drives.values import profile_value_problem
+    out: dict[str, float] = {}
     for code, v in values.items():
         p = profile.param(code)
         if p is None:
-            raise UsageError(f"sim URL: set=: {code} is not a parameter of {profile.name}")
+            # a setting the family's model takes beyond the profile (SETTINGS of its module: code ->
+            # the values it takes), e.g. the Yaskawa model's d5-01, which has no register
+            extra = _model_settings(profile)
+            key = next((k for k in extra if k.lower() == code.lower()), None)
+            if key is None:
+                raise UsageError(f"sim URL: set=: {code} is not a parameter of {profile.name}")
+            if v not in extra[key]:
+                raise UsageError(f"sim URL: set=: {key} = {v:g}: the simulated {profile.name} takes "
+                                 f"{' or '.join(f'{x:g}' for x in extra[key])}")
+            out[key] = v
+            continue
+        out[code] = v
         # a setting the drive cannot hold exactly is refused, as on the master side (never rounded:
         # F07=0.01 with F07's 0.1 s resolution used to start the plant with F07 = 0)
         why = profile_value_problem(profile, p, v)
         if why is not None:
             raise UsageError(f"sim URL: set=: {why}")
-    return {"defaults": dict(values)}
+    return {"defaults": out}
+
+
+def _model_settings(profile) -> dict:
+    """The settings the family's sim model takes beyond the profile's parameters: the SETTINGS table
+    of its module (code -> the values it takes); {} for none."""
+    ref = sim_model_ref(profile)
+    if ref is None:
+        return {}
+    return dict(getattr(importlib.import_module(ref.partition(":")[0]), "SETTINGS", None) or {})
 
 
 def url_baud(url: str) -> int | None:

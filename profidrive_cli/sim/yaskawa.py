@@ -35,13 +35,17 @@ Simulator choices (not from the manual):
   standstill when running, rising to 80 % at max frequency, +20 % while accelerating;
   register 0x0037 (output power) in 0.1 kW from an assumed 3.7 kW motor;
 - forward and reverse together: the drive stops and shows the alarm bit.
-- torque (spec §2.4: bytes 4-5 torque reference / limit, 6-7 compensation, 0.1 %, flux vector only):
-  the option d5_01 stands for the drive parameter d5-01 (torque control select; the profile has no
-  register for it), default 1. With A1-02 = 3 (flux vector) and d5_01 = 1 a running drive is torque
-  controlled: the axis follows sim/torque_axis.py under the torque word, limited at E1-04 (the
-  frequency reference is not used as a speed limit). With A1-02 = 3 and d5_01 = 0 a non-zero
-  torque word is a torque limit: the speed stops rising where the load of sim/torque_axis.py
-  reaches it. Bytes 4-5 of the input report the torque produced (0.1 %): in torque control the
+- torque (spec §2.4: bytes 4-5 torque reference / limit, 6-7 compensation, 0.1 %, flux vector only;
+  manual src L594 "Torque Reference/Limit ... 0.1% Flux Vector mode only"): the option d5_01 stands
+  for the drive parameter d5-01 (torque control select; the profile has no register for it),
+  default 0 = speed control, the drive's factory setting (issue 34: the sim used to start in torque
+  control, so `run --torque-limit 50 --hz 30` ran the motor to 60 Hz). A sim URL sets it as
+  set=7:d5-01=1 (SETTINGS below, read by sim/plant.py), `sim-ctl set 7 d5-01 1` while it runs.
+  With A1-02 = 3 (flux vector) and d5_01 = 0 a non-zero torque word is a torque limit: the speed
+  follows the reference with the ramp and stops rising where the load of sim/torque_axis.py
+  reaches the limit. With A1-02 = 3 and d5_01 = 1 a running drive is torque controlled: the axis
+  follows sim/torque_axis.py under the torque word, limited at E1-04 (the frequency reference is
+  not used as a speed limit). Bytes 4-5 of the input report the torque produced (0.1 %): in torque control the
   reference (or the load at the speed limit), in speed control the load of sim/torque_axis.py plus
   20 % while accelerating. In other control methods the torque words are ignored.
 """
@@ -70,6 +74,11 @@ CFGS = {"basic": b"\x72", "extended1": b"\x5f\x6f", "extended2": b"\x55\x65"}
 
 ERR_FUNCTION, ERR_ADDRESS, ERR_QUANTITY, ERR_RANGE, ERR_WRITE = 0x01, 0x02, 0x03, 0x21, 0x22
 
+#: the model's settings beyond the profile's parameters (code -> the values it takes), for a sim URL's
+#: set= (sim/plant.py) and sim-ctl set: d5-01 torque control select, 0 speed control (factory), 1
+#: torque control
+SETTINGS = {"d5-01": (0, 1)}
+
 
 def _s16(w: int) -> int:
     return w - 0x10000 if w & 0x8000 else w
@@ -79,7 +88,7 @@ class YaskawaModel(DriveModel):
     family = "yaskawa"
 
     def __init__(self, profile, b1_01=3, b1_02=3, processing_ms=12.0, comm_timeout=1.0,
-                 fast_stop_input=None, rated_kw=3.7, bus_fault="running", d5_01=1, **params):
+                 fast_stop_input=None, rated_kw=3.7, bus_fault="running", d5_01=0, **params):
         super().__init__(profile.ident, {k: CFGS[k] for k in profile.layouts if k in CFGS},
                          name=profile.title, user_prm_len=0, max_diag_len=6)
         self.profile = profile
@@ -93,6 +102,8 @@ class YaskawaModel(DriveModel):
         self.comm_timeout = float(comm_timeout)
         self.fast_stop_input = int(fast_stop_input) if fast_stop_input not in (None, "", "none") else None
         self.rated_kw = float(rated_kw)
+        if d5_01 not in SETTINGS["d5-01"]:
+            raise ValueError(f"yaskawa sim: d5-01 must be 0 (speed control) or 1 (torque control), got {d5_01!r}")
         self.d5_01 = int(d5_01)
         if bus_fault not in ("running", "always", "never"):
             raise ValueError(f"yaskawa sim: bus_fault must be running, always or never, got {bus_fault!r}")
@@ -528,6 +539,11 @@ class YaskawaModel(DriveModel):
 
     def set_value(self, code: str, value: float) -> None:
         from profidrive_cli.drives.values import profile_value_problem
+        if code.lower() == "d5-01":
+            if value not in SETTINGS["d5-01"]:
+                raise ValueError(f"d5-01 must be 0 (speed control) or 1 (torque control), got {value:g}")
+            self.d5_01 = int(value)
+            return
         p = self.profile.param(code)
         if p is None or p.register is None:
             raise ValueError(f"{code} is not a parameter of {self.profile.name}")

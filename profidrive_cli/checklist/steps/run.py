@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from profidrive_cli.checklist.fields import fmt
 from profidrive_cli.checklist.steps.base import StepFailed, StepType, rnd
+from profidrive_cli.session.live import Reach
 
 DIRECTIONS = ("forward", "reverse")
 DEFAULT_RUN_WITHIN_S = 10.0
@@ -97,7 +98,9 @@ class Run(StepType):
         if not st.running:
             st = d.start(timeout=float(a["within"]))
         deadline = t_start + float(a["within"])
-        reached_at = None
+        # the one "reached" rule of run (session/live.py Reach): settled in the band, not passed
+        # through; beyond it on the far side fails the step
+        reach = Reach(target, tol, start=v0 if st0.running else None, t0=t_start, unit=u.strip())
         while True:
             v = actual(st)
             if st.fault:
@@ -111,16 +114,20 @@ class Run(StepType):
                 min_abs = min(min_abs, abs(v))
                 if abs(v) <= tol or (min_abs < abs(v0) - tol and abs(v) > min_abs + tol):
                     through_zero = False
-            if v is not None and abs(v - target) <= tol and not through_zero:
-                reached_at = ch.now()
+            if not through_zero:
+                reach.feed(ch.now(), v)
+            if reach.overshoot:
+                r.measured = run_measured(st, v, None, None, None, unit)
+                raise StepFailed(reach.overshoot_words())
+            if reach.reached_after is not None:
                 break
-            if ch.now() > deadline:
+            if reach.missed(ch.now(), deadline):
                 r.measured = run_measured(st, v, None, None, None, unit)
                 raise StepFailed(f"actual {fmt(rnd(v))}{u} after {fmt(a['within'])} s, expected "
                                  f"{fmt(target)}{u} ± {fmt(tol)}")
             run.progress(sr, r, f"accelerating: {fmt(rnd(v))}{u} -> {fmt(target)}{u}")
             st = d.cycle()
-        reach_s = reached_at - t_start
+        reach_s = reach.reached_after
         lo = hi = actual(st)
         hold_end = ch.now() + float(a["duration"])
         while ch.now() < hold_end:

@@ -19,6 +19,7 @@ import weakref
 from profidrive_cli.checklist.fields import fmt
 from profidrive_cli.checklist.steps.base import StepFailed, rnd
 from profidrive_cli.session.group import Group
+from profidrive_cli.session.live import Reach
 
 #: Runner -> {step index: {station name: (passed, message, expected, measured)}}
 _DONE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
@@ -64,6 +65,9 @@ class _Drive:
             st = self.d.start(timeout=within)
         self.deadline = self.t_start + within
         self.st = st
+        # the one "reached" rule of run (session/live.py Reach)
+        self.reach = Reach(self.target, self.tol, start=self.v0 if st0.running else None,
+                           t0=self.t_start, unit=self.u.strip())
 
     def feed_reach(self, st, now) -> bool:
         """True once this drive is done with the reach phase (in the band, failed or tripped)."""
@@ -77,11 +81,17 @@ class _Drive:
             fell = self.min_abs < abs(self.v0) - self.tol
             if abs(v) <= self.tol or (fell and abs(v) > self.min_abs + self.tol):
                 self.through_zero = False
-        if v is not None and abs(v - self.target) <= self.tol and not self.through_zero:
-            self.reached = now - self.t_start
+        reach = self.reach
+        if not self.through_zero:
+            reach.feed(now, v)
+        if reach.overshoot:
+            self.failed = reach.overshoot_words()
+            return True
+        if reach.reached_after is not None:
+            self.reached = reach.reached_after
             self.lo = self.hi = v
             return True
-        if now > self.deadline:
+        if reach.missed(now, self.deadline):
             self.failed = (f"actual {fmt(rnd(v))}{self.u} after {fmt(now - self.t_start)} s, expected "
                            f"{fmt(self.target)}{self.u} ± {fmt(self.tol)}")
             return True
