@@ -17,6 +17,11 @@ from profidrive_cli.sim.motor import Motor
 
 from test_drive_cmds import lines, ok, pdrive  # noqa: F401  (fixture)
 
+#: the runs of these tests are not about the watchdog: a watchdog of 5 s (instead of 500 ms) keeps a
+#: test process stalled at load (the simulator of sim:// runs in it, on the wall clock) from tripping
+#: the drive on comm loss (E70) and failing a test about monitors
+LONG_WD = ("--watchdog", "5000")
+
 
 # -- the simulated motor: values by hand from the formulas in sim/motor.py ----------------------------
 
@@ -102,7 +107,7 @@ def _end(r):
 
 def test_moeller_default_monitors_in_json_and_csv(pdrive, tmp_path):
     log = tmp_path / "run.csv"
-    r = ok(pdrive("run", "6", "--hz", "20", "--duration", "8", "--monitor", "default", "--json",
+    r = ok(pdrive("run", "6", "--hz", "20", "--duration", "8", "--monitor", "default", "--json", *LONG_WD,
                   "--log", str(log)))
     start = lines(r)[0]
     assert {m["code"]: m["unit"] for m in start["monitors"]} == {"d001": "Hz", "d002": "A", "d013": "V",
@@ -123,7 +128,7 @@ def test_moeller_default_monitors_in_json_and_csv(pdrive, tmp_path):
 
 
 def test_toyo_default_monitors_follow_the_motor(pdrive):
-    r = ok(pdrive("run", "5", "--hz", "30", "--duration", "10", "--monitor", "default", "--json"))
+    r = ok(pdrive("run", "5", "--hz", "30", "--duration", "10", "--monitor", "default", "--json", *LONG_WD))
     start = lines(r)[0]
     assert {m["code"]: m["unit"] for m in start["monitors"]} == {
         "current": "A", "output-voltage": "V", "torque": "%", "dc-voltage": "V"}
@@ -166,7 +171,7 @@ def test_a_moeller_with_no_trip_stored_names_no_newest_record(pdrive):
 
 def test_trip_record_of_a_drive_that_tripped_while_running(sim, pdrive):
     port = "sim://?drivetrip=0.01&only=6&seed=1"
-    r = pdrive("run", "6", "--hz", "30", "--duration", "20", "--json", port=port)
+    r = pdrive("run", "6", "--hz", "30", "--duration", "20", "--json", *LONG_WD, port=port)
     assert r.exit_code == 1 and "tripped" in r.stderr
     tr = json.loads(ok(pdrive("faults", "6", "--json", port=port)).stdout)["trip_records"]
     f = {x["code"]: x["value"] for x in tr["records"][0]["fields"]}
@@ -220,7 +225,7 @@ def test_moeller_ppo2_maps_monitors_into_pzd3_and_restores_pnu916(sim, pdrive):
     before = [p["raw"] for p in json.loads(ok(pdrive("param", "get", "6", "PNU916[1]", "PNU916[2]",
                                                       "PNU916[3]", "--ppo", "2", "--json")).stdout)["parameters"]]
     assert before == [0, 0, 0]
-    r = ok(pdrive("run", "6", "--ppo", "2", "--hz", "20", "--duration", "8", "--monitor", "default", "--json"))
+    r = ok(pdrive("run", "6", "--ppo", "2", "--hz", "20", "--duration", "8", "--monitor", "default", "--json", *LONG_WD))
     mon = _end(r)["monitors"]
     # d001 is 4 octets: not mappable (spec: PZD words are 2 octets) -> parameter channel;
     # d002 (PNU 407) and d013 (PNU 417) into PZD3/PZD4; d012 is DV6-only and refused on the DF6
@@ -238,7 +243,7 @@ def test_moeller_ppo2_maps_monitors_into_pzd3_and_restores_pnu916(sim, pdrive):
 def test_fuji_reads_a_monitor_from_the_pcd_word_o48_assigns(sim, pdrive):
     # TV17 style: assignment word = group << 8 | number; M = group 3, M12 -> 0x030C
     ok(pdrive("param", "set", "3", "o49", "0x030C", "--ppo", "2", "--yes"))
-    r = ok(pdrive("run", "3", "--ppo", "2", "--hz", "30", "--duration", "8", "--monitor", "default", "--json"))
+    r = ok(pdrive("run", "3", "--ppo", "2", "--hz", "30", "--duration", "8", "--monitor", "default", "--json", *LONG_WD))
     mon = _end(r)["monitors"]
     assert mon["M12"]["via"] == "cyclic" and mon["M11"]["via"] == "parameter channel"
     assert mon["M12"]["value"] == pytest.approx(200.0, abs=0.1)            # 400 V * 30/60 Hz
@@ -263,7 +268,7 @@ def test_fuji_default_monitors_have_units(pdrive, address, units):
     ("extended2", {"PWR"}),                        # 6-word message: no current word
 ])
 def test_yaskawa_default_monitors_per_layout(pdrive, fmt, expect):
-    r = ok(pdrive("run", "7", "--format", fmt, "--hz", "30", "--duration", "6", "--monitor", "default", "--json"))
+    r = ok(pdrive("run", "7", "--format", fmt, "--hz", "30", "--duration", "6", "--monitor", "default", "--json", *LONG_WD))
     mon = _end(r)["monitors"]
     assert set(mon) == expect
     if "output-current" in mon:
