@@ -430,16 +430,23 @@ def test_recording_leaves_the_drive_as_it_was():
 
     st = St()
 
-    class D:
+    class D:                           # a Drive's cycle, start and stop (drives/base.py)
         channel = Ch()
 
         def cycle(self):
             return st
+
+        def start(self):
+            return "started"
+
+        def stop(self):
+            return "stopped"
     d = D()
     with record(d) as tr:
         assert d.cycle() is st and d.cycle() is st
     assert len(tr) == 2 and tr.rows[0] == (0.0, 5.0, 10.0, 10.0)
     assert "cycle" not in vars(d) and d.cycle() is st        # the class's own method again
+    assert not {"start", "stop"} & set(vars(d)) and (d.start(), d.stop()) == ("started", "stopped")
 
 
 def test_run_plot_with_several_stations_is_refused_before_anything_moves(tmp_path, sim):

@@ -62,11 +62,9 @@ def record(drive):
             return own(*a, **kw)
         return call
 
-    shadowed = {"cycle": (inner, cycle)}
-    for name, asked_to_stop in (("stop", True), ("start", False)):
-        own = getattr(drive, name, None)
-        if own is not None:
-            shadowed[name] = (own, marking(own, asked_to_stop))
+    # every Drive has start() and stop() (drives/base.py): a stop asked ends the reference's trace
+    shadowed = {"cycle": (inner, cycle), "stop": (drive.stop, marking(drive.stop, True)),
+                "start": (drive.start, marking(drive.start, False))}
     for name, (_, mine) in shadowed.items():
         setattr(drive, name, mine)
     try:
