@@ -14,16 +14,27 @@ history words in toyo/formats.py; Moeller's PNU 963 in moeller.py), found throug
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Callable, Optional
 
-def hex_word(param, raw: int) -> str:
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profile import ParamDef, Profile
+
+#: a formatter by `format:` name: (profile, parameter, raw word, engineering value) -> the text as the
+#: card's tables write it; None: shown as a plain number
+Formatter = Callable[["Profile", "ParamDef", int, object], Optional[str]]
+#: a parser by `format:` name: (profile, parameter, text) -> the raw word (UsageError when refused)
+Parser = Callable[["Profile", "ParamDef", str], int]
+
+
+def hex_word(param: ParamDef, raw: int) -> str:
     return f"0x{raw:0{8 if param.size == 32 else 4}X}"
 
 
-def _plain(profile, param, raw, value):
+def _plain(profile: Profile, param: ParamDef, raw: int, value: object) -> str | None:
     return None
 
 
-def _hex_text(profile, param, raw, value):
+def _hex_text(profile: Profile, param: ParamDef, raw: int, value: object) -> str | None:
     return hex_word(param, raw)
 
 
@@ -42,17 +53,17 @@ FORMATS = {
 }
 
 #: formatters every family shares; a family module adds or overrides its own in FORMATTERS
-GENERIC = {"code": _plain, "hex": _hex_text, "bits": _hex_text}
+GENERIC: dict[str, Formatter] = {"code": _plain, "hex": _hex_text, "bits": _hex_text}
 
 
-def formatter_for(profile, fmt: str):
+def formatter_for(profile: Profile, fmt: str) -> Formatter | None:
     """The formatter(profile, param, raw, value) for `fmt` on this profile's family, or None."""
     from profidrive_cli.drives import codec_module
-    fam = getattr(codec_module(profile), "FORMATTERS", {})
+    fam: dict[str, Formatter] = getattr(codec_module(profile), "FORMATTERS", {})
     return fam.get(fmt) or GENERIC.get(fmt)
 
 
-def value_from_text(profile, param, text: str) -> int | None:
+def value_from_text(profile: Profile, param: ParamDef | None, text: str) -> int | None:
     """A value typed as the card's tables write it (the family's PARSERS by `format:`, e.g. Fuji o40
     "041A" or "F26") -> the raw word; None when the format has no such notation (parse as a number).
     Raises UsageError (with the accepted forms) for text the notation refuses."""
@@ -62,11 +73,12 @@ def value_from_text(profile, param, text: str) -> int | None:
     if fmt is None:
         return None
     from profidrive_cli.drives import codec_module
-    fn = getattr(codec_module(profile), "PARSERS", {}).get(fmt)
+    parsers: dict[str, Parser] = getattr(codec_module(profile), "PARSERS", {})
+    fn = parsers.get(fmt)
     return fn(profile, param, text) if fn is not None else None
 
 
-def display_text(profile, param, raw: int | None, value) -> str | None:
+def display_text(profile: Profile, param: ParamDef | None, raw: int | None, value: object) -> str | None:
     """The value as text for a parameter with a `format:`; None when it is shown as a plain number."""
     if param is None or raw is None or isinstance(raw, bool) or not isinstance(raw, int):
         return None
