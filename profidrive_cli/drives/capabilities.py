@@ -26,12 +26,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Iterator
+from typing import Any, Iterator, Mapping, Protocol
 
 from profidrive_cli.datafile import DataFileError, LineDict
 
-if TYPE_CHECKING:
-    from profidrive_cli.drives.profile import Layout
+
+class LayoutLike(Protocol):
+    """What the section reads of a drives.profile.Layout (profile.py imports this module)."""
+    @property
+    def pkw(self) -> bool: ...
 
 #: capability name -> what it lets pdrive do (the words of a refusal: "<card> cannot <this>")
 CAPABILITIES = {
@@ -127,7 +130,7 @@ def _lookup(doc: object, dotted: str) -> Any:   # Any: a parsed YAML value
     return node
 
 
-def parse_capabilities(path: str | Path, doc: LineDict, name: str, layouts: dict[str, Layout]) -> Capabilities:
+def parse_capabilities(path: str | Path, doc: LineDict, name: str, layouts: Mapping[str, LayoutLike]) -> Capabilities:
     """The `capabilities:` section of a profile document, checked with file:line."""
     caps = Capabilities(name, tuple(layouts))
     sec = doc.get("capabilities")

@@ -14,27 +14,36 @@ history words in toyo/formats.py; Moeller's PNU 963 in moeller.py), found throug
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Callable, Optional
+from typing import Any, Callable, Optional, Protocol
 
-if TYPE_CHECKING:
-    from profidrive_cli.drives.profile import ParamDef, Profile
+from profidrive_cli.drives.registry import ProfileLike
+
+
+class FormatParam(Protocol):
+    """What the formats read of a drives.profile.ParamDef (profile.py imports this module)."""
+    @property
+    def size(self) -> int: ...
+    @property
+    def extra(self) -> dict[str, Any]: ...
+
 
 #: a formatter by `format:` name: (profile, parameter, raw word, engineering value) -> the text as the
-#: card's tables write it; None: shown as a plain number
-Formatter = Callable[["Profile", "ParamDef", int, object], Optional[str]]
+#: card's tables write it, None: shown as a plain number. A family's take its own Profile and
+#: ParamDef, which this module cannot name (profile.py imports it): hence the `...`
+Formatter = Callable[..., Optional[str]]
 #: a parser by `format:` name: (profile, parameter, text) -> the raw word (UsageError when refused)
-Parser = Callable[["Profile", "ParamDef", str], int]
+Parser = Callable[..., int]
 
 
-def hex_word(param: ParamDef, raw: int) -> str:
+def hex_word(param: FormatParam, raw: int) -> str:
     return f"0x{raw:0{8 if param.size == 32 else 4}X}"
 
 
-def _plain(profile: Profile, param: ParamDef, raw: int, value: object) -> str | None:
+def _plain(profile: ProfileLike, param: FormatParam, raw: int, value: object) -> str | None:
     return None
 
 
-def _hex_text(profile: Profile, param: ParamDef, raw: int, value: object) -> str | None:
+def _hex_text(profile: ProfileLike, param: FormatParam, raw: int, value: object) -> str | None:
     return hex_word(param, raw)
 
 
@@ -56,14 +65,14 @@ FORMATS = {
 GENERIC: dict[str, Formatter] = {"code": _plain, "hex": _hex_text, "bits": _hex_text}
 
 
-def formatter_for(profile: Profile, fmt: str) -> Formatter | None:
+def formatter_for(profile: ProfileLike, fmt: str) -> Formatter | None:
     """The formatter(profile, param, raw, value) for `fmt` on this profile's family, or None."""
     from profidrive_cli.drives import codec_module
     fam: dict[str, Formatter] = getattr(codec_module(profile), "FORMATTERS", {})
     return fam.get(fmt) or GENERIC.get(fmt)
 
 
-def value_from_text(profile: Profile, param: ParamDef | None, text: str) -> int | None:
+def value_from_text(profile: ProfileLike, param: FormatParam | None, text: str) -> int | None:
     """A value typed as the card's tables write it (the family's PARSERS by `format:`, e.g. Fuji o40
     "041A" or "F26") -> the raw word; None when the format has no such notation (parse as a number).
     Raises UsageError (with the accepted forms) for text the notation refuses."""
@@ -78,7 +87,7 @@ def value_from_text(profile: Profile, param: ParamDef | None, text: str) -> int 
     return fn(profile, param, text) if fn is not None else None
 
 
-def display_text(profile: Profile, param: ParamDef | None, raw: int | None, value: object) -> str | None:
+def display_text(profile: ProfileLike, param: FormatParam | None, raw: int | None, value: object) -> str | None:
     """The value as text for a parameter with a `format:`; None when it is shown as a plain number."""
     if param is None or raw is None or isinstance(raw, bool) or not isinstance(raw, int):
         return None

@@ -24,12 +24,30 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Mapping, Protocol
 
 from profidrive_cli.datafile import DataFileError, LineDict, LineList
 
-if TYPE_CHECKING:
-    from profidrive_cli.drives.profile import Profile
+
+class _Coded(Protocol):
+    @property
+    def code(self) -> str: ...
+
+
+class MonitoredProfile(Protocol):
+    """What these readers use of a drives.profile.Profile (which imports this module: named here by
+    its shape, not imported)."""
+    @property
+    def name(self) -> str: ...
+    @property
+    def family(self) -> str: ...
+    @property
+    def path(self) -> Path | None: ...
+    @property
+    def raw(self) -> LineDict: ...
+    @property
+    def layouts(self) -> Mapping[str, object]: ...
+    def param(self, code: str) -> _Coded | None: ...
 
 
 @dataclass
@@ -64,7 +82,7 @@ class TripRecordConfig:
     latest_first: int = 1
 
 
-def _path(profile: Profile) -> str | Path:
+def _path(profile: MonitoredProfile) -> str | Path:
     return profile.path or "<profile>"
 
 
@@ -74,13 +92,13 @@ def _line(node: object, key: str | None = None) -> int | None:
     return getattr(node, "line", None)
 
 
-def _codes(profile: Profile, node: object, key: str, items: object) -> list[str]:
+def _codes(profile: MonitoredProfile, node: object, key: str, items: object) -> list[str]:
     if not isinstance(items, list) or not all(isinstance(c, (str, int)) for c in items) or not items:
         raise DataFileError(_path(profile), _line(node, key), f"'{key}' must be a non-empty list of codes")
     return [str(c) for c in items]
 
 
-def monitor_config(profile: Profile) -> MonitorConfig:
+def monitor_config(profile: MonitoredProfile) -> MonitorConfig:
     """The `monitors:` section (an empty default set when there is none)."""
     doc = profile.raw.get("monitors")
     if doc is None:
@@ -113,7 +131,7 @@ def monitor_config(profile: Profile) -> MonitorConfig:
     return MonitorConfig(default, words, cyclic)
 
 
-def cyclic_monitors(profile: Profile, layout: str) -> dict[str, str]:
+def cyclic_monitors(profile: MonitoredProfile, layout: str) -> dict[str, str]:
     """The `monitors.cyclic` parameters that `layout` carries in its input words: code -> word. The
     family module says which words a layout's input has (`input_words(profile, layout)`); none
     without it. No bus."""
@@ -130,7 +148,7 @@ def cyclic_monitors(profile: Profile, layout: str) -> dict[str, str]:
     return {c: w for c, w in cyc.items() if w in have}
 
 
-def trip_record_config(profile: Profile) -> TripRecordConfig | None:
+def trip_record_config(profile: MonitoredProfile) -> TripRecordConfig | None:
     """The `trip_records:` section, or None: the card keeps no trip records."""
     doc = profile.raw.get("trip_records")
     if doc is None:
