@@ -25,8 +25,16 @@ Reads the profile only; no bus.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterator, Mapping, Protocol
 
 from profidrive_cli.datafile import DataFileError, LineDict
+
+
+class LayoutLike(Protocol):
+    """What the section reads of a drives.profile.Layout (profile.py imports this module)."""
+    @property
+    def pkw(self) -> bool: ...
 
 #: capability name -> what it lets pdrive do (the words of a refusal: "<card> cannot <this>")
 CAPABILITIES = {
@@ -46,7 +54,7 @@ class Capability:
     name: str
     layouts: tuple[str, ...] | None = None      # None: every layout
     reason: str = ""                            # why not (the card, or the other layouts)
-    detail: dict = field(default_factory=dict)
+    detail: dict[str, Any] = field(default_factory=dict)   # the declaration's other keys (YAML values)
     capable: bool = True
 
 
@@ -63,7 +71,7 @@ class Capabilities:
     def __contains__(self, name: str) -> bool:
         return name in self.names
 
-    def __iter__(self):
+    def __iter__(self) -> Iterator[str]:
         return iter(sorted(self.names))
 
     def layouts(self, name: str) -> tuple[str, ...]:
@@ -105,7 +113,7 @@ class Capabilities:
             from profidrive_cli import UsageError
             raise UsageError(msg)
 
-    def detail(self, name: str) -> dict:
+    def detail(self, name: str) -> dict[str, Any]:
         c = self.decl.get(name)
         return dict(c.detail) if c is not None else {}
 
@@ -113,7 +121,7 @@ class Capabilities:
         return frozenset(n for n in self.names if self.has(n, layout))
 
 
-def _lookup(doc, dotted: str):
+def _lookup(doc: object, dotted: str) -> Any:   # Any: a parsed YAML value
     node = doc
     for part in dotted.split("."):
         if not isinstance(node, dict) or part not in node:
@@ -122,7 +130,7 @@ def _lookup(doc, dotted: str):
     return node
 
 
-def parse_capabilities(path, doc: LineDict, name: str, layouts: dict) -> Capabilities:
+def parse_capabilities(path: str | Path, doc: LineDict, name: str, layouts: Mapping[str, LayoutLike]) -> Capabilities:
     """The `capabilities:` section of a profile document, checked with file:line."""
     caps = Capabilities(name, tuple(layouts))
     sec = doc.get("capabilities")

@@ -14,16 +14,36 @@ history words in toyo/formats.py; Moeller's PNU 963 in moeller.py), found throug
 
 from __future__ import annotations
 
+from typing import Any, Callable, Optional, Protocol
 
-def hex_word(param, raw: int) -> str:
+from profidrive_cli.drives.registry import ProfileLike
+
+
+class FormatParam(Protocol):
+    """What the formats read of a drives.profile.ParamDef (profile.py imports this module)."""
+    @property
+    def size(self) -> int: ...
+    @property
+    def extra(self) -> dict[str, Any]: ...
+
+
+#: a formatter by `format:` name: (profile, parameter, raw word, engineering value) -> the text as the
+#: card's tables write it, None: shown as a plain number. A family's take its own Profile and
+#: ParamDef, which this module cannot name (profile.py imports it): hence the `...`
+Formatter = Callable[..., Optional[str]]
+#: a parser by `format:` name: (profile, parameter, text) -> the raw word (UsageError when refused)
+Parser = Callable[..., int]
+
+
+def hex_word(param: FormatParam, raw: int) -> str:
     return f"0x{raw:0{8 if param.size == 32 else 4}X}"
 
 
-def _plain(profile, param, raw, value):
+def _plain(profile: ProfileLike, param: FormatParam, raw: int, value: object) -> str | None:
     return None
 
 
-def _hex_text(profile, param, raw, value):
+def _hex_text(profile: ProfileLike, param: FormatParam, raw: int, value: object) -> str | None:
     return hex_word(param, raw)
 
 
@@ -42,17 +62,17 @@ FORMATS = {
 }
 
 #: formatters every family shares; a family module adds or overrides its own in FORMATTERS
-GENERIC = {"code": _plain, "hex": _hex_text, "bits": _hex_text}
+GENERIC: dict[str, Formatter] = {"code": _plain, "hex": _hex_text, "bits": _hex_text}
 
 
-def formatter_for(profile, fmt: str):
+def formatter_for(profile: ProfileLike, fmt: str) -> Formatter | None:
     """The formatter(profile, param, raw, value) for `fmt` on this profile's family, or None."""
     from profidrive_cli.drives import codec_module
-    fam = getattr(codec_module(profile), "FORMATTERS", {})
+    fam: dict[str, Formatter] = getattr(codec_module(profile), "FORMATTERS", {})
     return fam.get(fmt) or GENERIC.get(fmt)
 
 
-def value_from_text(profile, param, text: str) -> int | None:
+def value_from_text(profile: ProfileLike, param: FormatParam | None, text: str) -> int | None:
     """A value typed as the card's tables write it (the family's PARSERS by `format:`, e.g. Fuji o40
     "041A" or "F26") -> the raw word; None when the format has no such notation (parse as a number).
     Raises UsageError (with the accepted forms) for text the notation refuses."""
@@ -62,11 +82,12 @@ def value_from_text(profile, param, text: str) -> int | None:
     if fmt is None:
         return None
     from profidrive_cli.drives import codec_module
-    fn = getattr(codec_module(profile), "PARSERS", {}).get(fmt)
+    parsers: dict[str, Parser] = getattr(codec_module(profile), "PARSERS", {})
+    fn = parsers.get(fmt)
     return fn(profile, param, text) if fn is not None else None
 
 
-def display_text(profile, param, raw: int | None, value) -> str | None:
+def display_text(profile: ProfileLike, param: FormatParam | None, raw: int | None, value: object) -> str | None:
     """The value as text for a parameter with a `format:`; None when it is shown as a plain number."""
     if param is None or raw is None or isinstance(raw, bool) or not isinstance(raw, int):
         return None

@@ -11,12 +11,20 @@ last word for what the declaration does not cover (tests/test_jog.py checks that
 
 from __future__ import annotations
 
-def jog_refusal(profile, layout: str | None = None) -> str | None:
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from profidrive_cli.drives.capabilities import Capabilities
+    from profidrive_cli.drives.profile import Profile
+
+
+def jog_refusal(profile: Profile, layout: str | None = None) -> str | None:
     """None when this profile's card can jog in `layout`, else one line saying why not."""
-    caps = getattr(profile, "capabilities", None)
+    caps: Capabilities | None = getattr(profile, "capabilities", None)
     if caps is not None and "jog" in getattr(caps, "decl", {}):
         why = caps.refusal("jog", layout or profile.default_layout)
         if why is not None:
             return why
     from profidrive_cli.drives import drive_class
-    return drive_class(profile).jog_refusal_for(profile, layout or profile.default_layout)
+    refusal: str | None = drive_class(profile).jog_refusal_for(profile, layout or profile.default_layout)
+    return refusal

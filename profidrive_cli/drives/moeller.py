@@ -19,16 +19,20 @@ address_from_switches(right, left), value_from_wire(param, raw), wire_from_value
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from profidrive_cli import UsageError
 
 from profidrive_cli.datafile import DataFileError, LineDict
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.values import value_problem
-from profidrive_cli.drives.base import DriveError, DriveStatus, ParamError, ParamValue, Reaction
+from profidrive_cli.drives.base import CyclicChannel, DriveError, DriveStatus, ParamError, ParamValue, Reaction
 from profidrive_cli.drives.profile import COMMON_EXTRA_KEYS, per_profile
 from profidrive_cli.drives.sections import key, key_line, section
+
+if TYPE_CHECKING:
+    from profidrive_cli.drives.formats import Formatter
+    from profidrive_cli.drives.profile import ParamDef, Profile
 
 FAMILY_PARAM_KEYS = {"bytes", "format", "ranges", "df6", "df6_max", "note", "array"}
 FORMATS = ("code", "hex", "bits", "baud", "alarm947")
@@ -53,15 +57,15 @@ class MoellerConfig:
     comm_loss_other_param: str | None = "P001"
     comm_loss_alarm: str = "E70"
     df6_device_id: int = 0x812C
-    sim_defaults: dict | None = None
+    sim_defaults: dict[Any, Any] | None = None     # code -> number, checked (YAML keys)
 
 
-def _err(profile, node, key, msg) -> DataFileError:
+def _err(profile: Profile, node: object, key: str, msg: str) -> DataFileError:
     line = node.line_of(key) if isinstance(node, LineDict) else getattr(node, "line", None)
     return DataFileError(profile.path or "<profile>", line, msg)
 
 
-def _validate_params(profile) -> None:
+def _validate_params(profile: Profile) -> None:
     path = profile.path or "<profile>"
     for p in profile.parameters.values():
         b = p.extra.get("bytes")
@@ -132,9 +136,9 @@ class MoellerKeys:
     sim_defaults: dict[Any, Any] = key("mapping", {}, type_msg="sim_defaults must be a mapping code: value")
 
 
-def _param_of(profile, keys, name: str, default: str, where: str) -> str:
+def _param_of(profile: Profile, keys: object, name: str, default: str, where: str) -> str:
     """keys.<name> (or the default), which must be a parameter of the profile."""
-    v = getattr(keys, name)
+    v: str | None = getattr(keys, name)
     v = default if v is None else v
     if profile.param(v) is None:
         raise DataFileError(profile.path or "<profile>", key_line(keys, name),
@@ -142,7 +146,7 @@ def _param_of(profile, keys, name: str, default: str, where: str) -> str:
     return v
 
 
-def _build_config(profile) -> MoellerConfig:
+def _build_config(profile: Profile) -> MoellerConfig:
     _validate_params(profile)
     doc = profile.raw if isinstance(profile.raw, LineDict) else LineDict()
     path = profile.path or "<profile>"
@@ -186,7 +190,7 @@ moeller_config = per_profile(_build_config)   # -> MoellerConfig, built once per
 # =============================================================================================
 
 
-def value_from_wire(param, raw: int):
+def value_from_wire(param: ParamDef, raw: int) -> float | int:
     """PWE (right-aligned) -> engineering value: the low `bytes` octets, sign-extended if signed."""
     nbytes = param.extra.get("bytes", param.size // 8)
     bits = 8 * nbytes
@@ -199,19 +203,19 @@ def value_from_wire(param, raw: int):
     return round(v, 6)
 
 
-def wire_from_value(param, value) -> int:
+def wire_from_value(param: ParamDef, value: float) -> int:
     """Engineering value -> PWE integer in the parameter's own width (two's complement if < 0)."""
-    nbytes = param.extra.get("bytes", param.size // 8)
+    nbytes: int = param.extra.get("bytes", param.size // 8)     # checked: 1, 2 or 4
     raw = int(round(value / param.scale)) if param.scale else int(value)
     return raw & ((1 << (8 * nbytes)) - 1)
 
 
-def param_value(profile, param, raw: int):
+def param_value(profile: Profile, param: ParamDef, raw: int) -> float | int:
     """Hook used by the core decoder."""
     return value_from_wire(param, raw)
 
 
-def in_ranges(param, value) -> bool:
+def in_ranges(param: ParamDef, value: float) -> bool:
     rg = param.extra.get("ranges")
     if rg:
         return any(lo - 1e-9 <= value <= hi + 1e-9 for lo, hi in rg)
@@ -231,25 +235,25 @@ def device_name(word: int) -> str:
     return f"{fam}6" if model == 0x12C else f"{fam} model {model}"
 
 
-def baud_text(code: int, profile) -> str:
+def baud_text(code: int, profile: Profile) -> str:
     return pd.config(profile).baud_codes.get(code, f"invalid baud-rate code {code}")
 
 
-def _baud_format(profile, param, raw, value) -> str:
+def _baud_format(profile: Profile, param: ParamDef, raw: int, value: object) -> str:
     """PNU 963 (`format: baud`): the card's own code and its rate (spec 6.3, src L716-728: 0 = 12 Mbit/s)."""
     return f"{raw} ({baud_text(raw, profile)})"
 
 
-def _fault_format(profile, param, raw, value) -> str:
+def _fault_format(profile: Profile, param: ParamDef, raw: int, value: object) -> str:
     """PNU 947 (`format: alarm947`): the fault number and its name (spec 6.4, src L730-759, Table 8)."""
     return f"{raw} ({fault_text(profile, raw)})"
 
 
 #: value texts by `format:` (drives/formats.py); code, hex and bits are the generic ones
-FORMATTERS = {"baud": _baud_format, "alarm947": _fault_format}
+FORMATTERS: dict[str, Formatter] = {"baud": _baud_format, "alarm947": _fault_format}
 
 
-def fault_text(profile, number: int) -> str:
+def fault_text(profile: Profile, number: int) -> str:
     if number == 0:
         return "no fault"
     alarms = profile.alarms_for(number)
@@ -302,17 +306,17 @@ class MoellerDrive(pd.ProfidriveDrive):
         from profidrive_cli.drives.moeller_audit import audit_rules
         return audit_rules(profile)
 
-    def __init__(self, channel, profile, layout: str | None = None):
+    def __init__(self, channel: CyclicChannel, profile: Profile, layout: str | None = None):
         super().__init__(channel, profile, layout)
         self.mc = moeller_config(profile)
         self._device: str | None = None
 
-    def raw_to_value(self, ref: pd.ParamRef, raw: int):
+    def raw_to_value(self, ref: pd.ParamRef, raw: int) -> float | int:
         if ref.param is None:
             return raw
         return value_from_wire(ref.param, raw)
 
-    def value_to_raw(self, ref: pd.ParamRef, value) -> int:
+    def value_to_raw(self, ref: pd.ParamRef, value: float | int) -> int:
         if ref.param is None:
             return int(value) & ((1 << ref.size) - 1)
         return wire_from_value(ref.param, value)
@@ -323,7 +327,7 @@ class MoellerDrive(pd.ProfidriveDrive):
             self._device = device_name(self.read_raw(pd.PNU_DEVICE_ID) & 0xFFFF)
         return self._device
 
-    def check_value(self, ref: pd.ParamRef, value) -> str | None:
+    def check_value(self, ref: pd.ParamRef, value: float | int) -> str | None:
         p = ref.param
         if p is None:
             return super().check_value(ref, value)
@@ -443,7 +447,7 @@ class MoellerDrive(pd.ProfidriveDrive):
         return probs
 
 
-def make_drive(channel, profile, layout: str | None = None) -> MoellerDrive:
+def make_drive(channel: CyclicChannel, profile: Profile, layout: str | None = None) -> MoellerDrive:
     moeller_config(profile)
     return MoellerDrive(channel, profile, layout)
 
@@ -453,8 +457,8 @@ def make_drive(channel, profile, layout: str | None = None) -> MoellerDrive:
 # =============================================================================================
 
 
-def decode_area(profile, layout: str, direction: str, data: bytes, *,
-                max_hz: float | None = None) -> dict:
+def decode_area(profile: Profile, layout: str, direction: str, data: bytes, *,
+                max_hz: float | None = None) -> dict[str, Any]:
     mc = moeller_config(profile)
     out = pd.decode_area(profile, layout, direction, data, max_hz=max_hz)
     text = out["text"]

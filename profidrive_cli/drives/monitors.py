@@ -23,8 +23,31 @@ parameter, or a family address form such as Toyo's TB03[0,99]).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping, Protocol
 
 from profidrive_cli.datafile import DataFileError, LineDict, LineList
+
+
+class _Coded(Protocol):
+    @property
+    def code(self) -> str: ...
+
+
+class MonitoredProfile(Protocol):
+    """What these readers use of a drives.profile.Profile (which imports this module: named here by
+    its shape, not imported)."""
+    @property
+    def name(self) -> str: ...
+    @property
+    def family(self) -> str: ...
+    @property
+    def path(self) -> Path | None: ...
+    @property
+    def raw(self) -> LineDict: ...
+    @property
+    def layouts(self) -> Mapping[str, object]: ...
+    def param(self, code: str) -> _Coded | None: ...
 
 
 @dataclass
@@ -59,44 +82,48 @@ class TripRecordConfig:
     latest_first: int = 1
 
 
-def _line(node, key=None) -> int | None:
+def _path(profile: MonitoredProfile) -> str | Path:
+    return profile.path or "<profile>"
+
+
+def _line(node: object, key: str | None = None) -> int | None:
     if key is not None and isinstance(node, LineDict):
         return node.line_of(key)
     return getattr(node, "line", None)
 
 
-def _codes(profile, node, key, items) -> list[str]:
+def _codes(profile: MonitoredProfile, node: object, key: str, items: object) -> list[str]:
     if not isinstance(items, list) or not all(isinstance(c, (str, int)) for c in items) or not items:
-        raise DataFileError(profile.path, _line(node, key), f"'{key}' must be a non-empty list of codes")
+        raise DataFileError(_path(profile), _line(node, key), f"'{key}' must be a non-empty list of codes")
     return [str(c) for c in items]
 
 
-def monitor_config(profile) -> MonitorConfig:
+def monitor_config(profile: MonitoredProfile) -> MonitorConfig:
     """The `monitors:` section (an empty default set when there is none)."""
     doc = profile.raw.get("monitors")
     if doc is None:
         return MonitorConfig()
     if not isinstance(doc, dict):
-        raise DataFileError(profile.path, _line(profile.raw, "monitors"), "'monitors' must be a mapping")
+        raise DataFileError(_path(profile), _line(profile.raw, "monitors"), "'monitors' must be a mapping")
     for k in doc:
         if k not in ("default", "words", "cyclic"):
-            raise DataFileError(profile.path, _line(doc, k), f"monitors: unknown key '{k}'")
-    words = {}
+            raise DataFileError(_path(profile), _line(doc, k), f"monitors: unknown key '{k}'")
+    words: dict[str, MonitorWord] = {}
     for code, w in (doc.get("words") or {}).items():
         if not isinstance(w, dict) or not isinstance(w.get("word"), str) \
                 or not isinstance(w.get("scale", 1.0), (int, float)):
-            raise DataFileError(profile.path, _line(doc["words"], code),
+            raise DataFileError(_path(profile), _line(doc["words"], code),
                                 f"monitors.words.{code}: {{word: NAME, name: TEXT, unit: U, scale: NUMBER}}")
         words[str(code)] = MonitorWord(str(code), w["word"], str(w.get("name", code)), str(w.get("unit", "")),
                                        float(w.get("scale", 1.0)), bool(w.get("signed", False)))
-    cyclic = {}
+    cyclic: dict[str, str] = {}
     cy = doc.get("cyclic") or {}
     if not isinstance(cy, dict):
-        raise DataFileError(profile.path, _line(doc, "cyclic"), "monitors.cyclic: {CODE: INPUT_WORD, ...}")
+        raise DataFileError(_path(profile), _line(doc, "cyclic"), "monitors.cyclic: {CODE: INPUT_WORD, ...}")
     for code, word in cy.items():
         p = profile.param(str(code))
         if p is None or not isinstance(word, str):
-            raise DataFileError(profile.path, _line(cy, code),
+            raise DataFileError(_path(profile), _line(cy, code),
                                 f"monitors.cyclic.{code}: a parameter code of the profile and the name of "
                                 f"the input word carrying it")
         cyclic[p.code] = word
@@ -104,7 +131,7 @@ def monitor_config(profile) -> MonitorConfig:
     return MonitorConfig(default, words, cyclic)
 
 
-def cyclic_monitors(profile, layout: str) -> dict[str, str]:
+def cyclic_monitors(profile: MonitoredProfile, layout: str) -> dict[str, str]:
     """The `monitors.cyclic` parameters that `layout` carries in its input words: code -> word. The
     family module says which words a layout's input has (`input_words(profile, layout)`); none
     without it. No bus."""
@@ -121,31 +148,31 @@ def cyclic_monitors(profile, layout: str) -> dict[str, str]:
     return {c: w for c, w in cyc.items() if w in have}
 
 
-def trip_record_config(profile) -> TripRecordConfig | None:
+def trip_record_config(profile: MonitoredProfile) -> TripRecordConfig | None:
     """The `trip_records:` section, or None: the card keeps no trip records."""
     doc = profile.raw.get("trip_records")
     if doc is None:
         return None
     where = _line(profile.raw, "trip_records")
     if not isinstance(doc, dict):
-        raise DataFileError(profile.path, where, "'trip_records' must be a mapping")
+        raise DataFileError(_path(profile), where, "'trip_records' must be a mapping")
     for k in doc:
         if k not in ("latest", "latest_first", "empty", "records"):
-            raise DataFileError(profile.path, _line(doc, k), f"trip_records: unknown key '{k}'")
+            raise DataFileError(_path(profile), _line(doc, k), f"trip_records: unknown key '{k}'")
     empty = doc.get("empty", "zero")
     if empty not in ("zero", "error"):
-        raise DataFileError(profile.path, _line(doc, "empty"), "trip_records.empty: zero or error")
+        raise DataFileError(_path(profile), _line(doc, "empty"), "trip_records.empty: zero or error")
     recs = doc.get("records")
     if not isinstance(recs, list) or not recs:
-        raise DataFileError(profile.path, _line(doc, "records"), "trip_records.records: a non-empty list")
-    out = []
+        raise DataFileError(_path(profile), _line(doc, "records"), "trip_records.records: a non-empty list")
+    out: list[TripRecordSpec] = []
     for i, r in enumerate(recs):
         line = recs.line_of(i) if isinstance(recs, LineList) else where
         if not isinstance(r, dict) or "fields" not in r:
-            raise DataFileError(profile.path, line, "trip record: {position: TEXT, fields: [CODE, ...]}")
+            raise DataFileError(_path(profile), line, "trip record: {position: TEXT, fields: [CODE, ...]}")
         out.append(TripRecordSpec(str(r.get("position", i + 1)), _codes(profile, r, "fields", r["fields"])))
     latest = doc.get("latest")
     first = doc.get("latest_first", 1)
     if first not in (0, 1):
-        raise DataFileError(profile.path, _line(doc, "latest_first"), "trip_records.latest_first: 0 or 1")
+        raise DataFileError(_path(profile), _line(doc, "latest_first"), "trip_records.latest_first: 0 or 1")
     return TripRecordConfig(out, str(latest) if latest is not None else None, empty, first)

@@ -41,6 +41,7 @@ import functools
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, Callable, TypeVar
 
 from profidrive_cli.data import profiles_dir, user_profile_dirs
 from profidrive_cli.datafile import DataFileError, LineDict, load_yaml, load_yaml_head, read_text
@@ -48,6 +49,9 @@ from profidrive_cli.dp.cfg import CfgError, decode_cfg, io_sizes, parse_hex
 from profidrive_cli.drives.capabilities import Capabilities, parse_capabilities
 from profidrive_cli.drives.formats import FORMATS
 from profidrive_cli.drives.registry import unknown_family
+
+if TYPE_CHECKING:
+    from profidrive_cli.drives.monitors import MonitorWord
 
 ProfileError = DataFileError
 
@@ -62,7 +66,7 @@ class Layout:
     output_len: int
     pkw: bool
     description: str = ""
-    extra: dict = field(default_factory=dict)
+    extra: dict[str, Any] = field(default_factory=dict)   # the YAML node's other keys
 
 
 @dataclass
@@ -81,7 +85,7 @@ class ParamDef:
     signed: bool = False
     size: int = 16                    # bits on the wire: 16 or 32
     line: int = 0
-    extra: dict = field(default_factory=dict)
+    extra: dict[str, Any] = field(default_factory=dict)   # the YAML node's other keys
 
     @property
     def writable(self) -> bool:
@@ -164,12 +168,17 @@ class Profile:
         return self.layouts.get(f"ppo{n}")
 
 
-def _err(path, node, key, msg) -> DataFileError:
+def _err(path: str | Path, node: object, key: str, msg: str) -> DataFileError:
     line = node.line_of(key) if isinstance(node, LineDict) else getattr(node, "line", None)
     return DataFileError(path, line, msg)
 
 
-def _get(path, node: LineDict, key: str, types, required=True, default=None):
+#: a YAML type _get checks a value against: one type or a tuple of them
+_Types = type | tuple[type, ...]
+
+
+def _get(path: str | Path, node: LineDict, key: str, types: _Types, required: bool = True,
+         default: Any = None) -> Any:   # Any: a parsed YAML value, checked against `types` here
     if key not in node:
         if required:
             raise DataFileError(path, node.line, f"missing field '{key}'")
@@ -193,7 +202,7 @@ _PARAM_KEYS = {"code", "name", "unit", "scale", "min", "max", "access", "default
                "register", "signed", "size"}
 
 
-def _param(path, node) -> ParamDef:
+def _param(path: str | Path, node: object) -> ParamDef:
     if not isinstance(node, LineDict):
         raise DataFileError(path, getattr(node, "line", None), "a parameter must be a mapping")
     num = (int, float)
@@ -329,11 +338,11 @@ def load_profile_file(path: str | Path, *, check_sections: bool = True) -> Profi
         bus_settings=_bus_settings(path, doc, params),
     )
     if check_sections:
-        _check_sections(profile)
+        _check_sections(profile, path)
     return profile
 
 
-def _check_sections(profile: Profile) -> None:
+def _check_sections(profile: Profile, path: Path) -> None:
     """The sections read when they are used, read now (a profile that loads is one every command can
     use): the family's own keys (drives/registry.py `config`: ppo_select, comm_loss, ... -- every
     code they name checked against the parameters), `monitors:` and `trip_records:`, whose codes
@@ -348,7 +357,7 @@ def _check_sections(profile: Profile) -> None:
     trips = trip_record_config(profile)
     forms = getattr(resolve(fam.codec), "ADDRESS_FORMS", None) if fam is not None else None
     raw = profile.raw
-    named: list[tuple[object, object, str, str]] = []        # (node, key, where, code)
+    named: list[tuple[object, str, str, str]] = []        # (node, key, where, code)
     node = raw.get("monitors")
     if isinstance(node, LineDict) and isinstance(node.get("default"), list):
         named += [(node, "default", "monitors.default", c) for c in mon.default]
@@ -359,23 +368,23 @@ def _check_sections(profile: Profile) -> None:
             named += [(rec, "fields", "trip_records.records.fields", c) for c in spec.fields]
     for where_node, key_, where, code in named:
         if not _addressable(profile, code, mon.words, forms):
-            raise _err(profile.path, where_node, key_, f"{where}: {code} is not a parameter of this profile")
+            raise _err(path, where_node, key_, f"{where}: {code} is not a parameter of this profile")
 
 
 _RAW_PNU = re.compile(r"PNU\s*(0x[0-9a-f]+|\d+)(\s*\[\s*(0x[0-9a-f]+|\d+)\s*\])?", re.I)
 
 
-def _addressable(profile: Profile, code: str, words: object, forms: object) -> bool:
+def _addressable(profile: Profile, code: str, words: dict[str, MonitorWord], forms: object) -> bool:
     """A code a monitor or trip record may name: see _check_sections."""
     base = code.split("[", 1)[0].strip()
-    if profile.param(code) is not None or profile.param(base) is not None or code in words:  # type: ignore[operator]
+    if profile.param(code) is not None or profile.param(base) is not None or code in words:
         return True
     if any(c.lower() == code.lower() for c in profile.parameters) or _RAW_PNU.fullmatch(code):
         return True
     return isinstance(forms, re.Pattern) and forms.fullmatch(code) is not None
 
 
-def _bus_settings(path, doc, params: dict[str, ParamDef]) -> dict[str, float | int]:
+def _bus_settings(path: str | Path, doc: LineDict, params: dict[str, ParamDef]) -> dict[str, float | int]:
     """`bus_settings:`: code -> the value the manual's commissioning for the field bus sets."""
     node = _get(path, doc, "bus_settings", LineDict, False, None)
     out: dict[str, float | int] = {}
@@ -391,7 +400,7 @@ def _bus_settings(path, doc, params: dict[str, ParamDef]) -> dict[str, float | i
 _GROUP_NAME = re.compile(r"[a-z][a-z0-9_-]*\Z")
 
 
-def _groups(path, doc, params: dict[str, ParamDef]) -> dict[str, tuple[str, ...]]:
+def _groups(path: str | Path, doc: LineDict, params: dict[str, ParamDef]) -> dict[str, tuple[str, ...]]:
     """`groups:`: a mapping name -> list of code patterns; every pattern must match a parameter."""
     node = _get(path, doc, "groups", LineDict, False, None)
     if node is None:
@@ -412,19 +421,22 @@ def _groups(path, doc, params: dict[str, ParamDef]) -> dict[str, tuple[str, ...]
     return out
 
 
-def _word_order(path, doc) -> str:
-    wo = _get(path, doc, "word_order", str, False, "big")
+def _word_order(path: str | Path, doc: LineDict) -> str:
+    wo: str = _get(path, doc, "word_order", str, False, "big")
     if wo not in ("big", "little"):
         raise _err(path, doc, "word_order", f"word_order must be big or little, got {wo!r}")
     return wo
 
 
-def per_profile(build):
+_C = TypeVar("_C")
+
+
+def per_profile(build: Callable[[Profile], _C]) -> Callable[[Profile], _C]:
     """Memoise a family codec's config builder per Profile object (profiles are immutable once loaded)."""
-    cache: dict[int, tuple[Profile, object]] = {}
+    cache: dict[int, tuple[Profile, _C]] = {}
 
     @functools.wraps(build)
-    def get(profile):
+    def get(profile: Profile) -> _C:
         hit = cache.get(id(profile))
         if hit is not None and hit[0] is profile:
             return hit[1]
@@ -542,7 +554,7 @@ def all_profiles() -> list[Profile]:
     return [_load_cached(e.path) for e in profile_index()]
 
 
-def _lookup(match) -> Profile | None:
+def _lookup(match: Callable[[IndexEntry], bool]) -> Profile | None:
     """The first profile (by file name) whose index entry matches and whose full load confirms it;
     files the index cannot read are loaded only if no readable one matches (raising their error).
     The plug-ins' folders are read only when no shipped or user profile matches."""
@@ -553,7 +565,7 @@ def _lookup(match) -> Profile | None:
     return _lookup_in(match, profile_index()) if plugins() else None
 
 
-def _lookup_in(match, entries: list[IndexEntry]) -> Profile | None:
+def _lookup_in(match: Callable[[IndexEntry], bool], entries: list[IndexEntry]) -> Profile | None:
     for e in entries:
         if match(e):
             p = _load_cached(e.path)

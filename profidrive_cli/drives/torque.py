@@ -17,8 +17,13 @@ May touch: nothing of drives (base imports this module). Imports no layer above 
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 from profidrive_cli import UsageError
+
+if TYPE_CHECKING:
+    from profidrive_cli.drives.capabilities import Capabilities
+    from profidrive_cli.drives.profile import Profile
 
 TORQUE_MAX_PERCENT = 200.0
 
@@ -34,11 +39,11 @@ def no_torque_reason(family: str) -> str:
     return NO_TORQUE.get(family, f"{family}: this card has no torque word in its cyclic data")
 
 
-def capability_refusal(profile, name: str, layout: str | None) -> str | None:
+def capability_refusal(profile: Profile, name: str, layout: str | None) -> str | None:
     """The profile's `capabilities:` refusal for `name` ('torque' or 'torque_limit') on `layout`, None
     when it is declared possible there or not declared at all (the Drive's own answer then decides).
     Bus-free, so run, checklist and API refuse with the same words before anything moves."""
-    caps = getattr(profile, "capabilities", None)
+    caps: Capabilities | None = getattr(profile, "capabilities", None)
     if caps is None or name not in getattr(caps, "decl", {}):
         return None
     return caps.refusal(name, layout or profile.default_layout)

@@ -24,12 +24,20 @@ import math
 import re
 from decimal import Decimal, InvalidOperation
 from fractions import Fraction
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence, Union
+
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profile import ParamDef, Profile
+
+#: a number value_problem reads exactly
+Number = Union[float, Fraction, Decimal]
+#: allowed intervals (None: unbounded on that side)
+Ranges = Sequence[tuple[Union[Fraction, None], Union[Fraction, None]]]
 
 NOISE = Fraction(1, 10**9)        # of one resolution step
 
 
-def _frac(x) -> Fraction:
+def _frac(x: Number) -> Fraction:
     if isinstance(x, Fraction):
         return x
     if isinstance(x, int):
@@ -47,23 +55,23 @@ def _num(f: Fraction) -> str:
         return str(f)
 
 
-def _u(p) -> str:
+def _u(p: ParamDef) -> str:
     return f" {p.unit}" if getattr(p, "unit", "") else ""
 
 
-def _step(p, scale=None) -> Fraction | None:
+def _step(p: ParamDef, scale: float | None = None) -> Fraction | None:
     sc = p.scale if scale is None else scale
     if not sc:
         return None
     return abs(_frac(sc))
 
 
-def code_values(p) -> list[tuple[int, int]] | None:
+def code_values(p: ParamDef) -> list[tuple[int, int]] | None:
     """The listed codes of a parameter (`values: {0: ..., 2-39: ...}`) as (low, high) ranges."""
     vals = p.extra.get("values")
     if not isinstance(vals, dict) or not vals:
         return None
-    out = []
+    out: list[tuple[int, int]] = []
     for k in vals:
         if isinstance(k, int) and not isinstance(k, bool):
             out.append((k, k))
@@ -76,7 +84,7 @@ def code_values(p) -> list[tuple[int, int]] | None:
     return sorted(out) or None
 
 
-def _ranges(p) -> Sequence[tuple[Fraction | None, Fraction | None]] | None:
+def _ranges(p: ParamDef) -> Ranges | None:
     """Allowed intervals: `values` codes, else `ranges`, else min..max (None: unbounded)."""
     cv = code_values(p)
     if cv:
@@ -88,15 +96,15 @@ def _ranges(p) -> Sequence[tuple[Fraction | None, Fraction | None]] | None:
                   for lo, hi in rg]
             rg = [(lo, hi) for lo, hi in rg if lo <= hi]
         return rg
-    rg = p.extra.get("ranges")
-    if isinstance(rg, list) and rg:
-        return [(_frac(lo), _frac(hi)) for lo, hi in rg]
+    listed = p.extra.get("ranges")
+    if isinstance(listed, list) and listed:
+        return [(_frac(lo), _frac(hi)) for lo, hi in listed]
     if p.min is None and p.max is None:
         return None
     return [(_frac(p.min) if p.min is not None else None, _frac(p.max) if p.max is not None else None)]
 
 
-def _wire_bounds(p, step: Fraction | None) -> tuple[Fraction, Fraction] | None:
+def _wire_bounds(p: ParamDef, step: Fraction | None) -> tuple[Fraction, Fraction] | None:
     bits = 8 * int(p.extra.get("bytes", 0)) if isinstance(p.extra.get("bytes"), int) else int(p.size or 16)
     if step is None:
         return None
@@ -107,12 +115,12 @@ def _wire_bounds(p, step: Fraction | None) -> tuple[Fraction, Fraction] | None:
     return Fraction(lo) * step, Fraction(hi) * step
 
 
-def _inside(v: Fraction, rg) -> bool:
+def _inside(v: Fraction, rg: Ranges) -> bool:
     return any((lo is None or v >= lo) and (hi is None or v <= hi) for lo, hi in rg)
 
 
-def _allowed_text(p, rg) -> str:
-    parts = []
+def _allowed_text(p: ParamDef, rg: Ranges) -> str:
+    parts: list[str] = []
     for lo, hi in rg:
         if lo is not None and hi is not None and lo == hi:
             parts.append(_num(lo))
@@ -129,7 +137,7 @@ def _snap_up(x: Fraction, step: Fraction) -> Fraction:
     return math.ceil(x / step) * step
 
 
-def nearest_valid(p, v: Fraction, scale=None) -> list[Fraction]:
+def nearest_valid(p: ParamDef, v: Fraction, scale: float | None = None) -> list[Fraction]:
     """The valid values just below and just above v (one or two, ascending)."""
     step = _step(p, scale) or Fraction(1)
     rg = _ranges(p) or [(None, None)]
@@ -151,7 +159,7 @@ def nearest_valid(p, v: Fraction, scale=None) -> list[Fraction]:
                 cands.add(c)
     below = [c for c in cands if c <= v]
     above = [c for c in cands if c >= v]
-    out = []
+    out: list[Fraction] = []
     if below:
         out.append(max(below))
     if above and (not out or min(above) != out[0]):
@@ -159,14 +167,15 @@ def nearest_valid(p, v: Fraction, scale=None) -> list[Fraction]:
     return out
 
 
-def _nearest_words(p, v: Fraction, scale=None) -> str:
+def _nearest_words(p: ParamDef, v: Fraction, scale: float | None = None) -> str:
     near = nearest_valid(p, v, scale)
     if not near:
         return ""
     return "; nearest " + " or ".join(f"{_num(c)}{_u(p)}" for c in near)
 
 
-def value_problem(p, value, scale=None, label: str | None = None) -> str | None:
+def value_problem(p: ParamDef, value: object, scale: float | None = None, label: str | None = None
+                  ) -> str | None:
     """None when parameter `p` (a profile ParamDef) can hold `value` exactly, else one line saying why
     with the nearest values it can hold. `scale` overrides p.scale (Toyo 400 V class)."""
     what = label or p.code
@@ -203,7 +212,7 @@ def value_problem(p, value, scale=None, label: str | None = None) -> str | None:
     return None
 
 
-def profile_value_problem(profile, p, value) -> str | None:
+def profile_value_problem(profile: Profile, p: ParamDef, value: object) -> str | None:
     """value_problem() with the scale the family uses for this profile (Toyo: the 400 V class scale):
     for checks made from the profile alone, before a drive is connected (checklist validate, the
     prompt of param set)."""
@@ -213,7 +222,7 @@ def profile_value_problem(profile, p, value) -> str | None:
     return value_problem(p, value, scale=hook(profile, p) if hook else None)
 
 
-def raw_value_problem(label: str, value, bits: int = 16) -> str | None:
+def raw_value_problem(label: str, value: object, bits: int = 16) -> str | None:
     """For raw PNU / register access (no profile entry): a whole number that fits `bits` (a negative
     number is taken as two's complement)."""
     if isinstance(value, bool) or not isinstance(value, (int, float)) or \
@@ -228,7 +237,7 @@ def raw_value_problem(label: str, value, bits: int = 16) -> str | None:
     return None
 
 
-def exact_raw(p, value, scale=None) -> int:
+def exact_raw(p: ParamDef, value: Number, scale: float | None = None) -> int:
     """The wire integer of a value value_problem() accepted (exact: no rounding beyond float noise)."""
     step = _step(p, scale)
     if step is None:
@@ -241,13 +250,13 @@ def exact_raw(p, value, scale=None) -> int:
 DEFAULT_DANGER = "initialises data or runs the motor on its own (marked dangerous in the profile)"
 
 
-def is_dangerous(p) -> bool:
+def is_dangerous(p: ParamDef | None) -> bool:
     return p is not None and bool(p.extra.get("dangerous"))
 
 
-def danger(p) -> str | None:
+def danger(p: ParamDef | None) -> str | None:
     """What writing `p` does, in words, when the profile marks it dangerous; None otherwise."""
-    if not is_dangerous(p):
+    if p is None or not is_dangerous(p):
         return None
     text = p.extra.get("danger")
     return str(text) if text else DEFAULT_DANGER

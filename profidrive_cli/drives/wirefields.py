@@ -16,25 +16,33 @@ hand. Field kinds:
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from profidrive_cli import UsageError
 
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profile import Profile
+
 DIRECTIONS = ("request", "response")
 
+#: one field of an area, as the station table's JSON has it (kind, name, offset, size, and the
+#: kind's own keys: role, bits, scale, unit, ...)
+WireField = dict[str, Any]
 
-def _field(kind: str, name: str, offset: int, size: int = 2, **extra) -> dict:
-    d = {"kind": kind, "name": name, "offset": offset, "size": size}
+
+def _field(kind: str, name: str, offset: int, size: int = 2, **extra: object) -> WireField:
+    d: WireField = {"kind": kind, "name": name, "offset": offset, "size": size}
     d.update({k: v for k, v in extra.items() if v is not None})
     return d
 
 
-def _ppo_fields(profile, layout: str, direction: str) -> tuple[int, list[dict]]:
+def _ppo_fields(profile: Profile, layout: str, direction: str) -> tuple[int, list[WireField]]:
     from profidrive_cli.drives.profidrive.config import config
     from profidrive_cli.drives.profidrive.ppo import PKW_WORDS, ppo_layout
     cfg = config(profile)
     ppo = ppo_layout(profile, layout)
-    fields, off = [], 0
+    fields: list[WireField] = []
+    off = 0
     if ppo.pkw:
         fields.append(_field("pkw", "PKW", 0, 2 * PKW_WORDS))
         off = 2 * PKW_WORDS
@@ -54,7 +62,7 @@ def _ppo_fields(profile, layout: str, direction: str) -> tuple[int, list[dict]]:
     return ppo.length(direction), fields
 
 
-def yaskawa_fields(profile, layout: str, direction: str) -> tuple[int, list[dict]]:
+def yaskawa_fields(profile: Profile, layout: str, direction: str) -> tuple[int, list[WireField]]:
     from profidrive_cli.drives.yaskawa.codec import (COMMAND_BITS, COMMAND_TEXT, FORMATS, MFO_BITS,
                                                      SIGNED_WORDS, STATUS_BITS, STATUS_TEXT,
                                                      FrequencyScale)
@@ -66,7 +74,7 @@ def yaskawa_fields(profile, layout: str, direction: str) -> tuple[int, list[dict
     scale = FrequencyScale(cfg.o1_03, float(profile.max_frequency_default), cfg.reference_unit_hz,
                            cfg.feedback_unit_hz)
     names = fmt.out_words if direction == "request" else fmt.in_words
-    fields = []
+    fields: list[WireField] = []
     for i, name in enumerate(names):
         off = 2 * i
         if name == "command":
@@ -96,7 +104,7 @@ def yaskawa_fields(profile, layout: str, direction: str) -> tuple[int, list[dict
     return fmt.size, fields
 
 
-def toyo_fields(profile, layout: str, direction: str) -> tuple[int, list[dict]]:
+def toyo_fields(profile: Profile, layout: str, direction: str) -> tuple[int, list[WireField]]:
     from profidrive_cli.drives.toyo.codec import speed_percent
     from profidrive_cli.drives.toyo.config import toyo_config
     from profidrive_cli.drives.toyo.params import value_from_wire
@@ -104,7 +112,8 @@ def toyo_fields(profile, layout: str, direction: str) -> tuple[int, list[dict]]:
     lay = tc.layouts.get(layout)
     if lay is None:
         raise UsageError(f"{profile.name}: no layout '{layout}' (known: {', '.join(tc.layouts)})")
-    fields, off = [], 0
+    fields: list[WireField] = []
+    off = 0
     if lay.pkw:
         fields.append(_field("pkw", "PKW", 0, 8))
         off = 8
@@ -119,7 +128,8 @@ def toyo_fields(profile, layout: str, direction: str) -> tuple[int, list[dict]]:
         if kind in ("ctw", "zsw", "run_cmd", "bits"):
             table = {"ctw": "ctw", "zsw": "zsw", "run_cmd": "run_cmd"}.get(kind, f.get("bits"))
             role = {"ctw": "control", "zsw": "status"}.get(kind)
-            fields.append(_field("bits", name, o, role=role, bits=dict(tc.bits.get(table, {}))))
+            bits = tc.bits.get(table, {}) if table is not None else {}
+            fields.append(_field("bits", name, o, role=role, bits=dict(bits)))
         elif kind == "speed":
             # the first speed word is the main reference / actual value
             role = None
@@ -132,6 +142,7 @@ def toyo_fields(profile, layout: str, direction: str) -> tuple[int, list[dict]]:
                                  scale=float(f.get("scale", 1))))
         elif kind == "param":
             p = profile.param(f["param"])
+            assert p is not None, "toyo_config checked that fields.*.param is a parameter"
             per_count = value_from_wire(profile, p, 1000) / 1000.0
             fields.append(_field("scaled", name, o, signed=p.signed, unit=p.unit, scale=per_count))
         else:
@@ -140,7 +151,7 @@ def toyo_fields(profile, layout: str, direction: str) -> tuple[int, list[dict]]:
     return n, fields
 
 
-def area_fields(profile, layout: str, direction: str) -> dict:
+def area_fields(profile: Profile, layout: str, direction: str) -> dict[str, Any]:
     """{"length": octets, "fields": [...]} of one direction of a layout (request = master -> drive)."""
     if direction not in DIRECTIONS:
         raise UsageError(f"direction must be request or response, got {direction!r}")
@@ -157,7 +168,7 @@ def area_fields(profile, layout: str, direction: str) -> dict:
     return {"length": length, "fields": fields}
 
 
-def _ak_texts(profile) -> tuple[dict, dict]:
+def _ak_texts(profile: Profile) -> tuple[dict[int, str], dict[int, str]]:
     if profile.family == "toyo":
         from profidrive_cli.drives.toyo.describe import REQUEST_TEXT, RESPONSE_TEXT
         return dict(REQUEST_TEXT), dict(RESPONSE_TEXT)
@@ -165,7 +176,7 @@ def _ak_texts(profile) -> tuple[dict, dict]:
     return dict(REQUEST_TEXT), dict(RESPONSE_TEXT)
 
 
-def _params(profile) -> dict[int, str]:
+def _params(profile: Profile) -> dict[int, str]:
     """PNU * 256 + subindex (255: any subindex) -> 'code name', for PKW requests and answers."""
     out: dict[int, str] = {}
     for p in profile.parameters.values():
@@ -177,7 +188,7 @@ def _params(profile) -> dict[int, str]:
     return out
 
 
-def layout_table(profile, layout: str) -> dict:
+def layout_table(profile: Profile, layout: str) -> dict[str, Any]:
     """Everything a decoder needs for one layout of a profile: both directions' fields, the word order,
     PKW request/response texts and parameter names."""
     d: dict[str, Any] = {"profile": profile.name, "layout": layout, "title": profile.title,

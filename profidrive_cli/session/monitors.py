@@ -334,6 +334,7 @@ class TripRecords:
 def trip_records(sess: MonitorHost) -> TripRecords:
     """The card's trip records as the profile's `trip_records:` describes them; empty records are
     left out (a first field of 0, or a refused first read, as the section's `empty:` says)."""
+    assert sess.profile is not None                                  # identified
     cfg = trip_record_config(sess.profile)
     if cfg is None:
         return TripRecords(False, note=NO_TRIP_RECORDS)

@@ -356,6 +356,7 @@ class FujiModel(ProfidriveModel):
 
     def _all_zero(self, now: float) -> None:
         """OPC-PDP3 o32: all-zero output data (values >= 3 act like 0)."""
+        assert self.fc.zero_data is not None            # data_exchange calls this only then
         mode = self.values.get(self.fc.zero_data.get("param", "o32"), 0)
         if mode == 1 or (mode == 2 and self.last_ctw_in & Ctw.CONTROL_BY_PLC):
             if self.state not in (State.FAULT, State.S1):

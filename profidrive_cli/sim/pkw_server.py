@@ -91,6 +91,7 @@ class PkwServer:
         if not write:
             v = self.read_special(req.pnu, req.subindex)
             if v is None:
+                assert p is not None            # a PNU the profile lacks is answered by read_special
                 v = self.values[p.code]
             return PkwFrame(ok_ak, req.pnu, req.subindex, v & 0xFFFFFFFF)
         raw = req.value & (0xFFFF if size == 16 else 0xFFFFFFFF)

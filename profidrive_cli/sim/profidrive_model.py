@@ -220,8 +220,8 @@ class ProfidriveModel(PkwServer, DriveModel):
     def write_special(self, pnu: int, sub: int, raw: int) -> str | None:
         c = self.cfg
         if pnu in c.pzd_map:
-            if raw and (pd.param_for(self.profile, raw) is None
-                        or pd.param_for(self.profile, raw).size != 16):
+            q = pd.param_for(self.profile, raw) if raw else None
+            if raw and (q is None or q.size != 16):
                 return "out_of_range"
             m = self.pzd_setpoint_map if pnu == c.pzd_map[0] else self.pzd_actual_map
             m[sub - 1] = raw

@@ -120,6 +120,7 @@ class ToyoModel(ProfidriveModel):
         return False
 
     def _tl(self) -> ty.ToyoLayout:
+        assert self.layout is not None                  # a layout is set by Chk_Cfg before data
         return self.tc.layouts[self.layout]
 
     def _plch(self) -> bool:

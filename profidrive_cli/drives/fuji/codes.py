@@ -7,15 +7,19 @@ Pure functions of the profile and its FujiConfig (drives/fuji/config.py); no bus
 from __future__ import annotations
 
 import re
+from typing import TYPE_CHECKING
 
 from profidrive_cli import UsageError
 from profidrive_cli.drives.fuji.config import CommLossAction, fuji_config
+
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profile import Alarm, ParamDef, Profile
 
 # =============================================================================================
 # function codes
 # =============================================================================================
 
-def parse_function_code(profile, text: str) -> tuple[str, int, int, int] | None:
+def parse_function_code(profile: Profile, text: str) -> tuple[str, int, int, int] | None:
     """'F26' -> ('F26', group code 4, pnu 0x104, subindex 26); None when it is not a function code.
 
     Group letters match in any case ('Y98' = 'y98'). A two-character group (W1, J1, o1, ...) wins when
@@ -51,7 +55,7 @@ def parse_function_code(profile, text: str) -> tuple[str, int, int, int] | None:
     return f"{g}{num:02d}", fc.groups[g], fc.pnu_base + fc.groups[g], num
 
 
-def function_code_name(profile, pnu: int, subindex: int) -> str | None:
+def function_code_name(profile: Profile, pnu: int, subindex: int) -> str | None:
     """PNU 0x104, subindex 26 -> 'F26' (None outside the function-code PNUs)."""
     fc = fuji_config(profile)
     code = pnu - fc.pnu_base
@@ -61,7 +65,7 @@ def function_code_name(profile, pnu: int, subindex: int) -> str | None:
     return None
 
 
-def pcd_assignment(profile, code: str) -> int:
+def pcd_assignment(profile: Profile, code: str) -> int:
     """The o40-o51 / PNU915/916 word for a function code: group << 8 | number (F26 -> 0x041A)."""
     r = parse_function_code(profile, code)
     if r is None:
@@ -69,7 +73,7 @@ def pcd_assignment(profile, code: str) -> int:
     return r[1] << 8 | r[3]
 
 
-def pcd_assignment_code(profile, word: int) -> str | None:
+def pcd_assignment_code(profile: Profile, word: int) -> str | None:
     """0x041A -> 'F26'; 0 -> None (not assigned)."""
     if word == 0:
         return None
@@ -82,12 +86,12 @@ def pcd_assignment_code(profile, word: int) -> str | None:
 # =============================================================================================
 
 
-def alarm_candidates(profile, number: int) -> list:
+def alarm_candidates(profile: Profile, number: int) -> list[Alarm]:
     """Every alarm that a PNU947 malfunction code can stand for (several for 0x2212 etc.)."""
     return profile.alarms_for(number)
 
 
-def alarm_by_mcode(profile, mcode: int):
+def alarm_by_mcode(profile: Profile, mcode: int) -> Alarm | None:
     fc = fuji_config(profile)
     for a in profile.alarms:
         if fc.mcodes.get(a.code) == mcode:
@@ -95,11 +99,11 @@ def alarm_by_mcode(profile, mcode: int):
     return None
 
 
-def mcode_of(profile, code: str) -> int | None:
+def mcode_of(profile: Profile, code: str) -> int | None:
     return fuji_config(profile).mcodes.get(code)
 
 
-def alarm_text(profile, number: int) -> str:
+def alarm_text(profile: Profile, number: int) -> str:
     if number == 0:
         return "no alarm"
     al = alarm_candidates(profile, number)
@@ -109,14 +113,14 @@ def alarm_text(profile, number: int) -> str:
     return txt if len(al) == 1 else f"one of {txt}"
 
 
-def ppo_for_o30(profile, value: int) -> str | None:
+def ppo_for_o30(profile: Profile, value: int) -> str | None:
     for name, vals in fuji_config(profile).ppo_values.items():
         if value in vals:
             return name
     return None
 
 
-def o30_for_layout(profile, layout: str) -> int | None:
+def o30_for_layout(profile: Profile, layout: str) -> int | None:
     vals = fuji_config(profile).ppo_values.get(layout)
     if not vals:
         return None
@@ -126,7 +130,7 @@ def o30_for_layout(profile, layout: str) -> int | None:
     return min(vals)
 
 
-def comm_loss_action(profile, o27: int) -> CommLossAction:
+def comm_loss_action(profile: Profile, o27: int) -> CommLossAction:
     for a in fuji_config(profile).comm_loss_actions:
         if o27 in a.values:
             return a
@@ -134,7 +138,7 @@ def comm_loss_action(profile, o27: int) -> CommLossAction:
     return CommLossAction(frozenset({o27}), "coast", False, False, True)
 
 
-def comm_loss_text(profile, o27: int, o28: float) -> str:
+def comm_loss_text(profile: Profile, o27: int, o28: float) -> str:
     fc = fuji_config(profile)
     a = comm_loss_action(profile, o27)
     if a.stop == "none":
@@ -145,6 +149,6 @@ def comm_loss_text(profile, o27: int, o28: float) -> str:
     return f"{fc.comm_loss_param} = {o27}: {stop} {when}{rec}, then trip {fc.comm_loss_alarm}"
 
 
-def param_value(profile, param, raw: int):
+def param_value(profile: Profile, param: ParamDef, raw: int) -> float | int:
     """Hook used by the core decoder: engineering value of a wire value."""
     return param.from_raw(raw & 0xFFFF)

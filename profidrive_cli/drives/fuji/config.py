@@ -10,12 +10,16 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Iterable
 
 from profidrive_cli.datafile import DataFileError, LineDict
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.profile import COMMON_EXTRA_KEYS, per_profile
 from profidrive_cli.drives.sections import key, key_line, node_line, read
+
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profile import Profile
 
 #: parameter keys this family reads besides the common schema
 FAMILY_PARAM_KEYS = {"note", "dangerous", "format", "power_cycle", "array"}
@@ -41,13 +45,13 @@ class FujiConfig:
     ppo_values: dict[str, frozenset[int]] = field(default_factory=dict)   # layout -> o30 values
     errors: dict[int, str] = field(default_factory=dict)
     busy_error: int = 104
-    storage: dict | None = None            # y97 (OPC-PDP3)
+    storage: dict[Any, Any] | None = None            # y97 (OPC-PDP3): its YAML mapping, checked
     comm_loss_param: str = "o27"
     comm_loss_timer: str = "o28"
     comm_loss_decel: str = "F08"
     comm_loss_alarm: str = "Er5"
     comm_loss_actions: list[CommLossAction] = field(default_factory=list)
-    zero_data: dict | None = None          # o32 (OPC-PDP3)
+    zero_data: dict[Any, Any] | None = None          # o32 (OPC-PDP3): its YAML mapping
     history_pnu: int = 947
     history_elements: int = 32
     history: list[tuple[str, int, str | None]] = field(default_factory=list)  # position, ind, M-code
@@ -59,12 +63,12 @@ class FujiConfig:
         return {g.lower(): g for g in self.groups}
 
 
-def _err(profile, node, key, msg) -> DataFileError:
+def _err(profile: Profile, node: object, key: str, msg: str) -> DataFileError:
     line = node.line_of(key) if isinstance(node, LineDict) else getattr(node, "line", None)
     return DataFileError(profile.path or "<profile>", line, msg)
 
 
-def parse_int_set(items, what: str = "value") -> frozenset[int]:
+def parse_int_set(items: Iterable[object], what: str = "value") -> frozenset[int]:
     """[0, 1, "6-255"] -> {0, 1, 6, ..., 255}."""
     out: set[int] = set()
     for it in items:
@@ -135,7 +139,7 @@ class FujiKeys:
     baud_codes: Any = key("any", {})                # number -> text; anything else is ignored
 
 
-def _build_config(profile) -> FujiConfig:
+def _build_config(profile: Profile) -> FujiConfig:
     doc = profile.raw if isinstance(profile.raw, LineDict) else LineDict()
     path = profile.path or "<profile>"
     _check_params(path, profile)
@@ -171,7 +175,7 @@ def _build_config(profile) -> FujiConfig:
     return c
 
 
-def _check_params(path, profile) -> None:
+def _check_params(path: str | Path, profile: Profile) -> None:
     for p in profile.parameters.values():
         unknown = set(p.extra) - FAMILY_PARAM_KEYS - COMMON_EXTRA_KEYS
         if unknown:
@@ -182,7 +186,7 @@ def _check_params(path, profile) -> None:
             raise DataFileError(path, p.line, f"{p.code}: format must be one of {', '.join(FORMATS)}")
 
 
-def _read_groups(profile, fc: FunctionCodeKeys, c: FujiConfig) -> None:
+def _read_groups(profile: Profile, fc: FunctionCodeKeys, c: FujiConfig) -> None:
     groups = fc.groups
     if not groups:
         raise DataFileError(profile.path or "<profile>", key_line(fc, "groups"), _GROUPS.format())
@@ -199,7 +203,7 @@ def _read_groups(profile, fc: FunctionCodeKeys, c: FujiConfig) -> None:
                             "group letters must differ in more than case")
 
 
-def _check_storage(profile, storage: dict) -> None:
+def _check_storage(profile: Profile, storage: dict[Any, Any]) -> None:
     for k in ("param", "eeprom", "ram", "save", "saved_reads"):
         if k not in storage:
             raise _err(profile, storage, k if k in storage else "param", f"storage: missing '{k}'")
@@ -207,7 +211,7 @@ def _check_storage(profile, storage: dict) -> None:
         raise _err(profile, storage, "param", f"storage.param {storage['param']} is not a parameter")
 
 
-def _read_comm_loss(path, profile, cl: CommLossKeys, c: FujiConfig) -> None:
+def _read_comm_loss(path: str | Path, profile: Profile, cl: CommLossKeys, c: FujiConfig) -> None:
     c.comm_loss_param, c.comm_loss_timer = str(cl.action_param), str(cl.timer_param)
     c.comm_loss_decel, c.comm_loss_alarm = str(cl.decel_param), str(cl.alarm)
     for k, code in (("action_param", c.comm_loss_param), ("timer_param", c.comm_loss_timer),
@@ -232,10 +236,10 @@ def _read_comm_loss(path, profile, cl: CommLossKeys, c: FujiConfig) -> None:
                                                   bool(a.get("recover", False)), bool(a.get("trip", True))))
 
 
-def _history(path, profile, fh: FaultHistoryKeys) -> list[tuple[str, int, str | None]]:
+def _history(path: str | Path, profile: Profile, fh: FaultHistoryKeys) -> list[tuple[str, int, str | None]]:
     if not fh.entries:
         raise DataFileError(path, key_line(fh, "entries"), "fault_history.entries must be a list")
-    out = []
+    out: list[tuple[str, int, str | None]] = []
     for e in fh.entries:
         line = getattr(e, "line", node_line(fh))
         if not isinstance(e, dict) or not isinstance(e.get("index"), int):
@@ -259,7 +263,7 @@ FUJI_STW_BITS = {0: "ready for run-ON", 1: "ready to run", 2: "running", 3: "ala
                  8: "FAR (frequency arrival)", 9: "R/L (PROFIBUS commands active)", 10: "FDT (frequency >= E31)"}
 
 
-def profidrive_config(profile) -> pd.ProfidriveConfig:
+def profidrive_config(profile: Profile) -> pd.ProfidriveConfig:
     """The core's per-card configuration, built from the Fuji keys (hook used by pd.config)."""
     fc = fuji_config(profile)
     ctw = dict(pd.CTW_NAMES)

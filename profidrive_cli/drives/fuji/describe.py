@@ -7,17 +7,22 @@ Text and JSON only; no bus.
 from __future__ import annotations
 
 import re
+from typing import TYPE_CHECKING, Any
 
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.fuji.codes import (alarm_candidates, alarm_text, function_code_name,
                                               pcd_assignment_code)
 from profidrive_cli.drives.fuji.config import fuji_config
 
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profile import Profile
+
+
 def _hex_word(w: int) -> str:
     return f"0x{w:04X}"
 
 
-def _replace_value_text(out: dict, pk: dict, new: str) -> None:
+def _replace_value_text(out: dict[str, Any], pk: dict[str, Any], new: str) -> None:
     old = pk.get("value_text")
     if not old:
         return
@@ -33,7 +38,7 @@ def _replace_value_text(out: dict, pk: dict, new: str) -> None:
     pk["value_text"] = new
 
 
-def _rename_in_summary(out: dict, pk: dict, code: str) -> None:
+def _rename_in_summary(out: dict[str, Any], pk: dict[str, Any], code: str) -> None:
     """Say 'F26' instead of 'PNU 260[26] = F26' / 'PNU 271' in the one-line summaries."""
     pnu, sub = pk["pnu"], pk["subindex"]
     pats = [rf"PNU {pnu}\[{sub}\] = {re.escape(code)}\b", rf"PNU {pnu}\[{sub}\]", rf"PNU {pnu}\b"]
@@ -49,8 +54,8 @@ def _rename_in_summary(out: dict, pk: dict, code: str) -> None:
         text[-1] = "summary: " + out["summary"]
 
 
-def decode_area(profile, layout: str, direction: str, data: bytes, *,
-                max_hz: float | None = None) -> dict:
+def decode_area(profile: Profile, layout: str, direction: str, data: bytes, *,
+                max_hz: float | None = None) -> dict[str, Any]:
     """The core PPO decoder plus function-code names, alarm candidates, direction and PCD words."""
     fc = fuji_config(profile)
     out = pd.decode_area(profile, layout, direction, data, max_hz=max_hz)

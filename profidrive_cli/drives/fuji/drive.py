@@ -7,16 +7,19 @@ Subclasses drives/profidrive ProfidriveDrive through its hooks; the channel does
 from __future__ import annotations
 
 import re
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from profidrive_cli import UsageError
 from profidrive_cli.drives import profidrive as pd
-from profidrive_cli.drives.base import (DriveError, DriveStatus, FaultRecord, ParamError, ParamValue,
+from profidrive_cli.drives.base import (CyclicChannel, DriveError, DriveStatus, FaultRecord, ParamError, ParamValue,
                                         Reaction)
 from profidrive_cli.drives.fuji.codes import (alarm_by_mcode, alarm_candidates, comm_loss_text,
                                               parse_function_code, pcd_assignment_code, ppo_for_o30)
 from profidrive_cli.drives.fuji import reaction
 from profidrive_cli.drives.fuji.config import FUJI_STW_BITS, fuji_config
+
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profile import Profile
 
 class FujiDrive(pd.ProfidriveDrive):
     family = "fuji"
@@ -30,7 +33,7 @@ class FujiDrive(pd.ProfidriveDrive):
         from profidrive_cli.drives.fuji.audit import audit_rules
         return audit_rules(profile)
 
-    def __init__(self, channel, profile, layout: str | None = None):
+    def __init__(self, channel: CyclicChannel, profile: Profile, layout: str | None = None):
         self.fc = fuji_config(profile)
         super().__init__(channel, profile, layout)
         #: remarks for the user from the last calls (e.g. "o30 takes effect after a power cycle")
@@ -84,7 +87,7 @@ class FujiDrive(pd.ProfidriveDrive):
             for _ in range(3):
                 self.cycle()
 
-    def write_refused_message(self, ref: pd.ParamRef, value, result: pd.PkwResult) -> str:
+    def write_refused_message(self, ref: pd.ParamRef, value: float | int, result: pd.PkwResult) -> str:
         if result.error == 1:
             return (f"{ref.label}: the card refused the write (error 1: {result.error_text}); either "
                     f"the code is read-only or PNU927 = 0 blocks parameter writes (write PNU927 = 1)")
@@ -270,6 +273,6 @@ class FujiDrive(pd.ProfidriveDrive):
                                           f"after changing {self.fc.ppo_param})")
 
 
-def make_drive(channel, profile, layout: str | None = None) -> FujiDrive:
+def make_drive(channel: CyclicChannel, profile: Profile, layout: str | None = None) -> FujiDrive:
     fuji_config(profile)
     return FujiDrive(channel, profile, layout)

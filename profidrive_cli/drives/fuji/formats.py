@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import difflib
 import re
+from typing import TYPE_CHECKING
 
 from profidrive_cli import UsageError
 from profidrive_cli.drives import profidrive as pd
@@ -12,8 +13,12 @@ from profidrive_cli.drives.formats import hex_word
 from profidrive_cli.drives.fuji.codes import (alarm_by_mcode, alarm_text, parse_function_code,
                                               pcd_assignment_code)
 
+if TYPE_CHECKING:
+    from profidrive_cli.drives.formats import Formatter, Parser
+    from profidrive_cli.drives.profile import ParamDef, Profile
 
-def fcode_text(profile, param, raw, value) -> str:
+
+def fcode_text(profile: Profile, param: ParamDef, raw: int, value: object) -> str:
     """o40-o43 / o48-o51 / PNU915-916: group << 8 | number in four hex digits and the function code
     (fuji-opc-g1-pdp.md L243: "F26 -> group F = 0x04, number 26 = 0x1A, giving assignment 041A")."""
     w = raw & 0xFFFF
@@ -22,7 +27,7 @@ def fcode_text(profile, param, raw, value) -> str:
     return f"{hex_word(param, w)} ({pcd_assignment_code(profile, w) or 'no such function code'})"
 
 
-def alarm_code_text(profile, param, raw, value) -> str:
+def alarm_code_text(profile: Profile, param: ParamDef, raw: int, value: object) -> str:
     """M16-M19: the inverter alarm code in decimal (fuji-opc-g1-pdp.md L603, L611-616: 1 = OC1)."""
     if raw == 0:
         return "0 (no alarm)"
@@ -30,18 +35,18 @@ def alarm_code_text(profile, param, raw, value) -> str:
     return f"{raw} ({a.code} {a.meaning})" if a else f"{raw} (alarm code not in the manual's table)"
 
 
-def alarm947_text(profile, param, raw, value) -> str:
+def alarm947_text(profile: Profile, param: ParamDef, raw: int, value: object) -> str:
     """PNU947: the PROFIdrive malfunction code in hex and every alarm it can stand for (L657)."""
     w = raw & 0xFFFF
     return f"0x{w:04X} ({alarm_text(profile, w)})"
 
 
-def baud_text(profile, param, raw, value) -> str:
+def baud_text(profile: Profile, param: ParamDef, raw: int, value: object) -> str:
     """PNU963: the card's code and its rate (fuji-opc-g1-pdp.md L579-591: 10 = 12M)."""
     return f"{raw} ({pd.config(profile).baud_codes.get(raw, 'not in the manual table')})"
 
 
-def fcode_value(profile, param, text: str) -> int:
+def fcode_value(profile: Profile, param: ParamDef, text: str) -> int:
     """A typed o40-o51 / PNU915-916 value -> the assignment word. Accepted as the manual writes it
     (G1 manual 001_02ee17c3305f1f71.txt L2440-2453: "F => Function code group 04hex", "26 Function code
     number 1Ahex", "041A"): four hex digits (041A), 0x041A, the function code itself (F26), or 0 (not
@@ -77,6 +82,7 @@ def fcode_value(profile, param, text: str) -> int:
 
 
 #: the typed text -> raw word, per `format:` (drives/formats.py value_from_text)
-PARSERS = {"fcode": fcode_value}
+PARSERS: dict[str, Parser] = {"fcode": fcode_value}
 
-FORMATTERS = {"fcode": fcode_text, "alarm": alarm_code_text, "alarm947": alarm947_text, "baud": baud_text}
+FORMATTERS: dict[str, Formatter] = {"fcode": fcode_text, "alarm": alarm_code_text,
+                                    "alarm947": alarm947_text, "baud": baud_text}

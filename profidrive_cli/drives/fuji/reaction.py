@@ -5,13 +5,29 @@ o32 (Table 10.1). Reads through the drive's own read_param only.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
-from profidrive_cli.drives.base import Reaction
+from profidrive_cli.drives.base import ParamValue, Reaction
 from profidrive_cli.drives.fuji.codes import comm_loss_action, comm_loss_text
+from profidrive_cli.drives.fuji.config import FujiConfig
+
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profile import Profile
 
 
-def light_alarm(d: Any, settings: dict) -> list[str]:
+class FujiDriveLike(Protocol):
+    """What these readers use of a drives.fuji.drive.FujiDrive (which imports this module)."""
+    @property
+    def fc(self) -> FujiConfig: ...
+    @property
+    def profile(self) -> Profile: ...
+    @property
+    def layout(self) -> str: ...
+    def can_read(self, code: str) -> bool: ...
+    def read_param(self, code: str) -> ParamValue: ...
+
+
+def light_alarm(d: FujiDriveLike, settings: dict[str, Any]) -> list[str]:
     """H81 (light-alarm selection, FRENIC manual): er5 selected as a light alarm keeps the inverter
     running whatever o27 says (OPC-G1-PDP manual L2781-2784, OPC-PDP3 L6557-6559). Which bit stands
     for er5 is in the FRENIC manual, not in the card's: any bit set is said."""
@@ -25,7 +41,7 @@ def light_alarm(d: Any, settings: dict) -> list[str]:
             f"running after a break whatever o27 says (card manual, chapter 9)"]
 
 
-def comm_loss_reaction(d: Any) -> Reaction:
+def comm_loss_reaction(d: FujiDriveLike) -> Reaction:
     fc = d.fc
     o27 = int(d.read_param(fc.comm_loss_param).raw)
     o28 = float(d.read_param(fc.comm_loss_timer).value)
@@ -48,7 +64,7 @@ def comm_loss_reaction(d: Any) -> Reaction:
                     decel_s=decel, settings=settings, warnings=warnings)
 
 
-def bus_run_refusal(d: Any) -> str | None:
+def bus_run_refusal(d: FujiDriveLike) -> str | None:
     """y98 must be 3 (run and frequency from PROFIBUS, the manual's recommendation); with y98 = 0
     the inverter does not even trip er5 (OPC-PDP3 manual L3783-3789)."""
     if not d.can_read("y98"):
@@ -66,7 +82,7 @@ def bus_run_refusal(d: Any) -> str | None:
             f"y98 = 3 (run and frequency from PROFIBUS) and test again")
 
 
-def zero_data_reaction(d: Any, head: str) -> Reaction:
+def zero_data_reaction(d: FujiDriveLike, head: str) -> Reaction:
     zd = d.fc.zero_data
     if not zd:
         return Reaction(head + "; control word bit 10 = 0: the card ignores the control word and keeps "

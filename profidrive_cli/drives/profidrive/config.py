@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from profidrive_cli.datafile import DataFileError, LineDict
 from profidrive_cli.drives.profidrive.pkw import GENERIC_ERRORS
@@ -19,6 +20,9 @@ from profidrive_cli.drives.profidrive.pnu import (PNU_FAULT_NUMBER, PNU_PZD_ACTU
                                                   default_fault_positions)
 from profidrive_cli.drives.profidrive.words import CTW_NAMES, DERIVED_BITS, STW_NAMES
 from profidrive_cli.drives.sections import key, key_line, section
+
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profile import Profile
 
 ERROR_ROLES = ("unknown_pnu", "read_only", "out_of_range", "bad_subindex", "not_array",
                "wrong_type", "stop_only", "no_rights", "bad_request")
@@ -60,7 +64,7 @@ class ProfidriveConfig:
         return self.error_texts.get(number, f"error {number}")
 
     @classmethod
-    def from_profile(cls, profile) -> "ProfidriveConfig":
+    def from_profile(cls, profile: Profile) -> ProfidriveConfig:
         path = profile.path or "<profile>"
         doc = profile.raw if isinstance(profile.raw, LineDict) else LineDict()
         sec = section(ProfidriveKeys, path, doc, "profidrive", where="profidrive",
@@ -107,7 +111,7 @@ class ProfidriveConfig:
             cfg.jog_reference = sec.jog_reference
         return cfg
 
-    def _read_pkw(self, path, pkw: PkwKeys) -> None:
+    def _read_pkw(self, path: str | Path, pkw: PkwKeys) -> None:
         self.pkw_timeout = pkw.timeout_s
         if pkw.zero_after_error is not None:
             self.zero_after_error = pkw.zero_after_error
@@ -202,7 +206,7 @@ class ProfidriveKeys:
     jog_reference: str | None = key("text", None, type_msg="jog_reference {value!r} is not in parameters")
 
 
-def _texts(path, m: dict, message: str) -> dict[int, str]:
+def _texts(path: str | Path, m: dict[Any, Any], message: str) -> dict[int, str]:
     """A mapping number -> text (keys and values checked, `message` on the first bad entry)."""
     for k, v in m.items():
         if not isinstance(k, int) or not isinstance(v, str):
@@ -210,8 +214,8 @@ def _texts(path, m: dict, message: str) -> dict[int, str]:
     return dict(m)
 
 
-def _ramps(path, profile, rp: dict) -> dict[str, str]:
-    out = {}
+def _ramps(path: str | Path, profile: Profile, rp: dict[Any, Any]) -> dict[str, str]:
+    out: dict[str, str] = {}
     for k, v in rp.items():
         if k not in ("accel", "decel", "quick_decel") or not isinstance(v, str):
             raise _e(path, rp, k, "ramps: keys accel, decel, quick_decel; values parameter codes")
@@ -221,13 +225,13 @@ def _ramps(path, profile, rp: dict) -> dict[str, str]:
     return out
 
 
-def _e(path, node, key, msg) -> DataFileError:
+def _e(path: str | Path, node: object, key: str, msg: str) -> DataFileError:
     line = node.line_of(key) if isinstance(node, LineDict) else getattr(node, "line", None)
     return DataFileError(path, line, msg)
 
 
-def _bit_names(path, m: dict, key: str) -> dict[int, str | None]:
-    out = {}
+def _bit_names(path: str | Path, m: dict[Any, Any], key: str) -> dict[int, str | None]:
+    out: dict[int, str | None] = {}
     for k, v in m.items():
         if not isinstance(k, int) or not 0 <= k <= 15 or not (v is None or isinstance(v, str)):
             raise _e(path, m, k, f"{key}: keys are bit numbers 0..15, values names (null = unused)")
@@ -238,7 +242,7 @@ def _bit_names(path, m: dict, key: str) -> dict[int, str | None]:
 _config_cache: dict[int, tuple[object, ProfidriveConfig]] = {}
 
 
-def config(profile) -> ProfidriveConfig:
+def config(profile: Profile) -> ProfidriveConfig:
     """The profile's ProfidriveConfig (validated once, cached per profile object).
 
     A family's row in drives/registry.py may name a `core_config` builder (profile ->
@@ -254,9 +258,9 @@ def config(profile) -> ProfidriveConfig:
     return cfg
 
 
-def ctw_names(profile) -> dict[int, str]:
+def ctw_names(profile: Profile) -> dict[int, str]:
     return config(profile).ctw_names
 
 
-def stw_names(profile) -> dict[int, str]:
+def stw_names(profile: Profile) -> dict[int, str]:
     return config(profile).stw_names

@@ -6,6 +6,8 @@ alarms and the card config; a family module may supply `param_value(profile, par
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any, Callable
+
 from profidrive_cli import UsageError
 from profidrive_cli.drives.formats import display_text
 from profidrive_cli.drives.profidrive.config import ProfidriveConfig, config
@@ -20,6 +22,13 @@ from profidrive_cli.drives.profidrive.words import (CTW_ZERO_NAMES, Ctw, State, 
                                                     command_from_control_word,
                                                     state_from_status)
 
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profile import ParamDef, Profile
+
+#: a decoded word or area: named fields, JSON-serialisable, with its `text`
+Decoded = dict[str, Any]
+
+
 def _pct_text(pct: float) -> str:
     r = round(pct, 4)
     return f"{r:g} %" if abs(r) < 1e6 else f"{r} %"
@@ -29,12 +38,12 @@ def _hz_text(hz: float) -> str:
     return f"{hz:.2f} Hz"
 
 
-def describe_pkw(profile, frame: PkwFrame, direction: str, cfg: ProfidriveConfig | None = None,
-                 request: PkwFrame | None = None) -> dict:
+def describe_pkw(profile: Profile, frame: PkwFrame, direction: str, cfg: ProfidriveConfig | None = None,
+                 request: PkwFrame | None = None) -> Decoded:
     """Named fields of one PKW frame; `text` (one line) and `summary` (short) included."""
     cfg = cfg or config(profile)
     texts = REQUEST_TEXT if direction == "request" else RESPONSE_TEXT
-    d: dict = {"pke": frame.pke, "ak": frame.ak, "ak_text": texts.get(frame.ak, "reserved"),
+    d: Decoded = {"pke": frame.pke, "ak": frame.ak, "ak_text": texts.get(frame.ak, "reserved"),
                "spm": frame.spm, "pnu": frame.pnu, "ind": frame.ind, "subindex": frame.subindex,
                "pwe": frame.value}
     card = cfg.supported_requests if direction == "request" else cfg.supported_responses
@@ -83,7 +92,8 @@ def describe_pkw(profile, frame: PkwFrame, direction: str, cfg: ProfidriveConfig
     return d
 
 
-def _value_text(profile, cfg: ProfidriveConfig, p, frame: PkwFrame, d: dict) -> str:
+def _value_text(profile: Profile, cfg: ProfidriveConfig, p: ParamDef | None, frame: PkwFrame,
+                d: Decoded) -> str:
     pnu = frame.pnu
     if pnu in cfg.pzd_map:
         w = frame.value & 0xFFFF
@@ -112,25 +122,26 @@ def _value_text(profile, cfg: ProfidriveConfig, p, frame: PkwFrame, d: dict) -> 
     return display_text(profile, p, raw, value) or format_value(p, value, raw)
 
 
-def _family_value(profile, p, raw: int):
+def _family_value(profile: Profile, p: ParamDef, raw: int) -> float | int:
     """Engineering value; family modules may provide `param_value(profile, param, raw)`."""
     from profidrive_cli.drives import codec_module
     try:
         mod = codec_module(profile)
     except UsageError:
         mod = None
-    fn = getattr(mod, "param_value", None) if mod is not None else None
+    fn: Callable[[Profile, ParamDef, int], float | int] | None = (
+        getattr(mod, "param_value", None) if mod is not None else None)
     if fn is not None:
         return fn(profile, p, raw)
     return p.from_raw(raw)
 
 
-def describe_control_word(profile, ctw: int, cfg: ProfidriveConfig | None = None) -> dict:
+def describe_control_word(profile: Profile, ctw: int, cfg: ProfidriveConfig | None = None) -> Decoded:
     cfg = cfg or config(profile)
     names = dict(cfg.ctw_names)
     for b in cfg.unused_ctw_bits | ({8, 9} - set(names)):
         names[b] = f"bit {b} (not used)"
-    bits = []
+    bits: list[Decoded] = []
     for b in range(16):
         on = bool(ctw >> b & 1)
         if b in names or on:
@@ -144,8 +155,8 @@ def describe_control_word(profile, ctw: int, cfg: ProfidriveConfig | None = None
             "set": bit_list(ctw, names), "command": command, "text": text}
 
 
-def describe_status_word(profile, stw: int, actual: int | None = None,
-                         cfg: ProfidriveConfig | None = None) -> dict:
+def describe_status_word(profile: Profile, stw: int, actual: int | None = None,
+                         cfg: ProfidriveConfig | None = None) -> Decoded:
     cfg = cfg or config(profile)
     names = cfg.stw_names
     # a captured area is one snapshot: the state comes from the status word alone; an actual value
@@ -164,9 +175,9 @@ def describe_status_word(profile, stw: int, actual: int | None = None,
             "text": text}
 
 
-def describe_n2(word: int, max_hz: float | None, label: str, what: str, max_note: str = "") -> dict:
+def describe_n2(word: int, max_hz: float | None, label: str, what: str, max_note: str = "") -> Decoded:
     pct = n2_to_percent(word)
-    d = {"raw": word, "hex": f"0x{word:04X}", "percent": round(pct, 6), "label": label}
+    d: Decoded = {"raw": word, "hex": f"0x{word:04X}", "percent": round(pct, 6), "label": label}
     text = f"{label} ({what}) 0x{word:04X}: {_pct_text(pct)}"
     if max_hz:
         hz = pct * max_hz / 100.0
@@ -182,8 +193,8 @@ def check_direction(direction: str) -> None:
         raise UsageError(f"direction must be request or response, got {direction!r}")
 
 
-def decode_area(profile, layout: str, direction: str, data: bytes, *,
-                max_hz: float | None = None) -> dict:
+def decode_area(profile: Profile, layout: str, direction: str, data: bytes, *,
+                max_hz: float | None = None) -> Decoded:
     """Decode a captured PPO output (direction "request") or input ("response") area."""
     check_direction(direction)
     cfg = config(profile)
@@ -198,12 +209,12 @@ def decode_area(profile, layout: str, direction: str, data: bytes, *,
                 if profile.max_frequency_param else f"max frequency {mhz:g} Hz, profile default")
     else:
         mhz, note = float(max_hz), f"max frequency {max_hz:g} Hz"
-    out: dict = {"profile": profile.name, "layout": ppo.name, "direction": direction,
+    out: Decoded = {"profile": profile.name, "layout": ppo.name, "direction": direction,
                  "word_order": ppo.word_order, "octets": bytes(data).hex(" ").upper()}
     arrow = "master -> drive" if direction == "request" else "drive -> master"
     text = [f"{profile.name} {ppo.name.upper()} {direction} ({arrow}), {len(data)} octets: "
             f"{out['octets']}"]
-    summary = []
+    summary: list[str] = []
     if area.pkw is not None:
         frame = PkwFrame.from_words(area.pkw)
         pk = describe_pkw(profile, frame, direction, cfg)
@@ -224,7 +235,7 @@ def decode_area(profile, layout: str, direction: str, data: bytes, *,
         out["actual"] = act
         text += [sw["text"], act["text"]]
         summary += [sw["state"], f"actual {_pct_text(act['percent'])}"]
-    extra = []
+    extra: list[Decoded] = []
     for i, w in enumerate(area.pzd[2:], start=3):
         extra.append({"pzd": i, "raw": w, "hex": f"0x{w:04X}"})
     if extra:

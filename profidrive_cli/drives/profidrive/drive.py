@@ -7,10 +7,10 @@ hooks. `make_drive` makes `family: profidrive` work.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from profidrive_cli import UsageError
-from profidrive_cli.drives.base import (Drive, DriveError, DriveStatus, FaultRecord, ParamError,
+from profidrive_cli.drives.base import (CyclicChannel, Drive, DriveError, DriveStatus, FaultRecord, ParamError,
                                         ParamInfo, ParamValue)
 from profidrive_cli.drives.values import raw_value_problem, value_problem
 from profidrive_cli.drives.profidrive.config import ProfidriveConfig, config
@@ -28,6 +28,9 @@ from profidrive_cli.drives.profidrive.ppo import (PpoArea, decode_area_bytes, en
 from profidrive_cli.drives.profidrive.scaling import n2_from_percent, n2_to_percent, to_signed16
 from profidrive_cli.drives.profidrive.words import (Ctw, State, Stw, Target, next_control_word,
                                                     state_from_status, target_reached)
+
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profile import Profile
 
 class ProfidriveDrive(Drive):
     """The Drive interface over a PPO layout (drives/base.py), generic PROFIdrive V2.
@@ -47,7 +50,7 @@ class ProfidriveDrive(Drive):
 
     family = "profidrive"
 
-    def __init__(self, channel, profile, layout: str | None = None,
+    def __init__(self, channel: CyclicChannel, profile: Profile, layout: str | None = None,
                  cfg: ProfidriveConfig | None = None):
         super().__init__(channel, profile, layout)
         self.cfg = cfg or config(profile)
@@ -129,7 +132,7 @@ class ProfidriveDrive(Drive):
         return (out[0] if out else None, out[1] if len(out) > 1 else None,
                 inp[0] if inp else None, inp[1] if len(inp) > 1 else None)
 
-    def raw_to_value(self, ref: ParamRef, raw: int):
+    def raw_to_value(self, ref: ParamRef, raw: int) -> float | int:
         p = ref.param
         if p is None:
             return raw
@@ -137,19 +140,19 @@ class ProfidriveDrive(Drive):
             raw &= 0xFFFF
         return p.from_raw(raw)
 
-    def value_to_raw(self, ref: ParamRef, value) -> int:
+    def value_to_raw(self, ref: ParamRef, value: float | int) -> int:
         p = ref.param
         raw = int(value) if p is None else p.to_raw(value)
         bits = ref.size
         return raw & ((1 << bits) - 1)
 
-    def check_value(self, ref: ParamRef, value) -> str | None:
+    def check_value(self, ref: ParamRef, value: float | int) -> str | None:
         """The exact-value check (drives/values.py): resolution, range, codes, wire width."""
         if ref.param is not None:
             return value_problem(ref.param, value)
         return raw_value_problem(ref.label, value, ref.size)
 
-    def write_refused_message(self, ref: ParamRef, value, result: PkwResult) -> str:
+    def write_refused_message(self, ref: ParamRef, value: float | int, result: PkwResult) -> str:
         stop_only = self.cfg.error_numbers.get("stop_only")
         if result.error is not None and result.error == stop_only:
             return (f"{ref.label} can only be changed while the motor is stopped "
@@ -277,7 +280,7 @@ class ProfidriveDrive(Drive):
         unit = ref.param.unit if ref.param is not None else ""
         return ParamValue(ref.code, ref.name, raw, value, unit)
 
-    def write_param(self, code: str, value) -> ParamValue:
+    def write_param(self, code: str, value: float | int) -> ParamValue:
         ref = self.resolve_param(code)
         p = ref.param
         if p is not None and not p.writable:
@@ -510,6 +513,6 @@ class ProfidriveDrive(Drive):
                                  "the fault to clear (is its cause still present?)")
 
 
-def make_drive(channel, profile, layout: str | None = None) -> ProfidriveDrive:
+def make_drive(channel: CyclicChannel, profile: Profile, layout: str | None = None) -> ProfidriveDrive:
     """Family `profidrive`: a plain PROFIdrive V2 drive configured only by its profile."""
     return ProfidriveDrive(channel, profile, layout)

@@ -13,9 +13,10 @@ from typing import TYPE_CHECKING
 
 from profidrive_cli import UsageError
 from profidrive_cli.drives.profidrive.config import ProfidriveConfig, config
+from profidrive_cli.drives.profile import per_profile
 
 if TYPE_CHECKING:                                   # pragma: no cover
-    from profidrive_cli.drives.profile import ParamDef
+    from profidrive_cli.drives.profile import ParamDef, Profile
 
 _RAW_RE = re.compile(r"^PNU\s*(0x[0-9a-f]+|\d+)\s*(?:\[\s*(0x[0-9a-f]+|\d+)\s*\])?$", re.I)
 _CODE_IND_RE = re.compile(r"^(.+?)\s*\[\s*(0x[0-9a-f]+|\d+)\s*\]$", re.I)
@@ -37,29 +38,30 @@ class ParamRef:
         return f"{self.code} ({self.name})" if self.name else self.code
 
 
-def param_index(profile) -> dict[tuple[int, int | None], object]:
-    """(pnu, index) -> ParamDef, cached on the profile."""
-    idx = getattr(profile, "_pnu_index", None)
-    if idx is None:
-        idx = {}
-        for p in profile.parameters.values():
-            if p.pnu is not None:
-                idx.setdefault((p.pnu, p.index), p)
-        try:
-            profile._pnu_index = idx
-        except AttributeError:
-            pass
+def _build_param_index(profile: Profile) -> dict[tuple[int, int | None], ParamDef]:
+    idx: dict[tuple[int, int | None], ParamDef] = {}
+    for p in profile.parameters.values():
+        if p.pnu is not None:
+            idx.setdefault((p.pnu, p.index), p)
     return idx
 
 
-def param_for(profile, pnu: int, subindex: int = 0):
+_param_index = per_profile(_build_param_index)
+
+
+def param_index(profile: Profile) -> dict[tuple[int, int | None], ParamDef]:
+    """(pnu, index) -> ParamDef, cached per profile."""
+    return _param_index(profile)
+
+
+def param_for(profile: Profile, pnu: int, subindex: int = 0) -> ParamDef | None:
     """The profile's ParamDef at PNU/subindex (function-code style first, then the whole PNU)."""
     idx = param_index(profile)
     return idx.get((pnu, subindex)) or idx.get((pnu, None)) or (idx.get((pnu, 0)) if subindex == 0
                                                                  else None)
 
 
-def resolve_code(profile, code: str, cfg: ProfidriveConfig | None = None) -> ParamRef:
+def resolve_code(profile: Profile, code: str, cfg: ProfidriveConfig | None = None) -> ParamRef:
     """Native code ("F002", "A004"), code with index ("PNU947[9]") or raw "PNU<n>[<ind>]"."""
     cfg = cfg or config(profile)
     text = code.strip()
@@ -100,7 +102,7 @@ def decimals_for(scale: float) -> int:
     return max(0, min(6, -math.floor(math.log10(abs(scale)) + 1e-9)))
 
 
-def format_value(param, value, raw: int | None = None) -> str:
+def format_value(param: ParamDef | None, value: object, raw: int | None = None) -> str:
     """Engineering value with the parameter's resolution and unit ("4.00 s", "0x1F", "2")."""
     if param is None:
         return str(value)

@@ -8,8 +8,25 @@ fault_subindexes, fault_positions, baud_codes, device_ids); this module does not
 from __future__ import annotations
 
 import re
+from typing import Protocol
 
 from profidrive_cli.drives.profidrive.pkw import PkwFrame, read_request, write_request
+
+
+class PnuConfig(Protocol):
+    """The fields of a ProfidriveConfig these functions read (config.py imports this module)."""
+    @property
+    def pzd_map(self) -> tuple[int, int]: ...
+    @property
+    def fault_memory_pnu(self) -> int: ...
+    @property
+    def fault_subindexes(self) -> list[int]: ...
+    @property
+    def fault_positions(self) -> list[str]: ...
+    @property
+    def baud_codes(self) -> dict[int, str]: ...
+    @property
+    def device_ids(self) -> dict[int, str]: ...
 
 PNU_PZD_SETPOINT = 915
 PNU_PZD_ACTUAL = 916
@@ -25,7 +42,7 @@ PNU_STATUS_WORD = 968
 PNU_SAVE = 971
 
 
-def pzd_map_pnu(direction: str, cfg=None) -> int:
+def pzd_map_pnu(direction: str, cfg: PnuConfig | None = None) -> int:
     sp, act = (cfg.pzd_map if cfg else (PNU_PZD_SETPOINT, PNU_PZD_ACTUAL))
     if direction in ("setpoint", "write", "out", "request"):
         return sp
@@ -34,13 +51,13 @@ def pzd_map_pnu(direction: str, cfg=None) -> int:
     raise ValueError(f"PZD map direction must be setpoint or actual, got {direction!r}")
 
 
-def pzd_map_read(direction: str, slot: int, cfg=None) -> PkwFrame:
+def pzd_map_read(direction: str, slot: int, cfg: PnuConfig | None = None) -> PkwFrame:
     """Read which PNU travels in PZD(slot+2) (slot 1 = PZD3)."""
     return read_request(pzd_map_pnu(direction, cfg), slot, array=True)
 
 
 def pzd_map_write(direction: str, slot: int, pnu: int,
-                  cfg=None) -> PkwFrame:
+                  cfg: PnuConfig | None = None) -> PkwFrame:
     """Map `pnu` into PZD(slot+2); pnu 0 frees the word."""
     return write_request(pzd_map_pnu(direction, cfg), pnu, slot, array=True)
 
@@ -50,7 +67,7 @@ def save_requests(pnu: int = PNU_SAVE) -> list[PkwFrame]:
     return [write_request(pnu, 0), write_request(pnu, 1)]
 
 
-def fault_memory_requests(cfg) -> list[tuple[str, PkwFrame]]:
+def fault_memory_requests(cfg: PnuConfig) -> list[tuple[str, PkwFrame]]:
     return [(pos, read_request(cfg.fault_memory_pnu, sub, array=True))
             for pos, sub in zip(cfg.fault_positions, cfg.fault_subindexes)]
 
@@ -65,11 +82,11 @@ def baud_code_for(codes: dict[int, str], baud: int) -> int | None:
     return None
 
 
-def decode_baud(code: int, cfg) -> str:
+def decode_baud(code: int, cfg: PnuConfig) -> str:
     return cfg.baud_codes.get(code, f"unknown baud-rate code {code}")
 
 
-def decode_device_id(word: int, cfg) -> str:
+def decode_device_id(word: int, cfg: PnuConfig) -> str:
     return cfg.device_ids.get(word, f"unknown device 0x{word:04X}")
 
 

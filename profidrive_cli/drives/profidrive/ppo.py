@@ -7,9 +7,12 @@ the profile's layouts (sizes, `pkw:` flag, word order); no parameter or state-ma
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Iterable, Literal
+from typing import TYPE_CHECKING, Iterable, Literal
 
 from profidrive_cli import UsageError
+
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profile import Profile
 
 def _check_order(word_order: str) -> Literal["big", "little"]:
     if word_order not in ("big", "little"):
@@ -71,7 +74,7 @@ class PpoLayout:
         return cls(f"ppo{n}", pkw, pzd, pzd, word_order)
 
 
-def ppo_layout(profile, layout_name: str | None = None) -> PpoLayout:
+def ppo_layout(profile: Profile, layout_name: str | None = None) -> PpoLayout:
     """The PPO layout of a profile layout: PKW from the layout's `pkw:` flag, PZD words from its cfg."""
     name = layout_name or profile.default_layout
     lay = profile.layouts.get(name)

@@ -6,22 +6,27 @@ Sans-IO arithmetic over the profile's tables. May touch: drives/profidrive (word
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any
+
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.toyo.config import toyo_config
 
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profile import Profile
 
-def speed_word(profile, percent: float) -> int:
+
+def speed_word(profile: Profile, percent: float) -> int:
     """Percent of A-00 -> speed word (20000 = 100 %), two's complement, clamped to 16 bits."""
     fs = toyo_config(profile).speed_full_scale
     raw = round(percent * fs / 100.0)
     return max(-0x8000, min(0x7FFF, raw)) & 0xFFFF
 
 
-def speed_percent(profile, word: int) -> float:
+def speed_percent(profile: Profile, word: int) -> float:
     return pd.to_signed16(word) * 100.0 / toyo_config(profile).speed_full_scale
 
 
-def protection(profile, code: int) -> tuple[str, str]:
+def protection(profile: Profile, code: int) -> tuple[str, str]:
     """Protection code -> (short name, meaning)."""
     al = profile.alarms_for(code)
     if al:
@@ -35,7 +40,7 @@ def history_word(code: int, mode: int = 0, block: int = 0) -> int:
     return (code & 0xFF) | (mode & 0x3) << 8 | (block & 1) << 12
 
 
-def decode_history_word(profile, word: int) -> dict:
+def decode_history_word(profile: Profile, word: int) -> dict[str, Any]:
     tc = toyo_config(profile)
     code = word & tc.history_code_mask
     mode = (word >> tc.history_mode_shift) & 0x3
@@ -61,12 +66,12 @@ def decode_traceback_ind(ind: int) -> tuple[int, int]:
 RECORDING_TEXT = {0: "newest", 1: "2nd newest", 2: "3rd newest", 3: "oldest (4th)"}
 
 
-def bit_names(profile, table: str, word: int) -> list[str]:
+def bit_names(profile: Profile, table: str, word: int) -> list[str]:
     names = toyo_config(profile).bits.get(table, {})
     return [names.get(b, f"bit {b}") for b in range(16) if word >> b & 1]
 
 
-def run_cmd_fields(word: int) -> dict:
+def run_cmd_fields(word: int) -> dict[str, Any]:
     preset = (word >> 6) & 0x7
     accdec = (word >> 9) & 0x3
     return {"run": bool(word & 1), "jog": bool(word & 2), "reverse": bool(word & 4),
@@ -80,7 +85,7 @@ def ctw_command(word: int) -> str:
     """What a mode-0 control word asks the VF66 for (priority OFF2 > OFF3 > OFF1)."""
     if not word & pd.Ctw.CONTROL_BY_PLC:
         return "master control invalid (bit 10 = 0: the previous command is kept)"
-    parts = []
+    parts: list[str] = []
     if not word & pd.Ctw.NO_OFF2:
         parts.append("OFF2 coast stop")
     elif not word & pd.Ctw.NO_OFF3:

@@ -10,12 +10,15 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from profidrive_cli.datafile import DataFileError, LineDict
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.profile import COMMON_EXTRA_KEYS, per_profile
 from profidrive_cli.drives.sections import key, read
+
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profile import Profile
 
 FAMILY_PARAM_KEYS = {"power_cycle", "format", "bits", "plc", "scale_400v", "traceback", "note"}
 FIELD_KINDS = ("ctw", "zsw", "run_cmd", "bits", "speed", "scaled", "date", "raw", "param")
@@ -46,7 +49,9 @@ class ToyoConfig:
     speed_full_scale: int = 20000
     voltage_class: int = 200
     layouts: dict[str, ToyoLayout] = field(default_factory=dict)
-    fields: dict[str, dict] = field(default_factory=dict)
+    #: name -> the field's YAML mapping (its kind checked; name, bits, param, unit, scale, signed
+    #: read where they are used): Any, parsed YAML
+    fields: dict[str, dict[str, Any]] = field(default_factory=dict)
     bits: dict[str, dict[int, str]] = field(default_factory=dict)
     errors: dict[int, str] = field(default_factory=dict)
     block_bit: int = 10
@@ -64,14 +69,14 @@ class ToyoConfig:
     traceback_points: int = 100
 
 
-def input_words(profile, layout: str) -> list[str]:
+def input_words(profile: Profile, layout: str) -> list[str]:
     """The names of `layout`'s input words as the drive reads them (PLC registers with PLCH on)."""
     tc = toyo_config(profile)
     tl = tc.layouts[layout]
     return list(tl.words("response", tc.plch or tl.plch))
 
 
-def _err(profile, node, key, msg) -> DataFileError:
+def _err(profile: Profile, node: object, key: str, msg: str) -> DataFileError:
     line = node.line_of(key) if isinstance(node, LineDict) else getattr(node, "line", None)
     return DataFileError(profile.path or "<profile>", line, msg)
 
@@ -82,7 +87,7 @@ _MAPPING = "'{key}' must be a mapping"
 _MISSING = "missing section '{key}'"
 
 
-def _required(kind: str, **rules) -> Any:
+def _required(kind: str, **rules: Any) -> Any:
     return key(kind, required=True, type_msg=_MAPPING, missing_msg=_MISSING, **rules)
 
 
@@ -127,7 +132,7 @@ class ToyoKeys:
     traceback: TracebackKeys = _required("section", section=TracebackKeys)
 
 
-def _build_config(profile) -> ToyoConfig:
+def _build_config(profile: Profile) -> ToyoConfig:
     doc = profile.raw if isinstance(profile.raw, LineDict) else LineDict()
     path = profile.path or "<profile>"
     k = read(ToyoKeys, path, doc)
@@ -157,8 +162,9 @@ def _build_config(profile) -> ToyoConfig:
     return c
 
 
-def _fields(profile, fields: dict, bits: dict) -> dict[str, dict]:
-    out = {}
+def _fields(profile: Profile, fields: dict[Any, Any], bits: dict[str, dict[int, str]]
+            ) -> dict[str, dict[str, Any]]:
+    out: dict[str, dict[str, Any]] = {}
     for name, f in fields.items():
         if not isinstance(f, dict) or f.get("kind") not in FIELD_KINDS:
             raise _err(profile, fields, name, f"fields.{name}: kind must be one of {', '.join(FIELD_KINDS)}")
@@ -170,15 +176,15 @@ def _fields(profile, fields: dict, bits: dict) -> dict[str, dict]:
     return out
 
 
-def _layouts(profile, lays, fields: dict) -> dict[str, ToyoLayout]:
-    out = {}
+def _layouts(profile: Profile, lays: object, fields: dict[str, dict[str, Any]]) -> dict[str, ToyoLayout]:
+    out: dict[str, ToyoLayout] = {}
     for name, lay in profile.layouts.items():
         ex = lay.extra
         node = lays.get(name) if isinstance(lays, dict) else None
         mode = ex.get("mode", 0)
         if mode not in (0, 1):
             raise _err(profile, node, "mode", f"layout {name}: mode must be 0 or 1")
-        lists = {}
+        lists: dict[str, list[str]] = {}
         for key in ("out", "in", "out_plch", "in_plch"):
             v = ex.get(key)
             if v is None:
@@ -204,7 +210,7 @@ def _layouts(profile, lays, fields: dict) -> dict[str, ToyoLayout]:
 toyo_config = per_profile(_build_config)   # -> ToyoConfig, built once per profile
 
 
-def profidrive_config(profile) -> pd.ProfidriveConfig:
+def profidrive_config(profile: Profile) -> pd.ProfidriveConfig:
     """The core's configuration for this card (hook used by pd.config)."""
     tc = toyo_config(profile)
     ctw = {b: t for b, t in tc.bits.get("ctw", {}).items()}

@@ -7,6 +7,8 @@ May touch: drives/profidrive (word helpers), config, codec, params (value scalin
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any, Sequence
+
 from profidrive_cli import UsageError
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.toyo.codec import (RECORDING_TEXT, bit_names, ctw_command, decode_history_word,
@@ -14,12 +16,15 @@ from profidrive_cli.drives.toyo.codec import (RECORDING_TEXT, bit_names, ctw_com
 from profidrive_cli.drives.toyo.config import toyo_config
 from profidrive_cli.drives.toyo.params import param_at, value_from_wire
 
-REQUEST_TEXT = {0: "no task", 1: "read data", 2: "write data", 6: "read data with subindex"}
-RESPONSE_TEXT = {0: "no response / still processing", 1: "requested data transferred",
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profile import Profile
+
+REQUEST_TEXT: dict[int, str] = {0: "no task", 1: "read data", 2: "write data", 6: "read data with subindex"}
+RESPONSE_TEXT: dict[int, str] = {0: "no response / still processing", 1: "requested data transferred",
                  4: "requested data with subindex transferred", 7: "error"}
 
 
-def decode_diag(profile, ext: bytes) -> dict:
+def decode_diag(profile: Profile, ext: bytes) -> dict[str, Any]:
     """The PBUS66-Z device-related diagnosis (octets from +6 on): 0, or 9 + four flag words."""
     tc = toyo_config(profile)
     if not ext or ext[0] == 0:
@@ -27,7 +32,7 @@ def decode_diag(profile, ext: bytes) -> dict:
     if ext[0] != 9 or len(ext) < 9:
         return {"length": ext[0], "text": [f"unexpected device block length {ext[0]} ({len(ext)} octets)"]}
     ws = pd.bytes_to_words(bytes(ext[1:9]), tc.diag_word_order)
-    out: dict = {"length": 9}
+    out: dict[str, Any] = {"length": 9}
     text = []
     for key, table, w in (("status_flag", "status_flag", ws[0]), ("fault_flag1", "fault_flag1", ws[1]),
                           ("fault_flag2", "fault_flag2", ws[2]), ("mf_output", "mf_output", ws[3])):
@@ -38,10 +43,11 @@ def decode_diag(profile, ext: bytes) -> dict:
     return out
 
 
-def describe_word(profile, fname: str, raw: int, direction: str, *, max_hz: float | None = None) -> dict:
+def describe_word(profile: Profile, fname: str, raw: int, direction: str, *,
+                  max_hz: float | None = None) -> dict[str, Any]:
     tc = toyo_config(profile)
     f = tc.fields.get(fname)
-    d: dict = {"field": fname, "raw": raw, "hex": f"0x{raw:04X}"}
+    d: dict[str, Any] = {"field": fname, "raw": raw, "hex": f"0x{raw:04X}"}
     if f is None:      # i000xx / o000xx PLC registers
         reg = "communication input register" if fname.startswith("i") else "communication output register"
         d["name"] = f"{fname} ({reg})"
@@ -95,6 +101,7 @@ def describe_word(profile, fname: str, raw: int, direction: str, *, max_hz: floa
         d["text"] = f"{head} = {val:g} {d['unit']}".rstrip()
     elif kind == "param":
         p = profile.param(f["param"])
+        assert p is not None, "toyo_config checked that fields.*.param is a parameter"
         val = value_from_wire(profile, p, raw)
         d["value"], d["unit"] = val, p.unit
         d["text"] = f"{head} = {pd.format_value(p, val, raw)}" + (
@@ -108,14 +115,15 @@ def describe_word(profile, fname: str, raw: int, direction: str, *, max_hz: floa
     return d
 
 
-def describe_pkw(profile, words, direction: str, *, max_hz: float | None = None) -> dict:
+def describe_pkw(profile: Profile, words: Sequence[int], direction: str, *,
+                 max_hz: float | None = None) -> dict[str, Any]:
     tc = toyo_config(profile)
     pke, ind, pwe1, pwe2 = words
     ak, spm, pnu_field = pd.decode_pke(pke)
     block = (pnu_field >> tc.block_bit) & 1
     pnu = pnu_field & ((1 << tc.block_bit) - 1)
     texts = REQUEST_TEXT if direction == "request" else RESPONSE_TEXT
-    d: dict = {"pke": pke, "ak": ak, "ak_text": texts.get(ak, "not defined by the card"), "spm": spm,
+    d: dict[str, Any] = {"pke": pke, "ak": ak, "ak_text": texts.get(ak, "not defined by the card"), "spm": spm,
                "pnu": pnu, "pnu_hex": f"0x{pnu:03X}", "block": block + 1, "ind": ind, "pwe1": pwe1,
                "pwe": pwe2}
     head = f"PKE 0x{pke:04X}: {'task' if direction == 'request' else 'response'} ID {ak} ({d['ak_text']})"
@@ -180,8 +188,8 @@ def describe_pkw(profile, words, direction: str, *, max_hz: float | None = None)
     return d
 
 
-def decode_area(profile, layout: str, direction: str, data: bytes, *,
-                max_hz: float | None = None) -> dict:
+def decode_area(profile: Profile, layout: str, direction: str, data: bytes, *,
+                max_hz: float | None = None) -> dict[str, Any]:
     """Decode a captured output (request) or input (response) area of any PBUS66-Z layout."""
     pd.check_direction(direction)
     tc = toyo_config(profile)
@@ -196,7 +204,7 @@ def decode_area(profile, layout: str, direction: str, data: bytes, *,
     words = pd.bytes_to_words(data, tc.word_order)
     plch = tc.plch or tl.plch
     arrow = "master -> drive" if direction == "request" else "drive -> master"
-    out: dict = {"profile": profile.name, "layout": layout, "mode": tl.mode, "plch": plch,
+    out: dict[str, Any] = {"profile": profile.name, "layout": layout, "mode": tl.mode, "plch": plch,
                  "direction": direction, "word_order": tc.word_order, "octets": data.hex(" ").upper()}
     text = [f"{profile.name} {layout} (mode {tl.mode}{', PLCH on' if plch else ''}) {direction} ({arrow}), "
             f"{len(data)} octets, {tc.word_order}-endian words: {out['octets']}"]

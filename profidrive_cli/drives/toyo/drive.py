@@ -9,10 +9,10 @@ params.
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from profidrive_cli.drives import profidrive as pd
-from profidrive_cli.drives.base import (DriveError, DriveStatus, FaultRecord, ParamError, ParamValue,
+from profidrive_cli.drives.base import (CyclicChannel, DriveError, DriveStatus, FaultRecord, ParamError, ParamValue,
                                         Reaction)
 from profidrive_cli.drives.toyo.codec import (bit_names, decode_history_word, speed_percent, speed_word,
                                               traceback_ind)
@@ -22,11 +22,14 @@ from profidrive_cli.drives.toyo.params import (_toyo_frame, effective_scale, fra
 from profidrive_cli.drives.torque import torque_counts
 from profidrive_cli.drives.values import value_problem
 
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profile import ParamDef, Profile
+
 TORQUE_RES = 100.0 / 5000          # % of rated torque per count (spec §4.2: 5000 = rated torque)
 TORQUE_SELECT = 0x0002             # multi-function input 2 bit 1: speed/torque control select (Table 3.8)
 
 
-def date_words(now) -> dict[str, int]:
+def date_words(now: datetime) -> dict[str, int]:
     """The date/time words from a datetime (used by the VF66 when J-14 = 1; spec toyo-vf66-pbus66z.md
     §4.5, manual L1137-1143): month/day = month << 8 | day (low byte day 1-31, high byte month 1-12),
     hour/minute = hour << 8 | minute (low byte minute 0-59, high byte hour 0-23), binary."""
@@ -52,7 +55,7 @@ class ToyoDrive(pd.ProfidriveDrive):
         from profidrive_cli.drives.toyo.audit import audit_rules
         return audit_rules(profile)
 
-    def __init__(self, channel, profile, layout: str | None = None):
+    def __init__(self, channel: CyclicChannel, profile: Profile, layout: str | None = None):
         self.tc = toyo_config(profile)
         super().__init__(channel, profile, layout)
         self.tl = self.tc.layouts[self.layout]
@@ -98,7 +101,7 @@ class ToyoDrive(pd.ProfidriveDrive):
     def normal_stop_warnings(self) -> list[str]:
         return [TOYO_C00_WARNING]
 
-    def on_device(self, p: Any) -> bool:
+    def on_device(self, p: ParamDef) -> bool:
         return p.pnu != self.tc.history_pnu      # the fault history: `pdrive faults` reads it
 
     def not_dumpable_why(self) -> str:
@@ -116,15 +119,15 @@ class ToyoDrive(pd.ProfidriveDrive):
     def resolve_for(cls, profile: Any, code: str) -> pd.ParamRef:
         return resolve_param(profile, toyo_config(profile), code)
 
-    def raw_to_value(self, ref: pd.ParamRef, raw: int):
+    def raw_to_value(self, ref: pd.ParamRef, raw: int) -> float | int:
         return value_from_wire(self.profile, ref.param, raw) if ref.param is not None else raw & 0xFFFF
 
-    def check_value(self, ref: pd.ParamRef, value) -> str | None:
+    def check_value(self, ref: pd.ParamRef, value: float | int) -> str | None:
         if ref.param is None:
             return super().check_value(ref, value)
         return value_problem(ref.param, value, scale=effective_scale(self.profile, ref.param))
 
-    def value_to_raw(self, ref: pd.ParamRef, value) -> int:
+    def value_to_raw(self, ref: pd.ParamRef, value: float | int) -> int:
         return wire_from_value(self.profile, ref.param, value) if ref.param is not None else int(value) & 0xFFFF
 
     def _read(self, ref: pd.ParamRef) -> ParamValue:
@@ -133,7 +136,7 @@ class ToyoDrive(pd.ProfidriveDrive):
             raise ParamError(f"{ref.label}: the card refused the read: {res.describe_error()}", res.error)
         return self._param_value(ref, res.value)
 
-    def write_param(self, code: str, value) -> ParamValue:
+    def write_param(self, code: str, value: float | int) -> ParamValue:
         ref = self.resolve_param(code)
         p = ref.param
         if ref.array or (p is not None and not p.writable):
@@ -497,6 +500,6 @@ class ToyoDrive(pd.ProfidriveDrive):
         return vals
 
 
-def make_drive(channel, profile, layout: str | None = None) -> ToyoDrive:
+def make_drive(channel: CyclicChannel, profile: Profile, layout: str | None = None) -> ToyoDrive:
     toyo_config(profile)
     return ToyoDrive(channel, profile, layout)

@@ -9,20 +9,24 @@ drives/profidrive (ParamRef, PkwFrame), config, codec.
 from __future__ import annotations
 
 import re
+from typing import TYPE_CHECKING
 
 from profidrive_cli import UsageError
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.toyo.codec import traceback_ind
 from profidrive_cli.drives.toyo.config import ToyoConfig, toyo_config
 
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profile import ParamDef, Profile
 
-def effective_scale(profile, p) -> float:
+
+def effective_scale(profile: Profile, p: ParamDef) -> float:
     if toyo_config(profile).voltage_class == 400 and "scale_400v" in p.extra:
         return float(p.extra["scale_400v"])
     return p.scale
 
 
-def value_from_wire(profile, p, raw: int):
+def value_from_wire(profile: Profile, p: ParamDef, raw: int) -> float | int:
     raw &= 0xFFFF
     if p.signed and raw & 0x8000:
         raw -= 0x10000
@@ -33,19 +37,19 @@ def value_from_wire(profile, p, raw: int):
     return round(v, 6)
 
 
-def wire_from_value(profile, p, value) -> int:
+def wire_from_value(profile: Profile, p: ParamDef, value: float) -> int:
     """Setting values go without their decimal point (15.0 with scale 0.1 -> 150)."""
     sc = effective_scale(profile, p)
     raw = round(value / sc) if sc else int(value)
     return int(raw) & 0xFFFF
 
 
-def param_value(profile, param, raw: int):
+def param_value(profile: Profile, param: ParamDef, raw: int) -> float | int:
     """Hook used by the core decoder."""
     return value_from_wire(profile, param, raw)
 
 
-def param_at(profile, pnu: int):
+def param_at(profile: Profile, pnu: int) -> ParamDef | None:
     for p in profile.parameters.values():
         if p.pnu == pnu:
             return p
@@ -59,7 +63,7 @@ def _toyo_frame(ak: int, pnu: int, ind: int = 0, value: int = 0) -> pd.PkwFrame:
 _TB_RE = re.compile(r"^TB(\d{1,2})\s*\[\s*(\d)\s*[,:]\s*(\d{1,3})\s*\]$", re.I)
 
 
-def find_param(profile, text: str):
+def find_param(profile: Profile, text: str) -> ParamDef | None:
     t = text.strip()
     p = profile.param(t)
     if p is not None:
@@ -70,7 +74,7 @@ def find_param(profile, text: str):
     return None
 
 
-def resolve_param(profile, tc: ToyoConfig, code: str) -> pd.ParamRef:
+def resolve_param(profile: Profile, tc: ToyoConfig, code: str) -> pd.ParamRef:
     """Monitor names ('dc-voltage'), console codes ('A-00', needs a pnu in the profile),
     'TB06[1,10]' (traceback: recording 0-3, point 0-99), 'FH[2]' (fault history), 'PNU688',
     'PNU720[3]' (IND word), '688'."""

@@ -9,11 +9,16 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from typing import Any, Callable, ClassVar
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Callable, ClassVar
 
 from profidrive_cli.datafile import DataFileError, LineDict
+from profidrive_cli.drives.profile import per_profile
 from profidrive_cli.drives.sections import key, read, section
 from profidrive_cli.drives.yaskawa.codec import FORMATS
+
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profile import Profile
 
 # ---------------------------------------------------------------------------------------------------
 # Family keys of the profile (validated with file:line)
@@ -36,7 +41,7 @@ class YaskawaConfig:
     enter_register: int | None = None
     fault_history: list[tuple[str, str]] = field(default_factory=list)   # (position, param code)
     alarm_kinds: dict[str, str] = field(default_factory=dict)            # code -> fault|ope|cpf|alarm
-    led_diagnostics: list[dict] = field(default_factory=list)
+    led_diagnostics: list[dict[str, str]] = field(default_factory=list)   # pwr, com, err, wd, condition, ...
 
 
 _NUMBER = "'{key}' must be a number, got {value!r}"
@@ -76,11 +81,8 @@ class YaskawaTopKeys:
     decisions: list[str] = key("texts", [], type_msg="'decisions' must be a list of strings")
 
 
-def family_config(profile) -> YaskawaConfig:
-    """Validate and return the Yaskawa keys of a profile (cached on the profile object)."""
-    cached = getattr(profile, "_yaskawa_config", None)
-    if cached is not None:
-        return cached
+def _build_config(profile: Profile) -> YaskawaConfig:
+    """Validate and return the Yaskawa keys of a profile."""
     path = profile.path or profile.name
     raw = profile.raw if isinstance(profile.raw, LineDict) else LineDict()
     _check_layouts(path, profile, raw)
@@ -95,14 +97,13 @@ def family_config(profile) -> YaskawaConfig:
     cfg.alarm_kinds = _alarm_kinds(path, raw)
     top = read(YaskawaTopKeys, path, raw)
     cfg.led_diagnostics = [_led_row(path, item) for item in top.led_diagnostics]
-    try:
-        profile._yaskawa_config = cfg
-    except AttributeError:   # pragma: no cover - a frozen profile object
-        pass
     return cfg
 
 
-def _check_layouts(path, profile, raw: LineDict) -> None:
+family_config = per_profile(_build_config)   # -> YaskawaConfig, built once per profile
+
+
+def _check_layouts(path: str | Path, profile: Profile, raw: LineDict) -> None:
     layouts_node = raw.get("layouts")
     for name, lay in profile.layouts.items():
         line = layouts_node.line_of(name) if isinstance(layouts_node, LineDict) else None
@@ -116,16 +117,17 @@ def _check_layouts(path, profile, raw: LineDict) -> None:
             raise DataFileError(path, line, f"layout '{name}': cfg must be {FORMATS[name].cfg.hex(' ').upper()}")
 
 
-def _enter_register(path, raw: LineDict, en: LineDict) -> int:
-    if not isinstance(en.get("register"), int):
+def _enter_register(path: str | Path, raw: LineDict, en: LineDict) -> int:
+    reg = en.get("register")
+    if not isinstance(reg, int):
         raise DataFileError(path, raw["yaskawa"].line_of("enter_register"),
                             "'enter_register' must be a mapping with an integer 'register'")
     _check_source(path, en)
-    return en["register"]
+    return reg
 
 
-def _fault_history(path, profile, fh: list) -> list[tuple[str, str]]:
-    out = []
+def _fault_history(path: str | Path, profile: Profile, fh: list[Any]) -> list[tuple[str, str]]:
+    out: list[tuple[str, str]] = []
     for i, item in enumerate(fh):
         line = fh.line_of(i) if hasattr(fh, "line_of") else None
         if not isinstance(item, LineDict) or not isinstance(item.get("position"), str) \
@@ -139,7 +141,7 @@ def _fault_history(path, profile, fh: list) -> list[tuple[str, str]]:
     return out
 
 
-def _check_params(path, profile, raw: LineDict) -> None:
+def _check_params(path: str | Path, profile: Profile, raw: LineDict) -> None:
     for code, p in profile.parameters.items():
         node = _param_node(raw, p.line)
         src = p.extra.get("register_source")
@@ -155,8 +157,8 @@ def _check_params(path, profile, raw: LineDict) -> None:
                                 f"{code}: register must be 0..0xFFFF")
 
 
-def _alarm_kinds(path, raw: LineDict) -> dict[str, str]:
-    out = {}
+def _alarm_kinds(path: str | Path, raw: LineDict) -> dict[str, str]:
+    out: dict[str, str] = {}
     alarms = raw.get("alarms", [])
     for a in alarms if isinstance(alarms, list) else []:
         if not isinstance(a, LineDict):
@@ -168,7 +170,7 @@ def _alarm_kinds(path, raw: LineDict) -> dict[str, str]:
     return out
 
 
-def _led_row(path, item) -> dict[str, str]:
+def _led_row(path: str | Path, item: object) -> dict[str, str]:
     if not isinstance(item, LineDict):
         raise DataFileError(path, getattr(item, "line", None), "an LED row must be a mapping")
     for k in ("pwr", "com", "err", "wd"):
@@ -182,7 +184,7 @@ def _led_row(path, item) -> dict[str, str]:
     return {k: str(v) for k, v in item.items()}
 
 
-def _check_source(path, node: LineDict) -> None:
+def _check_source(path: str | Path, node: LineDict) -> None:
     src = node.get("register_source")
     if src is not None and src not in REGISTER_SOURCES:
         raise DataFileError(path, node.line_of("register_source"),
@@ -196,7 +198,7 @@ def _param_node(raw: LineDict, line: int) -> LineDict | None:
     return None
 
 
-def led_diagnosis(profile, pwr: str, com: str, err: str, wd: str) -> dict:
+def led_diagnosis(profile: Profile, pwr: str, com: str, err: str, wd: str) -> dict[str, str]:
     """The LED table row for a state (pwr, com, err, wd), or an 'unspecified' row (spec §1.7)."""
     for row in family_config(profile).led_diagnostics:
         if (row["pwr"], row["com"], row["err"], row["wd"]) == (pwr, com, err, wd):
@@ -205,7 +207,7 @@ def led_diagnosis(profile, pwr: str, com: str, err: str, wd: str) -> dict:
             "cause": "LED combination not in the manual's table", "remedy": "Treat as an option fault"}
 
 
-def register_name(profile, reg: int) -> str | None:
+def register_name(profile: Profile, reg: int) -> str | None:
     for p in profile.parameters.values():
         if p.register == reg:
             return p.code

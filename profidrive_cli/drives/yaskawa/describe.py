@@ -5,7 +5,7 @@ JSON-serialisable dict with a "text" list. May touch: codec, paramaccess (area p
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from profidrive_cli import UsageError
 from profidrive_cli.drives.yaskawa.codec import (COMMAND_TEXT, FORMATS, MFO_BITS, STATUS_TEXT, AreaFormat,
@@ -15,6 +15,9 @@ from profidrive_cli.drives.yaskawa.config import family_config, register_name
 from profidrive_cli.drives.yaskawa.paramaccess import (ERROR_CODES, FC_NONE, FC_READ, FC_WRITE,
                                                        FUNCTION_NAMES, HS_STATUS_NAMES, ParamArea,
                                                        decode_hs, error_text)
+
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profile import Profile
 
 # ---------------------------------------------------------------------------------------------------
 # decode_area: captured areas -> named fields (pdrive decode)
@@ -26,12 +29,12 @@ def _flags_text(word: int, flags: dict[str, bool], names: dict[str, str]) -> str
     return f"0x{word:04X}" + (": " + ", ".join(on) if on else ": (none)")
 
 
-def _reg_label(profile, reg: int) -> str:
+def _reg_label(profile: Profile, reg: int) -> str:
     n = register_name(profile, reg)
     return f"0x{reg:04X}" + (f" ({n})" if n else "")
 
 
-def decode_area(profile, layout: str, direction: str, data: bytes) -> dict:
+def decode_area(profile: Profile, layout: str, direction: str, data: bytes) -> dict[str, Any]:
     """Decode one captured output area (direction "request") or input area ("response")."""
     if layout not in FORMATS or layout not in profile.layouts:
         raise UsageError(f"{profile.name}: no layout '{layout}' (known: {', '.join(profile.layouts)})")
@@ -112,7 +115,8 @@ def decode_area(profile, layout: str, direction: str, data: bytes) -> dict:
     return out
 
 
-def _decode_param(profile, fmt: AreaFormat, direction: str, area: bytes) -> tuple[dict, list[str]]:
+def _decode_param(profile: Profile, fmt: AreaFormat, direction: str, area: bytes
+                  ) -> tuple[dict[str, Any], list[str]]:
     p = ParamArea.parse(fmt, area)
     fn = p.function
     d: dict[str, Any] = {"function": fn, "function_name": FUNCTION_NAMES.get(fn, "invalid"),

@@ -7,10 +7,10 @@ drives/values, drives/torque, and this package's codec, paramaccess and config.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any, Iterable
 
 from profidrive_cli import UsageError
-from profidrive_cli.drives.base import (Drive, DriveError, DriveStatus, FaultRecord, ParamError,
+from profidrive_cli.drives.base import (CyclicChannel, Drive, DriveError, DriveStatus, FaultRecord, ParamError,
                                         ParamInfo, ParamValue, Reaction)
 from profidrive_cli.drives.torque import capability_refusal, torque_counts
 from profidrive_cli.drives.values import raw_value_problem, value_problem
@@ -19,6 +19,9 @@ from profidrive_cli.drives.yaskawa.codec import (COMMAND_BITS, FORMATS, STATUS_B
 from profidrive_cli.drives.yaskawa.config import family_config, parse_register_code, register_name
 from profidrive_cli.drives.yaskawa.paramaccess import (ParamAccess, ParamRequest, ParamResult, error_text,
                                                        refusal_words)
+
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profile import ParamDef, Profile
 
 FAMILY = "yaskawa"
 
@@ -63,7 +66,7 @@ class YaskawaDrive(Drive):
     def status_flag_names(cls, profile: Any, layout: str) -> list[str]:
         return list(STATUS_BITS)              # the status word's bits (spec 2.5), whatever the layout
 
-    def __init__(self, channel, profile, layout: str | None = None):
+    def __init__(self, channel: CyclicChannel, profile: Profile, layout: str | None = None):
         super().__init__(channel, profile, layout)
         if self.layout not in profile.layouts or self.layout not in FORMATS:
             raise UsageError(f"{profile.name}: no layout '{self.layout}' (known: {', '.join(profile.layouts)})")
@@ -394,7 +397,7 @@ class YaskawaDrive(Drive):
             start, count = start + n, count - n
         return out
 
-    def write_registers(self, start: int, values) -> None:
+    def write_registers(self, start: int, values: Iterable[int]) -> None:
         if self.params is None:
             raise self._no_channel()
         values = list(values)
@@ -461,7 +464,7 @@ class YaskawaDrive(Drive):
     def dumpable(self, p: Any) -> bool:
         return p.register is not None            # MEMOBUS registers, not PNUs
 
-    def _resolve(self, code: str):
+    def _resolve(self, code: str) -> tuple[int, ParamDef | None]:
         reg = parse_register_code(code)
         if reg is not None:
             if reg > 0xFFFF:
@@ -527,7 +530,7 @@ class YaskawaDrive(Drive):
             self._o1_03 = None
         return self.read_resolved(info)
 
-    def check_value(self, p, value) -> str | None:
+    def check_value(self, p: ParamDef, value: float | int) -> str | None:
         """The exact-value check (drives/values.py) against the profile's entry: resolution, the
         listed codes, min..max, the 16-bit register. The drive may still refuse a value its own
         limits (which differ between F7, G7 and P7) do not allow."""
@@ -596,5 +599,5 @@ class YaskawaDrive(Drive):
         return self._fmax
 
 
-def make_drive(channel, profile, layout: str | None = None) -> YaskawaDrive:
+def make_drive(channel: CyclicChannel, profile: Profile, layout: str | None = None) -> YaskawaDrive:
     return YaskawaDrive(channel, profile, layout)

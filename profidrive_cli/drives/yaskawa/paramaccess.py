@@ -8,7 +8,7 @@ waits. May touch: codec (AreaFormat), drives/base (errors).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Iterable
 
 from profidrive_cli import UsageError
 from profidrive_cli.drives.base import DriveError
@@ -74,7 +74,7 @@ class ParamRequest:
         return cls(FC_READ, start, count)
 
     @classmethod
-    def write(cls, start: int, values) -> ParamRequest:
+    def write(cls, start: int, values: Iterable[int]) -> ParamRequest:
         vals = tuple(int(v) for v in values)
         return cls(FC_WRITE, start, len(vals), vals)
 
