@@ -14,13 +14,12 @@ import difflib
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal, NoReturn, Sequence, TypeGuard, overload
+from typing import TYPE_CHECKING, Any, Literal, NoReturn, Protocol, Sequence, TypeGuard, overload
 
 from profidrive_cli import PdriveError, UsageError
 from profidrive_cli.datafile import DataFileError, LineDict, LineList
 
 if TYPE_CHECKING:                                   # pragma: no cover
-    from profidrive_cli.checklist.steps.base import RawStepFacts, StationFacts
     from profidrive_cli.drives.profile import ParamDef, Profile
 
 
@@ -55,6 +54,57 @@ def line_at(node: object, key: object = None, default: int = 0) -> int:
         return node.line_of(key)
     line: int | None = getattr(node, "line", default)     # LineDict / LineList: int
     return line or default
+
+
+# What a step type's check gets of spec.py (which imports the step types, so they cannot import it):
+# spec.Step, spec.StationSpec and spec._RawStep satisfy these.
+
+#: a step's typed fields (validate's args, spec.Step.args): field name -> value (ParamTarget, number, ...)
+StepArgs = dict[str, Any]
+
+
+class StepFacts(Protocol):
+    """spec.Step: one step as it runs on one station."""
+    @property
+    def index(self) -> int: ...
+    @property
+    def type(self) -> str: ...
+    @property
+    def args(self) -> StepArgs: ...
+
+
+class StationFacts(Protocol):
+    """spec.StationSpec: the station a step is validated for and runs on."""
+    @property
+    def name(self) -> str: ...
+    @property
+    def address(self) -> int: ...
+    @property
+    def profile(self) -> Profile: ...
+    @property
+    def ident(self) -> int: ...
+    @property
+    def gsd(self) -> str | None: ...
+    @property
+    def layout(self) -> str: ...
+    @property
+    def flag_names(self) -> list[str]: ...
+    @property
+    def steps(self) -> Sequence[StepFacts]: ...
+
+
+class RawStepFacts(Protocol):
+    """spec._RawStep: the step as written (before a station's variables and checks)."""
+    @property
+    def index(self) -> int: ...
+    @property
+    def type(self) -> str: ...
+    @property
+    def line(self) -> int: ...
+    @property
+    def body_line(self) -> int: ...
+    @property
+    def stations(self) -> list[tuple[str, int]] | None: ...
 
 
 class Skip(Exception):

@@ -29,9 +29,10 @@ from typing import TYPE_CHECKING, Any, Callable, Iterator, NoReturn
 
 from profidrive_cli import PdriveError, __version__
 from profidrive_cli.checklist import steptrace
+from profidrive_cli.checklist.fields import StationFacts
 from profidrive_cli.checklist.spec import Checklist, StationSpec, Step
 from profidrive_cli.checklist.steps import STEPS
-from profidrive_cli.checklist.steps.base import StationFacts, StepFailed, hex4, status_dict
+from profidrive_cli.checklist.steps.base import StepFailed, hex4, status_dict
 from profidrive_cli.checklist.steptrace import StepTrace
 
 if TYPE_CHECKING:                                   # pragma: no cover

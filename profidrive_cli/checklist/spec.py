@@ -23,9 +23,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping
 
 from profidrive_cli import PdriveError, UsageError
-from profidrive_cli.checklist.fields import FieldChecker, ParamTarget, Skip, fmt, line_at, tname
+from profidrive_cli.checklist.fields import FieldChecker, ParamTarget, Skip, StepArgs, fmt, line_at, tname
 from profidrive_cli.checklist.steps import STEPS
-from profidrive_cli.checklist.steps.base import StepArgs
 from profidrive_cli.datafile import DataFileError, LineDict, LineList, load_yaml_text, read_text
 
 if TYPE_CHECKING:                                   # pragma: no cover

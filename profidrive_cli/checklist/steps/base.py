@@ -16,10 +16,10 @@ steps/__init__.py. It holds its schema and its execution together:
         pass; raises StepFailed for an unmet expectation (PdriveError: the step is an error).
 
 The runner does the rest once for every type: timing, the observer, on_fail, the safe stop, the report.
-This module imports nothing of the checklist (for the type checker only, fields.py's FieldChecker) but
-may be imported by all of it. What a step type gets of spec.py and runner.py is said here as Protocols
-(StationFacts, RawStepFacts, StepRun, ...): those modules import this registry, so this one cannot
-import them; spec.StationSpec, runner.Runner and the rest satisfy them.
+This module imports nothing of the checklist (for the type checker only, fields.py's types) but may be
+imported by all of it. What a step type gets of runner.py is said here as Protocols (StepRun, StepRecord,
+Handle, ...), what it gets of spec.py in fields.py (StationFacts, RawStepFacts): those modules import the
+registry, so a step type cannot import them; runner.Runner, spec.StationSpec and the rest satisfy them.
 """
 
 from __future__ import annotations
@@ -29,63 +29,14 @@ from contextlib import AbstractContextManager
 from typing import TYPE_CHECKING, Any, Callable, Protocol, Sequence, TypeVar
 
 if TYPE_CHECKING:                                   # pragma: no cover
-    from profidrive_cli.checklist.fields import FieldChecker
+    from profidrive_cli.checklist.fields import FieldChecker, RawStepFacts, StationFacts, StepArgs, StepFacts
     from profidrive_cli.drives.base import Drive, DriveStatus
-    from profidrive_cli.drives.profile import Profile
     from profidrive_cli.session import DriveSession
-
-#: a step's typed fields (validate's args, spec.Step.args): field name -> value (ParamTarget, number, ...)
-StepArgs = dict[str, Any]
-
-
-class StepFacts(Protocol):
-    """spec.Step: one step as it runs on one station."""
-    @property
-    def index(self) -> int: ...
-    @property
-    def type(self) -> str: ...
-    @property
-    def args(self) -> StepArgs: ...
-
-
-class StationFacts(Protocol):
-    """spec.StationSpec: the station a step is validated for and runs on."""
-    @property
-    def name(self) -> str: ...
-    @property
-    def address(self) -> int: ...
-    @property
-    def profile(self) -> Profile: ...
-    @property
-    def ident(self) -> int: ...
-    @property
-    def gsd(self) -> str | None: ...
-    @property
-    def layout(self) -> str: ...
-    @property
-    def flag_names(self) -> list[str]: ...
-    @property
-    def steps(self) -> Sequence[StepFacts]: ...
-
 
 class ChecklistFacts(Protocol):
     """spec.Checklist: its stations."""
     @property
     def stations(self) -> Sequence[StationFacts]: ...
-
-
-class RawStepFacts(Protocol):
-    """spec._RawStep: the step as written (before a station's variables and checks)."""
-    @property
-    def index(self) -> int: ...
-    @property
-    def type(self) -> str: ...
-    @property
-    def line(self) -> int: ...
-    @property
-    def body_line(self) -> int: ...
-    @property
-    def stations(self) -> list[tuple[str, int]] | None: ...
 
 
 class StepRecord(Protocol):

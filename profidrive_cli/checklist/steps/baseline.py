@@ -23,9 +23,8 @@ from typing import TYPE_CHECKING, Any
 
 from profidrive_cli import PdriveError
 from profidrive_cli.bustools import baseline as B
-from profidrive_cli.checklist.fields import fmt
-from profidrive_cli.checklist.steps.base import (Handle, R, RawStepFacts, SR, StationFacts, StepArgs, StepFailed,
-                                                 StepRun, StepType)
+from profidrive_cli.checklist.fields import RawStepFacts, StationFacts, StepArgs, fmt
+from profidrive_cli.checklist.steps.base import Handle, R, SR, StepFailed, StepRun, StepType
 
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.checklist.fields import FieldChecker

@@ -9,11 +9,10 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from profidrive_cli import PdriveError
-from profidrive_cli.checklist.steps.base import (Handle, R, RawStepFacts, SR, StationFacts, StepArgs, StepFailed,
-                                                 StepRun, StepType, hex4)
+from profidrive_cli.checklist.steps.base import Handle, R, SR, StepFailed, StepRun, StepType, hex4
 
 if TYPE_CHECKING:                                   # pragma: no cover
-    from profidrive_cli.checklist.fields import FieldChecker
+    from profidrive_cli.checklist.fields import FieldChecker, RawStepFacts, StationFacts, StepArgs
     from profidrive_cli.drives.base import Drive
 
 

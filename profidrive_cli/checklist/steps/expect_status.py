@@ -6,12 +6,11 @@ execute() runs it on the station's Drive for the Runner. Imports only the checkl
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
 import difflib
+from typing import TYPE_CHECKING, Any
 
-from profidrive_cli.checklist.fields import Skip, is_num, tname
-from profidrive_cli.checklist.steps.base import (Handle, R, RawStepFacts, SR, StationFacts, StepArgs, StepFailed,
-                                                 StepRun, StepType, rnd)
+from profidrive_cli.checklist.fields import RawStepFacts, Skip, StationFacts, StepArgs, is_num, tname
+from profidrive_cli.checklist.steps.base import Handle, R, SR, StepFailed, StepRun, StepType, rnd
 from profidrive_cli.datafile import LineDict
 
 if TYPE_CHECKING:                                   # pragma: no cover

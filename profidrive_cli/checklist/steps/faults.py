@@ -6,12 +6,11 @@ execute() runs it on the station's Drive for the Runner. Imports only the checkl
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
 import difflib
+from typing import TYPE_CHECKING, Any
 
-from profidrive_cli.checklist.fields import layout_has_params, tname
-from profidrive_cli.checklist.steps.base import (Handle, R, RawStepFacts, SR, StationFacts, StepArgs, StepFailed,
-                                                 StepRun, StepType)
+from profidrive_cli.checklist.fields import RawStepFacts, StationFacts, StepArgs, layout_has_params, tname
+from profidrive_cli.checklist.steps.base import Handle, R, SR, StepFailed, StepRun, StepType
 
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.checklist.fields import FieldChecker

@@ -8,11 +8,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from profidrive_cli.checklist.steps.base import (Handle, R, RawStepFacts, SR, StationFacts, StepArgs, StepRun,
-                                                 StepType)
+from profidrive_cli.checklist.steps.base import Handle, R, SR, StepRun, StepType
 
 if TYPE_CHECKING:                                   # pragma: no cover
-    from profidrive_cli.checklist.fields import FieldChecker
+    from profidrive_cli.checklist.fields import FieldChecker, RawStepFacts, StationFacts, StepArgs
     from profidrive_cli.drives.base import Drive
 
 

@@ -8,9 +8,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from profidrive_cli.checklist.fields import fmt, is_num, range_problem
-from profidrive_cli.checklist.steps.base import (Handle, R, RawStepFacts, SR, StationFacts, StepArgs, StepFailed,
-                                                 StepRun, StepType, close_to)
+from profidrive_cli.checklist.fields import RawStepFacts, StationFacts, StepArgs, fmt, is_num, range_problem
+from profidrive_cli.checklist.steps.base import Handle, R, SR, StepFailed, StepRun, StepType, close_to
 
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.checklist.fields import FieldChecker

@@ -17,9 +17,8 @@ import contextlib
 import weakref
 from typing import TYPE_CHECKING, Any, Callable
 
-from profidrive_cli.checklist.fields import fmt
-from profidrive_cli.checklist.steps.base import (ChecklistFacts, Handle, R, SR, StationFacts, StepArgs, StepFailed,
-                                                 StepRun, rnd)
+from profidrive_cli.checklist.fields import StationFacts, StepArgs, fmt
+from profidrive_cli.checklist.steps.base import ChecklistFacts, Handle, R, SR, StepFailed, StepRun, rnd
 from profidrive_cli.session.group import Group
 from profidrive_cli.session.live import Reach
 

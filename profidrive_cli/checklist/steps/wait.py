@@ -8,9 +8,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from profidrive_cli.checklist.fields import fmt
-from profidrive_cli.checklist.steps.base import (Handle, R, RawStepFacts, SR, StationFacts, StepArgs, StepRun,
-                                                 StepType, status_dict)
+from profidrive_cli.checklist.fields import RawStepFacts, StationFacts, StepArgs, fmt
+from profidrive_cli.checklist.steps.base import Handle, R, SR, StepRun, StepType, status_dict
 
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.checklist.fields import FieldChecker

@@ -9,9 +9,8 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from profidrive_cli import PdriveError
-from profidrive_cli.checklist.fields import fmt
-from profidrive_cli.checklist.steps.base import (Handle, R, RawStepFacts, SR, StationFacts, StepArgs, StepFailed,
-                                                 StepRun, StepType, close_to)
+from profidrive_cli.checklist.fields import RawStepFacts, StationFacts, StepArgs, fmt
+from profidrive_cli.checklist.steps.base import Handle, R, SR, StepFailed, StepRun, StepType, close_to
 from profidrive_cli.drives.values import danger, profile_value_problem
 
 if TYPE_CHECKING:                                   # pragma: no cover
