@@ -229,8 +229,12 @@ def _reach_and_hold(run: StepRun[SR, R], sr: SR, r: R, a: StepArgs, drives: list
             if x.feed_reach(x.d.cycle(), ch.now()):
                 pending.remove(x)
         end_round()
-        if any(x.st is not None and x.st.fault for x in drives):
-            return                          # a trip ends the run for all
+        tripped = [x.name for x in drives if x.st is not None and x.st.fault]
+        if tripped:                         # a trip ends the run for all
+            for x in pending:               # (still on the way: not reached, not failed yet)
+                x.failed = f"not in the band when the run ended: {', '.join(tripped)} tripped (a trip ends " \
+                           f"the run for all)"
+            return
         run.progress(sr, r, "accelerating: " + ", ".join(
             f"{x.name} {fmt(rnd(x.actual(x.st)))}{x.u}" for x in drives if x.st is not None))
     if any(x.failed for x in drives):
