@@ -165,7 +165,7 @@ _CONSTRUCT_ERRORS = (ValueError, TypeError, AttributeError, OverflowError, KeyEr
 _NUMBER_TAGS = frozenset({"tag:yaml.org,2002:int", "tag:yaml.org,2002:float"})
 
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:                                   # pragma: no cover
     class _LoaderHost:
         """What _Limits calls of the PyYAML loader classes it is mixed into (their Parser, Composer and
         SafeConstructor), for the type checker only: PyYAML has no type hints, its nodes and events
