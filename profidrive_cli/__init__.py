@@ -9,6 +9,8 @@ The Python API (docs/api.md) is exported here lazily (PEP 562): `import profidri
 loads nothing more; `pdrive.open_bus(...)` imports profidrive_cli.api on first use.
 """
 
+from typing import Any
+
 __version__ = "0.1.0"
 
 
@@ -29,7 +31,7 @@ _API_NAMES = frozenset({"open_bus", "Bus", "Drive", "DriveError", "Fault", "Faul
                         "SessionTerminated", "Station", "Status", "StopResult"})
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> Any:     # whatever profidrive_cli.api exports under that name
     if name in _API_NAMES:
         import profidrive_cli.api as api
         value = getattr(api, name)
@@ -41,5 +43,5 @@ def __getattr__(name: str):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def __dir__():
+def __dir__() -> list[str]:
     return sorted(set(globals()) | _API_NAMES | {"aio"})

@@ -35,7 +35,10 @@ import re
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.datafile import LineDict
 
 USER_FILE = Path("pdrive") / "config.yaml"
 PROJECT_FILE = "pdrive.yaml"
@@ -53,7 +56,7 @@ class FileText(str):
     it is used (a station's profile or layout), a mistake in it is blamed on that line."""
     source: str
 
-    def __new__(cls, value: str, source: str):
+    def __new__(cls, value: str, source: str) -> FileText:
         obj = super().__new__(cls, value)
         obj.source = source
         return obj
@@ -64,7 +67,7 @@ class FileHz(float):
     source label says "from FILE:LINE", not "from --fmax" (session/motion.py)."""
     source: str
 
-    def __new__(cls, value: float, source: str):
+    def __new__(cls, value: float, source: str) -> FileHz:
         obj = super().__new__(cls, value)
         obj.source = source
         return obj
@@ -86,7 +89,7 @@ class Setting:
     source: str
     project: bool = field(default=False, compare=False, repr=False)
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {"value": self.value, "source": self.source}
 
 
@@ -138,7 +141,7 @@ class Effective:
             return {}
         return dict(self.stations.get(address, {}))
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {"files": [{"kind": f.kind, "path": str(f.path), "exists": f.exists} for f in self.files],
                 "port": {**self.port.to_dict(), "name": self.port_name},
                 "baud": self.baud.to_dict(), "master_address": self.master_address.to_dict(),
@@ -210,7 +213,7 @@ def load(env: Mapping[str, str] | None = None, cwd: str | Path | None = None) ->
 def _apply(cfg: Config, path: Path, project: bool = False) -> None:
     from profidrive_cli.datafile import DataFileError, LineDict, load_yaml
 
-    def Setting(value, source):             # every value of this file: its kind travels with it
+    def Setting(value: Any, source: str) -> _Setting:  # every value of this file: its kind travels with it
         return _Setting(value, source, project)
     doc = load_yaml(path, "config file")
     if doc is None:
@@ -220,7 +223,7 @@ def _apply(cfg: Config, path: Path, project: bool = False) -> None:
                             f"(keys: {', '.join(_TOP_KEYS)})")
     _known(doc, _TOP_KEYS, path, "config file")
 
-    def where(d, key) -> str:
+    def where(d: LineDict, key: str) -> str:
         return f"{path}:{d.line_of(key)}"
     if "port" in doc:
         cfg.port = Setting(_text(doc, "port", path), where(doc, "port"))
@@ -261,7 +264,7 @@ def _apply(cfg: Config, path: Path, project: bool = False) -> None:
         cfg.ports[name] = np
 
 
-def _stations(entry, path: Path, name: str, project: bool = False) -> dict[int, dict[str, Setting]]:
+def _stations(entry: LineDict, path: Path, name: str, project: bool = False) -> dict[int, dict[str, Setting]]:
     from profidrive_cli.datafile import DataFileError, LineDict
     st = entry.get("stations")
     if st is None:
@@ -295,7 +298,7 @@ def _stations(entry, path: Path, name: str, project: bool = False) -> dict[int, 
     return out
 
 
-def _known(d, keys, path: Path, what: str) -> None:
+def _known(d: LineDict, keys: tuple[str, ...], path: Path, what: str) -> None:
     from profidrive_cli.datafile import DataFileError
     for k in d:
         if k not in keys:
@@ -303,7 +306,7 @@ def _known(d, keys, path: Path, what: str) -> None:
                                 f"{', '.join(keys)})")
 
 
-def _text(d, key: str, path: Path, what: str | None = None) -> str:
+def _text(d: LineDict, key: str, path: Path, what: str | None = None) -> str:
     from profidrive_cli.datafile import DataFileError
     v = d[key]
     if not isinstance(v, str) or not v.strip():
@@ -311,7 +314,7 @@ def _text(d, key: str, path: Path, what: str | None = None) -> str:
     return v.strip()
 
 
-def _baud(d, key: str, path: Path, what: str | None = None) -> str:
+def _baud(d: LineDict, key: str, path: Path, what: str | None = None) -> str:
     from profidrive_cli.datafile import DataFileError
     v = d[key]
     if isinstance(v, bool) or not isinstance(v, (int, str)) or (isinstance(v, str) and not v.strip()):
@@ -320,7 +323,7 @@ def _baud(d, key: str, path: Path, what: str | None = None) -> str:
     return str(v).strip()
 
 
-def _address(d, key: str, path: Path, what: str) -> int:
+def _address(d: LineDict, key: str, path: Path, what: str) -> int:
     from profidrive_cli.datafile import DataFileError
     v = d[key]
     if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= 125:
@@ -370,7 +373,8 @@ def resolve(port: str | None = None, baud: str | int | None = None,
         dev = chosen if chosen is not None else Setting(None, "default")
         _not_a_lost_name(dev, cfg)
 
-    def pick(given, given_src, env_name, per_port, top, default):
+    def pick(given: Any, given_src: str, env_name: str | None, per_port: Setting | None, top: Setting | None,
+             default: Any) -> Setting:
         if given is not None:
             return Setting(given, given_src)
         if env_name and env.get(env_name):

@@ -21,10 +21,12 @@ Without libyaml, or with PDRIVE_PURE_YAML=1 in the environment, the pure-Python 
 from __future__ import annotations
 
 import os
+import re
 import reprlib
 import stat
 from pathlib import Path
-from typing import Any, Callable
+from types import TracebackType
+from typing import IO, TYPE_CHECKING, Any, Iterable, Literal
 
 import yaml
 from yaml.composer import Composer
@@ -82,7 +84,7 @@ def read_input_file(path: str | Path, what: str = "file", max_bytes: int = MAX_Y
     p = Path(path)
     with open_input_file(p, what, max_bytes) as fh:
         try:
-            data = fh.read(max_bytes + 1)
+            data: bytes = fh.read(max_bytes + 1)
         except OSError as e:
             raise DataFileError(p, None, f"cannot read {what}: {e.strerror or e}") from None
     if len(data) > max_bytes:
@@ -90,7 +92,7 @@ def read_input_file(path: str | Path, what: str = "file", max_bytes: int = MAX_Y
     return data
 
 
-def open_input_file(path: str | Path, what: str = "file", max_bytes: int = MAX_YAML_BYTES):
+def open_input_file(path: str | Path, what: str = "file", max_bytes: int = MAX_YAML_BYTES) -> IO[bytes]:
     """read_input_file's checks, then the file open for reading (binary; the caller closes it):
     for reading a large input in chunks."""
     p = Path(path)
@@ -140,17 +142,19 @@ def read_text(path: str | Path, what: str = "data file", max_bytes: int = MAX_YA
 # ------------------------------------------------------------------------------------------------ YAML
 
 
-class LineDict(dict):
+class LineDict(dict[Any, Any]):
+    """A YAML mapping: keys and values are whatever the document holds (validated by the reader)."""
     line: int = 0
-    key_lines: dict
+    key_lines: dict[Any, int]
 
-    def line_of(self, key: str) -> int:
+    def line_of(self, key: Any) -> int:
         return self.key_lines.get(key, self.line)
 
 
-class LineList(list):
+class LineList(list[Any]):
+    """A YAML sequence: items are whatever the document holds (validated by the reader)."""
     line: int = 0
-    item_lines: list
+    item_lines: list[int]
 
     def line_of(self, i: int) -> int:
         return self.item_lines[i] if i < len(self.item_lines) else self.line
@@ -161,16 +165,34 @@ _CONSTRUCT_ERRORS = (ValueError, TypeError, AttributeError, OverflowError, KeyEr
 _NUMBER_TAGS = frozenset({"tag:yaml.org,2002:int", "tag:yaml.org,2002:float"})
 
 
-class _Limits:
+if TYPE_CHECKING:                                   # pragma: no cover
+    class _LoaderHost:
+        """What _Limits calls of the PyYAML loader classes it is mixed into (their Parser, Composer and
+        SafeConstructor), for the type checker only: PyYAML has no type hints, its nodes and events
+        are Any here. At run time _Limits stands on object and these come from the loader's MRO."""
+
+        def check_event(self, *choices: Any) -> bool:
+            raise NotImplementedError
+
+        def peek_event(self) -> Any: ...
+
+        def compose_node(self, parent: Any, index: Any) -> Any: ...
+
+        def construct_object(self, node: Any, deep: bool = False) -> Any: ...
+
+        def flatten_mapping(self, node: Any) -> None: ...
+else:
+    _LoaderHost = object
+
+
+class _Limits(_LoaderHost):
     """Mixed in before a loader's Composer and SafeConstructor: no aliases, bounded depth, bounded
     numbers, construction errors marked. Depth is checked before the composer descends, so a deeply
     nested file never reaches Python's (or C's) recursion limit."""
 
     _depth = 0
-    #: (SafeConstructor's, which every loader this is mixed into has)
-    flatten_mapping: Callable[[Any], None]
 
-    def compose_node(self, parent, index):
+    def compose_node(self, parent: Any, index: Any) -> Any:
         if self.check_event(yaml.AliasEvent):
             ev = self.peek_event()
             raise yaml.composer.ComposerError(
@@ -186,7 +208,7 @@ class _Limits:
         finally:
             self._depth -= 1
 
-    def construct_object(self, node, deep=False):
+    def construct_object(self, node: Any, deep: bool = False) -> Any:
         if isinstance(node, yaml.ScalarNode) and node.tag in _NUMBER_TAGS \
                 and len(node.value) > MAX_NUMBER_CHARS:
             raise yaml.constructor.ConstructorError(
@@ -230,17 +252,17 @@ def _construct_sequence(loader: _Limits, node: yaml.SequenceNode) -> LineList:
     return lst
 
 
-class _PureLoader(_Limits, yaml.SafeLoader):
+class _PureLoader(_Limits, yaml.SafeLoader):  # type: ignore[misc]  # PyYAML has no type hints: SafeLoader is Any
     """The pure-Python loader: yaml.SafeLoader (safe construction only) with the limits."""
 
 
 if _CParser is not None:
-    class _CLoader(_Limits, Composer, _CParser, SafeConstructor, Resolver):
+    class _CLoader(_Limits, Composer, _CParser, SafeConstructor, Resolver):  # type: ignore[misc]  # (as _PureLoader)
         """libyaml's parser makes the events; PyYAML's Python Composer (ahead of CParser's own C
         composer in the MRO, so the limits above apply node by node), SafeConstructor and Resolver do
         the rest, exactly as in _PureLoader."""
 
-        def __init__(self, stream):
+        def __init__(self, stream: str) -> None:
             _CParser.__init__(self, stream)
             SafeConstructor.__init__(self)
             Resolver.__init__(self)
@@ -253,7 +275,7 @@ for _cls in filter(None, (_PureLoader, _CLoader)):
     _cls.add_constructor(yaml.resolver.BaseResolver.DEFAULT_SEQUENCE_TAG, _construct_sequence)
 
 
-def _loader_class(pure: bool | None, text: str = ""):
+def _loader_class(pure: bool | None, text: str = "") -> type[_PureLoader] | type[_CLoader]:
     if pure is None:
         pure = os.environ.get("PDRIVE_PURE_YAML", "") not in ("", "0")
     if pure or _CLoader is None:
@@ -278,13 +300,14 @@ _LIBYAML_ERRORS = (yaml.reader.ReaderError, yaml.scanner.ScannerError, yaml.pars
 class _errors_as_data_file_error:
     """Every YAML or construction error raised inside as one DataFileError with file:line."""
 
-    def __init__(self, path):
+    def __init__(self, path: str | Path) -> None:
         self.path = path
 
-    def __enter__(self):
+    def __enter__(self) -> _errors_as_data_file_error:
         return self
 
-    def __exit__(self, typ, e, tb):
+    def __exit__(self, typ: type[BaseException] | None, e: BaseException | None,
+                 tb: TracebackType | None) -> Literal[False]:
         if e is None or isinstance(e, DataFileError):
             return False
         path = self.path
@@ -328,7 +351,7 @@ def load_yaml_text(text: str, path: str | Path = "<string>", *, pure: bool | Non
         return _node_data(cls, text)
 
 
-def _node_data(cls, text: str) -> Any:
+def _node_data(cls: type[_PureLoader] | type[_CLoader], text: str) -> Any:
     loader = cls(text)
     try:
         return loader.get_single_data()
@@ -355,7 +378,7 @@ _DIRECT_TAGS = frozenset({"tag:yaml.org,2002:int", "tag:yaml.org,2002:float", "t
                           "tag:yaml.org,2002:null", "tag:yaml.org,2002:timestamp"})
 
 
-def _direct_data(loader) -> Any:
+def _direct_data(loader: _CLoader) -> Any:
     try:
         loader.get_event()                                  # StreamStart
         if not loader.check_event(yaml.DocumentStartEvent):
@@ -374,10 +397,12 @@ def _direct_data(loader) -> Any:
         raise _Fallback from None
 
 
-_implicit_tables: dict = {}
+#: first character of a plain scalar (None: any) -> [(tag, regexp)]
+_ImplicitTable = dict[str | None, list[tuple[str, re.Pattern[str]]]]
+_implicit_tables: dict[type[_CLoader], _ImplicitTable] = {}
 
 
-def _implicit_table(cls) -> dict:
+def _implicit_table(cls: type[_CLoader]) -> _ImplicitTable:
     """Resolver.resolve for plain scalars as a table: first character -> [(tag, regexp)], the
     class's implicit resolvers for that character followed by the wildcard ones (what resolve tries)."""
     table = _implicit_tables.get(cls)
@@ -390,7 +415,7 @@ def _implicit_table(cls) -> dict:
     return table
 
 
-def _direct_node(loader, ev, depth: int, table: dict) -> Any:
+def _direct_node(loader: _CLoader, ev: Any, depth: int, table: _ImplicitTable) -> Any:
     if depth > MAX_YAML_DEPTH:
         raise _Fallback
     kind = type(ev)
@@ -440,7 +465,7 @@ def _direct_node(loader, ev, depth: int, table: dict) -> Any:
     raise _Fallback
 
 
-def load_yaml_head(text: str, keys, path: str | Path = "<string>", *,
+def load_yaml_head(text: str, keys: Iterable[str], path: str | Path = "<string>", *,
                    pure: bool | None = None) -> LineDict | None:
     """The top-level keys `keys` of a YAML mapping document, read only as far as needed: parsing
     stops once all of them were seen, so a file whose first lines hold them is read only that far.
@@ -459,7 +484,7 @@ def load_yaml_head(text: str, keys, path: str | Path = "<string>", *,
         return _head_data(cls, text, set(keys))
 
 
-def _head_data(cls, text: str, want: set) -> LineDict | None:
+def _head_data(cls: type[_PureLoader] | type[_CLoader], text: str, want: set[str]) -> LineDict | None:
     loader = cls(text)
     try:
         loader.get_event()                              # StreamStart

@@ -25,7 +25,8 @@ import os
 import stat
 import tempfile
 from pathlib import Path
-from typing import IO, Any
+from types import TracebackType
+from typing import IO, Any, Literal, NoReturn
 
 from profidrive_cli import PdriveError, UsageError
 
@@ -59,7 +60,7 @@ def _is_special(p: Path) -> bool:
     return not stat.S_ISREG(st.st_mode) and not stat.S_ISDIR(st.st_mode)
 
 
-def format_by_suffix(path: str | os.PathLike, formats: dict[str, str], what: str,
+def format_by_suffix(path: str | os.PathLike[str], formats: dict[str, str], what: str,
                      named: str) -> str:
     """The format a report option writes, by the file name's extension (`formats`: suffix -> format,
     lower case); OutputPathError (exit 2, before anything is written) for another extension, so a
@@ -72,7 +73,7 @@ def format_by_suffix(path: str | os.PathLike, formats: dict[str, str], what: str
     return fmt
 
 
-def check_output_path(path: str | os.PathLike, what: str = "output file") -> Path:
+def check_output_path(path: str | os.PathLike[str], what: str = "output file") -> Path:
     """Check, before anything is sent or written, that `path` can be written; creates nothing.
 
     Raises OutputPathError with the path and the reason in one line.
@@ -124,7 +125,7 @@ class OutputFile:
     log). Write errors raise OutputWriteError; the target is then untouched.
     """
 
-    def __init__(self, path: str | os.PathLike, mode: str = "w", *, encoding: str | None = "utf-8",
+    def __init__(self, path: str | os.PathLike[str], mode: str = "w", *, encoding: str | None = "utf-8",
                  newline: str | None = None, what: str = "output file"):
         if mode not in ("w", "wb"):
             raise ValueError(mode)
@@ -157,7 +158,7 @@ class OutputFile:
             raise _path_error(self.what, self.path, _reason(e), e.errno) from None
         return self.file
 
-    def write(self, data) -> None:
+    def write(self, data: str | bytes) -> None:      # str in mode "w", bytes in "wb"
         f = self._check_open()
         try:
             f.write(data)
@@ -219,7 +220,7 @@ class OutputFile:
                 pass
             self._tmp = None
 
-    def _fail(self, e: OSError):
+    def _fail(self, e: OSError) -> NoReturn:
         self.discard()
         kept = ("; the previous file is untouched" if self.path.exists() and not
                 _is_special(self.path) else "")
@@ -227,11 +228,12 @@ class OutputFile:
         self.error.errno, self.error.reason = e.errno, _reason(e)
         raise self.error from None
 
-    def __enter__(self):
+    def __enter__(self) -> OutputFile:
         self.open()
         return self
 
-    def __exit__(self, exc_type, exc, tb):
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> Literal[False]:
         if exc_type is None:
             self.commit()
         else:
@@ -245,14 +247,14 @@ def _umask() -> int:
     return m
 
 
-def write_text_atomic(path: str | os.PathLike, text: str, what: str = "output file") -> Path:
+def write_text_atomic(path: str | os.PathLike[str], text: str, what: str = "output file") -> Path:
     """Write a whole text file at once, replacing the old one only on success."""
     with OutputFile(path, "w", what=what) as f:
         f.write(text)
     return Path(path)
 
 
-def write_bytes_atomic(path: str | os.PathLike, data: bytes, what: str = "output file") -> Path:
+def write_bytes_atomic(path: str | os.PathLike[str], data: bytes, what: str = "output file") -> Path:
     with OutputFile(path, "wb", what=what) as f:
         f.write(data)
     return Path(path)

@@ -19,9 +19,16 @@ line ("deadline"), both in the legend.
 from __future__ import annotations
 
 import io
+import os
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 from profidrive_cli import UsageError
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
 #: file suffix -> matplotlib format
 FORMATS = {".svg": "svg", ".png": "png"}
@@ -48,7 +55,7 @@ def require_matplotlib(what: str = "--plot") -> None:
         raise UsageError(f"{what} needs matplotlib, which is not installed: {INSTALL_HINT}") from None
 
 
-def plot_format(path, what: str = "--plot") -> str:
+def plot_format(path: str | os.PathLike[str], what: str = "--plot") -> str:
     from profidrive_cli.outfile import format_by_suffix
     return format_by_suffix(path, FORMATS, what, ".svg or .png")
 
@@ -59,17 +66,19 @@ class Trace:
     label ("d002 [A]"), and marks (time, text) such as "stop"."""
     title: str = ""
     speed_unit: str = "Hz"
-    t: list = field(default_factory=list)
-    reference: list = field(default_factory=list)
-    actual: list = field(default_factory=list)
-    monitors: dict = field(default_factory=dict)      # label -> list of values (None: not read yet)
-    marks: list = field(default_factory=list)
-    band: tuple | None = None            # (low, high, label): the speed band a step expected
-    deadlines: list = field(default_factory=list)      # (time, label): by when it expected it
+    t: list[float] = field(default_factory=list)
+    reference: list[float | None] = field(default_factory=list)
+    actual: list[float | None] = field(default_factory=list)
+    #: label -> list of values (None: not read yet)
+    monitors: dict[str, list[float | None]] = field(default_factory=dict)
+    marks: list[tuple[float, str]] = field(default_factory=list)
+    band: tuple[float, float, str] | None = None            # (low, high, label): the speed band a step expected
+    deadlines: list[tuple[float, str]] = field(default_factory=list)      # (time, label): by when it expected it
     _stride: int = 1
     _skip: int = 0
 
-    def add(self, t: float, reference=None, actual=None, monitors: dict | None = None) -> None:
+    def add(self, t: float, reference: float | None = None, actual: float | None = None,
+            monitors: dict[str, float | None] | None = None) -> None:
         if self._skip:
             self._skip -= 1
             return
@@ -128,7 +137,7 @@ def render(trace: Trace, fmt: str = "svg", width_in: float = 9.0) -> bytes:
     return buf.getvalue()
 
 
-def figure(trace: Trace, width_in: float = 9.0):
+def figure(trace: Trace, width_in: float = 9.0) -> Figure:
     """The matplotlib Figure that render() saves (Agg backend)."""
     require_matplotlib()
     import matplotlib
@@ -182,13 +191,13 @@ def figure(trace: Trace, width_in: float = 9.0):
     return fig
 
 
-def _legend_outside(ax) -> None:
+def _legend_outside(ax: Axes) -> None:
     """The legend to the right of the axes (constrained layout makes room): it covers no curve."""
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, fontsize=8,
               frameon=False)
 
 
-def _mark_rows(marks: list, t: list) -> list[int]:
+def _mark_rows(marks: list[tuple[float, str]], t: list[float]) -> list[int]:
     """The line of the band each phase name goes on: the next line up when it would start within
     12 % of the time axis of the previous name on that line (names of close phases do not overlap)."""
     if not marks:
@@ -206,11 +215,11 @@ def _mark_rows(marks: list, t: list) -> list[int]:
     return rows
 
 
-def _nan(v):
+def _nan(v: float | None) -> float:
     return float("nan") if v is None else v
 
 
-def write_plot(trace: Trace, path, what: str = "--plot"):
+def write_plot(trace: Trace, path: str | os.PathLike[str], what: str = "--plot") -> Path:
     """Render and write: a temporary file beside `path`, renamed over it when complete."""
     from profidrive_cli.outfile import write_bytes_atomic
     return write_bytes_atomic(path, render(trace, plot_format(path, what)), what=what)

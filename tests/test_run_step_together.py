@@ -82,3 +82,59 @@ def test_a_together_step_is_handed_to_together_py_with_everything(monkeypatch):
     r = SimpleNamespace(step=SimpleNamespace(args=a))
     assert run_step.STEP.execute(run, sr, r, d, h) == "done together"
     assert got["args"] == (run, sr, r, d, h, a, run_step.run_measured)
+
+
+def test_a_trip_while_another_drive_still_accelerates_fails_both_in_words():
+    # c1 trips at its first cycle while c2 is still on its way to 10 Hz: a trip ends the run for all.
+    # c2 never reached the band: its outcome says why, in words (it was an internal TypeError: the
+    # message formatted the time to the band, None, with :.2f, and c1's trip was lost with it)
+    from profidrive_cli.checklist.steps import together
+    from profidrive_cli.drives.base import DriveStatus
+
+    class Clock:
+        t = 0.0
+
+        def now(self):
+            return self.t
+
+    clock = Clock()
+
+    class FakeDrive:
+        channel = clock
+
+        def __init__(self, trips):
+            self.trips, self.hz = trips, 0.0
+
+        def max_frequency(self):
+            return 50.0
+
+        def _st(self, running=True):
+            fault = self.trips and clock.t > 0
+            return DriveStatus("fault" if fault else "operation", running and not fault, fault, {},
+                               self.hz * 2, self.hz, fault_code="OC1" if fault else None)
+
+        def status(self):
+            return self._st(running=False)
+
+        def set_speed_hz(self, hz):
+            pass
+
+        def start(self, timeout):
+            return self._st()
+
+        def cycle(self):
+            clock.t += 0.01
+            self.hz += 0.1
+            return self._st()
+
+    a = {"unit": "hz", "speed": 10.0, "direction": "forward", "duration": 0.0, "tolerance": 0.5,
+         "within": 10.0}
+    stopped = SimpleNamespace(how="normal", stopped=True)
+    drives = [together._Drive(n, FakeDrive(trips), SimpleNamespace(address=ad, stop_report=stopped), a)
+              for n, ad, trips in (("c1", 3, True), ("c2", 4, False))]
+    run = SimpleNamespace(progress=lambda *args: None)
+    together._reach_and_hold(run, None, None, a, drives, SimpleNamespace(end_round=lambda: None))
+    c1, c2 = (x.result(a, "the other", lambda *args: {}) for x in drives)
+    assert c1[:2] == (False, "the drive tripped while accelerating (OC1)")
+    assert c2[0] is False
+    assert c2[1] == "not in the band when the run ended: c1 tripped (a trip ends the run for all)"

@@ -14,13 +14,16 @@ import difflib
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, Literal, NoReturn, Protocol, Sequence, TypeGuard, overload
 
 from profidrive_cli import PdriveError, UsageError
 from profidrive_cli.datafile import DataFileError, LineDict, LineList
 
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.drives.profile import ParamDef, Profile
 
-def tname(v) -> str:
+
+def tname(v: object) -> str:
     if isinstance(v, bool):
         return "true/false"
     if isinstance(v, (int, float)):
@@ -36,20 +39,72 @@ def tname(v) -> str:
     return type(v).__name__
 
 
-def is_num(v) -> bool:
+def is_num(v: object) -> TypeGuard[float]:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
-def fmt(v) -> str:
+def fmt(v: object) -> str:
     return f"{v:g}" if isinstance(v, float) else str(v)
 
 
-def line_at(node, key=None, default=0) -> int:
+def line_at(node: object, key: object = None, default: int = 0) -> int:
     if key is not None and isinstance(node, LineDict):
         return node.line_of(key)
     if key is not None and isinstance(node, LineList) and isinstance(key, int):
         return node.line_of(key)
-    return getattr(node, "line", default) or default
+    line: int | None = getattr(node, "line", default)     # LineDict / LineList: int
+    return line or default
+
+
+# What a step type's check gets of spec.py (which imports the step types, so they cannot import it):
+# spec.Step, spec.StationSpec and spec._RawStep satisfy these.
+
+#: a step's typed fields (validate's args, spec.Step.args): field name -> value (ParamTarget, number, ...)
+StepArgs = dict[str, Any]
+
+
+class StepFacts(Protocol):
+    """spec.Step: one step as it runs on one station."""
+    @property
+    def index(self) -> int: ...
+    @property
+    def type(self) -> str: ...
+    @property
+    def args(self) -> StepArgs: ...
+
+
+class StationFacts(Protocol):
+    """spec.StationSpec: the station a step is validated for and runs on."""
+    @property
+    def name(self) -> str: ...
+    @property
+    def address(self) -> int: ...
+    @property
+    def profile(self) -> Profile: ...
+    @property
+    def ident(self) -> int: ...
+    @property
+    def gsd(self) -> str | None: ...
+    @property
+    def layout(self) -> str: ...
+    @property
+    def flag_names(self) -> list[str]: ...
+    @property
+    def steps(self) -> Sequence[StepFacts]: ...
+
+
+class RawStepFacts(Protocol):
+    """spec._RawStep: the step as written (before a station's variables and checks)."""
+    @property
+    def index(self) -> int: ...
+    @property
+    def type(self) -> str: ...
+    @property
+    def line(self) -> int: ...
+    @property
+    def body_line(self) -> int: ...
+    @property
+    def stations(self) -> list[tuple[str, int]] | None: ...
 
 
 class Skip(Exception):
@@ -61,7 +116,7 @@ class ParamTarget:
     """A parameter a step reads or writes, resolved for one station's profile."""
     code: str                      # as the checklist wrote it (after variables)
     label: str                     # canonical code for the family ("F07", "PNU947[9]", "REG0x0180")
-    param: Any = None              # profile ParamDef, None for raw addresses
+    param: ParamDef | None = None  # the profile's, None for raw addresses
     unit: str = ""
 
     @property
@@ -86,23 +141,24 @@ class FieldChecker:
             self._seen.add(key)
             self.errors.append(DataFileError(self.path, line, msg))
 
-    def fail(self, line: int | None, msg: str):
+    def fail(self, line: int | None, msg: str) -> NoReturn:
         self.err(line, msg)
         raise Skip()
 
-    def unknown_key(self, k, known, what) -> str:
+    def unknown_key(self, k: object, known: Sequence[str], what: str) -> str:
         close = difflib.get_close_matches(str(k), list(known), 1)
         return f"unknown {what} {k!r}" + (f" (did you mean {close[0]}?)" if close else
                                           f" (known: {', '.join(known)})")
 
-    def param(self, st, code: str, line: int, where: str) -> ParamTarget:
+    def param(self, st: StationFacts, code: str, line: int, where: str) -> ParamTarget:
         try:
             label, p = resolve_param(st.profile, code)
         except PdriveError as e:
             self.fail(line, f"{where}: {e} (station {st.name!r})")
         return ParamTarget(code=code, label=label, param=p, unit=(p.unit if p is not None else ""))
 
-    def fields(self, rs, body, allowed: tuple, shorthand: str | None = None, required: tuple = ()) -> LineDict:
+    def fields(self, rs: RawStepFacts, body: Any, allowed: tuple[str, ...], shorthand: str | None = None,
+               required: tuple[str, ...] = ()) -> LineDict:
         """The step's mapping (or its shorthand scalar as `shorthand: value`), unknown keys rejected."""
         w = f"step {rs.index} ({rs.type})"
         if body is None:
@@ -130,7 +186,21 @@ class FieldChecker:
             raise Skip()
         return d
 
-    def num(self, rs, d: LineDict, key, default=None, minimum=None, positive=False, required=False):
+    @overload
+    def num(self, rs: RawStepFacts, d: LineDict, key: str, default: float, minimum: float | None = None,
+            positive: bool = False, required: bool = False) -> float: ...
+
+    @overload
+    def num(self, rs: RawStepFacts, d: LineDict, key: str, default: None = None, minimum: float | None = None,
+            positive: bool = False, *, required: Literal[True]) -> float: ...
+
+    @overload
+    def num(self, rs: RawStepFacts, d: LineDict, key: str, default: None = None, minimum: float | None = None,
+            positive: bool = False, required: bool = False) -> float | None: ...
+
+    def num(self, rs: RawStepFacts, d: LineDict, key: str, default: float | None = None,
+            minimum: float | None = None, positive: bool = False, required: bool = False) -> float | None:
+        """The number d[key] (int or float, checked), else `default` (None: not given)."""
         w = f"step {rs.index} ({rs.type})"
         if key not in d:
             if required:
@@ -145,14 +215,14 @@ class FieldChecker:
             self.fail(d.line_of(key), f"{w}: '{key}' must be above 0, got {fmt(v)}")
         return v
 
-    def code_field(self, st, rs, d, key="param") -> ParamTarget:
+    def code_field(self, st: StationFacts, rs: RawStepFacts, d: LineDict, key: str = "param") -> ParamTarget:
         v = d[key]
         if not isinstance(v, (str, int)) or isinstance(v, bool):
             self.fail(d.line_of(key), f"step {rs.index} ({rs.type}): '{key}' must be a parameter code, "
                       f"got {tname(v)}")
         return self.param(st, str(v), d.line_of(key), f"step {rs.index} ({rs.type})")
 
-    def need_param_channel(self, st, rs):
+    def need_param_channel(self, st: StationFacts, rs: RawStepFacts) -> None:
         """Fail the step when the station's layout has no parameter channel (PKW / handshake)."""
         if not layout_has_params(st.profile, st.layout):
             self.fail(rs.line, f"step {rs.index} ({rs.type}): station {st.name!r} uses layout {st.layout}, "
@@ -160,23 +230,26 @@ class FieldChecker:
                       f"{param_layouts(st.profile)})")
 
 
-    def need_capability(self, st, rs, name: str, line: int | None = None) -> bool:
+    def need_capability(self, st: StationFacts, rs: RawStepFacts, name: str, line: int | None = None) -> bool:
         """Fail the step when the station's card cannot do `name` on its layout (the profile's
         `capabilities:`), in the words the CLI and the drive use; True when it can."""
-        msg = st.profile.capabilities.refusal(name, st.layout)
+        caps = st.profile.capabilities
+        assert caps is not None                 # every loaded profile has them (parse_capabilities)
+        msg = caps.refusal(name, st.layout)
         if msg is None:
             return True
         self.fail(line or rs.line, f"step {rs.index} ({rs.type}): station {st.name!r}: {msg}")
         return False
 
 
-def resolve_param(profile, code: str) -> tuple[str, Any]:
+def resolve_param(profile: Profile, code: str) -> tuple[str, ParamDef | None]:
     """(canonical label, ParamDef or None for a raw address) for `code` in this profile's family, the way
     the family's Drive resolves it; UsageError naming the closest codes when it is unknown."""
     from profidrive_cli.drives import drive_class
     text = str(code).strip()
     try:
-        return drive_class(profile).param_label_for(profile, text)     # a class fact: no Drive built
+        found: tuple[str, ParamDef | None] = drive_class(profile).param_label_for(profile, text)  # a class fact
+        return found                                                    # (no Drive built)
     except UsageError as e:
         msg = str(e)
         if "unknown" in msg.lower():
@@ -192,7 +265,7 @@ def resolve_param(profile, code: str) -> tuple[str, Any]:
         raise UsageError(msg) from None
 
 
-def range_problem(p, value) -> str | None:
+def range_problem(p: ParamDef, value: float) -> str | None:
     """The profile's limits for a value (Moeller-style `ranges` lists first), None when inside."""
     rg = p.extra.get("ranges")
     u = f" {p.unit}" if p.unit else ""
@@ -209,10 +282,10 @@ def range_problem(p, value) -> str | None:
     return None
 
 
-def layout_has_params(profile, layout: str) -> bool:
+def layout_has_params(profile: Profile, layout: str) -> bool:
     return bool(profile.layouts[layout].pkw)
 
 
-def param_layouts(profile) -> str:
+def param_layouts(profile: Profile) -> str:
     return ", ".join(n for n, l in profile.layouts.items() if l.pkw) or "none"
 

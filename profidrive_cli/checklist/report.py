@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import xml.etree.ElementTree as ET
 from pathlib import Path
+from typing import Any
 
 from profidrive_cli.checklist.runner import ERROR, FAILED, NOT_RUN, PASSED, SKIPPED, RunResult, StationResult
 from profidrive_cli.checklist.report_words import hexv as _hexv
@@ -60,10 +61,10 @@ def to_json(result: RunResult) -> str:
     return json.dumps(d, indent=2, ensure_ascii=False, default=_default) + "\n"
 
 
-def _identity_json(d: dict | None) -> dict | None:
+def _identity_json(d: dict[str, Any] | None) -> dict[str, Any] | None:
     if not d:
         return d
-    out: dict = {}
+    out: dict[str, Any] = {}
     for k, v in d.items():
         if k == "address":
             out["station"] = v
@@ -79,7 +80,7 @@ def _identity_json(d: dict | None) -> dict | None:
 _FINAL_NAMES = {"speed_hz": "actual_hz", "speed_percent": "actual_percent"}
 
 
-def _measured_json(v):
+def _measured_json(v: object) -> object:
     """A step's measured values with the status in the contract's names: speed_hz / speed_percent ->
     actual_hz / actual_percent, a status's `flags` (the bits set) as a list; the rest as measured."""
     if isinstance(v, list):
@@ -93,7 +94,7 @@ def _measured_json(v):
     return out
 
 
-def _station_json(s: dict) -> dict:
+def _station_json(s: dict[str, Any]) -> dict[str, Any]:
     out = {("station" if k == "address" else k): v for k, v in s.items()}
     out["steps"] = [{**st, "measured": _measured_json(st.get("measured"))} for st in s.get("steps", [])]
     out["expected_identity"] = _identity_json(s.get("expected_identity"))
@@ -107,7 +108,7 @@ def _station_json(s: dict) -> dict:
     return out
 
 
-def _default(o):
+def _default(o: object) -> list[Any] | str:
     if isinstance(o, (set, tuple)):
         return list(o)
     if isinstance(o, Path):
@@ -123,7 +124,7 @@ _MARK = {PASSED: "✅ passed", FAILED: "❌ failed", ERROR: "❌ error", SKIPPED
          "interrupted": "⚠ interrupted"}
 
 
-def _md(text) -> str:
+def _md(text: object) -> str:
     """One table cell: no pipes or newlines."""
     s = "" if text is None else str(text)
     return s.replace("\\", "\\\\").replace("|", "\\|").replace("\n", " ").strip()

@@ -13,7 +13,8 @@ from __future__ import annotations
 from html import escape
 
 from profidrive_cli.checklist.report_words import hexv, snap, val
-from profidrive_cli.checklist.runner import ERROR, FAILED, NOT_RUN, PASSED, SKIPPED, RunResult, StationResult
+from profidrive_cli.checklist.runner import (ERROR, FAILED, NOT_RUN, PASSED, SKIPPED, RunResult, StationResult,
+                                             StepResult)
 from profidrive_cli.checklist.steptrace import PLOTTED, to_plot_trace
 
 RESULT = {PASSED: ("passed", "pass"), FAILED: ("failed", "fail"), ERROR: ("error", "fail"),
@@ -31,7 +32,7 @@ table { border-collapse: collapse; margin: 0.8em 0; } td, th { border: 1px solid
 """
 
 
-def _e(v) -> str:
+def _e(v: object) -> str:
     return escape("" if v is None else str(v))
 
 
@@ -131,9 +132,10 @@ def _station(sr: StationResult, plots: bool) -> list[str]:
     return out
 
 
-def _svg(r, title: str) -> str:
+def _svg(r: StepResult, title: str) -> str:
     """The step's plot as inline SVG (the XML declaration and DOCTYPE dropped)."""
     from profidrive_cli.plot import render
+    assert r.trace is not None              # only a step with a trace is plotted (_station)
     svg = render(to_plot_trace(r.trace, title, r.expected), "svg", width_in=8.0).decode("utf-8")
     i = svg.find("<svg")
     return svg[i:] if i >= 0 else svg

@@ -3,8 +3,12 @@ parameter snapshot entry, an ident in hex. Shared by report.py and report_html.p
 
 from __future__ import annotations
 
+from typing import Any, TypeVar
 
-def val(v) -> str:
+_T = TypeVar("_T")
+
+
+def val(v: object) -> str:
     if isinstance(v, float):
         return f"{v:g}"
     if isinstance(v, dict):
@@ -16,7 +20,7 @@ def val(v) -> str:
     return "" if v is None else str(v)
 
 
-def snap(e) -> str:
+def snap(e: dict[str, Any] | None) -> str:
     if not e:
         return "—"
     if "error" in e:
@@ -24,7 +28,7 @@ def snap(e) -> str:
     return f"{val(e['value'])}{(' ' + e['unit']) if e.get('unit') else ''}"
 
 
-def hexv(v):
+def hexv(v: _T) -> _T | str:
     return f"0x{v:04X}" if isinstance(v, int) and not isinstance(v, bool) else v
 
 

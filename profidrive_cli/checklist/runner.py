@@ -21,15 +21,25 @@ import contextlib
 import signal
 import threading
 import time
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
-from typing import Any, Callable
+from types import FrameType
+from typing import TYPE_CHECKING, Any, Callable, Iterator, NoReturn
 
 from profidrive_cli import PdriveError, __version__
 from profidrive_cli.checklist import steptrace
+from profidrive_cli.checklist.fields import StationFacts
 from profidrive_cli.checklist.spec import Checklist, StationSpec, Step
 from profidrive_cli.checklist.steps import STEPS
 from profidrive_cli.checklist.steps.base import StepFailed, hex4, status_dict
+from profidrive_cli.checklist.steptrace import StepTrace
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.api.bus import Bus
+    from profidrive_cli.checklist.fields import ParamTarget
+    from profidrive_cli.drives.base import Drive, DriveStatus
+    from profidrive_cli.session import DriveSession
 
 PASSED, FAILED, ERROR, SKIPPED, NOT_RUN = "passed", "failed", "error", "skipped", "not run"
 
@@ -38,7 +48,7 @@ class Terminated(KeyboardInterrupt):
     """SIGTERM between stations (while no DriveSession is open), turned into an interrupt."""
 
 
-def _interrupts() -> tuple:
+def _interrupts() -> tuple[type[BaseException], ...]:
     from profidrive_cli.session import SessionTerminated
     return (KeyboardInterrupt, SessionTerminated)
 
@@ -56,14 +66,14 @@ def _interrupt_name(e: BaseException) -> str:
 
 
 @contextlib.contextmanager
-def signals_as_interrupts():
+def signals_as_interrupts() -> Iterator[None]:
     """SIGTERM raises Terminated in the main thread while the block runs (SIGINT already raises
     KeyboardInterrupt). Outside the main thread this does nothing."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
-    def on_term(signum, frame):
+    def on_term(signum: int, frame: FrameType | None) -> NoReturn:
         raise Terminated()
     old = signal.signal(signal.SIGTERM, on_term)
     try:
@@ -86,19 +96,19 @@ class StepResult:
     step: Step
     status: str = NOT_RUN
     message: str = ""
-    measured: dict = field(default_factory=dict)
-    expected: dict = field(default_factory=dict)
+    measured: dict[str, Any] = field(default_factory=dict)
+    expected: dict[str, Any] = field(default_factory=dict)
     started: str | None = None
     finished: str | None = None
     duration_s: float = 0.0
     #: the drive cycle by cycle during a step that moves it (steptrace.StepTrace; not in the JSON)
-    trace: Any = None
+    trace: StepTrace | None = None
 
     @property
     def ok(self) -> bool:
         return self.status in (PASSED, SKIPPED)
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         d = self.step.to_dict()
         d.update({"status": self.status, "message": self.message, "expected": self.expected,
                   "measured": self.measured, "started": self.started, "finished": self.finished,
@@ -111,23 +121,24 @@ class StationResult:
     spec: StationSpec
     steps: list[StepResult]
     status: str = NOT_RUN
-    identity: dict = field(default_factory=dict)        # what the bus reported
+    identity: dict[str, Any] = field(default_factory=dict)        # what the bus reported
     error: str | None = None                            # the session could not open, or an interrupt
-    snapshot_before: dict = field(default_factory=dict)
-    snapshot_after: dict = field(default_factory=dict)
+    #: parameter label -> {"value", "unit", "raw", "name"} or {"error"}
+    snapshot_before: dict[str, dict[str, Any]] = field(default_factory=dict)
+    snapshot_after: dict[str, dict[str, Any]] = field(default_factory=dict)
     snapshot_note: str = ""
-    final_status: dict = field(default_factory=dict)    # the drive's status at the end (left stopped?)
+    final_status: dict[str, Any] = field(default_factory=dict)    # the drive's status at the end (left stopped?)
     started: str | None = None
     finished: str | None = None
     duration_s: float = 0.0
 
-    def counts(self) -> dict:
+    def counts(self) -> dict[str, int]:
         c = {PASSED: 0, FAILED: 0, ERROR: 0, SKIPPED: 0, NOT_RUN: 0}
         for r in self.steps:
             c[r.status] += 1
         return c
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {"name": self.spec.name, "address": self.spec.address, "status": self.status,
                 "error": self.error, "expected_identity": self.spec.identity(), "identity": self.identity,
                 "started": self.started, "finished": self.finished, "duration_s": round(self.duration_s, 3),
@@ -146,7 +157,7 @@ class RunResult:
     finished: str = ""
     duration_s: float = 0.0
     interrupted: str | None = None      # "SIGINT" / "SIGTERM"
-    options: dict = field(default_factory=dict)
+    options: dict[str, Any] = field(default_factory=dict)
 
     @property
     def passed(self) -> bool:
@@ -158,7 +169,7 @@ class RunResult:
             return "interrupted"
         return PASSED if self.passed else FAILED
 
-    def counts(self) -> dict:
+    def counts(self) -> dict[str, int]:
         c = {PASSED: 0, FAILED: 0, ERROR: 0, SKIPPED: 0, NOT_RUN: 0}
         for s in self.stations:
             for k, v in s.counts().items():
@@ -174,7 +185,7 @@ class RunResult:
                 return s, None
         return None
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         cl = self.checklist
         return {"pdrive": __version__, "checklist": {"name": cl.name, "description": cl.description,
                                                       "file": str(cl.path), "sha256": cl.sha256},
@@ -196,10 +207,14 @@ class StationHandle:
     session behind them (api.Bus.session: a session.DriveSession), whose checked write_param, save,
     safe stop, counters and master the steps use. closed(): after the station is left, what the safe
     stop on the way out did (dict for the report)."""
-    drive: Any
-    identity: dict            # address, ident (int), profile (name), gsd (file name or None), layout, ...
-    session: Any
-    closed: Callable[[], dict] | None = None
+    drive: Drive
+    identity: dict[str, Any]  # address, ident (int), profile (name), gsd (file name or None), layout, ...
+    session: DriveSession
+    closed: Callable[[], dict[str, Any]] | None = None
+
+
+#: Runner's open_station: a station's spec -> a context manager yielding its StationHandle
+OpenStation = Callable[[StationFacts], AbstractContextManager[StationHandle]]
 
 
 class Observer:
@@ -228,10 +243,10 @@ class Runner:
     are confirmed (the report says so).
     """
 
-    def __init__(self, checklist: Checklist, open_station, *, port: str = "", yes: bool = False,
+    def __init__(self, checklist: Checklist, open_station: OpenStation, *, port: str = "", yes: bool = False,
                  ask: Callable[[str], bool] | None = None, dry_run: bool = False,
-                 observer: Observer | None = None, progress_interval: float = 0.25, options: dict | None = None,
-                 trace_steps: bool = False):
+                 observer: Observer | None = None, progress_interval: float = 0.25,
+                 options: dict[str, Any] | None = None, trace_steps: bool = False) -> None:
         self.cl = checklist
         #: record the drive cycle by cycle during the steps that move it (an HTML report plots them)
         self.trace_steps = trace_steps
@@ -367,14 +382,14 @@ class Runner:
             self.obs.step_finished(sr, r)
 
     # -- what step types use ------------------------------------------------------------------
-    def progress(self, sr, r, text: str, force: bool = False) -> None:
+    def progress(self, sr: StationResult, r: StepResult, text: str, force: bool = False) -> None:
         """Tell the observer how a step is getting on (at most every progress_interval s unless force)."""
         t = time.monotonic()
         if force or t - self._progress_at >= self.progress_interval:
             self._progress_at = t
             self.obs.step_progress(sr, r, text)
 
-    def _snapshot(self, sr: StationResult, drive, which: str) -> None:
+    def _snapshot(self, sr: StationResult, drive: Drive, which: str) -> None:
         target = sr.snapshot_before if which == "before" else sr.snapshot_after
         codes = _snapshot_targets(sr.spec)
         if not codes:
@@ -407,7 +422,7 @@ class Runner:
             sr.final_status = {"error": f"could not confirm the drive stopped: {e}"}
 
     @contextlib.contextmanager
-    def _traced(self, r: StepResult, drive):
+    def _traced(self, r: StepResult, drive: Drive) -> Iterator[None]:
         """Record the drive's cycles during a step that moves it (for the HTML report's plots)."""
         if not self.trace_steps or r.step.type not in steptrace.PLOTTED:
             yield
@@ -416,7 +431,8 @@ class Runner:
             r.trace = tr
             yield
 
-    def cycle_for(self, sr, r, drive, seconds: float, text: str = "") -> Any:
+    def cycle_for(self, sr: StationResult, r: StepResult, drive: Drive, seconds: float,
+                  text: str = "") -> DriveStatus:
         """Keep exchanging cyclic data for `seconds` on the drive's clock; returns the last status."""
         ch = drive.channel
         end = ch.now() + seconds
@@ -434,14 +450,14 @@ class Runner:
 # =============================================================================================
 
 
-def _identity_dict(identity) -> dict:
+def _identity_dict(identity: dict[str, Any] | None) -> dict[str, Any]:
     out = {}
     for k, v in dict(identity or {}).items():
         out[k] = hex4(v) if k == "ident" else v
     return out
 
 
-def _snapshot_targets(spec: StationSpec) -> list:
+def _snapshot_targets(spec: StationSpec) -> list[ParamTarget]:
     """The header/station snapshot list plus every parameter the station's steps read or write."""
     out = list(spec.snapshot)
     for s in spec.steps:
@@ -461,8 +477,9 @@ def dry_run_port(checklist: Checklist) -> str:
     return "sim://?stations=" + ",".join(f"{s.address}:{s.profile.name}" for s in checklist.stations)
 
 
-def session_opener(bus, *, cycle_hz: float | None = None, watchdog_ms: float | None = None,
-                   on_message: Callable[[str], None] | None = None, checklist: Checklist | None = None):
+def session_opener(bus: Bus, *, cycle_hz: float | None = None, watchdog_ms: float | None = None,
+                   on_message: Callable[[str], None] | None = None,
+                   checklist: Checklist | None = None) -> OpenStation:
     """open_station for Runner: one session per station on one bus, the front door the CLI's drive
     commands use (api.Bus.session; the caller closes the bus after the run). The session identifies
     the station, refuses a station of another family, parameterises it with the watchdog armed, and
@@ -472,7 +489,7 @@ def session_opener(bus, *, cycle_hz: float | None = None, watchdog_ms: float | N
     from profidrive_cli.session import DEFAULT_WATCHDOG_MS
 
     @contextlib.contextmanager
-    def open_station(spec: StationSpec):
+    def open_station(spec: StationFacts) -> Iterator[StationHandle]:
         wd, raised = watchdog_ms or DEFAULT_WATCHDOG_MS, None
         if checklist is not None:
             wd, raised = group_watchdog(checklist, spec, bus.master, wd)
@@ -481,7 +498,7 @@ def session_opener(bus, *, cycle_hz: float | None = None, watchdog_ms: float | N
         if raised is not None:
             s.warn(f"{spec.name}: {raised}")
 
-        def closed() -> dict:
+        def closed() -> dict[str, Any]:
             rep = s.stop_report
             if rep is None:
                 return {}
@@ -492,16 +509,14 @@ def session_opener(bus, *, cycle_hz: float | None = None, watchdog_ms: float | N
                     out["state"] = rep.status.state
             return out
 
-        handle = StationHandle(None, {}, s, closed=closed)
         with s:
-            handle.drive = s.drive
-            handle.identity = session_identity(s)
-            yield handle
+            drive = s.need_drive()                  # connected: the session's Drive
+            yield StationHandle(drive, session_identity(s), s, closed=closed)
 
     return open_station
 
 
-def session_identity(s) -> dict:
+def session_identity(s: DriveSession) -> dict[str, Any]:
     """The identity a DriveSession found: address, ident, profile, layout, GSD file of the ident, DP state."""
     gsd = None
     try:

@@ -20,12 +20,15 @@ import hashlib
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, Mapping
 
 from profidrive_cli import PdriveError, UsageError
-from profidrive_cli.checklist.fields import FieldChecker, ParamTarget, Skip, fmt, line_at, tname
+from profidrive_cli.checklist.fields import FieldChecker, ParamTarget, Skip, StepArgs, fmt, line_at, tname
 from profidrive_cli.checklist.steps import STEPS
 from profidrive_cli.datafile import DataFileError, LineDict, LineList, load_yaml_text, read_text
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.drives.profile import Profile
 
 COMMON_KEYS = ("name", "on_fail", "stations")
 ON_FAIL = ("stop", "continue")
@@ -35,6 +38,9 @@ STATION_KEYS = ("name", "address", "profile", "ident", "gsd", "layout", "variabl
 
 _VAR_RE = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)\}")
 _NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+
+#: a checklist variable's value (`variables:`, --var NAME=VALUE)
+VarValue = str | int | float | bool
 
 
 class ChecklistError(DataFileError):
@@ -61,7 +67,7 @@ class Step:
     index: int                     # position in the file's steps list, 1-based
     type: str
     line: int
-    args: dict                     # typed fields of the step
+    args: StepArgs                 # typed fields of the step
     title: str                     # what the step does, in words
     name: str | None = None        # the checklist's own name for the step
     on_fail: str = "stop"
@@ -70,7 +76,7 @@ class Step:
     def label(self) -> str:
         return self.name or self.title
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         args = {}
         for k, v in self.args.items():
             if isinstance(v, ParamTarget):
@@ -84,18 +90,18 @@ class Step:
 class StationSpec:
     name: str
     address: int
-    profile: Any                   # drives.profile.Profile
+    profile: Profile
     ident: int                     # the ident the station must answer with
     ident_source: str              # "checklist" | "gsd" | "profile"
     gsd: str | None                # GSD file name the ident must map to (None: not checked)
     layout: str
-    variables: dict
+    variables: dict[str, VarValue]
     snapshot: list[ParamTarget]
     line: int
     steps: list[Step] = field(default_factory=list)
     flag_names: list[str] = field(default_factory=list)
 
-    def identity(self) -> dict:
+    def identity(self) -> dict[str, Any]:
         return {"name": self.name, "address": self.address, "profile": self.profile.name,
                 "family": self.profile.family, "ident": f"0x{self.ident:04X}",
                 "ident_source": self.ident_source, "gsd": self.gsd, "layout": self.layout}
@@ -110,7 +116,7 @@ class Checklist:
     port: str | None
     baud: str | None
     master_address: int | None
-    variables: dict                # global values after --var
+    variables: dict[str, VarValue]  # global values after --var
     stations: list[StationSpec]
     step_count: int                # steps in the file
     on_fail: str = "stop"          # the header's default: also decides whether a station that cannot be
@@ -136,9 +142,9 @@ class Checklist:
 # =============================================================================================
 
 
-def parse_var_assignments(items: list[str] | tuple[str, ...]) -> dict:
+def parse_var_assignments(items: list[str] | tuple[str, ...]) -> dict[str, VarValue]:
     """--var NAME=VALUE (VALUE read as a YAML scalar: 0.5 -> float, 10 -> int, text -> str)."""
-    out = {}
+    out: dict[str, VarValue] = {}
     for item in items or ():
         name, eq, text = item.partition("=")
         name = name.strip()
@@ -154,11 +160,12 @@ def parse_var_assignments(items: list[str] | tuple[str, ...]) -> dict:
     return out
 
 
-def load_checklist(path: str | Path, overrides: dict | None = None) -> Checklist:
+def load_checklist(path: str | Path, overrides: dict[str, VarValue] | None = None) -> Checklist:
     return load_checklist_text(read_text(path), Path(path), overrides)
 
 
-def load_checklist_text(text: str, path: str | Path = "<string>", overrides: dict | None = None) -> Checklist:
+def load_checklist_text(text: str, path: str | Path = "<string>",
+                        overrides: dict[str, VarValue] | None = None) -> Checklist:
     try:
         doc = load_yaml_text(text, path)
     except ChecklistError:
@@ -180,12 +187,12 @@ def load_checklist_text(text: str, path: str | Path = "<string>", overrides: dic
 
 
 class _Validator(FieldChecker):
-    def __init__(self, path: Path, overrides: dict):
+    def __init__(self, path: Path, overrides: dict[str, VarValue]) -> None:
         super().__init__(path)
         self.overrides = overrides
 
     # -- header --------------------------------------------------------------------------------
-    def checklist(self, doc, sha: str) -> Checklist | None:
+    def checklist(self, doc: Any, sha: str) -> Checklist | None:      # doc: the YAML as loaded
         if not isinstance(doc, LineDict):
             self.err(line_at(doc, default=1), "a checklist must be a YAML mapping with name, stations and steps")
             return None
@@ -251,13 +258,15 @@ class _Validator(FieldChecker):
                          variables=variables, stations=stations, step_count=len(raw_steps),
                          on_fail=default_on_fail)
 
-    def _station_declares(self, doc, key) -> bool:
+    def _station_declares(self, doc: LineDict, key: str) -> bool:
         for s in doc.get("stations") or []:
             if isinstance(s, LineDict) and isinstance(s.get("variables"), dict) and key in s["variables"]:
                 return True
         return False
 
-    def opt(self, node: LineDict, key: str, types, required=False, default=None, what: str = ""):
+    def opt(self, node: LineDict, key: str, types: type | tuple[type, ...], required: bool = False,
+            default: Any = None, what: str = "") -> Any:
+        """node[key] when it is of `types` (Any: the caller's `types` says which), else `default`."""
         if key not in node:
             if required:
                 self.err(line_at(node), f"{what}missing field '{key}'")
@@ -273,9 +282,9 @@ class _Validator(FieldChecker):
             return default
         return v
 
-    def variables(self, node: LineDict, key: str) -> dict:
+    def variables(self, node: LineDict, key: str) -> dict[str, VarValue]:
         vs = self.opt(node, key, dict, default=None)
-        out: dict = {}
+        out: dict[str, VarValue] = {}
         if not vs:
             return out
         for k, v in vs.items():
@@ -290,7 +299,8 @@ class _Validator(FieldChecker):
         return out
 
     # -- variables -----------------------------------------------------------------------------
-    def subst(self, value, variables: dict, line: int, where: str):
+    def subst(self, value: Any, variables: Mapping[str, VarValue], line: int, where: str) -> Any:
+        """value (YAML as loaded) with ${NAME} replaced."""
         if isinstance(value, str):
             m = _VAR_RE.fullmatch(value.strip())
             if m:
@@ -299,7 +309,7 @@ class _Validator(FieldChecker):
                     self.fail(line, self._undefined(name, variables, where))
                 return variables[name]
 
-            def rep(mm):
+            def rep(mm: re.Match[str]) -> str:
                 name = mm.group(1)
                 if name not in variables:
                     self.fail(line, self._undefined(name, variables, where))
@@ -317,14 +327,15 @@ class _Validator(FieldChecker):
             return lst
         return value
 
-    def _undefined(self, name, variables, where) -> str:
+    def _undefined(self, name: str, variables: Mapping[str, VarValue], where: str) -> str:
         close = difflib.get_close_matches(name, list(variables), 1)
         return f"{where}: variable ${{{name}}} is not defined" + (
             f" (did you mean {close[0]}?)" if close else
             f" (defined: {', '.join(sorted(variables)) or 'none'}; add it under `variables:` or give --var)")
 
     # -- stations ------------------------------------------------------------------------------
-    def station(self, lst: LineList, i: int, node, global_vars: dict, snapshot_node) -> StationSpec:
+    def station(self, lst: LineList, i: int, node: Any, global_vars: dict[str, VarValue],
+                snapshot_node: Any) -> StationSpec:
         from profidrive_cli.drives.profile import load_profile
         ln = lst.line_of(i)
         if not isinstance(node, LineDict):
@@ -413,7 +424,7 @@ class _Validator(FieldChecker):
                 st.snapshot.append(t)
         return st
 
-    def _gsd_ident(self, line, w, gsd) -> int | None:
+    def _gsd_ident(self, line: int, w: str, gsd: str) -> int | None:
         from profidrive_cli.gsd import library
         p = Path(gsd)
         found = p if (("/" in gsd or "\\" in gsd) and p.is_file()) else None
@@ -436,7 +447,7 @@ class _Validator(FieldChecker):
 
     # -- parameters ----------------------------------------------------------------------------
     # -- steps: structure (same for every station) ---------------------------------------------
-    def raw_steps(self, lst, default_on_fail) -> list["_RawStep"]:
+    def raw_steps(self, lst: list[Any], default_on_fail: str) -> list[_RawStep]:
         out = []
         for i, node in enumerate(lst):
             ln = lst.line_of(i) if isinstance(lst, LineList) else 0
@@ -446,7 +457,7 @@ class _Validator(FieldChecker):
                 continue
         return out
 
-    def raw_step(self, index, ln, node, default_on_fail) -> "_RawStep":
+    def raw_step(self, index: int, ln: int, node: Any, default_on_fail: str) -> _RawStep:
         step_types = tuple(STEPS)                    # the registry: checklist/steps/
         if isinstance(node, str):                     # bare step: "- save", "- stop", "- reset_fault"
             key = node.strip()
@@ -491,7 +502,7 @@ class _Validator(FieldChecker):
                         on_fail, stations)
 
     # -- steps: per station --------------------------------------------------------------------
-    def plan(self, st: StationSpec, raw_steps: list["_RawStep"]) -> list[Step]:
+    def plan(self, st: StationSpec, raw_steps: list[_RawStep]) -> list[Step]:
         out = []
         state = {"running": False}
         for rs in raw_steps:
@@ -527,7 +538,7 @@ class _RawStep:
 _flag_cache: dict[tuple[str, str], list[str]] = {}
 
 
-def _flag_names(profile, layout: str) -> list[str]:
+def _flag_names(profile: Profile, layout: str) -> list[str]:
     """The family's status flag names in this layout: a class fact of its Drive (no bus, no simulator)."""
     key = (profile.name, layout)
     if key not in _flag_cache:

@@ -12,6 +12,14 @@ around the speed it was to reach and the deadline (`within`), so a failed step's
 from __future__ import annotations
 
 import contextlib
+from typing import TYPE_CHECKING, Any, Callable, Iterator
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.drives.base import Drive, DriveStatus
+    from profidrive_cli.plot import Trace
+
+#: one cycle: (t, speed_hz, speed_percent, reference_percent)
+Row = tuple[float, "float | None", "float | None", "float | None"]
 
 #: step types whose trace is plotted (the ones that move the drive)
 PLOTTED = ("run", "stop", "jog")
@@ -21,12 +29,12 @@ MAX_CYCLES = 50_000
 
 
 class StepTrace:
-    def __init__(self):
-        self.rows: list[tuple] = []       # (t, speed_hz, speed_percent, reference_percent)
+    def __init__(self) -> None:
+        self.rows: list[Row] = []       # (t, speed_hz, speed_percent, reference_percent)
         self._stride = 1
         self._n = 0
 
-    def add(self, t, st, stopping: bool = False) -> None:
+    def add(self, t: float, st: DriveStatus, stopping: bool = False) -> None:
         """One cycle's status; stopping: the drive is being stopped (no reference is kept from the
         stop's start, nor while it is in fault: the plot shows what the drive was asked)."""
         self._n += 1
@@ -43,7 +51,7 @@ class StepTrace:
 
 
 @contextlib.contextmanager
-def record(drive):
+def record(drive: Drive) -> Iterator[StepTrace]:
     """Yield a StepTrace filled with every cycle `drive` makes inside the block."""
     tr = StepTrace()
     inner = drive.cycle
@@ -51,20 +59,21 @@ def record(drive):
     t0 = ch.now()
     stopping = [False]                 # a stop was asked (until the next start)
 
-    def cycle():
+    def cycle() -> DriveStatus:
         st = inner()
         tr.add(ch.now() - t0, st, stopping[0])
         return st
 
-    def marking(own, asked_to_stop: bool):
-        def call(*a, **kw):
+    def marking(own: Callable[..., DriveStatus], asked_to_stop: bool) -> Callable[..., DriveStatus]:
+        def call(*a: Any, **kw: Any) -> DriveStatus:       # stop(...) / start(...) as the Drive takes them
             stopping[0] = asked_to_stop
             return own(*a, **kw)
         return call
 
     # every Drive has start() and stop() (drives/base.py): a stop asked ends the reference's trace
-    shadowed = {"cycle": (inner, cycle), "stop": (drive.stop, marking(drive.stop, True)),
-                "start": (drive.start, marking(drive.start, False))}
+    shadowed: dict[str, tuple[Callable[..., DriveStatus], Callable[..., DriveStatus]]] = {
+        "cycle": (inner, cycle), "stop": (drive.stop, marking(drive.stop, True)),
+        "start": (drive.start, marking(drive.start, False))}
     for name, (_, mine) in shadowed.items():
         setattr(drive, name, mine)
     try:
@@ -77,7 +86,7 @@ def record(drive):
                 setattr(drive, name, own)
 
 
-def to_plot_trace(tr: StepTrace, title: str, expected: dict | None = None):
+def to_plot_trace(tr: StepTrace, title: str, expected: dict[str, Any] | None = None) -> Trace:
     from profidrive_cli.plot import Trace
     rows = tr.rows
     fmax = None
@@ -88,7 +97,7 @@ def to_plot_trace(tr: StepTrace, title: str, expected: dict | None = None):
     hz_ok = fmax is not None and all(r[1] is not None or r[2] is None for r in rows)
     out = Trace(title=title, speed_unit="Hz" if hz_ok else "%")
     for t, hz, pct, ref in rows:
-        if hz_ok:
+        if hz_ok and fmax is not None:                      # (hz_ok: fmax known)
             out.add(t, None if ref is None else ref * fmax / 100.0, hz if hz is not None else None)
         else:
             out.add(t, ref, pct)
@@ -97,7 +106,7 @@ def to_plot_trace(tr: StepTrace, title: str, expected: dict | None = None):
     return out
 
 
-def _expectations(out, expected: dict, fmax: float | None) -> None:
+def _expectations(out: Trace, expected: dict[str, Any], fmax: float | None) -> None:
     """The band and the deadline of a run step ({speed, unit, tolerance, within_s}), the band of a
     jog ({speed_hz, tolerance}), the deadline of a stop ({stopped, within_s}), in the plot's unit.
     The deadline is counted from the start of the step's trace (the step's own clock starts a cycle

@@ -210,7 +210,7 @@ def _command_loaded() -> None:
         _set_signals(signal.default_int_handler, _raise_terminated)
 
 
-def main(argv=None):
+def main(argv: list[str] | None = None) -> None:
     """`pdrive` (argv None: the process is pdrive and its signals are handled from the start; a
     list: called from a program, whose signal handlers are left alone)."""
     global _STARTING

@@ -16,12 +16,78 @@ steps/__init__.py. It holds its schema and its execution together:
         pass; raises StepFailed for an unmet expectation (PdriveError: the step is an error).
 
 The runner does the rest once for every type: timing, the observer, on_fail, the safe stop, the report.
-This module imports nothing of the checklist but may be imported by all of it.
+This module imports nothing of the checklist (for the type checker only, fields.py's types) but may be
+imported by all of it. What a step type gets of runner.py is said here as Protocols (StepRun, StepRecord,
+Handle, ...), what it gets of spec.py in fields.py (StationFacts, RawStepFacts): those modules import the
+registry, so a step type cannot import them; runner.Runner, spec.StationSpec and the rest satisfy them.
 """
 
 from __future__ import annotations
 
 import math
+from contextlib import AbstractContextManager
+from typing import TYPE_CHECKING, Any, Callable, Protocol, Sequence, TypeVar
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.checklist.fields import FieldChecker, RawStepFacts, StationFacts, StepArgs, StepFacts
+    from profidrive_cli.drives.base import Drive, DriveStatus
+    from profidrive_cli.session import DriveSession
+
+class ChecklistFacts(Protocol):
+    """spec.Checklist: its stations."""
+    @property
+    def stations(self) -> Sequence[StationFacts]: ...
+
+
+class StepRecord(Protocol):
+    """runner.StepResult: what a step fills in (expected, measured)."""
+    @property
+    def step(self) -> StepFacts: ...
+    expected: dict[str, Any]
+    measured: dict[str, Any]
+
+
+class StationRecord(Protocol):
+    """runner.StationResult: the station's results."""
+    @property
+    def spec(self) -> StationFacts: ...
+
+
+class Handle(Protocol):
+    """runner.StationHandle: the open station."""
+    @property
+    def drive(self) -> Drive: ...
+    @property
+    def identity(self) -> dict[str, Any]: ...
+    @property
+    def session(self) -> DriveSession: ...
+
+
+#: the run's own result types (runner.StationResult, runner.StepResult), handed back to it by a step
+SR = TypeVar("SR", bound=StationRecord)
+R = TypeVar("R", bound=StepRecord)
+_SRc = TypeVar("_SRc", bound=StationRecord, contravariant=True)
+_Rc = TypeVar("_Rc", bound=StepRecord, contravariant=True)
+
+
+class StepRun(Protocol[_SRc, _Rc]):
+    """runner.Runner: what a step type uses of the run (progress and cycle_for take back the
+    station's and the step's results the run gave the step)."""
+    @property
+    def cl(self) -> ChecklistFacts: ...
+    @property
+    def dry_run(self) -> bool: ...
+    @property
+    def yes(self) -> bool: ...
+    @property
+    def ask(self) -> Callable[[str], bool] | None: ...
+    @property
+    def open_station(self) -> Callable[[StationFacts], AbstractContextManager[Handle]]: ...
+
+    def progress(self, sr: _SRc, r: _Rc, text: str, force: bool = False) -> None: ...
+
+    def cycle_for(self, sr: _SRc, r: _Rc, drive: Drive, seconds: float,
+                  text: str = "") -> DriveStatus: ...
 
 
 class StepFailed(Exception):
@@ -33,31 +99,33 @@ class StepType:
 
     name: str = ""
 
-    def validate(self, check, st, rs, body, state) -> tuple[dict, str]:
+    def validate(self, check: FieldChecker, st: StationFacts, rs: RawStepFacts, body: Any,
+                 state: dict[str, bool]) -> tuple[StepArgs, str]:
+        """body: the step's YAML after substitution (LineDict, scalar or None), checked here."""
         raise NotImplementedError
 
-    def execute(self, run, sr, r, d, h) -> str:
+    def execute(self, run: StepRun[SR, R], sr: SR, r: R, d: Drive, h: Handle) -> str:
         raise NotImplementedError
 
 
-def hex4(v) -> str | None:
+def hex4(v: int | str | None) -> str | None:
     return f"0x{v:04X}" if isinstance(v, int) else v
 
 
-def close_to(a, b, tol) -> bool:
+def close_to(a: float, b: float, tol: float) -> bool:
     try:
         return abs(float(a) - float(b)) <= float(tol) + 1e-9
     except (TypeError, ValueError):
         return a == b
 
 
-def rnd(v):
+def rnd(v: float | None) -> float | None:
     if v is None or not isinstance(v, float):
         return v
     return round(v, 3) if math.isfinite(v) else v
 
 
-def status_dict(st) -> dict:
+def status_dict(st: DriveStatus | None) -> dict[str, Any]:
     if st is None:
         return {}
     return {"state": st.state, "running": st.running, "stopped": st.stopped, "fault": st.fault,

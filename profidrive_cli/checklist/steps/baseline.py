@@ -19,12 +19,16 @@ from __future__ import annotations
 
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from profidrive_cli import PdriveError
 from profidrive_cli.bustools import baseline as B
-from profidrive_cli.checklist.fields import fmt
-from profidrive_cli.checklist.steps.base import StepFailed, StepType
+from profidrive_cli.checklist.fields import RawStepFacts, StationFacts, StepArgs, fmt
+from profidrive_cli.checklist.steps.base import Handle, R, SR, StepFailed, StepRun, StepType
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.checklist.fields import FieldChecker
+    from profidrive_cli.drives.base import Drive
 
 SCOPES = ("bus", "station")
 FIELDS = ("file", "scope", "counter_margin", "reply_margin_ms", "reply_margin_percent")
@@ -33,7 +37,8 @@ FIELDS = ("file", "scope", "counter_margin", "reply_margin_ms", "reply_margin_pe
 class Baseline(StepType):
     name = "baseline"
 
-    def validate(self, check: Any, st: Any, rs: Any, body: Any, state: Any) -> tuple[dict[str, Any], str]:
+    def validate(self, check: FieldChecker, st: StationFacts, rs: RawStepFacts, body: Any,
+                 state: dict[str, bool]) -> tuple[StepArgs, str]:
         w = f"step {rs.index} (baseline)"
         d = check.fields(rs, body, FIELDS, "file", required=("file",))
         file = d["file"]
@@ -61,7 +66,7 @@ class Baseline(StepType):
         return args, (f"{what} as in baseline {file} (margins: counters +{fmt(counter)}, reply time "
                       f"+{fmt(reply_ms)} ms and +{fmt(percent)} %)")
 
-    def execute(self, run: Any, sr: Any, r: Any, d: Any, h: Any) -> str:
+    def execute(self, run: StepRun[SR, R], sr: SR, r: R, d: Drive, h: Handle) -> str:
         a = r.step.args
         base = B.load(a["file"])
         margins = B.Margins(int(a["counter_margin"]), float(a["reply_margin_ms"]),

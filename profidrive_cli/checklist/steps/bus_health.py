@@ -15,9 +15,15 @@ execute() runs it on the station's Drive for the Runner. Imports only the checkl
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any
+
 from profidrive_cli.bustools.buswatch import health_figures
-from profidrive_cli.checklist.fields import fmt
-from profidrive_cli.checklist.steps.base import StepFailed, StepType
+from profidrive_cli.checklist.fields import RawStepFacts, StationFacts, StepArgs, fmt
+from profidrive_cli.checklist.steps.base import Handle, R, SR, StepFailed, StepRun, StepType
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.checklist.fields import FieldChecker
+    from profidrive_cli.drives.base import Drive
 
 DEFAULT_SECONDS = 10.0
 #: the figures in words
@@ -36,7 +42,8 @@ LIMITS = {
 class BusHealth(StepType):
     name = "bus_health"
 
-    def validate(self, check, st, rs, body, state):
+    def validate(self, check: FieldChecker, st: StationFacts, rs: RawStepFacts, body: Any,
+                 state: dict[str, bool]) -> tuple[StepArgs, str]:
         d = check.fields(rs, body, ("seconds",) + tuple(LIMITS), "seconds")
         seconds = check.num(rs, d, "seconds", default=DEFAULT_SECONDS, positive=True)
         limits = {k: check.num(rs, d, k, default=default, minimum=0) for k, (_, default) in LIMITS.items()}
@@ -45,7 +52,7 @@ class BusHealth(StepType):
                  f"corrupt, {fmt(limits['max_reparams'])} re-parameterisations")
         return {"seconds": seconds, **limits}, title
 
-    def execute(self, run, sr, r, d, h):
+    def execute(self, run: StepRun[SR, R], sr: SR, r: R, d: Drive, h: Handle) -> str:
         a = r.step.args
         sess = h.session
         r.expected = {k: a[k] for k in LIMITS}

@@ -13,9 +13,15 @@ ack: true. Needs the station's parameter channel (the configured reaction is rea
 
 from __future__ import annotations
 
-from profidrive_cli.checklist.fields import fmt
-from profidrive_cli.checklist.steps.base import StepFailed, StepType
+from typing import TYPE_CHECKING, Any
+
+from profidrive_cli.checklist.fields import RawStepFacts, StationFacts, StepArgs, fmt
+from profidrive_cli.checklist.steps.base import Handle, R, SR, StepFailed, StepRun, StepType
 from profidrive_cli.drives import drive_class
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.checklist.fields import FieldChecker
+    from profidrive_cli.drives.base import Drive
 
 MODES = ("silence", "clear")
 
@@ -23,7 +29,8 @@ MODES = ("silence", "clear")
 class CommLoss(StepType):
     name = "comm_loss"
 
-    def validate(self, check, st, rs, body, state):
+    def validate(self, check: FieldChecker, st: StationFacts, rs: RawStepFacts, body: Any,
+                 state: dict[str, bool]) -> tuple[StepArgs, str]:
         d = check.fields(rs, body, ("hz", "mode", "timeout", "tolerance", "start_timeout", "ack"), "hz")
         w = f"step {rs.index} (comm_loss)"
         hz = check.num(rs, d, "hz", default=20.0, positive=True)
@@ -44,7 +51,7 @@ class CommLoss(StepType):
                  "start_timeout": start_timeout, "ack": ack},
                 f"comm-loss test at {fmt(hz)} Hz ({mode})" + (", acknowledge the fault" if ack else ""))
 
-    def execute(self, run, sr, r, d, h):
+    def execute(self, run: StepRun[SR, R], sr: SR, r: R, d: Drive, h: Handle) -> str:
         from profidrive_cli.session.commloss import run_commloss
         a = r.step.args
         run.progress(sr, r, f"running at {fmt(a['hz'])} Hz, then breaking the link ({a['mode']})")

@@ -6,14 +6,21 @@ execute() runs it on the station's Drive for the Runner. Imports only the checkl
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any
+
 from profidrive_cli import PdriveError
-from profidrive_cli.checklist.steps.base import StepFailed, StepType, hex4
+from profidrive_cli.checklist.steps.base import Handle, R, SR, StepFailed, StepRun, StepType, hex4
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.checklist.fields import FieldChecker, RawStepFacts, StationFacts, StepArgs
+    from profidrive_cli.drives.base import Drive
 
 
 class ExpectIdentity(StepType):
     name = "expect_identity"
 
-    def validate(self, check, st, rs, body, state):
+    def validate(self, check: FieldChecker, st: StationFacts, rs: RawStepFacts, body: Any,
+                 state: dict[str, bool]) -> tuple[StepArgs, str]:
         d = check.fields(rs, body, ("ident", "profile", "gsd"))
         ident = st.ident
         if "ident" in d:
@@ -31,7 +38,7 @@ class ExpectIdentity(StepType):
         args = {"ident": ident, "profile": profile, "gsd": gsd}
         return args, f"identity: ident 0x{ident:04X}, profile {profile}" + (f", GSD {gsd}" if gsd else "")
 
-    def execute(self, run, sr, r, d, h):
+    def execute(self, run: StepRun[SR, R], sr: SR, r: R, d: Drive, h: Handle) -> str:
         a = r.step.args
         idt = h.identity or {}
         got_ident = idt.get("ident")

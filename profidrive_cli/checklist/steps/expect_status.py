@@ -7,10 +7,15 @@ execute() runs it on the station's Drive for the Runner. Imports only the checkl
 from __future__ import annotations
 
 import difflib
+from typing import TYPE_CHECKING, Any
 
-from profidrive_cli.checklist.fields import Skip, is_num, tname
-from profidrive_cli.checklist.steps.base import StepFailed, StepType, rnd
+from profidrive_cli.checklist.fields import RawStepFacts, Skip, StationFacts, StepArgs, is_num, tname
+from profidrive_cli.checklist.steps.base import Handle, R, SR, StepFailed, StepRun, StepType, rnd
 from profidrive_cli.datafile import LineDict
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.checklist.fields import FieldChecker
+    from profidrive_cli.drives.base import Drive, DriveStatus
 
 # generic status names every family answers (DriveStatus fields), besides the family's own flags
 GENERIC_FLAGS = ("running", "fault", "stopped")
@@ -19,7 +24,8 @@ GENERIC_FLAGS = ("running", "fault", "stopped")
 class ExpectStatus(StepType):
     name = "expect_status"
 
-    def validate(self, check, st, rs, body, state):
+    def validate(self, check: FieldChecker, st: StationFacts, rs: RawStepFacts, body: Any,
+                 state: dict[str, bool]) -> tuple[StepArgs, str]:
         w = f"step {rs.index} (expect_status)"
         if not isinstance(body, LineDict) or not body:
             check.fail(rs.body_line, f"{w}: expected a mapping of status flags to true/false, e.g. "
@@ -63,7 +69,7 @@ class ExpectStatus(StepType):
             parts.insert(0, f"state ~ {state_text!r}")
         return {"flags": flags, "state": state_text, "within": within}, "status: " + ", ".join(parts)
 
-    def execute(self, run, sr, r, d, h):
+    def execute(self, run: StepRun[SR, R], sr: SR, r: R, d: Drive, h: Handle) -> str:
         a = r.step.args
         flags, state_text = a["flags"], a["state"]
         r.expected = {**{k: v for k, v in flags.items()}, **({"state": state_text} if state_text else {})}
@@ -87,7 +93,7 @@ class ExpectStatus(StepType):
         return f"state {st.state}"
 
 
-def flag_of(st, name: str) -> bool:
+def flag_of(st: DriveStatus, name: str) -> bool:
     if name == "running":
         return bool(st.running)
     if name == "fault":

@@ -7,15 +7,21 @@ execute() runs it on the station's Drive for the Runner. Imports only the checkl
 from __future__ import annotations
 
 import difflib
+from typing import TYPE_CHECKING, Any
 
-from profidrive_cli.checklist.fields import layout_has_params, tname
-from profidrive_cli.checklist.steps.base import StepFailed, StepType
+from profidrive_cli.checklist.fields import RawStepFacts, StationFacts, StepArgs, layout_has_params, tname
+from profidrive_cli.checklist.steps.base import Handle, R, SR, StepFailed, StepRun, StepType
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.checklist.fields import FieldChecker
+    from profidrive_cli.drives.base import Drive
 
 
 class Faults(StepType):
     name = "faults"
 
-    def validate(self, check, st, rs, body, state):
+    def validate(self, check: FieldChecker, st: StationFacts, rs: RawStepFacts, body: Any,
+                 state: dict[str, bool]) -> tuple[StepArgs, str]:
         d = check.fields(rs, body, ("expect", "history"), "expect")
         w = f"step {rs.index} (faults)"
         expect = d.get("expect", "none")
@@ -44,13 +50,13 @@ class Faults(StepType):
             title = f"fault {expect} " + ("in the fault history" if history else "is the current fault")
         return {"expect": expect, "history": history}, title
 
-    def execute(self, run, sr, r, d, h):
+    def execute(self, run: StepRun[SR, R], sr: SR, r: R, d: Drive, h: Handle) -> str:
         a = r.step.args
         st = d.status()
         need_history = a["history"] or a["expect"] != "none"
         hist = d.fault_history() if need_history else []
-        entries = [{"position": f.position, "raw": f.raw, "codes": f.codes, "meanings": f.meanings}
-                   for f in hist]
+        entries: list[dict[str, Any]] = [
+            {"position": f.position, "raw": f.raw, "codes": f.codes, "meanings": f.meanings} for f in hist]
         recorded = [e for e in entries if e["raw"] and e["codes"]]
         r.measured = {"fault": st.fault, "current": st.fault_code, "state": st.state}
         if need_history:

@@ -11,9 +11,15 @@ station's Drive for the Runner. Imports only the checklist toolkits (fields.py, 
 
 from __future__ import annotations
 
-from profidrive_cli.checklist.fields import fmt
-from profidrive_cli.checklist.steps.base import StepFailed, StepType, rnd
+from typing import TYPE_CHECKING, Any
+
+from profidrive_cli.checklist.fields import RawStepFacts, StationFacts, StepArgs, fmt
+from profidrive_cli.checklist.steps.base import Handle, R, SR, StepFailed, StepRun, StepType, rnd
 from profidrive_cli.drives.jog import jog_refusal
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.checklist.fields import FieldChecker
+    from profidrive_cli.drives.base import Drive, DriveStatus
 
 DIRECTIONS = ("forward", "reverse")
 DEFAULT_TOL_HZ = 0.5
@@ -23,7 +29,8 @@ DEFAULT_STOP_WITHIN_S = 30.0
 class Jog(StepType):
     name = "jog"
 
-    def validate(self, check, st, rs, body, state):
+    def validate(self, check: FieldChecker, st: StationFacts, rs: RawStepFacts, body: Any,
+                 state: dict[str, bool]) -> tuple[StepArgs, str]:
         d = check.fields(rs, body, ("duration", "direction", "hz", "tolerance", "within"), "duration",
                          ("duration",))
         w = f"step {rs.index} (jog)"
@@ -46,7 +53,7 @@ class Jog(StepType):
         return {"duration": duration, "direction": direction, "hz": hz, "tolerance": tol,
                 "within": within}, title
 
-    def execute(self, run, sr, r, d, h):
+    def execute(self, run: StepRun[SR, R], sr: SR, r: R, d: Drive, h: Handle) -> str:
         a = r.step.args
         reverse = a["direction"] == "reverse"
         want = a["hz"]
@@ -59,7 +66,7 @@ class Jog(StepType):
         ch = d.channel
         fmax = d.max_frequency()
 
-        def hz_of(s):
+        def hz_of(s: DriveStatus) -> float | None:
             if s.speed_hz is not None:
                 return s.speed_hz
             return None if s.speed_percent is None else s.speed_percent * fmax / 100.0

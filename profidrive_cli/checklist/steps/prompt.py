@@ -7,20 +7,26 @@ execute() runs it on the station's Drive for the Runner. Imports only the checkl
 from __future__ import annotations
 
 import threading
+from typing import TYPE_CHECKING, Any
 
-from profidrive_cli.checklist.steps.base import StepFailed, StepType
+from profidrive_cli.checklist.steps.base import Handle, R, SR, StepFailed, StepRun, StepType
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.checklist.fields import FieldChecker, RawStepFacts, StationFacts, StepArgs
+    from profidrive_cli.drives.base import Drive
 
 
 class Prompt(StepType):
     name = "prompt"
 
-    def validate(self, check, st, rs, body, state):
+    def validate(self, check: FieldChecker, st: StationFacts, rs: RawStepFacts, body: Any,
+                 state: dict[str, bool]) -> tuple[StepArgs, str]:
         d = check.fields(rs, body, ("text",), "text", ("text",))
         if not isinstance(d["text"], str) or not d["text"].strip():
             check.fail(d.line_of("text"), f"step {rs.index} (prompt): 'text' must be the question for the operator")
         return {"text": d["text"].strip()}, f"operator: {d['text'].strip()}"
 
-    def execute(self, run, sr, r, d, h):
+    def execute(self, run: StepRun[SR, R], sr: SR, r: R, d: Drive, h: Handle) -> str:
         text = r.step.args["text"]
         r.expected = {"answer": "yes"}
         if run.dry_run:
@@ -33,11 +39,12 @@ class Prompt(StepType):
             r.measured = {"answer": None, "by": "nobody"}
             raise StepFailed("no operator to confirm (not a terminal): run with --yes to confirm prompts")
         # ask in a thread and keep the drive's cyclic data (and the watchdog) going meanwhile
-        box: dict = {}
+        ask = run.ask
+        box: dict[str, bool | BaseException] = {}
 
-        def asker():
+        def asker() -> None:
             try:
-                box["answer"] = bool(run.ask(text))
+                box["answer"] = bool(ask(text))
             except BaseException as e:    # noqa: BLE001 - EOF / interrupt at the prompt
                 box["error"] = e
         t = threading.Thread(target=asker, name="checklist-prompt", daemon=True)

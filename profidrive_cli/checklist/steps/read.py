@@ -6,14 +6,21 @@ execute() runs it on the station's Drive for the Runner. Imports only the checkl
 
 from __future__ import annotations
 
-from profidrive_cli.checklist.fields import fmt, is_num, range_problem
-from profidrive_cli.checklist.steps.base import StepFailed, StepType, close_to
+from typing import TYPE_CHECKING, Any
+
+from profidrive_cli.checklist.fields import RawStepFacts, StationFacts, StepArgs, fmt, is_num, range_problem
+from profidrive_cli.checklist.steps.base import Handle, R, SR, StepFailed, StepRun, StepType, close_to
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.checklist.fields import FieldChecker
+    from profidrive_cli.drives.base import Drive
 
 
 class Read(StepType):
     name = "read"
 
-    def validate(self, check, st, rs, body, state):
+    def validate(self, check: FieldChecker, st: StationFacts, rs: RawStepFacts, body: Any,
+                 state: dict[str, bool]) -> tuple[StepArgs, str]:
         d = check.fields(rs, body, ("param", "expect", "tolerance", "min", "max", "range"), "param", ("param",))
         w = f"step {rs.index} (read)"
         check.need_param_channel(st, rs)
@@ -49,7 +56,7 @@ class Read(StepType):
             title = f"read {t.label}"
         return {"param": t, "expect": expect, "tolerance": tol, "min": lo, "max": hi}, title
 
-    def execute(self, run, sr, r, d, h):
+    def execute(self, run: StepRun[SR, R], sr: SR, r: R, d: Drive, h: Handle) -> str:
         a = r.step.args
         t = a["param"]
         pv = d.read_param(t.code)

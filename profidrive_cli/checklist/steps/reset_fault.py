@@ -6,17 +6,24 @@ execute() runs it on the station's Drive for the Runner. Imports only the checkl
 
 from __future__ import annotations
 
-from profidrive_cli.checklist.steps.base import StepFailed, StepType, status_dict
+from typing import TYPE_CHECKING, Any
+
+from profidrive_cli.checklist.steps.base import Handle, R, SR, StepFailed, StepRun, StepType, status_dict
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.checklist.fields import FieldChecker, RawStepFacts, StationFacts, StepArgs
+    from profidrive_cli.drives.base import Drive
 
 
 class ResetFault(StepType):
     name = "reset_fault"
 
-    def validate(self, check, st, rs, body, state):
+    def validate(self, check: FieldChecker, st: StationFacts, rs: RawStepFacts, body: Any,
+                 state: dict[str, bool]) -> tuple[StepArgs, str]:
         check.fields(rs, body, ("within",))
         return {}, "reset (acknowledge) the fault"
 
-    def execute(self, run, sr, r, d, h):
+    def execute(self, run: StepRun[SR, R], sr: SR, r: R, d: Drive, h: Handle) -> str:
         before = d.status()
         st = d.reset_fault()
         r.measured = {"fault_before": before.fault, "code_before": before.fault_code, **status_dict(st)}

@@ -6,9 +6,15 @@ execute() runs it on the station's Drive for the Runner. Imports only the checkl
 
 from __future__ import annotations
 
-from profidrive_cli.checklist.fields import fmt
-from profidrive_cli.checklist.steps.base import StepFailed, StepType, rnd
+from typing import TYPE_CHECKING, Any
+
+from profidrive_cli.checklist.fields import RawStepFacts, StationFacts, StepArgs, fmt
+from profidrive_cli.checklist.steps.base import Handle, R, SR, StepFailed, StepRun, StepType, rnd
 from profidrive_cli.session.live import Reach
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.checklist.fields import FieldChecker
+    from profidrive_cli.drives.base import Drive, DriveStatus
 
 DIRECTIONS = ("forward", "reverse")
 DEFAULT_RUN_WITHIN_S = 10.0
@@ -19,14 +25,15 @@ DEFAULT_TOL_PERCENT = 1.0
 class Run(StepType):
     name = "run"
 
-    def validate(self, check, st, rs, body, state):
+    def validate(self, check: FieldChecker, st: StationFacts, rs: RawStepFacts, body: Any,
+                 state: dict[str, bool]) -> tuple[StepArgs, str]:
         d = check.fields(rs, body, ("hz", "percent", "direction", "duration", "tolerance", "within",
                                     "together"))
         w = f"step {rs.index} (run)"
         if ("hz" in d) == ("percent" in d):
             check.fail(rs.body_line, f"{w}: give the speed as either hz or percent")
         unit = "hz" if "hz" in d else "percent"
-        speed = check.num(rs, d, unit, positive=True)
+        speed = check.num(rs, d, unit, positive=True, required=True)    # there: checked above
         direction = d.get("direction", "forward")
         if direction not in DIRECTIONS:
             check.fail(d.line_of("direction"), f"{w}: direction must be forward or reverse, got {direction!r}")
@@ -35,7 +42,7 @@ class Run(StepType):
         if unit == "hz":
             fp = st.profile.param(st.profile.max_frequency_param or "")
             top = fp.max if fp is not None and fp.max is not None else None
-            if top is not None and speed > top:
+            if top is not None and fp is not None and speed > top:
                 check.fail(d.line_of("hz"), f"{w}: {fmt(speed)} Hz is above what {st.profile.name} can run "
                            f"({fp.code} max {fmt(top)} Hz)")
         duration = check.num(rs, d, "duration", default=0.0, minimum=0)
@@ -59,7 +66,7 @@ class Run(StepType):
             args.update(together=True, together_stations=names)
         return args, title
 
-    def execute(self, run, sr, r, d, h):
+    def execute(self, run: StepRun[SR, R], sr: SR, r: R, d: Drive, h: Handle) -> str:
         a = r.step.args
         if a.get("together"):
             from profidrive_cli.checklist.steps import together
@@ -73,7 +80,7 @@ class Run(StepType):
                       "within_s": a["within"], "hold_s": a["duration"]}
         ch = d.channel
 
-        def actual(s):
+        def actual(s: DriveStatus) -> float | None:
             if unit == "hz":
                 if s.speed_hz is not None:
                     return s.speed_hz
@@ -106,7 +113,7 @@ class Run(StepType):
             if st.fault:
                 r.measured = run_measured(st, v, None, None, None, unit)
                 raise StepFailed(f"the drive tripped while accelerating ({st.fault_code or st.state})")
-            if through_zero and v is not None:
+            if through_zero and v is not None and v0 is not None:     # (through_zero: v0 known)
                 # standstill seen: a sample within ± tol of zero, or the magnitude fell and is
                 # rising again (at a low cycle rate no sample need land near zero). Not the sign
                 # alone: a drive that reports the commanded direction with the speed's magnitude
@@ -129,6 +136,7 @@ class Run(StepType):
             st = d.cycle()
         reach_s = reach.reached_after
         lo = hi = actual(st)
+        assert lo is not None and hi is not None    # Reach counts known speeds only: the one that reached
         hold_end = ch.now() + float(a["duration"])
         while ch.now() < hold_end:
             st = d.cycle()
@@ -150,7 +158,8 @@ class Run(StepType):
             f"; {fmt(rnd(v))}{u} at the end"
 
 
-def run_measured(st, v, reach_s, lo, hi, unit) -> dict:
+def run_measured(st: DriveStatus, v: float | None, reach_s: float | None, lo: float | None, hi: float | None,
+                 unit: str) -> dict[str, Any]:
     key = "actual_hz" if unit == "hz" else "actual_percent"
     out = {key: rnd(v), "reached_after_s": round(reach_s, 3) if reach_s is not None else None,
            "state": st.state, "speed_hz": rnd(st.speed_hz), "speed_percent": rnd(st.speed_percent)}

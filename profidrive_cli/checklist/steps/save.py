@@ -6,18 +6,25 @@ execute() runs it on the station's Drive for the Runner. Imports only the checkl
 
 from __future__ import annotations
 
-from profidrive_cli.checklist.steps.base import StepType
+from typing import TYPE_CHECKING, Any
+
+from profidrive_cli.checklist.steps.base import Handle, R, SR, StepRun, StepType
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.checklist.fields import FieldChecker, RawStepFacts, StationFacts, StepArgs
+    from profidrive_cli.drives.base import Drive
 
 
 class Save(StepType):
     name = "save"
 
-    def validate(self, check, st, rs, body, state):
+    def validate(self, check: FieldChecker, st: StationFacts, rs: RawStepFacts, body: Any,
+                 state: dict[str, bool]) -> tuple[StepArgs, str]:
         check.fields(rs, body, ())
         check.need_param_channel(st, rs)
         return {}, "save parameters to non-volatile memory"
 
-    def execute(self, run, sr, r, d, h):
+    def execute(self, run: StepRun[SR, R], sr: SR, r: R, d: Drive, h: Handle) -> str:
         how = h.session.save_support()
         msg = h.session.save()        # 'automatic' cards: every write is already stored
         r.measured = {"saved": True, "how": how}

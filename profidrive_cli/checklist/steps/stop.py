@@ -6,8 +6,14 @@ execute() runs it on the station's Drive for the Runner. Imports only the checkl
 
 from __future__ import annotations
 
-from profidrive_cli.checklist.fields import fmt
-from profidrive_cli.checklist.steps.base import StepFailed, StepType, rnd, status_dict
+from typing import TYPE_CHECKING, Any
+
+from profidrive_cli.checklist.fields import RawStepFacts, StationFacts, StepArgs, fmt
+from profidrive_cli.checklist.steps.base import Handle, R, SR, StepFailed, StepRun, StepType, rnd, status_dict
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.checklist.fields import FieldChecker
+    from profidrive_cli.drives.base import Drive
 
 STOP_MODES = ("normal", "quick", "coast")
 #: stop mode -> the capability the card must declare (drives/capabilities.py)
@@ -18,7 +24,8 @@ DEFAULT_STOP_WITHIN_S = 30.0
 class Stop(StepType):
     name = "stop"
 
-    def validate(self, check, st, rs, body, state):
+    def validate(self, check: FieldChecker, st: StationFacts, rs: RawStepFacts, body: Any,
+                 state: dict[str, bool]) -> tuple[StepArgs, str]:
         d = check.fields(rs, body, ("mode", "within"), "mode")
         mode = d.get("mode", "normal")
         if mode not in STOP_MODES:
@@ -30,7 +37,7 @@ class Stop(StepType):
         state["running"] = False
         return {"mode": mode, "within": within}, f"stop ({mode}), stopped within {fmt(within)} s"
 
-    def execute(self, run, sr, r, d, h):
+    def execute(self, run: StepRun[SR, R], sr: SR, r: R, d: Drive, h: Handle) -> str:
         a = r.step.args
         ch = d.channel
         t0 = ch.now()

@@ -15,31 +15,46 @@ from __future__ import annotations
 
 import contextlib
 import weakref
+from typing import TYPE_CHECKING, Any, Callable
 
-from profidrive_cli.checklist.fields import fmt
-from profidrive_cli.checklist.steps.base import StepFailed, rnd
+from profidrive_cli.checklist.fields import StationFacts, StepArgs, fmt
+from profidrive_cli.checklist.steps.base import ChecklistFacts, Handle, R, SR, StepFailed, StepRun, rnd
 from profidrive_cli.session.group import Group
 from profidrive_cli.session.live import Reach
 
-#: Runner -> {step index: {station name: (passed, message, expected, measured)}}
-_DONE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.dp.poller import Master
+    from profidrive_cli.drives.base import Drive, DriveStatus
+    from profidrive_cli.session import DriveSession
+
+#: run.py's run_measured(st, v, reach_s, lo, hi, unit) -> the step's measured dict
+RunMeasured = Callable[["DriveStatus", "float | None", "float | None", "float | None", "float | None", str],
+                       dict[str, Any]]
+#: one station's outcome: (passed, message, expected, measured)
+Outcome = tuple[bool, str, dict[str, Any], dict[str, Any]]
+
+#: Runner -> {step index: {station name: Outcome}}
+_DONE: weakref.WeakKeyDictionary[object, dict[int, dict[str, Outcome]]] = weakref.WeakKeyDictionary()
 
 
 class _Drive:
     """One drive of the run and its checks (the rules of `run`)."""
 
-    def __init__(self, name, drive, session, a):
+    def __init__(self, name: str, drive: Drive, session: DriveSession, a: StepArgs) -> None:
         self.name, self.d, self.session = name, drive, session
+        assert session.address is not None          # an open session found its station (as api/bus.py)
+        self.address: int = session.address
         sign = -1.0 if a["direction"] == "reverse" else 1.0
         self.target = sign * float(a["speed"])
         self.tol, self.unit = float(a["tolerance"]), a["unit"]
         self.u = " Hz" if self.unit == "hz" else " %"
-        self.reached = None              # seconds to the band
-        self.lo = self.hi = None
+        self.reached: float | None = None              # seconds to the band
+        self.lo: float | None = None
+        self.hi: float | None = None
         self.failed = ""
-        self.st = None
+        self.st: DriveStatus | None = None
 
-    def actual(self, s):
+    def actual(self, s: DriveStatus) -> float | None:
         if self.unit == "hz":
             if s.speed_hz is not None:
                 return s.speed_hz
@@ -69,14 +84,14 @@ class _Drive:
         self.reach = Reach(self.target, self.tol, start=self.v0 if st0.running else None,
                            t0=self.t_start, unit=self.u.strip())
 
-    def feed_reach(self, st, now) -> bool:
+    def feed_reach(self, st: DriveStatus, now: float) -> bool:
         """True once this drive is done with the reach phase (in the band, failed or tripped)."""
         self.st = st
         v = self.actual(st)
         if st.fault:
             self.failed = f"the drive tripped while accelerating ({st.fault_code or st.state})"
             return True
-        if self.through_zero and v is not None:
+        if self.through_zero and v is not None and self.v0 is not None:     # (through_zero: v0 known)
             self.min_abs = min(self.min_abs, abs(v))
             fell = self.min_abs < abs(self.v0) - self.tol
             if abs(v) <= self.tol or (fell and abs(v) > self.min_abs + self.tol):
@@ -97,7 +112,7 @@ class _Drive:
             return True
         return False
 
-    def feed_hold(self, st) -> None:
+    def feed_hold(self, st: DriveStatus) -> None:
         self.st = st
         v = self.actual(st)
         if self.failed:
@@ -105,12 +120,13 @@ class _Drive:
         if st.fault:
             self.failed = f"the drive tripped while running ({st.fault_code or st.state})"
         elif v is not None:
+            assert self.lo is not None and self.hi is not None     # reached: set to the speed that reached
             self.lo, self.hi = min(self.lo, v), max(self.hi, v)
             if abs(v - self.target) > self.tol:
                 self.failed = (f"actual left the band: {fmt(rnd(v))}{self.u} while holding "
                                f"{fmt(self.target)}{self.u} ± {fmt(self.tol)}")
 
-    def result(self, a, others: str, run_measured) -> tuple:
+    def result(self, a: StepArgs, others: str, run_measured: RunMeasured) -> Outcome:
         st = self.st
         v = self.actual(st) if st is not None else None
         expected = {"speed": self.target, "unit": "Hz" if self.unit == "hz" else "%",
@@ -131,7 +147,8 @@ class _Drive:
         return True, msg, expected, measured
 
 
-def execute(run, sr, r, d, h, a, run_measured) -> str:
+def execute(run: StepRun[SR, R], sr: SR, r: R, d: Drive, h: Handle, a: StepArgs,
+            run_measured: RunMeasured) -> str:
     """run_measured: run.py's measured dict (passed in: run.py imports this module)."""
     names = a.get("together_stations") or [s.name for s in run.cl.stations]
     specs = [s for s in run.cl.stations if s.name in names]
@@ -150,7 +167,8 @@ def execute(run, sr, r, d, h, a, run_measured) -> str:
     return msg
 
 
-def group_watchdog(checklist, spec, master, asked_ms: float) -> tuple[float, str | None]:
+def group_watchdog(checklist: ChecklistFacts, spec: StationFacts, master: Master,
+                   asked_ms: float) -> tuple[float, str | None]:
     """The DP watchdog (ms) for `spec`'s station: the one asked for, raised to three rounds of the
     largest group of a `together` step it runs in (Group.watchdog_for, as run 3,4,5), with the
     warning's words when raised. The rounds as the step paces them (Group.rate of the stations'
@@ -175,9 +193,10 @@ def group_watchdog(checklist, spec, master, asked_ms: float) -> tuple[float, str
     return best
 
 
-def _run_all(run, sr, r, d, h, a, specs, run_measured) -> dict:
+def _run_all(run: StepRun[SR, R], sr: SR, r: R, d: Drive, h: Handle, a: StepArgs,
+             specs: list[StationFacts], run_measured: RunMeasured) -> dict[str, Outcome]:
     drives = [_Drive(sr.spec.name, d, h.session, a)]
-    results: dict = {}
+    results: dict[str, Outcome] = {}
     with contextlib.ExitStack() as stack:
         group = Group(h.session.master)
         stack.callback(group.join(h.session))
@@ -197,8 +216,9 @@ def _run_all(run, sr, r, d, h, a, specs, run_measured) -> dict:
     return results
 
 
-def _reach_and_hold(run, sr, r, a, drives, group) -> None:
-    def end_round():
+def _reach_and_hold(run: StepRun[SR, R], sr: SR, r: R, a: StepArgs, drives: list[_Drive],
+                    group: Group) -> None:
+    def end_round() -> None:
         group.end_round()
     for x in drives:
         x.begin(float(a["within"]))
@@ -209,8 +229,12 @@ def _reach_and_hold(run, sr, r, a, drives, group) -> None:
             if x.feed_reach(x.d.cycle(), ch.now()):
                 pending.remove(x)
         end_round()
-        if any(x.st is not None and x.st.fault for x in drives):
-            return                          # a trip ends the run for all
+        tripped = [x.name for x in drives if x.st is not None and x.st.fault]
+        if tripped:                         # a trip ends the run for all
+            for x in pending:               # (still on the way: not reached, not failed yet)
+                x.failed = f"not in the band when the run ended: {', '.join(tripped)} tripped (a trip ends " \
+                           f"the run for all)"
+            return
         run.progress(sr, r, "accelerating: " + ", ".join(
             f"{x.name} {fmt(rnd(x.actual(x.st)))}{x.u}" for x in drives if x.st is not None))
     if any(x.failed for x in drives):
@@ -220,11 +244,11 @@ def _reach_and_hold(run, sr, r, a, drives, group) -> None:
         for x in drives:
             x.feed_hold(x.d.cycle())
         end_round()
-        if any(x.st.fault for x in drives):
+        if any(x.st is not None and x.st.fault for x in drives):
             return
         run.progress(sr, r, f"holding ({max(0.0, hold_end - ch.now()):.1f} s left)")
 
 
-def _stop_all(drives, group) -> None:
+def _stop_all(drives: list[_Drive], group: Group) -> None:
     """Every drive stopped together (the Group's stop of all)."""
-    group.stop_all([(x.session.address, x.session, None) for x in drives])
+    group.stop_all([(x.address, x.session, None) for x in drives])

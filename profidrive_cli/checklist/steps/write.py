@@ -6,16 +6,23 @@ execute() runs it on the station's Drive for the Runner. Imports only the checkl
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any
+
 from profidrive_cli import PdriveError
-from profidrive_cli.checklist.fields import fmt
-from profidrive_cli.checklist.steps.base import StepFailed, StepType, close_to
+from profidrive_cli.checklist.fields import RawStepFacts, StationFacts, StepArgs, fmt
+from profidrive_cli.checklist.steps.base import Handle, R, SR, StepFailed, StepRun, StepType, close_to
 from profidrive_cli.drives.values import danger, profile_value_problem
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.checklist.fields import FieldChecker
+    from profidrive_cli.drives.base import Drive
 
 
 class Write(StepType):
     name = "write"
 
-    def validate(self, check, st, rs, body, state):
+    def validate(self, check: FieldChecker, st: StationFacts, rs: RawStepFacts, body: Any,
+                 state: dict[str, bool]) -> tuple[StepArgs, str]:
         d = check.fields(rs, body, ("param", "value", "allow_dangerous"), None, ("param", "value"))
         w = f"step {rs.index} (write)"
         check.need_param_channel(st, rs)
@@ -43,7 +50,7 @@ class Write(StepType):
                 f"write {t.label} = {fmt(value)}{u}" + (" (dangerous, allowed)" if allow and p is not None
                                                          and danger(p) else ""))
 
-    def execute(self, run, sr, r, d, h):
+    def execute(self, run: StepRun[SR, R], sr: SR, r: R, d: Drive, h: Handle) -> str:
         a = r.step.args
         t = a["param"]
         value = a["value"]
