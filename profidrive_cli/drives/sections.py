@@ -92,7 +92,7 @@ def line_dict(value: dict[Any, Any], line: int = 0) -> LineDict:
 
 def line_of(node: object, name: object) -> int | None:
     if isinstance(node, LineDict):
-        return node.line_of(name)               # type: ignore[arg-type]
+        return node.line_of(name)
     line = getattr(node, "line", None)
     return line if isinstance(line, int) else None
 
