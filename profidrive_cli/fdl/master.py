@@ -28,6 +28,7 @@ its noise counted as illegal, and after the last retry the request counts as not
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Final, Literal
 
 from profidrive_cli.fdl import frames as F
 from profidrive_cli.fdl.fast import DxTemplate, dx_template
@@ -35,7 +36,7 @@ from profidrive_cli.fdl.fcb import MasterFcb
 from profidrive_cli.fdl.timing import BusParams
 
 REPLY, NO_ANSWER = "reply", "no answer"
-MORE = "more"       # dx_feed(): the beginning of the expected reply, wait for the rest
+MORE: Final = "more"       # dx_feed(): the beginning of the expected reply, wait for the rest
 
 #: FCS + ED for every FCS value (the fast path's request tail)
 _TAILS = tuple(bytes((i, F.ED)) for i in range(256))
@@ -225,7 +226,7 @@ class FdlMaster:
         c.requests += 1
         return out
 
-    def dx_feed(self, data: bytes, now: float) -> bytes | str | None:
+    def dx_feed(self, data: bytes, now: float) -> bytes | Literal["more"] | None:
         """The fast check of a Data_Exchange reply (after dx_request). Returns
 
             the input octets   the octets so far are exactly the DL reply the template expects
