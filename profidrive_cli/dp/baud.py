@@ -24,7 +24,7 @@ link it opened except the one it returns.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable, Iterable
+from typing import TYPE_CHECKING, Callable, Iterable, TypeAlias
 
 from profidrive_cli.fdl import frames as F
 from profidrive_cli.fdl.timing import BAUD_NAMES, CHAR_BITS
@@ -50,6 +50,10 @@ class BaudFound:
 
     def describe(self) -> str:
         return f"baud rate {BAUD_NAMES[self.baud]} ({self.how})"
+
+
+#: (the rate found, the master made on it or, listening only, the link), or (None, None)
+_Found: TypeAlias = "tuple[BaudFound, Master | Link] | tuple[None, None]"
 
 
 def rateless(link: Link) -> str | None:
@@ -95,7 +99,7 @@ def heard_telegrams(link: Link, seconds: float) -> int:
 def detect_baud(open_link: Callable[[int], Link], make_master: Callable[[Link, int], Master],
                 addresses: Iterable[int] | None = None, *, listen: bool = True,
                 probe: bool = True, rates: Iterable[int] = PROBE_ORDER,
-                progress: Callable[[str], None] | None = None) -> tuple[BaudFound, Master | Link] | tuple[None, None]:
+                progress: Callable[[str], None] | None = None) -> _Found:
     """(BaudFound, master-or-link) at the rate found, or (None, None).
 
     With probe=False only listening is done (and the open link is returned instead of a master).
@@ -158,7 +162,7 @@ def detect_baud(open_link: Callable[[int], Link], make_master: Callable[[Link, i
 
 def _on_a_rateless_line(link: Link, what: str, make_master: Callable[[Link, int], Master],
                         addresses: Iterable[int] | None, *, listen: bool, probe: bool,
-                        progress: Callable[[str], None] | None) -> tuple[BaudFound, Master | Link] | tuple[None, None]:
+                        progress: Callable[[str], None] | None) -> _Found:
     """detect_baud on a line without a rate: listen and probe once on `link` (opened at whatever
     rate: the octets are the same) with a master at RATELESS_BAUD, and say so."""
     name = BAUD_NAMES[RATELESS_BAUD]

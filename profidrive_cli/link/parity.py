@@ -80,7 +80,8 @@ def unmark_parity(data: bytes, carry: bytes = b"") -> tuple[bytes, tuple[int, ..
 if os.name == "posix":
     import termios
 
-    class ParityMarkingSerial(serial.Serial):  # type: ignore[misc]  # pyserial has no type hints: Serial is Any
+    # pyserial has no type hints: serial.Serial is Any, which mypy --strict will not subclass
+    class ParityMarkingSerial(serial.Serial):  # type: ignore[misc]
         """serial.Serial (POSIX) with parity checking and error marking on, and unmarked reads."""
 
         def __init__(self, *args: Any, **kwargs: Any) -> None:   # pyserial's own arguments
