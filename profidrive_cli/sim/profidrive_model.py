@@ -132,7 +132,7 @@ class ProfidriveModel(PkwServer, DriveModel):
         self._last_tick: float | None = None
         self._frozen_target: float | None = None
         # PKW server
-        self._pkw_req: tuple[int, int, int, int] | None = None
+        self._pkw_req: tuple[int, ...] | None = None
         self._pkw_resp: PkwFrame = pd.IDLE
         self._pkw_wait = 0
         self.pkw_log: list[tuple[PkwFrame, PkwFrame]] = []
@@ -475,7 +475,7 @@ class ProfidriveModel(PkwServer, DriveModel):
         lay = self._ppo()
         area = pd.decode_area_bytes(lay, outputs, "request")
         self.tick(now)
-        resp = self._pkw_serve(area.pkw, now) if lay.pkw else None
+        resp = self._pkw_serve(area.pkw, now) if area.pkw is not None else None   # (None: no PKW in lay)
         self.apply_control(area.word1, area.word2, now)
         self._pzd_write(area.pzd[2:])
         self.stw = self.status_word()

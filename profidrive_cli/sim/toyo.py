@@ -296,7 +296,7 @@ class ToyoModel(ProfidriveModel):
         tl = self._tl()
         area = pd.decode_area_bytes(lay, outputs, "request")
         self.tick(now)
-        resp = self._pkw_serve(area.pkw, now) if lay.pkw else None
+        resp = self._pkw_serve(area.pkw, now) if area.pkw is not None else None   # (None: no PKW in lay)
         w = dict(zip(tl.words("request", self._plch()), area.pzd))
         if "run_cmd" in w:
             self.run_cmd = w["run_cmd"] if self.mode == 1 else (w["run_cmd"] & ~0x7)
