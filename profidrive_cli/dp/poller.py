@@ -22,7 +22,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
-from typing import Literal, overload
+from typing import Callable, Literal, overload
 
 from profidrive_cli import BusError
 from profidrive_cli.dp import services as S
@@ -60,7 +60,7 @@ class Master:
         self.address = address
         self.stations: dict[int, StationMachine] = {}
         self._line_free_at = 0.0     # earliest start of the next request (TSYN / TID1 / TID2 kept)
-        self.on_event = None         # callable(address, Event) for live views / logs
+        self.on_event: Callable[[int, Event], object] | None = None    # for live views / logs
         #: stations in data exchange take the fast path (dp/dx_fast.py); False: the general
         #: engine for every request (same octets, counters and FCB states, only slower)
         self.fast_dx = True

@@ -27,15 +27,34 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 from dataclasses import dataclass, field
 
 from profidrive_cli import BusError
 from profidrive_cli.dp.services import SlaveDiag
 from profidrive_cli.fdl import frames as F
 
-if TYPE_CHECKING:                     # (for annotations only)
-    from profidrive_cli.dp.poller import Master
+if TYPE_CHECKING:
+    from profidrive_cli.fdl.master import FdlMaster
+    from profidrive_cli.fdl.timing import BusParams
+
+
+class ScanMaster(Protocol):
+    """What a scan uses of dp.poller.Master (which imports this module)."""
+
+    params: BusParams
+
+    @property
+    def address(self) -> int: ...
+
+    @property
+    def fdl(self) -> FdlMaster: ...
+
+    def fdl_status(self, da: int) -> F.Frame | None: ...
+
+    def slave_diag(self, da: int, wake: bool = False) -> SlaveDiag | None: ...
+
+    def get_cfg(self, da: int) -> bytes | None: ...
 
 #: FDL status requests to one silent address before it counts as empty (see the module text)
 WARMUP_PROBES = 5
@@ -60,7 +79,7 @@ class ScanEntry:
         return self.diag.ident if self.diag else None
 
 
-def probe(master: Master, addr: int) -> F.Frame | None:
+def probe(master: ScanMaster, addr: int) -> F.Frame | None:
     """One FDL status request, as a live list sends it: a single attempt, and a second (with the
     configured retries) only where something answered garbled. An empty address costs one request
     and one slot time, not 1 + retries of them. The reply frame, or None."""
@@ -80,7 +99,7 @@ def probe(master: Master, addr: int) -> F.Frame | None:
     return reply
 
 
-def wake(master: Master, addr: int, probes: int = WARMUP_PROBES) -> tuple[F.Frame | None, int]:
+def wake(master: ScanMaster, addr: int, probes: int = WARMUP_PROBES) -> tuple[F.Frame | None, int]:
     """Up to `probes` FDL status requests (probe()) to `addr` until one is answered: a slave still
     searching the baud rate answers only after a few. (reply frame, unanswered probes before it), or
     (None, probes) when the address stayed silent."""
@@ -97,7 +116,7 @@ def _entry(addr: int, reply: F.Frame, unanswered: int = 0) -> ScanEntry:
                      unanswered=unanswered, sc_only=sc)
 
 
-def scan(master: Master, first: int = 0, last: int = 126,
+def scan(master: ScanMaster, first: int = 0, last: int = 126,
          progress: Callable[[int], object] | None = None, read_cfg: bool = False,
          quick: bool = False) -> list[ScanEntry]:
     """progress(address) is called before each probe of the quick pass (for a progress bar).

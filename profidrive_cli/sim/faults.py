@@ -37,15 +37,21 @@ from __future__ import annotations
 
 import random
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from profidrive_cli import UsageError
 from profidrive_cli.fdl import frames as F
 from profidrive_cli.sim.slave import DATA_EXCH
 
 if TYPE_CHECKING:
-    from profidrive_cli.sim.bus import SimBus
     from profidrive_cli.sim.slave import SimSlave
+
+
+class Segment(Protocol):
+    """What a FaultPlan sees of the bus (sim/bus.py SimBus, which imports this module): its stations."""
+
+    @property
+    def slaves(self) -> dict[int, SimSlave]: ...
 
 REPLY_KINDS = ("noise", "flip", "drop", "late", "wrongsa")
 STATION_KINDS = ("powercycle", "drivetrip")
@@ -139,7 +145,7 @@ class FaultPlan:
                 return kind
         return None
 
-    def on_telegram(self, bus: SimBus, t: float) -> None:
+    def on_telegram(self, bus: Segment, t: float) -> None:
         """Every request on the bus: unplug (power off, silent) or plug in the stations of
         `unplugs` whose time has come (counted as kind "unplug" / "replug")."""
         if self.t0 is None:
@@ -160,7 +166,7 @@ class FaultPlan:
                 s.powered = True
                 self._count(a, "replug", t)
 
-    def on_request(self, bus: SimBus, slave: SimSlave, req: F.Frame, t: float) -> None:
+    def on_request(self, bus: Segment, slave: SimSlave, req: F.Frame, t: float) -> None:
         """A new Data_Exchange request to `slave` in data exchange, before the slave handles it."""
         kind = self._choose(slave.address, STATION_KINDS, lambda k: True)
         if kind is None:
@@ -172,7 +178,7 @@ class FaultPlan:
             code = self.trip_codes.get(slave.address) or default_trip_code(slave.model)
             slave.inject_trip(code, t)
 
-    def on_silence(self, bus: SimBus, req: F.Frame, t: float) -> bytes | None:
+    def on_silence(self, bus: Segment, req: F.Frame, t: float) -> bytes | None:
         """A request that needs a reply, to an address where no station is: the octets of a
         phantom (a lone 0xE5 in the reply slot), or None (silence)."""
         kind = self._choose(req.da, SILENT_KINDS, lambda k: True)
@@ -181,7 +187,7 @@ class FaultPlan:
         self._count(req.da, kind, t)
         return PHANTOM_OCTETS
 
-    def on_reply(self, bus: SimBus, req: F.Frame, reply: bytes, t: float) -> tuple[bytes, float] | None:
+    def on_reply(self, bus: Segment, req: F.Frame, reply: bytes, t: float) -> tuple[bytes, float] | None:
         """-> None (dropped) or (octets, extra delay in seconds)."""
         sc = reply[:1] == b"\xE5"
         kind = self._choose(req.da, REPLY_KINDS, lambda k: not (k == "wrongsa" and sc))

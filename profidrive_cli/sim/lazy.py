@@ -20,14 +20,18 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from profidrive_cli import PdriveError
 from profidrive_cli.drives.registry import sim_diag_len
 from profidrive_cli.sim.model import SlaveModel, ticks_always
 
-if TYPE_CHECKING:
-    from profidrive_cli.sim.slave import SimSlave
+
+
+class ModelHolder(Protocol):
+    """The station that holds a LazyModel (sim/slave.py SimSlave, which imports this module)."""
+
+    model: SlaveModel | LazyModel
 
 #: tick times kept until the model is built (more than any model's standstill history: Toyo keeps 100)
 REPLAY_TICKS = 256
@@ -43,7 +47,7 @@ class LazyModel:
     _ident: int
     _diag_len: int
     _ticks: deque[float]
-    _owner: SimSlave | None
+    _owner: ModelHolder | None
     _label: str
 
     def __init__(self, build: Callable[[], SlaveModel], ident: int, family: str, label: str = ""):
@@ -58,7 +62,7 @@ class LazyModel:
         d["_owner"] = None
         d["_label"] = label
 
-    def attach(self, slave: SimSlave) -> None:
+    def attach(self, slave: ModelHolder) -> None:
         """The SimSlave that holds this model: it gets the built model in its place."""
         self.__dict__["_owner"] = slave
 
