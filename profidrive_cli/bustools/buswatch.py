@@ -19,9 +19,14 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from profidrive_cli import BusError
 from profidrive_cli.dp.scan import probe, scan
+
+if TYPE_CHECKING:
+    from profidrive_cli.dp.poller import Master
+    from profidrive_cli.dp.services import SlaveDiag
 
 #: counters shown and rated, in this order (keys of fdl.master.StationCounters)
 COUNTER_KEYS = ("requests", "retries", "no_answer", "illegal", "reparams")
@@ -33,7 +38,7 @@ CATEGORIES = ("data exchange", "waiting", "diagnosis pending", "configuration fa
               "no answer")
 
 
-def categorize(diag) -> str:
+def categorize(diag: SlaveDiag | None) -> str:
     """The category of a Slave_Diag (None: no answer)."""
     if diag is None or diag.has("Station_Non_Existent"):
         return "no answer"
@@ -56,8 +61,9 @@ class WatchedStation:
     state: str = ""                    # Slave_Diag state in words (dp.services.SlaveDiag.state_words)
     category: str = "no answer"
     master: int | None = None          # the master that parameterised it (None: none)
-    counters: dict = field(default_factory=dict)
-    rates: dict = field(default_factory=dict)     # counter key -> rise per second over the window ({} at first)
+    counters: dict[str, int] = field(default_factory=dict)
+    #: counter key -> rise per second over the window ({} at first)
+    rates: dict[str, float] = field(default_factory=dict)
     seen_passes: int = 0
     #: FDL status requests it left unanswered before its first answer in the first scan (dp/scan.py
     #: ScanEntry.unanswered: the warm-up pass woke it, Baud_Search); 0 for a station found later by
@@ -86,7 +92,7 @@ class BusWatch:
     """A live list polled pass after pass. `window_s`: counter rates are taken over this much time;
     `probe_per_pass`: empty addresses probed per pass."""
 
-    def __init__(self, master, first: int = 0, last: int = 126, *, window_s: float = 5.0,
+    def __init__(self, master: Master, first: int = 0, last: int = 126, *, window_s: float = 5.0,
                  probe_per_pass: int = 4):
         self.master = master
         self.first, self.last = first, last
@@ -95,7 +101,8 @@ class BusWatch:
         self.stations: dict[int, WatchedStation] = {}
         self.passes = 0
         self._cycles: list[float] = []
-        self._history: dict[int, deque] = {}       # address -> (t, counters) snapshots
+        #: address -> (t, counters) snapshots
+        self._history: dict[int, deque[tuple[float, dict[str, int]]]] = {}
         self._empty: list[int] = []
         self._probe_at = 0
         self.t0 = master.link.now()
@@ -159,7 +166,7 @@ class BusWatch:
 
     # -- internals ---------------------------------------------------------------------------------
 
-    def _update_diag(self, ws: WatchedStation, diag) -> None:
+    def _update_diag(self, ws: WatchedStation, diag: SlaveDiag | None) -> None:
         ws.category = categorize(diag)
         if diag is None:
             ws.state = "no answer"
@@ -220,11 +227,12 @@ class BusWatch:
                         if dt >= min(MIN_RATE_S, self.window_s) else {})
 
 
-def health_figures(before: dict, after: dict) -> dict:
+def health_figures(before: dict[str, int], after: dict[str, int]) -> dict[str, float]:
     """Counter rises between two snapshots of one station (fdl StationCounters.as_dict()), and the
     retries per 1,000 requests: what a bus_health check compares with its thresholds."""
-    d = {k: after.get(k, 0) - before.get(k, 0) for k in ("requests", "retries", "no_answer", "illegal",
-                                                         "reparams", "data_exchanges")}
+    d: dict[str, float] = {k: after.get(k, 0) - before.get(k, 0)
+                           for k in ("requests", "retries", "no_answer", "illegal", "reparams",
+                                     "data_exchanges")}
     d["retries_per_1000"] = 1000.0 * d["retries"] / d["requests"] if d["requests"] else 0.0
     return d
 

@@ -18,12 +18,15 @@ from __future__ import annotations
 import signal
 import threading
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any, BinaryIO, Callable
 
 from profidrive_cli import UsageError, __version__
 from profidrive_cli.bustools.listen import listen
 from profidrive_cli.dp.capture import LINKTYPE_USER0, Capture, PcapWriter, merge_errors
 from profidrive_cli.fdl.timing import BAUD_NAMES, BAUD_RATES
+
+if TYPE_CHECKING:
+    from profidrive_cli.link.base import Link
 
 INTERFACE = "pdrive"
 DEFAULT_BAUD = 19200
@@ -100,7 +103,7 @@ class _TermGuard:
 class _Fifo:
     """The pcap stream to Wireshark: every write flushed at once (a live view)."""
 
-    def __init__(self, fh):
+    def __init__(self, fh: BinaryIO) -> None:
         self.fh = fh
 
     def write(self, data: bytes) -> None:
@@ -108,7 +111,8 @@ class _Fifo:
         self.fh.flush()
 
 
-def capture(link, fifo_path: str, duration: float | None = None, clock=time.monotonic) -> int:
+def capture(link: Link, fifo_path: str, duration: float | None = None,
+            clock: Callable[[], float] = time.monotonic) -> int:
     """Listen on `link` and stream every telegram to the fifo (pcap, DLT_USER0, wall-clock times)
     until SIGTERM, Ctrl-C, a closed fifo or `duration`. Returns the number of frames written; the
     link is closed on every way out."""

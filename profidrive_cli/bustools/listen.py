@@ -8,13 +8,16 @@ Decoding (dp/capture.py) and output (pcap, text, JSON) stay with the caller.
 from __future__ import annotations
 
 import time
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
+
+if TYPE_CHECKING:
+    from profidrive_cli.link.base import Link
 
 #: a read returns at least this often, so that a duration ends on time on a silent bus
 POLL_S = 0.2
 
 
-def listen(link, duration: float | None, on_data: Callable[[bytes, float], None],
+def listen(link: Link, duration: float | None, on_data: Callable[[bytes, float], None],
            clock: Callable[[], float] = time.monotonic,
            on_tick: Callable[[float], None] | None = None) -> None:
     """Read `link` for `duration` seconds (None: until an exception, e.g. KeyboardInterrupt or a

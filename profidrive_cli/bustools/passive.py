@@ -15,15 +15,26 @@ the profile's max-frequency parameter goes by on the wire; from then on that val
 from __future__ import annotations
 
 import inspect
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
 
 from profidrive_cli import UsageError
 from profidrive_cli.dp import services as S
 from profidrive_cli.fdl import frames as F
 
 if TYPE_CHECKING:                                   # pragma: no cover
-    from profidrive_cli.drives.profile import Profile
+    from profidrive_cli.dp.capture import Captured
+    from profidrive_cli.drives.profile import ParamDef, Profile
+
+#: a family codec's decoded area (drives/<family>/codec.py decode_area): its shape is the family's,
+#: its values JSON's; and the common `drive` object made from it (docs/json.md), whose `param` and
+#: values come from that area
+Area = dict[str, Any]
+DriveObject = dict[str, Any]
+#: a codec's decode_area (with or without max_hz) and whether it takes max_hz
+Decoder = tuple[Callable[..., Area], bool]
 
 
 @dataclass
@@ -35,7 +46,7 @@ class Watched:
     seen_cfg: bytes | None = None    # the last Chk_Cfg the master sent it
     fmax: float | None = None        # learnt from a PKW answer of the max-frequency parameter
     #: the family's (decode_area, takes max_hz), looked up at the first area
-    decoder: tuple | None = field(default=None, repr=False, compare=False)
+    decoder: Decoder | None = field(default=None, repr=False, compare=False)
 
     @property
     def name(self) -> str:
@@ -52,7 +63,7 @@ class Watched:
                     return name
         d = self.profile.default_layout
 
-        def fits(name):
+        def fits(name: str) -> bool:
             lay = lays[name]
             return (lay.output_len if direction == "request" else lay.input_len) == n
         if fits(d):
@@ -72,7 +83,7 @@ def parse_station(text: str) -> tuple[int, str, str | None]:
     return int(addr), name, layout or None
 
 
-def watch_list(specs) -> dict[int, Watched]:
+def watch_list(specs: Iterable[str]) -> dict[int, Watched]:
     """--station values -> {address: Watched}; unknown profiles and layouts refused (exit 2)."""
     from profidrive_cli.drives.profile import load_profile
     out: dict[int, Watched] = {}
@@ -109,9 +120,9 @@ class PassiveDecoder:
 
     def __init__(self, watched: dict[int, Watched]):
         self.watched = watched
-        self._areas: dict[tuple, dict] = {}
+        self._areas: dict[tuple[int, str, bytes, str | None, float | None], DriveObject] = {}
 
-    def decode(self, c) -> dict | None:
+    def decode(self, c: Captured) -> DriveObject | None:
         f = c.frame
         if f is None or f.sd in (F.SC, F.SD4):
             return None
@@ -126,7 +137,7 @@ class PassiveDecoder:
             return None
         return self._decode_area(st, direction, bytes(f.data))
 
-    def _decode_area(self, st: Watched, direction: str, data: bytes) -> dict:
+    def _decode_area(self, st: Watched, direction: str, data: bytes) -> DriveObject:
         layout = st.layout_for(direction, len(data))
         key = (st.address, direction, data, layout, st.fmax)
         d = self._areas.get(key)
@@ -139,8 +150,8 @@ class PassiveDecoder:
         return d
 
 
-def _decode_new(st: Watched, direction: str, data: bytes, layout: str | None) -> dict:
-    base = {"station": st.address, "profile": st.name, "direction": direction}
+def _decode_new(st: Watched, direction: str, data: bytes, layout: str | None) -> DriveObject:
+    base: DriveObject = {"station": st.address, "profile": st.name, "direction": direction}
     if layout is None:
         base["error"] = (f"{len(data)} octets fit no layout of {st.name} "
                          f"({', '.join(st.profile.layouts)})")
@@ -157,10 +168,10 @@ def _decode_new(st: Watched, direction: str, data: bytes, layout: str | None) ->
 
 #: family codec -> (its decode_area, whether that takes max_hz): looked up (inspect.signature) once
 #: per codec, not per frame
-_DECODERS: dict = {}
+_DECODERS: dict[ModuleType, Decoder] = {}
 
 
-def _decoder(profile):
+def _decoder(profile: Profile) -> Decoder:
     from profidrive_cli.drives import codec_module
     mod = codec_module(profile)
     hit = _DECODERS.get(mod)
@@ -170,7 +181,7 @@ def _decoder(profile):
     return hit
 
 
-def _decode(st: Watched, layout: str, direction: str, data: bytes) -> dict:
+def _decode(st: Watched, layout: str, direction: str, data: bytes) -> Area:
     if st.decoder is None:
         st.decoder = _decoder(st.profile)
     fn, takes_max_hz = st.decoder
@@ -179,7 +190,7 @@ def _decode(st: Watched, layout: str, direction: str, data: bytes) -> dict:
     return fn(st.profile, layout, direction, data)
 
 
-def _learn_fmax(st: Watched, param: dict) -> None:
+def _learn_fmax(st: Watched, param: dict[str, Any]) -> None:
     if param.get("code") and param.get("code") == st.profile.max_frequency_param \
             and isinstance(param.get("value"), (int, float)) and param["value"] > 0:
         st.fmax = float(param["value"])
@@ -187,7 +198,7 @@ def _learn_fmax(st: Watched, param: dict) -> None:
 
 # -- one family's decoded area -> the common `drive` object -------------------------------------
 
-def normalise(profile, direction: str, area: dict) -> dict:
+def normalise(profile: Profile, direction: str, area: Area) -> DriveObject:
     """The common fields of a decoded area: command / control (request), state / status
     (response), reference_hz / actual_hz, param (the parameter channel), text (one line)."""
     from profidrive_cli.drives import drive_class
@@ -199,13 +210,13 @@ def normalise(profile, direction: str, area: dict) -> dict:
     return d
 
 
-def _round(x):
+def _round(x: float | None) -> float | None:
     return None if x is None else round(float(x), 3)
 
 
-def _ppo(direction: str, area: dict) -> dict:
+def _ppo(direction: str, area: Area) -> DriveObject:
     """PROFIdrive cards (Fuji, Moeller) and Toyo: CTW/STW words, N2 or Toyo speed words, PKW."""
-    d: dict = {}
+    d: DriveObject = {}
     if direction == "request":
         cw = area.get("control_word") or area.get("run_command")
         if cw:
@@ -234,7 +245,7 @@ def _ppo(direction: str, area: dict) -> dict:
     return d
 
 
-def _toyo_mode1_state(fields: list, d: dict) -> None:
+def _toyo_mode1_state(fields: list[dict[str, Any]], d: DriveObject) -> None:
     """Toyo mode 1 has no status word: the status flag (toyo-vf66-pbus66z.md Table 3.9, bit 1
     "running normally", bit 2 "jog running") and the fault flags say what the drive does."""
     by = {f.get("field"): f for f in fields}
@@ -250,11 +261,11 @@ def _toyo_mode1_state(fields: list, d: dict) -> None:
     d["status_word"] = sf.get("hex")
 
 
-def _pkw(direction: str, pk: dict) -> dict:
+def _pkw(direction: str, pk: dict[str, Any]) -> dict[str, Any]:
     code = pk.get("code") or f"PNU{pk.get('pnu')}"
     if code.upper().startswith("PNU") and pk.get("subindex") and "[" not in code:
         code += f"[{pk['subindex']}]"              # an array element (Fuji's subindex is the code)
-    p = {"ak": pk["ak"], "code": code, "ak_text": pk.get("ak_text")}
+    p: dict[str, Any] = {"ak": pk["ak"], "code": code, "ak_text": pk.get("ak_text")}
     vt = pk.get("value_text")
     if "value" in pk:
         p["value"] = pk["value"]
@@ -278,9 +289,9 @@ def _pkw(direction: str, pk: dict) -> dict:
 
 
 #: Yaskawa run-command and status flags in the manual's words (drives/yaskawa/codec.py names)
-def _yaskawa(profile, direction: str, area: dict) -> dict:
+def _yaskawa(profile: Profile, direction: str, area: Area) -> DriveObject:
     from profidrive_cli.drives.yaskawa.codec import COMMAND_TEXT, STATUS_TEXT
-    d: dict = {}
+    d: DriveObject = {}
     if direction == "request":
         cmd = area.get("command")
         if cmd:
@@ -314,13 +325,13 @@ def _yaskawa(profile, direction: str, area: dict) -> dict:
     return d
 
 
-def _memobus(profile, direction: str, pa: dict) -> dict | None:
+def _memobus(profile: Profile, direction: str, pa: dict[str, Any]) -> dict[str, Any] | None:
     from profidrive_cli.drives.yaskawa.paramaccess import FC_READ, FC_WRITE
     reg = pa.get("start_register", 0)
     prm = next((p for p in profile.parameters.values() if p.register == reg), None)
     code = prm.code if prm is not None else f"register 0x{reg:04X}"
     fn = pa["function"]
-    p: dict = {"function": fn, "code": code}
+    p: dict[str, Any] = {"function": fn, "code": code}
     if direction == "request":
         if fn == FC_READ:
             p["request"], p["text"] = "read", f"read {code}"
@@ -348,14 +359,14 @@ def _memobus(profile, direction: str, pa: dict) -> dict | None:
     return p
 
 
-def _reg_value(prm, raw: int) -> str:
+def _reg_value(prm: ParamDef | None, raw: int) -> str:
     if prm is None:
         return f"0x{raw:04X}"
     from profidrive_cli.drives.base import value_text
     return value_text(prm.from_raw(raw), prm.unit or "")
 
 
-def drive_text(d: dict) -> str:
+def drive_text(d: DriveObject) -> str:
     """The decoded part of a sniff line: 'operate, reference 30.00 Hz; read F07'."""
     parts = []
     if "command" in d:
@@ -372,7 +383,7 @@ def drive_text(d: dict) -> str:
     return text
 
 
-def frame_suffix(d: dict) -> str:
+def frame_suffix(d: DriveObject) -> str:
     """What `pdrive sniff --station` appends to a frame's line."""
     arrow = "->" if d["direction"] == "request" else "<-"
     who = f"drive {d['station']} ({d['profile']}"

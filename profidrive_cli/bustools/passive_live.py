@@ -23,11 +23,14 @@ Sans-IO: dp.capture.Captured in (their arrival times), plain dicts out.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Callable, NamedTuple
+from typing import TYPE_CHECKING, Any, Callable, NamedTuple
 
 from profidrive_cli.dp import services as S
 from profidrive_cli.fdl import frames as F
 from profidrive_cli.fdl.timing import CHAR_BITS, BusParams
+
+if TYPE_CHECKING:
+    from profidrive_cli.dp.capture import Captured
 
 PARAMETERISING = "parameterising"
 CONFIGURING = "configuring"
@@ -99,7 +102,7 @@ class _Cycle:
         self.lo = min(self.lo, dt)
         self.hi = max(self.hi, dt)
 
-    def as_dict(self) -> dict | None:
+    def as_dict(self) -> dict[str, float] | None:
         if not self.n:
             return None
         return {"min": round(self.lo, 6), "mean": round(self.total / self.n, 6),
@@ -113,13 +116,13 @@ class StationLive:
     ident: int | None = None
     master: int | None = None
     exchanges: int = 0
-    counters: dict = field(default_factory=lambda: {"retries": 0, "no_answer": 0, "illegal": 0,
+    counters: dict[str, int] = field(default_factory=lambda: {"retries": 0, "no_answer": 0, "illegal": 0,
                                                     "reparams": 0})
     cycle: _Cycle = field(default_factory=_Cycle)
     last_fcb: bool | None = None
     last_dx_t: float | None = None
     was_dx: bool = False
-    drive: dict = field(default_factory=dict)     # the last decoded request / response (--station)
+    drive: dict[str, object] = field(default_factory=dict)   # the last decoded request / response (--station)
     silent: int = 0                  # rounds unanswered in a row (LOST_AFTER)
     silent_since: float | None = None    # when they began: the first unanswered request's time
     lost: bool = False               # lost (LOST_AFTER unanswered, or left data exchange), not back
@@ -128,16 +131,17 @@ class StationLive:
     prev_req_t: float | None = None  # the request to it before the last one
     last_req_t: float | None = None
     wd_s: float | None = None        # the watchdog from its last Set_Prm (None: off / not seen)
-    wd_expiries: list = field(default_factory=list)   # (t, silence s, watchdog s), the last few
+    #: (t, silence s, watchdog s), the last few
+    wd_expiries: list[tuple[float, float, float]] = field(default_factory=list)
     diag: bytes | None = None        # its last Slave_Diag answer
-    diag_idents: set = field(default_factory=set)
-    sets_prm_from: set = field(default_factory=set)   # masters that sent it Set_Prm
-    statuses: dict = field(default_factory=dict)      # rs/rr/nr/ue answers counted
+    diag_idents: set[int] = field(default_factory=set)
+    sets_prm_from: set[int] = field(default_factory=set)   # masters that sent it Set_Prm
+    statuses: dict[str, int] = field(default_factory=dict)      # rs/rr/nr/ue answers counted
     late: int = 0                    # replies later than LiveList.late_s (request -> reply)
     late_max: float = 0.0            # the latest of them (s)
 
-    def as_dict(self) -> dict:
-        d = {"station": self.address, "state": self.state,
+    def as_dict(self) -> dict[str, object]:
+        d: dict[str, object] = {"station": self.address, "state": self.state,
              "ident": self.ident, "ident_hex": None if self.ident is None else f"0x{self.ident:04X}",
              "master": self.master, "exchanges": self.exchanges,
              "cycle_s": self.cycle.as_dict(), "counters": dict(self.counters)}
@@ -195,7 +199,7 @@ class LiveList:
         return st
 
     # -- feeding ---------------------------------------------------------------------------------
-    def feed(self, c) -> None:
+    def feed(self, c: Captured) -> None:
         self.frames += 1
         self.octets += len(c.raw)
         f = c.frame
@@ -236,7 +240,7 @@ class LiveList:
         else:
             self._pending = None           # a reply nobody is waiting for (another master's?)
 
-    def _status(self, c, st: StationLive, status: int) -> None:
+    def _status(self, c: Captured, st: StationLive, status: int) -> None:
         kind = STATUS_KINDS[status]
         st.statuses[kind] = st.statuses.get(kind, 0) + 1
         if status == F.RS and st.wd_s is not None and _gap(st) > st.wd_s:
@@ -248,7 +252,7 @@ class LiveList:
         assert st.wd_s is not None
         st.wd_expiries = (st.wd_expiries + [(round(t, 6), round(_gap(st), 6), st.wd_s)])[-5:]
 
-    def _diag(self, c, st: StationLive, data: bytes) -> None:
+    def _diag(self, c: Captured, st: StationLive, data: bytes) -> None:
         st.diag_idents.add(data[4] << 8 | data[5])
         old, st.diag = st.diag, data
         if old is None or self.notes is None:
@@ -277,7 +281,7 @@ class LiveList:
                 self._note("lost", st.address, t, f"station {st.address} stopped answering: "
                            f"{LOST_AFTER} rounds in a row unanswered{since}")
 
-    def _answered(self, c, high: bool) -> None:
+    def _answered(self, c: Captured, high: bool) -> None:
         p = self._pending
         self._pending = None
         if p is None:
@@ -303,7 +307,7 @@ class LiveList:
         elif st.state == NO_ANSWER:
             st.state = SEEN
 
-    def _request(self, c, f: F.Frame) -> None:
+    def _request(self, c: Captured, f: F.Frame) -> None:
         self._unanswered = None
         self._no_answer(c.t)
         before, self._unanswered = self._unanswered, None
@@ -364,7 +368,7 @@ class LiveList:
             self._pending = _Pending(st, dx, c.t, retry or same, c.raw)
 
     # -- reading ---------------------------------------------------------------------------------
-    def bus_cycle(self) -> dict | None:
+    def bus_cycle(self) -> dict[str, float] | None:
         """The master's Data_Exchange cycle over every station: min of the minima, mean of all
         intervals, max of the maxima."""
         cs = [s.cycle for s in self.stations.values() if s.cycle.n]
@@ -379,15 +383,15 @@ class LiveList:
         None: baud rate unknown."""
         return bus_load_percent(self.octets, t, self.baud)
 
-    def token_rotation(self) -> dict | None:
+    def token_rotation(self) -> dict[str, float] | None:
         """The token rotation of the master that passed the most tokens: {min, mean, max, n}."""
         if not self.rotation:
             return None
         m = max(self.rotation, key=lambda a: self.rotation[a].n)
         return self.rotation[m].as_dict()
 
-    def snapshot(self, t: float) -> dict:
-        snap = {"t_s": round(t, 3), "frames": self.frames, "tokens": self.tokens,
+    def snapshot(self, t: float) -> dict[str, object]:
+        snap: dict[str, object] = {"t_s": round(t, 3), "frames": self.frames, "tokens": self.tokens,
                 "masters": sorted(self.masters), "cycle_s": self.bus_cycle(),
                 "bus_load_percent": self.bus_load(t), "token_rotation_s": self.token_rotation(),
                 "errors": dict(sorted(self.errors.items())),

@@ -15,7 +15,7 @@ import shlex
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence
+from typing import Mapping, Sequence
 
 from profidrive_cli import PdriveError, UsageError, __version__
 from profidrive_cli.outfile import check_output_path, write_text_atomic
@@ -28,7 +28,7 @@ EXTCAP_NAME = "pdrive-extcap"
 # ---------------------------------------------------------------------------------------------
 # where things go
 
-def personal_dirs(platform: str = sys.platform, env=os.environ,
+def personal_dirs(platform: str = sys.platform, env: Mapping[str, str] = os.environ,
                   home: Path | None = None) -> tuple[Path, list[Path]]:
     """(plugins folder, extcap folders): Wireshark's personal folders ("Personal Lua Plugins" and
     the personal extcap path in Help > About > Folders). Windows: %APPDATA%\\Wireshark\\plugins and
@@ -89,11 +89,13 @@ def parse_station(text: str) -> StationSpec:
     return StationSpec(address, prof.name, layout)
 
 
-def station_table(stations: list[StationSpec]) -> dict:
+def station_table(stations: list[StationSpec]) -> dict[str, object]:
     """The table the dissector reads: every profile's layouts, aliases, default layouts, stations."""
     from profidrive_cli.drives.profile import all_profiles
     from profidrive_cli.drives.wirefields import layout_table
-    layouts, aliases, defaults = {}, {}, {}
+    layouts: dict[str, object] = {}
+    aliases: dict[str, str] = {}
+    defaults: dict[str, str] = {}
     for prof in all_profiles():
         defaults[prof.name] = prof.default_layout
         for a in prof.aliases:
@@ -104,7 +106,7 @@ def station_table(stations: list[StationSpec]) -> dict:
             "aliases": aliases, "defaults": defaults, "layouts": layouts}
 
 
-def _lua(v, indent: str = "") -> str:
+def _lua(v: object, indent: str = "") -> str:
     if v is None:
         return "nil"
     if isinstance(v, bool):

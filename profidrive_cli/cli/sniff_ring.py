@@ -75,7 +75,7 @@ def run_ring(opts: Any, ring_s: float | None, trigger_exprs: tuple[str, ...], af
     # numbered on after an earlier run's captures: a restart never writes over one of them
     rec = Recorder(tset, ring_s, after, first_n=store.last_number() + 1)
     writer = _Writer(pattern, LINKTYPES[linktype], opts.json, tset, store)
-    cap = Capture()  # type: ignore[no-untyped-call]
+    cap = Capture()
     link = opts.open_link()
     if link.is_simulator:
         err.print("sim:// is silent unless a master talks: start `pdrive sim --plc --pty` and "

@@ -24,7 +24,7 @@ link it opened except the one it returns.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable, Iterable
+from typing import TYPE_CHECKING, Callable, Iterable, TypeAlias
 
 from profidrive_cli.fdl import frames as F
 from profidrive_cli.fdl.timing import BAUD_NAMES, CHAR_BITS
@@ -52,7 +52,11 @@ class BaudFound:
         return f"baud rate {BAUD_NAMES[self.baud]} ({self.how})"
 
 
-def rateless(link) -> str | None:
+#: (the rate found, the master made on it or, listening only, the link), or (None, None)
+_Found: TypeAlias = "tuple[BaudFound, Master | Link] | tuple[None, None]"
+
+
+def rateless(link: Link) -> str | None:
     """What the line is when it has no baud rate of its own (a pty, a TCP connection, the simulator
     without baud=), None for a serial line (or rfc2217://, which sets the converter's rate)."""
     from profidrive_cli.link.serial_link import _is_pty
@@ -72,7 +76,7 @@ def listen_window(baud: int) -> float:
     return max(0.08, 300 * CHAR_BITS / baud)
 
 
-def heard_telegrams(link, seconds: float) -> int:
+def heard_telegrams(link: Link, seconds: float) -> int:
     """Telegrams with a valid FCS (SD1/SD2/SD3) read from the line within `seconds`."""
     rx = F.Receiver()
     end = link.now() + seconds
@@ -95,7 +99,7 @@ def heard_telegrams(link, seconds: float) -> int:
 def detect_baud(open_link: Callable[[int], Link], make_master: Callable[[Link, int], Master],
                 addresses: Iterable[int] | None = None, *, listen: bool = True,
                 probe: bool = True, rates: Iterable[int] = PROBE_ORDER,
-                progress: Callable[[str], None] | None = None):
+                progress: Callable[[str], None] | None = None) -> _Found:
     """(BaudFound, master-or-link) at the rate found, or (None, None).
 
     With probe=False only listening is done (and the open link is returned instead of a master).
@@ -156,8 +160,9 @@ def detect_baud(open_link: Callable[[int], Link], make_master: Callable[[Link, i
     return None, None
 
 
-def _on_a_rateless_line(link, what: str, make_master, addresses, *, listen: bool, probe: bool,
-                        progress):
+def _on_a_rateless_line(link: Link, what: str, make_master: Callable[[Link, int], Master],
+                        addresses: Iterable[int] | None, *, listen: bool, probe: bool,
+                        progress: Callable[[str], None] | None) -> _Found:
     """detect_baud on a line without a rate: listen and probe once on `link` (opened at whatever
     rate: the octets are the same) with a master at RATELESS_BAUD, and say so."""
     name = BAUD_NAMES[RATELESS_BAUD]
@@ -189,7 +194,7 @@ def _on_a_rateless_line(link, what: str, make_master, addresses, *, listen: bool
     return BaudFound(RATELESS_BAUD, f"station {hit} answered; {why}"), master
 
 
-def _answers(master, addr: int, named: bool) -> bool:
+def _answers(master: Master, addr: int, named: bool) -> bool:
     """An FDL status answer from `addr`: a named station gets the warm-up probes (dp/scan.py wake),
     an address of a search through all of them one probe."""
     from profidrive_cli.dp.scan import probe, wake

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import struct
 from dataclasses import dataclass
+from typing import Protocol, TypedDict
 
 from profidrive_cli import UsageError
 from profidrive_cli.dp.services import service_name
@@ -39,7 +40,23 @@ _SD_NAMES = {F.SD1: "SD1", F.SD2: "SD2", F.SD3: "SD3", F.SD4: "SD4", F.SC: "SC"}
 #: seen last (a bus repeats its telegrams cycle after cycle); cleared when this many are kept, so the
 #: memory stays bounded whatever the capture's length
 _CACHE_MAX = 4096
-_FIELDS: dict[bytes, dict] = {}
+
+
+class FrameFields(TypedDict, total=False):
+    """What frame_fields() tells of a frame (the JSON of `pdrive sniff`)."""
+    sd: str
+    raw: str
+    service: str
+    da: int
+    sa: int
+    dsap: int | None
+    ssap: int | None
+    fc: str
+    fc_text: str
+    du: str
+
+
+_FIELDS: dict[bytes, FrameFields] = {}
 _BODIES: dict[bytes, str] = {}
 
 
@@ -50,16 +67,17 @@ class Captured:
     frame: F.Frame | None = None
     error: str = ""
 
-    def describe(self) -> dict:
+    def describe(self) -> dict[str, object]:
+        """The frame's fields (frame_fields) after its time, or its time, error and octets (a JSON row)."""
         f = self.frame
         if f is None:
             return {"t": round(self.t, 6), "error": self.error, "raw": self.raw.hex(" ")}
-        d = {"t": round(self.t, 6)}
+        d: dict[str, object] = {"t": round(self.t, 6)}
         d.update(frame_fields(self))
         return d
 
 
-def frame_fields(c: Captured) -> dict:
+def frame_fields(c: Captured) -> FrameFields:
     """describe() of a frame without its time: sd, raw, service, da/sa, SAPs, fc, fc_text, du (kept
     per octets: do not change the dict)."""
     d = _FIELDS.get(c.raw)
@@ -73,17 +91,17 @@ def frame_fields(c: Captured) -> dict:
     return d
 
 
-def _fields(raw: bytes, f: F.Frame) -> dict:
-    d: dict = {"sd": _SD_NAMES[f.sd], "raw": raw.hex(" ")}
+def _fields(raw: bytes, f: F.Frame) -> FrameFields:
+    d: FrameFields = {"sd": _SD_NAMES[f.sd], "raw": raw.hex(" ")}
     if f.sd == F.SC:
         d["service"] = "short acknowledge"
         return d
-    d.update(da=f.da, sa=f.sa)
+    d["da"], d["sa"] = f.da, f.sa
     if f.sd == F.SD4:
         d["service"] = "token"
         return d
-    d.update(dsap=f.dsap, ssap=f.ssap, fc=f"0x{f.fc:02X}", fc_text=F.describe_fc(f.fc),
-             du=f.data.hex(" "))
+    d.update({"dsap": f.dsap, "ssap": f.ssap, "fc": f"0x{f.fc:02X}", "fc_text": F.describe_fc(f.fc),
+              "du": f.data.hex(" ")})
     if f.is_request and f.function == F.FDL_STATUS:
         d["service"] = "FDL status"
     elif not f.is_request and f.dsap is None and f.ssap is None and f.fc & 0x0F == F.OK and not f.data:
@@ -107,7 +125,7 @@ def format_line(c: Captured, arrow: str = "") -> str:
     return f"{round(c.t, 6):>12.6f}  {a}{body}"
 
 
-def _body(d: dict) -> str:
+def _body(d: FrameFields) -> str:
     """A frame's line after its time column (and arrow)."""
     if d["sd"] == "SC":
         return "SC   short acknowledge"
@@ -120,7 +138,7 @@ def _body(d: dict) -> str:
 class Capture:
     """Feed octets with the time they arrived; collect Captured frames and framing errors."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.rx = F.Receiver()
         self._t = 0.0
 
@@ -228,6 +246,12 @@ def check_time(index: int, t: float, lo: float, hi: float, fmt: str, limits: str
         raise TimeRangeError(index, t, fmt, limits)
 
 
+class BinaryWriter(Protocol):
+    """Where a PcapWriter writes: a binary file, a fifo, a pipe."""
+
+    def write(self, data: bytes, /) -> object: ...
+
+
 class PcapWriter:
     """A classic pcap file (microsecond timestamps, little-endian). `start` is the wall-clock time
     (time.time()) of t = 0: write(t, raw) stamps start + t, so a capture timed on a monotonic clock
@@ -235,7 +259,7 @@ class PcapWriter:
     A time pcap cannot hold (before 1970, from 2106-02-07 06:28:16 UTC on: u32 seconds) is a
     TimeRangeError, and nothing of that packet is written."""
 
-    def __init__(self, fh, linktype: int = LINKTYPE_USER0, start: float = 0.0):
+    def __init__(self, fh: BinaryWriter, linktype: int = LINKTYPE_USER0, start: float = 0.0):
         self.fh = fh
         self.start = start
         self.linktype = linktype

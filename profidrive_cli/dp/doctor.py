@@ -17,7 +17,9 @@ import os
 import struct
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any, TypedDict
 
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.fdl import frames as F
@@ -44,9 +46,9 @@ class Check:
     name: str
     status: str
     detail: str
-    data: dict = field(default_factory=dict)
+    data: dict[str, object] = field(default_factory=dict)
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, object]:
         return {"name": self.name, "status": self.status, "detail": self.detail, **self.data}
 
 
@@ -56,7 +58,7 @@ class Report:
     kind: str                          # "serial", "url", "simulator"
     checks: list[Check] = field(default_factory=list)
     baud_rates: dict[int, str] = field(default_factory=dict)    # rate -> "ok" / why refused
-    recommend: dict = field(default_factory=dict)
+    recommend: dict[str, object] = field(default_factory=dict)
     #: the line carried traffic before we transmitted (another master): nothing more is sent
     busy: bool = False
     #: the slowest FDL status round trip measured, seconds
@@ -64,7 +66,7 @@ class Report:
     #: nothing but (at most) the echo came back to the echo check's request: a free address
     probe_silent: bool = False
 
-    def add(self, name: str, status: str, detail: str, **data) -> Check:
+    def add(self, name: str, status: str, detail: str, **data: object) -> Check:
         c = Check(name, status, detail, data)
         self.checks.append(c)
         return c
@@ -73,7 +75,7 @@ class Report:
     def failed(self) -> bool:
         return any(c.status == FAIL for c in self.checks)
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, object]:
         return {"port": self.port, "kind": self.kind, "ok": not self.failed,
                 "checks": [c.as_dict() for c in self.checks],
                 "baud_rates": {str(k): v for k, v in self.baud_rates.items()},
@@ -109,7 +111,19 @@ def usb_driver(port: str, sysfs: str = "/sys") -> tuple[str | None, bool]:
     return driver, on_usb
 
 
-def permission(path: str) -> dict:
+class Permission(TypedDict):
+    """permission(): who may open a device file."""
+    path: str
+    group: str
+    user: str
+    root: bool
+    access: bool
+    in_group_now: bool
+    in_group_file: bool
+    mode: str
+
+
+def permission(path: str) -> Permission:
     """Who may open the device: access for us, its group, whether we are in it (now / after login)."""
     import grp
     import pwd
@@ -140,7 +154,8 @@ def reported_baud(fd: int) -> int | None:
         return None
     _i, _o, cflag, _l, _line, _cc, ispeed, ospeed = struct.unpack("=4IB19s2I", buf)
     if cflag & CBAUD == BOTHER:
-        return ospeed
+        rate: int = ospeed           # (struct.unpack's values are Any)
+        return rate
     code = cflag & CBAUD
     for name in dir(termios):
         if name.startswith("B") and name[1:].isdigit() and getattr(termios, name) == code:
@@ -172,7 +187,8 @@ def usb_slot_bits(baud: int, latency_ms: int | None) -> int:
 # -- the whole check -----------------------------------------------------------------------------
 def diagnose(port: str, baud: int = 19200, master_address: int = 2, probe_address: int = 126,
              rs485: bool = False, listen_s: float = 0.3, sysfs: str = "/sys",
-             station: int | None = None, platform: str | None = None, winreg=None) -> Report:
+             station: int | None = None, platform: str | None = None,
+             winreg: Any = None) -> Report:     # the winreg module, or a test's stand-in
     """platform: sys.platform (tests switch it); winreg: the registry module on Windows (a stand-in
     in tests)."""
     if not 0 <= probe_address <= 126 or probe_address == master_address:
@@ -235,7 +251,7 @@ def diagnose(port: str, baud: int = 19200, master_address: int = 2, probe_addres
         _recommend(rep, baud, on_usb, latency)
         return rep
 
-    def posix_checks(ser) -> None:
+    def posix_checks(ser: Any) -> None:
         if not is_pty:
             parity_check(rep, ser)
         fd = getattr(ser, "fd", None)
@@ -281,7 +297,8 @@ def _latency_row(rep: Report, latency: int, where: str, how: str) -> None:
 
 
 def _on_the_line(rep: Report, port: str, baud: int, rs485: bool, master: int, probe: int,
-                 listen_s: float, station: int | None, platform_checks) -> None:
+                 listen_s: float, station: int | None,
+                 platform_checks: Callable[[Any], None]) -> None:
     """The checks that open the port: the DP baud rates, the open at `baud`, the platform's own
     checks of the open port (platform_checks(ser)), the echo and the round trip."""
     _baud_rates(rep, port, rs485)
@@ -295,7 +312,7 @@ def _on_the_line(rep: Report, port: str, baud: int, rs485: bool, master: int, pr
 
 
 def _windows(port: str, baud: int, master: int, probe: int, rs485: bool, listen_s: float,
-             station: int | None, winreg) -> Report:
+             station: int | None, winreg: Any) -> Report:
     """A COM port: listed by Windows (no device file, no permission bits), the FTDI latency timer
     from the registry (dp/winports.py), then the same open / baud / echo / round-trip checks."""
     from profidrive_cli.dp.winports import HOW_TO_LOWER, ftdi_latency, usb_adapter
@@ -352,7 +369,8 @@ def _simulator(port: str) -> Report:
     return rep
 
 
-def _open_check(rep: Report, port: str, baud: int, rs485: bool, quiet: bool = False):
+def _open_check(rep: Report, port: str, baud: int, rs485: bool, quiet: bool = False) -> Any:
+    # the open pyserial port or None (pyserial has no type hints: the `ser` of these checks is Any)
     from profidrive_cli.link.serial_link import open_serial
     try:
         ser = open_serial(port, baud, rs485)
@@ -364,7 +382,7 @@ def _open_check(rep: Report, port: str, baud: int, rs485: bool, quiet: bool = Fa
     return ser
 
 
-def parity_check(rep: Report, ser) -> None:
+def parity_check(rep: Report, ser: Any) -> None:
     """Whether the port checks parity: a POSIX serial device marks each octet that arrived with a
     parity or framing error (link/parity.py), which makes its telegram illegal; elsewhere (Windows:
     pyserial cannot mark single octets) a wrong parity bit passes and only the FCS can catch it."""
@@ -405,7 +423,7 @@ def _baud_rates(rep: Report, port: str, rs485: bool) -> None:
         rep.add("baud rates", OK, f"every DP rate opens ({', '.join(ok)})", accepted=ok)
 
 
-def _read_for(ser, seconds: float) -> bytes:
+def _read_for(ser: Any, seconds: float) -> bytes:
     from profidrive_cli.link.serial_link import read_available
     end = time.monotonic() + seconds
     got = bytearray()
@@ -416,7 +434,7 @@ def _read_for(ser, seconds: float) -> bytes:
         got += read_available(ser, left)
 
 
-def _echo(rep: Report, ser, port: str, baud: int, master: int, probe: int, listen_s: float) -> None:
+def _echo(rep: Report, ser: Any, port: str, baud: int, master: int, probe: int, listen_s: float) -> None:
     p = BusParams.for_baud(baud)
     try:
         ser.reset_input_buffer()
@@ -469,7 +487,7 @@ def _echo(rep: Report, ser, port: str, baud: int, master: int, probe: int, liste
 ROUND_TRIPS = 5
 
 
-def _exchange(ser, req: bytes, timeout: float, echo: bool) -> tuple[float | None, bytes]:
+def _exchange(ser: Any, req: bytes, timeout: float, echo: bool) -> tuple[float | None, bytes]:
     """Send `req`, read until one whole telegram came back: (seconds from the end of the write to
     the last octet, what came) or (None, what came) on timeout."""
     ser.reset_input_buffer()
@@ -489,7 +507,7 @@ def _exchange(ser, req: bytes, timeout: float, echo: bool) -> tuple[float | None
             return time.monotonic() - t0, bytes(got)
 
 
-def _round_trip(rep: Report, ser, baud: int, master: int, station: int | None) -> None:
+def _round_trip(rep: Report, ser: Any, baud: int, master: int, station: int | None) -> None:
     """The round trip of a real exchange against its wire time: FDL status requests to `station`
     (or to the first address that answers one) — a converter or adapter that buffers shows here."""
     if rep.busy:
@@ -542,7 +560,7 @@ def _round_trip(rep: Report, ser, baud: int, master: int, station: int | None) -
         rep.add("round trip", OK, text, **data)
 
 
-def _timing(rep: Report, ser, baud: int, master: int, probe: int) -> None:
+def _timing(rep: Report, ser: Any, baud: int, master: int, probe: int) -> None:
     """The turnaround and request-gap rows (dp/doctor_timing.py) after the echo and round trip."""
     from profidrive_cli.dp.doctor_timing import timing_rows
     rt = next((c.data for c in rep.checks if c.name == "round trip" and "station" in c.data), None)

@@ -22,13 +22,13 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
-from typing import Literal, overload
+from typing import Callable, Literal, overload
 
 from profidrive_cli import BusError
 from profidrive_cli.dp import services as S
 from profidrive_cli.dp.dx_fast import exchange_fast
-from profidrive_cli.dp.station import (CFG_FAULT, LOCKED, PRM_FAULT, RELEASED, STATE_WORDS, Event,
-                                       SlaveConfig, StationMachine)
+from profidrive_cli.dp.station import (CFG_FAULT, LOCKED, PRM_FAULT, RELEASED, STATE_WORDS, DpRequest,
+                                       Event, SlaveConfig, StationMachine)
 from profidrive_cli.fdl import frames as F
 from profidrive_cli.fdl.master import MORE, REPLY, FdlMaster, Outcome, format_counters
 from profidrive_cli.fdl.timing import BusParams
@@ -60,7 +60,7 @@ class Master:
         self.address = address
         self.stations: dict[int, StationMachine] = {}
         self._line_free_at = 0.0     # earliest start of the next request (TSYN / TID1 / TID2 kept)
-        self.on_event = None         # callable(address, Event) for live views / logs
+        self.on_event: Callable[[int, Event], object] | None = None    # for live views / logs
         #: stations in data exchange take the fast path (dp/dx_fast.py); False: the general
         #: engine for every request (same octets, counters and FCB states, only slower)
         self.fast_dx = True
@@ -90,7 +90,7 @@ class Master:
     def params(self, value: BusParams) -> None:
         self.fdl.params = value
 
-    def counters(self) -> dict[int, dict]:
+    def counters(self) -> dict[int, dict[str, int]]:
         """{station address: counters dict} for every station the master has talked to."""
         return {a: c.as_dict() for a, c in sorted(self.fdl.counters.items())}
 
@@ -130,7 +130,8 @@ class Master:
         self.fdl.sent(at)
         self._line_free_at = at + self.fdl.params.chars(len(out)) + self.fdl.params.tsyn
 
-    def _transact(self, da, function, data, dsap, ssap, expect) -> Outcome:
+    def _transact(self, da: int, function: int, data: bytes, dsap: int | None, ssap: int | None,
+                  expect: int) -> Outcome:
         self._wait_idle()
         now = self.link.now()
         self._last_req[da] = now
@@ -158,7 +159,7 @@ class Master:
             now = self.link.now()
             reads += 1
             if chunk:
-                res = fdl.dx_feed(chunk, now) if dx else None
+                res: Outcome | bytes | Literal["more"] | None = fdl.dx_feed(chunk, now) if dx else None
                 if res is None:
                     res = fdl.feed(chunk, now)
                 elif res is MORE:
@@ -167,7 +168,9 @@ class Master:
                     if not self.link.instant:        # (the instant simulator keeps no idle times)
                         self._line_free_at = now + fdl.params.tid1_seconds
                     self._await_reads = reads
-                    return res
+                    # never MORE here (made None above): mypy narrows a Literal by ==, not by the
+                    # `is` this per-cycle path keeps
+                    return res  # type: ignore[return-value]
                 rest = self.fdl.missing()
                 if rest > 1 and not self.link.instant:
                     total = self.fdl.telegram_octets()
@@ -194,6 +197,7 @@ class Master:
             self.link.flush_input()
             self._wait_idle()
             waited_for = 0
+            assert nxt is not None, "expire() with no request pending"      # (one is, here)
             out, deadline = nxt
             self.link.write(out)
             self._sent(out)
@@ -288,7 +292,7 @@ class Master:
         self.on_outcome(st, req, res)
         return True
 
-    def on_outcome(self, st: StationMachine, req, res: Outcome) -> None:
+    def on_outcome(self, st: StationMachine, req: DpRequest, res: Outcome) -> None:
         """Hand a request's outcome to the station's machine; its events to the listeners."""
         ev = st.on_outcome(req, res, self.link.now())
         if any(e.kind == "state" and e.data == "start" for e in ev):

@@ -26,11 +26,35 @@ fill two slots in a row (a noisy line) still lists nothing that is not there.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Protocol
 from dataclasses import dataclass, field
 
 from profidrive_cli import BusError
 from profidrive_cli.dp.services import SlaveDiag
 from profidrive_cli.fdl import frames as F
+
+if TYPE_CHECKING:
+    from profidrive_cli.fdl.master import FdlMaster
+    from profidrive_cli.fdl.timing import BusParams
+
+
+class ScanMaster(Protocol):
+    """What a scan uses of dp.poller.Master (which imports this module)."""
+
+    params: BusParams
+
+    @property
+    def address(self) -> int: ...
+
+    @property
+    def fdl(self) -> FdlMaster: ...
+
+    def fdl_status(self, da: int) -> F.Frame | None: ...
+
+    def slave_diag(self, da: int, wake: bool = False) -> SlaveDiag | None: ...
+
+    def get_cfg(self, da: int) -> bytes | None: ...
 
 #: FDL status requests to one silent address before it counts as empty (see the module text)
 WARMUP_PROBES = 5
@@ -43,7 +67,7 @@ class ScanEntry:
     diag: SlaveDiag | None = None
     cfg: bytes | None = None
     error: str = ""
-    counters: dict = field(default_factory=dict)
+    counters: dict[str, int] = field(default_factory=dict)
     #: FDL status requests it left unanswered before its answer (0: it answered the first;
     #: more: it was still searching the baud rate, the warm-up pass woke it)
     unanswered: int = 0
@@ -55,7 +79,7 @@ class ScanEntry:
         return self.diag.ident if self.diag else None
 
 
-def probe(master, addr: int):
+def probe(master: ScanMaster, addr: int) -> F.Frame | None:
     """One FDL status request, as a live list sends it: a single attempt, and a second (with the
     configured retries) only where something answered garbled. An empty address costs one request
     and one slot time, not 1 + retries of them. The reply frame, or None."""
@@ -75,7 +99,7 @@ def probe(master, addr: int):
     return reply
 
 
-def wake(master, addr: int, probes: int = WARMUP_PROBES):
+def wake(master: ScanMaster, addr: int, probes: int = WARMUP_PROBES) -> tuple[F.Frame | None, int]:
     """Up to `probes` FDL status requests (probe()) to `addr` until one is answered: a slave still
     searching the baud rate answers only after a few. (reply frame, unanswered probes before it), or
     (None, probes) when the address stayed silent."""
@@ -86,13 +110,14 @@ def wake(master, addr: int, probes: int = WARMUP_PROBES):
     return None, probes
 
 
-def _entry(addr: int, reply, unanswered: int = 0) -> ScanEntry:
+def _entry(addr: int, reply: F.Frame, unanswered: int = 0) -> ScanEntry:
     sc = reply.sd == F.SC
     return ScanEntry(addr, "slave" if sc else F.STATION_TYPES[reply.station_type],
                      unanswered=unanswered, sc_only=sc)
 
 
-def scan(master, first: int = 0, last: int = 126, progress=None, read_cfg: bool = False,
+def scan(master: ScanMaster, first: int = 0, last: int = 126,
+         progress: Callable[[int], object] | None = None, read_cfg: bool = False,
          quick: bool = False) -> list[ScanEntry]:
     """progress(address) is called before each probe of the quick pass (for a progress bar).
     quick: no warm-up pass (one FDL status per address; a slave in Baud_Search is missed)."""

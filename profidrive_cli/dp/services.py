@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 
 import functools
 import struct
+from typing import Any
 
 # SAPs (slave DSAP / master SSAP)
 SAP_SET_SLAVE_ADD = 55
@@ -45,7 +46,7 @@ class ServiceError(ValueError):
 # Set_Prm
 
 @functools.cache
-def _set_prm_header():
+def _set_prm_header() -> Any:          # a construct Struct (construct has no type hints)
     """The fixed Set_Prm header layout (construct: built on first use, so importing dp/ stays cheap
     for commands that never build a Set_Prm)."""
     import construct as cs
@@ -104,11 +105,12 @@ class SetPrm:
 
     def encode(self) -> bytes:
         f1, f2 = self.wd_factors or (watchdog_factors(self.wd_ms) if self.wd_ms else (1, 1))
-        return _set_prm_header().build(dict(
+        octets: bytes = _set_prm_header().build(dict(   # construct (untyped)
             station_status=dict(lock_req=self.lock, unlock_req=self.unlock, sync_req=self.sync,
                                 freeze_req=self.freeze, wd_on=self.wd_ms is not None, reserved=0),
             wd_fact_1=f1, wd_fact_2=f2, min_tsdr=self.min_tsdr, ident=self.ident,
             group=self.group)) + bytes(self.user_prm)
+        return octets
 
     @classmethod
     def decode(cls, du: bytes) -> "SetPrm":

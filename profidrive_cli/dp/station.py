@@ -95,7 +95,7 @@ class StationMachine:
         self.fresh_inputs = False      # set when a Data_Exchange delivered inputs
 
     # -- helpers ------------------------------------------------------------------------------
-    def _goto(self, state: str, events: list, text: str = "") -> None:
+    def _goto(self, state: str, events: list[Event], text: str = "") -> None:
         if state != self.state:
             self.state = state
             if state == DATA_EXCH:
@@ -109,7 +109,7 @@ class StationMachine:
                 and not any(d.has(b) for b in bad1) and not d.has("Prm_Req")
                 and d.has("WD_On") == (self.config.wd_ms is not None))
 
-    def restart(self, events: list, why: str, now: float = 0.0, delay: float = 0.0) -> None:
+    def restart(self, events: list[Event], why: str, now: float = 0.0, delay: float = 0.0) -> None:
         self._may_resume = False
         self.last_error = why
         self.wait_until = now + delay
@@ -224,7 +224,7 @@ class StationMachine:
         self.restart(ev, f"Data_Exchange answered {F.describe_fc(f.fc)}", now)
         return ev
 
-    def _on_diag(self, f: F.Frame, now: float, ev: list) -> list[Event]:
+    def _on_diag(self, f: F.Frame, now: float, ev: list[Event]) -> list[Event]:
         if f.sd == F.SC or not f.data:
             self.counters.illegal += 1
             return ev

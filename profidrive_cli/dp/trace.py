@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
+from typing import Any, Protocol
 
 from profidrive_cli.dp.capture import Capture, format_line, merge_errors
 from profidrive_cli.link.base import Link
@@ -29,8 +31,15 @@ from profidrive_cli.link.base import Link
 log = logging.getLogger("profidrive_cli.trace")
 
 
+class PacketRecorder(Protocol):
+    """Where TraceLink records each telegram (a PcapWriter): its wall-clock time and octets."""
+
+    def write(self, t: float, raw: bytes) -> None: ...
+
+
 class TraceLink(Link):
-    def __init__(self, inner: Link, recorder=None, wall_clock=time.time):
+    def __init__(self, inner: Link, recorder: PacketRecorder | None = None,
+                 wall_clock: Callable[[], float] = time.time):
         self.inner = inner
         self.recorder = recorder
         self.name = inner.name
@@ -48,7 +57,7 @@ class TraceLink(Link):
         #: the exception the recorder raised (recording stopped there), else None
         self.recorder_error: BaseException | None = None
 
-    def __getattr__(self, name):
+    def __getattr__(self, name: str) -> Any:      # whatever the wrapped link offers
         # anything else the wrapped link offers (ser, reopen hooks, …)
         return getattr(self.inner, name)
 

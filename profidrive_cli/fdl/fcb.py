@@ -20,7 +20,7 @@ class MasterFcb:
 
     __slots__ = ("_started", "_fcb")
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.reset()
 
     def reset(self) -> None:
@@ -47,7 +47,7 @@ class SlaveFcb:
 
     __slots__ = ("master", "last_fcb", "last_reply")
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.reset()
 
     def reset(self) -> None:

@@ -176,7 +176,7 @@ class FrameError:
 NEED_MORE = None
 
 
-def parse(buf: bytes | bytearray, pos: int = 0):
+def parse(buf: bytes | bytearray, pos: int = 0) -> tuple[Frame, int] | FrameError | None:
     """Look for one telegram at buf[pos:].
 
     Returns NEED_MORE (None) when the octets so far are a valid prefix, (Frame, used) for a telegram,
@@ -266,7 +266,7 @@ def missing(buf: bytes | bytearray, pos: int = 0) -> int:
 class Receiver:
     """Streaming receiver: feed octets, take frames or typed errors. Never loops without consuming."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.buf = bytearray()
 
     def feed(self, data: bytes) -> None:
@@ -278,7 +278,7 @@ class Receiver:
     def __len__(self) -> int:
         return len(self.buf)
 
-    def next(self):
+    def next(self) -> Frame | FrameError | None:
         """NEED_MORE (None), a Frame, or a FrameError; consumed octets are dropped from the buffer."""
         r = parse(self.buf)
         if r is None:
@@ -290,9 +290,9 @@ class Receiver:
         del self.buf[:used]
         return frame
 
-    def drain(self) -> list:
+    def drain(self) -> list[Frame | FrameError]:
         """Every complete frame / error currently in the buffer."""
-        out: list = []
+        out: list[Frame | FrameError] = []
         while True:
             r = self.next()
             if r is None:

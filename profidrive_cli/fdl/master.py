@@ -28,6 +28,7 @@ its noise counted as illegal, and after the last retry the request counts as not
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Final, Literal
 
 from profidrive_cli.fdl import frames as F
 from profidrive_cli.fdl.fast import DxTemplate, dx_template
@@ -35,7 +36,7 @@ from profidrive_cli.fdl.fcb import MasterFcb
 from profidrive_cli.fdl.timing import BusParams
 
 REPLY, NO_ANSWER = "reply", "no answer"
-MORE = "more"       # dx_feed(): the beginning of the expected reply, wait for the rest
+MORE: Final = "more"       # dx_feed(): the beginning of the expected reply, wait for the rest
 
 #: FCS + ED for every FCS value (the fast path's request tail)
 _TAILS = tuple(bytes((i, F.ED)) for i in range(256))
@@ -73,9 +74,9 @@ class StationCounters:
     diag_reads: int = 0
     data_exchanges: int = 0
     dh: int = 0
-    extra: dict = field(default_factory=dict)
+    extra: dict[str, int] = field(default_factory=dict)
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, int]:
         d = {k: v for k, v in self.__dict__.items() if k != "extra"}
         d.update(self.extra)
         return d
@@ -86,7 +87,7 @@ _BRIEF = (("retries", "retry"), ("no_answer", "no answer"), ("illegal", "illegal
           ("rr", "RR"), ("ue", "UE"), ("dh", "DH"), ("reparams", "reparam"))
 
 
-def format_counters(c: "StationCounters | dict") -> str:
+def format_counters(c: "StationCounters | dict[str, int] | None") -> str:
     """'12 req, 1 retry, 1 illegal' — requests always, the error counters when not zero."""
     d = c.as_dict() if isinstance(c, StationCounters) else dict(c or {})
     parts = [f"{d.get('requests', 0)} req"]
@@ -117,7 +118,7 @@ class FdlMaster:
         self._hard = float("inf")     # the end of the attempt in progress (its start + _cap)
         self._expect = 255
         self._dx: DxTemplate | None = None           # the fast path's template for the request
-        self._dx_cache: dict[tuple, DxTemplate] = {}
+        self._dx_cache: dict[tuple[int, int, int, int, int], DxTemplate] = {}
         self._dx_params: BusParams | None = None     # the params the cached templates' times are for
 
     def counters_for(self, da: int) -> StationCounters:
@@ -225,7 +226,7 @@ class FdlMaster:
         c.requests += 1
         return out
 
-    def dx_feed(self, data: bytes, now: float):
+    def dx_feed(self, data: bytes, now: float) -> bytes | Literal["more"] | None:
         """The fast check of a Data_Exchange reply (after dx_request). Returns
 
             the input octets   the octets so far are exactly the DL reply the template expects
@@ -294,7 +295,8 @@ class FdlMaster:
         """Keep waiting until at least `t`, never beyond the cap of the attempt in progress."""
         self.deadline = min(max(self.deadline, t), self._hard)
 
-    def send_no_reply(self, da: int, function: int, data: bytes = b"", dsap=None, ssap=None) -> bytes:
+    def send_no_reply(self, da: int, function: int, data: bytes = b"", dsap: int | None = None,
+                      ssap: int | None = None) -> bytes:
         """SDN (e.g. Global_Control broadcast): FCB/FCV 0, nothing to wait for."""
         return F.encode(F.Frame(F.SD2, da, self.address, F.request_fc(function), bytes(data), dsap, ssap))
 
@@ -381,7 +383,7 @@ class FdlMaster:
         self._pending = None
         return Outcome(REPLY, frame, self._retries, self._illegal)
 
-    def expire(self, now: float):
+    def expire(self, now: float) -> tuple[bytes, float] | Outcome | None:
         """Deadline passed without a valid reply: (octets, deadline) to retry, or the NO_ANSWER outcome."""
         if self._pending is None:
             return None

@@ -137,6 +137,6 @@ def frame_octets(du_octets: int, saps: bool = False) -> int:
 def wire_time_data_exchange(baud: int, out_octets: int, in_octets: int, tsdr_bits: int = 11) -> float:
     """Seconds for one Data_Exchange on the wire: SD2 frames (9 octets + data), TSDR, TID1."""
     p = BusParams.for_baud(baud)
-    def frame_len(n):
+    def frame_len(n: int) -> int:
         return 6 if n == 0 else (14 if n == 8 else n + 9)
     return p.cycle_time(frame_len(out_octets), frame_len(in_octets), tsdr_bits)

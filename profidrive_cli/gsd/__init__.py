@@ -10,6 +10,7 @@ the library for a station's name, does not import the parser and the interpreter
 from __future__ import annotations
 
 import importlib
+from typing import Any
 
 _WHERE = {
     "PrmField": "interp", "PrmResult": "interp", "build_prm": "interp", "chk_cfg": "interp",
@@ -23,7 +24,7 @@ _WHERE = {
 __all__ = sorted(_WHERE)
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> Any:     # whatever the submodule defines under that name
     mod = _WHERE.get(name)
     if mod is None:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
@@ -32,5 +33,5 @@ def __getattr__(name: str):
     return value
 
 
-def __dir__():
+def __dir__() -> list[str]:
     return sorted(set(globals()) | set(_WHERE))

@@ -237,7 +237,8 @@ def device_user_prm(gsd: Gsd) -> bytes:
     return _build(gsd, [], None).user_prm
 
 
-def _build(gsd: Gsd, mods: list[Module], overrides) -> PrmResult:
+def _build(gsd: Gsd, mods: list[Module],
+           overrides: Mapping[str, int | str] | Sequence[str] | None) -> PrmResult:
     ov = _normalise_overrides(overrides)
     slots = _slots(gsd, mods)
     warnings: list[str] = []

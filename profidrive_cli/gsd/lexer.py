@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import builtins
 import re
+from collections.abc import Iterator
 from typing import Any
 
 from profidrive_cli.datafile import DataFileError
@@ -67,7 +68,7 @@ class Toks:
     __slots__ = ("t", "i", "path", "line", "what")
 
     def __init__(self, text: str, path: str, line: int, what: str):
-        t: list[tuple[str, Any]] = []
+        t: list[tuple[str, str | builtins.int | None]] = []
         for m in TOK.finditer(text):
             s, punct, word = m.groups()
             if s is not None:
@@ -109,7 +110,7 @@ class Toks:
         if self.at_end():
             raise self.error(f"{what} missing")
         kind, v = self.t[self.i]
-        if kind != "n":
+        if kind != "n" or not isinstance(v, int):
             raise self.error(f"bad number {self._show()!s} (expected {what})" if kind == "w"
                              else f"expected {what}, found {self._show()}")
         self.i += 1
@@ -119,7 +120,7 @@ class Toks:
         if self.at_end():
             raise self.error(f"{what} missing")
         kind, v = self.t[self.i]
-        if kind != "s":
+        if kind != "s" or not isinstance(v, str):
             raise self.error(f'expected a "quoted" {what}, found {self._show()}')
         self.i += 1
         return v
@@ -148,7 +149,7 @@ class Toks:
             raise self.error(f"unexpected {self._show()} after the value")
 
 
-def logical_lines(path: str, lines: list[str], start: int):
+def logical_lines(path: str, lines: list[str], start: int) -> Iterator[tuple[int, str]]:
     """(first physical line, text) of each logical line from lines[start:]: `;` comments cut outside
     strings, `\\` continuations joined; an unterminated string raises DataFileError at the line it
     opened."""

@@ -61,7 +61,7 @@ _parsed: dict[str, tuple[tuple[int, int], Gsd]] = {}
 _heads: dict[str, tuple[tuple[int, int], tuple[int | None, str | None]]] = {}
 
 
-def parse_gsd(path):
+def parse_gsd(path: str | Path) -> Gsd:
     """gsd.parser.parse_gsd, imported on first use (naming stations needs no parser)."""
     from profidrive_cli.gsd.parser import parse_gsd as parse
     return parse(path)
@@ -190,7 +190,7 @@ class LibraryEntry:
     error: str | None = None     # the parse error, if the file does not parse
     shadowed_by: Path | None = None   # a user file with the same ident that wins over this one
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, str | int | None]:
         return {"path": str(self.path), "source": self.source,
                 "ident": self.ident, "ident_hex": None if self.ident is None else f"0x{self.ident:04X}",
                 "vendor": self.vendor, "model": self.model, "modules": self.modules, "error": self.error,

@@ -402,7 +402,7 @@ class Gsd:
 _PPO_SEL = re.compile(r"\s*ppo[\s_-]*(?:type[\s_-]*)?0*(\d+)\s*\Z", re.I)
 
 
-def _ppo_pattern(n: int) -> re.Pattern:
+def _ppo_pattern(n: int) -> re.Pattern[str]:
     return re.compile(r"ppo[\s_-]*(?:type[\s_-]*)?0*" + str(n) + r"(?!\d)", re.I)
 
 

@@ -206,7 +206,8 @@ class _Parser:
         return rest.strip() if args is None else f"({args}) {rest.strip()}".strip()
 
     # ------------------------------------------------------------------ top level
-    def top(self, line, kw_raw, kw, args, eq, rest) -> None:
+    def top(self, line: int, kw_raw: str, kw: str, args: str | None, eq: str | None,
+            rest: str) -> None:
         g = self.gsd
         if kw in _INT_KEYS or _BAUD_KEY.match(kw) or (kw.endswith("_supp") and kw[:-5] in _BAUD_SUFFIXES):
             t = self.toks(rest, line, kw_raw)
@@ -314,7 +315,8 @@ class _Parser:
             raise self.err(line, f"{kw_raw}: {a}-{b} is wider than 32 bits")
         return DiagArea(first_bit=a, last_bit=b, line=line)
 
-    def prm_statement(self, block: PrmBlock, line, kw_raw, kw, args, rest) -> None:
+    def prm_statement(self, block: PrmBlock, line: int, kw_raw: str, kw: str, args: str | None,
+                      rest: str) -> None:
         off = self.args_int(args, line, kw_raw)
         if off >= MAX_USER_PRM_LEN:
             raise self.err(line, f"{kw_raw}({off}): offset beyond the {MAX_USER_PRM_LEN} octets "
@@ -334,7 +336,8 @@ class _Parser:
             block.refs.append(PrmRef(offset=off, ref=ref, line=line))
 
     # ------------------------------------------------------------------ blocks
-    def in_prmtext(self, line, kw_raw, kw, args, eq, rest) -> None:
+    def in_prmtext(self, line: int, kw_raw: str, kw: str, args: str | None, eq: str | None,
+                   rest: str) -> None:
         pt: PrmText = self.stack[-1][1]
         if kw == "text":
             v = self.args_int(args, line, kw_raw, signed=True)
@@ -344,7 +347,8 @@ class _Parser:
         else:
             self.unknown(line, kw_raw, args, rest, " inside PrmText")
 
-    def in_extuserprmdata(self, line, kw_raw, kw, args, eq, rest) -> None:
+    def in_extuserprmdata(self, line: int, kw_raw: str, kw: str, args: str | None, eq: str | None,
+                          rest: str) -> None:
         d: ExtUserPrmData = self.stack[-1][1]
         if kw in _TYPE_NAMES:
             if d.data_type:
@@ -398,7 +402,8 @@ class _Parser:
         else:
             self.unknown(line, kw_raw, args, rest, " inside ExtUserPrmData")
 
-    def in_module(self, line, kw_raw, kw, args, eq, rest) -> None:
+    def in_module(self, line: int, kw_raw: str, kw: str, args: str | None, eq: str | None,
+                  rest: str) -> None:
         mod: Module = self.stack[-1][1]
         if kw.isascii() and kw.isdigit() and args is None and not rest.strip():
             if len(kw) > MAX_NUMBER_CHARS:
@@ -443,15 +448,18 @@ class _Parser:
             else:
                 mod.extra[key] = self.unknown(line, kw_raw, args, rest, f" in Module {mod.display_name!r}")
 
-    def in_data_area_beg(self, line, kw_raw, kw, args, eq, rest) -> None:
+    def in_data_area_beg(self, line: int, kw_raw: str, kw: str, args: str | None, eq: str | None,
+                         rest: str) -> None:
         area: dict[str, Any] = self.stack[-1][1]
         area[kw] = rest.strip()
 
-    def in_version_firmware_download(self, line, kw_raw, kw, args, eq, rest) -> None:
+    def in_version_firmware_download(self, line: int, kw_raw: str, kw: str, args: str | None, eq: str | None,
+                                     rest: str) -> None:
         block: dict[str, Any] = self.stack[-1][1]
         block[kw if args is None else f"{kw}({args.strip()})"] = rest.strip()
 
-    def in_unit_diag_area(self, line, kw_raw, kw, args, eq, rest) -> None:
+    def in_unit_diag_area(self, line: int, kw_raw: str, kw: str, args: str | None, eq: str | None,
+                          rest: str) -> None:
         area: DiagArea = self.stack[-1][1]
         if kw in ("value", "x_value"):
             v = self.args_int(args, line, kw_raw)
@@ -463,7 +471,8 @@ class _Parser:
         else:
             self.unknown(line, kw_raw, args, rest, " inside Unit_Diag_Area")
 
-    def in_unitdiagtype(self, line, kw_raw, kw, args, eq, rest) -> None:
+    def in_unitdiagtype(self, line: int, kw_raw: str, kw: str, args: str | None, eq: str | None,
+                        rest: str) -> None:
         dt: UnitDiagType = self.stack[-1][1]
         base = kw[2:] if kw.startswith("x_") else kw
         if base in ("unit_diag_bit", "unit_diag_not_bit"):
@@ -482,7 +491,8 @@ class _Parser:
         else:
             self.unknown(line, kw_raw, args, rest, " inside UnitDiagType")
 
-    def in_slotdefinition(self, line, kw_raw, kw, args, eq, rest) -> None:
+    def in_slotdefinition(self, line: int, kw_raw: str, kw: str, args: str | None, eq: str | None,
+                          rest: str) -> None:
         if kw != "slot":
             self.unknown(line, kw_raw, args, rest, " inside SlotDefinition")
             return

@@ -18,6 +18,9 @@ from __future__ import annotations
 
 import time
 from abc import ABC, abstractmethod
+from collections.abc import Callable
+from types import TracebackType
+from typing import TypeVar
 
 from profidrive_cli import BusError
 
@@ -29,7 +32,7 @@ from profidrive_cli import BusError
 SPIN_S = 0.0002
 
 
-def precise_sleep(seconds: float, clock=time.monotonic) -> None:
+def precise_sleep(seconds: float, clock: Callable[[], float] = time.monotonic) -> None:
     """Sleep, then poll the clock for the last SPIN_S: returns close after `seconds`, never early."""
     if seconds <= 0:
         return
@@ -40,7 +43,7 @@ def precise_sleep(seconds: float, clock=time.monotonic) -> None:
         pass
 
 
-def plain_sleep(seconds: float, clock=time.monotonic) -> None:
+def plain_sleep(seconds: float, clock: Callable[[], float] = time.monotonic) -> None:
     """Sleep without spinning: never returns early (the OS may wake the thread a little late)."""
     if seconds <= 0:
         return
@@ -59,10 +62,13 @@ class LinkLost(BusError):
     counters  {station address: counters dict} at the moment of the loss, when a master raised it
     """
 
-    def __init__(self, message: str, port: str = "", counters: dict | None = None):
+    def __init__(self, message: str, port: str = "", counters: dict[int, dict[str, int]] | None = None):
         super().__init__(message)
         self.port = port
         self.counters = dict(counters or {})
+
+
+_L = TypeVar("_L", bound="Link")
 
 
 class Link(ABC):
@@ -104,8 +110,9 @@ class Link(ABC):
     def close(self) -> None:
         pass
 
-    def __enter__(self):
+    def __enter__(self: _L) -> _L:
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
         self.close()

@@ -23,6 +23,9 @@ from __future__ import annotations
 
 import os
 
+from collections.abc import Iterable
+from typing import Any
+
 import serial
 
 MARK = 0xFF
@@ -33,7 +36,7 @@ class LineOctets(bytes):
 
     errors: tuple[int, ...]
 
-    def __new__(cls, data: bytes = b"", errors=()):
+    def __new__(cls, data: bytes = b"", errors: Iterable[int] = ()) -> "LineOctets":
         obj = super().__new__(cls, data)
         obj.errors = tuple(errors)
         return obj
@@ -77,17 +80,18 @@ def unmark_parity(data: bytes, carry: bytes = b"") -> tuple[bytes, tuple[int, ..
 if os.name == "posix":
     import termios
 
-    class ParityMarkingSerial(serial.Serial):
+    # pyserial has no type hints: serial.Serial is Any, which mypy --strict will not subclass
+    class ParityMarkingSerial(serial.Serial):  # type: ignore[misc]
         """serial.Serial (POSIX) with parity checking and error marking on, and unmarked reads."""
 
-        def __init__(self, *args, **kwargs):
+        def __init__(self, *args: Any, **kwargs: Any) -> None:   # pyserial's own arguments
             self._carry = b""
             self.marks_parity = False
             #: octets flagged with a parity/framing error since the port was opened
             self.parity_errors = 0
             super().__init__(*args, **kwargs)
 
-        def _reconfigure_port(self, force_update=False):
+        def _reconfigure_port(self, force_update: bool = False) -> None:
             super()._reconfigure_port(force_update)
             attrs = termios.tcgetattr(self.fd)
             if self._parity == serial.PARITY_NONE:
@@ -99,9 +103,10 @@ if os.name == "posix":
             self.marks_parity = bool(termios.tcgetattr(self.fd)[0] & termios.PARMRK)
 
         def _read_raw(self, size: int) -> bytes:
-            return super().read(size)
+            raw: bytes = super().read(size)      # pyserial's read (untyped)
+            return raw
 
-        def read(self, size=1):
+        def read(self, size: int = 1) -> bytes:
             raw = self._read_raw(size)
             if not self.marks_parity:
                 return raw
@@ -109,7 +114,7 @@ if os.name == "posix":
             self.parity_errors += len(errors)
             return LineOctets(data, errors) if errors else data
 
-        def reset_input_buffer(self):
+        def reset_input_buffer(self) -> None:
             self._carry = b""
             super().reset_input_buffer()
 else:                                        # pragma: no cover (Windows: no termios)

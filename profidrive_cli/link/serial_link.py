@@ -176,7 +176,8 @@ def read_available(ser: serial.SerialBase, timeout: float) -> bytes:
         return _read_fd(ser, timeout)
     n = ser.in_waiting
     if n:
-        return ser.read(n)
+        got: bytes = ser.read(n)            # pyserial (untyped); LineOctets from a parity-marking port
+        return got
     if timeout <= 0:
         return b""
     fd = None
@@ -190,13 +191,15 @@ def read_available(ser: serial.SerialBase, timeout: float) -> bytes:
         if not n:
             # readable but nothing to read: the other end went away (EOF on a pty/USB unplug)
             raise serial.SerialException("device reports readiness to read but returned no data")
-        return ser.read(n)
+        got = ser.read(n)
+        return got
     ser.timeout = timeout
-    first = ser.read(1)
+    first: bytes = ser.read(1)
     if not first:
         return b""
     n = ser.in_waiting
-    return first + (ser.read(n) if n else b"")
+    rest: bytes = ser.read(n) if n else b""
+    return first + rest
 
 
 #: the most one read takes from a POSIX fd (more than any telegram)
@@ -230,7 +233,7 @@ def _read_fd(ser: serial.Serial, timeout: float) -> bytes:
     return data
 
 
-def _read_socket(ser, timeout: float) -> bytes:
+def _read_socket(ser: _SocketSerial, timeout: float) -> bytes:
     """socket:// reports only whether data waits (in_waiting 0 or 1): take everything that is
     there with one recv once the socket is readable (one select, one recv) instead of an octet at a
     time. pyserial's own read would drop what it had gathered when the peer closes right after
@@ -243,7 +246,7 @@ def _read_socket(ser, timeout: float) -> bytes:
     if not r:
         return b""
     try:
-        data = sock.recv(_SOCKET_CHUNK)
+        data: bytes = sock.recv(_SOCKET_CHUNK)     # pyserial's private socket (reached untyped)
     except BlockingIOError:
         return b""
     if not data:

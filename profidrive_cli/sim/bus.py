@@ -35,11 +35,15 @@ import heapq
 from collections import deque
 from dataclasses import dataclass, field
 from itertools import count
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable, ContextManager, Iterator
 
 from profidrive_cli.fdl import frames as F
 from profidrive_cli.fdl.timing import TSYN_BITS, BusParams
 from profidrive_cli.sim.slave import DATA_EXCH, SimSlave, TickLog
+
+if TYPE_CHECKING:
+    from profidrive_cli.sim.control import Controller
+    from profidrive_cli.sim.faults import FaultPlan
 
 TIMINGS = ("instant", "wire", "virtual")
 #: seconds of bus time after which every station's next due time is asked again (a safety net for a
@@ -56,7 +60,7 @@ class BusStats:
     tsyn_violations: int = 0
     collisions: int = 0            # master sent while a reply was due
     cancelled: int = 0             # replies not yet delivered when the master sent again
-    injected: dict = field(default_factory=dict)
+    injected: dict[str, int] = field(default_factory=dict)
 
 
 @dataclass(eq=False)
@@ -79,13 +83,13 @@ class Reply:
         n = int((now - self.start) / self.char_s + 1e-9)
         return max(0, min(len(self.octets), n))
 
-    def __iter__(self):            # old form: (time complete, octets)
+    def __iter__(self) -> Iterator[float | bytes]:            # old form: (time complete, octets)
         return iter((self.end, self.octets))
 
 
 class SimBus:
     def __init__(self, slaves: list[SimSlave], baud: int = 19200, timing: str = "instant",
-                 tsdr_bits: int = 11, faults=None):
+                 tsdr_bits: int = 11, faults: FaultPlan | None = None):
         if timing not in TIMINGS:
             raise ValueError(f"timing must be one of {', '.join(TIMINGS)}, got {timing!r}")
         #: the bus's clock ticks (what a station not run at some of them makes up for)
@@ -211,7 +215,8 @@ class SimBus:
             self.pending.popleft()(now)
         self.resync(now)
 
-    def control(self, lock=None, clock=None):
+    def control(self, lock: ContextManager[Any] | None = None,
+                clock: Callable[[], float] | None = None) -> Controller:
         """A sim/control.py Controller of this bus (the Python API's Bus.simulator): its commands
         run at once, under `lock` (the master's), at the time `clock()` gives."""
         from profidrive_cli.sim.control import Controller
@@ -293,7 +298,7 @@ class SimBus:
             self.busy_until = max(self.busy_until, r.end)
         return out
 
-    def _take_requests(self, t_req_end: float, out: list) -> None:
+    def _take_requests(self, t_req_end: float, out: list[Reply]) -> None:
         while True:
             r = self.rx.next()
             if r is None:

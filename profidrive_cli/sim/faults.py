@@ -36,10 +36,22 @@ expected_counters() says what pdrive's master must count for them (fdl/master.py
 from __future__ import annotations
 
 import random
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Protocol
 
 from profidrive_cli import UsageError
 from profidrive_cli.fdl import frames as F
 from profidrive_cli.sim.slave import DATA_EXCH
+
+if TYPE_CHECKING:
+    from profidrive_cli.sim.slave import SimSlave
+
+
+class Segment(Protocol):
+    """What a FaultPlan sees of the bus (sim/bus.py SimBus, which imports this module): its stations."""
+
+    @property
+    def slaves(self) -> dict[int, SimSlave]: ...
 
 REPLY_KINDS = ("noise", "flip", "drop", "late", "wrongsa")
 STATION_KINDS = ("powercycle", "drivetrip")
@@ -56,14 +68,15 @@ URL_KEYS = ALL_KINDS + ("only", "late_ms", "tripcode", "unplug")
 DEFAULT_TRIP_CODES = ("OC1", "OC", "E01", "EF0")
 
 
-def default_trip_code(model) -> str:
+def default_trip_code(model: object) -> str:
     prof = getattr(model, "profile", None)
     codes = [a.code for a in getattr(prof, "alarms", [])] if prof is not None else []
     for c in DEFAULT_TRIP_CODES:
         if c in codes:
             return c
     if codes:
-        return codes[0]
+        code: str = codes[0]          # (an alarm's code; `prof` is looked up duck-typed)
+        return code
     raise ValueError(f"{getattr(model, 'family', 'this')} station has no alarms to trip")
 
 
@@ -103,7 +116,10 @@ class FaultPlan:
         """What the master's counters must show for the injections so far (all stations, or one):
         illegal, failed_attempts (= retries + no_answer), rs, reparams, dh."""
         c = self.counts if station is None else self.by_station.get(station, {})
-        g = lambda k: c.get(k, 0)  # noqa: E731
+
+        def g(k: str) -> int:
+            return c.get(k, 0)
+
         return {"illegal": g("flip") + g("wrongsa") + g("noise"),
                 "failed_attempts": g("drop") + g("flip") + g("late") + g("wrongsa"),
                 "rs": g("powercycle"), "reparams": g("powercycle"), "dh": g("drivetrip")}
@@ -115,7 +131,8 @@ class FaultPlan:
         per[kind] = per.get(kind, 0) + 1
         self.history.append((t, station, kind))
 
-    def _choose(self, station: int, kinds: tuple[str, ...], applicable) -> str | None:
+    def _choose(self, station: int, kinds: tuple[str, ...],
+                applicable: Callable[[str], bool]) -> str | None:
         for i, (st, kind) in enumerate(self.queue):
             if st == station and kind in kinds and applicable(kind):
                 del self.queue[i]
@@ -128,7 +145,7 @@ class FaultPlan:
                 return kind
         return None
 
-    def on_telegram(self, bus, t: float) -> None:
+    def on_telegram(self, bus: Segment, t: float) -> None:
         """Every request on the bus: unplug (power off, silent) or plug in the stations of
         `unplugs` whose time has come (counted as kind "unplug" / "replug")."""
         if self.t0 is None:
@@ -149,7 +166,7 @@ class FaultPlan:
                 s.powered = True
                 self._count(a, "replug", t)
 
-    def on_request(self, bus, slave, req, t: float) -> None:
+    def on_request(self, bus: Segment, slave: SimSlave, req: F.Frame, t: float) -> None:
         """A new Data_Exchange request to `slave` in data exchange, before the slave handles it."""
         kind = self._choose(slave.address, STATION_KINDS, lambda k: True)
         if kind is None:
@@ -161,7 +178,7 @@ class FaultPlan:
             code = self.trip_codes.get(slave.address) or default_trip_code(slave.model)
             slave.inject_trip(code, t)
 
-    def on_silence(self, bus, req, t: float) -> bytes | None:
+    def on_silence(self, bus: Segment, req: F.Frame, t: float) -> bytes | None:
         """A request that needs a reply, to an address where no station is: the octets of a
         phantom (a lone 0xE5 in the reply slot), or None (silence)."""
         kind = self._choose(req.da, SILENT_KINDS, lambda k: True)
@@ -170,7 +187,7 @@ class FaultPlan:
         self._count(req.da, kind, t)
         return PHANTOM_OCTETS
 
-    def on_reply(self, bus, req, reply: bytes, t: float):
+    def on_reply(self, bus: Segment, req: F.Frame, reply: bytes, t: float) -> tuple[bytes, float] | None:
         """-> None (dropped) or (octets, extra delay in seconds)."""
         sc = reply[:1] == b"\xE5"
         kind = self._choose(req.da, REPLY_KINDS, lambda k: not (k == "wrongsa" and sc))
@@ -189,7 +206,9 @@ class FaultPlan:
         if kind == "late":
             return reply, self.late_s
         # wrongsa (never on an SC: it carries no address)
-        f, _ = F.parse(reply)
+        parsed = F.parse(reply)
+        assert isinstance(parsed, tuple), parsed      # a station's own reply: one whole telegram
+        f, _ = parsed
         wrong = F.Frame(f.sd, f.da, (f.sa + 1) % 126, f.fc, f.data, f.dsap, f.ssap)
         return F.encode(wrong, force_sd2=f.sd == F.SD2), 0.0
 

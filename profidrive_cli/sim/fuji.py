@@ -32,11 +32,18 @@ Dialect on top of sim/profidrive_model.py:
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+from typing import TYPE_CHECKING, Any
+
 from profidrive_cli.drives import fuji as fj
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.profidrive import Ctw, State
 from profidrive_cli.sim.motor import Motor, store
 from profidrive_cli.sim.profidrive_model import ProfidriveModel
+
+if TYPE_CHECKING:
+    from profidrive_cli.drives.fuji.config import FujiConfig
+    from profidrive_cli.drives.profile import Alarm, ParamDef, Profile
 
 SAVE_SECONDS = 1.0
 
@@ -44,10 +51,11 @@ SAVE_SECONDS = 1.0
 class FujiModel(ProfidriveModel):
     family = "fuji"
 
-    def __init__(self, profile, *, bus_control: bool = True, o30: int | None = None,
-                 strict_o30: bool | None = None, card_version: int = 100, **kw):
-        self.fc = fj.fuji_config(profile)
-        defaults = {}
+    def __init__(self, profile: Profile, *, bus_control: bool = True, o30: int | None = None,
+                 strict_o30: bool | None = None, card_version: int = 100,
+                 **kw: Any):                # ProfidriveModel's keyword arguments
+        self.fc: FujiConfig = fj.fuji_config(profile)
+        defaults: dict[str, float] = {}
         if bus_control:
             defaults["y98"] = 3
         if o30 is not None:
@@ -139,7 +147,7 @@ class FujiModel(ProfidriveModel):
         return level > 0 and abs(self.freq) >= level - 1e-9
 
     # -- alarms ----------------------------------------------------------------------------------
-    def _alarm(self, alarm):
+    def _alarm(self, alarm: int | str) -> Alarm:
         """'OC1', 'oc1', '1' / 'M1' (alarm code), '0x2301' (PNU947 code, first candidate)."""
         text = str(alarm).strip()
         a = self.profile.alarm_by_code(text)
@@ -151,18 +159,18 @@ class FujiModel(ProfidriveModel):
             if cands:
                 return cands[0]
         elif t.lstrip("M").isdigit():
-            a = fj.alarm_by_mcode(self.profile, int(t.lstrip("M")))
-            if a is not None:
-                return a
+            by_m: Alarm | None = fj.alarm_by_mcode(self.profile, int(t.lstrip("M")))
+            if by_m is not None:
+                return by_m
         known = ", ".join(x.code for x in self.profile.alarms[:12])
         raise ValueError(f"unknown alarm '{alarm}' for {self.profile.name} (e.g. {known}, ...)")
 
-    def alarm_number(self, alarm) -> int:
+    def alarm_number(self, alarm: int | str) -> int:
         if isinstance(alarm, int):
             return alarm
         return self._alarm(alarm).number
 
-    def trip(self, alarm, now: float = 0.0) -> None:
+    def trip(self, alarm: int | str, now: float = 0.0) -> None:
         a = self._alarm(alarm) if not isinstance(alarm, int) else None
         self._trip_code = a.code if a is not None else None
         super().trip(a.number if a is not None else alarm, now)
@@ -179,7 +187,7 @@ class FujiModel(ProfidriveModel):
         self._loss_action = None
         self.comm_lost_at = None
 
-    def seed_faults(self, alarms) -> None:
+    def seed_faults(self, alarms: Iterable[int | str]) -> None:
         items = [self._alarm(a) for a in alarms]
         self.alarm_log = [(a.number, a.code) for a in items] + self.alarm_log
         del self.alarm_log[len(self.fc.history):]
@@ -209,7 +217,7 @@ class FujiModel(ProfidriveModel):
         first = 40 if direction == "setpoint" else 48
         return f"o{first + slot - 1}"
 
-    def _assigned_param(self, word: int):
+    def _assigned_param(self, word: int) -> ParamDef | None:
         code = fj.pcd_assignment_code(self.profile, word)
         return self.profile.param(code) if code else None
 
@@ -252,7 +260,9 @@ class FujiModel(ProfidriveModel):
             p = self._assigned_param(word)
             v = 0
             if p is not None:
-                special = self._read_special_mcode(p.pnu, p.index)
+                # (every parameter of the shipped Fuji profiles has both: one without reads the store)
+                special = (self._read_special_mcode(p.pnu, p.index)
+                           if p.pnu is not None and p.index is not None else None)
                 v = special if special is not None else self.values.get(p.code, 0)
             out.append(v & 0xFFFF)
         return out
@@ -411,7 +421,7 @@ class FujiModel(ProfidriveModel):
                     self._react(now)
 
 
-def make_model(profile, **options) -> FujiModel:
+def make_model(profile: Profile, **options: Any) -> FujiModel:     # (the sim:// URL's options)
     if "address" in options:
         options["node_address"] = int(options.pop("address"))
     for k in ("o30", "card_version", "baud_code", "node_address", "pkw_latency"):

@@ -19,10 +19,19 @@ everything to it from then on (for whoever kept a reference).
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
+from typing import Any, Protocol
 
 from profidrive_cli import PdriveError
 from profidrive_cli.drives.registry import sim_diag_len
-from profidrive_cli.sim.model import ticks_always
+from profidrive_cli.sim.model import SlaveModel, ticks_always
+
+
+
+class ModelHolder(Protocol):
+    """The station that holds a LazyModel (sim/slave.py SimSlave, which imports this module)."""
+
+    model: SlaveModel | LazyModel
 
 #: tick times kept until the model is built (more than any model's standstill history: Toyo keeps 100)
 REPLAY_TICKS = 256
@@ -32,7 +41,16 @@ REPLAY_TICKS = 256
 class LazyModel:
     """Stands for the model `build()` returns (a SlaveModel whose ident is `ident`) until first use."""
 
-    def __init__(self, build, ident: int, family: str, label: str = ""):
+    # its own state, kept in __dict__ (attribute access goes to the built model): declared only
+    _build: Callable[[], SlaveModel]
+    _real: SlaveModel | None
+    _ident: int
+    _diag_len: int
+    _ticks: deque[float]
+    _owner: ModelHolder | None
+    _label: str
+
+    def __init__(self, build: Callable[[], SlaveModel], ident: int, family: str, label: str = ""):
         d = self.__dict__
         d["_build"] = build
         d["_real"] = None
@@ -44,7 +62,7 @@ class LazyModel:
         d["_owner"] = None
         d["_label"] = label
 
-    def attach(self, slave) -> None:
+    def attach(self, slave: ModelHolder) -> None:
         """The SimSlave that holds this model: it gets the built model in its place."""
         self.__dict__["_owner"] = slave
 
@@ -52,7 +70,7 @@ class LazyModel:
     def built(self) -> bool:
         return self._real is not None
 
-    def materialize(self):
+    def materialize(self) -> SlaveModel:
         """The built model (built now if it was not yet)."""
         real = self._real
         if real is not None:
@@ -104,12 +122,12 @@ class LazyModel:
             _catch_up(real, times, then)
 
     # -- everything else builds it --------------------------------------------------------------
-    def __getattr__(self, name: str):
+    def __getattr__(self, name: str) -> Any:      # the built model's attribute, whatever it is
         if name.startswith("__"):
             raise AttributeError(name)
         return getattr(self.materialize(), name)
 
-    def __setattr__(self, name: str, value) -> None:
+    def __setattr__(self, name: str, value: object) -> None:
         setattr(self.materialize(), name, value)
 
     def __repr__(self) -> str:
@@ -117,7 +135,7 @@ class LazyModel:
         return f"<LazyModel {self._label} {'built: ' + repr(real) if real is not None else 'not built'}>"
 
 
-def _catch_up(model, times: list[float], then: float | None) -> None:
+def _catch_up(model: SlaveModel, times: list[float], then: float | None) -> None:
     """The built model makes up for the ticks it missed (tick by tick when it predates catch_up)."""
     if ticks_always(model):
         for t in times:

@@ -21,11 +21,16 @@ Dialect on top of the generic PROFIdrive model:
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any
+
 from profidrive_cli.drives import moeller as mo
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.profidrive import Ctw, State
 from profidrive_cli.sim.motor import Motor, store
 from profidrive_cli.sim.profidrive_model import ProfidriveModel
+
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profile import ParamDef, Profile
 
 DEVICE_IDS = {"DF6": 0x812C, "DV6": 0x012C}
 
@@ -33,8 +38,9 @@ DEVICE_IDS = {"DF6": 0x812C, "DV6": 0x012C}
 class MoellerModel(ProfidriveModel):
     family = "moeller"
 
-    def __init__(self, profile, *, device: str = "DF6", bus_control: bool = True, **kw):
-        self.mc = mo.moeller_config(profile)
+    def __init__(self, profile: Profile, *, device: str = "DF6", bus_control: bool = True,
+                 **kw: Any):                # ProfidriveModel's keyword arguments
+        self.mc: mo.MoellerConfig = mo.moeller_config(profile)
         dev = device.upper()
         if dev not in DEVICE_IDS:
             raise ValueError(f"device must be DF6 or DV6, got {device!r}")
@@ -94,13 +100,14 @@ class MoellerModel(ProfidriveModel):
         return level > 0 and abs(self.freq) >= level
 
     # -- values ------------------------------------------------------------------------------
-    def value_from_wire(self, p, raw: int):
-        return mo.value_from_wire(p, raw)
+    def value_from_wire(self, p: ParamDef, raw: int) -> float:
+        v: float = mo.value_from_wire(p, raw)
+        return v
 
-    def wire_from_value(self, p, value) -> int:
+    def wire_from_value(self, p: ParamDef, value: float) -> int:
         return mo.wire_from_value(p, value)
 
-    def value_allowed(self, p, value) -> bool:
+    def value_allowed(self, p: ParamDef, value: float) -> bool:
         if not mo.in_ranges(p, value):
             return False
         if self.device == "DF6":
@@ -182,7 +189,7 @@ class MoellerModel(ProfidriveModel):
                 self.values[p.code] = self.wire_from_value(p, min(v, p.max or v))
 
 
-def make_model(profile, **options) -> MoellerModel:
+def make_model(profile: Profile, **options: Any) -> MoellerModel:     # (the sim:// URL's options)
     if "address" in options:
         options["node_address"] = int(options.pop("address"))
     return MoellerModel(profile, **options)

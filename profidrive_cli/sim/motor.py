@@ -13,6 +13,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from profidrive_cli.sim.profidrive_model import ProfidriveModel
 
 
 @dataclass
@@ -56,7 +60,7 @@ class Motor:
         return self.dc_v * (1.0 + self.ripple * math.sin(2.0 * math.pi * 300.0 * self.t))
 
 
-def store(model, code: str, value: float) -> None:
+def store(model: ProfidriveModel, code: str, value: float) -> None:
     """Put an engineering value into a model's parameter store as its wire value: clamped to the
     parameter's range, rounded to its step. Nothing when the profile has no such code."""
     p = model.profile.param(code)

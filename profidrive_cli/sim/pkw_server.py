@@ -5,10 +5,15 @@ families' dialects override pkw_answer (sim/fuji.py, sim/moeller.py, sim/toyo.py
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any
 
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.profidrive import PkwFrame
+
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profidrive.config import ProfidriveConfig
+    from profidrive_cli.drives.profile import ParamDef
 
 #: request AK of a write -> the positive response AK (PROFIdrive V2; Moeller spec 5.3)
 WRITE_ACK = {2: 1, 3: 2, 7: 4, 8: 5}
@@ -18,15 +23,16 @@ class PkwServer:
     """The PKW channel's server side: _pkw_serve per Data_Exchange, pkw_answer per task."""
 
     # provided by ProfidriveModel
-    cfg: Any
+    cfg: ProfidriveConfig
+    # (a Profile there: Any here, as SlaveModel says Profile | None and DriveModel narrows it to Profile)
     profile: Any
     values: dict[str, int]
     edit_rights: int
     pkw_latency: int
-    pkw_log: list
-    pzd_setpoint_map: list
-    _pkw_req: Any
-    _pkw_resp: Any
+    pkw_log: list[tuple[PkwFrame, PkwFrame]]
+    pzd_setpoint_map: list[int]
+    _pkw_req: tuple[int, ...] | None
+    _pkw_resp: PkwFrame
     _pkw_wait: int
 
     if TYPE_CHECKING:                                   # pragma: no cover  (ProfidriveModel's)
@@ -38,8 +44,8 @@ class PkwServer:
         def value_allowed(self, p: Any, value: Any) -> bool: ...
         def value_from_wire(self, p: Any, raw: int) -> Any: ...
 
-    def _pkw_serve(self, words, now: float):
-        words = tuple(words)
+    def _pkw_serve(self, area_words: Iterable[int], now: float) -> tuple[int, int, int, int]:
+        words = tuple(area_words)
         if words != self._pkw_req:
             self._pkw_req = words
             req = PkwFrame.from_words(words)
@@ -113,9 +119,10 @@ class PkwServer:
             self.values[p.code] = raw
         return PkwFrame(ok_ak, req.pnu, req.subindex, req.value)
 
-    def _array_len(self, pnu: int, p) -> int:
-        if p is not None and isinstance(p.extra.get("array"), int):
-            return p.extra["array"]
+    def _array_len(self, pnu: int, p: ParamDef | None) -> int:
+        n = None if p is None else p.extra.get("array")
+        if isinstance(n, int):
+            return n
         if pnu in self.cfg.pzd_map:
             return len(self.pzd_setpoint_map)
         if pnu == self.cfg.fault_memory_pnu:

@@ -46,6 +46,9 @@ from __future__ import annotations
 
 import functools
 import importlib
+from collections.abc import Collection
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
 from urllib.parse import parse_qs, urlsplit
 
 from profidrive_cli import UsageError
@@ -57,6 +60,10 @@ from profidrive_cli.sim.lazy import LazyModel
 from profidrive_cli.sim.model import SlaveModel
 from profidrive_cli.sim.slave import SimSlave
 
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profile import IndexEntry
+    from profidrive_cli.sim.faults import FaultPlan
+
 DEFAULT_PLANT = ((3, "fuji-g1"), (4, "fuji-pdp3"), (5, "toyo"), (6, "moeller"), (7, "yaskawa"))
 KNOWN_KEYS = {"stations", "baud", "timing", "trip", "faults", "tsdr", "seed", "set", "warmup",
               "firstcontact", "learn"}
@@ -65,8 +72,9 @@ MAX_WARMUP = 1000
 TIMINGS = ("instant", "wire", "virtual")
 
 
-def make_model(profile: Profile, **options) -> SlaveModel:
+def make_model(profile: Profile, **options: Any) -> SlaveModel:    # (the sim:// URL's options)
     ref = sim_model_ref(profile)          # the family table (drives/registry.py) names the model
+    m: SlaveModel
     if ref is not None:
         mod_name, _, fn_name = ref.partition(":")
         m = getattr(importlib.import_module(mod_name), fn_name)(profile, **options)
@@ -94,7 +102,7 @@ def _gsd_modes(profile: Profile, m: SlaveModel) -> None:
         m.sync_supported, m.freeze_supported = bool(g.sync_mode_supp), bool(g.freeze_mode_supp)
 
 
-def _index_entry(name: str):
+def _index_entry(name: str) -> IndexEntry | None:
     """The profile index entry a station name (profile name or alias) stands for; None for a path
     or a name the index does not know (then the full load says what is wrong, at once)."""
     if name.endswith((".yaml", ".yml")) or "/" in name:
@@ -102,7 +110,7 @@ def _index_entry(name: str):
     return index_entry(name)
 
 
-def _build_model(name: str, addr: int, baud: int, preset: dict | None = None) -> SlaveModel:
+def _build_model(name: str, addr: int, baud: int, preset: dict[str, float] | None = None) -> SlaveModel:
     prof = load_profile(name)
     try:
         model = make_model(prof, **_preset_options(prof, preset or {}))
@@ -195,7 +203,7 @@ def _presets(values: list[str]) -> dict[int, dict[str, float]]:
     return out
 
 
-def _preset_options(profile, values: dict[str, float]) -> dict:
+def _preset_options(profile: Profile, values: dict[str, float]) -> dict[str, dict[str, float]]:
     """The model options that preset `values`: `defaults` (code -> value), which every family's
     make_model takes (the Yaskawa model turns them into its parameter options, E1_04=50)."""
     if not values:
@@ -225,7 +233,7 @@ def _preset_options(profile, values: dict[str, float]) -> dict:
     return {"defaults": out}
 
 
-def _model_settings(profile) -> dict:
+def _model_settings(profile: Profile) -> dict[str, Collection[float]]:
     """The settings the family's sim model takes beyond the profile's parameters: the SETTINGS table
     of its module (code -> the values it takes); {} for none."""
     ref = sim_model_ref(profile)
@@ -286,7 +294,8 @@ def build_bus(url: str, now: float = 0.0, default_baud: int = 19200) -> SimBus:
         preset = presets.pop(addr, {})
         entry = None if preset else _index_entry(name)
         model: SlaveModel | LazyModel
-        if entry is not None:
+        # (an entry that answers to a name has its family and ident: drives/profile.py _read_entry)
+        if entry is not None and entry.ident is not None and entry.family is not None:
             # built on first use (sim/lazy.py): a scan loads no profile, no model, no codec
             model = LazyModel(functools.partial(_build_model, name, addr, baud), entry.ident,
                               entry.family, f"{addr} ({name})")
@@ -337,7 +346,7 @@ def build_bus(url: str, now: float = 0.0, default_baud: int = 19200) -> SimBus:
     return SimBus(slaves, baud=baud, timing=timing, tsdr_bits=tsdr, faults=plan)
 
 
-def _check_trip_codes(plan, addrs: dict[int, SimSlave], faults_mod) -> None:
+def _check_trip_codes(plan: FaultPlan, addrs: dict[int, SimSlave], faults_mod: ModuleType) -> None:
     """drivetrip needs an alarm each station in scope knows: fill in the defaults, refuse unknown codes."""
     for a in plan.trip_codes:
         if a not in addrs:

@@ -24,7 +24,7 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.link.base import Link, plain_sleep
@@ -55,10 +55,11 @@ class PlantLink(Link):
 
     TICK_S = 0.005
 
-    def __init__(self, bus, tap=None, clock=time.monotonic):
+    def __init__(self, bus: SimBus, tap: Callable[[bytes], object] | None = None,
+                 clock: Callable[[], float] = time.monotonic):
         self.bus = bus
         self.tap = tap or (lambda data: None)
-        self.now = clock
+        self.now = clock        # type: ignore[method-assign]  # (the plant's clock stands for Link.now)
         self._ticked = float("-inf")
 
     def _tick(self, now: float) -> None:
@@ -181,14 +182,15 @@ class StationPlan:
     reads: list[str] = field(default_factory=list)
     next_read: int = 0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         self.reads = list(self.script.read_codes)
 
 
 class Plc:
     """The built-in cyclic master over a PlantLink. run(stop) until stop() is true."""
 
-    def __init__(self, bus, tap=None, log=None, cycle_s: float = MIN_CYCLE_S,
+    def __init__(self, bus: object, tap: Callable[[bytes], object] | None = None,
+                 log: Callable[[str], object] | None = None, cycle_s: float = MIN_CYCLE_S,
                  scripts: dict[int, MotionScript] | None = None):
         from profidrive_cli.dp.poller import Master
         from profidrive_cli.fdl.timing import BusParams
@@ -251,7 +253,7 @@ class Plc:
                 self.cond.notify_all()
         self.cycles += 1
 
-    def run(self, stop=lambda: False) -> None:
+    def run(self, stop: Callable[[], bool] = lambda: False) -> None:
         self.bring_up()
         for plan in self.plans.values():
             plan.thread = threading.Thread(target=self._drive_thread, args=(plan,), daemon=True,
@@ -318,7 +320,7 @@ class Plc:
         except (PlcStopped, Exception):
             pass
 
-    def _one_run(self, drive, plan: StationPlan, pct: float) -> None:
+    def _one_run(self, drive: Drive, plan: StationPlan, pct: float) -> None:
         s = plan.script
         drive.set_speed(pct)
         drive.start(timeout=5.0)
@@ -331,7 +333,7 @@ class Plc:
         drive.stop(mode="normal", wait=True, timeout=30.0)
         self._hold(drive, s.pause_s)
 
-    def _read_one(self, drive, plan: StationPlan) -> None:
+    def _read_one(self, drive: Drive, plan: StationPlan) -> None:
         """The next of the plan's parameter reads (round robin); a code the card cannot address
         (UsageError, e.g. no published PNU) is dropped from the plan."""
         while drive.has_param_channel and plan.reads:
@@ -343,7 +345,7 @@ class Plc:
             except UsageError:
                 plan.reads.remove(code)
 
-    def _hold(self, drive, seconds: float) -> None:
+    def _hold(self, drive: Drive, seconds: float) -> None:
         end = drive.channel.now() + seconds
         while drive.channel.now() < end:
             drive.status()

@@ -49,11 +49,16 @@ fault_cause_active (True keeps the fault through an acknowledgement), pkw_log, s
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Mapping
+from typing import TYPE_CHECKING
 
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives.profidrive import Ctw, PkwFrame, State, Stw
 from profidrive_cli.sim.model import DriveModel
 from profidrive_cli.sim.pkw_server import WRITE_ACK, PkwServer  # noqa: F401  (WRITE_ACK: re-exported)
+
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profile import ParamDef, Profile
 
 STATE_BITS = {
     State.S1: Stw.SWITCHING_ON_INHIBITED,
@@ -74,9 +79,10 @@ class ProfidriveModel(PkwServer, DriveModel):
     #: how the family calls its faults in messages ("alarm", "protection") and extra hint text
     alarm_noun = "alarm"
     alarm_hint = ""
+    profile: Profile
 
-    def __init__(self, profile, *, cfg: pd.ProfidriveConfig | None = None,
-                 defaults: dict | None = None, pkw_latency: int = 0, name: str | None = None,
+    def __init__(self, profile: Profile, *, cfg: pd.ProfidriveConfig | None = None,
+                 defaults: Mapping[str, float] | None = None, pkw_latency: int = 0, name: str | None = None,
                  node_address: int = 0, baud_code: int = 0, device_id: int = 0,
                  profile_version: int = 2, pzd_map_len: int = 8):
         cfgs = {}
@@ -107,10 +113,10 @@ class ProfidriveModel(PkwServer, DriveModel):
                     v = p.max
             self.values[p.code] = self.wire_from_value(p, v)
         for code, v in (defaults or {}).items():
-            p = profile.param(str(code))
-            if p is None:
+            dp = profile.param(str(code))
+            if dp is None:
                 raise ValueError(f"{profile.name}: default for unknown parameter {code}")
-            self.values[p.code] = self.wire_from_value(p, v)
+            self.values[dp.code] = self.wire_from_value(dp, v)
         self.pzd_setpoint_map = [0] * pzd_map_len
         self.pzd_actual_map = [0] * pzd_map_len
         self.edit_rights = 1
@@ -132,7 +138,7 @@ class ProfidriveModel(PkwServer, DriveModel):
         self._last_tick: float | None = None
         self._frozen_target: float | None = None
         # PKW server
-        self._pkw_req: tuple[int, int, int, int] | None = None
+        self._pkw_req: tuple[int, ...] | None = None
         self._pkw_resp: PkwFrame = pd.IDLE
         self._pkw_wait = 0
         self.pkw_log: list[tuple[PkwFrame, PkwFrame]] = []
@@ -161,9 +167,9 @@ class ProfidriveModel(PkwServer, DriveModel):
     def arrival_reached(self) -> bool:
         return False
 
-    def param_value(self, code: str):
+    def param_value(self, code: str) -> float:
         p = self.profile.param(code)
-        return self.value_from_wire(p, self.values[p.code])  # type: ignore[union-attr]  # (config codes)
+        return self.value_from_wire(p, self.values[p.code])  # type: ignore[union-attr, arg-type]  # (config codes)
 
     def ramp_times(self) -> tuple[float, float, float]:
         def t(role: str, default: float) -> float:
@@ -192,16 +198,16 @@ class ProfidriveModel(PkwServer, DriveModel):
     def comm_loss_action(self) -> tuple[str, str | None]:
         return ("ramp", None)
 
-    def value_from_wire(self, p, raw: int):
+    def value_from_wire(self, p: ParamDef, raw: int) -> float:
         if p.size == 16:
             raw &= 0xFFFF
         return p.from_raw(raw)
 
-    def wire_from_value(self, p, value) -> int:
+    def wire_from_value(self, p: ParamDef, value: float) -> int:
         raw = p.to_raw(value)
         return raw & ((1 << p.size) - 1)
 
-    def value_allowed(self, p, value) -> bool:
+    def value_allowed(self, p: ParamDef, value: float) -> bool:
         return p.check_range(value) is None
 
     def read_special(self, pnu: int, sub: int) -> int | None:
@@ -256,7 +262,7 @@ class ProfidriveModel(PkwServer, DriveModel):
             return self.fault
         return self.history[i - 1] if i - 1 < len(self.history) else 0
 
-    def alarm_number(self, alarm) -> int:
+    def alarm_number(self, alarm: int | str) -> int:
         if isinstance(alarm, int):
             return alarm
         text = str(alarm).strip()
@@ -475,7 +481,7 @@ class ProfidriveModel(PkwServer, DriveModel):
         lay = self._ppo()
         area = pd.decode_area_bytes(lay, outputs, "request")
         self.tick(now)
-        resp = self._pkw_serve(area.pkw, now) if lay.pkw else None
+        resp = self._pkw_serve(area.pkw, now) if area.pkw is not None else None   # (None: no PKW in lay)
         self.apply_control(area.word1, area.word2, now)
         self._pzd_write(area.pzd[2:])
         self.stw = self.status_word()
@@ -516,7 +522,7 @@ class ProfidriveModel(PkwServer, DriveModel):
     # =========================================================================================
     # faults, communication loss
     # =========================================================================================
-    def trip(self, alarm, now: float = 0.0) -> None:
+    def trip(self, alarm: int | str, now: float = 0.0) -> None:
         number = self.alarm_number(alarm)
         if number <= 0:
             raise ValueError(f"fault number must be > 0, got {number}")
@@ -528,7 +534,7 @@ class ProfidriveModel(PkwServer, DriveModel):
         self.state, self.stop_mode = State.FAULT, None
         self.on_trip(number, now)
 
-    def seed_faults(self, alarms) -> None:
+    def seed_faults(self, alarms: Iterable[int | str]) -> None:
         nums = [self.alarm_number(a) for a in alarms]
         self.history = nums + self.history
         del self.history[max(0, len(self.cfg.fault_subindexes) - 1):]
@@ -540,6 +546,7 @@ class ProfidriveModel(PkwServer, DriveModel):
         if action == "continue" or not was_running:
             return
         if action == "trip":
+            assert alarm is not None, "comm_loss_action(): a trip names its alarm"
             self.trip(alarm, now)
         elif action == "coast":
             self.freq = 0.0

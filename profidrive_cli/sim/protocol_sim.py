@@ -14,6 +14,7 @@ unplug() makes every later call fail like a pulled USB adapter (tests of LinkLos
 from __future__ import annotations
 
 import time
+from typing import TYPE_CHECKING, Any, TypedDict
 from urllib.parse import parse_qs, urlsplit
 
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException, SerialTimeoutException  # noqa: F401
@@ -33,13 +34,26 @@ class VirtualClock:
             self.t += seconds
 
 
-class Serial(SerialBase):
+if TYPE_CHECKING:
+    from profidrive_cli.sim.bus import SimBus
+
+
+class SimulatorInfo(TypedDict):
+    """Serial.simulator_info(): the simulated segment behind an open sim:// port."""
+    stations: dict[int, str]
+    timing: str
+    baud: int
+    faults: bool
+
+
+# pyserial has no type hints: SerialBase is Any, which mypy --strict will not subclass
+class Serial(SerialBase):  # type: ignore[misc]
     """A pyserial port whose other end is a simulated PROFIBUS segment."""
 
     BAUDRATES = (9600, 19200, 45450, 93750, 187500, 500000, 1500000, 3000000, 6000000, 12000000)
 
-    def __init__(self, *args, **kwargs):
-        self.bus = None
+    def __init__(self, *args: Any, **kwargs: Any) -> None:      # pyserial's own arguments
+        self.bus: SimBus | None = None
         self._rxbuf = bytearray()
         self.clock = time.monotonic
         self.virtual: VirtualClock | None = None
@@ -48,7 +62,7 @@ class Serial(SerialBase):
         self.locked_baud: int | None = None
         super().__init__(*args, **kwargs)
 
-    def open(self):
+    def open(self) -> None:
         if self._port is None:
             raise ValueError("port must be configured before it can be used")
         from profidrive_cli.sim.plant import build_bus
@@ -66,14 +80,15 @@ class Serial(SerialBase):
         self._unplugged = False
         self.is_open = True
 
-    def simulator_info(self) -> dict:
+    def simulator_info(self) -> SimulatorInfo:
         """What `pdrive doctor` reports about the simulated segment behind this open port: the
         stations {address: family}, the timing, the baud rate and whether faults are injected."""
         bus = self.bus
+        assert bus is not None, "simulator_info() of a closed port"
         return {"stations": {a: s.model.family for a, s in sorted(bus.slaves.items())},
                 "timing": bus.timing, "baud": bus.params.baud, "faults": bus.faults is not None}
 
-    def close(self):
+    def close(self) -> None:
         self.is_open = False
         self.bus = None
 
@@ -97,10 +112,10 @@ class Serial(SerialBase):
             from profidrive_cli.link.base import precise_sleep
             precise_sleep(seconds)
 
-    def _reconfigure_port(self):
+    def _reconfigure_port(self) -> None:
         pass
 
-    def from_url(self, url):
+    def from_url(self, url: str) -> str:
         return url
 
     def _collect(self, now: float) -> None:
@@ -108,15 +123,17 @@ class Serial(SerialBase):
             self._rxbuf += self.bus.take(now)
 
     @property
-    def in_waiting(self):
+    def in_waiting(self) -> int:
         if self._unplugged or not self.is_open:
             self._check()
+        assert self.bus is not None            # (an open port has its bus)
         self._rxbuf += self.bus.take(self.clock())
         return len(self._rxbuf)
 
-    def read(self, size=1):
+    def read(self, size: int = 1) -> bytes:
         if self._unplugged or not self.is_open:
             self._check()
+        assert self.bus is not None            # (an open port has its bus)
         deadline = None if self._timeout is None else self.clock() + self._timeout
         while True:
             now = self.clock()
@@ -141,9 +158,10 @@ class Serial(SerialBase):
     #: runs up to the request first
     TICK_S = 0.01
 
-    def write(self, data):
+    def write(self, data: bytes) -> int:
         if self._unplugged or not self.is_open:
             self._check()
+        assert self.bus is not None            # (an open port has its bus)
         now = self.clock()
         if now - self._ticked >= self.TICK_S:
             self.bus.tick(now)
@@ -153,39 +171,40 @@ class Serial(SerialBase):
         self.bus.receive(bytes(data), now)
         return len(data)
 
-    def reset_input_buffer(self):
+    def reset_input_buffer(self) -> None:
         self._check()
+        assert self.bus is not None            # (an open port has its bus)
         self._rxbuf.clear()
         self.bus.flush()
 
-    def reset_output_buffer(self):
+    def reset_output_buffer(self) -> None:
         pass
 
     @property
-    def out_waiting(self):
+    def out_waiting(self) -> int:
         return 0
 
     @property
-    def cts(self):
+    def cts(self) -> bool:
         return True
 
     @property
-    def dsr(self):
+    def dsr(self) -> bool:
         return True
 
     @property
-    def ri(self):
+    def ri(self) -> bool:
         return False
 
     @property
-    def cd(self):
+    def cd(self) -> bool:
         return True
 
-    def _update_rts_state(self):
+    def _update_rts_state(self) -> None:
         pass
 
-    def _update_dtr_state(self):
+    def _update_dtr_state(self) -> None:
         pass
 
-    def _update_break_state(self):
+    def _update_break_state(self) -> None:
         pass

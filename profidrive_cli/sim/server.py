@@ -19,13 +19,21 @@ import socket
 import sys
 import threading
 import time
-from typing import Callable
+from typing import Any, Callable, Protocol
 
 from profidrive_cli.sim.bus import SimBus
 
 
+class Endpoint(Protocol):
+    """What serve() needs of where the master is: octets in (waiting at most `timeout` s), out."""
+
+    def read(self, timeout: float) -> bytes: ...
+
+    def write(self, data: bytes) -> None: ...
+
+
 class PtyEndpoint:
-    def __init__(self):
+    def __init__(self) -> None:
         import tty                      # POSIX only: `sim --pty` (imported here, so that the module
                                         # loads on Windows, where --listen and --serial work)
         self.master_fd, self.slave_fd = os.openpty()
@@ -335,7 +343,7 @@ class SerialEndpoint:
 
     def __init__(self, port: str, baud: int):
         from profidrive_cli.link.serial_link import open_serial
-        self._open = lambda: open_serial(port, baud)
+        self._open: Callable[[], Any] = lambda: open_serial(port, baud)    # a pyserial port (untyped)
         self.ser = self._open()
         self.path = port
         self.reopened = 0
@@ -390,8 +398,8 @@ class SerialEndpoint:
 TICK_S = 0.005
 
 
-def serve(bus: SimBus, endpoint, stop=lambda: False, poll: float = 0.005, clock=time.monotonic,
-          tick_s: float = TICK_S) -> None:
+def serve(bus: SimBus, endpoint: Endpoint, stop: Callable[[], bool] = lambda: False, poll: float = 0.005,
+          clock: Callable[[], float] = time.monotonic, tick_s: float = TICK_S) -> None:
     """Run until stop() is true. Reply octets go out at the times the bus gives.
 
     The bus's clock ticks every `tick_s` (and a station a request addresses runs its own first,

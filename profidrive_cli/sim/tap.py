@@ -11,12 +11,15 @@ from __future__ import annotations
 import os
 import socket
 import time
+from collections.abc import Callable
+from typing import Any
 
 
 class Tap:
     DRAIN_S = 0.05          # how often what clients write is read away (and TCP clients accepted)
 
-    def __init__(self, endpoint, clock=time.monotonic):
+    # endpoint: a sim/server.py endpoint (pty, TCP or serial), told apart by what it has (duck typed)
+    def __init__(self, endpoint: Any, clock: Callable[[], float] = time.monotonic):
         self.ep = endpoint
         self.clock = clock
         self.dropped = 0

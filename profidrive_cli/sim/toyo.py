@@ -41,7 +41,9 @@
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Iterable
 from itertools import repeat
+from typing import TYPE_CHECKING, Any
 
 from profidrive_cli.drives import profidrive as pd
 from profidrive_cli.drives import toyo as ty
@@ -49,6 +51,10 @@ from profidrive_cli.drives.profidrive import Ctw, State
 from profidrive_cli.sim import torque_axis
 from profidrive_cli.sim.motor import Motor
 from profidrive_cli.sim.profidrive_model import ProfidriveModel, _ramp
+
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profile import Profile
+    from profidrive_cli.drives.toyo.config import ToyoConfig
 
 # protection code -> (fault flag word 1 or 2, bit)
 FLAG_OF_CODE = {1: (1, 0), 2: (1, 1), 5: (1, 4), 6: (1, 5), 7: (1, 6), 8: (1, 7), 9: (1, 8), 10: (1, 9),
@@ -69,11 +75,12 @@ class ToyoModel(ProfidriveModel):
     #: to ride through a lost master: the manual names no setting; make_model(comm_loss="ignore"))
     comm_loss = "trip"
 
-    def __init__(self, profile, *, mode: int | None = None, bus_control: bool = True,
+    def __init__(self, profile: Profile, *, mode: int | None = None, bus_control: bool = True,
                  voltage_class: int | None = None, accel_s: float = 5.0, decel_s: float = 5.0,
-                 quick_s: float = 1.0, jog_percent: float = 10.0, inverter_mode: int = 0, **kw):
-        self.tc = ty.toyo_config(profile)
-        defaults = dict(BUS_CONTROL_DEFAULTS) if bus_control else {}
+                 quick_s: float = 1.0, jog_percent: float = 10.0, inverter_mode: int = 0,
+                 **kw: Any):                # ProfidriveModel's keyword arguments
+        self.tc: ToyoConfig = ty.toyo_config(profile)
+        defaults: dict[str, float] = dict(BUS_CONTROL_DEFAULTS) if bus_control else {}
         if mode is not None:
             if mode not in (0, 1):
                 raise ValueError("mode (J-08) must be 0 or 1")
@@ -98,8 +105,8 @@ class ToyoModel(ProfidriveModel):
         self.bad_clock = 0
         self.had_exchange = False
         self.trip_log: list[int] = []                  # history words, newest first (max 6)
-        self.recordings: list[list[tuple]] = []        # traceback recordings, newest first (max 4)
-        self.samples: deque = deque(maxlen=self.tc.traceback_points)
+        self.recordings: list[list[tuple[int, ...]]] = []     # traceback recordings, newest first (max 4)
+        self.samples: deque[tuple[int, ...]] = deque(maxlen=self.tc.traceback_points)
         self.first_trip_seen = False
         self._trip_code = 0
         self.motor = Motor(rated_v=200.0 if self.voltage_class == 200 else 400.0)
@@ -297,7 +304,7 @@ class ToyoModel(ProfidriveModel):
         tl = self._tl()
         area = pd.decode_area_bytes(lay, outputs, "request")
         self.tick(now)
-        resp = self._pkw_serve(area.pkw, now) if lay.pkw else None
+        resp = self._pkw_serve(area.pkw, now) if area.pkw is not None else None   # (None: no PKW in lay)
         w = dict(zip(tl.words("request", self._plch()), area.pzd))
         if "run_cmd" in w:
             self.run_cmd = w["run_cmd"] if self.mode == 1 else (w["run_cmd"] & ~0x7)
@@ -500,7 +507,7 @@ class ToyoModel(ProfidriveModel):
         return reply(1, raw)            # the value actually written
 
     # -- faults ------------------------------------------------------------------------------------
-    def trip(self, alarm, now: float = 0.0) -> None:
+    def trip(self, alarm: int | str, now: float = 0.0) -> None:
         code = self.alarm_number(alarm)
         if code == FAN_FAILURE:
             self.fan_failure = True        # a warning: the inverter keeps running
@@ -521,7 +528,7 @@ class ToyoModel(ProfidriveModel):
     def on_acknowledge(self, number: int, now: float) -> None:
         self._trip_code = 0
 
-    def seed_faults(self, alarms) -> None:
+    def seed_faults(self, alarms: Iterable[int | str]) -> None:
         words = [ty.history_word(self.alarm_number(a), self.inverter_mode, 0) for a in alarms]
         self.trip_log = words + self.trip_log
         del self.trip_log[len(self.tc.history_indexes):]
@@ -554,7 +561,7 @@ class ToyoModel(ProfidriveModel):
             self.apply_control(0, 0, now)
 
 
-def make_model(profile, **options) -> ToyoModel:
+def make_model(profile: Profile, **options: Any) -> ToyoModel:     # (the sim:// URL's options)
     comm_loss = options.pop("comm_loss", None)
     for k in ("mode", "voltage_class", "inverter_mode", "pkw_latency"):
         if k in options and options[k] is not None:

@@ -53,9 +53,14 @@ Simulator choices (not from the manual):
 from __future__ import annotations
 
 import struct
+from collections.abc import Iterable
+from typing import TYPE_CHECKING, Any
 
 from profidrive_cli.sim import torque_axis
 from profidrive_cli.sim.model import DriveModel
+
+if TYPE_CHECKING:
+    from profidrive_cli.drives.profile import Profile
 
 # command word bits (spec §2.2)
 FWD, REV, EXT_FAULT, RESET, CLEAR_LOG, BASE_BLOCK = 0, 1, 8, 9, 14, 15
@@ -87,8 +92,11 @@ def _s16(w: int) -> int:
 class YaskawaModel(DriveModel):
     family = "yaskawa"
 
-    def __init__(self, profile, b1_01=3, b1_02=3, processing_ms=12.0, comm_timeout=1.0,
-                 fast_stop_input=None, rated_kw=3.7, bus_fault="running", d5_01=0, **params):
+    # (the numbers may come as text, from a sim:// URL; **params: E1_04=50.0, ... in engineering units)
+    def __init__(self, profile: Profile, b1_01: int | str = 3, b1_02: int | str = 3,
+                 processing_ms: float | str = 12.0, comm_timeout: float | str = 1.0,
+                 fast_stop_input: int | str | None = None, rated_kw: float | str = 3.7,
+                 bus_fault: str = "running", d5_01: int = 0, **params: float | str) -> None:
         super().__init__(profile.ident, {k: CFGS[k] for k in profile.layouts if k in CFGS},
                          name=profile.title, user_prm_len=0, max_diag_len=6)
         self.profile = profile
@@ -118,10 +126,10 @@ class YaskawaModel(DriveModel):
         self._set("b1-02", int(b1_02))
         for key, value in params.items():       # e.g. E1_04=50.0, C1_01=2.0 (engineering units)
             code = key.replace("_", "-")
-            p = profile.param(code)
-            if p is None or p.register is None:
+            prm = profile.param(code)
+            if prm is None or prm.register is None:
                 raise ValueError(f"yaskawa sim: unknown option {key!r}")
-            self.regs[p.register] = p.to_raw(float(value)) & 0xFFFF
+            self.regs[prm.register] = prm.to_raw(float(value)) & 0xFFFF
         self.stored = dict(self.regs)
         self._storing_until = -1.0
 
@@ -147,7 +155,8 @@ class YaskawaModel(DriveModel):
         self._cmd_hs = 0                # last command HS bit seen
         self._resp_hs = 0
         self._status = 0                # response STATUS field
-        self._pending: tuple | None = None
+        #: the parameter request being processed: (function, start register, quantity, data words)
+        self._pending: tuple[int, int, int, list[int]] | None = None
         self._t_toggle = 0.0
         self._answers_since_toggle = 0
         self._reply = bytes(16)         # reply area without the HS byte (16-byte model, cut per layout)
@@ -394,7 +403,7 @@ class YaskawaModel(DriveModel):
         if rising >> CLEAR_LOG & 1:
             self.history.clear()
 
-    def _inputs(self, names) -> list[int]:
+    def _inputs(self, names: Iterable[str]) -> list[int]:
         fmax = self.fmax
         f = abs(self.out_hz)
         running = self._run_latched and self.fault is None
@@ -584,7 +593,7 @@ class YaskawaModel(DriveModel):
         self.history = (nums + self.history)[:4]
 
 
-def make_model(profile, **options) -> YaskawaModel:
+def make_model(profile: Profile, **options: Any) -> YaskawaModel:     # (the sim:// URL's options)
     # `defaults` (code -> value: a sim URL's set=, the preset every family's model takes) become the
     # model's parameter options (E1-04 -> E1_04)
     for code, v in (options.pop("defaults", None) or {}).items():
