@@ -7,8 +7,8 @@ import json
 import logging
 import os
 import sys
-from types import TracebackType
 from dataclasses import dataclass, field
+from types import TracebackType
 from typing import TYPE_CHECKING, Any, Callable, Literal, TypeVar, overload
 
 import click

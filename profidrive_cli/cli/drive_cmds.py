@@ -17,7 +17,7 @@ from profidrive_cli import BusError, UsageError
 from profidrive_cli.cli.common import (BusOptions, bus_options, confirm_real_port, emit_json, err, out,
                                        station_address)
 from profidrive_cli.cli import render_drive as R
-# re-exported: run, jog, commloss-test use them
+# re-exported (explicitly, for mypy): audit_cmd imports them from here
 from profidrive_cli.cli.drive_opts import _terminations as _terminations, drive_options as drive_options
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.session import (DriveSession, RestoreInterrupted, RestoreRefused,
