@@ -5,13 +5,18 @@ from __future__ import annotations
 
 import math
 import sys
+from typing import TYPE_CHECKING, Any
 
 import click
 from rich.markup import escape
 
 from profidrive_cli import UsageError
-from profidrive_cli.cli.common import bus_options, emit_json, out
-from profidrive_cli.cli.drive_cmds import _confirmer, _session, _terminations, drive_options
+from profidrive_cli.cli.common import BusOptions, bus_options, emit_json, out
+from profidrive_cli.cli.drive_cmds import _confirmer, _session
+from profidrive_cli.cli.drive_opts import _terminations, drive_options
+
+if TYPE_CHECKING:
+    from profidrive_cli.session.commloss import CommLossResult
 
 
 @click.command("commloss-test")
@@ -35,8 +40,10 @@ from profidrive_cli.cli.drive_cmds import _confirmer, _session, _terminations, d
 @drive_options
 @bus_options
 @_terminations
-def commloss_cmd(opts, address, hz, mode, timeout, tolerance, start_timeout, ack, cycle_hz, yes,
-                 profile_name, ppo, fmt, watchdog_ms):
+def commloss_cmd(opts: BusOptions, address: int | None, hz: float, mode: str, timeout: float | None,
+                 tolerance: float | None, start_timeout: float | None, ack: bool, cycle_hz: float | None,
+                 yes: bool, profile_name: str | None, ppo: int | None, fmt: str | None,
+                 watchdog_ms: int) -> None:
     """Comm-loss acceptance test: run at --hz, break the link, measure the drive's reaction.
 
     The limit is watchdog + configured delay + stop time + tolerance (the drive's configured
@@ -57,10 +64,12 @@ def commloss_cmd(opts, address, hz, mode, timeout, tolerance, start_timeout, ack
                                                     f"the link ({mode})"))
     events = emit_json if opts.json else _text_event
     with session as s:
+        assert s.profile is not None            # the open session has its profile
         if not opts.json:
             out.print(escape(f"station {s.address} ({s.profile.name}): comm-loss test, mode {mode}, "
                              f"{hz:g} Hz, watchdog {s.watchdog_ms:g} ms"))
         else:
+            assert s.ident is not None          # the open session read the station's ident
             emit_json({"event": "start", "station": s.address, "ident": s.ident,
                        "ident_hex": f"0x{s.ident:04X}", "profile": s.profile.name, "mode": mode,
                        "reference_hz": hz, "watchdog_s": s.watchdog_ms / 1000.0})
@@ -72,7 +81,7 @@ def commloss_cmd(opts, address, hz, mode, timeout, tolerance, start_timeout, ack
         sys.exit(1)
 
 
-def _text_event(ev: dict) -> None:
+def _text_event(ev: dict[str, Any]) -> None:
     kind = ev.get("event")
     if kind == "reaction":
         out.print(escape(f"  configured reaction: {ev['words']}"))
@@ -93,18 +102,18 @@ def _text_event(ev: dict) -> None:
                   + ("" if ev["watchdog_expired"] else " (the station had not left data exchange)"))
 
 
-def _f(v) -> str:
+def _f(v: float | None) -> str:
     return "-" if v is None else f"{v:.3f} s"
 
 
-def _measured(res) -> str:
+def _measured(res: CommLossResult) -> str:
     if not res.reacted:
         return "no stop or trip seen (still running)"
     return (f"{res.measured_s:.3f} s at the latest (the first look that saw it came back then; "
             f"not before {res.not_before_s:.3f} s)")
 
 
-def _text_result(res) -> None:
+def _text_result(res: CommLossResult) -> None:
     rows = [("watchdog", f"{res.watchdog_ms:g} ms"),
             ("configured reaction", res.reaction.words),
             ("limit", res.limit.words() if res.limit else _f(res.expected_s)),

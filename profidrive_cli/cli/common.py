@@ -8,7 +8,8 @@ import logging
 import os
 import sys
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from types import TracebackType
+from typing import TYPE_CHECKING, Any, Callable, Literal, TypeVar, overload
 
 import click
 from rich.console import Console
@@ -17,9 +18,15 @@ from profidrive_cli import UsageError
 from profidrive_cli.fdl.timing import parse_baud
 
 if TYPE_CHECKING:                                   # pragma: no cover
-    from profidrive_cli.config import Effective
+    from profidrive_cli.api import Bus
+    from profidrive_cli.config import Effective, Setting
+    from profidrive_cli.dp.baud import BaudFound
+    from profidrive_cli.dp.poller import Master
+    from profidrive_cli.link.base import Link
 
-def baud_from(text, source: str) -> int:
+R = TypeVar("R")
+
+def baud_from(text: str | int, source: str) -> int:
     """A baud rate a bus command takes, from where it came (`source`: "option --baud", "env
     PDRIVE_BAUD", "FILE:LINE"); UsageError naming that source unless it is the option itself."""
     try:
@@ -37,7 +44,7 @@ NO_PORT_HELP = ("no port given: use --port DEVICE (e.g. /dev/ttyUSB0, COM3, sock
 PIPE_WIDTH = 4096
 
 
-def make_console(stderr: bool = False, **kw) -> Console:
+def make_console(stderr: bool = False, **kw: Any) -> Console:
     """A rich console for command output: no soft wrapping, and not wrapped at 80 columns when the
     stream is not a terminal (a pipe or a file gets whole lines; $COLUMNS still wins)."""
     stream = sys.stderr if stderr else sys.stdout
@@ -70,14 +77,14 @@ class BusOptions:
     trace: str | None = None
     #: the rate --baud auto found (set by the first open_master/open_link)
     found_baud: int | None = None
-    _recorder: object = None
+    _recorder: TraceFile | None = None
     #: config.Effective: the settings with their sources (config file, env, option, default)
     settings: Effective | None = None
     #: the settings of a project file named (or to be named) on stderr (BusOptions._announce)
-    _announced: set = field(default_factory=set)
+    _announced: set[str | tuple[str, int | None, str]] = field(default_factory=set)
     #: those lines before the port is opened: printed then (_notices_now), after the checks of
     #: the options, so that bad input stays one line
-    _pending: list | None = field(default_factory=list)
+    _pending: list[str] | None = field(default_factory=list)
 
     def source_of(self, name: str) -> str:
         """Where the port / baud / master_address came from ("option --baud", "FILE:LINE", ...)."""
@@ -101,7 +108,7 @@ class BusOptions:
             self._notices_now()
         return named.port.value if named is not None else fallback
 
-    def station_defaults(self, address: int | None) -> dict:
+    def station_defaults(self, address: int | None) -> _UsedDefaults:
         """{"profile" | "layout" | "fmax": value} the config file gives this station on this port.
         Reading a value from it is using it: one from a project file is named on stderr then. The
         values keep their FILE:LINE (config.FileText / FileHz) for the labels and errors."""
@@ -174,7 +181,7 @@ class BusOptions:
         self._notices_now()
         return rate
 
-    def silence_hint(self, link, baud_auto: bool = False) -> str:
+    def silence_hint(self, link: Link, baud_auto: bool = False) -> str:
         """What to try when nobody answered, fitting the cause: a forced --echo the port never gave
         back (every write waited for an echo that did not come; link.echo_errors) is that; else,
         with baud_auto, --baud auto (the rate may be wrong) unless it was already given."""
@@ -190,7 +197,7 @@ class BusOptions:
         from profidrive_cli.sim.plant import url_baud
         return url_baud(str(self.port))
 
-    def open_link(self, baud: int | None = None):
+    def open_link(self, baud: int | None = None) -> Link:
         """The link at `baud`, the given rate, or (--baud auto) the rate heard on the line; with
         -vv or --trace wrapped so that every telegram is logged / recorded."""
         if baud is None and self.auto_baud:
@@ -198,13 +205,13 @@ class BusOptions:
             return self._traced(link)
         return self._traced(self._raw_link(baud or self.baud_rate()))
 
-    def _raw_link(self, baud: int):
+    def _raw_link(self, baud: int) -> Link:
         from profidrive_cli.link import open_link
         port = self.require_port()
         self._notices_now()
         return open_link(port, baud, rs485=self.rs485, echo=self.echo)
 
-    def _traced(self, link):
+    def _traced(self, link: Link) -> Link:
         if self.verbose < 2 and not self.trace:
             return link
         from profidrive_cli.dp.trace import TraceLink
@@ -212,12 +219,12 @@ class BusOptions:
             self._recorder = _open_trace(self.trace)
         return TraceLink(link, self._recorder)
 
-    def _make_master(self, link, baud: int | None):
+    def _make_master(self, link: Link, baud: int | None) -> Master:
         from profidrive_cli.api.bus import make_master     # the one place the master is built
         return make_master(link, baud or self.baud_rate(), self.master_address,
                            slot_time=self.slot_time, retries=self.retries)
 
-    def open_master(self, baud: int | None = None, address: int | None = None):
+    def open_master(self, baud: int | None = None, address: int | None = None) -> Master:
         """A Master at `baud`, the given rate, or (--baud auto) the rate found by listening and
         then probing `address` (every address when None)."""
         if address is not None:
@@ -229,7 +236,7 @@ class BusOptions:
         return self._make_master(self.open_link(baud), baud)
 
     def open_bus(self, address: int | None = None, *, handle_signals: bool = False,
-                 on_message=None):
+                 on_message: Callable[[str], None] | None = None) -> Bus:
         """The drive commands' front door: an api.Bus on open_master(address) (--trace / -vv,
         --baud auto and its messages as for every bus command) with the settings and their
         sources. Its stations: Bus.drive (the API's drive) or Bus.session (the session level).
@@ -238,54 +245,60 @@ class BusOptions:
         return Bus(self.open_master(address=address), handle_signals=handle_signals,
                    settings=self.settings, on_message=on_message)
 
-    def _make_master_traced(self, link, baud: int | None):
+    def _make_master_traced(self, link: Link, baud: int | None) -> Master:
         return self._make_master(self._traced(link), baud)
 
-    def _detect(self, addresses, probe: bool):
+    @overload
+    def _detect(self, addresses: list[int] | None, probe: Literal[True]) -> tuple[BaudFound, Master]: ...
+    @overload
+    def _detect(self, addresses: list[int] | None, probe: Literal[False]) -> tuple[BaudFound, Link]: ...
+
+    def _detect(self, addresses: list[int] | None, probe: bool) -> tuple[BaudFound, Master | Link]:
         from profidrive_cli import BusError
         from profidrive_cli.dp.baud import detect_baud
         from profidrive_cli.link import open_link
         port = self.require_port()
         self._notices_now()
-        found, obj = detect_baud(
+        res = detect_baud(
             lambda b: open_link(port, b, rs485=self.rs485, echo=self.echo),
             self._make_master_traced, addresses, probe=probe)
-        if found is None:
+        if res[0] is None:
             where = "" if addresses is None else f" from station {addresses[0]}"
             how = "heard no running master" + ("" if not probe else
                                                  f" and got no answer{where}")
             raise BusError(f"--baud auto: {how} at any DP baud rate on {port}")
+        found, obj = res
         self.found_baud = found.baud
         err.print(f"{found.describe()}")
         return found, obj
 
 
-class _UsedDefaults(dict):
+class _UsedDefaults(dict[str, Any]):
     """A station's config defaults {key: value}; reading a key that a project file set names that
     file:line on stderr (once per key): only the defaults a command really uses are named."""
 
-    def __init__(self, opts: BusOptions, address, settings: dict):
+    def __init__(self, opts: BusOptions, address: int | None, settings: dict[str, Setting]) -> None:
         super().__init__({k: s.value for k, s in settings.items()})
         self._opts, self._address, self._settings = opts, address, settings
 
-    def _used(self, key):
+    def _used(self, key: str) -> None:
         s = self._settings.get(key)
-        tag = ("station", self._address, key)
+        tag: tuple[str, int | None, str] = ("station", self._address, key)
         if s is not None and s.project and tag not in self._opts._announced:
             self._opts._announced.add(tag)
             value = f"{s.value:g} Hz" if key == "fmax" else f"{s.value}"
             self._opts._notice(f"station {self._address} {key} {value}", s.source)
 
-    def __getitem__(self, key):
+    def __getitem__(self, key: str) -> Any:
         self._used(key)
         return super().__getitem__(key)
 
-    def get(self, key, default=None):
+    def get(self, key: str, default: Any = None) -> Any:
         if key in self:
             self._used(key)
         return super().get(key, default)
 
-    def peek(self, key):
+    def peek(self, key: str) -> Any:
         """The value without using it (an fmax only checked against the drive's own): not named."""
         return super().get(key)
 
@@ -293,7 +306,7 @@ class _UsedDefaults(dict):
 class _StderrHandler(logging.Handler):
     """Log lines on whatever sys.stderr is when they are emitted (click's test runner swaps it)."""
 
-    def emit(self, record):
+    def emit(self, record: logging.LogRecord) -> None:
         try:
             sys.stderr.write(self.format(record) + "\n")
             sys.stderr.flush()
@@ -315,7 +328,7 @@ def configure_logging(verbose: int) -> None:
     logger.setLevel(logging.DEBUG if verbose >= 2 else logging.INFO)
 
 
-def _open_trace(path: str):
+def _open_trace(path: str) -> TraceFile:
     """The --trace recorder: a pcap written beside the target and renamed over it when the command
     ends (whatever way it ends: the trace of a failure is the useful one)."""
     rec = TraceFile(path)
@@ -371,10 +384,11 @@ class TraceFile:
                 self.error = e
         return self.error
 
-    def __enter__(self):
+    def __enter__(self) -> TraceFile:
         return self
 
-    def __exit__(self, exc_type, exc, tb):
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> Literal[False]:
         e = self.close()
         if e is None:
             return False
@@ -389,7 +403,7 @@ class TraceFile:
         return False
 
 
-def complete_port(ctx, param, incomplete: str):
+def complete_port(ctx: click.Context, param: click.Parameter, incomplete: str) -> list[str]:
     """Shell completion of --port: the port names from the config files, and sim://."""
     try:
         from profidrive_cli.config import load
@@ -399,7 +413,7 @@ def complete_port(ctx, param, incomplete: str):
     return [n for n in [*names, "sim://"] if n.startswith(incomplete)]
 
 
-def bus_options(f):
+def bus_options(f: Callable[..., R]) -> Callable[..., R]:
     """--port, --baud, --master-address, --slot-time, --retries, --rs485, --echo, -v, --trace, --json."""
     @click.option("--port", default=None, metavar="PORT", shell_complete=complete_port,
                   help="Serial device, pyserial URL, sim://, or a port name from the config file "
@@ -423,8 +437,9 @@ def bus_options(f):
                   help="Record every telegram this command sends and receives (pcap).")
     @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
     @functools.wraps(f)
-    def wrapper(port, baud, master_address, slot_time, retries, rs485, echo, verbose, trace,
-                as_json, **kw):
+    def wrapper(port: str | None, baud: str | None, master_address: int | None, slot_time: int | None,
+                retries: int | None, rs485: bool, echo: bool | None, verbose: int, trace: str | None,
+                as_json: bool, **kw: Any) -> R:
         configure_logging(verbose)
         if trace:
             from profidrive_cli.outfile import check_output_path
@@ -438,7 +453,7 @@ def bus_options(f):
     return wrapper
 
 
-def emit_json(obj) -> None:
+def emit_json(obj: Any) -> None:  # Any: whatever json.dumps takes (a command's JSON object)
     sys.stdout.write(json.dumps(obj, indent=None, sort_keys=False) + "\n")
     sys.stdout.flush()
 

@@ -7,17 +7,18 @@ command line, asks for confirmation before writing to a real port, and renders (
 from __future__ import annotations
 
 import contextlib
+from typing import TYPE_CHECKING, Any, Callable, Iterator, TypeVar
 
 import click
 from rich.markup import escape
 from rich.progress import Progress
 
 from profidrive_cli import BusError, UsageError
-from profidrive_cli.cli.common import (bus_options, confirm_real_port, emit_json, err, out,
+from profidrive_cli.cli.common import (BusOptions, bus_options, confirm_real_port, emit_json, err, out,
                                        station_address)
 from profidrive_cli.cli import render_drive as R
-# re-exported: run, jog, commloss-test use them
-from profidrive_cli.cli.drive_opts import _terminations, drive_options
+# re-exported (explicitly, for mypy): audit_cmd imports them from here
+from profidrive_cli.cli.drive_opts import _terminations as _terminations, drive_options as drive_options
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.session import (DriveSession, RestoreInterrupted, RestoreRefused,
                                     SessionTerminated)
@@ -25,6 +26,16 @@ from profidrive_cli.session.backup import CARD_MANUAL, default_source, nothing_c
 from profidrive_cli.session.dumpfile import not_dumped_words, write_dump
 from profidrive_cli.session.restore import scope_problem
 from profidrive_cli.outfile import check_output_path
+
+if TYPE_CHECKING:
+    from profidrive_cli.cli.render_drive import RunView
+    from profidrive_cli.session.params import ParamRow
+
+T = TypeVar("T")
+#: a before-connect callback (DriveSession's before_connect)
+Before = Callable[[DriveSession], None]
+#: the progress callback of a parameter pass: (done, total, code)
+ProgressFn = Callable[[int, int, str], None]
 
 
 # =============================================================================================
@@ -36,17 +47,19 @@ def _message(text: str) -> None:
     err.print(escape(text))
 
 
-def _confirmer(opts, yes: bool, what: str):
+def _confirmer(opts: BusOptions, yes: bool, what: str) -> Before:
     """before_connect callback: writing to a real port needs --yes or a 'y' on the terminal
     (common.confirm_real_port: the same question io and checklist run ask)."""
-    def before(session):
+    def before(session: DriveSession) -> None:
+        assert session.profile is not None      # identify() chose it before the before-connect call
         confirm_real_port(opts.port, yes, f"{what} — station {session.address} "
                                           f"({session.profile.name}) on {opts.port}")
     return before
 
 
-def _session(opts, address, profile_name, ppo, fmt, watchdog_ms, *, cycle_hz=0.0, before=None,
-             log=None) -> DriveSession:
+def _session(opts: BusOptions, address: int | None, profile_name: str | None, ppo: int | None,
+             fmt: str | None, watchdog_ms: float, *, cycle_hz: float | None = 0.0,
+             before: Before | None = None, log: str | None = None) -> DriveSession:
     """The station at the session level through the API (Bus.session on the bus of these options),
     not yet opened: `with` it opens the station; its exit stops the drive safely, releases the
     station and closes the port (own_port)."""
@@ -62,7 +75,8 @@ def _session(opts, address, profile_name, ppo, fmt, watchdog_ms, *, cycle_hz=0.0
 
 
 @contextlib.contextmanager
-def run_ending(session, view, end: dict, started, extra=None):
+def run_ending(session: DriveSession, view: RunView, end: dict[str, Any], started: Callable[[], bool],
+               extra: Callable[[], dict[str, Any]] | None = None) -> Iterator[None]:
     """How a run or a jog ends, whatever way it ends: the reason (SIGTERM, Ctrl-C, a bus error), the
     stop report, the final state, counters and warnings in `end`, and the view's last word.
     started() says whether the drive was started (for `stopped` when no stop was needed); extra()
@@ -121,7 +135,8 @@ def _split_address(args: tuple[str, ...], min_rest: int) -> tuple[int | None, li
 @drive_options
 @bus_options
 @_terminations
-def status_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms):
+def status_cmd(opts: BusOptions, address: int | None, profile_name: str | None, ppo: int | None,
+               fmt: str | None, watchdog_ms: int) -> None:
     """One read of a drive's status: state, flags, speed, current fault."""
     # built on the Python API (api/): the bus, the drive and their ending; rendered from its session
     if address is not None:
@@ -147,18 +162,18 @@ def status_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms):
 class _ParamGroup(click.Group):
     """The param group; its `fleet` subgroup (cli/fleet_cmd.py) is loaded when it is asked for."""
 
-    def get_command(self, ctx, name):
+    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
         if name == "fleet":
             from profidrive_cli.cli.fleet_cmd import fleet_group
             return fleet_group
         return super().get_command(ctx, name)
 
-    def list_commands(self, ctx):
+    def list_commands(self, ctx: click.Context) -> list[str]:
         return sorted([*super().list_commands(ctx), "fleet"])
 
 
 @click.group("param", cls=_ParamGroup)
-def param_group():
+def param_group() -> None:
     """Read and write drive parameters by their native codes (F03, A004, C1-01, dc-voltage, PNU23[1],
     REG0x0180); dump, restore and compare whole parameter sets."""
 
@@ -168,7 +183,8 @@ def param_group():
 @drive_options
 @bus_options
 @_terminations
-def param_get(opts, args, profile_name, ppo, fmt, watchdog_ms):
+def param_get(opts: BusOptions, args: tuple[str, ...], profile_name: str | None, ppo: int | None,
+              fmt: str | None, watchdog_ms: int) -> None:
     """Read parameters (engineering value with unit, and the raw wire value)."""
     if len(args) == 1 and args[0].isdigit() and int(args[0]) <= 125:
         # a lone station address: the code is what is missing, not the address
@@ -178,6 +194,7 @@ def param_get(opts, args, profile_name, ppo, fmt, watchdog_ms):
     if not codes:
         raise UsageError("param get: give at least one parameter code")
     with _session(opts, address, profile_name, ppo, fmt, watchdog_ms) as s:
+        assert s.profile is not None            # the open session has its profile
         infos = [s.params.info(c) for c in codes]     # every code checked before the first read
         values = [s.params.read_info(i) for i in infos]
     if opts.json:
@@ -197,7 +214,8 @@ def param_get(opts, args, profile_name, ppo, fmt, watchdog_ms):
 @drive_options
 @bus_options
 @_terminations
-def param_set(opts, args, save, yes, allow_dangerous, profile_name, ppo, fmt, watchdog_ms):
+def param_set(opts: BusOptions, args: tuple[str, ...], save: bool, yes: bool, allow_dangerous: bool,
+              profile_name: str | None, ppo: int | None, fmt: str | None, watchdog_ms: int) -> None:
     """Write one parameter: checked first (a value the parameter cannot hold exactly is refused,
     never rounded), read back after."""
     address, rest = _split_address(args, 2)
@@ -208,7 +226,7 @@ def param_set(opts, args, save, yes, allow_dangerous, profile_name, ppo, fmt, wa
         raise UsageError("param set: expected [ADDRESS] CODE VALUE")
     code, text = rest
 
-    def before(session):
+    def before(session: DriveSession) -> None:
         # the profile is known here, the drive is not connected yet: nothing has been written;
         # a dangerous entry or a value it cannot hold is refused before anyone is asked
         what = session.params.preflight(code, text, allow_dangerous=allow_dangerous)
@@ -216,6 +234,7 @@ def param_set(opts, args, save, yes, allow_dangerous, profile_name, ppo, fmt, wa
         _confirmer(opts, yes, words)(session)
 
     with _session(opts, address, profile_name, ppo, fmt, watchdog_ms, before=before) as s:
+        assert s.profile is not None            # the open session has its profile
         params = s.params
         # the code resolved once and every check made once; execute() neither resolves nor checks again
         plan = params.plan(code, text, allow_dangerous=allow_dangerous)
@@ -249,17 +268,19 @@ def param_set(opts, args, save, yes, allow_dangerous, profile_name, ppo, fmt, wa
 @drive_options
 @bus_options
 @_terminations
-def param_dump(opts, address, output, changed, profile_name, ppo, fmt, watchdog_ms):
+def param_dump(opts: BusOptions, address: int | None, output: str, changed: bool, profile_name: str | None,
+               ppo: int | None, fmt: str | None, watchdog_ms: int) -> None:
     """Read every readable parameter into a YAML file (with the station's identity and profile).
     An existing file is replaced only when the dump is complete."""
     check_output_path(output, "-o")             # before the bus is opened
     with _session(opts, address, profile_name, ppo, fmt, watchdog_ms) as s:
+        assert s.profile is not None            # the open session has its profile
         doc = _with_progress(opts, "reading parameters", lambda prog: s.params.dump(prog, changed=changed))
     write_dump(doc, output)                     # through outfile.OutputFile
     n_set, n_ro, n_bad = len(doc["parameters"]), len(doc["readonly"]), len(doc.get("unreadable", {}))
     absent = doc.get("not_dumped")
     if opts.json:
-        d = {"file": output, "station": s.address, "profile": s.profile.name, "settings": n_set,
+        d: dict[str, Any] = {"file": output, "station": s.address, "profile": s.profile.name, "settings": n_set,
              "readonly": n_ro, "unreadable": n_bad}
         if changed:
             d["no_factory_default"] = len(doc["no_factory_default"])
@@ -282,7 +303,7 @@ def param_dump(opts, address, output, changed, profile_name, ppo, fmt, watchdog_
 def _groups_arg(values: tuple[str, ...], option: str) -> tuple[str, ...]:
     """--only a --only b,c -> (a, b, c). An empty name (--only '', --only ',', --only 'a,,b') is bad
     input: read as "no scope" it would restore every group, the opposite of what was asked."""
-    out = []
+    out: list[str] = []
     for v in values:
         names = [g.strip() for g in v.split(",")]
         if not all(names):
@@ -292,7 +313,7 @@ def _groups_arg(values: tuple[str, ...], option: str) -> tuple[str, ...]:
     return tuple(out)
 
 
-def _file_args(args, what: str):
+def _file_args(args: tuple[str, ...], what: str) -> tuple[int | None, str]:
     address, rest = _split_address(args, 1)
     if len(rest) != 1:
         raise UsageError(f"param {what}: expected [ADDRESS] FILE.yaml")
@@ -313,8 +334,9 @@ def _file_args(args, what: str):
 @drive_options
 @bus_options
 @_terminations
-def param_restore(opts, args, dry_run, yes, allow_dangerous, only, exclude, profile_name, ppo, fmt,
-                  watchdog_ms):
+def param_restore(opts: BusOptions, args: tuple[str, ...], dry_run: bool, yes: bool, allow_dangerous: bool,
+                  only: tuple[str, ...], exclude: tuple[str, ...], profile_name: str | None,
+                  ppo: int | None, fmt: str | None, watchdog_ms: int) -> None:
     """Write back what differs from a dump. Every row is checked first (drive identity, code, exact
     value, writability, motor stopped where needed): any problem and nothing is written. Each write
     is read back. Ends with a table. --only / --exclude limit it to parameter groups."""
@@ -323,7 +345,8 @@ def param_restore(opts, args, dry_run, yes, allow_dangerous, only, exclude, prof
     only_g, excl_g = _groups_arg(only, "--only"), _groups_arg(exclude, "--exclude")
     confirm = None if dry_run else _confirmer(opts, yes, f"restore parameters from {path}")
 
-    def before(session):
+    def before(session: DriveSession) -> None:
+        assert session.profile is not None      # identify() chose it before the before-connect call
         bad = scope_problem(session.profile, only_g, excl_g)   # before anyone is asked
         if bad:
             raise UsageError(bad)
@@ -341,7 +364,8 @@ def param_restore(opts, args, dry_run, yes, allow_dangerous, only, exclude, prof
                 err.print(escape(line))
         refused = UsageError(f"{path}: {len(e.problems)} problem(s); nothing was written")
         # under --json the error object carries them (one document on stdout)
-        refused.json_details = {"file": path, "written": 0, "problems": e.problems}
+        refused.json_details = {  # type: ignore[attr-defined]  # read by cli/main.py with getattr
+            "file": path, "written": 0, "problems": e.problems}
         raise refused from None
     except RestoreInterrupted as e:
         _print_rows(opts, s, e.rows, "restore", False, interrupted=str(e))
@@ -362,7 +386,8 @@ def param_restore(opts, args, dry_run, yes, allow_dangerous, only, exclude, prof
 @drive_options
 @bus_options
 @_terminations
-def param_diff(opts, args, defaults, profile_name, ppo, fmt, watchdog_ms):
+def param_diff(opts: BusOptions, args: tuple[str, ...], defaults: bool, profile_name: str | None,
+               ppo: int | None, fmt: str | None, watchdog_ms: int) -> None:
     """Compare the drive with a dump, or with the factory defaults (--defaults); nothing is written.
     Exit code as diff's: 0 when the drive holds what the file says (--defaults: nothing changed from
     the factory), 1 when a parameter differs or cannot be read (--defaults: or when no setting could
@@ -386,12 +411,13 @@ def param_diff(opts, args, defaults, profile_name, ppo, fmt, watchdog_ms):
         raise SystemExit(1)             # the table (or the JSON document) is the message
 
 
-def _print_rows(opts, s, rows, what: str, dry_run: bool, interrupted: str | None = None) -> None:
+def _print_rows(opts: BusOptions, s: DriveSession, rows: list[ParamRow], what: str, dry_run: bool, interrupted: str | None = None) -> None:
     counts: dict[str, int] = {}
     for r in rows:
         counts[r.result] = counts.get(r.result, 0) + 1
     if opts.json:
-        d = {"station": s.address, "profile": s.profile.name, "dry_run": dry_run,
+        assert s.profile is not None            # the session was opened
+        d: dict[str, Any] = {"station": s.address, "profile": s.profile.name, "dry_run": dry_run,
              "counts": counts, "rows": [r.to_dict() for r in rows]}
         if what == "defaults":
             d["compared_with"] = "factory defaults"     # each row's file_value is the factory default
@@ -451,13 +477,13 @@ def _print_rows(opts, s, rows, what: str, dry_run: bool, interrupted: str | None
     out.print(", ".join(f"{counts[k]} {k}" for k in order if counts.get(k)) or "nothing in the file")
 
 
-def _with_progress(opts, label: str, fn):
+def _with_progress(opts: BusOptions, label: str, fn: Callable[[ProgressFn | None], T]) -> T:
     if opts.json or not err.is_terminal:
         return fn(None)
     with Progress(console=err, transient=True) as prog:
         task = prog.add_task(label, total=None)
 
-        def cb(i, n, code):
+        def cb(i: int, n: int, code: str) -> None:
             prog.update(task, total=n, completed=i, description=f"{label} {code}")
         return fn(cb)
 
@@ -474,11 +500,13 @@ def _with_progress(opts, label: str, fn):
 @drive_options
 @bus_options
 @_terminations
-def faults_cmd(opts, address, clear, yes, profile_name, ppo, fmt, watchdog_ms):
+def faults_cmd(opts: BusOptions, address: int | None, clear: bool, yes: bool, profile_name: str | None,
+               ppo: int | None, fmt: str | None, watchdog_ms: int) -> None:
     """Fault history (all candidate alarms where one number means several) and the current fault."""
     before = _confirmer(opts, yes, "acknowledge the current fault") if clear else None
-    cleared = None
+    cleared: dict[str, Any] | None = None
     with _session(opts, address, profile_name, ppo, fmt, watchdog_ms, before=before) as s:
+        assert s.profile is not None            # the open session has its profile
         cur = s.status()
         history = s.fault_history()
         trips = s.trip_records()

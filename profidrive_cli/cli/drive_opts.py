@@ -7,14 +7,19 @@ from __future__ import annotations
 
 import functools
 import sys
+from typing import Any, Callable, ParamSpec, TypeVar
 
 import click
 
 from profidrive_cli.cli.common import err
 from profidrive_cli.session import SessionTerminated
 
+F = TypeVar("F", bound=Callable[..., Any])
+P = ParamSpec("P")
+R = TypeVar("R")
 
-def drive_options(f):
+
+def drive_options(f: F) -> F:
     """--profile, --ppo, --format, --watchdog."""
     f = click.option("--watchdog", "watchdog_ms", default=500, show_default=True,
                      type=click.IntRange(10, 650000), help="Slave watchdog in ms (always armed).")(f)
@@ -26,10 +31,10 @@ def drive_options(f):
     return f
 
 
-def _terminations(f):
+def _terminations(f: Callable[P, R]) -> Callable[P, R]:
     """SIGTERM (SessionTerminated) -> one line and exit 143; the session has already stopped the drive."""
     @functools.wraps(f)
-    def wrapper(*a, **kw):
+    def wrapper(*a: P.args, **kw: P.kwargs) -> R:
         try:
             return f(*a, **kw)
         except SessionTerminated as e:

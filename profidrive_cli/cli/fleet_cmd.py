@@ -9,31 +9,36 @@ from __future__ import annotations
 
 from html import escape as html_escape
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, Callable
 
 import click
 from rich.markup import escape
 from rich.table import Table
 
 from profidrive_cli import BusError, UsageError
-from profidrive_cli.cli.common import bus_options, emit_json, err, out
+from profidrive_cli.cli.common import BusOptions, bus_options, emit_json, err, out
 from profidrive_cli.cli.drive_opts import _terminations, drive_options
-from profidrive_cli.cli.render_drive import value_text
-from profidrive_cli.drives.base import DriveError
+from profidrive_cli.drives.base import DriveError, value_text
 from profidrive_cli.outfile import check_output_path, format_by_suffix, write_text_atomic
 from profidrive_cli.session import fleet
 from profidrive_cli.session.dumpfile import write_dump
+
+if TYPE_CHECKING:
+    from profidrive_cli.session.drivesession import DriveSession
 
 #: --html writes a page: the file name says so (as checklist run --report, run --plot)
 HTML_SUFFIXES = {".html": "html", ".htm": "html"}
 
 
 @click.group("fleet")
-def fleet_group():
+def fleet_group() -> None:
     """A line of drives: dump several stations into a directory, compare them side by side (the odd
     values, a golden file with per-drive exceptions)."""
 
 
-def _read_stations(opts, addresses, profile_name, ppo, fmt, watchdog_ms, each):
+def _read_stations(opts: BusOptions, addresses: list[int], profile_name: str | None, ppo: int | None,
+                   fmt: str | None, watchdog_ms: int,
+                   each: Callable[[int, DriveSession], None]) -> dict[int, str]:
     """Open each station in turn on one bus (api.Bus.session) and call each(address, session);
     a station that cannot be read is reported and skipped: {address: why}."""
     failed: dict[int, str] = {}
@@ -61,17 +66,19 @@ def _read_stations(opts, addresses, profile_name, ppo, fmt, watchdog_ms, each):
 @drive_options
 @bus_options
 @_terminations
-def fleet_dump(opts, stations, directory, profile_name, ppo, fmt, watchdog_ms):
+def fleet_dump(opts: BusOptions, stations: str, directory: str, profile_name: str | None, ppo: int | None,
+               fmt: str | None, watchdog_ms: int) -> None:
     """Dump every station of STATIONS into DIR, one file each (as `param dump`). STATIONS: 3-7,9.
     Exit 1 when a station could not be read (the others are written)."""
     addresses = fleet.parse_stations(stations)
     paths = {a: Path(directory) / fleet.dump_file_name(a) for a in addresses}
     for p in paths.values():
         check_output_path(p, "-o")              # before the bus is opened
-    written: dict[int, dict] = {}
+    written: dict[int, dict[str, Any]] = {}
 
-    def each(a, s):
+    def each(a: int, s: DriveSession) -> None:
         doc = s.params.dump()
+        assert s.profile is not None            # an open session has its profile
         write_dump(doc, paths[a])
         written[a] = {"station": a, "profile": s.profile.name, "file": str(paths[a]),
                       "settings": len(doc["parameters"])}
@@ -99,7 +106,8 @@ def fleet_dump(opts, stations, directory, profile_name, ppo, fmt, watchdog_ms):
 @drive_options
 @bus_options
 @_terminations
-def fleet_diff(opts, source, golden, html_path, show_all, profile_name, ppo, fmt, watchdog_ms):
+def fleet_diff(opts: BusOptions, source: str, golden: str | None, html_path: str | None, show_all: bool,
+               profile_name: str | None, ppo: int | None, fmt: str | None, watchdog_ms: int) -> None:
     """Compare a line of drives: the dumps in DIR, or the live STATIONS (e.g. 3-7) on --port. A
     matrix station x code with the odd values (those that differ from the majority of the same
     profile) marked. Exit 1 when a drive differs from the golden file outside its exceptions, or,
@@ -118,7 +126,7 @@ def fleet_diff(opts, source, golden, html_path, show_all, profile_name, ppo, fmt
             raise UsageError(f"{source}: neither a directory nor station addresses (e.g. 3-7)") from None
         sets = []
 
-        def each(a, s):
+        def each(a: int, s: DriveSession) -> None:
             sets.append(fleet.from_dump(s.params.dump()))
 
         failed = _read_stations(opts, addresses, profile_name, ppo, fmt, watchdog_ms, each)
@@ -130,7 +138,7 @@ def fleet_diff(opts, source, golden, html_path, show_all, profile_name, ppo, fmt
         d["failed"] = {str(a): why for a, why in failed.items()}
         emit_json(d)
     else:
-        _print(result, show_all or opts.verbose)
+        _print(result, bool(show_all or opts.verbose))
     if result.violations or (gold is None and result.odd) or failed:
         raise SystemExit(1)
 

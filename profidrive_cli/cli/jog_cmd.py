@@ -11,29 +11,35 @@ from __future__ import annotations
 import math
 import sys
 import time
+from typing import TYPE_CHECKING, Any, Callable
 
 import click
 
 from profidrive_cli import UsageError
 from profidrive_cli.cli import render_drive as R
-from profidrive_cli.cli.common import bus_options
-from profidrive_cli.cli.drive_cmds import (_confirmer, _session, _terminations, drive_options,
-                                          run_ending)
+from profidrive_cli.cli.common import BusOptions, bus_options, err
+from profidrive_cli.cli.drive_cmds import _confirmer, _session, run_ending
+from profidrive_cli.cli.drive_opts import _terminations, drive_options
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.session.live import Live
+
+if TYPE_CHECKING:
+    from profidrive_cli.session.cycle import Sample
+    from profidrive_cli.session.drivesession import DriveSession
 
 #: On a terminal the jog runs while a key is held: the terminal repeats a held key (after its
 #: auto-repeat delay, typically 250-600 ms); no key for this long counts as released and stops.
 DEADMAN_S = 0.75
 
 
-def _refuse_or_confirm(opts, yes: bool, what: str):
+def _refuse_or_confirm(opts: BusOptions, yes: bool, what: str) -> Callable[[DriveSession], None]:
     """before_connect: a card without jog is refused (exit 2) before the confirmation and before any
     telegram to the station; then the real-port question."""
     confirm = _confirmer(opts, yes, what)
 
-    def before(session):
+    def before(session: DriveSession) -> None:
         from profidrive_cli.drives.jog import jog_refusal
+        assert session.profile is not None      # identify() chose it before the before-connect call
         why = jog_refusal(session.profile, session.layout)
         if why is not None:
             raise UsageError(why)
@@ -50,7 +56,8 @@ def _refuse_or_confirm(opts, yes: bool, what: str):
 @drive_options
 @bus_options
 @_terminations
-def jog_cmd(opts, address, reverse, duration, yes, profile_name, ppo, fmt, watchdog_ms):
+def jog_cmd(opts: BusOptions, address: int | None, reverse: bool, duration: float | None, yes: bool,
+            profile_name: str | None, ppo: int | None, fmt: str | None, watchdog_ms: int) -> None:
     """Jog a drive with the card's own jog function; a safe stop on every exit.
 
     On a terminal: hold space to jog (releasing the key stops it, deadman), q quits. With --duration S
@@ -67,16 +74,17 @@ def jog_cmd(opts, address, reverse, duration, yes, profile_name, ppo, fmt, watch
     session = _session(opts, address, profile_name, ppo, fmt, watchdog_ms, cycle_hz=None,
                        before=_refuse_or_confirm(opts, yes, f"jog the drive {direction}"))
     view = R.RunView(mode)
-    end: dict = {"reason": "", "stop": None}
+    end: dict[str, Any] = {"reason": "", "stop": None}
     lives: list[Live] = []
 
-    def stopping(sample):
+    def stopping(sample: Sample) -> None:
         if not view.phase.startswith("stopping"):
             view.set_phase("stopping")
         view.update(sample)
     session.on_sample = stopping
     with run_ending(session, view, end, lambda: (bool(lives) and lives[0].started) or session.may_run):
         with session as s:
+            assert s.profile is not None        # the open session has its profile
             fmax_hz, src = s.fmax()
             speed = s.jog_speed()
             view.start({"address": s.address, "ident": f"0x{s.ident:04X}", "profile": s.profile.name,
@@ -87,7 +95,7 @@ def jog_cmd(opts, address, reverse, duration, yes, profile_name, ppo, fmt, watch
                         "cycle_hz_target": round(s.cycle_hz, 3), "wire_hz": round(s.wire_hz, 3),
                         "watchdog_ms": s.watchdog_ms, "duration_s": duration, "warnings": s.warnings})
             if speed is not None and mode != "json":
-                R.err.print(f"jog speed: {speed.code} = {R.value_text(speed.value, speed.unit)}")
+                err.print(f"jog speed: {speed.code} = {R.value_text(speed.value, speed.unit)}")
             live = Live(s, lambda: s.jog(reverse), release=s.release_jog, duration=duration,
                         on_sample=view.update, on_phase=view.set_phase)
             lives.append(live)
@@ -103,7 +111,7 @@ def jog_cmd(opts, address, reverse, duration, yes, profile_name, ppo, fmt, watch
         raise DriveError(f"station {session.address}: {end['reason']}; the drive is stopped")
 
 
-def _held_key(live: Live, view, reverse: bool) -> None:
+def _held_key(live: Live, view: R.RunView, reverse: bool) -> None:
     """Hold space to jog, release stops (DEADMAN_S without a repeated key), q quits."""
     view.hint = f"hold space to jog ({'reverse' if reverse else 'forward'}) · release stops · q quits"
     view.set_phase("ready: hold space to jog")

@@ -8,6 +8,7 @@ import select
 import sys
 import time
 from collections import deque
+from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 from rich.console import Group
 from rich.live import Live
@@ -18,12 +19,21 @@ from rich.text import Text
 
 from profidrive_cli.cli import jsonout as J
 from profidrive_cli.cli.common import emit_json, err, out
-from profidrive_cli.drives.base import value_text  # noqa: F401  (also used as R.value_text)
+from profidrive_cli.drives.base import value_text as value_text  # noqa: F401  (also used as R.value_text)
+
+if TYPE_CHECKING:
+    from rich.console import RenderableType
+
+    from profidrive_cli.drives.base import DriveStatus, FaultRecord, ParamValue
+    from profidrive_cli.session.cycle import Sample
+    from profidrive_cli.session.drivesession import DriveSession
+    from profidrive_cli.session.monitors import Monitors, TripRecords
+    from profidrive_cli.session.params import ParamRow
 
 SPARK = "▁▂▃▄▅▆▇█"
 
 
-def sparkline(values, hi: float = 100.0) -> str:
+def sparkline(values: Iterable[float | None], hi: float = 100.0) -> str:
     """Block characters for |value| in 0..hi (a blank for no value)."""
     chars = []
     for v in values:
@@ -35,7 +45,7 @@ def sparkline(values, hi: float = 100.0) -> str:
     return "".join(chars)
 
 
-def fmt_num(v, digits: int = 2, unit: str = "") -> str:
+def fmt_num(v: float | None, digits: int = 2, unit: str = "") -> str:
     if v is None:
         return "-"
     text = f"{v:.{digits}f}"
@@ -47,7 +57,7 @@ def flag_words(flags: dict[str, bool]) -> str:
     return ", ".join(on) if on else "(none set)"
 
 
-def counter_words(c: dict) -> str:
+def counter_words(c: dict[str, Any]) -> str:
     keys = ("retries", "no_answer", "illegal", "reparams", "rs", "rr")
     return ", ".join(f"{k.replace('_', ' ')} {c.get(k, 0)}" for k in keys)
 
@@ -57,17 +67,19 @@ def counter_words(c: dict) -> str:
 # =============================================================================================
 
 
-def torque_fields(st) -> dict:
+def torque_fields(st: DriveStatus) -> dict[str, float]:
     """The torque keys of a status where the card has them (torque runs, cards with a torque word)."""
-    out = {}
-    if getattr(st, "torque_ref_percent", None) is not None:
-        out["torque_ref_percent"] = st.torque_ref_percent
-    if getattr(st, "torque_percent", None) is not None:
-        out["torque_percent"] = st.torque_percent
+    out: dict[str, float] = {}
+    ref = getattr(st, "torque_ref_percent", None)
+    if ref is not None:
+        out["torque_ref_percent"] = ref
+    actual = getattr(st, "torque_percent", None)
+    if actual is not None:
+        out["torque_percent"] = actual
     return out
 
 
-def torque_words(st) -> str:
+def torque_words(st: DriveStatus) -> str:
     d = torque_fields(st)
     if not d:
         return ""
@@ -79,28 +91,28 @@ class RunView:
     """mode 'live' (rich Live on a terminal), 'text' (a line a second) or 'json' (one object per
     update, at most `json_hz` per second, plus start/phase/end events)."""
 
-    def __init__(self, mode: str, json_hz: float = 10.0, trend_len: int = 60, trend_hz: float = 5.0):
+    def __init__(self, mode: str, json_hz: float = 10.0, trend_len: int = 60, trend_hz: float = 5.0) -> None:
         self.mode = mode
         self.json_period = 1.0 / json_hz
-        self.trend: deque = deque(maxlen=trend_len)
+        self.trend: deque[float | None] = deque(maxlen=trend_len)
         self.trend_period = 1.0 / trend_hz
-        self.header: dict = {}
+        self.header: dict[str, Any] = {}
         self.phase = "starting"
-        self.last = None
+        self.last: Sample | None = None
         self.hint = ""
         self._last_emit = -1e9
         self._last_trend = -1e9
         self._last_text = -1e9
         self._live: Live | None = None
         self.reached_after: float | None = None
-        self.peak_hz = None
+        self.peak_hz: float | None = None
         #: session.monitors.Monitors of run --monitor, or None
-        self.monitors = None
+        self.monitors: Monitors | None = None
         #: a fault code -> its name (session.live.fault_name on the station's profile), or None
-        self.fault_name = None
+        self.fault_name: Callable[[str], str | None] | None = None
 
     # -- lifecycle ---------------------------------------------------------------------------
-    def start(self, header: dict) -> None:
+    def start(self, header: dict[str, Any]) -> None:
         self.header = header
         if self.mode == "json":
             emit_json({"event": "start", **start_json(header)})
@@ -117,10 +129,10 @@ class RunView:
                 f"max frequency {h['fmax_hz']:g} Hz {h['fmax_source']}; cycle {h['cycle_hz_target']:.1f} Hz "
                 f"(bus limit {h['wire_hz']:.1f} Hz), watchdog {h['watchdog_ms']:g} ms")
 
-    def set_phase(self, phase: str, sample=None) -> None:
+    def set_phase(self, phase: str, sample: Sample | None = None) -> None:
         self.phase = phase
         if self.mode == "json":
-            d = {"event": "phase", "phase": phase}
+            d: dict[str, Any] = {"event": "phase", "phase": phase}
             if sample is not None:
                 d["t_s"] = round(sample.t, 3)
             emit_json(d)
@@ -129,7 +141,7 @@ class RunView:
         if sample is not None:
             self.update(sample, force=True)
 
-    def update(self, sample, force: bool = False) -> None:
+    def update(self, sample: Sample, force: bool = False) -> None:
         self.last = sample
         now = time.monotonic()
         if now - self._last_trend >= self.trend_period:
@@ -138,7 +150,7 @@ class RunView:
         if self.mode == "json":
             if force or now - self._last_emit >= self.json_period:
                 self._last_emit = now
-                d = {"event": "update", "phase": self.phase, **sample_json(sample.to_dict()),
+                d: dict[str, Any] = {"event": "update", "phase": self.phase, **sample_json(sample.to_dict()),
                      **torque_fields(sample.status)}
                 if self.monitors is not None:
                     d["monitors"] = monitors_json(self.monitors.to_dict())
@@ -148,7 +160,7 @@ class RunView:
                 self._last_text = now
                 out.print(escape(self._text_line(sample)))
 
-    def _text_line(self, s) -> str:
+    def _text_line(self, s: Sample) -> str:
         st = s.status
         fault = f"  FAULT {self._fault_words(st.fault_code)}" if st.fault else ""
         mon = f"  {monitor_words(self.monitors)}" if self.monitors is not None else ""
@@ -158,14 +170,14 @@ class RunView:
                 f"retries {s.counters.get('retries', 0)} errors "
                 f"{s.counters.get('no_answer', 0) + s.counters.get('illegal', 0)}{torque_words(st)}{fault}{mon}")
 
-    def _fault_words(self, code) -> str:
+    def _fault_words(self, code: str | None) -> str:
         """'EF0 (External fault ...)' as `pdrive faults` names it; 'code not read' without a code."""
         if not code:
             return "(code not read)"
         name = self.fault_name(code) if self.fault_name is not None else None
         return f"{code} ({name})" if name else str(code)
 
-    def finish(self, end: dict) -> None:
+    def finish(self, end: dict[str, Any]) -> None:
         if self._live is not None:
             self._live.stop()
             self._live = None
@@ -184,7 +196,7 @@ class RunView:
             err.print(escape(words))
 
     # -- rich rendering ----------------------------------------------------------------------
-    def _renderable(self):
+    def _renderable(self) -> Panel:
         h = self.header
         s = self.last
         title = f"station {h.get('address')} · {h.get('profile')} · {h.get('layout')}"
@@ -212,7 +224,7 @@ class RunView:
         t.add_row("trend", Text(sparkline(self.trend) or " ", style="cyan"))
         if self.monitors is not None:
             t.add_row("monitors", Text(monitor_words(self.monitors) or "-"))
-        parts = [t]
+        parts: list[RenderableType] = [t]
         if self.hint:
             parts.append(Text(self.hint, style="dim"))
         return Panel(Group(*parts), title=title)
@@ -224,7 +236,7 @@ class RunView:
 # =============================================================================================
 
 
-def start_json(header: dict) -> dict:
+def start_json(header: dict[str, Any]) -> dict[str, Any]:
     """station, ident + ident_hex, watchdog_s (the header says watchdog_ms)."""
     d = J.station_identity(header)
     if "watchdog_ms" in d:
@@ -233,7 +245,7 @@ def start_json(header: dict) -> dict:
     return d
 
 
-def sample_json(d: dict) -> dict:
+def sample_json(d: dict[str, Any]) -> dict[str, Any]:
     """A sample's dict: t -> t_s, flags as the list of names set."""
     d = J.renamed(d, {"t": "t_s"})
     if "flags" in d:
@@ -241,17 +253,17 @@ def sample_json(d: dict) -> dict:
     return d
 
 
-def monitors_json(d: dict) -> dict:
+def monitors_json(d: dict[str, Any]) -> dict[str, Any]:
     """{code: {value, unit, raw, t, via}} -> the same with t_s."""
     return {c: J.renamed(v, {"t": "t_s"}) for c, v in d.items()}
 
 
-def stop_json(d: dict | None) -> dict | None:
+def stop_json(d: dict[str, Any] | None) -> dict[str, Any] | None:
     """The stop report: seconds -> duration_s."""
     return None if d is None else J.renamed(d, {"seconds": "duration_s"})
 
 
-def end_json(end: dict) -> dict:
+def end_json(end: dict[str, Any]) -> dict[str, Any]:
     d = dict(end)
     if "stop" in d:
         d["stop"] = stop_json(d["stop"])
@@ -260,12 +272,12 @@ def end_json(end: dict) -> dict:
     return d
 
 
-def monitor_header(mons) -> list[dict]:
+def monitor_header(mons: Monitors) -> list[dict[str, str]]:
     """The start event's monitor list: code, name and unit of each."""
     return [{"code": c, "name": mons.values[c].name, "unit": mons.values[c].unit} for c in mons.codes]
 
 
-def monitor_words(mons) -> str:
+def monitor_words(mons: Monitors) -> str:
     """'d002 3.4 A · d013 180.5 V' (— until a value was read)."""
     parts = []
     for c in mons.active:
@@ -283,20 +295,20 @@ class KeyReader:
     """Single keys from stdin in cbreak mode (Ctrl-C still sends SIGINT). Yields 'up', 'down', 'r',
     'space', 'q'."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.fd = sys.stdin.fileno()
-        self._old = None
+        self._old: list[Any] | None = None
         self._buf = b""
         self._since = 0.0
 
-    def __enter__(self):
+    def __enter__(self) -> KeyReader:
         import termios
         import tty
         self._old = termios.tcgetattr(self.fd)
         tty.setcbreak(self.fd, termios.TCSANOW)   # keep keys typed while starting
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> None:
         import termios
         if self._old is not None:
             termios.tcsetattr(self.fd, termios.TCSADRAIN, self._old)
@@ -309,7 +321,7 @@ class KeyReader:
             except OSError:
                 return []
             self._since = time.monotonic()
-        out_keys = []
+        out_keys: list[str] = []
         b = self._buf
         while b:
             if b[:1] == b"\x1b":
@@ -339,8 +351,9 @@ class KeyReader:
 # =============================================================================================
 
 
-def status_dict(session, sample) -> dict:
+def status_dict(session: DriveSession, sample: Sample) -> dict[str, Any]:
     st = sample.status
+    assert session.profile is not None and session.ident is not None    # an open session found them
     fmax, src = session.fmax() if session.drive is not None else (sample.fmax_hz, "")
     return {"address": session.address, "ident": f"0x{session.ident:04X}", "profile": session.profile.name,
             "family": session.profile.family, "title": session.profile.title, "layout": session.layout,
@@ -352,7 +365,7 @@ def status_dict(session, sample) -> dict:
             "raw": dict(st.raw), "counters": sample.counters, **torque_fields(st)}
 
 
-def status_json(d: dict) -> dict:
+def status_json(d: dict[str, Any]) -> dict[str, Any]:
     """status_dict in the contract's shape: station, ident + ident_hex, flags as the list of names
     set, actual_hz / actual_percent."""
     d = J.renamed(J.station_identity(d), {"speed_hz": "actual_hz", "speed_percent": "actual_percent"})
@@ -360,7 +373,7 @@ def status_json(d: dict) -> dict:
     return d
 
 
-def print_status(d: dict) -> None:
+def print_status(d: dict[str, Any]) -> None:
     out.print(f"[bold]station {d['address']}[/bold]: {escape(d['profile'])} ({escape(d['title'])}), "
               f"layout {escape(d['layout'])}")
     state = d["state"] + ("  (stopped)" if d["stopped"] else ("  (running)" if d["running"] else ""))
@@ -380,7 +393,7 @@ def print_status(d: dict) -> None:
     out.print(f"  words:  {escape(raw)}")
 
 
-def param_table(values) -> Table:
+def param_table(values: Iterable[ParamValue]) -> Table:
     t = Table(show_header=True)
     for c in ("code", "name", "value", "raw"):
         t.add_column(c)
@@ -390,14 +403,15 @@ def param_table(values) -> Table:
     return t
 
 
-def param_json(pv) -> dict:
-    d = {"code": pv.code, "name": pv.name, "value": pv.value, "unit": pv.unit, "raw": pv.raw}
+def param_json(pv: ParamValue) -> dict[str, Any]:
+    d: dict[str, Any] = {"code": pv.code, "name": pv.name, "value": pv.value, "unit": pv.unit, "raw": pv.raw}
     if getattr(pv, "text", None):
         d["text"] = pv.text          # the value as the card's tables show it (`format:`)
     return d
 
 
-def rows_table(rows, title: str, columns=("code", "name", "file", "drive", "result", "reason"),
+def rows_table(rows: Iterable[ParamRow], title: str,
+               columns: tuple[str, ...] = ("code", "name", "file", "drive", "result", "reason"),
                sources: dict[str, str] | None = None) -> Table:
     """sources: code -> where its factory value comes from (the `source` column of diff --defaults)."""
     t = Table(title=title, show_header=True)
@@ -413,7 +427,7 @@ def rows_table(rows, title: str, columns=("code", "name", "file", "drive", "resu
     return t
 
 
-def faults_table(records, title: str) -> Table:
+def faults_table(records: Iterable[FaultRecord], title: str) -> Table:
     t = Table(title=title, show_header=True)
     for c in ("position", "number", "alarm", "meaning"):
         t.add_column(c)
@@ -423,11 +437,11 @@ def faults_table(records, title: str) -> Table:
     return t
 
 
-def fault_json(r) -> dict:
+def fault_json(r: FaultRecord) -> dict[str, Any]:
     return {"position": r.position, "number": r.raw, "codes": list(r.codes), "meanings": list(r.meanings)}
 
 
-def print_trip_records(trips) -> None:
+def print_trip_records(trips: TripRecords) -> None:
     """faults: the card's trip records as a table (one row per record, one column per field), or the
     one line saying the card keeps none / none is stored."""
     if not trips.supported or trips.note:
@@ -449,7 +463,7 @@ def print_trip_records(trips) -> None:
     out.print(t)
 
 
-def _field_label(f: dict) -> str:
+def _field_label(f: dict[str, Any]) -> str:
     """'Trip record 1 (d081): frequency' -> 'frequency'; the code where the name says nothing."""
-    name = f.get("name") or f["code"]
+    name: str = f.get("name") or f["code"]
     return name.split("): ", 1)[1] if "): " in name else name

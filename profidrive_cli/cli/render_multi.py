@@ -5,7 +5,7 @@ Rendering only; the run is session/multirun.py."""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rich.live import Live
 from rich.markup import escape
@@ -16,8 +16,11 @@ from profidrive_cli.api import format_counters
 from profidrive_cli.cli.common import emit_json, err, out
 from profidrive_cli.cli.render_drive import fmt_num, stop_json
 
+if TYPE_CHECKING:
+    from profidrive_cli.session.cycle import Sample
 
-def sample_dict(address: int, t_s: float, sample, phase: str) -> dict:
+
+def sample_dict(address: int, t_s: float, sample: Sample, phase: str) -> dict[str, Any]:
     st = sample.status
     return {"event": "update", "station": address, "phase": phase, "t_s": round(t_s, 3),
             "state": st.state, "running": st.running, "stopped": st.stopped, "fault": st.fault,
@@ -27,7 +30,7 @@ def sample_dict(address: int, t_s: float, sample, phase: str) -> dict:
             "cycles": sample.cycles, "counters": sample.counters}
 
 
-def start_json(header: dict) -> dict:
+def start_json(header: dict[str, Any]) -> dict[str, Any]:
     """The start event in the contract's names (docs/json.md): the watchdog as `watchdog_s`."""
     d: dict[str, Any] = {"event": "start"}
     for k, v in header.items():
@@ -38,7 +41,7 @@ def start_json(header: dict) -> dict:
     return d
 
 
-def end_json(end: dict) -> dict:
+def end_json(end: dict[str, Any]) -> dict[str, Any]:
     """The end event in the contract's names: each station's stop time as `stop.duration_s`."""
     d = {"event": "end", **end}
     if "stations" in end:
@@ -51,12 +54,12 @@ class MultiView:
     """mode 'live', 'text' or 'json'. Updates are emitted at most `rate` times a second of the run's
     clock per drive (phases and each drive's last sample always)."""
 
-    def __init__(self, mode: str, rate: float = 10.0):
+    def __init__(self, mode: str, rate: float = 10.0) -> None:
         self.mode = mode
         self.period = 1.0 / rate if mode == "json" else 1.0
-        self.header: dict = {}
+        self.header: dict[str, Any] = {}
         self.phase = "connecting"
-        self.rows: dict[int, tuple] = {}          # address -> (t_s, sample, phase)
+        self.rows: dict[int, tuple[float, Sample, str]] = {}          # address -> (t_s, sample, phase)
         self.phases: dict[int, str] = {}
         self.hint = ""
         self._last: dict[int, float] = {}
@@ -65,7 +68,7 @@ class MultiView:
         self._live: Live | None = None
 
     # -- callbacks of session.multirun.MultiRun ------------------------------------------------
-    def start(self, header: dict) -> None:
+    def start(self, header: dict[str, Any]) -> None:
         self.header = header
         if self.mode == "json":
             emit_json(start_json(header))
@@ -95,7 +98,7 @@ class MultiView:
         elif self.mode == "text":
             out.print(escape(f"-- {phase}" + (f" (station {address})" if address is not None else "")))
 
-    def update(self, address: int, t_s: float, sample, phase: str) -> None:
+    def update(self, address: int, t_s: float, sample: Sample, phase: str) -> None:
         self.rows[address] = (t_s, sample, phase)
         self.phases[address] = phase
         if phase == self._shown_phase.get(address) and t_s - self._last.get(address, -1e9) < self.period:
@@ -113,7 +116,7 @@ class MultiView:
         elif self.mode == "text":
             out.print(escape(self._line(address, t_s, sample, phase)))
 
-    def finish(self, end: dict) -> None:
+    def finish(self, end: dict[str, Any]) -> None:
         if not self.header:                      # refused before anything started: the error says it
             return
         for a in sorted(self._pending):          # each drive's last sample is always shown
@@ -153,7 +156,7 @@ class MultiView:
         return lines
 
     @staticmethod
-    def _line(address: int, t_s: float, s, phase: str) -> str:
+    def _line(address: int, t_s: float, s: Sample, phase: str) -> str:
         st = s.status
         fault = f"  FAULT {st.fault_code or ''}" if st.fault else ""
         return (f"{t_s:7.2f} s  station {address:<3} {phase:<9} {st.state:<28} ref "
@@ -162,7 +165,7 @@ class MultiView:
                 f"{s.counters.get('no_answer', 0) + s.counters.get('illegal', 0)}{fault}")
 
     # -- rich ----------------------------------------------------------------------------------
-    def _renderable(self):
+    def _renderable(self) -> Table:
         h = self.header
         t = Table(title=f"{len(h.get('stations', []))} drives · cycle {h.get('cycle_hz_target', 0):.1f} Hz"
                   + (" · Sync" if h.get("sync") else "") + f" · {self.phase}",

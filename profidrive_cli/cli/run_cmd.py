@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import sys
+from typing import TYPE_CHECKING, Any, Callable
 
 import click
 
@@ -14,12 +15,17 @@ from profidrive_cli import UsageError
 from profidrive_cli.cli import render_drive as R
 from profidrive_cli.cli import run_multi, run_plot, run_torque
 from profidrive_cli.api.drive import fmax_readable
-from profidrive_cli.cli.common import bus_options
-from profidrive_cli.cli.drive_cmds import (_confirmer, _session, _terminations, drive_options,
-                                          run_ending)
+from profidrive_cli.cli.common import BusOptions, bus_options
+from profidrive_cli.cli.drive_cmds import _confirmer, _session, run_ending
+from profidrive_cli.cli.drive_opts import _terminations, drive_options
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.outfile import check_output_path
 from profidrive_cli.session.live import NOT_REACHED, Live, end_status, fault_name
+
+if TYPE_CHECKING:
+    from profidrive_cli.session.cycle import Sample
+    from profidrive_cli.session.drivesession import DriveSession
+    from profidrive_cli.session.monitors import Monitors
 
 
 @click.command("run")
@@ -59,8 +65,12 @@ from profidrive_cli.session.live import NOT_REACHED, Live, end_status, fault_nam
                    "effect in the same instant; only where every station's GSD allows it.")
 @bus_options
 @_terminations
-def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, reverse, torque, torque_limit,
-            duration, fmax, cycle_hz, yes, log_path, reconnect_s, monitor_spec, sync, plot_path):
+def run_cmd(opts: BusOptions, address: int | tuple[int, ...] | None, profile_name: str | None,
+            ppo: int | None, fmt: str | None, watchdog_ms: int, hz: run_multi.Speeds | None,
+            percent: run_multi.Speeds | None, reverse: bool, torque: float | None,
+            torque_limit: float | None, duration: float | None, fmax: float | None,
+            cycle_hz: float | None, yes: bool, log_path: str | None, reconnect_s: float | None,
+            monitor_spec: str | None, sync: bool, plot_path: str | None) -> None:
     """Run a drive at a speed (or a torque) and show it live; stops it safely on every exit.
     Several stations (3,4,5) run together on one bus cycle, each stopped on every exit.
 
@@ -75,6 +85,7 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
                      "--reconnect": reconnect_s, "--monitor": monitor_spec,
                      "--profile": profile_name, "--ppo": ppo, "--format": fmt, "--plot": plot_path})
     run_multi.single_checks(hz, percent, sync)
+    assert not isinstance(hz, tuple) and not isinstance(percent, tuple)     # single_checks refused lists
     for name, v in (("--hz", hz), ("--percent", percent), ("--fmax", fmax), ("--duration", duration),
                     ("--cycle-hz", cycle_hz), ("--torque", torque), ("--torque-limit", torque_limit)):
         if v is not None and not math.isfinite(v):
@@ -93,9 +104,9 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
     if log_path is not None:                 # checked before the bus is opened: nothing moves first
         check_output_path(log_path, "--log")
     plotter = run_plot.RunPlot.prepare(plot_path)          # also before the bus: matplotlib, the path
-    mons = []                                # --monitor: checked before anything is asked or written
+    mons: list[Monitors] = []                # --monitor: checked before anything is asked or written
 
-    def before(sess):
+    def before(sess: DriveSession) -> None:
         from profidrive_cli.session.monitors import setup_monitors
         mons.extend([setup_monitors(sess, monitor_spec)] if monitor_spec is not None else [])
         _confirmer(opts, yes, what + (mons[0].question_note() if mons else ""))(sess)
@@ -104,10 +115,10 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
     view = R.RunView(mode)
     if plotter is not None:
         plotter.attach(view)
-    end = {"reason": "", "stop": None, "failed": False, "problem": None}
+    end: dict[str, Any] = {"reason": "", "stop": None, "failed": False, "problem": None}
     lives: list[Live] = []
 
-    def stopping(sample):                    # every stop, also the one on any exit, stays visible
+    def stopping(sample: Sample) -> None:    # every stop, also the one on any exit, stays visible
         view.monitors = None                 # no monitor reads during the stop: show none stale
         if not view.phase.startswith("stopping"):
             view.set_phase("stopping")
@@ -116,6 +127,7 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
     with run_ending(session, view, end, lambda: bool(lives) and lives[0].started,
                     extra=lambda: _run_extra(lives, mons)), run_plot.written_at_the_end(plotter, session):
         with session as s:
+            assert s.profile is not None        # the open session has its profile
             s.check_torque(torque, torque_limit)          # the card's reason before anything shows
             if fmax is None:      # the config file's: used where the drive's own is not readable,
                 cfg = opts.station_defaults(s.address)     # else only checked against it (warning)
@@ -123,7 +135,11 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
             fmax_hz, src = s.fmax(fmax)
             if mons:
                 mons[0].map_cyclic()            # before the start; restored after the stop
-            pct = percent if percent is not None else s.percent_for_hz(hz, fmax)
+            if percent is not None:
+                pct = percent
+            else:
+                assert hz is not None           # run_torque.prepare gave a percent where no --hz
+                pct = s.percent_for_hz(hz, fmax)
             if reverse:
                 pct = -abs(pct)
             view.start({"address": s.address, "ident": f"0x{s.ident:04X}", "profile": s.profile.name,
@@ -139,12 +155,12 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
             if interactive:
                 view.hint = "up/down speed · r reverse · space stop/start · q quit"
 
-            def start():
+            def start() -> Sample:
                 if torque_limit is not None or live.torque is not None:
                     return s.start_torque(live.torque, torque_limit, live.percent)
                 return s.start(live.percent)
 
-            def on_sample(sample):
+            def on_sample(sample: Sample) -> None:
                 if mons:
                     mons[0].poll(sample)         # one monitor read per loop, round robin
                     view.monitors = mons[0]      # shown again after a stop (space) and start
@@ -177,7 +193,7 @@ def run_cmd(opts, address, profile_name, ppo, fmt, watchdog_ms, hz, percent, rev
         raise DriveError(f"station {session.address}: {why}; the drive is stopped")
 
 
-def _keys(keys, step: float):
+def _keys(keys: R.KeyReader, step: float) -> Callable[[Live], bool]:
     """The keys of a run on a terminal, once per cycle: up/down change the speed by `step` % (the
     torque by 1 %), r reverses, space stops / starts, q quits (returns True)."""
     def on_cycle(live: Live) -> bool:
@@ -203,8 +219,8 @@ def _keys(keys, step: float):
     return on_cycle
 
 
-def _run_extra(lives, mons) -> dict:
-    d = {"reached_after_s": lives[0].reached_after if lives else None}
+def _run_extra(lives: list[Live], mons: list[Monitors]) -> dict[str, Any]:
+    d: dict[str, Any] = {"reached_after_s": lives[0].reached_after if lives else None}
     if lives:
         # the fault the run ended with, named as `pdrive faults` names it (the stop reads the code)
         s = lives[0].session

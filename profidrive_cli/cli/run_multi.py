@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import sys
+from typing import TYPE_CHECKING
 
 import click
 
@@ -13,21 +14,29 @@ from profidrive_cli import UsageError
 from profidrive_cli.cli.common import confirm_real_port
 from profidrive_cli.drives.base import DriveError
 
+if TYPE_CHECKING:
+    from profidrive_cli.cli.common import BusOptions
+    from profidrive_cli.session.drivesession import DriveSession
 
-class StationsType(click.ParamType):
+#: a --hz / --percent value: one number, or one per station
+Speeds = float | tuple[float, ...]
+
+
+class StationsType(click.ParamType["int | tuple[int, ...]", object]):
     """ADDRESS or ADDRESS,ADDRESS,...: an int for one station (as before), a tuple for several."""
     name = "address"
 
-    def convert(self, value, param, ctx):
+    def convert(self, value: object, param: click.Parameter | None,
+                ctx: click.Context | None) -> int | tuple[int, ...]:
         if isinstance(value, (int, tuple)):
             return value
         text = str(value)
         if "," not in text:
-            return click.INT.convert(text, param, ctx)
+            return click.INT.convert(text, param, ctx)  # type: ignore[arg-type]  # int() parses a str; click types INT's input as SupportsInt only
         items = [t.strip() for t in text.split(",")]
         if any(not t for t in items):
             self.fail(f"{text!r}: an empty station in the list", param, ctx)
-        out = tuple(click.INT.convert(t, param, ctx) for t in items)
+        out = tuple(click.INT.convert(t, param, ctx) for t in items)  # type: ignore[arg-type]  # (as above)
         for a in out:
             if not 0 <= a <= 125:
                 self.fail(f"station address {a} outside 0..125", param, ctx)
@@ -37,17 +46,18 @@ class StationsType(click.ParamType):
         return out
 
 
-class SpeedsType(click.ParamType):
+class SpeedsType(click.ParamType["Speeds", object]):
     """A number, or numbers separated by commas (one per station): a float or a tuple of floats."""
     name = "float"
 
-    def convert(self, value, param, ctx):
+    def convert(self, value: object, param: click.Parameter | None, ctx: click.Context | None) -> Speeds:
         if isinstance(value, (float, int, tuple)):
             return value
         text = str(value)
         if "," not in text:
-            return click.FLOAT.convert(text, param, ctx)
-        return tuple(click.FLOAT.convert(t.strip(), param, ctx) for t in text.split(","))
+            return click.FLOAT.convert(text, param, ctx)  # type: ignore[arg-type]  # float() parses a str; click types FLOAT's input as SupportsFloat only
+        return tuple(click.FLOAT.convert(t.strip(), param, ctx)  # type: ignore[arg-type]  # (as above)
+                     for t in text.split(","))
 
 
 STATIONS = StationsType()
@@ -58,7 +68,7 @@ _ONE_STATION_ONLY = ("--torque", "--torque-limit", "--log", "--reconnect", "--mo
                      "--ppo", "--format", "--plot")
 
 
-def single_checks(hz, percent, sync) -> None:
+def single_checks(hz: Speeds | None, percent: Speeds | None, sync: bool) -> None:
     """`run ADDRESS`: lists and --sync belong to several stations."""
     for name, v in (("--hz", hz), ("--percent", percent)):
         if isinstance(v, tuple):
@@ -67,7 +77,7 @@ def single_checks(hz, percent, sync) -> None:
         raise UsageError("--sync: give several stations (run 3,4,5 --sync)")
 
 
-def _speeds(name: str, v, n: int) -> list[float]:
+def _speeds(name: str, v: Speeds, n: int) -> list[float]:
     vals = list(v) if isinstance(v, tuple) else [v] * n
     if len(vals) != n:
         raise UsageError(f"{name}: {len(vals)} values for {n} stations; give one for all or one each")
@@ -77,8 +87,9 @@ def _speeds(name: str, v, n: int) -> list[float]:
     return vals
 
 
-def run_several(opts, addresses: tuple, *, hz, percent, reverse, duration, fmax, cycle_hz, yes,
-                watchdog_ms, sync, refused: dict) -> None:
+def run_several(opts: BusOptions, addresses: tuple[int, ...], *, hz: Speeds | None, percent: Speeds | None,
+                reverse: bool, duration: float | None, fmax: float | None, cycle_hz: float | None,
+                yes: bool, watchdog_ms: int, sync: bool, refused: dict[str, object]) -> None:
     """The options' checks (nothing is sent before they pass), then the run; DriveError (exit 1) when
     a drive did not reach its speed or did not stop."""
     from profidrive_cli.cli.render_drive import KeyReader
@@ -94,12 +105,13 @@ def run_several(opts, addresses: tuple, *, hz, percent, reverse, duration, fmax,
     if hz is not None:
         refs = [("hz", v) for v in _speeds("--hz", hz, n)]
     else:
+        assert percent is not None          # one of --hz / --percent (checked above)
         refs = [("percent", v) for v in _speeds("--percent", percent, n)]
         for _, v in refs:
             if not -100.0 <= v <= 100.0:
                 raise UsageError(f"--percent {v:g} is outside -100..100")
-    for name, v in (("--duration", duration), ("--cycle-hz", cycle_hz), ("--fmax", fmax)):
-        if v is not None and (not math.isfinite(v) or v <= 0):
+    for name, x in (("--duration", duration), ("--cycle-hz", cycle_hz), ("--fmax", fmax)):
+        if x is not None and (not math.isfinite(x) or x <= 0):
             raise UsageError(f"{name} must be a number above 0")
     if cycle_hz is not None and cycle_hz > 10000:
         raise UsageError(f"--cycle-hz {cycle_hz:g} must be in 0..10000 (exclusive of 0)")
@@ -109,8 +121,12 @@ def run_several(opts, addresses: tuple, *, hz, percent, reverse, duration, fmax,
     view = MultiView("json" if opts.json else ("live" if sys.stdout.isatty() else "text"))
     keys: list[KeyReader] = []
 
-    def confirm(sessions):
-        what = ", ".join(f"{s.address} ({s.profile.name})" for s in sessions)
+    def confirm(sessions: list[DriveSession]) -> None:
+        names = []
+        for s in sessions:
+            assert s.profile is not None    # identified before the question
+            names.append(f"{s.address} ({s.profile.name})")
+        what = ", ".join(names)
         speeds = ", ".join(f"{v:g}{' Hz' if k == 'hz' else ' %'}" for k, v in refs)
         confirm_real_port(opts.port, yes, f"run {len(sessions)} drives — stations {what} at {speeds}"
                                           f"{' (reverse)' if reverse else ''} on {opts.port}")

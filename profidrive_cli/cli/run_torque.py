@@ -4,11 +4,19 @@ The card's own check (does this layout carry the word?) runs in session/torque.p
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Callable
+
 from profidrive_cli import UsageError
 from profidrive_cli.drives.torque import NO_TORQUE
 
+if TYPE_CHECKING:
+    from profidrive_cli.session.drivesession import DriveSession
 
-def prepare(hz, percent, reverse, torque, torque_limit):
+    Before = Callable[[DriveSession], None]
+
+
+def prepare(hz: float | None, percent: float | None, reverse: bool, torque: float | None,
+            torque_limit: float | None) -> tuple[float | None, float | None, str]:
     """(torque, percent, what) for run: the torque signed by --reverse, the speed 0 % when a torque
     run gives none, and the words of the confirmation question."""
     if torque is not None and torque_limit is not None:
@@ -28,8 +36,8 @@ def prepare(hz, percent, reverse, torque, torque_limit):
     return torque, percent, what
 
 
-def header(torque, torque_limit) -> dict:
-    out = {}
+def header(torque: float | None, torque_limit: float | None) -> dict[str, float]:
+    out: dict[str, float] = {}
     if torque is not None:
         out["torque_ref_percent"] = torque
     if torque_limit is not None:
@@ -37,13 +45,14 @@ def header(torque, torque_limit) -> dict:
     return out
 
 
-def guard(before, torque, torque_limit):
+def guard(before: Before | None, torque: float | None, torque_limit: float | None) -> Before | None:
     """The before-connect callback, preceded by the family's refusal (Fuji, Moeller: no torque word)
     so that a real port is not even asked about a run the card cannot do."""
     if torque is None and torque_limit is None:
         return before
 
-    def check_then_before(session):
+    def check_then_before(session: DriveSession) -> None:
+        assert session.profile is not None      # identify() chose it before the before-connect call
         fam = session.profile.family
         if fam in NO_TORQUE:
             raise UsageError(f"{'--torque' if torque is not None else '--torque-limit'}: {NO_TORQUE[fam]}")
