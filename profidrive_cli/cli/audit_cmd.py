@@ -14,7 +14,8 @@ from rich.markup import escape
 
 from profidrive_cli import UsageError
 from profidrive_cli.cli.common import bus_options, emit_json, out, station_address
-from profidrive_cli.cli.drive_cmds import _message, _terminations, drive_options
+from profidrive_cli.cli.drive_cmds import _message
+from profidrive_cli.cli.drive_opts import _terminations, drive_options
 from profidrive_cli.outfile import OutputFile, check_output_path
 
 #: the comm-loss step of the written checklist runs the drive at this speed before the break

@@ -6,13 +6,15 @@ import contextlib
 import signal
 import sys
 import threading
+from collections.abc import Iterator
+from typing import TYPE_CHECKING, Any, overload
 
 import click
 from rich.markup import escape
 from rich.table import Table
 
 from profidrive_cli import BusError, UsageError
-from profidrive_cli.cli.common import (bus_options, confirm_real_port, emit_json, err, hex_option, out,
+from profidrive_cli.cli.common import (BusOptions, bus_options, confirm_real_port, emit_json, err, hex_option, out,
                                        station_address)
 from profidrive_cli.cli.jsonout import ident_fields
 from profidrive_cli.cli.names import device_name
@@ -20,8 +22,22 @@ from profidrive_cli.dp.cfg import CfgError, decode_cfg
 from profidrive_cli.fdl.timing import BAUD_NAMES
 from profidrive_cli.link.base import LinkLost
 
+if TYPE_CHECKING:
+    from collections.abc import Callable
+    from types import FrameType
 
-def _diag_json(d) -> dict | None:
+    from profidrive_cli.bustools.baseline import NetworkRecord
+    from profidrive_cli.dp.poller import Master
+    from profidrive_cli.dp.services import SlaveDiag
+    from profidrive_cli.dp.station import StationMachine
+    from profidrive_cli.gsd.model import Gsd
+    from profidrive_cli.gsd.slavedata import SlaveLayout
+
+    #: what signal.signal takes and gives back: a function, SIG_DFL / SIG_IGN, or None
+    _Handler = Callable[[int, FrameType | None], Any] | int | None
+
+
+def _diag_json(d: SlaveDiag | None) -> dict[str, Any] | None:
     if d is None:
         return None
     blocks = _ext_blocks(d)
@@ -30,14 +46,20 @@ def _diag_json(d) -> dict | None:
             "ext": d.ext.hex(" "), "ext_blocks": [b["text"] for b in blocks], "ext_decoded": blocks}
 
 
-def _ext_blocks(d) -> list[dict]:
+def _ext_blocks(d: SlaveDiag) -> list[dict[str, Any]]:
     """The extended diagnosis block by block, decoded as sniff decodes it (dp/du_decode.ext_block:
     the DP-V1 status / alarm blocks included)."""
     from profidrive_cli.dp.du_decode import ext_block
     return [ext_block(b) for b in d.ext_blocks()]
 
 
-def _cfg_json(cfg: bytes | None) -> list | None:
+@overload
+def _cfg_json(cfg: bytes) -> list[dict[str, Any]]: ...
+@overload
+def _cfg_json(cfg: None) -> None: ...
+@overload
+def _cfg_json(cfg: bytes | None) -> list[dict[str, Any]] | None: ...
+def _cfg_json(cfg: bytes | None) -> list[dict[str, Any]] | None:
     if cfg is None:
         return None
     try:
@@ -68,8 +90,9 @@ def _cfg_json(cfg: bytes | None) -> list | None:
               help="Scan the range of a --save FILE and report what changed; exit 1 on any difference.")
 @click.option("--junit", default=None, metavar="FILE", help="--compare: also write a JUnit XML report.")
 @bus_options
-def scan_cmd(opts, first, last, gsd_dir, watch, interval, duration, quick, save_path, compare_path,
-             junit):
+def scan_cmd(opts: BusOptions, first: int, last: int, gsd_dir: str | None, watch: bool,
+             interval: float, duration: float | None, quick: bool, save_path: str | None,
+             compare_path: str | None, junit: str | None) -> None:
     """Live list: every station on the bus, its type, ident and DP state."""
     from profidrive_cli.dp.scan import scan
     if first > last:
@@ -79,10 +102,11 @@ def scan_cmd(opts, first, last, gsd_dir, watch, interval, duration, quick, save_
     base = _baseline_options(watch, save_path, compare_path, junit)
     opts.require_port()
     master = opts.open_master()
-    if save_path is not None or base is not None:
+    if base is None and save_path is not None:
         from profidrive_cli.cli import scan_baseline
-        if base is None:
-            raise SystemExit(scan_baseline.save(opts, master, first, last, save_path, quick, gsd_dir))
+        raise SystemExit(scan_baseline.save(opts, master, first, last, save_path, quick, gsd_dir))
+    if base is not None and compare_path is not None:      # (a baseline comes with --compare only)
+        from profidrive_cli.cli import scan_baseline
         raise SystemExit(scan_baseline.compare(opts, master, base, compare_path, junit, quick))
     if watch:
         from profidrive_cli.cli.scan_watch import watch as run_watch
@@ -135,7 +159,8 @@ def scan_cmd(opts, first, last, gsd_dir, watch, interval, duration, quick, save_
             out.print(late_answer(e.address, e.unanswered))
 
 
-def _baseline_options(watch, save_path, compare_path, junit):
+def _baseline_options(watch: bool, save_path: str | None, compare_path: str | None,
+                      junit: str | None) -> NetworkRecord | None:
     """--save / --compare / --junit checked, their files too, before the port opens: the baseline of
     --compare (None without it)."""
     if save_path is not None and compare_path is not None:
@@ -166,7 +191,7 @@ def late_answer(address: int, unanswered: int) -> str:
 @click.argument("address", type=int)
 @click.option("--gsd-dir", default=None, help="Extra GSD folder for diagnosis texts.")
 @bus_options
-def diag_cmd(opts, address, gsd_dir):
+def diag_cmd(opts: BusOptions, address: int, gsd_dir: str | None) -> None:
     """The whole Slave_Diag of one station decoded, and its Get_Cfg."""
     station_address(address)
     master = opts.open_master(address=address)
@@ -203,10 +228,10 @@ def diag_cmd(opts, address, gsd_dir):
     out.print(f"counters: {format_counters(counters)}")
 
 
-def _unit_diag_texts(d, gsd_dir) -> list[str]:
+def _unit_diag_texts(d: SlaveDiag, gsd_dir: str | None) -> list[str]:
     if not any(b.kind == "device" for b in d.ext_blocks()):
         return []
-    from profidrive_cli.gsd import decode_unit_diag
+    from profidrive_cli.gsd.interp import decode_unit_diag
     from profidrive_cli.gsd.library import find_by_ident
     g = find_by_ident(d.ident, gsd_dir)
     if g is None:
@@ -231,8 +256,9 @@ def _unit_diag_texts(d, gsd_dir) -> list[str]:
               type=click.FloatRange(0.0, 3600.0), metavar="S",
               help="At the end, hold the safe state at most S s waiting for the inputs to settle.")
 @bus_options
-def io_cmd(opts, address, cfg_hex, ident_hex, prm_hex, out_hex, count, wd_ms, gsd_file, modules, yes,
-           stop_timeout):
+def io_cmd(opts: BusOptions, address: int, cfg_hex: str | None, ident_hex: str | None,
+           prm_hex: str | None, out_hex: str | None, count: int, wd_ms: int, gsd_file: str | None,
+           modules: tuple[str, ...], yes: bool, stop_timeout: float) -> None:
     """Bring any DP slave to Data_Exchange with a given configuration and show its inputs.
 
     It ends like a PLC going to STOP: outputs all zero and Global_Control Clear_Data for at least
@@ -327,7 +353,8 @@ def _prm_hint(state: str, prm: bytes) -> str:
             f"--prm HEX (or --gsd FILE --module NAME)")
 
 
-def _gsd_layout(ident: int, gsd_file, cfg: bytes, prm: bytes):
+def _gsd_layout(ident: int, gsd_file: str | None, cfg: bytes,
+                prm: bytes) -> tuple[Gsd, SlaveLayout] | None:
     """(GSD, the layout of `cfg`) for io's by-module view: the GSD from --gsd, else the library by
     ident; None without one. Done before bring-up, so that parsing a large GSD never delays the
     first Data_Exchange past the watchdog."""
@@ -340,7 +367,8 @@ def _gsd_layout(ident: int, gsd_file, cfg: bytes, prm: bytes):
     return None if g is None else (g, layout(g, cfg, prm or None))
 
 
-def _by_module(master, address: int, by_module, prm: bytes, as_json: bool):
+def _by_module(master: Master, address: int, by_module: tuple[Gsd, SlaveLayout] | None, prm: bytes,
+               as_json: bool) -> SlaveLayout | None:
     """The station's data by module (gsd/slavedata.py) from its Get_Cfg (read once after bring-up;
     the layout of the configuration sent when they agree); None without a GSD or a Get_Cfg. Text
     output: the layout once, before the cycles."""
@@ -363,7 +391,7 @@ def _by_module(master, address: int, by_module, prm: bytes, as_json: bool):
     return lay
 
 
-def _values(lay, direction: str, data: bytes) -> list[dict]:
+def _values(lay: SlaveLayout, direction: str, data: bytes) -> list[dict[str, Any]]:
     from profidrive_cli.gsd.slavedata import values
     return values(lay, direction, data)
 
@@ -376,19 +404,19 @@ def _row(text: str) -> None:
 
 
 class _Terminated(BaseException):
-    def __init__(self, signum: int):
+    def __init__(self, signum: int) -> None:
         super().__init__(signum)
         self.signum = int(signum)
 
 
 @contextlib.contextmanager
-def _terminations_raise():
+def _terminations_raise() -> Iterator[None]:
     """SIGTERM raises _Terminated in the main thread while the block runs (SIGINT: KeyboardInterrupt)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
-    def on_term(signum, frame):
+    def on_term(signum: int, frame: FrameType | None) -> None:
         raise _Terminated(signum)
     old = signal.signal(signal.SIGTERM, on_term)
     try:
@@ -408,7 +436,8 @@ class _SafeEnd:
 
     PACE_S = 0.01
 
-    def __init__(self, master, address: int, wd_s: float, stop_timeout: float, wait_settle: bool):
+    def __init__(self, master: Master, address: int, wd_s: float, stop_timeout: float,
+                 wait_settle: bool) -> None:
         self.master = master
         self.address = address
         self.wd_s = wd_s
@@ -445,7 +474,7 @@ class _SafeEnd:
                 pass
             self._unguard(old)
 
-    def _hold(self, st) -> None:
+    def _hold(self, st: StationMachine) -> None:
         from profidrive_cli.dp import services as S
         m, link = self.master, self.master.link
         zeros = bytes(st.output_len)
@@ -476,21 +505,21 @@ class _SafeEnd:
         err.print(f"station {self.address}: outputs zero and Global_Control Clear for "
                   f"{held:.2f} s, then released")
 
-    def _guard(self):
+    def _guard(self) -> dict[signal.Signals, _Handler] | None:
         if threading.current_thread() is not threading.main_thread():
             return None
 
-        def hurry(signum, frame):
+        def hurry(signum: int, frame: FrameType | None) -> None:
             self.hurry = True
         return {s: signal.signal(s, hurry) for s in (signal.SIGINT, signal.SIGTERM)}
 
-    def _unguard(self, old) -> None:
+    def _unguard(self, old: dict[signal.Signals, _Handler] | None) -> None:
         for s, h in (old or {}).items():
             signal.signal(s, h if h is not None else signal.SIG_DFL)
 
 
-def _from_gsd(gsd_file, modules):
-    from profidrive_cli.gsd import build_prm
+def _from_gsd(gsd_file: str, modules: tuple[str, ...]) -> tuple[bytes, bytes, int | None]:
+    from profidrive_cli.gsd.interp import build_prm
     from profidrive_cli.gsd.library import load_gsd
     g = load_gsd(gsd_file)
     res = build_prm(g, list(modules))

@@ -3,21 +3,24 @@
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
 from typing import TYPE_CHECKING, NoReturn, cast
 
 import click
 from rich.console import Console
 from rich.markup import escape
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+from rich.progress import (BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TaskID, TextColumn,
+                           TimeElapsedColumn)
 
 from profidrive_cli import PdriveError, UsageError
-from profidrive_cli.checklist.spec import ChecklistError, load_checklist, parse_var_assignments
+from profidrive_cli.checklist.spec import Checklist, ChecklistError, load_checklist, parse_var_assignments
 from profidrive_cli.cli.common import (BusOptions, bus_options, can_ask, confirm_real_port, emit_json,
                                        is_sim_port, is_tty, make_console)
 from profidrive_cli.outfile import check_output_path
 
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.checklist.runner import Observer    # (_LiveView and _Quiet have its methods)
+    from profidrive_cli.checklist.runner import RunResult, StationResult, StepResult
 
 _MARK = {"passed": "[green]✔[/]", "failed": "[red]✘[/]", "error": "[red]✘[/]", "not run": "[dim]–[/]",
          "skipped": "[dim]–[/]", "interrupted": "[yellow]![/]"}
@@ -33,7 +36,7 @@ def _usage(ctx: click.Context, message: str, problems: list[str] | None = None) 
     ctx.exit(2)
 
 
-def _json_error(ctx, message: str, problems: list[str] | None = None) -> None:
+def _json_error(ctx: click.Context, message: str, problems: list[str] | None = None) -> None:
     if ctx.params.get("as_json"):
         from profidrive_cli.cli.jsonout import error_object
         obj = error_object(message, 2, stream=False)
@@ -42,7 +45,7 @@ def _json_error(ctx, message: str, problems: list[str] | None = None) -> None:
         emit_json(obj)
 
 
-def _load(ctx, path: str, variables: tuple[str, ...]):
+def _load(ctx: click.Context, path: str, variables: tuple[str, ...]) -> Checklist:
     """The validated checklist, or every problem on stderr (file:line each) and exit code 2."""
     try:
         return load_checklist(path, parse_var_assignments(variables))
@@ -59,7 +62,7 @@ def _load(ctx, path: str, variables: tuple[str, ...]):
 
 
 @click.group("checklist")
-def checklist_group():
+def checklist_group() -> None:
     """Scripted commissioning checklists: validate, rehearse on the simulator, run, report.
 
     The format is in docs/checklists.md; examples in examples/checklists/.
@@ -72,7 +75,7 @@ def checklist_group():
               help="Set a checklist variable (repeatable); overrides the file's value.")
 @click.option("--json", "as_json", is_flag=True, help="Print the plan per station as JSON.")
 @click.pass_context
-def validate_cmd(ctx, file, variables, as_json):
+def validate_cmd(ctx: click.Context, file: str, variables: tuple[str, ...], as_json: bool) -> None:
     """Check FILE.yaml without touching a bus: every problem with file:line (exit code 2)."""
     cl = _load(ctx, file, variables)
     if as_json:
@@ -109,7 +112,9 @@ def validate_cmd(ctx, file, variables, as_json):
 @click.option("--watchdog-ms", type=click.FloatRange(10, 650000), default=None, metavar="MS",
               help="DP watchdog armed in Set_Prm (default 500 ms).")
 @click.pass_context
-def run_cmd(ctx, opts: BusOptions, file, reports, dry_run, yes, variables, cycle_hz, watchdog_ms):
+def run_cmd(ctx: click.Context, opts: BusOptions, file: str, reports: tuple[str, ...], dry_run: bool,
+            yes: bool, variables: tuple[str, ...], cycle_hz: float | None,
+            watchdog_ms: float | None) -> None:
     """Run FILE.yaml on the drives it names, station by station; exit code 0 only when every step passed.
 
     A failed step (on_fail: stop, the default), Ctrl-C or SIGTERM stop the drive safely before pdrive
@@ -127,8 +132,8 @@ def run_cmd(ctx, opts: BusOptions, file, reports, dry_run, yes, variables, cycle
     cl = _load(ctx, file, variables)
     interactive = sys.stdin.isatty() and sys.stdout.isatty()
     if cl.has_prompts and not (yes or dry_run or interactive):
-        line = cl.first_prompt_line()
-        _usage(ctx, f"{cl.path}:{line}: the checklist has prompt steps and there is no terminal to "
+        prompt_line = cl.first_prompt_line()
+        _usage(ctx, f"{cl.path}:{prompt_line}: the checklist has prompt steps and there is no terminal to "
                     f"answer them: give --yes to take them as confirmed (nothing was sent to any drive)")
     # port: --port / PDRIVE_PORT, else the checklist's; --dry-run: a simulated bus of the same stations
     port: str | None
@@ -163,8 +168,13 @@ def run_cmd(ctx, opts: BusOptions, file, reports, dry_run, yes, variables, cycle
 
     live = is_tty() and not opts.json
     con = make_console(stderr=opts.json)
-    view = _LiveView(con, live) if not opts.json else _Quiet()
-    ask = view.ask if interactive and not opts.json else None
+    view: _LiveView | _Quiet
+    ask: Callable[[str], bool] | None = None
+    if opts.json:
+        view = _Quiet()
+    else:
+        view = live_view = _LiveView(con, live)
+        ask = live_view.ask if interactive else None
     options = {"yes": yes, "cycle_hz": cycle_hz, "watchdog_ms": watchdog_ms, "baud": str(baud),
                "master_address": master_address}
     with signals_as_interrupts():
@@ -212,14 +222,14 @@ def run_cmd(ctx, opts: BusOptions, file, reports, dry_run, yes, variables, cycle
     ctx.exit(0 if result.passed and not failed else 1)
 
 
-def _moves(cl) -> bool:
+def _moves(cl: Checklist) -> bool:
     return any(st.type in _MOVES for s in cl.stations for st in s.steps)
 
 
 _MOVES = ("write", "save", "run", "reset_fault")
 
 
-def _plan_lines(cl) -> list[str]:
+def _plan_lines(cl: Checklist) -> list[str]:
     """What the checklist will do that changes something, per station (for the question)."""
     lines = [f"{cl.path}: what it changes, station by station:"]
     for s in cl.stations:
@@ -229,13 +239,13 @@ def _plan_lines(cl) -> list[str]:
     return lines
 
 
-def _defaulted(ctx, name: str) -> bool:
+def _defaulted(ctx: click.Context, name: str) -> bool:
     """True when the option was not given (so the checklist's header value applies)."""
     src = ctx.get_parameter_source(name)
     return src is None or src.name in ("DEFAULT", "DEFAULT_MAP")
 
 
-def _summary(con: Console, result, written: list[str]) -> None:
+def _summary(con: Console, result: RunResult, written: list[str]) -> None:
     c = result.counts()
     verdict = {"passed": "[bold green]PASSED[/]", "failed": "[bold red]FAILED[/]",
                "interrupted": "[bold yellow]INTERRUPTED[/]"}[result.status]
@@ -263,7 +273,7 @@ def _summary(con: Console, result, written: list[str]) -> None:
 class _Quiet:
     """--json: no live output (the result goes to stdout as one JSON document)."""
 
-    def __getattr__(self, name):
+    def __getattr__(self, name: str) -> Callable[..., None]:
         return lambda *a, **k: None
 
 
@@ -271,14 +281,14 @@ class _LiveView:
     """Progress on the terminal: a live bar per station with the running step and its measurement; one
     line per finished step. Without a terminal: the lines only."""
 
-    def __init__(self, con: Console, live: bool):
+    def __init__(self, con: Console, live: bool) -> None:
         self.con = con
         self.live = live
         self.progress: Progress | None = None
-        self.task = None
+        self.task: TaskID | None = None
 
     # -- setup -----------------------------------------------------------------------------------
-    def begin(self, cl, port, dry_run):
+    def begin(self, cl: Checklist, port: str, dry_run: bool) -> None:
         head = f"[bold]{escape(cl.name)}[/] on {escape(port)}" + (" [yellow](dry run: simulator)[/]" if dry_run else "")
         self.con.print(head)
         if self.live:
@@ -287,48 +297,48 @@ class _LiveView:
                                      transient=True)
             self.progress.start()
 
-    def end(self):
+    def end(self) -> None:
         if self.progress is not None:
             self.progress.stop()
             self.progress = None
 
-    def _print(self, text: str):
+    def _print(self, text: str) -> None:
         (self.progress.console if self.progress is not None else self.con).print(text)
 
-    def message(self, text: str):
+    def message(self, text: str) -> None:
         self._print(f"    [dim]session: {escape(text)}[/]")
 
     # -- observer ----------------------------------------------------------------------------------
-    def run_started(self, run):
+    def run_started(self, run: RunResult) -> None:
         pass
 
-    def station_started(self, sr):
+    def station_started(self, sr: StationResult) -> None:
         s = sr.spec
         self._print(f"station [bold]{escape(s.name)}[/] (address {s.address}, {s.profile.name}, layout {s.layout})")
         if self.progress is not None:
             self.task = self.progress.add_task(escape(s.name), total=len(sr.steps))
 
-    def station_opened(self, sr):
+    def station_opened(self, sr: StationResult) -> None:
         idt = sr.identity
         self._print(f"    [dim]found ident {idt.get('ident')}, profile {idt.get('profile')}, "
                     f"GSD {escape(str(idt.get('gsd')))}[/]")
 
-    def step_started(self, sr, r):
+    def step_started(self, sr: StationResult, r: StepResult) -> None:
         if self.progress is not None and self.task is not None:
             self.progress.update(self.task, description=f"{r.step.index}. {escape(r.step.label)}")
 
-    def step_progress(self, sr, r, text):
+    def step_progress(self, sr: StationResult, r: StepResult, text: str) -> None:
         if self.progress is not None and self.task is not None:
             self.progress.update(self.task, description=f"{r.step.index}. {escape(r.step.label)}: {escape(text)}")
 
-    def step_finished(self, sr, r):
+    def step_finished(self, sr: StationResult, r: StepResult) -> None:
         mark = _MARK.get(r.status, r.status) if self.live else _PLAIN.get(r.status, r.status)
         msg = f" — {escape(r.message)}" if r.message else ""
         self._print(f"  {mark} {r.step.index:>2}. {escape(r.step.label)}{msg}")
         if self.progress is not None and self.task is not None:
             self.progress.advance(self.task)
 
-    def station_finished(self, sr):
+    def station_finished(self, sr: StationResult) -> None:
         if self.progress is not None and self.task is not None:
             self.progress.remove_task(self.task)
             self.task = None
@@ -339,7 +349,7 @@ class _LiveView:
             self._print(f"  [dim]{len(skipped)} step{'s' if len(skipped) != 1 else ''} not run "
                         f"({escape(skipped[0].message)})[/]")
 
-    def run_finished(self, run):
+    def run_finished(self, run: RunResult) -> None:
         pass
 
     # -- operator prompts (called from the runner's prompt thread while it keeps the bus cycling) ----

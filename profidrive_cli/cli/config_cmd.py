@@ -3,6 +3,9 @@ that apply (profidrive_cli/config.py does the work; this module only parses and 
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+from typing import Any
+
 import click
 from rich.markup import escape
 from rich.table import Table
@@ -12,7 +15,7 @@ from profidrive_cli.cli.common import baud_from, emit_json, out
 
 
 @click.group("config")
-def config_group():
+def config_group() -> None:
     """Config file: the effective settings and where each came from; the files that apply."""
 
 
@@ -21,7 +24,7 @@ def config_group():
 @click.option("--baud", default=None, metavar="RATE", help="As a bus command's --baud.")
 @click.option("--master-address", default=None, type=click.IntRange(0, 125))
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
-def config_show(port, baud, master_address, as_json):
+def config_show(port: str | None, baud: str | None, master_address: int | None, as_json: bool) -> None:
     """The settings a bus command would use (port, baud, master address, station defaults), each
     with where it came from: option, env, FILE:LINE or default; and the named ports."""
     cfg = C.load()
@@ -58,11 +61,11 @@ def config_show(port, baud, master_address, as_json):
     _print_files(eff.files)
 
 
-def _value(v) -> str:
+def _value(v: object) -> str:
     return f"{v:g}" if isinstance(v, float) else str(v)
 
 
-def _port_dict(p: C.NamedPort) -> dict:
+def _port_dict(p: C.NamedPort) -> dict[str, Any]:
     return {"name": p.name, "port": p.port.to_dict(),
             "baud": p.baud.to_dict() if p.baud else None,
             "master_address": p.master_address.to_dict() if p.master_address else None,
@@ -71,7 +74,7 @@ def _port_dict(p: C.NamedPort) -> dict:
             "source": p.source}
 
 
-def _print_files(files) -> None:
+def _print_files(files: Iterable[C.ConfigFile]) -> None:
     t = Table(show_header=True, title="config files (lowest precedence first)")
     for c in ("kind", "path", "exists"):
         t.add_column(c)
@@ -82,7 +85,7 @@ def _print_files(files) -> None:
 
 @config_group.command("path")
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
-def config_path(as_json):
+def config_path(as_json: bool) -> None:
     """The config files that apply, lowest precedence first, and whether each exists."""
     files = C.config_files()
     if as_json:

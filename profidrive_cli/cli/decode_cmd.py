@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from typing import Any
 
 import click
 
@@ -19,7 +20,8 @@ from profidrive_cli.dp.cfg import parse_hex
 @click.option("--request", "request", is_flag=True, help="master -> drive (DP output area)")
 @click.option("--response", "response", is_flag=True, help="drive -> master (DP input area)")
 @click.option("--json", "as_json", is_flag=True, help="print the decoded fields as JSON")
-def decode_cmd(profile, hex_octets, ppo, layout_name, request, response, as_json):
+def decode_cmd(profile: str, hex_octets: tuple[str, ...], ppo: int | None, layout_name: str | None,
+               request: bool, response: bool, as_json: bool) -> None:
     """Decode a captured area of PROFILE's layout into named fields.
 
     HEX is the area as hex octets or words, with or without spaces:
@@ -77,14 +79,14 @@ _SPEED_NAMES = {"reference": _REF, "frequency_reference": _REF,
                 "motor_speed": _ACT}
 
 
-def _result_json(result: dict) -> dict:
+def _result_json(result: dict[str, Any]) -> dict[str, Any]:
     """decode_area's dict in the contract's shape: octets in lower-case hex, each word's bits that
     are set as `flags` (a list of names), reference_hz / actual_hz."""
     from profidrive_cli.cli.jsonout import flag_list, octets, renamed
     d = dict(result)
     if "octets" in d:
         d["octets"] = octets(d["octets"])
-    def word(key, value):
+    def word(key: str | None, value: Any) -> Any:
         if not isinstance(value, dict):
             return value
         if key in _SPEED_NAMES:

@@ -4,12 +4,14 @@ dp/doctor.py and dp/doctor_timing.py; this is rendering only."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import click
 from rich.markup import escape
 from rich.table import Table
 
 from profidrive_cli import UsageError
-from profidrive_cli.cli.common import bus_options, emit_json, out
+from profidrive_cli.cli.common import BusOptions, bus_options, emit_json, out
 
 _MARK = {"ok": "[green]ok[/green]", "warn": "[yellow]warn[/yellow]", "fail": "[red]FAIL[/red]",
          "info": "info", "skip": "[dim]skip[/dim]"}
@@ -25,7 +27,7 @@ _MARK = {"ok": "[green]ok[/green]", "warn": "[yellow]warn[/yellow]", "fail": "[r
 @click.option("--listen", "listen_s", default=0.3, show_default=True, type=click.FloatRange(0.0, 10.0),
               help="Seconds to listen for other traffic before transmitting.")
 @bus_options
-def doctor_cmd(opts, probe_address, station, listen_s):
+def doctor_cmd(opts: BusOptions, probe_address: int, station: int | None, listen_s: float) -> None:
     """Check a serial setup for PROFIBUS: permission, DP baud rates, FTDI latency_timer, echo,
     kernel RS-485, the adapter's turnaround and request gap; recommend --slot-time and --retries.
     Without --port: list the ports."""
@@ -60,7 +62,7 @@ def doctor_cmd(opts, probe_address, station, listen_s):
         raise SystemExit(1)
 
 
-def _list_ports(opts) -> None:
+def _list_ports(opts: BusOptions) -> None:
     import serial.tools.list_ports
     ports = sorted(serial.tools.list_ports.comports(), key=lambda p: p.device)
     rows = [{"port": p.device, "description": p.description, "hwid": p.hwid} for p in ports]
@@ -80,19 +82,19 @@ def _list_ports(opts) -> None:
     out.print("pdrive doctor --port PORT checks one of them")
 
 
-def _ms_to_s(v):
+def _ms_to_s(v: Any) -> Any:
     if isinstance(v, list):
         return [_ms_to_s(x) for x in v]
     return None if v is None else round(v / 1000.0, 6)
 
 
-def _report_json(d: dict) -> dict:
+def _report_json(d: dict[str, Any]) -> dict[str, Any]:
     """The report in the contract's shape (docs/json.md): the simulator's stations as a list of
     {station, profile}, times in seconds (`*_ms` -> `*_s`, the latency timer's `ms` -> `latency_timer_s`),
     the kernel's RS-485 flag word as `ioctl_flags` (`flags` is a list of names everywhere else)."""
     checks = []
     for c in d["checks"]:
-        out = {}
+        out: dict[str, Any] = {}
         for k, v in c.items():
             if k == "stations" and isinstance(v, dict):
                 out[k] = [{"station": int(a), "profile": name} for a, name in v.items()]

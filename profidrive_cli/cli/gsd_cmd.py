@@ -5,6 +5,7 @@ work is in profidrive_cli.gsd."""
 from __future__ import annotations
 
 import json
+from typing import TYPE_CHECKING, Any
 
 import click
 from rich.console import Console
@@ -12,12 +13,16 @@ from rich.table import Table
 from rich.text import Text
 
 from profidrive_cli import UsageError
-from profidrive_cli.cli.common import bus_options, emit_json, hex_option, make_console, out, station_address
+from profidrive_cli.cli.common import BusOptions, bus_options, emit_json, hex_option, make_console, out, station_address
 from profidrive_cli.cli.jsonout import ident_fields, octets
 from profidrive_cli.gsd import build_prm, user_params
 from profidrive_cli.gsd.interp import device_user_prm
 from profidrive_cli.gsd.library import list_library, load_gsd, search_dirs
 from profidrive_cli.gsd.model import Gsd
+
+if TYPE_CHECKING:
+    from profidrive_cli.dp.poller import Master
+    from profidrive_cli.dp.services import SlaveDiag
 
 _gsd_dir_option = click.option(
     "--gsd-dir", "gsd_dir", metavar="DIR", default=None,
@@ -31,7 +36,7 @@ def _console() -> Console:
     return make_console(markup=False)
 
 
-def _echo_json(obj) -> None:
+def _echo_json(obj: Any) -> None:
     click.echo(json.dumps(obj, indent=2, ensure_ascii=False))
 
 
@@ -69,7 +74,7 @@ def _yn(v: bool) -> str:
     return "yes" if v else "no"
 
 
-def _identity(g: Gsd) -> dict:
+def _identity(g: Gsd) -> dict[str, Any]:
     return {
         "file": g.path, "encoding": g.encoding, "vendor": g.vendor_name, "model": g.model_name,
         "revision": g.revision, **ident_fields(g.ident_number),
@@ -86,7 +91,7 @@ def _identity(g: Gsd) -> dict:
     }
 
 
-def _modules(g: Gsd) -> list[dict]:
+def _modules(g: Gsd) -> list[dict[str, Any]]:
     out = []
     for m in g.modules:
         prm_len = (m.prm.length or 0) if not m.prm.empty else 0
@@ -98,15 +103,15 @@ def _modules(g: Gsd) -> list[dict]:
     return out
 
 
-def _module_json(m: dict) -> dict:
+def _module_json(m: dict[str, Any]) -> dict[str, Any]:
     """A module row in the contract's shape: octets in lower-case hex ("" for none)."""
     return {**m, "cfg": octets(m["cfg"]),
             "identifiers": [{**c, "octets": octets(c["octets"])} for c in m["identifiers"]]}
 
 
-def _prm_json(d: dict) -> dict:
+def _prm_json(d: dict[str, Any]) -> dict[str, Any]:
     """build_prm's dict in the contract's shape: ident + ident_hex, octets in lower-case hex."""
-    out: dict = {}
+    out: dict[str, Any] = {}
     for k, v in d.items():
         if k == "ident":
             out.update(ident_fields(v))
@@ -122,7 +127,7 @@ def _prm_json(d: dict) -> dict:
 
 
 @click.group("gsd")
-def gsd_group():
+def gsd_group() -> None:
     """GSD device description files: show one, list the library, build Set_Prm / Chk_Cfg octets, match a
     slave's configuration to modules."""
 
@@ -132,7 +137,7 @@ def gsd_group():
 @_gsd_dir_option
 @click.option("--module-params", is_flag=True, help="Also list every module's own user parameters.")
 @_json_option
-def show_cmd(source: str, gsd_dir: str | None, module_params: bool, as_json: bool):
+def show_cmd(source: str, gsd_dir: str | None, module_params: bool, as_json: bool) -> None:
     """Identity, baud rates and MaxTsdr, modules with decoded cfg octets, user parameters.
 
     FILE|IDENT is a GSD file, an ident number (0x00CA) or a library file name (YASK00CA).
@@ -223,7 +228,7 @@ def show_cmd(source: str, gsd_dir: str | None, module_params: bool, as_json: boo
 @gsd_group.command("list")
 @_gsd_dir_option
 @_json_option
-def list_cmd(gsd_dir: str | None, as_json: bool):
+def list_cmd(gsd_dir: str | None, as_json: bool) -> None:
     """The GSD library plus your own folders (--gsd-dir, $PDRIVE_GSD_DIR); your files win."""
     entries = list_library(gsd_dir)
     if as_json:
@@ -256,7 +261,8 @@ def list_cmd(gsd_dir: str | None, as_json: bool):
               help="Override a user parameter (number or its text); N:NAME picks block N (0 = device).")
 @_gsd_dir_option
 @_json_option
-def prm_cmd(source: str, modules: tuple[str, ...], sets: tuple[str, ...], gsd_dir: str | None, as_json: bool):
+def prm_cmd(source: str, modules: tuple[str, ...], sets: tuple[str, ...], gsd_dir: str | None,
+            as_json: bool) -> None:
     """Set_Prm user-parameter octets and Chk_Cfg octets for a module selection, explained octet by octet."""
     g = load_gsd(source, gsd_dir)
     res = build_prm(g, list(modules), list(sets))
@@ -309,8 +315,8 @@ def prm_cmd(source: str, modules: tuple[str, ...], sets: tuple[str, ...], gsd_di
               help="The Chk_Cfg your master sends: say where it parts from the slave's modules.")
 @_gsd_dir_option
 @bus_options
-def match_cmd(opts, address: int | None, cfg_hex: str | None, ident_text: str | None, prm_hex: str | None,
-              configured_hex: str | None, gsd_dir: str | None):
+def match_cmd(opts: BusOptions, address: int | None, cfg_hex: str | None, ident_text: str | None, prm_hex: str | None,
+              configured_hex: str | None, gsd_dir: str | None) -> None:
     """The GSD modules that give a slave's configuration.
 
     With ADDRESS: reads the slave's diagnosis (ident, Cfg_Fault) and Get_Cfg on the bus. Offline:
@@ -358,18 +364,18 @@ def match_cmd(opts, address: int | None, cfg_hex: str | None, ident_text: str | 
         raise SystemExit(1)
 
 
-def _read_slave(opts, address: int) -> tuple[int, bytes, bool]:
+def _read_slave(opts: BusOptions, address: int) -> tuple[int, bytes, bool]:
     """Ident, Get_Cfg and Cfg_Fault of a station on the port of the bus options."""
-    opts.require_port()
+    port = opts.require_port()
     master = opts.open_master(address=address)
     try:
-        d, cfg = read_slave(master, address, opts.port)
+        d, cfg = read_slave(master, address, port)
     finally:
         master.link.close()
     return d.ident, cfg, d.has("Cfg_Fault")
 
 
-def read_slave(master, address: int, port: str = "the bus"):
+def read_slave(master: Master, address: int, port: str = "the bus") -> tuple[SlaveDiag, bytes]:
     """(Slave_Diag, Get_Cfg octets) of a station, the bus-level way `diag` reads them (BusError when
     it does not answer)."""
     from profidrive_cli import BusError

@@ -13,7 +13,7 @@ from __future__ import annotations
 from typing import Any
 
 
-def ident_fields(ident: int | None) -> dict:
+def ident_fields(ident: int | None) -> dict[str, Any]:
     """{"ident": 64769, "ident_hex": "0xFD01"} (both None when unknown)."""
     return {"ident": ident, "ident_hex": None if ident is None else f"0x{ident:04X}"}
 
@@ -42,15 +42,15 @@ def octets(text_or_bytes: Any) -> str:
     return " ".join(text.split()).lower()
 
 
-def renamed(d: dict, names: dict[str, str]) -> dict:
+def renamed(d: dict[str, Any], names: dict[str, str]) -> dict[str, Any]:
     """A copy of `d` with keys renamed (old -> new), the order kept."""
     return {names.get(k, k): v for k, v in d.items()}
 
 
-def station_identity(d: dict) -> dict:
+def station_identity(d: dict[str, Any]) -> dict[str, Any]:
     """An identity dict (address, ident as int or "0x...") in the contract's shape: station, ident,
     ident_hex; the other keys kept in their order."""
-    out: dict = {}
+    out: dict[str, Any] = {}
     for k, v in d.items():
         if k == "address":
             out["station"] = v
@@ -61,7 +61,7 @@ def station_identity(d: dict) -> dict:
     return out
 
 
-def error_object(message: str, exit_code: int, stream: bool) -> dict:
+def error_object(message: str, exit_code: int, stream: bool) -> dict[str, Any]:
     d: dict[str, Any] = {"event": "error"} if stream else {}
     d.update({"error": message, "exit_code": exit_code})
     return d

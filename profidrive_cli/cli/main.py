@@ -9,6 +9,14 @@ import json
 import os
 import signal
 import sys
+from typing import TYPE_CHECKING, Any, NoReturn
+
+if TYPE_CHECKING:                                   # (nothing imported at run time)
+    from collections.abc import Callable, Sequence
+    from types import FrameType
+
+    #: what signal.signal takes: a function, SIG_DFL / SIG_IGN, or None
+    _Handler = Callable[[int, FrameType | None], Any] | int | None
 
 #: commands whose --json output is a stream (JSON Lines with an "event" key): their error object
 #: carries "event": "error" too
@@ -17,7 +25,7 @@ STREAM_COMMANDS = frozenset({"commloss-test", "io", "jog", "run", "sniff"})
 STREAM_WITH = {"scan": frozenset({"--watch"})}
 
 
-def _json_mode(argv) -> tuple[bool, bool]:
+def _json_mode(argv: Sequence[str] | None) -> tuple[bool, bool]:
     """(--json given, the command streams), read from the command line itself: known also when the
     error comes before the command body runs (a bad option, a bad --port)."""
     args = list(sys.argv[1:] if argv is None else argv)
@@ -33,7 +41,8 @@ def _signal_words(signum: int) -> str:
     return "interrupted" if signum == signal.SIGINT else f"terminated (signal {signum})"
 
 
-def _error_json(argv, message: str, code: int, details: dict | None = None) -> None:
+def _error_json(argv: Sequence[str] | None, message: str, code: int,
+                details: dict[str, Any] | None = None) -> None:
     """Under --json, the error object on stdout (docs/json.md; jsonout.error_object)."""
     as_json, stream = _json_mode(argv)
     if as_json:
@@ -48,7 +57,7 @@ def _error_json(argv, message: str, code: int, details: dict | None = None) -> N
             pass
 
 
-def _signal_at_start(signum, frame):
+def _signal_at_start(signum: int, frame: FrameType | None) -> NoReturn:
     """SIGINT / SIGTERM before a command has been loaded: the line, the error object, 128 + N."""
     _set_signals(signal.SIG_IGN)                         # a second signal: no second message
     try:
@@ -68,11 +77,11 @@ class _Terminated(BaseException):
         self.signum = signum
 
 
-def _raise_terminated(signum, frame):
+def _raise_terminated(signum: int, frame: FrameType | None) -> NoReturn:
     raise _Terminated(signum)
 
 
-def _set_signals(handler, term=None) -> bool:
+def _set_signals(handler: _Handler, term: _Handler = None) -> bool:
     """SIGINT to `handler`, SIGTERM to `term` (default: `handler`); False off the main thread."""
     try:
         signal.signal(signal.SIGINT, handler)
@@ -150,19 +159,19 @@ COMMANDS = {
 class LazyGroup(click.Group):
     """A group that imports a command's module when the command is looked up."""
 
-    def list_commands(self, ctx):
+    def list_commands(self, ctx: click.Context) -> list[str]:
         return sorted(COMMANDS)
 
-    def get_command(self, ctx, name):
+    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
         entry = COMMANDS.get(name)
         if entry is None:
             return None
         module, attr, _ = entry
-        cmd = getattr(importlib.import_module(module), attr)
+        cmd: click.Command = getattr(importlib.import_module(module), attr)   # (COMMANDS names commands)
         _command_loaded()
         return cmd
 
-    def format_commands(self, ctx, formatter):
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         rows = [(name, COMMANDS[name][2]) for name in self.list_commands(ctx)]
         with formatter.section("Commands"):
             formatter.write_dl(rows)
@@ -170,7 +179,7 @@ class LazyGroup(click.Group):
 
 @click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="pdrive", package_name="profidrive-cli")
-def cli():
+def cli() -> None:
     """pdrive: PROFIBUS-DP master and drive commissioning.
 
     Every command works on the built-in simulated bus: add --port sim://
@@ -180,7 +189,7 @@ def cli():
 MAX_LINE = 400
 
 
-def _line(text: str) -> str:
+def _line(text: object) -> str:
     """An error message as one line of at most MAX_LINE characters (a pasted value can be huge)."""
     text = " ".join(str(text).split())
     return text if len(text) <= MAX_LINE else text[:MAX_LINE - 25] + f"... ({len(text)} characters)"
@@ -193,7 +202,8 @@ def _os_error_text(e: OSError) -> str:
     return _line(f"{' -> '.join(paths)}: {why}" if paths else why)
 
 
-def _fail(argv, message: str, code: int, details: dict | None = None):
+def _fail(argv: Sequence[str] | None, message: str, code: int,
+          details: dict[str, Any] | None = None) -> NoReturn:
     """The one line on stderr and, under --json, the error object on stdout (docs/json.md); exit."""
     click.echo(f"pdrive: {message}", err=True)
     _error_json(argv, message, code, details)
@@ -225,7 +235,7 @@ def main(argv: list[str] | None = None) -> None:
             _set_signals(signal.SIG_IGN)       # the command has ended: a late signal changes nothing
 
 
-def _main(argv):
+def _main(argv: Sequence[str] | None) -> NoReturn:
     try:
         rc = cli.main(args=argv, prog_name="pdrive", standalone_mode=False)
     except click.exceptions.Abort:

@@ -3,9 +3,16 @@ terminal, a JSON Lines stream with --json, one table at the end otherwise. No pr
 
 from __future__ import annotations
 
-from profidrive_cli.bustools.buswatch import COUNTER_KEYS, BusWatch, WatchView
-from profidrive_cli.cli.common import emit_json, err, is_tty, out
+from typing import TYPE_CHECKING, Any
+
+from profidrive_cli.bustools.buswatch import COUNTER_KEYS, BusWatch, WatchedStation, WatchView
+from profidrive_cli.cli.common import BusOptions, emit_json, err, is_tty, out
 from profidrive_cli.cli.names import device_name
+
+if TYPE_CHECKING:
+    from rich.table import Table
+
+    from profidrive_cli.dp.poller import Master
 
 #: rich style per state category
 COLOURS = {"data exchange": "green", "waiting": "cyan", "diagnosis pending": "yellow",
@@ -15,7 +22,7 @@ COLOURS = {"data exchange": "green", "waiting": "cyan", "diagnosis pending": "ye
 ALARM_KEYS = ("retries", "no_answer", "illegal", "reparams")
 
 
-def _ms(v) -> str:
+def _ms(v: float | None) -> str:
     return "-" if v is None else f"{v * 1000:.1f}"
 
 
@@ -24,7 +31,7 @@ SHORT = {"requests": "req", "retries": "retries", "no_answer": "no answer", "ill
          "reparams": "re-param"}
 
 
-def counter_text(ws, colour: bool = True) -> str:
+def counter_text(ws: WatchedStation, colour: bool = True) -> str:
     """'33 req +10.3/s, 3 retries +1.0/s': requests always, the error counters when not zero, each with
     its rise per second when it rises; a rising error counter in bold red, a standing one in yellow."""
     parts = []
@@ -40,7 +47,7 @@ def counter_text(ws, colour: bool = True) -> str:
     return ", ".join(parts)
 
 
-def _detail(ws) -> str:
+def _detail(ws: WatchedStation) -> str:
     """The DP state in words where it says more than the category, and a late first answer."""
     words = _state_detail(ws)
     if ws.unanswered_before:
@@ -50,7 +57,7 @@ def _detail(ws) -> str:
     return words
 
 
-def _state_detail(ws) -> str:
+def _state_detail(ws: WatchedStation) -> str:
     if ws.category == "data exchange":
         return f"master {ws.master}" if ws.master is not None else ""
     if ws.category == "waiting" and ws.state == "waiting for parameters":
@@ -60,7 +67,7 @@ def _state_detail(ws) -> str:
     return ws.state
 
 
-def table(view: WatchView, title: str, gsd_dir, colour: bool = True):
+def table(view: WatchView, title: str, gsd_dir: str | None, colour: bool = True) -> Table:
     from rich.markup import escape
     from rich.table import Table
 
@@ -83,7 +90,7 @@ def table(view: WatchView, title: str, gsd_dir, colour: bool = True):
     return t
 
 
-def view_json(view: WatchView) -> dict:
+def view_json(view: WatchView) -> dict[str, Any]:
     from profidrive_cli.bustools.causes import watch_causes
     return {"event": "watch", "t_s": round(view.t_s, 3), "passes": view.passes,
             "causes": [c.as_dict() for c in watch_causes(view.stations)],
@@ -98,7 +105,8 @@ def view_json(view: WatchView) -> dict:
                          for ws in view.stations]}
 
 
-def watch(opts, master, first: int, last: int, interval: float, duration: float | None, gsd_dir) -> int:
+def watch(opts: BusOptions, master: Master, first: int, last: int, interval: float,
+          duration: float | None, gsd_dir: str | None) -> int:
     """Run the watched live list until --duration or Ctrl-C; the exit code (1: no station answered)."""
     from profidrive_cli.fdl.timing import BAUD_NAMES
     w = BusWatch(master, first, last)

@@ -4,11 +4,18 @@ from __future__ import annotations
 
 import signal
 import sys
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import click
 
 from profidrive_cli import UsageError
 from profidrive_cli.cli.common import emit_json, err, out
+
+if TYPE_CHECKING:
+    from profidrive_cli.sim.bus import SimBus
+    from profidrive_cli.sim.control_http import ControlServer
+    from profidrive_cli.sim.server import Endpoint
 
 
 def _host_port(listen: str, option: str = "--listen", lowest: int = 0) -> tuple[str, int]:
@@ -45,7 +52,8 @@ def _host_port(listen: str, option: str = "--listen", lowest: int = 0) -> tuple[
               help="Also serve the plant's control (JSON over HTTP: trip, clear, unplug, replug, set, "
                    "faults, state; `pdrive sim-ctl`), on 127.0.0.1 unless a host is named (then "
                    "with a token). PORT 0 picks a free one.")
-def sim_cmd(use_pty, listen, serial_port, plant, learn, baud, as_json, plc, control):
+def sim_cmd(use_pty: bool, listen: str | None, serial_port: str | None, plant: str | None,
+            learn: str | None, baud: str, as_json: bool, plc: bool, control: str | None) -> None:
     """Serve a simulated PROFIBUS segment for another master (Ctrl-C ends it).
 
     With --plc the segment has its own master: a PLC brings every station up and runs a scripted
@@ -72,17 +80,20 @@ def sim_cmd(use_pty, listen, serial_port, plant, learn, baud, as_json, plc, cont
         _check_plc_port(serial_port)
         plant = _wire_timed(plant)
     bus = build_bus(plant, default_baud=b)     # PNU 963 of the simulated cards follows --baud
+    ep: server.PtyEndpoint | server.TcpEndpoint | server.SerialEndpoint
     if use_pty:
         ep = server.PtyEndpoint()
         where = ep.path
     elif listen:
         host, port = _host_port(listen)
         try:
-            ep = server.TcpEndpoint(host, port)      # (its events: one line on stderr each)
+            tcp = server.TcpEndpoint(host, port)      # (its events: one line on stderr each)
         except OSError as e:
             raise UsageError(f"--listen {listen}: {e.strerror or e}") from None
-        where = f"socket://{ep.address[0]}:{ep.address[1]}"
+        ep = tcp
+        where = f"socket://{tcp.address[0]}:{tcp.address[1]}"
     else:
+        assert serial_port is not None               # (exactly one of the three, checked above)
         ep = server.SerialEndpoint(serial_port, b)
         where = serial_port
     ctl = _control_server(bus, control) if control else None
@@ -101,7 +112,7 @@ def sim_cmd(use_pty, listen, serial_port, plant, learn, baud, as_json, plc, cont
                       + (f"; reachable from the network: every request needs the token {ctl.token}"
                          if ctl.token else ""), markup=False)
     sys.stdout.flush()
-    stopping = []
+    stopping: list[int] = []
     signal.signal(signal.SIGTERM, lambda *a: stopping.append(1))
     signal.signal(signal.SIGINT, lambda *a: stopping.append(1))
     try:
@@ -118,7 +129,7 @@ def sim_cmd(use_pty, listen, serial_port, plant, learn, baud, as_json, plc, cont
     err.print("simulator stopped")
 
 
-def _control_server(bus, control: str):
+def _control_server(bus: SimBus, control: str) -> ControlServer:
     """--control HOST:PORT: the plant's control over HTTP (sim/control.py), queued onto the bus."""
     from profidrive_cli.sim.control import QueuedController
     from profidrive_cli.sim.control_http import ControlServer
@@ -129,7 +140,7 @@ def _control_server(bus, control: str):
         raise UsageError(f"--control {control}: {e.strerror or e}") from None
 
 
-def _check_plc_port(serial_port) -> None:
+def _check_plc_port(serial_port: str | None) -> None:
     """--plc sends a master's telegrams to the endpoint: on a real line they would reach real
     drives, so --port takes a pty only (e.g. one end of a socat pair)."""
     if serial_port is None:
@@ -149,7 +160,7 @@ def _wire_timed(plant: str) -> str:
     return plant + ("&" if "?" in plant else "?") + "timing=wire"
 
 
-def _run_plc(bus, ep, stop) -> None:
+def _run_plc(bus: SimBus, ep: Endpoint, stop: Callable[[], bool]) -> None:
     from profidrive_cli.sim.plc import Plc
     from profidrive_cli.sim.tap import Tap
     tap = Tap(ep)

@@ -6,6 +6,7 @@ import json
 import os
 import urllib.error
 import urllib.request
+from typing import Any
 
 import click
 
@@ -27,7 +28,8 @@ SHAPES: dict[str, tuple[str, ...]] = {
 @click.option("--json", "as_json", is_flag=True, help="Print the answer as JSON.")
 @click.argument("command", type=click.Choice(sorted(SHAPES)))
 @click.argument("args", nargs=-1)
-def simctl_cmd(control, token, as_json, command, args):
+def simctl_cmd(control: str | None, token: str | None, as_json: bool, command: str,
+               args: tuple[str, ...]) -> None:
     """Steer a running simulator: trip STATION [ALARM], clear STATION, unplug STATION, replug
     STATION, set STATION CODE VALUE, faults 'drop=0.1,noise=0.05' ('' for none), state."""
     control = control or os.environ.get("PDRIVE_SIM_CONTROL")
@@ -69,7 +71,7 @@ def simctl_cmd(control, token, as_json, command, args):
         out.print(", ".join(f"{k} {v}" for k, v in answer.items()), markup=False)
 
 
-def _faults_words(answer: dict) -> str:
+def _faults_words(answer: dict[str, Any]) -> str:
     """The injected faults as `sim-ctl faults` takes them (`faults_spec`: sim/control.py faults_answer), or none."""
     spec = answer.get("faults_spec")
     if spec is None:                    # (a simulator before faults_spec: the rates alone)

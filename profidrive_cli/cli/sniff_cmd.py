@@ -4,15 +4,23 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Iterator
+from typing import IO, TYPE_CHECKING
 
 import click
 
 from profidrive_cli import UsageError
 from profidrive_cli.bustools.listen import listen
-from profidrive_cli.cli.common import bus_options, out
+from profidrive_cli.cli.common import BusOptions, bus_options, out
 from profidrive_cli.datafile import DataFileError, open_input_file
 from profidrive_cli.dp.capture import HOLD, LINKTYPES, Capture, ErrorMerger, PcapWriter, TimeRangeError, format_line
 from profidrive_cli.outfile import OutputFile, check_output_path
+
+if TYPE_CHECKING:
+    from profidrive_cli.cli.sniff_view import SniffView
+    from profidrive_cli.dp.capfile import CaptureReader
+    from profidrive_cli.dp.capture import Captured
+    from profidrive_cli.link.base import Link
 
 
 # a raw capture file: 16 MiB is ~14 s of a saturated bus at 12 Mbit/s, ~2 h at 19.2 kbit/s
@@ -21,7 +29,7 @@ MAX_CAPTURE_BYTES = 16 * 1024 * 1024
 CHUNK_BYTES = 16 * 1024
 
 
-def _line(c) -> str:
+def _line(c: Captured) -> str:
     return format_line(c)
 
 
@@ -64,8 +72,11 @@ def _line(c) -> str:
               help="With --ring: remove its captures older than DAYS (default: kept while within "
                    "--max-disk).")
 @bus_options
-def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, live, gsd_dir, ring,
-              triggers, after_s, out_dir, max_disk, keep_days):
+def sniff_cmd(opts: BusOptions, duration: float, pcap_file: str | None, linktype: str,
+              raw_out: str | None, raw_file: str | None, stations: tuple[str, ...], live: bool,
+              gsd_dir: str | None, ring: float | None, triggers: tuple[str, ...],
+              after_s: float | None, out_dir: str | None, max_disk: str | None,
+              keep_days: float | None) -> None:
     """Passive capture: one line per frame (time, SD, SA->DA, SAPs, FC in words, service, DU).
 
     --pcap and --raw files are written beside the target and replace it only when the capture
@@ -105,7 +116,7 @@ def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, 
         writer = PcapWriter(files[0], LINKTYPES[linktype], start_wall) if pcap_file else None
         raw_fh = files[-1] if raw_out else None
 
-        def show(items, end_of_chunk: bool = True):
+        def show(items: list[Captured], end_of_chunk: bool = True) -> None:
             nonlocal count
             merged = merger.feed(items)
             if end_of_chunk:
@@ -119,7 +130,7 @@ def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, 
 
         if packets is not None:
             t0 = None
-            batch: list = []
+            batch: list[Captured] = []
             for p in packets:
                 if t0 is None:
                     t0 = p.t                         # the file's own clock: its first telegram
@@ -132,7 +143,7 @@ def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, 
             rest = cap.feed(b"", cap._t)
             show(batch + rest + [_truncated(cap)] if len(cap.rx) else batch + rest)
             view.finish(cap._t)
-        elif src is not None:
+        elif src is not None and raw_file:             # (src: only from a --from-file)
             # shown as if decoded in one piece: a telegram that starts in the chunk's last octets
             # waits for the next (HOLD), a garbage run that goes on in it stays one entry
             for chunk in _chunks(src, raw_file):
@@ -146,7 +157,7 @@ def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, 
             try:
                 _listen_start(link)
 
-                def on_data(data, t):
+                def on_data(data: bytes, t: float) -> None:
                     if raw_fh is not None:
                         raw_fh.write(data)
                     show(cap.feed(data, t))
@@ -181,7 +192,7 @@ def sniff_cmd(opts, duration, pcap_file, linktype, raw_out, raw_file, stations, 
 PACKETS_PER_SHOW = 1024
 
 
-def _packet_file(path):
+def _packet_file(path: str) -> CaptureReader | None:
     """The open packet reader of a pcap, pcapng or ProfiTrace .ptd file (by extension; its header
     checked now, before anything is written); None for a raw octet file (any other extension)."""
     from profidrive_cli.dp.capfile import capture_format, open_capture
@@ -189,7 +200,7 @@ def _packet_file(path):
     return None if fmt == "raw" else open_capture(path, fmt)
 
 
-def _chunks(fh, path):
+def _chunks(fh: IO[bytes], path: str) -> Iterator[bytes]:
     """The file's octets, CHUNK_BYTES at a time; DataFileError when it grew past the size limit or
     cannot be read."""
     total = 0
@@ -207,21 +218,22 @@ def _chunks(fh, path):
         yield chunk
 
 
-def _mtime(path) -> float:
+def _mtime(path: str) -> float:
     try:
         return os.path.getmtime(path)
     except OSError:
         return time.time()
 
 
-def _truncated(cap):
+def _truncated(cap: Capture) -> Captured:
     from profidrive_cli.dp.capture import Captured
     raw = bytes(cap.rx.buf)
     cap.rx.reset()
     return Captured(cap._t, raw, None, "truncated frame at end of input")
 
 
-def _view(stations, live, as_json, opts=None, gsd_dir=None, from_file=False):
+def _view(stations: tuple[str, ...], live: bool, as_json: bool, opts: BusOptions | None = None,
+          gsd_dir: str | None = None, from_file: bool = False) -> SniffView:
     """How each frame is shown: one line / JSON object (with --station the drives' words, every other
     slave by its GSD's modules, `gsd_dir` searched first), or the --live list (its bus load figured
     at the baud rate `opts` give; for a file only a rate given by --baud or PDRIVE_BAUD: the default
@@ -234,7 +246,7 @@ def _view(stations, live, as_json, opts=None, gsd_dir=None, from_file=False):
                      else None)
 
 
-def _listen_start(link) -> None:
+def _listen_start(link: Link) -> None:
     """Before listening: sim:// has no master of its own (point to one that has); octets a port
     buffered before the capture started are dropped (they would carry the wrong times). Sniff
     never writes to the port."""

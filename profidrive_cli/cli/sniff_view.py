@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import json
 import sys
-from typing import TYPE_CHECKING
+from collections.abc import Iterable
+from typing import TYPE_CHECKING, Any
 
 from profidrive_cli.bustools.passive import frame_suffix
 from profidrive_cli.cli.common import emit_json, out
@@ -18,6 +19,12 @@ from profidrive_cli.dp.du_decode import decode_du
 
 if TYPE_CHECKING:                                   # pragma: no cover
     from rich.live import Live
+    from rich.table import Table
+
+    from profidrive_cli.bustools.passive import PassiveDecoder
+    from profidrive_cli.bustools.passive_live import LiveList
+    from profidrive_cli.bustools.slaveview import SlaveView
+    from profidrive_cli.dp.capture import Captured
 
 REFRESH_S = 0.5
 #: the decoded data unit's lines sit under the frame line, past its time column
@@ -25,14 +32,14 @@ DECODED_INDENT = " " * 16
 
 
 class SniffView:
-    def __init__(self, station_specs=(), live: bool = False, as_json: bool = False,
+    def __init__(self, station_specs: Iterable[str] = (), live: bool = False, as_json: bool = False,
                  refresh_s: float = REFRESH_S, gsd_dir: str | None = None,
-                 baud: int | None = None):
-        self.decoder = None
+                 baud: int | None = None) -> None:
+        self.decoder: PassiveDecoder | None = None
         if station_specs:
             from profidrive_cli.bustools.passive import PassiveDecoder, watch_list
             self.decoder = PassiveDecoder(watch_list(station_specs))
-        self.live = None
+        self.live: LiveList | None = None
         if live:
             from profidrive_cli.bustools.causes import causes_json
             from profidrive_cli.bustools.passive_live import LiveList
@@ -41,7 +48,7 @@ class SniffView:
         self.refresh_s = refresh_s
         self._shown_at: float | None = None
         self._rich_live: Live | None = None
-        self.slaves = None                                    # every slave by module (issue 27)
+        self.slaves: SlaveView | None = None                  # every slave by module (issue 27)
         if not live:
             from profidrive_cli.bustools.slaveview import SlaveView
             self.slaves = SlaveView(gsd_dir, set(self.decoder.watched) if self.decoder else ())
@@ -49,7 +56,7 @@ class SniffView:
         self._lines: list[str] = []
 
     # -- one frame -------------------------------------------------------------------------------
-    def frame(self, c) -> None:
+    def frame(self, c: Captured) -> None:
         d = self.decoder.decode(c) if self.decoder is not None else None
         if self.live is not None:
             self.live.feed(c)
@@ -61,7 +68,8 @@ class SniffView:
             return
         f = c.frame
         fields = frame_fields(c) if f is not None else None
-        dec = decode_du(fields["service"], f.data) if fields is not None and "du" in fields else None
+        dec = (decode_du(fields["service"], f.data)
+               if f is not None and fields is not None and "du" in fields else None)
         if self.slaves is not None and f is not None:
             dec = self.slaves.decode(f, dec)
         write = self._lines.append
@@ -125,20 +133,20 @@ class SniffView:
                 out.print(line, markup=False)
 
 
-def frame_json(d: dict) -> dict:
+def frame_json(d: dict[str, Any]) -> dict[str, Any]:
     """A frame in the contract's shape (docs/json.md): "event" frame (or bad_frame), t_s."""
     out = {"event": "bad_frame" if "error" in d else "frame"}
     out.update(("t_s" if k == "t" else k, v) for k, v in d.items())
     return out
 
 
-def drive_json(d: dict) -> dict:
+def drive_json(d: dict[str, Any]) -> dict[str, Any]:
     """A decoded area in the contract's names (docs/json.md): the control / status bits set as
     `flags`."""
     return {("flags" if k in ("control", "status") else k): v for k, v in d.items()}
 
 
-def _cycle_json(c: dict | None, counted: bool = False) -> dict:
+def _cycle_json(c: dict[str, Any] | None, counted: bool = False) -> dict[str, Any]:
     """{min, mean, max[, n]} in seconds -> cycle_min_s, cycle_mean_s, cycle_max_s[, cycles_measured]."""
     c = c or {}
     d = {"cycle_min_s": c.get("min"), "cycle_mean_s": c.get("mean"), "cycle_max_s": c.get("max")}
@@ -147,7 +155,7 @@ def _cycle_json(c: dict | None, counted: bool = False) -> dict:
     return d
 
 
-def live_json(snap: dict, final: bool) -> dict:
+def live_json(snap: dict[str, Any], final: bool) -> dict[str, Any]:
     """A live-list snapshot as a `live` event: the cycle times as `*_s` keys (as in
     `scan --watch`), the decoded drive areas as in the frame events."""
     out = {"event": "live", "final": final}
@@ -161,8 +169,8 @@ def live_json(snap: dict, final: bool) -> dict:
     return out
 
 
-def _station_json(st: dict) -> dict:
-    out: dict = {}
+def _station_json(st: dict[str, Any]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
     for k, v in st.items():
         if k == "cycle_s":
             out.update(_cycle_json(v, counted=True))
@@ -173,11 +181,11 @@ def _station_json(st: dict) -> dict:
     return out
 
 
-def _ms(c: dict | None, key: str) -> str:
+def _ms(c: dict[str, Any] | None, key: str) -> str:
     return "-" if not c else f"{c[key] * 1000:.1f}"
 
 
-def _drive_text(drive: dict) -> str:
+def _drive_text(drive: dict[str, Any]) -> str:
     req, rep = drive.get("request", {}), drive.get("response", {})
     parts = []
     if req:
@@ -193,7 +201,7 @@ COLUMNS = ("station", "ident", "state", "exchanges", "cycle ms min/mean/max", "r
            "no answer", "illegal", "reparams", "drive (command / state)")
 
 
-def _rows(snap: dict) -> list[tuple[str, ...]]:
+def _rows(snap: dict[str, Any]) -> list[tuple[str, ...]]:
     rows: list[tuple[str, ...]] = []
     for s in snap["stations"]:
         c = s["cycle_s"]
@@ -205,7 +213,7 @@ def _rows(snap: dict) -> list[tuple[str, ...]]:
     return rows
 
 
-def _caption(snap: dict) -> str:
+def _caption(snap: dict[str, Any]) -> str:
     c = snap["cycle_s"]
     errs = ", ".join(f"{k} {v}" for k, v in snap["errors"].items()) or "none"
     masters = ", ".join(map(str, snap["masters"])) or "none seen"
@@ -220,7 +228,7 @@ def _caption(snap: dict) -> str:
             f"framing errors: {errs}{causes}")
 
 
-def live_table(snap: dict):
+def live_table(snap: dict[str, Any]) -> Table:
     from rich.table import Table
     t = Table(title="passive live list (listening only)", caption=_caption(snap))
     for col in COLUMNS:
@@ -231,7 +239,7 @@ def live_table(snap: dict):
     return t
 
 
-def plain_table(snap: dict) -> list[str]:
+def plain_table(snap: dict[str, Any]) -> list[str]:
     rows = [COLUMNS] + _rows(snap)
     widths = [max(len(r[i]) for r in rows) for i in range(len(COLUMNS))]
     lines = ["  ".join(v.ljust(w) for v, w in zip(r, widths)).rstrip() for r in rows]

@@ -11,7 +11,7 @@ from profidrive_cli import UsageError
 
 
 @click.group("wireshark")
-def wireshark_group():
+def wireshark_group() -> None:
     """Wireshark: install pdrive's PROFIBUS dissector and the live-capture (extcap) entry."""
 
 
@@ -26,7 +26,8 @@ def wireshark_group():
                    "with --dir only when given).")
 @click.option("--no-extcap", is_flag=True, help="Do not write the extcap launcher.")
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
-def install_cmd(plugins_dir, stations, extcap_dir, no_extcap, as_json):
+def install_cmd(plugins_dir: str | None, stations: tuple[str, ...], extcap_dir: str | None,
+                no_extcap: bool, as_json: bool) -> None:
     """Install pdrive's PROFIBUS dissector (and a station table) into Wireshark's plugins folder.
 
     Writes pdrive.lua, pdrive_stations.lua (layouts from the profiles, the stations given with
@@ -70,8 +71,10 @@ def install_cmd(plugins_dir, stations, extcap_dir, no_extcap, as_json):
 @click.option("--duration", default=None, type=float, metavar="S",
               help="Stop after S seconds (default: when Wireshark stops the capture).")
 @click.pass_context
-def extcap_cmd(ctx, extcap_interfaces, extcap_interface, extcap_dlts, extcap_config, extcap_version,
-               capture, fifo, port, baud, rs485, duration):
+def extcap_cmd(ctx: click.Context, extcap_interfaces: bool, extcap_interface: str | None,
+               extcap_dlts: bool, extcap_config: bool, extcap_version: str | None, capture: bool,
+               fifo: str | None, port: str | None, baud: str | None, rs485: bool,
+               duration: float | None) -> None:
     """The extcap entry point Wireshark runs (through the launcher pdrive wireshark install writes)."""
     from profidrive_cli.bustools import extcap as X
     if extcap_interfaces:
