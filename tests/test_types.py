@@ -3,7 +3,7 @@
 package it stands on (profidrive_cli/session/), on the drive families (profidrive_cli/drives/, the Drive
 interface with them), on the checklist and on the top-level modules: their errors are reported in those
 files only, the modules they import are followed silently; and on fdl/, link/, dp/, gsd/, sim/ and
-bustools/. (Issue 36 holds cli/, the last, to the same.)
+bustools/; and on the whole package, cli/ included (issue 36).
 
 mypy is in the `test` extra (pinned in constraints.txt). Without it the two checks are skipped, except
 under CI=true, where they fail. Each run uses its own cache under pytest's tmp_path (a fresh clone works).
@@ -63,8 +63,10 @@ def test_mypy_is_clean_on_the_package(tmp_path):
     # and the layers below and beside: the protocol stack, the simulator, the bus tools, GSD files
     ("profidrive_cli/fdl profidrive_cli/link profidrive_cli/dp profidrive_cli/gsd", "Success: no issues found in"),
     ("profidrive_cli/sim profidrive_cli/bustools", "Success: no issues found in"),
+    # and the whole package, cli/ with it (issue 36: types held everywhere)
+    ("profidrive_cli", "Success: no issues found in"),
 ], ids=["public_api", "session_package", "drive_interface", "asyncio_face", "family_registry", "drives",
-        "checklist", "top_level", "protocol_stack", "sim_and_bustools"])
+        "checklist", "top_level", "protocol_stack", "sim_and_bustools", "whole_package"])
 def test_mypy_strict_is_clean_on(tmp_path, target, success):
     rc, output = _mypy(tmp_path, "--strict", *target.split())
     assert rc == 0, output
