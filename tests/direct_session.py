@@ -6,12 +6,12 @@ the drive when the test leaves it (the runner's own stop is what the tests see).
 
 from __future__ import annotations
 
-from profidrive_cli.session import DriveSession
+from profidrive_cli.session import DriveStation
 
 
-def direct_session(drive, spec) -> DriveSession:
+def direct_session(drive, spec) -> DriveStation:
     """The session of `drive` (made by make_drive on a DirectChannel) for the checklist station `spec`."""
-    s = DriveSession(None, spec.address, profile=spec.profile.name, layout=spec.layout,
+    s = DriveStation(None, spec.address, profile=spec.profile.name, layout=spec.layout,
                      handle_signals=False)
     s.address, s.profile, s.layout = spec.address, spec.profile, spec.layout
     s.drive, s.channel = drive, drive.channel

@@ -10,7 +10,7 @@ import profidrive_cli as pdrive
 from profidrive_cli import UsageError
 from profidrive_cli.api import Bus, make_master
 from profidrive_cli.link import open_link
-from profidrive_cli.session import DriveSession
+from profidrive_cli.session import DriveStation
 
 SIM = "sim://?timing=virtual"
 
@@ -68,11 +68,11 @@ def test_open_bus_and_the_cli_build_the_same_master():
 def test_a_session_from_the_bus_opens_the_station_and_leaves_the_port_to_the_bus():
     with pdrive.open_bus(SIM) as bus:
         s = bus.session(3, profile="fuji-g1", watchdog_ms=300)
-        assert isinstance(s, DriveSession) and s.drive is None          # not opened yet
+        assert isinstance(s, DriveStation) and s.drive is None          # not opened yet
         with s:
             assert s.address == 3 and s.profile.name == "fuji-opc-g1-pdp" and s.watchdog_ms == 300
-            assert s.status().status.state
-        assert s.stop_report is not None and s.stop_report.how == "not needed"
+            assert s.motion.status().motion.status.state
+        assert s.motion.stop_report is not None and s.motion.stop_report.how == "not needed"
         assert not bus.closed and bus.master.link.ser.is_open          # the port stays the bus's
         assert [st.station for st in bus.scan(3, 3)] == [3]             # and the bus still works
         link = bus.master.link

@@ -16,7 +16,7 @@ from click.testing import CliRunner
 from conftest import pdrive_cmd, pty_sim_process, run_main
 from profidrive_cli.cli.common import BusOptions
 from profidrive_cli.cli.main import cli
-from profidrive_cli.session import DriveSession
+from profidrive_cli.session import DriveStation
 from profidrive_cli.session.commloss import run_commloss
 from test_json_contract import assert_stream
 
@@ -26,7 +26,7 @@ WD_MS = 200
 
 def session(url, address, **kw):
     m = BusOptions(url, "19200", 2, None, None, False, False, 0, False).open_master()
-    return DriveSession(m, address, watchdog_ms=WD_MS, cycle_hz=20, handle_signals=False, **kw)
+    return DriveStation(m, address, watchdog_ms=WD_MS, cycle_hz=20, handle_signals=False, **kw)
 
 
 def commloss(url, address, hz=20.0, **kw):

@@ -15,7 +15,7 @@ from click.testing import CliRunner
 from profidrive_cli.cli.common import BusOptions
 from profidrive_cli.cli.main import cli
 from profidrive_cli.drives.base import DriveError
-from profidrive_cli.session import DriveSession
+from profidrive_cli.session import DriveStation
 from profidrive_cli.session.commloss import run_commloss
 
 URL = "sim://?timing=virtual"
@@ -25,7 +25,7 @@ TOL = 0.25 + 0.5 * 0.2          # the default tolerance at a 200 ms watchdog
 
 def session(url, address, baud="19200", **kw):
     m = BusOptions(url, baud, 2, None, None, False, False, 0, False).open_master()
-    return DriveSession(m, address, watchdog_ms=WD_MS, cycle_hz=20, handle_signals=False, **kw)
+    return DriveStation(m, address, watchdog_ms=WD_MS, cycle_hz=20, handle_signals=False, **kw)
 
 
 def run(*args):

@@ -9,7 +9,7 @@ import pytest
 
 from profidrive_cli.cli.common import BusOptions
 from profidrive_cli.drives.profidrive.words import Ctw, Stw
-from profidrive_cli.session import DriveSession
+from profidrive_cli.session import DriveStation
 from profidrive_cli.session.cycle import MeteredChannel
 
 
@@ -107,10 +107,10 @@ def flag_ops_forbidden(monkeypatch):
 def test_a_cycle_does_no_flag_arithmetic(sim, flag_ops_forbidden, address):
     on, calls = flag_ops_forbidden
     m = BusOptions("sim://", "19200", 2, None, None, False, False, 0, False).open_master()
-    with DriveSession(m, address, handle_signals=False, cycle_hz=0) as s:
-        s.start(20.0)
+    with DriveStation(m, address, handle_signals=False, cycle_hz=0) as s:
+        s.motion.start(20.0)
         on[0] = True
-        samples = [s.poll() for _ in range(200)]
+        samples = [s.motion.poll() for _ in range(200)]
         on[0] = False
         assert any(x.status.running for x in samples)
         assert calls == []

@@ -1,4 +1,4 @@
-"""The safe stop's escalation time, end to end through DriveSession on the simulated bus.
+"""The safe stop's escalation time, end to end through DriveStation on the simulated bus.
 
 A drive that does not come to a stop is coasted after 1.5 x its deceleration time (scaled by the
 speed it was running at) + 3 s, at least 5 s and at most 600 s; 30 s when the deceleration time
@@ -10,7 +10,7 @@ simulator) measures how long it really waited before coasting.
 import pytest
 
 from profidrive_cli.cli.common import BusOptions
-from profidrive_cli.session import DriveSession
+from profidrive_cli.session import DriveStation
 
 URL = "sim://?timing=virtual"
 
@@ -20,7 +20,7 @@ def open_session(address, **kw):
     kw.setdefault("handle_signals", False)
     kw.setdefault("watchdog_ms", 5000)     # a few cycles a second: the watchdog must outlast them
     kw.setdefault("cycle_hz", 4)
-    return DriveSession(m, address, **kw)
+    return DriveStation(m, address, **kw)
 
 
 def stuck_stop(sim, address):

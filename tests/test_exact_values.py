@@ -12,7 +12,7 @@ import pytest
 from profidrive_cli import UsageError
 from profidrive_cli.drives.profile import load_profile
 from profidrive_cli import session as S
-from profidrive_cli.session import DriveSession
+from profidrive_cli.session import Parameters, DriveStation
 from profidrive_cli.drives.values import danger, value_problem
 
 from test_drive_cmds import pdrive  # noqa: F401  (the fixture: main() as a user runs it)
@@ -150,7 +150,7 @@ def test_restore_lists_every_problem_identity_unknown_readonly_rounding(sim, tmp
     f.write_text("pdrive_dump: 1\nstation: {address: 3, profile: fuji-opc-g1-pdp, ident: '0x1234'}\n"
                  "parameters:\n  F07: {value: 2.55}\n  ZZ99: {value: 1}\n  PNU918: {value: 3}\n"
                  "  F08: {value: 7.5}\n")
-    doc = DriveSession.load_dump(f)
+    doc = Parameters.load_dump(f)
     with session(3) as s:
         with pytest.raises(getattr(S, 'RestoreRefused', UsageError)) as ei:
             s.restore(doc)
@@ -166,7 +166,7 @@ def test_restore_lists_every_problem_identity_unknown_readonly_rounding(sim, tmp
 def test_restore_refuses_stop_only_rows_while_the_motor_runs(sim, tmp_path):
     f = tmp_path / "f03.yaml"
     f.write_text("parameters:\n  F08: {value: 7.5}\n  F03: {value: 50.0}\n")
-    doc = DriveSession.load_dump(f)
+    doc = Parameters.load_dump(f)
     with session(3) as s:
         s.start(10.0)
         with pytest.raises(getattr(S, 'RestoreRefused', UsageError)) as ei:
@@ -230,7 +230,7 @@ def test_every_cut_of_a_dump_is_refused(sim, pdrive, tmp_path):
     assert pdrive("param", "dump", "3", "-o", str(f)).exit_code == 0
     text = f.read_text()
     assert text.endswith("end: pdrive_dump\n")
-    DriveSession.load_dump(f)                                # the whole file loads
+    Parameters.load_dump(f)                                # the whole file loads
     cuts = set()
     pos = 0
     for line in text.splitlines(keepends=True):
@@ -241,7 +241,7 @@ def test_every_cut_of_a_dump_is_refused(sim, pdrive, tmp_path):
     for c in cuts:
         cut.write_text(text[:c])
         with pytest.raises(UsageError):
-            DriveSession.load_dump(cut)
+            Parameters.load_dump(cut)
     r = pdrive("param", "restore", "3", str(cut))
     assert r.exit_code == 2
 
@@ -250,10 +250,10 @@ def test_a_dump_with_a_wrong_count_is_refused(tmp_path):
     f = tmp_path / "c.yaml"
     f.write_text("pdrive_dump: 2\ncount: 2\nparameters:\n  F07: {value: 2.5}\nend: pdrive_dump\n")
     with pytest.raises(UsageError, match="count: 2.*1 parameter"):
-        DriveSession.load_dump(f)
+        Parameters.load_dump(f)
     f.write_text("pdrive_dump: 2\ncount: 1\nparameters:\n  F07: {value: 2.5}\n")
     with pytest.raises(UsageError, match="incomplete"):
-        DriveSession.load_dump(f)
+        Parameters.load_dump(f)
 
 
 OLD = b"keep me: the previous dump\n"

@@ -17,7 +17,7 @@ Family-keyed tables and getattr duck-typing on a session or a Drive, counted by 
 safestop._DECEL_CODES / _COMM_LOSS_WORDS and commloss_reaction._ACCEL_CODES became Drive.ramp_param /
 ramp_codes and Drive.comm_loss_words; cfg.ramps in safestop.read_decel / commloss_reaction.read_accel
 Drive.ramp_param; cycle.make_sample's drive._fmax Drive.speed_scale_hz; bringup's getattr(sess,
-"dp_sync" / "dp_freeze" / "log_extra") attributes DriveSession declares; safestop's callback_error /
+"dp_sync" / "dp_freeze" / "log_extra") attributes DriveStation declares; safestop's callback_error /
 after_stop SafeStop's own; bringup's track_motion wrapper Drive.on_motion. Step 2 (Parameters) turned
 backup.py's `hasattr(params, "line_of")` into isinstance(LineDict), the getattr(drive, "fmt" / "ppo" /
 "last_area") dispatches of session/monitors.py into Drive hooks (input_words, pzd_input_count,

@@ -360,13 +360,13 @@ def test_importing_link_loads_nothing_of_sim_and_sim_urls_still_open():
 
 #: the CLI's drive commands and their rendering: they get their drives through the API (an api.Bus from
 #: cli/common.py BusOptions.open_bus; Bus.drive, Bus.session), so they import nothing of fdl / link / dp
-#: and build no DriveSession and no Master themselves. Bus-level commands (scan, sniff, bus_cmds, doctor,
+#: and build no DriveStation and no Master themselves. Bus-level commands (scan, sniff, bus_cmds, doctor,
 #: wireshark, sim, decode) and cli/common.py (the port, --trace, --baud auto) may keep the lower imports.
 DRIVE_COMMANDS = ("drive_cmds", "commloss_cmd", "checklist_cmd", "config_cmd", "render_drive",
                   "audit_cmd", "render_multi", "run_plot", "run_torque", "jsonout", "names", "run_cmd", "jog_cmd",
                   "run_multi", "fleet_cmd")
 LOWER = ("fdl", "link", "dp")
-BUILT_BELOW = ("DriveSession", "Master")
+BUILT_BELOW = ("DriveStation", "Master")
 
 
 def _constructions(path: Path, names: tuple[str, ...]) -> list[tuple[int, str]]:
@@ -398,7 +398,7 @@ def test_the_cli_drive_commands_stand_on_the_api():
 
 def test_the_checklist_stands_on_the_sessions_the_front_door_opens():
     # every station handle has its session (api.Bus.session in pdrive): no `session is None` branch,
-    # no getattr(h, "session", None), and no DriveSession or Master built in checklist/
+    # no getattr(h, "session", None), and no DriveStation or Master built in checklist/
     bad = []
     for m, path in MODULES.items():
         if layer_of(m) != "checklist":

@@ -171,7 +171,7 @@ class FakeDrive:
 
 
 class Station(StationLines):
-    """The station Motion reads (motion.MotionStation), with its Motion as DriveSession builds it."""
+    """The station Motion reads (motion.MotionStation), with its Motion as DriveStation builds it."""
 
     def __init__(self, drive=None, profile="fuji-opc-g1-pdp", layout="ppo1", clock=None):
         self.drive = drive

@@ -1,6 +1,6 @@
 """session/safestop.py sans-IO, with a scripted drive on a fake clock: the escalation time rule,
 the normal stop / coast escalation and its messages, the shutdown on every way out. Reached through
-session/motion.py's Motion (a SafeStop) on a fake station, as DriveSession builds it.
+session/motion.py's Motion (a SafeStop) on a fake station, as DriveStation builds it.
 
 Expected values are worked by hand from the documented rule (docs/commands.md "the safe stop",
 tests/test_escalation.py): wait 1.5 x the deceleration time (scaled by the speed it ran at, at most
@@ -178,7 +178,7 @@ class StationLines:
 
 
 class Session(StationLines):
-    """The station Motion reads (motion.MotionStation), with its Motion as DriveSession has it.
+    """The station Motion reads (motion.MotionStation), with its Motion as DriveStation has it.
     may_run: the drive was told to turn (Drive.on_motion, as a start or jog does). stop_result:
     None runs Motion's own stop; a StopReport / exception scripts it (the shutdown's tests)."""
 
@@ -218,7 +218,7 @@ class Session(StationLines):
             if may_run:
                 drive.turn()
 
-    # what DriveSession delegates to its Motion
+    # what DriveStation delegates to its Motion
     final_status = property(lambda self: self.motion.final_status,
                             lambda self, v: setattr(self.motion, "final_status", v))
     stop_report = property(lambda self: self.motion.stop_report,

@@ -1,4 +1,4 @@
-"""session.DriveSession on the in-process simulated bus: station choice, profile and layout
+"""session.DriveStation on the in-process simulated bus: station choice, profile and layout
 checks, cycle rate, the safe stop on every way out, parameters, dump / restore."""
 
 import csv
@@ -9,7 +9,7 @@ import pytest
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.cli.common import BusOptions
 from profidrive_cli.drives.base import DriveError
-from profidrive_cli.session import (DriveSession, SessionTerminated, find_drive_stations,
+from profidrive_cli.session import (Parameters, DriveStation, SessionTerminated, find_drive_stations,
                                     resolve_layout, wire_limit_hz)
 from profidrive_cli.drives.profile import load_profile
 from profidrive_cli.fdl.timing import wire_time_data_exchange
@@ -29,7 +29,7 @@ def session(address=None, port="sim://", **kw):
     """A session; unpaced (cycle_hz=0, as the parameter commands use it) unless a rate is given."""
     kw.setdefault("handle_signals", False)
     kw.setdefault("cycle_hz", 0)
-    return DriveSession(master(port), address, **kw)
+    return DriveStation(master(port), address, **kw)
 
 
 def drive_model(buses, address, url="sim://"):
@@ -85,7 +85,7 @@ def test_absent_station_is_one_line():
 
 
 def test_a_station_locked_by_another_master_fails_fast(sim):
-    other = DriveSession(master(address=1), 3, handle_signals=False, cycle_hz=0).open()
+    other = DriveStation(master(address=1), 3, handle_signals=False, cycle_hz=0).open()
     try:
         with pytest.raises(BusError, match="did not reach data exchange: locked by master 1"):
             with session(3):
@@ -281,7 +281,7 @@ def test_dump_compare_restore(sim, tmp_path):
     with session(6) as s:
         s.write_param("F002", 2.0)
         s.write_param("A004", 60)
-    loaded = DriveSession.load_dump(f)
+    loaded = Parameters.load_dump(f)
     with session(6) as s:
         rows = {r.code: r for r in s.compare(loaded)}
         assert rows["F002"].result == "differs" and rows["F002"].drive_value == 2.0
@@ -301,7 +301,7 @@ def test_restore_refuses_a_file_of_another_device(sim, tmp_path):
     f = tmp_path / "y.yaml"
     f.write_text("pdrive_dump: 1\nstation: {address: 7, profile: yaskawa-si-p1}\n"
                  "parameters:\n  C1-01: {value: 1.0}\n")
-    doc = DriveSession.load_dump(f)
+    doc = Parameters.load_dump(f)
     with session(3) as s:
         with pytest.raises(UsageError, match="dumped from a yaskawa-si-p1 station"):
             s.restore(doc)
@@ -311,10 +311,10 @@ def test_dump_file_errors_name_file_and_line(tmp_path):
     f = tmp_path / "bad.yaml"
     f.write_text("parameters:\n  F07: fast\n")
     with pytest.raises(UsageError, match=r"bad.yaml:2: F07: the value must be a number"):
-        DriveSession.load_dump(f)
+        Parameters.load_dump(f)
     f.write_text("hello: 1\n")
     with pytest.raises(UsageError, match="not a pdrive parameter file"):
-        DriveSession.load_dump(f)
+        Parameters.load_dump(f)
 
 
 def test_fault_history_and_clear():

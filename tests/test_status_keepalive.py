@@ -14,7 +14,7 @@ from click.testing import CliRunner
 from profidrive_cli.api import bus as api_bus
 from profidrive_cli.cli.main import cli
 from profidrive_cli.dp import poller
-from profidrive_cli.session import DriveSession
+from profidrive_cli.session import Motion
 
 
 def test_the_keepalive_thread_keeps_off_the_master_while_status_reads(monkeypatch):
@@ -28,7 +28,7 @@ def test_the_keepalive_thread_keeps_off_the_master_while_status_reads(monkeypatc
             foreign.set()
         return step(self, st)
 
-    status = DriveSession.status
+    status = Motion.status
 
     def slow_status(self):
         reading[0] = True
@@ -42,7 +42,7 @@ def test_the_keepalive_thread_keeps_off_the_master_while_status_reads(monkeypatc
             reading[0] = False
 
     monkeypatch.setattr(poller.Master, "step", watched_step)
-    monkeypatch.setattr(DriveSession, "status", slow_status)
+    monkeypatch.setattr(Motion, "status", slow_status)
     r = CliRunner().invoke(cli, ["status", "3", "--port", "sim://", "--json"])
     assert r.exit_code == 0, r.output
     assert '"station": 3' in r.output

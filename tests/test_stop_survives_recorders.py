@@ -217,9 +217,9 @@ def test_run_with_a_log_that_fails_mid_run_stops_the_drive(capsys, monkeypatch, 
 
 def _session(**kw):
     from profidrive_cli.cli.common import BusOptions
-    from profidrive_cli.session import DriveSession
+    from profidrive_cli.session import DriveStation
     m = BusOptions("sim://", "19200", 2, None, None, False, False, 0, False).open_master()
-    return DriveSession(m, 3, handle_signals=False, cycle_hz=0, **kw)
+    return DriveStation(m, 3, handle_signals=False, cycle_hz=0, **kw)
 
 
 def _turn(s, sim):

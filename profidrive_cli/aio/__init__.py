@@ -329,7 +329,7 @@ class AsyncDrive:
         """The stop after a cancelled run, and its line through on_message (the caller gets a
         CancelledError, not the StopResult): the words of the stop on close."""
         self.sync.stop()
-        r = self.sync.session.stop_report
+        r = self.sync.session.motion.stop_report
         if r is not None:
             self.sync.session.say(stop_words(self.station, r))
 

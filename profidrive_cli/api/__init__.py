@@ -14,7 +14,7 @@
     # leaving the block (also by an exception): every drive this bus started is stopped safely
 
 The api layer stands on session/ and bustools/, and checklist/ and cli/ on it (PLAN in
-tests/test_layering.py): built on session/ (DriveSession), it never prompts and never prints. It is
+tests/test_layering.py): built on session/ (DriveStation), it never prompts and never prints. It is
 pdrive's own front door too: the master is built in one place (make_master), and the CLI's drive
 commands and the checklist get their stations from a Bus (Bus.drive, or Bus.session for the session
 level; docs/api.md). Errors are the CLI's: UsageError (bad input,

@@ -39,7 +39,7 @@ if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.api.drive import Drive
     from profidrive_cli.dp.poller import Master
     from profidrive_cli.link.base import Link
-    from profidrive_cli.session import DriveSession
+    from profidrive_cli.session import DriveStation
     from profidrive_cli.session.group import Group
     from profidrive_cli.session.safestop import StopReport
     from profidrive_cli.session.signals import SignalGuard
@@ -199,7 +199,7 @@ class Bus:
     def _close_unclosed(self, when: str) -> None:
         if self._closed:
             return
-        started = sorted(a for a, d in self._drives.items() if d.session.may_run)
+        started = sorted(a for a, d in self._drives.items() if d.session.motion.may_run)
         warnings.warn(f"pdrive: the bus on {self.port} was never closed; pdrive stops "
                       f"{'the drives it started (' + ', '.join(map(str, started)) + ')' if started else 'it'} {when} "
                       f"(use `with open_bus(...)` or bus.close())", ResourceWarning, source=self)
@@ -312,7 +312,7 @@ class Bus:
         if isinstance(exc, LinkLost):
             return None
         sessions = [d.session for d in self._drives.values() if d.session.channel is not None]
-        running = [s for s in sessions if s.may_run and not s.link_lost and s.drive is not None]
+        running = [s for s in sessions if s.motion.may_run and not s.link_lost and s.drive is not None]
         if not running:
             return None
         if exc is not None:
@@ -342,7 +342,7 @@ class Bus:
         except BusError as e:
             self._message(f"stop: {e}; each drive not yet stopped gets its own stop")
         for s in running:
-            r = s.stop_report
+            r = s.motion.stop_report
             if r is not None and r.stopped:
                 s.say(stop_words(_address(s), r))
         return None
@@ -407,7 +407,7 @@ class Bus:
         watchdog_ms: the DP watchdog (default API_WATCHDOG_MS: generous, as only the keep-alive
         thread holds the station between calls). The same station twice: the same Drive."""
         from profidrive_cli.api.drive import Drive
-        from profidrive_cli.session import DriveSession
+        from profidrive_cli.session import DriveStation
         with self._call():
             self._check_open()
             if station is not None and (isinstance(station, bool) or not isinstance(station, int)
@@ -420,7 +420,7 @@ class Bus:
                 defaults = {k: s.value for k, s in self.settings.station_defaults(station).items()}
             if layout is None and ppo is None:
                 layout = defaults.get("layout")
-            sess = DriveSession(self.master, station, profile=profile or defaults.get("profile"),
+            sess = DriveStation(self.master, station, profile=profile or defaults.get("profile"),
                                 layout=layout, ppo=ppo, watchdog_ms=watchdog_ms,
                                 cycle_hz=cycle_hz, stop_timeout=stop_timeout, close_link=False,
                                 handle_signals=False, on_message=self._message, env=self.env)
@@ -470,12 +470,12 @@ class Bus:
                 layout: str | None = None, ppo: int | None = None, fmt: str | None = None,
                 watchdog_ms: float = 500, cycle_hz: float | None = None,
                 stop_timeout: float | None = None, handle_signals: bool = True,
-                before_connect: Callable[["DriveSession"], None] | None = None,
+                before_connect: Callable[["DriveStation"], None] | None = None,
                 on_message: Callable[[str], None] | None = None,
                 log_csv: str | Path | None = None,
-                own_port: bool = False) -> "DriveSession":
+                own_port: bool = False) -> "DriveStation":
         """The station at the session level, for tools (the CLI's drive commands, the checklist):
-        a session.DriveSession on this bus's master, not yet opened. Use it as a context manager:
+        a session.DriveStation on this bus's master, not yet opened. Use it as a context manager:
         it finds the station, brings it to data exchange (before_connect(session) runs first, once
         the profile is known: a confirmation) and, on the way out, stops the drive safely and
         releases the station. Beside drive(): progress callbacks, on_message, the --log CSV, the
@@ -486,7 +486,7 @@ class Bus:
         sessions; False when the caller handles signals). own_port=True: the session takes the
         port (a tool on one station: the CLI's drive commands): its exit closes it, and this bus is
         done at once (closed; it must not have opened a drive)."""
-        from profidrive_cli.session import DriveSession
+        from profidrive_cli.session import DriveStation
         with self._call():
             self._check_open()
             if own_port and self._drives:
@@ -496,7 +496,7 @@ class Bus:
                 if station is not None and (isinstance(station, bool) or not isinstance(station, int)
                                             or not 0 <= station <= 125):
                     raise UsageError(f"station {station!r} is not a bus address 0..125")
-                sess = DriveSession(self.master, station, profile=profile, layout=layout, ppo=ppo,
+                sess = DriveStation(self.master, station, profile=profile, layout=layout, ppo=ppo,
                                     fmt=fmt, watchdog_ms=watchdog_ms, cycle_hz=cycle_hz,
                                     stop_timeout=stop_timeout, close_link=own_port,
                                     handle_signals=handle_signals, before_connect=before_connect,
@@ -585,12 +585,12 @@ def stop_words(address: int, r: "StopReport") -> str:
     return f"station {address}: could not confirm the stop: {r.message}"
 
 
-def _address(sess: "DriveSession") -> int:
+def _address(sess: "DriveStation") -> int:
     assert sess.address is not None                 # an opened drive's session found its station
     return int(sess.address)
 
 
-def _speed_percent(sess: "DriveSession") -> float | None:
+def _speed_percent(sess: "DriveStation") -> float | None:
     """The speed the drive last reported, in % (sizes its stop time as safestop.stop does)."""
     d = sess.drive
     last = getattr(d, "last_status", None) or getattr(d, "last", None)

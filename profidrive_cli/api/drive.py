@@ -1,4 +1,4 @@
-"""Drive: one drive station in data exchange on a Bus (a session.DriveSession underneath): status,
+"""Drive: one drive station in data exchange on a Bus (a session.DriveStation underneath): status,
 run / stop, parameters, faults. Every call holds the bus lock; writes on a real port need the bus
 opened with allow_real_port_writes=True. The safe stop of a drive this API started happens on
 Bus.close() (also on an exception leaving the `with`), or on Drive.close()."""
@@ -19,13 +19,13 @@ if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.drives.profile import Profile
     import threading
 
-    from profidrive_cli.session import DriveSession, Sample
+    from profidrive_cli.session import DriveStation, Sample
 
 #: run(wait=True) without a timeout waits at most this long for the reference
 DEFAULT_RUN_TIMEOUT_S = 60.0
 
 
-def fmax_readable(session: "DriveSession") -> bool:
+def fmax_readable(session: "DriveStation") -> bool:
     """The drive's own maximum frequency can be read (a parameter channel and a parameter number
     for the profile's max-frequency parameter): an fmax default from the config file then stays
     unused (an fmax given explicitly is checked against the drive's, with a warning)."""
@@ -41,14 +41,14 @@ def fmax_readable(session: "DriveSession") -> bool:
 class Drive:
     """A drive station opened with Bus.drive(); see docs/api.md."""
 
-    def __init__(self, bus: Any, session: "DriveSession", fmax: float | None = None):
+    def __init__(self, bus: Any, session: "DriveStation", fmax: float | None = None):
         self._bus = bus
         #: the session underneath (internal: not part of the stable API)
         self.session = session
         self._fmax_override = fmax
         self._closed = False
         if fmax is not None:
-            session.fmax(fmax)
+            session.motion.fmax(fmax)
 
     # -- identity ---------------------------------------------------------------------------------
     @property
@@ -87,7 +87,7 @@ class Drive:
         """The frequency 100 % stands for (read from the drive where it can be)."""
         with self._bus._call():
             self._check()
-            return self.session.fmax(self._fmax_override)[0]
+            return self.session.motion.fmax(self._fmax_override)[0]
 
     @property
     def warnings(self) -> list[str]:
@@ -115,7 +115,7 @@ class Drive:
         """One read of the status (the current fault named where the card can say it)."""
         with self._bus._call():
             self._check()
-            return self._status(self.session.status())
+            return self._status(self.session.motion.status())
 
     # -- motion -------------------------------------------------------------------------------------
     def run(self, hz: float | None = None, *, percent: float | None = None, wait: bool = False,
@@ -142,15 +142,15 @@ class Drive:
         with self._bus._call():
             self._check()
             s = self.session
-            pct = float(percent) if percent is not None else s.percent_for_hz(float(v),
+            pct = float(percent) if percent is not None else s.motion.percent_for_hz(float(v),
                                                                                self._fmax_override)
             self._bus._check_write(f"run station {self.station} at "
                                    f"{f'{hz:g} Hz' if hz is not None else f'{percent:g} %'}")
-            if s.may_run:
-                s.set_reference(pct)
-                sample = s.poll()
+            if s.motion.may_run:
+                s.motion.set_reference(pct)
+                sample = s.motion.poll()
             else:
-                sample = s.start(pct)
+                sample = s.motion.start(pct)
             if wait:
                 limit = DEFAULT_RUN_TIMEOUT_S if timeout is None else float(timeout)
                 end = sample.t + limit
@@ -174,7 +174,7 @@ class Drive:
                                          f"{' Hz' if sample.reference_hz is not None else ' %'} not "
                                          f"reached within {limit:g} s (actual "
                                          f"{'-' if act is None else f'{act:g} Hz'})")
-                    sample = s.poll()
+                    sample = s.motion.poll()
                     if not sample.status.fault:
                         reach.feed(sample.t, sample.actual_percent)
             return self._status(sample)
@@ -184,7 +184,7 @@ class Drive:
         deceleration time) until the drive reports stopped; a coast stop when it does not."""
         with self._bus._call():
             self._check()
-            r = self.session.stop(timeout=timeout)
+            r = self.session.motion.stop(timeout=timeout)
             return StopResult(r.how, bool(r.stopped), round(r.seconds, 3), r.message)
 
     # -- parameters --------------------------------------------------------------------------------
@@ -216,7 +216,7 @@ class Drive:
         means several)."""
         with self._bus._call():
             self._check()
-            cur = self.session.status().status
+            cur = self.session.motion.status().status
             hist = self.session.fault_history()
             return Faults(self.station, bool(cur.fault), cur.fault_code, cur.state,
                           tuple(Fault(str(r.position), int(r.raw), tuple(r.codes), tuple(r.meanings))
@@ -260,7 +260,7 @@ class Drive:
                 return None
             self._bus._drives.pop(self.station, None)
             self._close(None)
-            r = self.session.stop_report
+            r = self.session.motion.stop_report
             return None if r is None else StopResult(r.how, bool(r.stopped), round(r.seconds, 3),
                                                      r.message)
 

@@ -1,6 +1,6 @@
 """Bus-level tools: what pdrive does with a PROFIBUS line without a drive session -- listening to it,
 decoding what goes by, watching the live list, handing it to Wireshark. No module here opens a
-DriveSession, starts a drive or writes a parameter; the passive ones never transmit.
+DriveStation, starts a drive or writes a parameter; the passive ones never transmit.
 
 Its place (tests/test_layering.py): beside session/. It may import link, fdl, dp, gsd, drives and the
 top-level modules (profidrive_cli, datafile, outfile, data, config, plot) -- nothing of session, api,

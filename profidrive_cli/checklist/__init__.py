@@ -4,7 +4,7 @@
                 file:line errors, per station
     fields.py   the field toolkit step types check their fields with (FieldChecker, ParamTarget)
     steps/      one module per step type (schema + execution), registered by name in steps.STEPS
-    runner.py   the run loop over a validated checklist on drives (through session.DriveSession),
+    runner.py   the run loop over a validated checklist on drives (through session.DriveStation),
                 safe stop and results
     report.py   JSON, Markdown and JUnit XML reports of a run
 

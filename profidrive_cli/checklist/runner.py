@@ -39,13 +39,13 @@ if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.api.bus import Bus
     from profidrive_cli.checklist.fields import ParamTarget
     from profidrive_cli.drives.base import Drive, DriveStatus
-    from profidrive_cli.session import DriveSession
+    from profidrive_cli.session import DriveStation
 
 PASSED, FAILED, ERROR, SKIPPED, NOT_RUN = "passed", "failed", "error", "skipped", "not run"
 
 
 class Terminated(KeyboardInterrupt):
-    """SIGTERM between stations (while no DriveSession is open), turned into an interrupt."""
+    """SIGTERM between stations (while no DriveStation is open), turned into an interrupt."""
 
 
 def _interrupts() -> tuple[type[BaseException], ...]:
@@ -204,12 +204,12 @@ class RunResult:
 @dataclass
 class StationHandle:
     """What open_station yields: the Drive, the identity the bus reported for the station, and the
-    session behind them (api.Bus.session: a session.DriveSession), whose checked write_param, save,
+    session behind them (api.Bus.session: a session.DriveStation), whose checked write_param, save,
     safe stop, counters and master the steps use. closed(): after the station is left, what the safe
     stop on the way out did (dict for the report)."""
     drive: Drive
     identity: dict[str, Any]  # address, ident (int), profile (name), gsd (file name or None), layout, ...
-    session: DriveSession
+    session: DriveStation
     closed: Callable[[], dict[str, Any]] | None = None
 
 
@@ -412,7 +412,7 @@ class Runner:
             st = d.status()
             how = "already stopped"
             if st.running or not st.stopped:
-                rep = handle.session.stop()
+                rep = handle.session.motion.stop()
                 how = f"{rep.how} stop: {rep.message}"
                 st = rep.status or d.status()
             sr.final_status = {**status_dict(st), "stop": how}
@@ -468,7 +468,7 @@ def _snapshot_targets(spec: StationSpec) -> list[ParamTarget]:
 
 
 # =============================================================================================
-# opening stations through session.DriveSession
+# opening stations through session.DriveStation
 # =============================================================================================
 
 
@@ -499,7 +499,7 @@ def session_opener(bus: Bus, *, cycle_hz: float | None = None, watchdog_ms: floa
             s.warn(f"{spec.name}: {raised}")
 
         def closed() -> dict[str, Any]:
-            rep = s.stop_report
+            rep = s.motion.stop_report
             if rep is None:
                 return {}
             out: dict[str, Any] = {"exit_stop": rep.how, "exit_stop_message": rep.message}
@@ -516,8 +516,8 @@ def session_opener(bus: Bus, *, cycle_hz: float | None = None, watchdog_ms: floa
     return open_station
 
 
-def session_identity(s: DriveSession) -> dict[str, Any]:
-    """The identity a DriveSession found: address, ident, profile, layout, GSD file of the ident, DP state."""
+def session_identity(s: DriveStation) -> dict[str, Any]:
+    """The identity a DriveStation found: address, ident, profile, layout, GSD file of the ident, DP state."""
     gsd = None
     try:
         from profidrive_cli.gsd.library import find_path_by_ident

@@ -1,6 +1,6 @@
 """pdrive run / status / param (get, set, dump, restore, diff) / faults — drive operations from the shell.
 
-All protocol and safety logic lives in session/ (DriveSession); this module parses the
+All protocol and safety logic lives in session/ (DriveStation); this module parses the
 command line, asks for confirmation before writing to a real port, and renders (render_drive.py).
 """
 
@@ -20,10 +20,10 @@ from profidrive_cli.cli import render_drive as R
 # re-exported (explicitly, for mypy): audit_cmd imports them from here
 from profidrive_cli.cli.drive_opts import _terminations as _terminations, drive_options as drive_options
 from profidrive_cli.drives.base import DriveError
-from profidrive_cli.session import (DriveSession, RestoreInterrupted, RestoreRefused,
+from profidrive_cli.session import (DriveStation, RestoreInterrupted, RestoreRefused,
                                     SessionTerminated)
 from profidrive_cli.session.backup import CARD_MANUAL, default_source, nothing_compared
-from profidrive_cli.session.dumpfile import not_dumped_words, write_dump
+from profidrive_cli.session.dumpfile import load_dump, not_dumped_words, write_dump
 from profidrive_cli.session.restore import scope_problem
 from profidrive_cli.outfile import check_output_path
 
@@ -32,8 +32,8 @@ if TYPE_CHECKING:
     from profidrive_cli.session.params import ParamRow
 
 T = TypeVar("T")
-#: a before-connect callback (DriveSession's before_connect)
-Before = Callable[[DriveSession], None]
+#: a before-connect callback (DriveStation's before_connect)
+Before = Callable[[DriveStation], None]
 #: the progress callback of a parameter pass: (done, total, code)
 ProgressFn = Callable[[int, int, str], None]
 
@@ -50,7 +50,7 @@ def _message(text: str) -> None:
 def _confirmer(opts: BusOptions, yes: bool, what: str) -> Before:
     """before_connect callback: writing to a real port needs --yes or a 'y' on the terminal
     (common.confirm_real_port: the same question io and checklist run ask)."""
-    def before(session: DriveSession) -> None:
+    def before(session: DriveStation) -> None:
         assert session.profile is not None      # identify() chose it before the before-connect call
         confirm_real_port(opts.port, yes, f"{what} — station {session.address} "
                                           f"({session.profile.name}) on {opts.port}")
@@ -59,7 +59,7 @@ def _confirmer(opts: BusOptions, yes: bool, what: str) -> Before:
 
 def _session(opts: BusOptions, address: int | None, profile_name: str | None, ppo: int | None,
              fmt: str | None, watchdog_ms: float, *, cycle_hz: float | None = 0.0,
-             before: Before | None = None, log: str | None = None) -> DriveSession:
+             before: Before | None = None, log: str | None = None) -> DriveStation:
     """The station at the session level through the API (Bus.session on the bus of these options),
     not yet opened: `with` it opens the station; its exit stops the drive safely, releases the
     station and closes the port (own_port)."""
@@ -75,7 +75,7 @@ def _session(opts: BusOptions, address: int | None, profile_name: str | None, pp
 
 
 @contextlib.contextmanager
-def run_ending(session: DriveSession, view: RunView, end: dict[str, Any], started: Callable[[], bool],
+def run_ending(session: DriveStation, view: RunView, end: dict[str, Any], started: Callable[[], bool],
                extra: Callable[[], dict[str, Any]] | None = None) -> Iterator[None]:
     """How a run or a jog ends, whatever way it ends: the reason (SIGTERM, Ctrl-C, a bus error), the
     stop report, the final state, counters and warnings in `end`, and the view's last word.
@@ -93,10 +93,10 @@ def run_ending(session: DriveSession, view: RunView, end: dict[str, Any], starte
         end["reason"] = f"error: {e}"
         raise
     finally:
-        rep = session.stop_report
+        rep = session.motion.stop_report
         end["stop"] = rep.to_dict() if rep is not None else None
         end["stopped"] = bool(rep.stopped) if rep is not None else not started()
-        fs = session.final_status
+        fs = session.motion.final_status
         if fs is not None:
             end["state"] = fs.state
             end["fault"] = fs.fault
@@ -146,7 +146,7 @@ def status_cmd(opts: BusOptions, address: int | None, profile_name: str | None, 
                           watchdog_ms=watchdog_ms, cycle_hz=0.0)
         s = drive.session
         with bus._lock:     # as Drive.status: the keep-alive thread keeps off the master meanwhile
-            sample = s.status()
+            sample = s.motion.status()
         d = R.status_dict(s, sample)
     if opts.json:
         emit_json(R.status_json(d))
@@ -226,7 +226,7 @@ def param_set(opts: BusOptions, args: tuple[str, ...], save: bool, yes: bool, al
         raise UsageError("param set: expected [ADDRESS] CODE VALUE")
     code, text = rest
 
-    def before(session: DriveSession) -> None:
+    def before(session: DriveStation) -> None:
         # the profile is known here, the drive is not connected yet: nothing has been written;
         # a dangerous entry or a value it cannot hold is refused before anyone is asked
         what = session.params.preflight(code, text, allow_dangerous=allow_dangerous)
@@ -341,11 +341,11 @@ def param_restore(opts: BusOptions, args: tuple[str, ...], dry_run: bool, yes: b
     value, writability, motor stopped where needed): any problem and nothing is written. Each write
     is read back. Ends with a table. --only / --exclude limit it to parameter groups."""
     address, path = _file_args(args, "restore")
-    doc = DriveSession.load_dump(path)
+    doc = load_dump(path)
     only_g, excl_g = _groups_arg(only, "--only"), _groups_arg(exclude, "--exclude")
     confirm = None if dry_run else _confirmer(opts, yes, f"restore parameters from {path}")
 
-    def before(session: DriveSession) -> None:
+    def before(session: DriveStation) -> None:
         assert session.profile is not None      # identify() chose it before the before-connect call
         bad = scope_problem(session.profile, only_g, excl_g)   # before anyone is asked
         if bad:
@@ -403,7 +403,7 @@ def param_diff(opts: BusOptions, args: tuple[str, ...], defaults: bool, profile_
             raise SystemExit(1)             # nothing compared: no verdict (docs/commands.md)
         return
     address, path = _file_args(args, "diff")
-    doc = DriveSession.load_dump(path)
+    doc = load_dump(path)
     with _session(opts, address, profile_name, ppo, fmt, watchdog_ms) as s:
         rows = _with_progress(opts, "comparing", lambda prog: s.params.compare(doc, prog))
     _print_rows(opts, s, rows, "diff", False)
@@ -411,7 +411,7 @@ def param_diff(opts: BusOptions, args: tuple[str, ...], defaults: bool, profile_
         raise SystemExit(1)             # the table (or the JSON document) is the message
 
 
-def _print_rows(opts: BusOptions, s: DriveSession, rows: list[ParamRow], what: str, dry_run: bool, interrupted: str | None = None) -> None:
+def _print_rows(opts: BusOptions, s: DriveStation, rows: list[ParamRow], what: str, dry_run: bool, interrupted: str | None = None) -> None:
     counts: dict[str, int] = {}
     for r in rows:
         counts[r.result] = counts.get(r.result, 0) + 1
@@ -507,7 +507,7 @@ def faults_cmd(opts: BusOptions, address: int | None, clear: bool, yes: bool, pr
     cleared: dict[str, Any] | None = None
     with _session(opts, address, profile_name, ppo, fmt, watchdog_ms, before=before) as s:
         assert s.profile is not None            # the open session has its profile
-        cur = s.status()
+        cur = s.motion.status()
         history = s.fault_history()
         trips = s.trip_records()
         if clear:

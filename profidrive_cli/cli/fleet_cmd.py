@@ -24,7 +24,7 @@ from profidrive_cli.session import fleet
 from profidrive_cli.session.dumpfile import write_dump
 
 if TYPE_CHECKING:
-    from profidrive_cli.session.drivesession import DriveSession
+    from profidrive_cli.session.station import DriveStation
 
 #: --html writes a page: the file name says so (as checklist run --report, run --plot)
 HTML_SUFFIXES = {".html": "html", ".htm": "html"}
@@ -38,7 +38,7 @@ def fleet_group() -> None:
 
 def _read_stations(opts: BusOptions, addresses: list[int], profile_name: str | None, ppo: int | None,
                    fmt: str | None, watchdog_ms: int,
-                   each: Callable[[int, DriveSession], None]) -> dict[int, str]:
+                   each: Callable[[int, DriveStation], None]) -> dict[int, str]:
     """Open each station in turn on one bus (api.Bus.session) and call each(address, session);
     a station that cannot be read is reported and skipped: {address: why}."""
     failed: dict[int, str] = {}
@@ -76,7 +76,7 @@ def fleet_dump(opts: BusOptions, stations: str, directory: str, profile_name: st
         check_output_path(p, "-o")              # before the bus is opened
     written: dict[int, dict[str, Any]] = {}
 
-    def each(a: int, s: DriveSession) -> None:
+    def each(a: int, s: DriveStation) -> None:
         doc = s.params.dump()
         assert s.profile is not None            # an open session has its profile
         write_dump(doc, paths[a])
@@ -126,7 +126,7 @@ def fleet_diff(opts: BusOptions, source: str, golden: str | None, html_path: str
             raise UsageError(f"{source}: neither a directory nor station addresses (e.g. 3-7)") from None
         sets = []
 
-        def each(a: int, s: DriveSession) -> None:
+        def each(a: int, s: DriveStation) -> None:
             sets.append(fleet.from_dump(s.params.dump()))
 
         failed = _read_stations(opts, addresses, profile_name, ppo, fmt, watchdog_ms, each)

@@ -1,7 +1,7 @@
 """pdrive jog — the card's own jog function: held key on a terminal (deadman), --duration for scripts.
 
-All protocol and safety logic lives in session/ (DriveSession.jog / release_jog / stop, the safe stop
-on every exit in DriveSession.close, the loop in live.py); this module parses the command line, refuses
+All protocol and safety logic lives in session/ (DriveStation.jog / release_jog / stop, the safe stop
+on every exit in DriveStation.close, the loop in live.py); this module parses the command line, refuses
 a station whose card has no jog before anything is sent, asks before a real port, reads the keys and
 renders (render_drive.py).
 """
@@ -25,19 +25,19 @@ from profidrive_cli.session.live import Live
 
 if TYPE_CHECKING:
     from profidrive_cli.session.cycle import Sample
-    from profidrive_cli.session.drivesession import DriveSession
+    from profidrive_cli.session.station import DriveStation
 
 #: On a terminal the jog runs while a key is held: the terminal repeats a held key (after its
 #: auto-repeat delay, typically 250-600 ms); no key for this long counts as released and stops.
 DEADMAN_S = 0.75
 
 
-def _refuse_or_confirm(opts: BusOptions, yes: bool, what: str) -> Callable[[DriveSession], None]:
+def _refuse_or_confirm(opts: BusOptions, yes: bool, what: str) -> Callable[[DriveStation], None]:
     """before_connect: a card without jog is refused (exit 2) before the confirmation and before any
     telegram to the station; then the real-port question."""
     confirm = _confirmer(opts, yes, what)
 
-    def before(session: DriveSession) -> None:
+    def before(session: DriveStation) -> None:
         from profidrive_cli.drives.jog import jog_refusal
         assert session.profile is not None      # identify() chose it before the before-connect call
         why = jog_refusal(session.profile, session.layout)
@@ -82,11 +82,11 @@ def jog_cmd(opts: BusOptions, address: int | None, reverse: bool, duration: floa
             view.set_phase("stopping")
         view.update(sample)
     session.on_sample = stopping
-    with run_ending(session, view, end, lambda: (bool(lives) and lives[0].started) or session.may_run):
+    with run_ending(session, view, end, lambda: (bool(lives) and lives[0].started) or session.motion.may_run):
         with session as s:
             assert s.profile is not None        # the open session has its profile
-            fmax_hz, src = s.fmax()
-            speed = s.jog_speed()
+            fmax_hz, src = s.motion.fmax()
+            speed = s.motion.jog_speed()
             view.start({"address": s.address, "ident": f"0x{s.ident:04X}", "profile": s.profile.name,
                         "family": s.profile.family, "title": s.profile.title, "layout": s.layout,
                         "fmax_hz": fmax_hz, "fmax_source": src, "direction": direction,
@@ -96,7 +96,7 @@ def jog_cmd(opts: BusOptions, address: int | None, reverse: bool, duration: floa
                         "watchdog_ms": s.watchdog_ms, "duration_s": duration, "warnings": s.warnings})
             if speed is not None and mode != "json":
                 err.print(f"jog speed: {speed.code} = {R.value_text(speed.value, speed.unit)}")
-            live = Live(s, lambda: s.jog(reverse), release=s.release_jog, duration=duration,
+            live = Live(s, lambda: s.motion.jog(reverse), release=s.motion.release_jog, duration=duration,
                         on_sample=view.update, on_phase=view.set_phase)
             lives.append(live)
             if interactive:

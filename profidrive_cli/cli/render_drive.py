@@ -26,7 +26,7 @@ if TYPE_CHECKING:
 
     from profidrive_cli.drives.base import DriveStatus, FaultRecord, ParamValue
     from profidrive_cli.session.cycle import Sample
-    from profidrive_cli.session.drivesession import DriveSession
+    from profidrive_cli.session.station import DriveStation
     from profidrive_cli.session.monitors import Monitors, TripRecords
     from profidrive_cli.session.params import ParamRow
 
@@ -351,10 +351,10 @@ class KeyReader:
 # =============================================================================================
 
 
-def status_dict(session: DriveSession, sample: Sample) -> dict[str, Any]:
+def status_dict(session: DriveStation, sample: Sample) -> dict[str, Any]:
     st = sample.status
     assert session.profile is not None and session.ident is not None    # an open session found them
-    fmax, src = session.fmax() if session.drive is not None else (sample.fmax_hz, "")
+    fmax, src = session.motion.fmax() if session.drive is not None else (sample.fmax_hz, "")
     return {"address": session.address, "ident": f"0x{session.ident:04X}", "profile": session.profile.name,
             "family": session.profile.family, "title": session.profile.title, "layout": session.layout,
             "state": st.state, "running": st.running, "stopped": st.stopped, "fault": st.fault,

@@ -24,7 +24,7 @@ from profidrive_cli.session.live import NOT_REACHED, Live, end_status, fault_nam
 
 if TYPE_CHECKING:
     from profidrive_cli.session.cycle import Sample
-    from profidrive_cli.session.drivesession import DriveSession
+    from profidrive_cli.session.station import DriveStation
     from profidrive_cli.session.monitors import Monitors
 
 
@@ -106,7 +106,7 @@ def run_cmd(opts: BusOptions, address: int | tuple[int, ...] | None, profile_nam
     plotter = run_plot.RunPlot.prepare(plot_path)          # also before the bus: matplotlib, the path
     mons: list[Monitors] = []                # --monitor: checked before anything is asked or written
 
-    def before(sess: DriveSession) -> None:
+    def before(sess: DriveStation) -> None:
         from profidrive_cli.session.monitors import setup_monitors
         mons.extend([setup_monitors(sess, monitor_spec)] if monitor_spec is not None else [])
         _confirmer(opts, yes, what + (mons[0].question_note() if mons else ""))(sess)
@@ -128,18 +128,18 @@ def run_cmd(opts: BusOptions, address: int | tuple[int, ...] | None, profile_nam
                     extra=lambda: _run_extra(lives, mons)), run_plot.written_at_the_end(plotter, session):
         with session as s:
             assert s.profile is not None        # the open session has its profile
-            s.check_torque(torque, torque_limit)          # the card's reason before anything shows
+            s.motion.check_torque(torque, torque_limit)          # the card's reason before anything shows
             if fmax is None:      # the config file's: used where the drive's own is not readable,
                 cfg = opts.station_defaults(s.address)     # else only checked against it (warning)
                 fmax = cfg.get("fmax") if not fmax_readable(s) else cfg.peek("fmax")
-            fmax_hz, src = s.fmax(fmax)
+            fmax_hz, src = s.motion.fmax(fmax)
             if mons:
                 mons[0].map_cyclic()            # before the start; restored after the stop
             if percent is not None:
                 pct = percent
             else:
                 assert hz is not None           # run_torque.prepare gave a percent where no --hz
-                pct = s.percent_for_hz(hz, fmax)
+                pct = s.motion.percent_for_hz(hz, fmax)
             if reverse:
                 pct = -abs(pct)
             view.start({"address": s.address, "ident": f"0x{s.ident:04X}", "profile": s.profile.name,
@@ -157,8 +157,8 @@ def run_cmd(opts: BusOptions, address: int | tuple[int, ...] | None, profile_nam
 
             def start() -> Sample:
                 if torque_limit is not None or live.torque is not None:
-                    return s.start_torque(live.torque, torque_limit, live.percent)
-                return s.start(live.percent)
+                    return s.motion.start_torque(live.torque, torque_limit, live.percent)
+                return s.motion.start(live.percent)
 
             def on_sample(sample: Sample) -> None:
                 if mons:

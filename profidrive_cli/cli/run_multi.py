@@ -16,7 +16,7 @@ from profidrive_cli.drives.base import DriveError
 
 if TYPE_CHECKING:
     from profidrive_cli.cli.common import BusOptions
-    from profidrive_cli.session.drivesession import DriveSession
+    from profidrive_cli.session.station import DriveStation
 
 #: a --hz / --percent value: one number, or one per station
 Speeds = float | tuple[float, ...]
@@ -121,7 +121,7 @@ def run_several(opts: BusOptions, addresses: tuple[int, ...], *, hz: Speeds | No
     view = MultiView("json" if opts.json else ("live" if sys.stdout.isatty() else "text"))
     keys: list[KeyReader] = []
 
-    def confirm(sessions: list[DriveSession]) -> None:
+    def confirm(sessions: list[DriveStation]) -> None:
         names = []
         for s in sessions:
             assert s.profile is not None    # identified before the question

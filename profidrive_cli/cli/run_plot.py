@@ -16,7 +16,7 @@ from profidrive_cli.outfile import OutputWriteError, check_output_path
 if TYPE_CHECKING:
     from profidrive_cli.cli.render_drive import RunView
     from profidrive_cli.session.cycle import Sample
-    from profidrive_cli.session.drivesession import DriveSession
+    from profidrive_cli.session.station import DriveStation
     from profidrive_cli.session.monitors import Monitors
 
 
@@ -85,7 +85,7 @@ class RunPlot:
 
 
 @contextlib.contextmanager
-def written_at_the_end(plotter: RunPlot | None, session: DriveSession) -> Iterator[None]:
+def written_at_the_end(plotter: RunPlot | None, session: DriveStation) -> Iterator[None]:
     """Write the plot after the run (and its stop), on every way out. A plot that cannot be written
     after a good run is exit 1 (like --log); after a failed run it is a warning, the run's own
     error stays the one reported."""

@@ -10,9 +10,9 @@ from profidrive_cli import UsageError
 from profidrive_cli.drives.torque import NO_TORQUE
 
 if TYPE_CHECKING:
-    from profidrive_cli.session.drivesession import DriveSession
+    from profidrive_cli.session.station import DriveStation
 
-    Before = Callable[[DriveSession], None]
+    Before = Callable[[DriveStation], None]
 
 
 def prepare(hz: float | None, percent: float | None, reverse: bool, torque: float | None,
@@ -51,7 +51,7 @@ def guard(before: Before | None, torque: float | None, torque_limit: float | Non
     if torque is None and torque_limit is None:
         return before
 
-    def check_then_before(session: DriveSession) -> None:
+    def check_then_before(session: DriveStation) -> None:
         assert session.profile is not None      # identify() chose it before the before-connect call
         fam = session.profile.family
         if fam in NO_TORQUE:

@@ -42,7 +42,7 @@ class Finding:
 
 
 class AuditContext(Protocol):
-    """What a rule may use (session/audit.py provides it for a connected DriveSession)."""
+    """What a rule may use (session/audit.py provides it for a connected DriveStation)."""
 
     @property
     def drive(self) -> "Drive": ...

@@ -4,7 +4,7 @@ fdl, dp, gsd, drives, outfile and datafile -- nothing of checklist, cli, api, si
 bus-level tools without a drive session; the layer plan: tests/test_layering.py). No click and no
 rich: cli/drive_cmds.py and the checklist runner build on it.
 
-    drivesession.py  DriveSession: the station (discovery, bring-up, the metered channel, the Drive)
+    drivesession.py  DriveStation: the station (discovery, bring-up, the metered channel, the Drive)
                      composed with .motion (Motion) and .params (Parameters); its other public methods
                      hand on to those two
     station.py       StationView: the station's face its parts read (a Protocol: no import cycle)
@@ -30,12 +30,12 @@ rich: cli/drive_cmds.py and the checklist runner build on it.
 Public API (stable; everything else is internal)
 ------------------------------------------------
 
-    DriveSession(master, address=None, *, profile=None, layout=None, ppo=None, fmt=None,
+    DriveStation(master, address=None, *, profile=None, layout=None, ppo=None, fmt=None,
                  watchdog_ms=500, cycle_hz=None, stop_timeout=None, close_link=True,
                  handle_signals=True, before_connect=None, on_message=None, log_csv=None,
                  env=None)
 
-        with DriveSession(master, 5, ppo=3) as s:   # identify, Set_Prm/Chk_Cfg, Drive
+        with DriveStation(master, 5, ppo=3) as s:   # identify, Set_Prm/Chk_Cfg, Drive
         # (the CLI and the checklist get theirs from api.Bus.session(): docs/api.md)
             s.start(percent=s.percent_for_hz(30.0))
             while ...: sample = s.poll()
@@ -65,7 +65,7 @@ Public API (stable; everything else is internal)
                     SessionTerminated in the main thread; during the safe stop a second SIGINT/SIGTERM
                     escalates to a coast stop instead of interrupting it
 
-    Attributes after open: station (DriveStation), address, ident, profile, layout (name), drive
+    Attributes after open: station (Candidate), address, ident, profile, layout (name), drive
     (drives.base.Drive), channel (MeteredChannel), cycle_hz (target, 0 = unpaced), wire_hz (the bus
     limit for this station), warnings, messages, link_lost, stop_report (after stop() / close),
     final_status (the last DriveStatus seen); settable: on_sample(Sample), called on every cycle
@@ -89,7 +89,7 @@ Public API (stable; everything else is internal)
               checked before the first write (RestoreRefused(.problems), nothing written); only what
               differs is written and read back; RestoreInterrupted(.rows) when a write fails part-way
 
-    Module functions: find_drive_stations(master, first=0, last=125) -> [DriveStation];
+    Module functions: find_drive_stations(master, first=0, last=125) -> [Candidate];
     choose_profile(ident, name=None) -> (Profile, warnings); resolve_layout(profile, layout, ppo, fmt);
     wire_limit_hz(baud, out_octets, in_octets); default_cycle_hz(link, wire_hz);
     suggest_codes(profile, code); profiles_with_code(code)
@@ -101,9 +101,9 @@ from profidrive_cli.session.backup import ParamRow
 from profidrive_cli.session.cycle import (MeteredChannel, Sample, default_cycle_hz,
                                           wire_limit_hz)
 from profidrive_cli.session.cyclelog import cycle_words
-from profidrive_cli.session.discovery import (DriveStation, choose_profile, find_drive_stations,
+from profidrive_cli.session.discovery import (Candidate, choose_profile, find_drive_stations,
                                               resolve_layout)
-from profidrive_cli.session.drivesession import DEFAULT_WATCHDOG_MS, DriveSession
+from profidrive_cli.session.station import DEFAULT_WATCHDOG_MS, DriveStation
 from profidrive_cli.session.dumpfile import DUMP_END, DUMP_FORMAT
 from profidrive_cli.session.motion import Motion
 from profidrive_cli.session.parameters import Parameters
@@ -113,7 +113,7 @@ from profidrive_cli.session.safestop import StopReport
 from profidrive_cli.session.signals import SessionTerminated
 
 __all__ = [
-    "DEFAULT_WATCHDOG_MS", "DUMP_END", "DUMP_FORMAT", "DriveSession", "DriveStation", "MeteredChannel",
+    "DEFAULT_WATCHDOG_MS", "DUMP_END", "DUMP_FORMAT", "DriveStation", "Candidate", "MeteredChannel",
     "Motion", "ParamInfo", "ParamRow", "Parameters", "RestoreInterrupted", "RestoreRefused", "Sample", "SessionTerminated",
     "StopReport", "choose_profile", "cycle_words", "default_cycle_hz", "find_drive_stations",
     "profiles_with_code", "resolve_layout", "suggest_codes", "wire_limit_hz", "WritePlan",

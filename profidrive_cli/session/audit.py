@@ -1,5 +1,5 @@
 """`pdrive audit` on one connected drive: the family's rules (Drive.audit_rules, drives/audit.py)
-run over a DriveSession, reading through its Parameters; findings with their severity, code, value,
+run over a DriveStation, reading through its Parameters; findings with their severity, code, value,
 why it matters and the manual's fix. Nothing is written; the drive is not started (a rule may send
 one of the card's no-motion control words to read a status bit: drives/toyo/audit.py).
 
@@ -18,7 +18,7 @@ from profidrive_cli.drives.base import DriveError, ParamValue
 
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.drives.base import Drive
-    from profidrive_cli.session.drivesession import DriveSession
+    from profidrive_cli.session.station import DriveStation
 
 __all__ = ["AuditReport", "Skipped", "audit_session"]
 
@@ -54,7 +54,7 @@ class AuditReport:
 class _Context:
     """The AuditContext of a connected session (drives/audit.py)."""
 
-    def __init__(self, sess: "DriveSession", watchdog_s: float, cycle_s: float | None,
+    def __init__(self, sess: "DriveStation", watchdog_s: float, cycle_s: float | None,
                  max_reaction_s: float | None) -> None:
         self.sess = sess
         self._watchdog_s = watchdog_s
@@ -100,7 +100,7 @@ def _order(f: Finding) -> tuple[int, int]:
             TOPICS.index(topic) if topic in TOPICS else len(TOPICS))
 
 
-def audit_session(sess: "DriveSession", *, watchdog_s: float | None = None,
+def audit_session(sess: "DriveStation", *, watchdog_s: float | None = None,
                   cycle_s: float | None = None, max_reaction_s: float | None = None) -> AuditReport:
     """Run the family's rules on the open session `sess`. watchdog_s: the DP watchdog the master
     sets (default: the session's; either as the Set_Prm's factors give it); cycle_s: the master's bus cycle (default: the session's own

@@ -51,7 +51,7 @@ from profidrive_cli.session.commloss_reaction import (Reaction, check_bus_contro
                                                       read_accel, read_reaction)
 
 if TYPE_CHECKING:                                   # pragma: no cover
-    from profidrive_cli.session.drivesession import DriveSession
+    from profidrive_cli.session.station import DriveStation
 
 MODES = ("silence", "clear")
 OUTCOMES = ("pass", "fail", "inconclusive")
@@ -191,7 +191,7 @@ def check_args(hz: float, mode: str, timeout: float | None, tolerance: float | N
                              f"{name} {v:g} must be 0 s or more")
 
 
-def _run_to_speed(sess: "DriveSession", hz: float, pct: float, fmax_hz: float, start_timeout: float | None,
+def _run_to_speed(sess: "DriveStation", hz: float, pct: float, fmax_hz: float, start_timeout: float | None,
                   emit: Callable[[dict[str, Any]], None]) -> Sample:
     """Start and wait until at speed; says on the session's message line what it waits for and how
     long at most."""
@@ -211,11 +211,11 @@ def _run_to_speed(sess: "DriveSession", hz: float, pct: float, fmax_hz: float, s
     channel = sess.channel
     assert channel is not None                  # the session is connected
     sess.say(f"waiting for the drive to reach {hz:g} Hz (± {band:g} Hz), at most {limit:.3g} s ({why})")
-    sample = sess.start(pct)
+    sample = sess.motion.start(pct)
     emit({"event": "started", "t_s": round(sample.t, 3)})
     end = channel.now() + limit
     while True:
-        sample = sess.poll()
+        sample = sess.motion.poll()
         st = sample.status
         if st.fault:
             raise DriveError(f"station {sess.address}: the drive tripped before reaching {hz:g} Hz"
@@ -227,17 +227,17 @@ def _run_to_speed(sess: "DriveSession", hz: float, pct: float, fmax_hz: float, s
                              f"{limit:.3g} s (actual {sample.actual_hz} Hz; limit: {why})")
 
 
-def run_commloss(sess: "DriveSession", hz: float, mode: str = "silence", timeout: float | None = None,
+def run_commloss(sess: "DriveStation", hz: float, mode: str = "silence", timeout: float | None = None,
                  ack: bool = False, on_event: Callable[[dict[str, Any]], None] | None = None,
                  tolerance: float | None = None, start_timeout: float | None = None) -> CommLossResult:
-    """The whole test on an open DriveSession (see the module docstring). Raises UsageError for bad
+    """The whole test on an open DriveStation (see the module docstring). Raises UsageError for bad
     arguments before anything moves; the session's close does the safe stop on every other way out."""
     check_args(hz, mode, timeout, tolerance, start_timeout)
     emit = on_event or (lambda ev: None)
     drive, channel, address = sess.need_drive(), sess.channel, sess.address
     assert channel is not None and address is not None      # the session is connected
-    fmax_hz, _ = sess.fmax()
-    pct = sess.percent_for_hz(hz)           # refuses speeds the drive cannot hold
+    fmax_hz, _ = sess.motion.fmax()
+    pct = sess.motion.percent_for_hz(hz)           # refuses speeds the drive cannot hold
     reaction = read_reaction(sess) if mode == "silence" else clear_reaction(sess)
     check_bus_control(sess)
     wd_s = sess.watchdog_ms / 1000.0
@@ -337,7 +337,7 @@ def run_commloss(sess: "DriveSession", hz: float, mode: str = "silence", timeout
     res.final_state, res.fault_code = st.state, st.fault_code
     if st.fault and st.fault_code is None:
         try:
-            s2 = sess.status().status
+            s2 = sess.motion.status().status
             res.fault_code = s2.fault_code
         except DriveError:
             pass
@@ -348,17 +348,17 @@ def run_commloss(sess: "DriveSession", hz: float, mode: str = "silence", timeout
     # 5. leave it stopped (the stop command replaces the run outputs, also after a trip);
     #    acknowledge only when asked
     was_running = not (st.fault or st.stopped)
-    rep = sess.stop()
+    rep = sess.motion.stop()
     res.stop = dict(rep.to_dict(), needed=was_running)
     if rep.status is not None:
         res.final_state = rep.status.state
         res.fault_code = rep.status.fault_code or res.fault_code
-    if ack and sess.final_status is not None and sess.final_status.fault:
+    if ack and sess.motion.final_status is not None and sess.motion.final_status.fault:
         s3 = sess.clear_fault()
         res.acknowledged = not s3.status.fault
         res.final_state, res.fault_code = s3.status.state, s3.status.fault_code
-        if sess.stop_report is not None:
-            sess.stop_report.status = s3.status     # what the drive is left in: acknowledged
+        if sess.motion.stop_report is not None:
+            sess.motion.stop_report.status = s3.status     # what the drive is left in: acknowledged
     res.counters = dict(sess.counters)
     emit(res.to_dict())
     return res

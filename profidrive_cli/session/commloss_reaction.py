@@ -21,23 +21,23 @@ from profidrive_cli import UsageError
 from profidrive_cli.drives.base import DriveError, ParamValue, Reaction
 
 if TYPE_CHECKING:                                   # pragma: no cover
-    from profidrive_cli.session.drivesession import DriveSession
+    from profidrive_cli.session.station import DriveStation
 
 __all__ = ["Reaction", "read_reaction", "clear_reaction", "check_bus_control", "read_accel"]
 
 # -- reads ----------------------------------------------------------------------------------
-def _read(sess: "DriveSession", code: str) -> ParamValue:
+def _read(sess: "DriveStation", code: str) -> ParamValue:
     return sess.need_drive().read_param(code)
 
 
-def _readable(sess: "DriveSession", code: str) -> bool:
+def _readable(sess: "DriveStation", code: str) -> bool:
     assert sess.profile is not None
     p = sess.profile.param(code)
     return (p is not None and (p.pnu is not None or p.register is not None)
             and sess.need_drive().has_param_channel)
 
 
-def read_reaction(sess: "DriveSession") -> Reaction:
+def read_reaction(sess: "DriveStation") -> Reaction:
     """What the drive is set to do when its master goes away, read from the drive (the family's
     Drive.comm_loss_reaction: the card manuals' rules; see the profiles' decisions)."""
     d, prof = sess.need_drive(), sess.profile
@@ -55,7 +55,7 @@ def read_reaction(sess: "DriveSession") -> Reaction:
                      f"the {prof.family} family (profile {prof.name})")
 
 
-def check_bus_control(sess: "DriveSession") -> None:
+def check_bus_control(sess: "DriveStation") -> None:
     """Refuse (DriveError, before anything moves) a drive the bus cannot run (the family's
     Drive.bus_run_refusal: Fuji y98 must be 3)."""
     why = sess.need_drive().bus_run_refusal()
@@ -63,7 +63,7 @@ def check_bus_control(sess: "DriveSession") -> None:
         raise DriveError(f"station {sess.address}: {why}")
 
 
-def clear_reaction(sess: "DriveSession") -> Reaction:
+def clear_reaction(sess: "DriveStation") -> Reaction:
     """Clear mode: the outputs go to zero (control word 0, bit 10 = 0). Fuji OPC-PDP3: o32 decides
     (Table 10.1, L6562-6584); OPC-G1-PDP and Toyo (PROFIdrive mode): bit 10 = 0 keeps the last
     command; otherwise the drive stops by its normal stop (its deceleration time where it can be
@@ -85,7 +85,7 @@ def clear_reaction(sess: "DriveSession") -> Reaction:
                     "ramp", decel_s=decel, warnings=extra)
 
 
-def read_accel(sess: "DriveSession") -> tuple[float | None, str | None]:
+def read_accel(sess: "DriveStation") -> tuple[float | None, str | None]:
     """(acceleration time from 0 to the max frequency, its code) where the drive says it."""
     code = sess.need_drive().ramp_param("accel")      # the profile's ramps, else the card's own
     if not code or not _readable(sess, code):

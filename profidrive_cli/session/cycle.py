@@ -112,46 +112,32 @@ class Sample:
                 "counters": self.counters, "raw": dict(st.raw)}
 
 
-class Rating(Protocol):
-    """What choose_rate() reads and sets on the station being opened (session.DriveSession)."""
-    profile: Profile | None
-    layout: str | None
-    master: Any
-    requested_cycle_hz: float | None
-    wire_hz: float
-    cycle_hz: float
-
-    def warn(self, text: str) -> None: ...
-
-
 class _Sampler(Protocol):
     def sample(self, st: DriveStatus) -> Sample: ...
 
 
 class Sampling(Protocol):
-    """A station with a Motion (session.DriveSession)."""
+    """A station with a Motion (session.DriveStation)."""
     @property
     def motion(self) -> _Sampler: ...
 
 
-def choose_rate(sess: Rating) -> None:
-    """Set sess.wire_hz (the bus limit for its station and layout) and sess.cycle_hz (asked, or the
-    default); a rate above the wire limit adds a warning (sess.warn)."""
-    assert sess.profile is not None and sess.layout is not None
-    lay = sess.profile.layouts[sess.layout]
-    baud = sess.master.params.baud
-    sess.wire_hz = wire_limit_hz(baud, lay.output_len, lay.input_len)
-    if sess.requested_cycle_hz is None:
-        sess.cycle_hz = default_cycle_hz(sess.master.link, sess.wire_hz)
-    else:
-        sess.cycle_hz = float(sess.requested_cycle_hz)
-        if sess.cycle_hz > sess.wire_hz * 1.0001:
-            from profidrive_cli.fdl.timing import BAUD_NAMES
-            sess.warn(f"--cycle-hz {sess.cycle_hz:g} is more than {BAUD_NAMES.get(baud, baud)} "
-                       f"allows for this station ({sess.wire_hz:.1f} Hz: "
-                       f"{1000.0 / sess.wire_hz:.1f} ms per Data_Exchange of "
-                       f"{lay.output_len}/{lay.input_len} octets); on a real bus the wire sets "
-                       f"the pace")
+def choose_rate(baud: int, link: object, output_len: int, input_len: int,
+                asked_hz: float | None) -> tuple[float, float, str | None]:
+    """(the wire limit for a station of these area lengths, the cycle rate: asked or the default,
+    a warning when the asked rate is above the wire limit, else None)."""
+    wire_hz = wire_limit_hz(baud, output_len, input_len)
+    if asked_hz is None:
+        return wire_hz, default_cycle_hz(link, wire_hz), None
+    cycle_hz = float(asked_hz)
+    if cycle_hz <= wire_hz * 1.0001:
+        return wire_hz, cycle_hz, None
+    from profidrive_cli.fdl.timing import BAUD_NAMES
+    return wire_hz, cycle_hz, (f"--cycle-hz {cycle_hz:g} is more than {BAUD_NAMES.get(baud, baud)} "
+                               f"allows for this station ({wire_hz:.1f} Hz: "
+                               f"{1000.0 / wire_hz:.1f} ms per Data_Exchange of "
+                               f"{output_len}/{input_len} octets); on a real bus the wire sets "
+                               f"the pace")
 
 
 def make_sample(sess: Sampling, st: DriveStatus) -> Sample:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Mapping, Protocol
+from typing import TYPE_CHECKING, Mapping
 
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.config import source_of
@@ -18,24 +18,8 @@ if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.dp.poller import Master
 
 
-class Locating(Protocol):
-    """What locate() reads and sets on the station being opened (session.DriveSession)."""
-    master: Any
-    requested_address: int | None
-    env: Mapping[str, str]
-    profile_name: str | None
-    layout_args: tuple[str | None, int | None, str | None]
-    station: "DriveStation | None"
-    address: int | None
-    ident: int | None
-    profile: Profile | None
-    layout: str | None
-
-    def warn(self, text: str) -> None: ...
-
-
 @dataclass
-class DriveStation:
+class Candidate:
     address: int
     ident: int | None
     profile: Profile | None          # the profile whose ident matches (None: not a known drive)
@@ -47,7 +31,7 @@ class DriveStation:
         return f"{self.address} (ident 0x{self.ident:04X})" if self.ident is not None else str(self.address)
 
 
-def find_drive_stations(master: "Master", first: int = 0, last: int = 125) -> list[DriveStation]:
+def find_drive_stations(master: "Master", first: int = 0, last: int = 125) -> list[Candidate]:
     """Every slave that answers FDL status and Slave_Diag, with its profile (None when the ident is
     not one of ours). Retries are off during the probe so an empty bus is scanned quickly."""
     from profidrive_cli.dp.scan import scan
@@ -57,11 +41,11 @@ def find_drive_stations(master: "Master", first: int = 0, last: int = 125) -> li
         entries = scan(master, first, last)
     finally:
         master.fdl.params = saved
-    out: list[DriveStation] = []
+    out: list[Candidate] = []
     for e in entries:
         if e.station_type != "slave" or e.diag is None:
             continue
-        out.append(DriveStation(e.address, e.ident, profile_for_ident(e.diag.ident),
+        out.append(Candidate(e.address, e.ident, profile_for_ident(e.diag.ident),
                                 e.diag.state_words(master.address)))
     return out
 
@@ -144,39 +128,28 @@ def resolve_layout(profile: Profile, layout: str | None = None, ppo: int | None 
     return name
 
 
-def locate(sess: Locating) -> DriveStation:
-    """Find the session's station (its address, PDRIVE_STATION, or the only drive on the bus), its
-    profile and layout; sets sess.station, address, ident, profile, layout (warnings through
-    sess.warn)."""
-    addr = sess.requested_address
-    if addr is None:
-        addr = station_from_env(sess.env)
-    port = getattr(sess.master.link, "name", "") or "the bus"
-    if addr is None:
-        found = find_drive_stations(sess.master)
-        drives = [s for s in found if s.profile is not None]
-        if sess.profile_name and not drives:
-            drives = found
-        if len(drives) == 1:
-            sess.station = drives[0]
-        elif not drives:
-            others = f" (other slaves: {', '.join(s.describe() for s in found)})" if found else ""
-            raise BusError(f"no drive station answers on {port}{others}")
-        else:
-            raise UsageError(f"{len(drives)} drive stations on {port}: "
-                             f"{', '.join(s.describe() for s in drives)}; give ADDRESS "
-                             f"(or set PDRIVE_STATION)")
-    else:
-        d = sess.master.slave_diag(addr, wake=True)     # (a slave still searching the rate)
+def locate(master: "Master", address: int | None, env: Mapping[str, str],
+           profile_named: bool = False) -> Candidate:
+    """The station to open: `address`, else PDRIVE_STATION in `env`, else the only drive station on
+    the bus -- the only slave at all when a profile is named and no known drive answers (UsageError
+    listing the candidates when there are several; BusError when none answers)."""
+    if address is None:
+        address = station_from_env(env)
+    port = getattr(master.link, "name", "") or "the bus"
+    if address is not None:
+        d = master.slave_diag(address, wake=True)     # (a slave still searching the rate)
         if d is None:
-            raise BusError(f"station {addr} does not answer on {port}")
-        sess.station = DriveStation(addr, d.ident, profile_for_ident(d.ident),
-                                    d.state_words(sess.master.address))
-    assert sess.station is not None
-    sess.address = sess.station.address
-    sess.ident = sess.station.ident
-    sess.profile, warns = choose_profile(sess.ident, sess.profile_name, sess.address)
-    for w in warns:
-        sess.warn(w)
-    sess.layout = resolve_layout(sess.profile, *sess.layout_args)
-    return sess.station
+            raise BusError(f"station {address} does not answer on {port}")
+        return Candidate(address, d.ident, profile_for_ident(d.ident), d.state_words(master.address))
+    found = find_drive_stations(master)
+    drives = [s for s in found if s.profile is not None]
+    if profile_named and not drives:
+        drives = found
+    if len(drives) == 1:
+        return drives[0]
+    if not drives:
+        others = f" (other slaves: {', '.join(s.describe() for s in found)})" if found else ""
+        raise BusError(f"no drive station answers on {port}{others}")
+    raise UsageError(f"{len(drives)} drive stations on {port}: "
+                     f"{', '.join(s.describe() for s in drives)}; give ADDRESS "
+                     f"(or set PDRIVE_STATION)")

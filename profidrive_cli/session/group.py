@@ -39,10 +39,10 @@ from profidrive_cli.session.safestop import COAST_TIMEOUT_S, StopReport
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.dp.poller import Master
     from profidrive_cli.drives.base import Drive
-    from profidrive_cli.session.drivesession import DriveSession
+    from profidrive_cli.session.station import DriveStation
 
 #: (address, session, the speed in % it may be running at, None: unknown) of a drive to stop
-StopItem = tuple[int, "DriveSession", "float | None"]
+StopItem = tuple[int, "DriveStation", "float | None"]
 
 
 @dataclass(frozen=True)
@@ -249,7 +249,7 @@ class Group:
     @staticmethod
     def rate(master: "Master", wire_hz: Iterable[float]) -> tuple[float, float]:
         """(default rounds per second, the wire limit of a round) of stations with these wire limits
-        (DriveSession.wire_hz): one Data_Exchange per station."""
+        (DriveStation.wire_hz): one Data_Exchange per station."""
         wire = 1.0 / wire_round_s(wire_hz)
         return default_cycle_hz(master.link, wire), wire
 
@@ -267,7 +267,7 @@ class Group:
                       f"rounds (plus a retry) for its next exchange")
 
     # -- members ---------------------------------------------------------------------------------
-    def join(self, session: "DriveSession") -> Callable[[], None]:
+    def join(self, session: "DriveStation") -> Callable[[], None]:
         """Put a connected session's cyclic channel on the group; returns the function that takes it
         off (its channel back to its own)."""
         metered = session.channel
@@ -362,7 +362,7 @@ class Group:
     # -- the stop of all in one round --------------------------------------------------------------
     def stop_all(self, items: Sequence[StopItem], hurry: Callable[[], bool] = lambda: False,
                  on_sample: Callable[[int, Sample], None] | None = None) -> None:
-        """The stop of several drives at once. items: (address, DriveSession, percent) of the drives
+        """The stop of several drives at once. items: (address, DriveStation, percent) of the drives
         that may be running, all on the group. The normal stop command of every drive goes in one
         round; then rounds until each reports stopped (or in fault); a drive not stopped within its
         own stop time (safestop.stop_timeout), or every one when hurry() says so (a second signal),
@@ -375,7 +375,7 @@ class Group:
         pending: dict[int, tuple[str, float, float, str]] = {}     # address -> mode, deadline, limit, why
         by_addr = {a: s for a, s, _ in items}
         for a, s, pct in items:
-            limit = s.stop_timeout(pct)
+            limit = s.motion.stop_timeout(pct)
             pending[a] = ("normal", t0 + limit, limit, "")
             try:
                 _drive(s).stop("normal", wait=False)
@@ -404,8 +404,8 @@ class Group:
                 msg = (f"the drive is in fault{f' ({st.fault_code})' if st.fault_code else ''}: its "
                        f"output is off" if st.fault else "stopped")
                 s.motion.confirm_stopped()
-                s.final_status = st
-                s.stop_report = StopReport(mode, True, link.now() - t0,
+                s.motion.final_status = st
+                s.motion.stop_report = StopReport(mode, True, link.now() - t0,
                                            msg + (f"; {why}; coasted" if mode == "coast" else ""), st)
             self.end_round()
             now = link.now()
@@ -424,21 +424,21 @@ class Group:
                         pass
                     except DriveError as e:
                         pending.pop(a)
-                        s.stop_report = StopReport("failed", False, now - t0,
-                                                   f"{why}; coast stop not possible: {e}", s.final_status)
+                        s.motion.stop_report = StopReport("failed", False, now - t0,
+                                                   f"{why}; coast stop not possible: {e}", s.motion.final_status)
                 elif mode == "coast" and now > deadline:
                     pending.pop(a)
                     out = self.out.get(a)
                     if out is not None:
                         text = (f"station {a} out of data exchange ({out}): pdrive could not send the "
                                 f"stop; its DP watchdog ({s.watchdog_ms:g} ms) ends data exchange and "
-                                f"the drive stops by {s.comm_loss_text or 'its communication-loss setting'}")
+                                f"the drive stops by {s.motion.comm_loss_text or 'its communication-loss setting'}")
                     else:
                         text = f"{why}; the drive does not report stopped after a coast stop either"
-                    s.stop_report = StopReport("failed", False, now - t0, text, s.final_status)
+                    s.motion.stop_report = StopReport("failed", False, now - t0, text, s.motion.final_status)
 
 
-def _drive(s: "DriveSession") -> "Drive":
+def _drive(s: "DriveStation") -> "Drive":
     assert s.drive is not None                      # a member of a group is connected
     return s.drive
 

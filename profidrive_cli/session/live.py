@@ -1,4 +1,4 @@
-"""The live loop of `pdrive run` and `pdrive jog` on an open DriveSession, in the shape of multirun.py's:
+"""The live loop of `pdrive run` and `pdrive jog` on an open DriveStation, in the shape of multirun.py's:
 start the drive, cycle it until its --duration, a trip, the user (on_cycle: the CLI's keys) or a lost
 link ends it, then the stop. The CLI keeps the options, the keys (terminal input) and the rendering;
 it sees the loop through callbacks: on_sample(sample) every cycle, on_phase(words, sample or None) at
@@ -10,7 +10,7 @@ passed through; beyond it on the far side is an overshoot): run's `reached`, eac
 the API's Drive.run(wait=True) and the checklist's run step all feed it.
 
 No click and no rich here. An exception leaving the loop (Ctrl-C, SIGTERM, a bus error) leaves the
-drive to the session's own safe stop on exit (DriveSession.close).
+drive to the session's own safe stop on exit (DriveStation.close).
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.drives.base import DriveStatus
     from profidrive_cli.drives.profile import Profile
     from profidrive_cli.session.cycle import Sample
-    from profidrive_cli.session.drivesession import DriveSession
+    from profidrive_cli.session.station import DriveStation
     from profidrive_cli.session.safestop import StopReport
 
 #: the verdict of a run whose actual speed never settled at its reference (Reach) before its --duration
@@ -48,11 +48,11 @@ def default_tolerance(ref: float) -> float:
     return max(0.01 * abs(ref), 0.05)
 
 
-def end_status(session: "DriveSession") -> "DriveStatus | None":
+def end_status(session: "DriveStation") -> "DriveStatus | None":
     """The drive's last status: the stop's own where it has one (a fault's code is read there, the
     cycle's words may not carry it), else the last one seen."""
-    rep = session.stop_report
-    return rep.status if rep is not None and rep.status is not None else session.final_status
+    rep = session.motion.stop_report
+    return rep.status if rep is not None and rep.status is not None else session.motion.final_status
 
 
 def fault_name(profile: "Profile | None", code: str | None) -> str | None:
@@ -166,7 +166,7 @@ class Live:
     feed the speed to Reach and remember when it reached the reference (reached_after); must_reach:
     an overshoot ends the loop as a failure (its words in problem), and so does the --duration
     ending before the reference was reached (NOT_REACHED)."""
-    session: "DriveSession"
+    session: "DriveStation"
     start: Callable[[], "Sample"]
     release: Callable[[], "Sample"] | None = None
     duration: float | None = None
@@ -222,7 +222,7 @@ class Live:
     def pause(self, stopping: str, stopped: str) -> "StopReport":
         """The normal stop (then coast; bounded), the drive stays connected; `stopped` may name {how}."""
         self._phase(stopping, self.release() if self.release is not None else None)
-        rep = self.session.stop()
+        rep = self.session.motion.stop()
         self.running = False
         self._phase(stopped.format(how=rep.how))
         return rep
@@ -230,13 +230,13 @@ class Live:
     def set_reference(self, percent: float) -> None:
         """A new speed reference: judged on reaching it again."""
         self.percent = percent
-        self.session.set_reference(percent)
+        self.session.motion.set_reference(percent)
         self.reached_after = None
         self.reach = Reach.of_run(percent, self.last)
 
     def set_torque(self, percent: float) -> None:
         self.torque = percent
-        self.session.set_torque(percent)
+        self.session.motion.set_torque(percent)
 
     # -- the loop ---------------------------------------------------------------------------------
     def loop(self) -> int:
@@ -264,7 +264,7 @@ class Live:
         """The next cycle's sample; None after a lost link came back (the drive is stopped)."""
         s = self.session
         try:
-            return s.poll()
+            return s.motion.poll()
         except LinkLost as e:
             if self.reconnect_s is None:
                 raise
@@ -273,7 +273,7 @@ class Live:
             self._phase(f"link lost ({e}); reconnecting for up to {self.reconnect_s:g} s")
             s.master.reconnect(timeout=self.reconnect_s)
             self._phase("link restored: the drive was stopped by its watchdog and is not restarted")
-            rep = s.stop()
+            rep = s.motion.stop()
             self.running = False
             if self.on_cycle is None:
                 self.reason = f"link lost and restored; stop: {rep.how}"
@@ -318,11 +318,11 @@ class Live:
         """The stop at the end, when the drive may be turning: phase stopping (with the last sample,
         or the jog's release), the session's stop, phase stopped (with the final status)."""
         s = self.session
-        if not s.may_run:
+        if not s.motion.may_run:
             return
         self._phase("stopping", self.release() if self.release is not None else self.last)
-        s.stop()
-        rep = s.stop_report
+        s.motion.stop()
+        rep = s.motion.stop_report
         st = end_status(s)                 # with a fault's code, so the last line names it
         if self.tripped and self.fault_code is None and st is not None and st.fault_code:
             self.fault_code = st.fault_code

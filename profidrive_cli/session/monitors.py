@@ -32,7 +32,7 @@ NO_TRIP_RECORDS = "this card keeps no trip records"
 
 
 class MonitorHost(Protocol):
-    """What the monitors read of their station (session.DriveSession, or a stand-in)."""
+    """What the monitors read of their station (session.DriveStation, or a stand-in)."""
     profile: Profile | None
     layout: str | None
     drive: Drive | None
@@ -41,12 +41,23 @@ class MonitorHost(Protocol):
     log_extra: Extra | None
 
     @property
-    def after_stop(self) -> list[Callable[[bool], object]]: ...
+    def motion(self) -> "_AfterStop": ...
+    @property
+    def params(self) -> "_ReadWrite": ...
     def need_drive(self) -> Drive: ...
-    def read_param(self, code: str) -> ParamValue: ...
-    def write_param(self, code: str, value: str | float | int, *, check_running: bool = True,
-                    allow_dangerous: bool = False) -> ParamValue: ...
     def say(self, text: str) -> None: ...
+
+
+class _AfterStop(Protocol):
+    @property
+    def after_stop(self) -> list[Callable[[bool], object]]: ...
+
+
+class _ReadWrite(Protocol):
+    """The station's Parameters (the one write path: plan, then execute)."""
+    def read(self, code: str) -> ParamValue: ...
+    def write(self, code: str, value: str | float | int, *, check_running: bool = True,
+              allow_dangerous: bool = False) -> ParamValue: ...
 
 
 def monitor_codes(profile: Profile, layout: str, spec: str) -> list[str]:
@@ -127,8 +138,8 @@ class MonitorValue:
 
 @dataclass
 class Monitors:
-    """Round-robin reader of `codes` through `sess.read_param`."""
-    #: the DriveSession (or a stand-in with its attributes; its profile and drive are set by then)
+    """Round-robin reader of `codes` through `sess.params.read`."""
+    #: the DriveStation (or a stand-in with its attributes; its profile and drive are set by then)
     sess: MonitorHost
     codes: list[str]
     values: dict[str, MonitorValue] = field(default_factory=dict)
@@ -193,7 +204,7 @@ class Monitors:
         slots = list(range(1, pzd_in - 1))                # PNU 916 subindex n = input word PZD(n+2)
         if drive.monitor_mapping == "read":
             for n in slots:
-                assigned = int(sess.read_param(drive.pzd_assignment_param(n)).raw)
+                assigned = int(sess.params.read(drive.pzd_assignment_param(n)).raw)
                 code = drive.pzd_assigned_code(assigned)
                 if code in self.codes and code not in self.cyclic:
                     self.cyclic[code] = 1 + n
@@ -205,20 +216,20 @@ class Monitors:
                     continue
                 n = free.pop(0)
                 key = drive.pzd_assignment_param(n)
-                old = int(sess.read_param(key).raw)
+                old = int(sess.params.read(key).raw)
                 try:
-                    sess.write_param(key, p.pnu)
+                    sess.params.write(key, p.pnu)
                 except ParamError as e:
                     sess.say(f"--monitor {c}: not mapped into PZD{n + 2} ({e}); read through the PKW")
                     continue
                 if not self.saved_map:
-                    sess.after_stop.append(self.restore)
+                    sess.motion.after_stop.append(self.restore)
                 self.saved_map.append((key, old))
                 self.cyclic[c] = 1 + n
         return list(self.cyclic)
 
     def restore(self, link_ok: bool = True) -> list[str]:
-        """Write the PZD assignment back as it was (DriveSession.after_stop calls it after the safe
+        """Write the PZD assignment back as it was (DriveStation.after_stop calls it after the safe
         stop, on every exit); what could not be restored is said and returned, one line each."""
         if not link_ok:
             failed = [f"{k} not restored to {old} (link lost)" for k, old in self.saved_map]
@@ -230,7 +241,7 @@ class Monitors:
         while self.saved_map:
             key, old = self.saved_map.pop()
             try:
-                self.sess.write_param(key, old)
+                self.sess.params.write(key, old)
             except Exception as e:            # noqa: BLE001  (the link may be gone: say what is left)
                 failed.append(f"{key} not restored to {old} ({e})")
         for f in failed:
@@ -280,7 +291,7 @@ class Monitors:
         code = act[self._i % len(act)]
         self._i += 1
         try:
-            pv = self.sess.read_param(code)
+            pv = self.sess.params.read(code)
         except ParamError as e:              # the drive refused it: it has no such monitor
             self.dropped[code] = str(e)
             self.sess.say(f"--monitor {code}: {e}; not monitored")
@@ -344,12 +355,12 @@ def trip_records(sess: MonitorHost) -> TripRecords:
                                       f"not readable")
     out = TripRecords(True)
     if cfg.latest:
-        out.latest = int(sess.read_param(cfg.latest).raw) - cfg.latest_first + 1
+        out.latest = int(sess.params.read(cfg.latest).raw) - cfg.latest_first + 1
     for spec in cfg.records:
         fields = []
         for j, code in enumerate(spec.fields):
             try:
-                pv = sess.read_param(code)
+                pv = sess.params.read(code)
             except ParamError:
                 if j == 0 and cfg.empty == "error":
                     return out               # the first empty recording: no older ones

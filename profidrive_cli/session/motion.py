@@ -3,7 +3,7 @@
 or the profile default), percent for Hz, the reference, start (which first reads what the safe stop
 needs), poll, status and the Sample of a status; jog (session/jog.py) and torque runs
 (session/torque.py); the stop and the shutdown on every way out (session/safestop.py: SafeStop).
-Commands the drive only through drives.base.Drive. Reads of its station (DriveSession today) only
+Commands the drive only through drives.base.Drive. Reads of its station (DriveStation today) only
 what MotionStation names.
 
 may_run turns True when Motion starts or jogs the drive, and when anything else tells the Drive to
@@ -44,7 +44,7 @@ class MotionStation(StopStation, Protocol):
 
 
 class Motion(SafeStop):
-    """The drive's motion on one station: DriveSession builds it as `self.motion = Motion(self)`."""
+    """The drive's motion on one station: DriveStation builds it as `self.motion = Motion(self)`."""
 
     #: the station (SafeStop stores it): Motion reads more of it than the safe stop does
     station: MotionStation

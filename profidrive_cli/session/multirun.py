@@ -1,4 +1,4 @@
-"""Several drives in one run (pdrive run 3,4,5): one DriveSession per station on one master, all on one
+"""Several drives in one run (pdrive run 3,4,5): one DriveStation per station on one master, all on one
 bus cycle (group.py: the Group), each drive at its own speed; the stop of every drive on every way out.
 
 Order: identify every station (nothing written), check --sync against every station's GSD, ask once
@@ -11,7 +11,7 @@ in the same instant), a bounded wait for all of them together, a coast stop for 
 not stop in its time (or at once on a second signal), then Unsync/Unfreeze, release, close.
 
 The stations come from the bus (api.Bus, through the Stations protocol below: session/ does not
-import api/): Bus.session hands over one DriveSession per station on its master, not yet opened;
+import api/): Bus.session hands over one DriveStation per station on its master, not yet opened;
 the run closes the bus (so the port) once at its end, after the close of every session.
 
 Decided: a drive that trips, or a station that drops out of data exchange, ends the run for all: every
@@ -35,7 +35,7 @@ if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.dp.poller import Master
     from profidrive_cli.gsd.model import Gsd
     from profidrive_cli.session.cycle import Sample
-    from profidrive_cli.session.drivesession import DriveSession
+    from profidrive_cli.session.station import DriveStation
 
 DEFAULT_WATCHDOG_MS = 500
 
@@ -48,8 +48,8 @@ class Stations(Protocol):
 
     def session(self, station: int | None = None, *, watchdog_ms: float = 500,
                 cycle_hz: float | None = None, handle_signals: bool = True,
-                on_message: Callable[[str], None] | None = None) -> "DriveSession":
-        """A DriveSession for `station` on this bus's master, not yet opened; its close leaves the
+                on_message: Callable[[str], None] | None = None) -> "DriveStation":
+        """A DriveStation for `station` on this bus's master, not yet opened; its close leaves the
         port open."""
         ...
 
@@ -65,7 +65,7 @@ def _gsd_in_library(ident: int) -> "tuple[Gsd | None, str | None]":
     return g, (path.name if path is not None else None)
 
 
-def sync_modes(sessions: Sequence["DriveSession"],
+def sync_modes(sessions: Sequence["DriveStation"],
                gsd_for: "Callable[[int], tuple[Gsd | None, str | None]] | None" = None
                ) -> tuple[bool, bool]:
     """--sync: (Sync, Freeze) when every station's GSD claims Sync_Mode_supp (Freeze too when every
@@ -90,7 +90,7 @@ def sync_modes(sessions: Sequence["DriveSession"],
 @dataclass
 class StationRun:
     """One drive of the run: its session, reference and what happened to it."""
-    session: "DriveSession"
+    session: "DriveStation"
     address: int
     ref: tuple[str, float]               # ("hz" | "percent", value)
     percent: float = 0.0
@@ -104,7 +104,7 @@ class StationRun:
 
     def to_dict(self) -> dict[str, Any]:
         s = self.session
-        rep = s.stop_report
+        rep = s.motion.stop_report
         fs = end_status(s)                  # with a fault's code where the stop read it
         return {"station": self.address, "profile": s.profile.name if s.profile else None,
                 "started": self.started, "reached_after_s": self.reached_after,
@@ -132,7 +132,7 @@ class MultiRun:
     watchdog_ms: float = DEFAULT_WATCHDOG_MS
     cycle_hz: float | None = None
     sync: bool = False
-    confirm: Callable[[list["DriveSession"]], None] | None = None
+    confirm: Callable[[list["DriveStation"]], None] | None = None
     should_quit: Callable[[], bool] | None = None
     on_start: Callable[[dict[str, Any]], None] | None = None
     on_phase: Callable[[str, int | None], None] | None = None
@@ -251,9 +251,9 @@ class MultiRun:
         stations = []
         for r in self.runs:
             s = r.session
-            top, src = s.fmax(self.fmax)
+            top, src = s.motion.fmax(self.fmax)
             kind, value = r.ref
-            pct = value if kind == "percent" else s.percent_for_hz(value, self.fmax)
+            pct = value if kind == "percent" else s.motion.percent_for_hz(value, self.fmax)
             if not -100.0 <= pct <= 100.0:
                 raise UsageError(f"station {r.address}: {pct:g} % is outside -100..100")
             r.percent = -abs(pct) if self.reverse else pct
@@ -277,7 +277,7 @@ class MultiRun:
         for r in self.runs:
             self._phase("starting", r.address)
             try:
-                sample = r.session.start(0.0)
+                sample = r.session.motion.start(0.0)
             except StationOut:
                 raise
             except DriveError as e:
@@ -289,13 +289,13 @@ class MultiRun:
         group.end_round()
         t = self.now()
         for r in self.runs:
-            r.session.set_reference(r.percent)
+            r.session.motion.set_reference(r.percent)
             r.t_start = t
             r.reach = Reach.of_run(r.percent, r.last)
             r.reach.t0 = t
         for r in self.runs:                 # a codec that sets its words without an exchange
             if not group.exchanged(r.address):
-                self._sample(r, r.session.poll(), "running")
+                self._sample(r, r.session.motion.poll(), "running")
         group.end_round()              # (Sync: every new reference takes effect now)
         self._phase("running")
 
@@ -306,7 +306,7 @@ class MultiRun:
         while True:
             for r in self.runs:
                 try:
-                    sample = r.session.poll()
+                    sample = r.session.motion.poll()
                 except StationOut as e:
                     r.problem = f"dropped out of data exchange ({e.why})"
                     self._end(f"station {r.address} dropped out of data exchange ({e.why})")
@@ -354,7 +354,7 @@ class MultiRun:
     def _stop_all(self, exc: BaseException | None) -> None:
         if self.group is None or self.link_lost:
             return                          # nothing connected, or nothing can be sent: _close_all
-        runs = [r for r in self.runs if r.session.drive is not None and r.session.may_run]
+        runs = [r for r in self.runs if r.session.drive is not None and r.session.motion.may_run]
         if not runs:
             return
         self._phase("stopping")
@@ -364,7 +364,7 @@ class MultiRun:
             self.link_lost = True          # each session's close says what the watchdog will do
         except BusError as e:
             self._say(f"stop: {e}; each drive not yet stopped gets its own stop")
-        if all(r.session.stop_report is not None and r.session.stop_report.stopped for r in runs):
+        if all(r.session.motion.stop_report is not None and r.session.motion.stop_report.stopped for r in runs):
             self._phase("stopped")
 
     def _stop_together(self, runs: list[StationRun]) -> None:
@@ -378,7 +378,7 @@ class MultiRun:
         assert self.group is not None       # _stop_all() checked it
         self.group.stop_all([(r.address, r.session, r.percent) for r in runs], hurry, on_sample)
         for r in runs:
-            rep = r.session.stop_report
+            rep = r.session.motion.stop_report
             st = end_status(r.session)
             code = st.fault_code if st is not None else None
             if r.tripped and code and f"({code})" not in r.problem:
@@ -405,7 +405,7 @@ class MultiRun:
                 r.session.close(exc)
             except BaseException as e:      # noqa: BLE001  (the others still need their close)
                 first = first or e
-            rep = r.session.stop_report
+            rep = r.session.motion.stop_report
             if r.started and (rep is None or not rep.stopped):
                 self.failed = True
         try:
@@ -417,7 +417,7 @@ class MultiRun:
 
     def end_dict(self) -> dict[str, Any]:
         return {"reason": self.reason, "failed": self.failed,
-                "stopped": all((r.session.stop_report.stopped if r.session.stop_report is not None
+                "stopped": all((r.session.motion.stop_report.stopped if r.session.motion.stop_report is not None
                                 else not r.started) for r in self.runs),
                 "stations": [r.to_dict() for r in self.runs],
                 "rounds": self.group.rounds if self.group is not None else 0,

@@ -1,4 +1,4 @@
-"""Parameters: the parameter services of one station (a session.DriveSession builds one as
+"""Parameters: the parameter services of one station (a session.DriveStation builds one as
 `self.params`). A write is planned, then executed: plan(code, value) resolves the code once
 (Drive.param_info, the closest codes or the code's family when the station's family does not address
 it) and makes every check once -- writable, not dangerous unless allowed, the typed value parsed, the
@@ -31,7 +31,7 @@ Progress = Callable[[int, int, str], None]
 
 
 class Parameters:
-    """The parameters of the station `host` (a DriveSession: its profile, address, Drive, ...)."""
+    """The parameters of the station `host` (a DriveStation: its profile, address, Drive, ...)."""
 
     #: read a dump file (file:line errors; a cut-off format-2 file is refused): dumpfile.load_dump
     load_dump = staticmethod(dumpfile.load_dump)
@@ -123,7 +123,7 @@ class Parameters:
             return None
         st = self.need_drive().cycle()
         if st.running or not st.stopped:
-            hz = Sample(0, st, self.host.fmax_hz, 0, 0, {}).actual_hz
+            hz = Sample(0, st, self.host.motion.fmax_hz, 0, 0, {}).actual_hz
             return (f"{info.code} ({info.name}) can only be changed while the motor is "
                     f"stopped (the drive is {st.state}" + (f", {hz:g} Hz" if hz else "") + "); stop it first")
         return None

@@ -18,7 +18,7 @@ from profidrive_cli import UsageError
 from profidrive_cli.drives.base import Drive, ParamInfo, ParamValue
 from profidrive_cli.drives.formats import display_text, value_from_text
 from profidrive_cli.drives.profile import Profile, all_profiles, foreign_profiles_with_code
-from profidrive_cli.session.station import StationView
+from profidrive_cli.session.view import StationView
 
 __all__ = ["Host", "ParamInfo", "ParamRow", "ParamView", "WritePlan", "dangerous_words", "parse_text",
            "profiles_with_code", "suggest_codes", "unknown_code_message", "with_text"]
@@ -127,11 +127,17 @@ class WritePlan:
         return self.danger is not None
 
 
-class Host(StationView, Protocol):
-    """The station Parameters works on (session.DriveSession): its face and the max frequency."""
-
+class _Fmax(Protocol):
     @property
     def fmax_hz(self) -> float: ...
+
+
+class Host(StationView, Protocol):
+    """The station Parameters works on (session.DriveStation): its face and its Motion's max
+    frequency."""
+
+    @property
+    def motion(self) -> _Fmax: ...
 
 
 class ParamView(Protocol):

@@ -25,7 +25,7 @@ from profidrive_cli import PdriveError, UsageError
 from profidrive_cli.drives.base import Drive, DriveError, DriveStatus
 from profidrive_cli.session.cycle import Sample
 from profidrive_cli.session.signals import Guard
-from profidrive_cli.session.station import StationView
+from profidrive_cli.session.view import StationView
 
 COAST_TIMEOUT_S = 10.0
 DEFAULT_STOP_TIMEOUT_S = 30.0
@@ -48,7 +48,7 @@ class StopReport:
 
 
 class StopStation(StationView, Protocol):
-    """What the safe stop reads of its station (DriveSession) beyond its face; link_lost it also sets."""
+    """What the safe stop reads of its station (DriveStation) beyond its face; link_lost it also sets."""
     link_lost: bool
 
     @property

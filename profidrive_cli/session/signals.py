@@ -1,4 +1,4 @@
-"""SIGINT/SIGTERM while a DriveSession (or an API bus) is open: SIGTERM raises SessionTerminated in the
+"""SIGINT/SIGTERM while a DriveStation (or an API bus) is open: SIGTERM raises SessionTerminated in the
 main thread (like KeyboardInterrupt), and during the safe stop a further SIGINT/SIGTERM only sets
 `hurry` (the stop escalates to a coast stop instead of being interrupted). Main thread only
 (elsewhere a guard changes no handler). Touches only the signal module.
@@ -25,7 +25,7 @@ from typing import Any, Protocol
 
 
 class SessionTerminated(BaseException):
-    """SIGTERM arrived while a DriveSession was open (raised in the main thread, like KeyboardInterrupt)."""
+    """SIGTERM arrived while a DriveStation was open (raised in the main thread, like KeyboardInterrupt)."""
 
     def __init__(self, signum: int = signal.SIGTERM):
         super().__init__(f"terminated by signal {signum}")

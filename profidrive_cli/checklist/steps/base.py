@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Any, Callable, Protocol, Sequence, TypeVar
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.checklist.fields import FieldChecker, RawStepFacts, StationFacts, StepArgs, StepFacts
     from profidrive_cli.drives.base import Drive, DriveStatus
-    from profidrive_cli.session import DriveSession
+    from profidrive_cli.session import DriveStation
 
 class ChecklistFacts(Protocol):
     """spec.Checklist: its stations."""
@@ -60,7 +60,7 @@ class Handle(Protocol):
     @property
     def identity(self) -> dict[str, Any]: ...
     @property
-    def session(self) -> DriveSession: ...
+    def session(self) -> DriveStation: ...
 
 
 #: the run's own result types (runner.StationResult, runner.StepResult), handed back to it by a step

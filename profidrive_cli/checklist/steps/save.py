@@ -25,8 +25,8 @@ class Save(StepType):
         return {}, "save parameters to non-volatile memory"
 
     def execute(self, run: StepRun[SR, R], sr: SR, r: R, d: Drive, h: Handle) -> str:
-        how = h.session.save_support()
-        msg = h.session.save()        # 'automatic' cards: every write is already stored
+        how = h.session.params.save_support()
+        msg = h.session.params.save()        # 'automatic' cards: every write is already stored
         r.measured = {"saved": True, "how": how}
         return msg
 

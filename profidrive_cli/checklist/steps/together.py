@@ -25,7 +25,7 @@ from profidrive_cli.session.live import Reach
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.dp.poller import Master
     from profidrive_cli.drives.base import Drive, DriveStatus
-    from profidrive_cli.session import DriveSession
+    from profidrive_cli.session import DriveStation
 
 #: run.py's run_measured(st, v, reach_s, lo, hi, unit) -> the step's measured dict
 RunMeasured = Callable[["DriveStatus", "float | None", "float | None", "float | None", "float | None", str],
@@ -40,7 +40,7 @@ _DONE: weakref.WeakKeyDictionary[object, dict[int, dict[str, Outcome]]] = weakre
 class _Drive:
     """One drive of the run and its checks (the rules of `run`)."""
 
-    def __init__(self, name: str, drive: Drive, session: DriveSession, a: StepArgs) -> None:
+    def __init__(self, name: str, drive: Drive, session: DriveStation, a: StepArgs) -> None:
         self.name, self.d, self.session = name, drive, session
         assert session.address is not None          # an open session found its station (as api/bus.py)
         self.address: int = session.address
@@ -133,15 +133,15 @@ class _Drive:
                     "tolerance": self.tol, "within_s": a["within"], "hold_s": a["duration"],
                     "together_with": others}
         measured = run_measured(st, v, self.reached, self.lo, self.hi, self.unit) if st is not None else {}
-        if self.session.stop_report is not None:
-            measured["stop"] = self.session.stop_report.how
-            measured["stopped"] = self.session.stop_report.stopped
+        if self.session.motion.stop_report is not None:
+            measured["stop"] = self.session.motion.stop_report.how
+            measured["stopped"] = self.session.motion.stop_report.stopped
         if self.failed:
             return False, self.failed, expected, measured
         msg = (f"within ± {fmt(self.tol)}{self.u} of {fmt(self.target)}{self.u} after {self.reached:.2f} s"
                + (f", held {fmt(a['duration'])} s at {fmt(rnd(self.lo))}..{fmt(rnd(self.hi))}{self.u}"
                   if a["duration"] else "") + f"; run together with {others}, all stopped after")
-        rep = self.session.stop_report
+        rep = self.session.motion.stop_report
         if rep is None or not rep.stopped:
             return False, msg.replace("all stopped after", "NOT confirmed stopped after"), expected, measured
         return True, msg, expected, measured
