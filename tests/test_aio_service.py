@@ -177,7 +177,7 @@ def test_a_keep_alive_late_past_the_watchdog_warns_and_the_next_call_raises(
     caplog.set_level(logging.WARNING, logger="profidrive_cli.api")
     with pdrive.open_bus("sim://?timing=virtual", on_message=seen.append) as bus:
         drive = bus.drive(3)
-        assert drive.session.watchdog_ms == 1000
+        assert drive._station.watchdog_ms == 1000
         drive.run(hz=10, wait=True, timeout=30)
         with bus._lock:                               # no call and no keep-alive meanwhile
             bus.master.link.sleep(stall_s)

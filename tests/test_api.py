@@ -104,7 +104,7 @@ def test_run_wait_timeout_raises_and_the_with_block_still_stops_the_drive():
             d = bus.drive(3)
             d.run(hz=50, wait=True, timeout=0.2)     # F07 = 6 s to 60 Hz: 50 Hz takes 5 s
     assert _model(bus, 3).freq == 0.0
-    assert d.session.stop_report.how in ("normal", "coast") and d.session.stop_report.stopped
+    assert d._station.motion.stop_report.how in ("normal", "coast") and d._station.motion.stop_report.stopped
 
 
 @pytest.mark.parametrize("exc", [RuntimeError("boom"), KeyboardInterrupt()])
@@ -119,7 +119,7 @@ def test_an_exception_inside_the_with_stops_every_started_drive(exc):
             raise exc
     assert _model(bus, 3).freq == 0.0 and _model(bus, 5).freq == 0.0
     for d in (d3, d5):
-        assert d.session.stop_report.stopped
+        assert d._station.motion.stop_report.stopped
     assert bus.closed
     with pytest.raises(UsageError, match="closed"):
         d3.status()
@@ -291,7 +291,7 @@ def test_sigterm_inside_the_with_stops_the_drive(tmp_path):
         "        print('RUNNING', flush=True)\n"
         "        time.sleep(30)\n"
         "finally:\n"
-        "    r = d.session.stop_report\n"
+        "    r = d._station.motion.stop_report\n"
         "    print('STOP', r.how, r.stopped, sim.slave(3).model.freq, flush=True)\n")
     p = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                          text=True, cwd=tmp_path, env={**os.environ, "PYTHONPATH": str(root)})
@@ -355,5 +355,5 @@ def test_a_link_lost_while_idle_is_reported_at_the_next_call():
             while bus._keepalive_error is None and time.monotonic() < deadline:
                 time.sleep(0.05)
             d.status()
-    assert d.session.stop_report.how == "not sent (link lost)"
-    assert "watchdog" in d.session.stop_report.message
+    assert d._station.motion.stop_report.how == "not sent (link lost)"
+    assert "watchdog" in d._station.motion.stop_report.message

@@ -67,7 +67,7 @@ def test_open_bus_and_the_cli_build_the_same_master():
 
 def test_a_session_from_the_bus_opens_the_station_and_leaves_the_port_to_the_bus():
     with pdrive.open_bus(SIM) as bus:
-        s = bus.session(3, profile="fuji-g1", watchdog_ms=300)
+        s = bus.station(3, profile="fuji-g1", watchdog_ms=300)
         assert isinstance(s, DriveStation) and s.drive is None          # not opened yet
         with s:
             assert s.address == 3 and s.profile.name == "fuji-opc-g1-pdp" and s.watchdog_ms == 300
@@ -82,7 +82,7 @@ def test_a_session_from_the_bus_opens_the_station_and_leaves_the_port_to_the_bus
 def test_a_session_that_owns_the_port_closes_it_and_the_bus_is_done():
     bus = pdrive.open_bus(SIM)
     link = bus.master.link
-    s = bus.session(3, own_port=True)
+    s = bus.station(3, own_port=True)
     assert bus.closed
     with pytest.raises(UsageError, match="closed"):
         bus.scan()
@@ -95,18 +95,18 @@ def test_a_session_that_owns_the_port_closes_it_and_the_bus_is_done():
 def test_a_bad_session_request_is_one_usage_error():
     with pdrive.open_bus(SIM) as bus:
         with pytest.raises(UsageError, match="station 126 is not a bus address 0..125"):
-            bus.session(126)
+            bus.station(126)
         with pytest.raises(UsageError, match="watchdog 5 ms outside 10..650000 ms"):
-            bus.session(3, watchdog_ms=5)
+            bus.station(3, watchdog_ms=5)
         assert not bus.closed                       # a refused request leaves the bus as it was
         bus.drive(3)
         with pytest.raises(UsageError, match="has drives open: own_port needs a bus of its own"):
-            bus.session(4, own_port=True)
+            bus.station(4, own_port=True)
         assert not bus.closed and bus.master.link.ser.is_open
     # own_port and a refused request: the bus is closed with it (nothing is left open)
     bus = pdrive.open_bus(SIM)
     with pytest.raises(UsageError, match="watchdog"):
-        bus.session(3, watchdog_ms=5, own_port=True)
+        bus.station(3, watchdog_ms=5, own_port=True)
     assert bus.closed and not bus.master.link.ser.is_open
 
 

@@ -122,8 +122,8 @@ def test_sigterm_after_the_first_bus_closed_stops_the_second_bus_drive(tmp_path,
         "        print('RUNNING', sim.slave(3).model.freq > 19, flush=True)\n"
         "        time.sleep(30)\n"
         "finally:\n"
-        "    r = second.drives[0].session.stop_report if second.drives else \\\n"
-        "        drives[1 if second is b else 0].session.stop_report\n"
+        "    r = second.drives[0]._station.motion.stop_report if second.drives else \\\n"
+        "        drives[1 if second is b else 0]._station.motion.stop_report\n"
         "    print('STOP', r.how, r.stopped, sim.slave(3).model.freq, flush=True)\n"),
         signal_after_line="RUNNING True")
     assert "STOP normal True 0.0" in out, out + err
@@ -146,7 +146,7 @@ def test_on_message_raising_during_the_stop_skips_no_drive():
             d4.run(hz=30, wait=True, timeout=30)
             armed.append("armed")                    # from here every message raises
     assert _model(bus, 3).freq == 0.0 and _model(bus, 4).freq == 0.0
-    assert d3.session.stop_report.stopped and d4.session.stop_report.stopped
+    assert d3._station.motion.stop_report.stopped and d4._station.motion.stop_report.stopped
     assert len(armed) >= 3                           # the stop of each drive was said (and raised)
     assert bus.master.link.bus.slave(3).state != "Data_Exch"   # released
 
@@ -201,7 +201,7 @@ def test_leaving_the_with_sends_every_stop_command_in_the_same_cycle():
     # other exchange of either station between them
     assert abs(first_stop[3] - first_stop[4]) == 1, log[:20]
     assert _model(bus, 3).freq == 0.0 and _model(bus, 4).freq == 0.0
-    assert d3.session.stop_report.how == d4.session.stop_report.how == "normal"
+    assert d3._station.motion.stop_report.how == d4._station.motion.stop_report.how == "normal"
 
 
 def test_a_failure_of_the_stop_together_still_stops_every_drive_one_by_one(monkeypatch):
@@ -216,7 +216,7 @@ def test_a_failure_of_the_stop_together_still_stops_every_drive_one_by_one(monke
             d3.run(hz=30, wait=True, timeout=30)
             d4.run(hz=30, wait=True, timeout=30)
     assert _model(bus, 3).freq == 0.0 and _model(bus, 4).freq == 0.0
-    assert d3.session.stop_report.stopped and d4.session.stop_report.stopped
+    assert d3._station.motion.stop_report.stopped and d4._station.motion.stop_report.stopped
 
 
 # -- a bus never closed ----------------------------------------------------------------------------
@@ -227,7 +227,7 @@ def test_an_unclosed_bus_stops_its_drive_at_exit_with_a_resource_warning(tmp_pat
         "import atexit\n"
         "seen = {}\n"
         "def after():                  # registered before pdrive's: runs after it (LIFO)\n"
-        "    r = seen['drive'].session.stop_report\n"
+        "    r = seen['drive']._station.motion.stop_report\n"
         "    print('AFTER', r and r.how, seen['sim'].slave(3).model.freq, flush=True)\n"
         "atexit.register(after)\n"
         "import profidrive_cli as pdrive\n"

@@ -102,7 +102,7 @@ def test_the_api_checks_a_config_fmax_against_the_drives_own_too(tmp_path, monke
     with pdrive.open_bus("rig") as bus:
         d = bus.drive(3)
         assert d.fmax_hz == 60.0                                 # F03 read from the drive
-        assert f"fmax 50 Hz from {f}:5 ignored: the drive says F03 = 60 Hz" in d.session.warnings
+        assert f"fmax 50 Hz from {f}:5 ignored: the drive says F03 = 60 Hz" in d._station.warnings
 
 
 def test_an_option_given_is_not_announced(tmp_path):

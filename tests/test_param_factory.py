@@ -214,11 +214,11 @@ def test_the_session_level_restore_checks_the_groups_itself(tmp_path):
     from profidrive_cli.session.dumpfile import load_dump, write_dump
     f = tmp_path / "s6.yaml"
     with pdrive.open_bus("sim://?timing=virtual", env={}) as bus:
-        with bus.session(6, handle_signals=False) as s:
+        with bus.station(6, handle_signals=False) as s:
             write_dump(s.params.dump(), f)
     doc = load_dump(f)
     with pdrive.open_bus("sim://?timing=virtual", env={}) as bus:
-        with bus.session(6, handle_signals=False) as s:
+        with bus.station(6, handle_signals=False) as s:
             with pytest.raises(pdrive.UsageError) as e:
                 s.params.restore(doc, exclude=("motr",))
     assert str(e.value) == ("unknown parameter group 'motr' for moeller-de6-net-dp (groups: motor, "

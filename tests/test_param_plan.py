@@ -103,7 +103,7 @@ def test_api_set_param_resolves_once_and_checks_once(counted):
 def test_a_plan_is_checked_before_anything_is_written_and_executed_without_a_second_check():
     # Fuji F07 (acceleration time 1): 0..6000 s in 0.1 s steps (profile; tests/test_exact_values.py)
     with pdrive.open_bus("sim://?timing=virtual") as bus:
-        params = bus.drive(3).session.params
+        params = bus.drive(3)._station.params
         plan = params.plan("F07", "2.5")
         assert (plan.code, plan.info.code, plan.value, plan.text) == ("F07", "F07", 2.5, "2.5")
         assert plan.danger is None and not plan.stop_only
@@ -121,7 +121,7 @@ def test_execute_refuses_a_stop_only_parameter_while_the_motor_turns():
     # Fuji F03 (maximum frequency) may only change while stopped (profiles/fuji-opc-g1-pdp.yaml:111, access: stop)
     with pdrive.open_bus("sim://?timing=virtual") as bus:
         d = bus.drive(3)
-        params = d.session.params
+        params = d._station.params
         plan = params.plan("F03", "50")
         assert plan.stop_only
         d.run(hz=10.0)

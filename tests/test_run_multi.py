@@ -207,7 +207,7 @@ def test_sync_on_stations_whose_gsd_claims_it(sim):
 
 @pytest.mark.parametrize("addresses", [[3, 4], [3, 9]])
 def test_the_run_takes_its_stations_from_the_bus_and_closes_its_port_once(sim, addresses):
-    """MultiRun on the front door (api.Bus): one Bus.session per station, in order; at the end (also
+    """MultiRun on the front door (api.Bus): one Bus.station per station, in order; at the end (also
     when a station is not on the bus: station 9 is not in the default plant, ALL above) the bus is
     closed and its port closed exactly once; closing the bus again does not touch the port."""
     from profidrive_cli import PdriveError
@@ -216,7 +216,7 @@ def test_the_run_takes_its_stations_from_the_bus_and_closes_its_port_once(sim, a
     front = BusOptions(SIM_FAST + "&timing=virtual", "19200", 2, None, None, False, False, 0,
                        False).open_bus()
     link, closes, asked = front.master.link, [], []
-    real_close, real_session = link.close, front.session
+    real_close, real_session = link.close, front.station
 
     def close():
         closes.append(1)
@@ -225,7 +225,7 @@ def test_the_run_takes_its_stations_from_the_bus_and_closes_its_port_once(sim, a
     def session(station, **kw):
         asked.append(station)
         return real_session(station, **kw)
-    link.close, front.session = close, session
+    link.close, front.station = close, session
     run = MultiRun(front, addresses, [("hz", 20.0)] * 2, duration=0.5)
     if 9 in addresses:
         with pytest.raises(PdriveError):

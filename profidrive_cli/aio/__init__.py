@@ -211,7 +211,7 @@ class AsyncBus:
         """A second signal under run(): the stop under way (or the next) coasts at once."""
         bus = self._bus or self._closing
         if bus is not None:
-            bus._hurry()
+            bus.hurry()
 
     @property
     def sync(self) -> "Bus":
@@ -300,7 +300,7 @@ class AsyncDrive:
         drive is stopped (its normal stop, escalating as Drive.stop does), then CancelledError."""
         cancel = threading.Event()
         fut = asyncio.get_running_loop().run_in_executor(
-            self._bus._pool, functools.partial(self.sync._run, hz, percent, wait, timeout, cancel))
+            self._bus._pool, functools.partial(self.sync.run, hz, percent=percent, wait=wait, timeout=timeout, cancel=cancel))
         try:
             return await asyncio.shield(fut)
         except asyncio.CancelledError:
@@ -329,9 +329,10 @@ class AsyncDrive:
         """The stop after a cancelled run, and its line through on_message (the caller gets a
         CancelledError, not the StopResult): the words of the stop on close."""
         self.sync.stop()
-        r = self.sync.session.motion.stop_report
-        if r is not None:
-            self.sync.session.say(stop_words(self.station, r))
+        with self.sync.held() as s:
+            r = s.motion.stop_report
+            if r is not None:
+                s.say(stop_words(self.station, r))
 
     async def stop(self, *, timeout: float | None = None) -> "StopResult":
         return await self._bus._run(functools.partial(self.sync.stop, timeout=timeout))

@@ -199,7 +199,7 @@ class Bus:
     def _close_unclosed(self, when: str) -> None:
         if self._closed:
             return
-        started = sorted(a for a, d in self._drives.items() if d.session.motion.may_run)
+        started = sorted(a for a, d in self._drives.items() if d._station.motion.may_run)
         warnings.warn(f"pdrive: the bus on {self.port} was never closed; pdrive stops "
                       f"{'the drives it started (' + ', '.join(map(str, started)) + ')' if started else 'it'} {when} "
                       f"(use `with open_bus(...)` or bus.close())", ResourceWarning, source=self)
@@ -311,7 +311,7 @@ class Bus:
         from profidrive_cli.link.base import LinkLost
         if isinstance(exc, LinkLost):
             return None
-        sessions = [d.session for d in self._drives.values() if d.session.channel is not None]
+        sessions = [d._station for d in self._drives.values() if d._station.channel is not None]
         running = [s for s in sessions if s.motion.may_run and not s.link_lost and s.drive is not None]
         if not running:
             return None
@@ -347,7 +347,7 @@ class Bus:
                 s.say(stop_words(_address(s), r))
         return None
 
-    def _hurry(self) -> None:
+    def hurry(self) -> None:
         """A second signal arrived (the asyncio face's aio.run: its signal handler, not this bus's):
         the stop under way, or the next, coasts at once, as on a second signal here."""
         self._signals.hurry = True
@@ -466,7 +466,7 @@ class Bus:
                     d.close()
         return out
 
-    def session(self, station: int | None = None, *, profile: str | None = None,
+    def station(self, station: int | None = None, *, profile: str | None = None,
                 layout: str | None = None, ppo: int | None = None, fmt: str | None = None,
                 watchdog_ms: float = 500, cycle_hz: float | None = None,
                 stop_timeout: float | None = None, handle_signals: bool = True,
@@ -474,8 +474,8 @@ class Bus:
                 on_message: Callable[[str], None] | None = None,
                 log_csv: str | Path | None = None,
                 own_port: bool = False) -> "DriveStation":
-        """The station at the session level, for tools (the CLI's drive commands, the checklist):
-        a session.DriveStation on this bus's master, not yet opened. Use it as a context manager:
+        """The station level, for tools (the CLI's drive commands, the checklist): a DriveStation
+        (profidrive_cli.api.station) on this bus's master, not yet opened. Use it as a context manager:
         it finds the station, brings it to data exchange (before_connect(session) runs first, once
         the profile is known: a confirmation) and, on the way out, stops the drive safely and
         releases the station. Beside drive(): progress callbacks, on_message, the --log CSV, the
@@ -532,7 +532,7 @@ class Bus:
         return self._group
 
     def _keep_s(self) -> float:
-        wd = min((d.session.watchdog_ms for d in self._drives.values()), default=500.0)
+        wd = min((d._station.watchdog_ms for d in self._drives.values()), default=500.0)
         return min(KEEP_S, wd / 5000.0)
 
     def _exchanged(self, address: int, t: float) -> None:
@@ -550,7 +550,7 @@ class Bus:
         for miss in self._the_group().keep_others(list(self._drives), busy, self._last,
                                                   self._keep_s()):
             drive = self._drives.get(miss.address)
-            self._missed.note(miss, drive.session.warn if drive is not None else self._message)
+            self._missed.note(miss, drive._station.warn if drive is not None else self._message)
 
     def _keep_once(self) -> float | None:
         """One pass of the keep-alive thread (api/keepalive.py): the seconds to its next pass, None

@@ -1,10 +1,12 @@
-"""Drive: one drive station in data exchange on a Bus (a session.DriveStation underneath): status,
-run / stop, parameters, faults. Every call holds the bus lock; writes on a real port need the bus
+"""Drive: the public face of one drive station in data exchange on a Bus (a DriveStation, the one
+owner of the station's state; held() hands it to a tool under the bus lock): status, run / stop,
+parameters, faults. Every call holds the bus lock; writes on a real port need the bus
 opened with allow_real_port_writes=True. The safe stop of a drive this API started happens on
 Bus.close() (also on an exception leaving the `with`), or on Drive.close()."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 from typing import TYPE_CHECKING, Any
 
@@ -18,6 +20,7 @@ if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.drives.base import ParamValue
     from profidrive_cli.drives.profile import Profile
     import threading
+    from typing import Iterator
 
     from profidrive_cli.session import DriveStation, Sample
 
@@ -25,41 +28,28 @@ if TYPE_CHECKING:                                   # pragma: no cover
 DEFAULT_RUN_TIMEOUT_S = 60.0
 
 
-def fmax_readable(session: "DriveStation") -> bool:
-    """The drive's own maximum frequency can be read (a parameter channel and a parameter number
-    for the profile's max-frequency parameter): an fmax default from the config file then stays
-    unused (an fmax given explicitly is checked against the drive's, with a warning)."""
-    prof = session.profile
-    assert prof is not None                         # the session is open (identify() chose it)
-    code = prof.max_frequency_param
-    pdef = prof.param(code) if code else None
-    assert session.drive is not None                # ... and connected it
-    return bool(session.drive.has_param_channel and pdef is not None
-                and (getattr(pdef, "pnu", None) is not None or getattr(pdef, "register", None) is not None))
-
-
 class Drive:
     """A drive station opened with Bus.drive(); see docs/api.md."""
 
-    def __init__(self, bus: Any, session: "DriveStation", fmax: float | None = None):
+    def __init__(self, bus: Any, station: "DriveStation", fmax: float | None = None):
         self._bus = bus
-        #: the session underneath (internal: not part of the stable API)
-        self.session = session
+        #: the station this is the face of (the station level: held())
+        self._station = station
         self._fmax_override = fmax
         self._closed = False
         if fmax is not None:
-            session.motion.fmax(fmax)
+            station.motion.fmax(fmax)
 
     # -- identity ---------------------------------------------------------------------------------
     @property
     def station(self) -> int:
-        address = self.session.address
+        address = self._station.address
         assert address is not None                  # Bus.drive() opened the session
         return int(address)
 
     @property
     def ident(self) -> int | None:
-        return self.session.ident
+        return self._station.ident
 
     @property
     def ident_hex(self) -> str | None:
@@ -74,24 +64,24 @@ class Drive:
         return self._profile().family
 
     def _profile(self) -> "Profile":
-        prof = self.session.profile
+        prof = self._station.profile
         assert prof is not None                     # Bus.drive() opened the session
         return prof
 
     @property
     def layout(self) -> str:
-        return str(self.session.layout)
+        return str(self._station.layout)
 
     @property
     def fmax_hz(self) -> float:
         """The frequency 100 % stands for (read from the drive where it can be)."""
         with self._bus._call():
             self._check()
-            return self.session.motion.fmax(self._fmax_override)[0]
+            return self._station.motion.fmax(self._fmax_override)[0]
 
     @property
     def warnings(self) -> list[str]:
-        return list(self.session.warnings)
+        return list(self._station.warnings)
 
     def __repr__(self) -> str:
         return f"<Drive station {self.station} {self.profile} on {self._bus.port}>"
@@ -115,23 +105,19 @@ class Drive:
         """One read of the status (the current fault named where the card can say it)."""
         with self._bus._call():
             self._check()
-            return self._status(self.session.motion.status())
+            return self._status(self._station.motion.status())
 
     # -- motion -------------------------------------------------------------------------------------
     def run(self, hz: float | None = None, *, percent: float | None = None, wait: bool = False,
-            timeout: float | None = None) -> Status:
+            timeout: float | None = None, cancel: "threading.Event | None" = None) -> Status:
         """Run at `hz` (or `percent` of fmax; negative = reverse): start the drive, or change the
         reference when it already runs. wait=True: until the actual speed has settled at the
         reference (the rule of `pdrive run`, docs/commands.md; DriveError after `timeout` s, default
         60, when the drive trips, or when the actual goes beyond the reference by more than the
         tolerance: an overshoot). A speed above fmax is
-        refused (UsageError), never clipped."""
-        return self._run(hz, percent, wait, timeout, None)
-
-    def _run(self, hz: float | None, percent: float | None, wait: bool, timeout: float | None,
-             cancel: "threading.Event | None") -> Status:
-        """run(); `cancel` set (by the asyncio face, profidrive_cli.aio) ends the wait early with the
-        last status: the caller then stops the drive."""
+        refused (UsageError), never clipped. `cancel` (a threading.Event; the asyncio face sets it
+        when its task is cancelled): once set, the wait ends early with the last status, and the
+        caller stops the drive."""
         if (hz is None) == (percent is None):
             raise UsageError("run: give hz or percent (one of them)")
         v = hz if hz is not None else percent
@@ -141,7 +127,7 @@ class Drive:
             raise UsageError(f"run: timeout {timeout!r} must be above 0 s")
         with self._bus._call():
             self._check()
-            s = self.session
+            s = self._station
             pct = float(percent) if percent is not None else s.motion.percent_for_hz(float(v),
                                                                                self._fmax_override)
             self._bus._check_write(f"run station {self.station} at "
@@ -184,7 +170,7 @@ class Drive:
         deceleration time) until the drive reports stopped; a coast stop when it does not."""
         with self._bus._call():
             self._check()
-            r = self.session.motion.stop(timeout=timeout)
+            r = self._station.motion.stop(timeout=timeout)
             return StopResult(r.how, bool(r.stopped), round(r.seconds, 3), r.message)
 
     # -- parameters --------------------------------------------------------------------------------
@@ -192,7 +178,7 @@ class Drive:
         """Read one parameter by its native code ("F07", "A004", "C1-01", "PNU23[1]", ...)."""
         with self._bus._call():
             self._check()
-            return _param(self.session.params.read(code))
+            return _param(self._station.params.read(code))
 
     def set_param(self, code: str, value: float | int | str, *, allow_dangerous: bool = False
                   ) -> Param:
@@ -204,7 +190,7 @@ class Drive:
             raise UsageError(f"set_param {code}: {value!r} is not a value")
         with self._bus._call():
             self._check()
-            params = self.session.params
+            params = self._station.params
             # resolved once, every check once (writable, dangerous, exact value), nothing written
             plan = params.plan(code, value, allow_dangerous=allow_dangerous)
             self._bus._check_write(f"write {code} = {value} on station {self.station}")
@@ -216,8 +202,8 @@ class Drive:
         means several)."""
         with self._bus._call():
             self._check()
-            cur = self.session.motion.status().status
-            hist = self.session.fault_history()
+            cur = self._station.motion.status().status
+            hist = self._station.fault_history()
             return Faults(self.station, bool(cur.fault), cur.fault_code, cur.state,
                           tuple(Fault(str(r.position), int(r.raw), tuple(r.codes), tuple(r.meanings))
                                 for r in hist))
@@ -227,7 +213,7 @@ class Drive:
         with self._bus._call():
             self._check()
             self._bus._check_write(f"acknowledge the fault of station {self.station}")
-            return self._status(self.session.clear_fault())
+            return self._status(self._station.clear_fault())
 
     # -- audit --------------------------------------------------------------------------------------
     def audit(self, *, max_reaction_s: float | None = None, cycle_s: float | None = None,
@@ -240,7 +226,7 @@ class Drive:
         from profidrive_cli.session.audit import audit_session
         with self._bus._call():
             self._check()
-            rep = audit_session(self.session, watchdog_s=watchdog_s, cycle_s=cycle_s,
+            rep = audit_session(self._station, watchdog_s=watchdog_s, cycle_s=cycle_s,
                                 max_reaction_s=max_reaction_s)
             return AuditResult(
                 rep.station, rep.profile, rep.layout, rep.ident, rep.watchdog_s, rep.cycle_s,
@@ -251,6 +237,16 @@ class Drive:
                 tuple(AuditSkip(k.rule, k.topic, k.reason, k.manual) for k in rep.not_checked),
                 tuple(rep.checked))
 
+    # -- the station level ---------------------------------------------------------------------------
+    @contextlib.contextmanager
+    def held(self) -> "Iterator[DriveStation]":
+        """The station itself (the station level, profidrive_cli.api.station: its .motion and
+        .params), for the block, under the bus lock: the keep-alive thread keeps off the master
+        meanwhile, as during every call here. For tools (pdrive status renders its Sample)."""
+        with self._bus._call():
+            self._check()
+            yield self._station
+
     # -- end ------------------------------------------------------------------------------------------
     def close(self) -> StopResult | None:
         """Stop the drive if this API started it, release the station (it leaves data exchange);
@@ -260,7 +256,7 @@ class Drive:
                 return None
             self._bus._drives.pop(self.station, None)
             self._close(None)
-            r = self.session.motion.stop_report
+            r = self._station.motion.stop_report
             return None if r is None else StopResult(r.how, bool(r.stopped), round(r.seconds, 3),
                                                      r.message)
 
@@ -268,7 +264,7 @@ class Drive:
         if self._closed:
             return
         self._closed = True
-        self.session.close(exc)
+        self._station.close(exc)
 
 
 def _param(pv: "ParamValue") -> Param:

@@ -254,7 +254,7 @@ def resolve_param(profile: Profile, code: str) -> tuple[str, ParamDef | None]:
         msg = str(e)
         if "unknown" in msg.lower():
             from profidrive_cli.drives.profile import foreign_profiles_with_code
-            from profidrive_cli.session import suggest_codes
+            from profidrive_cli.api.station import suggest_codes
             others = sorted({p.family for p in foreign_profiles_with_code(text, profile)})
             near = suggest_codes(profile, text, 3)
             msg = f"unknown parameter '{text}' for {profile.name}"

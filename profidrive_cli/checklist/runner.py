@@ -39,7 +39,7 @@ if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.api.bus import Bus
     from profidrive_cli.checklist.fields import ParamTarget
     from profidrive_cli.drives.base import Drive, DriveStatus
-    from profidrive_cli.session import DriveStation
+    from profidrive_cli.api.station import DriveStation
 
 PASSED, FAILED, ERROR, SKIPPED, NOT_RUN = "passed", "failed", "error", "skipped", "not run"
 
@@ -49,7 +49,7 @@ class Terminated(KeyboardInterrupt):
 
 
 def _interrupts() -> tuple[type[BaseException], ...]:
-    from profidrive_cli.session import SessionTerminated
+    from profidrive_cli.api.station import SessionTerminated
     return (KeyboardInterrupt, SessionTerminated)
 
 
@@ -486,14 +486,14 @@ def session_opener(bus: Bus, *, cycle_hz: float | None = None, watchdog_ms: floa
     on exit stops the drive safely and releases it.
     checklist: a station of its `together` steps gets the watchdog of their group (three rounds)."""
     from profidrive_cli.checklist.steps.together import group_watchdog
-    from profidrive_cli.session import DEFAULT_WATCHDOG_MS
+    from profidrive_cli.api.station import DEFAULT_WATCHDOG_MS
 
     @contextlib.contextmanager
     def open_station(spec: StationFacts) -> Iterator[StationHandle]:
         wd, raised = watchdog_ms or DEFAULT_WATCHDOG_MS, None
         if checklist is not None:
             wd, raised = group_watchdog(checklist, spec, bus.master, wd)
-        s = bus.session(spec.address, profile=spec.profile.name, layout=spec.layout,
+        s = bus.station(spec.address, profile=spec.profile.name, layout=spec.layout,
                         cycle_hz=cycle_hz, watchdog_ms=wd, on_message=on_message)
         if raised is not None:
             s.warn(f"{spec.name}: {raised}")

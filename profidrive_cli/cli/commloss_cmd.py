@@ -16,7 +16,7 @@ from profidrive_cli.cli.drive_cmds import _confirmer, _session
 from profidrive_cli.cli.drive_opts import _terminations, drive_options
 
 if TYPE_CHECKING:
-    from profidrive_cli.session.commloss import CommLossResult
+    from profidrive_cli.api.station import CommLossResult
 
 
 @click.command("commloss-test")
@@ -57,7 +57,7 @@ def commloss_cmd(opts: BusOptions, address: int | None, hz: float, mode: str, ti
                     ("--start-timeout", start_timeout), ("--cycle-hz", cycle_hz)):
         if v is not None and not math.isfinite(v):
             raise UsageError(f"{name} must be a number")
-    from profidrive_cli.session.commloss import check_args, run_commloss
+    from profidrive_cli.api.station import check_commloss_args as check_args, run_commloss
     check_args(hz, mode, timeout, tolerance, start_timeout)     # before the bus is opened
     session = _session(opts, address, profile_name, ppo, fmt, watchdog_ms, cycle_hz=cycle_hz,
                        before=_confirmer(opts, yes, f"comm-loss test: run at {hz:g} Hz, then break "

@@ -20,16 +20,16 @@ from profidrive_cli.cli import render_drive as R
 # re-exported (explicitly, for mypy): audit_cmd imports them from here
 from profidrive_cli.cli.drive_opts import _terminations as _terminations, drive_options as drive_options
 from profidrive_cli.drives.base import DriveError
-from profidrive_cli.session import (DriveStation, RestoreInterrupted, RestoreRefused,
+from profidrive_cli.api.station import (DriveStation, RestoreInterrupted, RestoreRefused,
                                     SessionTerminated)
-from profidrive_cli.session.backup import CARD_MANUAL, default_source, nothing_compared
-from profidrive_cli.session.dumpfile import load_dump, not_dumped_words, write_dump
-from profidrive_cli.session.restore import scope_problem
+from profidrive_cli.api.station import CARD_MANUAL, default_source, nothing_compared
+from profidrive_cli.api.station import load_dump, not_dumped_words, write_dump
+from profidrive_cli.api.station import scope_problem
 from profidrive_cli.outfile import check_output_path
 
 if TYPE_CHECKING:
     from profidrive_cli.cli.render_drive import RunView
-    from profidrive_cli.session.params import ParamRow
+    from profidrive_cli.api.station import ParamRow
 
 T = TypeVar("T")
 #: a before-connect callback (DriveStation's before_connect)
@@ -69,7 +69,7 @@ def _session(opts: BusOptions, address: int | None, profile_name: str | None, pp
     defaults = opts.station_defaults(address)
     profile_name = profile_name or defaults.get("profile")
     layout = defaults.get("layout") if ppo is None and fmt is None else None
-    return opts.open_bus(address).session(
+    return opts.open_bus(address).station(
         address, profile=profile_name, layout=layout, ppo=ppo, fmt=fmt, watchdog_ms=watchdog_ms,
         cycle_hz=cycle_hz, before_connect=before, on_message=_message, log_csv=log, own_port=True)
 
@@ -144,10 +144,8 @@ def status_cmd(opts: BusOptions, address: int | None, profile_name: str | None, 
     with opts.open_bus(address, handle_signals=True, on_message=_message) as bus:
         drive = bus.drive(address, profile=profile_name, layout=fmt, ppo=ppo,
                           watchdog_ms=watchdog_ms, cycle_hz=0.0)
-        s = drive.session
-        with bus._lock:     # as Drive.status: the keep-alive thread keeps off the master meanwhile
-            sample = s.motion.status()
-        d = R.status_dict(s, sample)
+        with drive.held() as s:     # the keep-alive thread keeps off the master meanwhile
+            d = R.status_dict(s, s.motion.status())
     if opts.json:
         emit_json(R.status_json(d))
     else:

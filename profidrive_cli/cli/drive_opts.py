@@ -12,7 +12,7 @@ from typing import Any, Callable, ParamSpec, TypeVar
 import click
 
 from profidrive_cli.cli.common import err
-from profidrive_cli.session import SessionTerminated
+from profidrive_cli.api.station import SessionTerminated
 
 F = TypeVar("F", bound=Callable[..., Any])
 P = ParamSpec("P")

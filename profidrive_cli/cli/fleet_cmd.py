@@ -20,11 +20,11 @@ from profidrive_cli.cli.common import BusOptions, bus_options, emit_json, err, o
 from profidrive_cli.cli.drive_opts import _terminations, drive_options
 from profidrive_cli.drives.base import DriveError, value_text
 from profidrive_cli.outfile import check_output_path, format_by_suffix, write_text_atomic
-from profidrive_cli.session import fleet
-from profidrive_cli.session.dumpfile import write_dump
+from profidrive_cli.api import fleet
+from profidrive_cli.api.station import write_dump
 
 if TYPE_CHECKING:
-    from profidrive_cli.session.station import DriveStation
+    from profidrive_cli.api.station import DriveStation
 
 #: --html writes a page: the file name says so (as checklist run --report, run --plot)
 HTML_SUFFIXES = {".html": "html", ".htm": "html"}
@@ -48,7 +48,7 @@ def _read_stations(opts: BusOptions, addresses: list[int], profile_name: str | N
             try:
                 # the config file's profile and layout for this station, below the options
                 layout = defaults.get("layout") if ppo is None and fmt is None else None
-                with bus.session(a, profile=profile_name or defaults.get("profile"), layout=layout,
+                with bus.station(a, profile=profile_name or defaults.get("profile"), layout=layout,
                                  ppo=ppo, fmt=fmt, watchdog_ms=watchdog_ms, handle_signals=True,
                                  on_message=lambda t: err.print(escape(t))) as s:
                     each(a, s)

@@ -21,11 +21,11 @@ from profidrive_cli.cli.common import BusOptions, bus_options, err
 from profidrive_cli.cli.drive_cmds import _confirmer, _session, run_ending
 from profidrive_cli.cli.drive_opts import _terminations, drive_options
 from profidrive_cli.drives.base import DriveError
-from profidrive_cli.session.live import Live
+from profidrive_cli.api.station import Live
 
 if TYPE_CHECKING:
-    from profidrive_cli.session.cycle import Sample
-    from profidrive_cli.session.station import DriveStation
+    from profidrive_cli.api.station import Sample
+    from profidrive_cli.api.station import DriveStation
 
 #: On a terminal the jog runs while a key is held: the terminal repeats a held key (after its
 #: auto-repeat delay, typically 250-600 ms); no key for this long counts as released and stops.

@@ -25,10 +25,10 @@ if TYPE_CHECKING:
     from rich.console import RenderableType
 
     from profidrive_cli.drives.base import DriveStatus, FaultRecord, ParamValue
-    from profidrive_cli.session.cycle import Sample
-    from profidrive_cli.session.station import DriveStation
-    from profidrive_cli.session.monitors import Monitors, TripRecords
-    from profidrive_cli.session.params import ParamRow
+    from profidrive_cli.api.station import Sample
+    from profidrive_cli.api.station import DriveStation
+    from profidrive_cli.api.station import Monitors, TripRecords
+    from profidrive_cli.api.station import ParamRow
 
 SPARK = "▁▂▃▄▅▆▇█"
 

@@ -17,7 +17,7 @@ from profidrive_cli.cli.common import emit_json, err, out
 from profidrive_cli.cli.render_drive import fmt_num, stop_json
 
 if TYPE_CHECKING:
-    from profidrive_cli.session.cycle import Sample
+    from profidrive_cli.api.station import Sample
 
 
 def sample_dict(address: int, t_s: float, sample: Sample, phase: str) -> dict[str, Any]:

@@ -14,18 +14,17 @@ import click
 from profidrive_cli import UsageError
 from profidrive_cli.cli import render_drive as R
 from profidrive_cli.cli import run_multi, run_plot, run_torque
-from profidrive_cli.api.drive import fmax_readable
 from profidrive_cli.cli.common import BusOptions, bus_options
 from profidrive_cli.cli.drive_cmds import _confirmer, _session, run_ending
 from profidrive_cli.cli.drive_opts import _terminations, drive_options
 from profidrive_cli.drives.base import DriveError
 from profidrive_cli.outfile import check_output_path
-from profidrive_cli.session.live import NOT_REACHED, Live, end_status, fault_name
+from profidrive_cli.api.station import NOT_REACHED, Live, end_status, fault_name
 
 if TYPE_CHECKING:
-    from profidrive_cli.session.cycle import Sample
-    from profidrive_cli.session.station import DriveStation
-    from profidrive_cli.session.monitors import Monitors
+    from profidrive_cli.api.station import Sample
+    from profidrive_cli.api.station import DriveStation
+    from profidrive_cli.api.station import Monitors
 
 
 @click.command("run")
@@ -107,7 +106,7 @@ def run_cmd(opts: BusOptions, address: int | tuple[int, ...] | None, profile_nam
     mons: list[Monitors] = []                # --monitor: checked before anything is asked or written
 
     def before(sess: DriveStation) -> None:
-        from profidrive_cli.session.monitors import setup_monitors
+        from profidrive_cli.api.station import setup_monitors
         mons.extend([setup_monitors(sess, monitor_spec)] if monitor_spec is not None else [])
         _confirmer(opts, yes, what + (mons[0].question_note() if mons else ""))(sess)
     session = _session(opts, address, profile_name, ppo, fmt, watchdog_ms, cycle_hz=cycle_hz,
@@ -131,7 +130,7 @@ def run_cmd(opts: BusOptions, address: int | tuple[int, ...] | None, profile_nam
             s.motion.check_torque(torque, torque_limit)          # the card's reason before anything shows
             if fmax is None:      # the config file's: used where the drive's own is not readable,
                 cfg = opts.station_defaults(s.address)     # else only checked against it (warning)
-                fmax = cfg.get("fmax") if not fmax_readable(s) else cfg.peek("fmax")
+                fmax = cfg.get("fmax") if not s.motion.fmax_readable else cfg.peek("fmax")
             fmax_hz, src = s.motion.fmax(fmax)
             if mons:
                 mons[0].map_cyclic()            # before the start; restored after the stop

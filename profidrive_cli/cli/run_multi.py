@@ -16,7 +16,7 @@ from profidrive_cli.drives.base import DriveError
 
 if TYPE_CHECKING:
     from profidrive_cli.cli.common import BusOptions
-    from profidrive_cli.session.station import DriveStation
+    from profidrive_cli.api.station import DriveStation
 
 #: a --hz / --percent value: one number, or one per station
 Speeds = float | tuple[float, ...]
@@ -94,7 +94,7 @@ def run_several(opts: BusOptions, addresses: tuple[int, ...], *, hz: Speeds | No
     a drive did not reach its speed or did not stop."""
     from profidrive_cli.cli.render_drive import KeyReader
     from profidrive_cli.cli.render_multi import MultiView
-    from profidrive_cli.session.multirun import MultiRun
+    from profidrive_cli.api.station import MultiRun
     given = [k for k in _ONE_STATION_ONLY if refused.get(k) not in (None, False)]
     if given:
         raise UsageError(f"{given[0]}: one station only; not with several stations "

@@ -15,9 +15,9 @@ from profidrive_cli.outfile import OutputWriteError, check_output_path
 
 if TYPE_CHECKING:
     from profidrive_cli.cli.render_drive import RunView
-    from profidrive_cli.session.cycle import Sample
-    from profidrive_cli.session.station import DriveStation
-    from profidrive_cli.session.monitors import Monitors
+    from profidrive_cli.api.station import Sample
+    from profidrive_cli.api.station import DriveStation
+    from profidrive_cli.api.station import Monitors
 
 
 class RunPlot:

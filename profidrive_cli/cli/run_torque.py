@@ -10,7 +10,7 @@ from profidrive_cli import UsageError
 from profidrive_cli.drives.torque import NO_TORQUE
 
 if TYPE_CHECKING:
-    from profidrive_cli.session.station import DriveStation
+    from profidrive_cli.api.station import DriveStation
 
     Before = Callable[[DriveStation], None]
 

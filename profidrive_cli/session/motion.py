@@ -87,6 +87,17 @@ class Motion(SafeStop):
         assert p is not None                    # connected
         return p
 
+    @property
+    def fmax_readable(self) -> bool:
+        """The drive's own maximum frequency can be read (a parameter channel, and a parameter
+        number or register for the profile's max-frequency parameter): the one rule, for fmax() and
+        for the CLI's config-file fmax default (left unused then)."""
+        prof = self._profile()
+        code = prof.max_frequency_param
+        pdef = prof.param(code) if code else None
+        return bool(self.station.need_drive().has_param_channel and pdef is not None
+                    and (pdef.pnu is not None or pdef.register is not None))
+
     def fmax(self, override: float | None = None) -> tuple[float, str]:
         """(max frequency in Hz = 100 %, where it came from). With a parameter channel the drive's
         own value is read; without one `override` (--fmax) or the profile default is used."""
@@ -95,13 +106,11 @@ class Motion(SafeStop):
             return self._fmax
         prof = self._profile()
         code = prof.max_frequency_param
-        pdef = prof.param(code) if code else None
-        readable = pdef is not None and (pdef.pnu is not None or pdef.register is not None)
         # an fmax from a config file keeps its FILE:LINE (config.FileHz): the label names that line
         source = source_of(override)
         given = f"fmax {override:g} Hz from {source}" if source is not None else \
             f"--fmax {override:g}" if override is not None else ""
-        if d.has_param_channel and readable:
+        if self.fmax_readable:
             hz = float(d.max_frequency())
             src = f"read from the drive ({code})"
             if override is not None and not math.isclose(override, hz, rel_tol=1e-3):

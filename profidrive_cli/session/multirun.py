@@ -46,7 +46,7 @@ class Stations(Protocol):
     @property
     def master(self) -> "Master": ...
 
-    def session(self, station: int | None = None, *, watchdog_ms: float = 500,
+    def station(self, station: int | None = None, *, watchdog_ms: float = 500,
                 cycle_hz: float | None = None, handle_signals: bool = True,
                 on_message: Callable[[str], None] | None = None) -> "DriveStation":
         """A DriveStation for `station` on this bus's master, not yet opened; its close leaves the
@@ -212,7 +212,7 @@ class MultiRun:
 
     def _open(self) -> None:
         for a, ref in zip(self.addresses, self.refs):
-            s = self.bus.session(a, watchdog_ms=self.watchdog_ms, handle_signals=False,
+            s = self.bus.station(a, watchdog_ms=self.watchdog_ms, handle_signals=False,
                                  on_message=self.on_message, cycle_hz=self.cycle_hz)
             self.runs.append(StationRun(s, a, ref))
             s.identify()                    # Slave_Diag only: nothing written yet

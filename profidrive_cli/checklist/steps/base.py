@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Any, Callable, Protocol, Sequence, TypeVar
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.checklist.fields import FieldChecker, RawStepFacts, StationFacts, StepArgs, StepFacts
     from profidrive_cli.drives.base import Drive, DriveStatus
-    from profidrive_cli.session import DriveStation
+    from profidrive_cli.api.station import DriveStation
 
 class ChecklistFacts(Protocol):
     """spec.Checklist: its stations."""

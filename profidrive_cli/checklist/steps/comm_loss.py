@@ -52,7 +52,7 @@ class CommLoss(StepType):
                 f"comm-loss test at {fmt(hz)} Hz ({mode})" + (", acknowledge the fault" if ack else ""))
 
     def execute(self, run: StepRun[SR, R], sr: SR, r: R, d: Drive, h: Handle) -> str:
-        from profidrive_cli.session.commloss import run_commloss
+        from profidrive_cli.api.station import run_commloss
         a = r.step.args
         run.progress(sr, r, f"running at {fmt(a['hz'])} Hz, then breaking the link ({a['mode']})")
         res = run_commloss(h.session, float(a["hz"]), a["mode"], timeout=a["timeout"], ack=a["ack"],

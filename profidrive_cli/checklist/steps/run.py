@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 from profidrive_cli.checklist.fields import RawStepFacts, StationFacts, StepArgs, fmt
 from profidrive_cli.checklist.steps.base import Handle, R, SR, StepFailed, StepRun, StepType, rnd
-from profidrive_cli.session.live import Reach
+from profidrive_cli.api.station import Reach
 
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.checklist.fields import FieldChecker

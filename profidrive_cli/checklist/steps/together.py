@@ -19,13 +19,13 @@ from typing import TYPE_CHECKING, Any, Callable
 
 from profidrive_cli.checklist.fields import StationFacts, StepArgs, fmt
 from profidrive_cli.checklist.steps.base import ChecklistFacts, Handle, R, SR, StepFailed, StepRun, rnd
-from profidrive_cli.session.group import Group
-from profidrive_cli.session.live import Reach
+from profidrive_cli.api.station import Group
+from profidrive_cli.api.station import Reach
 
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.dp.poller import Master
     from profidrive_cli.drives.base import Drive, DriveStatus
-    from profidrive_cli.session import DriveStation
+    from profidrive_cli.api.station import DriveStation
 
 #: run.py's run_measured(st, v, reach_s, lo, hi, unit) -> the step's measured dict
 RunMeasured = Callable[["DriveStatus", "float | None", "float | None", "float | None", "float | None", str],
@@ -174,7 +174,7 @@ def group_watchdog(checklist: ChecklistFacts, spec: StationFacts, master: Master
     warning's words when raised. The rounds as the step paces them (Group.rate of the stations'
     wire limits at the bus's baud rate); decided before the station is parameterised, because the
     Set_Prm carries it (on its own turn too: the step runs on the first station's)."""
-    from profidrive_cli.session.cycle import wire_limit_hz
+    from profidrive_cli.api.station import wire_limit_hz
     best: tuple[float, str | None] = (asked_ms, None)
     by_name = {s.name: s for s in checklist.stations}
     steps = {id(st): st for s in checklist.stations for st in s.steps

@@ -1,0 +1,50 @@
+"""The station level of the API: what pdrive's own tools (the CLI's drive commands, the checklist,
+the asyncio face) use beyond Bus.drive(), and what a user's tool may use the same way (docs/api.md
+"The station level"). Bus.station() opens a DriveStation; everything a tool does with it goes
+through the names here -- no tool imports session/ (tests/test_layering.py: the one door).
+
+    DriveStation    one drive station, the one owner of its state (session/station.py);
+                    .motion: Motion (may it turn, start / jog / torque, the one stop path),
+                    .params: Parameters (the one write path: plan -> execute; dump / compare / restore)
+    Sample          one status sample of a station (status, reference, actual, counters)
+    StopReport      how a stop ended (normal / coast / failed / not sent)
+    Live, Reach     the loop of run and jog; the one "reached" rule (NOT_REACHED, end_status,
+                    fault_name: the words of a run's end)
+    MultiRun, Group several drives in one run; several stations on one bus cycle
+    Monitors, TripRecords, setup_monitors   run --monitor and the card's trip records
+    run_commloss, check_commloss_args, CommLossResult   the comm-loss acceptance test
+    dump files      load_dump, write_dump, not_dumped_words; restore's RestoreRefused /
+                    RestoreInterrupted / scope_problem; backup's default_source, nothing_compared,
+                    CARD_MANUAL
+    codes           suggest_codes (the closest codes), wire_limit_hz (a station's wire limit)
+
+The station level is typed (mypy --strict) but not a versioned contract (docs/versioning.md): it
+changes when the tools need it, and CHANGELOG.md says so where a user would notice.
+"""
+
+from profidrive_cli.session.backup import CARD_MANUAL, default_source, nothing_compared
+from profidrive_cli.session.commloss import CommLossResult, run_commloss
+from profidrive_cli.session.commloss import check_args as check_commloss_args
+from profidrive_cli.session.cycle import Sample, wire_limit_hz
+from profidrive_cli.session.discovery import Candidate
+from profidrive_cli.session.dumpfile import load_dump, not_dumped_words, write_dump
+from profidrive_cli.session.group import Group
+from profidrive_cli.session.live import NOT_REACHED, Live, Reach, end_status, fault_name
+from profidrive_cli.session.monitors import Monitors, TripRecords, setup_monitors
+from profidrive_cli.session.motion import Motion
+from profidrive_cli.session.multirun import MultiRun
+from profidrive_cli.session.parameters import Parameters
+from profidrive_cli.session.params import ParamInfo, ParamRow, WritePlan, suggest_codes
+from profidrive_cli.session.restore import RestoreInterrupted, RestoreRefused, scope_problem
+from profidrive_cli.session.safestop import StopReport
+from profidrive_cli.session.signals import SessionTerminated
+from profidrive_cli.session.station import DEFAULT_WATCHDOG_MS, DriveStation
+
+__all__ = [
+    "CARD_MANUAL", "Candidate", "CommLossResult", "DEFAULT_WATCHDOG_MS", "DriveStation", "Group", "Live",
+    "Monitors", "Motion", "MultiRun", "NOT_REACHED", "ParamInfo", "ParamRow", "Parameters", "Reach",
+    "RestoreInterrupted", "RestoreRefused", "Sample", "SessionTerminated", "StopReport", "TripRecords",
+    "WritePlan", "check_commloss_args", "default_source", "end_status", "fault_name", "load_dump",
+    "not_dumped_words", "nothing_compared", "run_commloss", "scope_problem", "setup_monitors",
+    "suggest_codes", "wire_limit_hz", "write_dump",
+]
