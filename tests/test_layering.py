@@ -417,3 +417,26 @@ def test_the_checklist_stands_on_the_sessions_the_front_door_opens():
         for line, what in _constructions(path, BUILT_BELOW):
             bad.append(f"{_where(path, line)}: builds a {what} (the opener's bus does: Bus.session)")
     assert not bad, "the checklist beside the front door:\n" + "\n".join(bad)
+
+
+#: the one door (issue 36): these layers reach the station layer only through profidrive_cli.api
+ONE_DOOR = ("cli", "checklist", "aio")
+
+
+def test_the_cli_the_checklist_and_aio_pass_through_the_one_door():
+    bad = []
+    for m, path in MODULES.items():
+        if m == "profidrive_cli.__main__" or layer_of(m) not in ONE_DOOR:
+            continue
+        for line, target, text in ALL_EDGES[m]:
+            if layer_of(target) == "session":
+                bad.append(f"{_where(path, line)}: {text} (the station level is "
+                           f"profidrive_cli.api.station)")
+    assert not bad, "past the one door:\n" + "\n".join(bad)
+
+
+def test_the_one_door_check_finds_a_session_import(tmp_path):
+    f = tmp_path / "cmd.py"
+    f.write_text("def f():\n    from profidrive_cli.session.live import Reach\n", encoding="utf-8")
+    found = [t for _, t, _ in imports_of("profidrive_cli.cli.cmd", f)]
+    assert "profidrive_cli.session.live" in found and layer_of(found[0]) == "session"
