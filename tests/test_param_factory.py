@@ -15,7 +15,7 @@ import yaml
 
 from profidrive_cli.datafile import DataFileError
 from profidrive_cli.drives.profile import load_profile, load_profile_file
-from profidrive_cli.session.params import ParamRow
+from profidrive_cli.session.paramtypes import ParamRow
 from profidrive_cli.session.restore import apply_scope, scope_problem
 from conftest import run_main
 

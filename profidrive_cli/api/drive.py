@@ -237,6 +237,13 @@ class Drive:
                 tuple(AuditSkip(k.rule, k.topic, k.reason, k.manual) for k in rep.not_checked),
                 tuple(rep.checked))
 
+    @property
+    def last_stop(self) -> StopResult | None:
+        """How this drive's last stop ended (stop(), the stop on close or on the way out of the
+        bus's `with`), None before any; readable after the bus is closed."""
+        r = self._station.motion.stop_report
+        return None if r is None else StopResult(r.how, bool(r.stopped), round(r.seconds, 3), r.message)
+
     # -- the station level ---------------------------------------------------------------------------
     @contextlib.contextmanager
     def held(self) -> "Iterator[DriveStation]":

@@ -34,7 +34,7 @@ from profidrive_cli.session.monitors import Monitors, TripRecords, setup_monitor
 from profidrive_cli.session.motion import Motion
 from profidrive_cli.session.multirun import MultiRun
 from profidrive_cli.session.parameters import Parameters
-from profidrive_cli.session.params import ParamInfo, ParamRow, WritePlan, suggest_codes
+from profidrive_cli.session.paramtypes import ParamInfo, ParamRow, WritePlan, suggest_codes
 from profidrive_cli.session.restore import RestoreInterrupted, RestoreRefused, scope_problem
 from profidrive_cli.session.safestop import StopReport
 from profidrive_cli.session.signals import SessionTerminated

@@ -268,7 +268,7 @@ class Drive(ABC):
         """Store parameters in non-volatile memory where the card supports it."""
         raise DriveError(f"{self.family}: this card has no separate save command")
 
-    # -- family hooks for session/params.py (defaults here; each codec answers what differs) ----
+    # -- family hooks for session/parameters.py (defaults here; each codec answers what differs) ----
     def param_info(self, code: str) -> ParamInfo:
         """How this family addresses `code` (no bus traffic); UsageError when it does not."""
         p = self.profile.param(code)

@@ -18,7 +18,7 @@ rich: cli/drive_cmds.py and the checklist runner build on it.
     cyclelog.py      the --log CSV, one row per Data_Exchange (outfile.OutputFile)
     parameters.py    Parameters: plan(code, value) -> WritePlan (the code resolved and checked once),
                      execute(plan) (stop-only, write, read back), read, save; dump / compare / restore
-    params.py        code helpers, value text, WritePlan, ParamRow
+    paramtypes.py    code helpers, value text, WritePlan, ParamRow
     backup.py        dump and compare;  dumpfile.py: the dump file format and loading
     restore.py       restore: plan every row first, then write and read back
     group.py         Group: several stations on one bus cycle (run 3,4,5, the checklist's together, api)
@@ -107,7 +107,7 @@ from profidrive_cli.session.station import DEFAULT_WATCHDOG_MS, DriveStation
 from profidrive_cli.session.dumpfile import DUMP_END, DUMP_FORMAT
 from profidrive_cli.session.motion import Motion
 from profidrive_cli.session.parameters import Parameters
-from profidrive_cli.session.params import ParamInfo, WritePlan, profiles_with_code, suggest_codes
+from profidrive_cli.session.paramtypes import ParamInfo, WritePlan, profiles_with_code, suggest_codes
 from profidrive_cli.session.restore import RestoreInterrupted, RestoreRefused
 from profidrive_cli.session.safestop import StopReport
 from profidrive_cli.session.signals import SessionTerminated

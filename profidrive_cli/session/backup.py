@@ -17,7 +17,7 @@ from profidrive_cli.drives.profile import load_profile
 from profidrive_cli.session.discovery import family_words
 from profidrive_cli.session.dumpfile import DUMP_END, DUMP_FORMAT
 from profidrive_cli.datafile import LineDict
-from profidrive_cli.session.params import ParamRow, ParamView
+from profidrive_cli.session.paramtypes import ParamRow, ParamView
 
 __all__ = ["BUS_SETTING", "CARD_MANUAL", "NO_DEFAULT", "ParamRow", "compare", "default_source", "dump",
            "dump_plan", "factory_diff", "nothing_compared", "same_value"]

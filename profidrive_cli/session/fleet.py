@@ -38,7 +38,7 @@ from profidrive_cli.datafile import DataFileError, LineDict, load_yaml
 from profidrive_cli.drives.profile import Profile, load_profile
 from profidrive_cli.session.backup import same_value
 from profidrive_cli.session.dumpfile import load_dump
-from profidrive_cli.session.params import suggest_codes
+from profidrive_cli.session.paramtypes import suggest_codes
 
 __all__ = ["Cell", "FleetDiff", "Golden", "StationSettings", "Violation", "compare", "dump_file_name",
            "from_dump", "load_dir", "load_golden", "parse_stations"]

@@ -104,7 +104,7 @@ def monitor_codes(profile: Profile, layout: str, spec: str) -> list[str]:
             continue
         p = profile.param(c)
         if p is None:
-            from profidrive_cli.session.params import suggest_codes
+            from profidrive_cli.session.paramtypes import suggest_codes
             near = suggest_codes(profile, c)
             raise UsageError(f"--monitor {c}: {profile.name} has no parameter {c}"
                              + (f" (closest: {', '.join(near)})" if near else ""))

@@ -22,7 +22,7 @@ import profidrive_cli.session.backup as backup
 import profidrive_cli.session.dumpfile as dumpfile
 import profidrive_cli.session.restore as restore
 from profidrive_cli.session.cycle import Sample
-from profidrive_cli.session.params import (Host, ParamRow, WritePlan, dangerous_words, parse_text,
+from profidrive_cli.session.paramtypes import (Host, ParamRow, WritePlan, dangerous_words, parse_text,
                                            unknown_code_message, with_text)
 
 __all__ = ["Parameters", "ParamRow", "WritePlan"]

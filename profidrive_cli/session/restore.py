@@ -25,7 +25,7 @@ from profidrive_cli.drives.base import DriveError, value_text
 from profidrive_cli.drives.profile import Profile, load_profile
 from profidrive_cli.session.backup import same_value
 from profidrive_cli.session.discovery import family_words
-from profidrive_cli.session.params import ParamRow, ParamView, WritePlan
+from profidrive_cli.session.paramtypes import ParamRow, ParamView, WritePlan
 
 
 class RestoreRefused(UsageError):

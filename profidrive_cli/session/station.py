@@ -1,7 +1,7 @@
 """DriveStation: one drive station in Data_Exchange behind the Drive interface, with a safe stop on
 every way out. Ties the session's parts together and keeps their shared state; the work is done in
 discovery.py, cycle.py, bringup.py, motion.py (Motion: run, jog, torque, the safe stop of
-safestop.py, may_run) + signals.py, cyclelog.py, params.py,
+safestop.py, may_run) + signals.py, cyclelog.py, paramtypes.py,
 backup.py + dumpfile.py + restore.py (the API is described in session/__init__.py). No click and no
 rich here.
 """
@@ -23,7 +23,7 @@ from profidrive_cli.session.cyclelog import CycleLog, Extra
 from profidrive_cli.session.discovery import Candidate, choose_profile, locate, resolve_layout
 from profidrive_cli.session.motion import Motion
 from profidrive_cli.session.parameters import Parameters
-from profidrive_cli.session.params import ParamInfo, ParamRow
+from profidrive_cli.session.paramtypes import ParamInfo, ParamRow
 from profidrive_cli.session.safestop import StopReport
 from profidrive_cli.session.signals import Guard, SignalGuard
 
