@@ -143,7 +143,7 @@ def _sample(t, act, ref=50.0, fault=False, code=None):
 
 
 class FakeSession:
-    """poll() hands out the given samples, one a cycle; stop() stops."""
+    """A station that is its own Motion: poll() hands out the given samples, one a cycle; stop() stops."""
 
     def __init__(self, samples):
         self.samples = list(samples)
@@ -154,7 +154,11 @@ class FakeSession:
         self.profile = None
         self.stop_status = None             # the status the stop reads (StopReport.status)
         self.sampled = []
-        self.motion = SimpleNamespace(sample=lambda st: self.sampled.append(st) or st)
+        self.motion = self                  # the station and its Motion in one fake
+
+    def sample(self, st):
+        self.sampled.append(st)
+        return st
 
     def poll(self):
         return self.samples.pop(0)
