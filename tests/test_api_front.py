@@ -71,7 +71,7 @@ def test_a_session_from_the_bus_opens_the_station_and_leaves_the_port_to_the_bus
         assert isinstance(s, DriveStation) and s.drive is None          # not opened yet
         with s:
             assert s.address == 3 and s.profile.name == "fuji-opc-g1-pdp" and s.watchdog_ms == 300
-            assert s.motion.status().motion.status.state
+            assert s.motion.status().status.state
         assert s.motion.stop_report is not None and s.motion.stop_report.how == "not needed"
         assert not bus.closed and bus.master.link.ser.is_open          # the port stays the bus's
         assert [st.station for st in bus.scan(3, 3)] == [3]             # and the bus still works

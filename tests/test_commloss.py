@@ -65,7 +65,7 @@ def test_every_family_passes_with_the_reaction_measured_within_the_bound(address
     assert res.reacted and res.watchdog_expired is True
     assert earliest - 1e-6 <= res.measured_s <= bound
     assert res.fault_code == code and res.final_state.startswith("fault")
-    assert s.stop_report.stopped
+    assert s.motion.stop_report.stopped
     assert res.acknowledged is False                  # no --ack: the fault stays
 
 
@@ -96,7 +96,7 @@ def test_a_drive_set_to_ignore_the_loss_fails_and_ends_stopped(address, preset, 
     assert words in res.verdict
     assert not res.reacted                    # it really kept running
     assert res.stop["needed"] is True and res.stop["stopped"] is True
-    assert s.final_status.stopped and not s.final_status.running
+    assert s.motion.final_status.stopped and not s.motion.final_status.running
 
 
 def test_toyo_configured_to_ignore_in_the_sim_fails_and_ends_stopped(sim):
@@ -107,13 +107,13 @@ def test_toyo_configured_to_ignore_in_the_sim_fails_and_ends_stopped(sim):
         res = run_commloss(s, 20.0)
     assert not res.passed and not res.reacted
     assert res.verdict.startswith("FAIL: still running at")
-    assert res.stop["needed"] is True and s.final_status.stopped
+    assert res.stop["needed"] is True and s.motion.final_status.stopped
 
 
 def test_ack_acknowledges_the_fault(sim):
     res, s = commloss(URL, 6, ack=True)
     assert res.passed and res.acknowledged
-    assert not s.final_status.fault and s.final_status.stopped
+    assert not s.motion.final_status.fault and s.motion.final_status.stopped
 
 
 def test_clear_mode_keeps_the_last_command_on_fuji_and_fails():
@@ -121,7 +121,7 @@ def test_clear_mode_keeps_the_last_command_on_fuji_and_fails():
     command in force (spec 3.1): the drive keeps running -> FAIL, and pdrive stops it."""
     res, s = commloss(URL, 3, mode="clear")
     assert not res.passed and not res.reacted
-    assert s.final_status.stopped
+    assert s.motion.final_status.stopped
 
 
 def test_bad_arguments_are_refused_before_anything_moves():
@@ -131,7 +131,7 @@ def test_bad_arguments_are_refused_before_anything_moves():
             run_commloss(s, 20.0, mode="loud")
         with pytest.raises(UsageError, match="0 Hz"):
             run_commloss(s, 0.0)
-        assert s.cycles <= 2 and not s.may_run
+        assert s.cycles <= 2 and not s.motion.may_run
 
 
 def run(*args):

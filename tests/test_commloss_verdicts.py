@@ -197,7 +197,7 @@ def test_fuji_y98_0_is_refused_before_the_drive_moves():
         with pytest.raises(DriveError, match=r"y98 = 0: run and frequency commands come from the "
                                              r"inverter.*does not trip er5.*set y98 = 3"):
             run_commloss(s, 20.0)
-        assert not s.may_run
+        assert not s.motion.may_run
 
 
 def pdrive(*args):
@@ -229,12 +229,12 @@ def test_toyo_sim_off2_with_c00_0_is_a_normal_stop():
     deceleration time instead of coasting at once; with C-00 = 1 (bus_control's seed) it coasts."""
     for c00, coasts in ((1, True), (0, False)):
         with session(URL + f"&set=5:C-00={c00}", 5) as s:
-            s.start(s.percent_for_hz(20.0))
+            s.motion.start(s.motion.percent_for_hz(20.0))
             for _ in range(200):
-                if abs((s.poll().actual_hz or 0) - 20.0) < 0.2:
+                if abs((s.motion.poll().actual_hz or 0) - 20.0) < 0.2:
                     break
             st = s.drive.stop("coast", wait=False)
-            model_hz = abs(s.poll().actual_hz or 0.0)
+            model_hz = abs(s.motion.poll().actual_hz or 0.0)
             assert (model_hz < 0.5) == coasts, (c00, model_hz, st)
 
 
@@ -288,7 +288,7 @@ def test_bad_tolerance_and_start_timeout_are_refused():
             run_commloss(s, 20.0, tolerance=-1.0)
         with pytest.raises(UsageError, match="--start-timeout 0 must be above 0 s"):
             run_commloss(s, 20.0, start_timeout=0.0)
-        assert not s.may_run
+        assert not s.motion.may_run
 
 
 # -- the checklist step ---------------------------------------------------------------------------

@@ -34,21 +34,21 @@ def stuck_stop(sim, address):
 
 def set_ramps(address, accel_code, decel_code, decel_s):
     with open_session(address, cycle_hz=0) as s:
-        s.write_param(accel_code, 0.1)
-        s.write_param(decel_code, decel_s)
+        s.params.write(accel_code, 0.1)
+        s.params.write(decel_code, decel_s)
 
 
 def escalate(sim, address, percent, **kw):
     """Run at `percent` of fmax, make the normal stop hang, leave the session: the StopReport."""
     s = open_session(address, **kw)
     with s:
-        s.start(percent)
+        s.motion.start(percent)
         for _ in range(40):                          # 10 s at 4 Hz: well past the 0.1 s ramp up
-            smp = s.poll()
+            smp = s.motion.poll()
         assert smp.status.running
         assert smp.status.speed_percent == pytest.approx(percent, abs=0.5)
         stuck_stop(sim, address)
-    return s.stop_report
+    return s.motion.stop_report
 
 
 # (deceleration time F08 in s, speed in % of fmax, expected wait before coasting in s)

@@ -153,9 +153,9 @@ def test_restore_lists_every_problem_identity_unknown_readonly_rounding(sim, tmp
     doc = Parameters.load_dump(f)
     with session(3) as s:
         with pytest.raises(getattr(S, 'RestoreRefused', UsageError)) as ei:
-            s.restore(doc)
+            s.params.restore(doc)
         probs = ei.value.problems
-        assert s.read_param("F08").value == 6.0
+        assert s.params.read("F08").value == 6.0
     assert any("ident 0x1234" in p for p in probs)
     assert any(p.startswith(f"{f}:4:") and "nearest 2.5 s or 2.6 s" in p for p in probs)
     assert any(p.startswith(f"{f}:5:") and "ZZ99" in p for p in probs)
@@ -168,11 +168,11 @@ def test_restore_refuses_stop_only_rows_while_the_motor_runs(sim, tmp_path):
     f.write_text("parameters:\n  F08: {value: 7.5}\n  F03: {value: 50.0}\n")
     doc = Parameters.load_dump(f)
     with session(3) as s:
-        s.start(10.0)
+        s.motion.start(10.0)
         with pytest.raises(getattr(S, 'RestoreRefused', UsageError)) as ei:
-            s.restore(doc)
+            s.params.restore(doc)
         assert any("F03" in p and "stopped" in p for p in ei.value.problems)
-        assert s.read_param("F08").value == 6.0
+        assert s.params.read("F08").value == 6.0
 
 
 def test_restore_skips_dangerous_rows_and_says_so(sim, pdrive, tmp_path):

@@ -68,12 +68,12 @@ def test_run_brings_up_five_stations_at_9600_without_a_watchdog_expiring(sim, mo
     one is in data exchange (the first max-frequency read), then released. Before the keep-alive,
     station 3 had no telegram for the 4 further start-ups (~0.5 s): its watchdog expired."""
     from profidrive_cli.cli.common import BusOptions
-    from profidrive_cli.session.station import DriveStation
+    from profidrive_cli.session.motion import Motion
     from profidrive_cli.session.multirun import MultiRun
 
     def brought_up(self, override=None):
         raise BroughtUp
-    monkeypatch.setattr(DriveStation, "fmax", brought_up)
+    monkeypatch.setattr(Motion, "fmax", brought_up)
     front = BusOptions(url, "9600", 2, None, None, False, False, 0, False).open_bus()
     master = front.master
     bus = next(iter(sim.values()))

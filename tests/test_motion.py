@@ -22,7 +22,7 @@ def standstill_hz(s):
     """The frequency below which the drive counts as stopped: DriveStatus.stopped's 0.05 % of the
     maximum frequency (drives/base.py). The model's own ramp may leave a few uHz after the stop it
     confirmed (seen under load: 8.5e-06 Hz), never more than that."""
-    return 0.0005 * s.fmax_hz
+    return 0.0005 * s.motion.fmax_hz
 
 
 #: an assignment to may_run / _may_run (not a comparison), or a setattr naming it
@@ -59,10 +59,10 @@ def test_a_drive_started_directly_is_stopped_on_close(sim, address, layout):
         d = s.drive
         d.set_speed(20.0)
         d.start(timeout=5.0)                   # as the checklist's run step does
-        assert s.may_run
+        assert s.motion.may_run
         for _ in range(5):
-            assert s.poll().status.running
-    assert s.stop_report.how == "normal" and s.stop_report.stopped, s.stop_report
+            assert s.motion.poll().status.running
+    assert s.motion.stop_report.how == "normal" and s.motion.stop_report.stopped, s.motion.stop_report
     model = drive_model(sim, address)
     assert abs(model.out_hz if address == 7 else model.freq) < standstill_hz(s)
 
@@ -76,19 +76,19 @@ def test_a_jog_given_directly_is_stopped_on_close_even_after_its_own_stop(sim, a
     with s:
         d = s.drive
         d.jog(True)
-        assert s.may_run
+        assert s.motion.may_run
         for _ in range(5):
             d.cycle()
         d.jog(False)
         d.stop("normal", wait=True, timeout=30.0)
-        assert s.may_run
-    assert s.stop_report.how == "normal" and s.stop_report.stopped, s.stop_report
+        assert s.motion.may_run
+    assert s.motion.stop_report.how == "normal" and s.motion.stop_report.stopped, s.motion.stop_report
     assert abs(drive_model(sim, address).freq) < standstill_hz(s)
 
 
 def test_a_session_that_never_commands_motion_needs_no_stop():
     with session(3) as s:
         s.drive.set_speed(20.0)                # a reference alone turns nothing
-        s.status()
-        assert not s.may_run
-    assert s.stop_report.how == "not needed"
+        s.motion.status()
+        assert not s.motion.may_run
+    assert s.motion.stop_report.how == "not needed"

@@ -126,6 +126,10 @@ class Host:
         self.master = SimpleNamespace(link=link if link is not None else SimpleNamespace(name="COM3"))
         self.warnings: list[str] = []
 
+    @property
+    def motion(self):                       # the station's Motion: here the fake itself (fmax_hz)
+        return self
+
     def need_drive(self):
         if self.drive is None:
             raise DriveError("no drive")

@@ -130,7 +130,7 @@ def test_a_trip_while_another_drive_still_accelerates_fails_both_in_words():
     a = {"unit": "hz", "speed": 10.0, "direction": "forward", "duration": 0.0, "tolerance": 0.5,
          "within": 10.0}
     stopped = SimpleNamespace(how="normal", stopped=True)
-    drives = [together._Drive(n, FakeDrive(trips), SimpleNamespace(address=ad, stop_report=stopped), a)
+    drives = [together._Drive(n, FakeDrive(trips), SimpleNamespace(address=ad, motion=SimpleNamespace(stop_report=stopped)), a)
               for n, ad, trips in (("c1", 3, True), ("c2", 4, False))]
     run = SimpleNamespace(progress=lambda *args: None)
     together._reach_and_hold(run, None, None, a, drives, SimpleNamespace(end_round=lambda: None))

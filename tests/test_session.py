@@ -41,7 +41,7 @@ def short_ramps(address, seconds=0.2):
         return
     with session(address) as s:
         for code in RAMPS[address]:
-            s.write_param(code, seconds)
+            s.params.write(code, seconds)
 
 
 # -- which station ---------------------------------------------------------------------------------
@@ -93,7 +93,7 @@ def test_a_station_locked_by_another_master_fails_fast(sim):
     finally:
         other.close()
     with session(3) as s:                           # released: free for us
-        assert s.status().status.state
+        assert s.motion.status().status.state
 
 
 def test_profile_of_another_family_names_the_station_family():
@@ -137,7 +137,7 @@ def test_a_rate_above_the_wire_warns_and_is_measured():
     with session(3, cycle_hz=200) as s:
         assert any("more than 19.2k allows" in w for w in s.warnings)
         for _ in range(30):
-            s.poll()
+            s.motion.poll()
         assert s.cycles >= 30
         assert s.achieved_hz > 60                # the instant sim keeps up with the request
         c = s.counters
@@ -148,7 +148,7 @@ def test_cycle_log_has_a_row_per_exchange(tmp_path):
     log = tmp_path / "c.csv"
     with session(6, log_csv=log) as s:
         for _ in range(5):
-            s.poll()
+            s.motion.poll()
         n = s.cycles
     rows = list(csv.reader(log.open()))
     assert rows[0][:6] == ["time_s", "cycle", "control_word", "reference", "status_word", "actual"]
@@ -164,35 +164,35 @@ def test_any_exception_stops_the_drive(sim, exc):
     s = session(3)
     with pytest.raises(type(exc)):
         with s:
-            s.start(s.percent_for_hz(20))
+            s.motion.start(s.motion.percent_for_hz(20))
             for _ in range(10):
-                assert s.poll().status.running
+                assert s.motion.poll().status.running
             raise exc
-    assert s.stop_report.how == "normal" and s.stop_report.stopped
+    assert s.motion.stop_report.how == "normal" and s.motion.stop_report.stopped
     model = drive_model(sim, 3)
     assert model.freq == 0.0
     with session(3) as s2:
-        st = s2.status().status
+        st = s2.motion.status().status
     assert st.stopped and not st.running
 
 
 def test_stop_escalates_to_coast(sim):
     s = session(6, stop_timeout=0.05)                # F003 5 s: a normal stop takes far longer
     with s:
-        s.start(s.percent_for_hz(25))
+        s.motion.start(s.motion.percent_for_hz(25))
         end = time.monotonic() + 1.0
         while time.monotonic() < end:
-            s.poll()
-        assert abs(s.poll().actual_hz) > 2
-    assert s.stop_report.how == "coast" and s.stop_report.stopped
+            s.motion.poll()
+        assert abs(s.motion.poll().actual_hz) > 2
+    assert s.motion.stop_report.how == "coast" and s.motion.stop_report.stopped
     assert any("coasting" in w for w in s.warnings)
     assert drive_model(sim, 6).freq == 0.0
 
 
 def test_no_stop_for_a_drive_this_session_did_not_start():
     with session(4) as s:
-        s.status()
-    assert s.stop_report.how == "not needed"
+        s.motion.status()
+    assert s.motion.stop_report.how == "not needed"
 
 
 def test_link_loss_says_the_watchdog_stops_the_drive(sim):
@@ -200,9 +200,9 @@ def test_link_loss_says_the_watchdog_stops_the_drive(sim):
     s = session(7, watchdog_ms=300)
     with pytest.raises(LinkLost):
         with s:
-            s.start(20.0)
+            s.motion.start(20.0)
             raise LinkLost("sim://: port lost while reading")
-    r = s.stop_report
+    r = s.motion.stop_report
     assert r.how == "not sent (link lost)" and not r.stopped
     assert "watchdog (300 ms)" in r.message and "BUS fault" in r.message
     assert s.link_lost
@@ -210,14 +210,14 @@ def test_link_loss_says_the_watchdog_stops_the_drive(sim):
 
 def test_fmax_sources():
     with session(3, ppo=3) as s:                     # no parameter channel: profile default / --fmax
-        hz, src = s.fmax()
+        hz, src = s.motion.fmax()
         assert hz == 60.0 and "profile default" in src and "no parameter channel" in src
-        assert s.percent_for_hz(30, 50.0) == pytest.approx(60.0)
-        assert "--fmax" in s.fmax(50.0)[1]
+        assert s.motion.percent_for_hz(30, 50.0) == pytest.approx(60.0)
+        assert "--fmax" in s.motion.fmax(50.0)[1]
     with session(6) as s:                            # Moeller PPO1: A004 read from the drive
-        assert s.fmax() == (50.0, "read from the drive (A004)")
+        assert s.motion.fmax() == (50.0, "read from the drive (A004)")
         with pytest.raises(UsageError, match="above the maximum frequency 50 Hz"):
-            s.percent_for_hz(60)
+            s.motion.percent_for_hz(60)
 
 
 # -- parameters ------------------------------------------------------------------------------------
@@ -225,14 +225,14 @@ def test_fmax_sources():
 def test_unknown_code_suggests_the_closest():
     with session(3) as s:
         with pytest.raises(UsageError) as e:
-            s.read_param("F3x")
+            s.params.read("F3x")
     assert "closest fuji codes: F03" in str(e.value)
 
 
 def test_code_of_another_family_names_both_families():
     with session(7) as s:
         with pytest.raises(UsageError) as e:
-            s.read_param("A004")
+            s.params.read("A004")
     msg = str(e.value)
     assert "A004 is a moeller code" in msg and "station 7 is yaskawa-si-p1" in msg
 
@@ -240,61 +240,61 @@ def test_code_of_another_family_names_both_families():
 def test_value_checks_before_writing():
     with session(3) as s:
         with pytest.raises(UsageError, match=r"expected a number 0..6000 s, got 'fast'"):
-            s.parse_value("F07", "fast")
+            s.params.parse("F07", "fast")
         with pytest.raises(UsageError, match=r"outside 0..6000 s"):
-            s.write_param("F07", 7000)
+            s.params.write("F07", 7000)
         with pytest.raises(UsageError, match="read-only"):
-            s.write_param("M16", 1)
-        assert s.read_param("F07").value == 6.0     # nothing was written
+            s.params.write("M16", 1)
+        assert s.params.read("F07").value == 6.0     # nothing was written
 
 
 def test_stop_only_parameter_refused_while_running(sim):
     short_ramps(7)
     with session(7) as s:
-        s.start(30.0)
+        s.motion.start(30.0)
         for _ in range(5):
-            s.poll()
+            s.motion.poll()
         with pytest.raises(DriveError, match="only be changed while the motor is stopped"):
-            s.write_param("E1-04", 50)
+            s.params.write("E1-04", 50)
     with session(7) as s:
-        assert s.read_param("E1-04").value == 60.0
+        assert s.params.read("E1-04").value == 60.0
 
 
 @pytest.mark.parametrize("address,code,value", [(3, "F07", 2.5), (4, "E31", 40.0), (6, "F002", 1.5),
                                                 (7, "C1-01", 4.0)])
 def test_write_is_read_back_and_survives(sim, address, code, value):
     with session(address) as s:
-        assert s.write_param(code, value).value == pytest.approx(value)
+        assert s.params.write(code, value).value == pytest.approx(value)
     with session(address) as s:
-        assert s.read_param(code).value == pytest.approx(value)
+        assert s.params.read(code).value == pytest.approx(value)
 
 
 def test_dump_compare_restore(sim, tmp_path):
     import yaml
     with session(6) as s:
-        doc = s.dump()
+        doc = s.params.dump()
     assert doc["station"]["profile"] == "moeller-de6-net-dp" and doc["station"]["ident"] == "0xFD06"
     assert doc["parameters"]["F002"]["value"] == 5.0
     assert "PNU971" not in doc["parameters"] and "PNU927" in doc["readonly"]   # command / rights
     f = tmp_path / "m.yaml"
     f.write_text(yaml.safe_dump(doc, sort_keys=False))
     with session(6) as s:
-        s.write_param("F002", 2.0)
-        s.write_param("A004", 60)
+        s.params.write("F002", 2.0)
+        s.params.write("A004", 60)
     loaded = Parameters.load_dump(f)
     with session(6) as s:
-        rows = {r.code: r for r in s.compare(loaded)}
+        rows = {r.code: r for r in s.params.compare(loaded)}
         assert rows["F002"].result == "differs" and rows["F002"].drive_value == 2.0
         assert rows["F003"].result == "unchanged"
-        dry = {r.code: r.result for r in s.restore(loaded, dry_run=True)}
+        dry = {r.code: r.result for r in s.params.restore(loaded, dry_run=True)}
         assert dry["F002"] == "would apply"
-        assert s.read_param("F002").value == 2.0
-        rows = {r.code: r for r in s.restore(loaded)}
+        assert s.params.read("F002").value == 2.0
+        rows = {r.code: r for r in s.params.restore(loaded)}
     assert rows["F002"].result == "applied" and rows["F002"].new_value == 5.0
     assert rows["A004"].result == "applied"
     assert not [r for r in rows.values() if r.result == "refused"]
     with session(6) as s:
-        assert s.read_param("F002").value == 5.0 and s.read_param("A004").value == 50
+        assert s.params.read("F002").value == 5.0 and s.params.read("A004").value == 50
 
 
 def test_restore_refuses_a_file_of_another_device(sim, tmp_path):
@@ -304,7 +304,7 @@ def test_restore_refuses_a_file_of_another_device(sim, tmp_path):
     doc = Parameters.load_dump(f)
     with session(3) as s:
         with pytest.raises(UsageError, match="dumped from a yaskawa-si-p1 station"):
-            s.restore(doc)
+            s.params.restore(doc)
 
 
 def test_dump_file_errors_name_file_and_line(tmp_path):
@@ -319,7 +319,7 @@ def test_dump_file_errors_name_file_and_line(tmp_path):
 
 def test_fault_history_and_clear():
     with session(6, "sim://?trip=6:E05") as s:
-        cur = s.status().status
+        cur = s.motion.status().status
         assert cur.fault and cur.fault_code == "E05"
         hist = s.fault_history()
         assert hist[0].codes == ["E05"]

@@ -223,11 +223,11 @@ def _session(**kw):
 
 
 def _turn(s, sim):
-    s.start(50.0)
+    s.motion.start(50.0)
     for _ in range(200):
         if _motors(sim)[3] != 0.0:
             return
-        s.poll()
+        s.motion.poll()
     raise AssertionError("the simulated drive never turned")
 
 
@@ -244,7 +244,7 @@ def test_a_sample_callback_that_raises_during_the_stop_does_not_skip_it(sim, lea
             _turn(s, sim)
             s.on_sample = broken
     assert len(calls) == 1                          # not called again once it raised
-    assert s.stop_report.how == "normal" and s.stop_report.stopped, s.stop_report
+    assert s.motion.stop_report.how == "normal" and s.motion.stop_report.stopped, s.motion.stop_report
     _stopped_by_pdrive(leaves, [3])
 
 
@@ -256,7 +256,7 @@ def test_a_message_callback_that_raises_during_the_stop_does_not_skip_it(sim, le
         with s:
             _turn(s, sim)
             s.on_message = broken                   # "stopped (normal stop, ...)" raises
-    assert s.stop_report.stopped and any(m.startswith("stopped") for m in s.messages)
+    assert s.motion.stop_report.stopped and any(m.startswith("stopped") for m in s.messages)
     _stopped_by_pdrive(leaves, [3])
 
 
@@ -278,9 +278,9 @@ def test_a_log_column_that_raises_ends_logging_not_the_run(sim, leaves, tmp_path
         with s:
             _turn(s, sim)
             for _ in range(5):
-                s.poll()
+                s.motion.poll()
     assert f"--log {log}: logging failed: ValueError: no such monitor" in str(e.value)
-    assert s.stop_report.stopped
+    assert s.motion.stop_report.stopped
     _stopped_by_pdrive(leaves, [3])
     assert not log.exists()                         # no half log: the temporary file is gone
     assert os.listdir(tmp_path) == []

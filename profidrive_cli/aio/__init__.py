@@ -300,7 +300,8 @@ class AsyncDrive:
         drive is stopped (its normal stop, escalating as Drive.stop does), then CancelledError."""
         cancel = threading.Event()
         fut = asyncio.get_running_loop().run_in_executor(
-            self._bus._pool, functools.partial(self.sync.run, hz, percent=percent, wait=wait, timeout=timeout, cancel=cancel))
+            self._bus._pool, functools.partial(self.sync.run, hz, percent=percent, wait=wait, timeout=timeout,
+                                              cancel=cancel))
         try:
             return await asyncio.shield(fut)
         except asyncio.CancelledError:

@@ -118,6 +118,10 @@ class Drive:
         refused (UsageError), never clipped. `cancel` (a threading.Event; the asyncio face sets it
         when its task is cancelled): once set, the wait ends early with the last status, and the
         caller stops the drive."""
+        return self._run(hz, percent, wait, timeout, cancel)
+
+    def _run(self, hz: float | None, percent: float | None, wait: bool, timeout: float | None,
+             cancel: "threading.Event | None") -> Status:
         if (hz is None) == (percent is None):
             raise UsageError("run: give hz or percent (one of them)")
         v = hz if hz is not None else percent

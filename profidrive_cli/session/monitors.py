@@ -38,7 +38,8 @@ class MonitorHost(Protocol):
     drive: Drive | None
     channel: MeteredChannel | None
     t0: float
-    log_extra: Extra | None
+
+    def settle(self, *, log_extra: Extra | None = None) -> None: ...
 
     @property
     def motion(self) -> "_AfterStop": ...
@@ -118,7 +119,7 @@ def setup_monitors(sess: MonitorHost, spec: str) -> "Monitors":
     checked Monitors, its columns added to the --log CSV."""
     assert sess.profile is not None and sess.layout is not None       # identified
     mons = Monitors(sess, monitor_codes(sess.profile, sess.layout, spec))
-    sess.log_extra = (mons.columns(), mons.row)
+    sess.settle(log_extra=(mons.columns(), mons.row))
     return mons
 
 

@@ -236,15 +236,14 @@ class MultiRun:
             self.warnings.append(raised)
             self.watchdog_ms = need
             for s in sessions:
-                s.watchdog_ms = need
+                s.settle(watchdog_ms=need)
         if self.confirm:
             self.confirm(sessions)
         self.group = Group(self.master, 1.0 / self.cycle_rate if self.cycle_rate else 0.0,
                            sync=self.sync, freeze=self.sync and self.freeze)
         for r in self.runs:
             s = r.session
-            s.cycle_hz = self.cycle_rate
-            s.dp_sync, s.dp_freeze = self.sync, self.sync and self.freeze
+            s.settle(cycle_hz=self.cycle_rate, sync=self.sync, freeze=self.sync and self.freeze)
             s.open()                        # Set_Prm (+ Sync_Req / Freeze_Req), Chk_Cfg, the Drive
             self.group.join(s)
         self.t0 = self.master.link.now()

@@ -132,6 +132,25 @@ class DriveStation:
             self.connect()
         return self
 
+    def settle(self, *, watchdog_ms: float | None = None, cycle_hz: float | None = None,
+               sync: bool | None = None, freeze: bool | None = None,
+               log_extra: Extra | None = None) -> None:
+        """What a coordinator decides between identify() and connect() (MultiRun: the group's rate,
+        a watchdog raised for the round, Sync / Freeze; run --monitor: its --log columns); refused
+        once the station is connected (its Set_Prm is sent)."""
+        if self.drive is not None:
+            raise PdriveError(f"station {self.address}: connected already; its Set_Prm is sent")
+        if watchdog_ms is not None:
+            self.watchdog_ms = float(watchdog_ms)
+        if cycle_hz is not None:
+            self.cycle_hz = float(cycle_hz)
+        if sync is not None:
+            self.dp_sync = sync
+        if freeze is not None:
+            self.dp_freeze = freeze
+        if log_extra is not None:
+            self.log_extra = log_extra
+
     def identify(self) -> Candidate:
         """Step 1: which station, which profile, which layout; the cycle rate (discovery.py, cycle.py
         answer; the station keeps)."""
