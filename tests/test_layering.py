@@ -42,6 +42,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from profidrive_cli.drives.registry import FAMILIES
+
 
 ROOT = Path(__file__).resolve().parent.parent
 PKG = ROOT / "profidrive_cli"
@@ -440,3 +442,96 @@ def test_the_one_door_check_finds_a_session_import(tmp_path):
     f.write_text("def f():\n    from profidrive_cli.session.live import Reach\n", encoding="utf-8")
     found = [t for _, t, _ in imports_of("profidrive_cli.cli.cmd", f)]
     assert "profidrive_cli.session.live" in found and layer_of(found[0]) == "session"
+
+# -- "One station, one door": families only in drives/ -----------------------------------------------
+
+#: the family packages: each row's codec in drives/registry.py FAMILIES (a package, or a module such as
+#: drives/moeller.py with its siblings moeller_*.py) and the PROFIdrive core the families build on
+FAMILY_PACKAGES: dict[str, str] = {name: row.codec for name, row in FAMILIES.items()}
+FAMILY_PACKAGES.setdefault("profidrive", "profidrive_cli.drives.profidrive")
+CORE = FAMILY_PACKAGES["profidrive"]
+#: the one way in from outside drives/: a family's own simulator model (its registry row's sim_model)
+#: may import its family and the core; the core's model (sim/profidrive_model.py) and its PKW server
+#: mixin (sim/pkw_server.py) the core
+SIM_MODELS: dict[str, set[str]] = {row.sim_model.partition(":")[0]: {row.codec, CORE}
+                                   for row in FAMILIES.values() if row.sim_model is not None}
+SIM_MODELS.update({"profidrive_cli.sim.profidrive_model": {CORE}, "profidrive_cli.sim.pkw_server": {CORE}})
+
+
+def family_of_module(module: str) -> str | None:
+    """The family whose package (or module family's siblings) `module` is part of, or None."""
+    for name, pkg in FAMILY_PACKAGES.items():
+        if module == pkg or module.startswith((pkg + ".", pkg + "_")):
+            return name
+    return None
+
+
+def _family_imports_outside_drives(graph: dict[str, list[tuple[int, str, str]]]) -> list[str]:
+    """One line per import, by a module outside profidrive_cli/drives/, of a family package (other than
+    a sim model's own): file:line (or module:line), the import and the family."""
+    bad = []
+    for m, edges in graph.items():
+        if m == "profidrive_cli.drives" or m.startswith("profidrive_cli.drives."):
+            continue
+        allowed = SIM_MODELS.get(m, set())
+        for line, target, text in edges:
+            fam = family_of_module(target)
+            if fam is None or FAMILY_PACKAGES[fam] in allowed:
+                continue
+            where = _where(MODULES[m], line) if m in MODULES else f"{m}:{line}"
+            bad.append(f"{where}: {text} (family {fam} outside drives/: ask drive_class(profile) or a "
+                       f"Drive hook)")
+    return bad
+
+
+def test_the_family_packages_are_the_registrys():
+    assert {"fuji", "moeller", "profidrive", "toyo", "yaskawa"} <= set(FAMILY_PACKAGES)
+    assert all(p in MODULES for p in FAMILY_PACKAGES.values())
+    assert family_of_module("profidrive_cli.drives.moeller_audit") == "moeller"
+    assert family_of_module("profidrive_cli.drives.yaskawa.codec") == "yaskawa"
+    assert family_of_module("profidrive_cli.drives.profile") is None
+    assert family_of_module("profidrive_cli.drives") is None
+    assert set(SIM_MODELS) == {"profidrive_cli.sim.fuji", "profidrive_cli.sim.moeller", "profidrive_cli.sim.toyo",
+                               "profidrive_cli.sim.yaskawa", "profidrive_cli.sim.profidrive_model",
+                               "profidrive_cli.sim.pkw_server"}
+    assert all(m in MODULES for m in SIM_MODELS)
+
+
+def test_the_family_check_finds_every_import_form(tmp_path):
+    # made up: a bus tool importing families absolutely, as a package attribute, relatively and inside a
+    # function is refused at each line; drives' own names (drive_class, base, registry) pass, and so
+    # do a sim model's imports of its family and the core -- not of another family
+    f = tmp_path / "x.py"
+    f.write_text("from profidrive_cli.drives import yaskawa\n"
+                 "import profidrive_cli.drives.toyo.codec\n"
+                 "from ..drives.fuji import codes\n"
+                 "def f():\n    from profidrive_cli.drives.profidrive.pkw import PkwFrame\n"
+                 "from profidrive_cli.drives import moeller as mo, drive_class\n"
+                 "from ..drives import base, registry\n"
+                 "from profidrive_cli.drives.moeller_audit import audit_rules\n")
+    graph = {"profidrive_cli.bustools.x": imports_of("profidrive_cli.bustools.x", f),
+             "profidrive_cli.sim.fuji": [(1, "profidrive_cli.drives.fuji.config", "import a"),
+                                         (2, "profidrive_cli.drives.profidrive", "import b"),
+                                         (3, "profidrive_cli.drives.toyo", "import c")],
+             "profidrive_cli.drives.x": [(4, "profidrive_cli.drives.yaskawa.codec", "import d")]}
+    why = "outside drives/: ask drive_class(profile) or a Drive hook)"
+    assert sorted(_family_imports_outside_drives(graph)) == sorted([
+        f"profidrive_cli.bustools.x:1: from profidrive_cli.drives import yaskawa (family yaskawa {why}",
+        f"profidrive_cli.bustools.x:2: import profidrive_cli.drives.toyo.codec (family toyo {why}",
+        f"profidrive_cli.bustools.x:3: from ..drives.fuji import codes (family fuji {why}",
+        f"profidrive_cli.bustools.x:5: from profidrive_cli.drives.profidrive.pkw import PkwFrame "
+        f"(family profidrive {why}",
+        f"profidrive_cli.bustools.x:6: from profidrive_cli.drives import moeller, drive_class "
+        f"(family moeller {why}",
+        f"profidrive_cli.bustools.x:8: from profidrive_cli.drives.moeller_audit import audit_rules "
+        f"(family moeller {why}",
+        f"profidrive_cli/sim/fuji.py:3: import c (family toyo {why}",
+    ])
+
+
+def test_no_family_package_is_imported_outside_drives():
+    # a family answers through its Drive class (drives.drive_class(profile): the hooks and class facts,
+    # normalise_area for sniff --station) and the registry's lazy references; only the simulator
+    # models stand on their family's codec
+    bad = _family_imports_outside_drives(ALL_EDGES)
+    assert not bad, "family packages imported outside drives/:\n" + "\n".join(bad)

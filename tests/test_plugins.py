@@ -2,7 +2,8 @@
 entry-point group `profidrive_cli.families` and a port kind in `profidrive_cli.links` is seen by
 `pdrive scan`, `decode`, `status` and `sim://`; $PDRIVE_PROFILE_PATH adds profile folders; a broken
 plug-in does not break pdrive and is named where a family is missing; a command on the shipped families
-never reads the installed distributions' entry points.
+never reads the installed distributions' entry points; `sniff --station` reads a plug-in station's
+areas through the family's Drive hook (normalise_area).
 
 The example plug-in (tests/data/plugin_demo: the family `demo`, a PROFIdrive PPO card with ident 0xDE01,
 and the port kind demosim://) is installed by pip into a new virtualenv's site-packages, and pdrive runs with that virtualenv's
@@ -86,6 +87,24 @@ def test_a_plugin_drive_runs_and_stops(plugin_venv: Path) -> None:
                    python=plugin_venv)
     assert proc.returncode == 0, proc.stderr
     assert "stop: normal (stopped)" in proc.stderr
+
+
+def test_sniff_reads_a_plugin_station_through_its_drive_hook(plugin_venv: Path, tmp_path: Path) -> None:
+    # a captured PPO1 exchange with station 9: CTW 0x047F with reference 0x2000 (50 % of FMAX's
+    # default 50 Hz = 25 Hz, N2), the answer STW 0x0337 (S4, operation) with actual 0x2000; the demo
+    # card's DemoDrive.normalise_area names the card in the state (the core's reading otherwise)
+    from profidrive_cli.fdl import frames as F
+    out_area = bytes.fromhex("00" * 8 + "04 7F 20 00")
+    in_area = bytes.fromhex("00" * 8 + "03 37 20 00")
+    raw = tmp_path / "dx.raw"
+    raw.write_bytes(F.encode(F.Frame(F.SD2, 9, 2, F.request_fc(F.SRD_HIGH, True, True), out_area))
+                    + F.encode(F.Frame(F.SD2, 2, 9, F.DL, in_area)))
+    proc = _pdrive("sniff", "--from-file", str(raw), "--station", "9=demo", "--json", python=plugin_venv)
+    assert proc.returncode == 0, proc.stderr
+    r, a = (json.loads(line)["drive"] for line in proc.stdout.splitlines())
+    assert (r["command"], r["reference_hz"]) == ("operate", 25.0)
+    assert a["state"] == "demo card: S4 operation" and a["actual_hz"] == 25.0
+    assert a["text"] == "demo card: S4 operation, actual 25.00 Hz"
 
 
 def test_the_plugin_port_kind_opens(plugin_venv: Path) -> None:

@@ -1,10 +1,11 @@
 """The passive PROFIdrive view of a running bus (`pdrive sniff --station 3=fuji-g1`): each given
 station's Data_Exchange outputs and inputs as the drive sees them, from captured telegrams alone.
 
-Built on the families' offline decoders (drives.decode_area, as `pdrive decode` uses them): command
-and state in the codec's words, reference and actual in Hz, the parameter channel (PKW, Yaskawa's
-MEMOBUS area) as requests and answers with the card's native codes ("read F07", "F07 = 5.0 s").
-Never transmits; sans-IO (dp.capture.Captured in, plain dicts and one-line texts out).
+Built on the families' offline decoders (drives.decode_area, as `pdrive decode` uses them) and
+their Drive classes' normalise_area, which reads the area in common words: command and state in the
+codec's words, reference and actual in Hz, the parameter channel (a PKW channel, a register area) as
+requests and answers with the card's native codes ("read F07", "F07 = 5.0 s"). No family is named
+here. Never transmits; sans-IO (dp.capture.Captured in, plain dicts and one-line texts out).
 
 The layout comes from `--station ADDR=PROFILE:LAYOUT`, else from the Chk_Cfg the master sent (when
 the capture saw it), else the profile's default layout (or the one layout whose lengths fit).
@@ -26,7 +27,7 @@ from profidrive_cli.fdl import frames as F
 
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.dp.capture import Captured
-    from profidrive_cli.drives.profile import ParamDef, Profile
+    from profidrive_cli.drives.profile import Profile
 
 #: a family codec's decoded area (drives/<family>/codec.py decode_area): its shape is the family's,
 #: its values JSON's; and the common `drive` object made from it (docs/json.md), whose `param` and
@@ -44,7 +45,7 @@ class Watched:
     profile: Profile
     layout: str | None = None        # as given; None: inferred
     seen_cfg: bytes | None = None    # the last Chk_Cfg the master sent it
-    fmax: float | None = None        # learnt from a PKW answer of the max-frequency parameter
+    fmax: float | None = None        # learnt from an answer of the max-frequency parameter
     #: the family's (decode_area, takes max_hz), looked up at the first area
     decoder: Decoder | None = field(default=None, repr=False, compare=False)
 
@@ -109,7 +110,7 @@ def is_data_exchange(f: F.Frame) -> bool:
 
 
 #: decoded areas kept per decoder: a station's area mostly repeats its previous one (the same
-#: command, reference and PKW request cycle after cycle); cleared when this many are kept
+#: command, reference and parameter request cycle after cycle); cleared when this many are kept
 AREA_CACHE_MAX = 1024
 
 
@@ -200,170 +201,12 @@ def _learn_fmax(st: Watched, param: dict[str, Any]) -> None:
 
 def normalise(profile: Profile, direction: str, area: Area) -> DriveObject:
     """The common fields of a decoded area: command / control (request), state / status
-    (response), reference_hz / actual_hz, param (the parameter channel), text (one line)."""
+    (response), reference_hz / actual_hz, param (the parameter channel) -- in the family's words,
+    its Drive class's normalise_area -- and text (one line)."""
     from profidrive_cli.drives import drive_class
-    if drive_class(profile).area_shape == "memobus":
-        d = _yaskawa(profile, direction, area)
-    else:
-        d = _ppo(direction, area)
+    d: DriveObject = drive_class(profile).normalise_area(profile, direction, area)
     d["text"] = drive_text(d)
     return d
-
-
-def _round(x: float | None) -> float | None:
-    return None if x is None else round(float(x), 3)
-
-
-def _ppo(direction: str, area: Area) -> DriveObject:
-    """PROFIdrive cards (Fuji, Moeller) and Toyo: CTW/STW words, N2 or Toyo speed words, PKW."""
-    d: DriveObject = {}
-    if direction == "request":
-        cw = area.get("control_word") or area.get("run_command")
-        if cw:
-            d["command"] = cw.get("command")
-            d["control"] = list(cw.get("set", []))
-            d["control_word"] = cw.get("hex") or f"0x{cw.get('word', cw.get('raw', 0)):04X}"
-        ref = area.get("reference")
-        if ref:
-            d["reference_hz"] = _round(ref.get("hz"))
-            d["reference_percent"] = _round(ref.get("percent"))
-    else:
-        sw = area.get("status_word")
-        if sw:
-            d["state"] = sw.get("state")
-            d["status"] = list(sw.get("set", []))
-            d["status_word"] = sw.get("hex") or f"0x{sw.get('word', sw.get('raw', 0)):04X}"
-        elif area.get("fields"):
-            _toyo_mode1_state(area["fields"], d)
-        act = area.get("actual")
-        if act:
-            d["actual_hz"] = _round(act.get("hz"))
-            d["actual_percent"] = _round(act.get("percent"))
-    pk = area.get("pkw")
-    if pk and pk.get("ak"):
-        d["param"] = _pkw(direction, pk)
-    return d
-
-
-def _toyo_mode1_state(fields: list[dict[str, Any]], d: DriveObject) -> None:
-    """Toyo mode 1 has no status word: the status flag (toyo-vf66-pbus66z.md Table 3.9, bit 1
-    "running normally", bit 2 "jog running") and the fault flags say what the drive does."""
-    by = {f.get("field"): f for f in fields}
-    sf = by.get("status_flag")
-    if sf is None:
-        return
-    names = list(sf.get("set", []))
-    faults = [n for k in ("fault_flag1", "fault_flag2") for n in by.get(k, {}).get("set", [])]
-    d["state"] = ("fault: " + ", ".join(faults) if faults else
-                  "jog running" if "jog running" in names else
-                  "running" if "running" in names else "stopped")
-    d["status"] = names
-    d["status_word"] = sf.get("hex")
-
-
-def _pkw(direction: str, pk: dict[str, Any]) -> dict[str, Any]:
-    code = pk.get("code") or f"PNU{pk.get('pnu')}"
-    if code.upper().startswith("PNU") and pk.get("subindex") and "[" not in code:
-        code += f"[{pk['subindex']}]"              # an array element (Fuji's subindex is the code)
-    p: dict[str, Any] = {"ak": pk["ak"], "code": code, "ak_text": pk.get("ak_text")}
-    vt = pk.get("value_text")
-    if "value" in pk:
-        p["value"] = pk["value"]
-        p["unit"] = pk.get("unit", "")
-    if direction == "request":
-        if vt is not None:
-            p["request"], p["text"] = "write", f"write {code} = {vt}"
-        elif "read" in (pk.get("ak_text") or "").lower() or "request" in (pk.get("ak_text") or "").lower():
-            p["request"], p["text"] = "read", f"read {code}"
-        else:
-            p["request"], p["text"] = "other", f"{pk.get('ak_text')} {code}"
-    else:
-        if "error" in pk and pk.get("error") is not None and pk.get("error") is not False:
-            p["error"] = pk["error"]
-            p["text"] = f"{code}: error {pk['error']} ({pk.get('error_text', '')})"
-        elif vt is not None:
-            p["text"] = f"{code} = {vt}"
-        else:
-            p["text"] = f"{code}: {pk.get('ak_text')}"
-    return p
-
-
-#: Yaskawa run-command and status flags in the manual's words (drives/yaskawa/codec.py names)
-def _yaskawa(profile: Profile, direction: str, area: Area) -> DriveObject:
-    from profidrive_cli.drives.yaskawa.codec import COMMAND_TEXT, STATUS_TEXT
-    d: DriveObject = {}
-    if direction == "request":
-        cmd = area.get("command")
-        if cmd:
-            fl = cmd["flags"]
-            d["command"] = ("forward and reverse (the drive stops with an alarm)"
-                            if fl.get("forward_run") and fl.get("reverse_run") else
-                            "forward run" if fl.get("forward_run") else
-                            "reverse run" if fl.get("reverse_run") else "stop")
-            d["control"] = [COMMAND_TEXT.get(k, k) for k, v in fl.items() if v]
-            d["control_word"] = f"0x{cmd['raw']:04X}"
-        ref = area.get("frequency_reference")
-        if ref:
-            d["reference_hz"] = _round(ref.get("hz"))
-    else:
-        stw = area.get("status")
-        if stw:
-            fl = stw["flags"]
-            d["state"] = ("fault" if fl.get("fault") else "alarm" if fl.get("alarm") else
-                          ("running reverse" if fl.get("reverse") else "running")
-                          if fl.get("running") else "ready" if fl.get("ready") else "not ready")
-            d["status"] = [STATUS_TEXT.get(k, k) for k, v in fl.items() if v]
-            d["status_word"] = f"0x{stw['raw']:04X}"
-        act = area.get("output_frequency") or area.get("speed_feedback")
-        if act:
-            d["actual_hz"] = _round(act.get("hz"))
-    pa = area.get("parameter_access")
-    if pa and pa.get("function"):
-        p = _memobus(profile, direction, pa)
-        if p is not None:
-            d["param"] = p
-    return d
-
-
-def _memobus(profile: Profile, direction: str, pa: dict[str, Any]) -> dict[str, Any] | None:
-    from profidrive_cli.drives.yaskawa.paramaccess import FC_READ, FC_WRITE
-    reg = pa.get("start_register", 0)
-    prm = next((p for p in profile.parameters.values() if p.register == reg), None)
-    code = prm.code if prm is not None else f"register 0x{reg:04X}"
-    fn = pa["function"]
-    p: dict[str, Any] = {"function": fn, "code": code}
-    if direction == "request":
-        if fn == FC_READ:
-            p["request"], p["text"] = "read", f"read {code}"
-        elif fn == FC_WRITE:
-            vals = pa.get("data") or [0]
-            p["request"] = "write"
-            p["text"] = f"write {code} = {_reg_value(prm, vals[0])}"
-        else:
-            p["request"], p["text"] = "other", f"function 0x{fn:02X} {code}"
-        return p
-    hs = pa.get("handshake") or {}
-    if not hs.get("complete"):
-        return None            # the handshake is still running: the area holds no answer yet
-    if pa.get("error"):
-        p["error"] = pa.get("error_code")
-        p["text"] = f"{code}: error {pa.get('error_name')} ({pa.get('error_meaning')})"
-    elif fn == FC_READ and pa.get("values"):
-        raw = pa["values"][0]
-        if prm is not None:
-            p["value"] = prm.from_raw(raw)
-            p["unit"] = prm.unit or ""
-        p["text"] = f"{code} = {_reg_value(prm, raw)}"
-    else:
-        p["text"] = f"{code}: {pa.get('function_name')} accepted"
-    return p
-
-
-def _reg_value(prm: ParamDef | None, raw: int) -> str:
-    if prm is None:
-        return f"0x{raw:04X}"
-    from profidrive_cli.drives.base import value_text
-    return value_text(prm.from_raw(raw), prm.unit or "")
 
 
 def drive_text(d: DriveObject) -> str:

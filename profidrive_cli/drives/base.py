@@ -203,6 +203,17 @@ class Drive(ABC):
         return []
 
     @classmethod
+    def normalise_area(cls, profile: Any, direction: str, area: dict[str, Any]) -> dict[str, Any]:
+        """Class fact, no bus: an area this family's decode_area decoded (direction "request": the
+        master's outputs, "response": the drive's inputs) in the common words of `pdrive sniff
+        --station` (the `drive` object of docs/json.md): command / control / control_word (request),
+        state / status / status_word (response), reference_hz / actual_hz, and `param`, the parameter
+        channel's request or answer with its one-line `text`; a field the area does not carry is left
+        out. A new dict each call (the caller adds to it). The base knows no area shape: {} (the sniff
+        line then names only the station); each family reads its own (area_shape)."""
+        return {}
+
+    @classmethod
     def audit_rules(cls, profile: Any) -> list[Any]:
         """Class fact, no bus: this family's rules for `pdrive audit`, drives.audit.AuditRule objects
         (each a check of a connected drive citing its manual line, or a topic the family's manual
@@ -364,7 +375,7 @@ class Drive(ABC):
 
     #: the shape of the codec's decode_area (drives.decode_area): "ppo" control/status words, N2 or
     #: the family's speed words and the PKW channel; "memobus" Yaskawa's run command / status words
-    #: and the MEMOBUS parameter area (bustools/passive.py normalises each)
+    #: and the MEMOBUS parameter area (the family's normalise_area reads its own)
     area_shape: str = "ppo"
 
     def start_hint(self, status: DriveStatus) -> str | None:

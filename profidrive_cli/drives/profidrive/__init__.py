@@ -9,7 +9,7 @@ The package's face: it re-exports the public names of its modules, one concern e
     config.py    the profile's `profidrive:` section (ProfidriveConfig, config(profile))
     params.py    parameter addressing (ParamRef, resolve_code) and value formatting
     drive.py     ProfidriveDrive (the Drive interface) and make_drive
-    describe.py  the generic decoder (describe_* and decode_area)
+    describe.py  the generic decoder (describe_* and decode_area); ppo_drive_object (sniff --station)
 Sans-IO except for `ProfidriveDrive`, which couples the codec with a CyclicChannel (the channel does
 the waiting; nothing here sleeps). The family codecs (moeller, fuji, toyo) build on this package
 (import it, not its modules); the API below is meant to stay stable.
@@ -88,6 +88,9 @@ Drive
     Beyond the Drive interface: request(frame), read_raw / write_raw(pnu, ...), card_info(),
     set_pzd(n, raw), pzd_mapping(direction), map_pzd(direction, slot, pnu), jog(on), extra_bits
     decode_area(profile, layout, direction, data, *, max_hz=None) -> dict   (generic PPO decoder)
+    ppo_drive_object(direction, area, *, state_without_status_word=None) -> dict
+        a decoded area in the common words of `sniff --station` (ProfidriveDrive.normalise_area);
+        pkw_drive_param(direction, pkw) -> dict: its PKW channel as the `param` there
     make_drive(channel, profile, layout=None) -> ProfidriveDrive  (so `family: profidrive` works)
 """
 
@@ -97,7 +100,8 @@ from profidrive_cli.drives.profidrive.config import (ERROR_ROLES, ProfidriveConf
                                                      ctw_names, stw_names)
 from profidrive_cli.drives.profidrive.describe import (check_direction, decode_area,
                                                        describe_control_word, describe_n2,
-                                                       describe_pkw, describe_status_word)
+                                                       describe_pkw, describe_status_word,
+                                                       pkw_drive_param, ppo_drive_object)
 from profidrive_cli.drives.profidrive.drive import ProfidriveDrive, make_drive
 from profidrive_cli.drives.profidrive.params import (ParamRef, decimals_for, format_value,
                                                      param_for, param_index, resolve_code)
@@ -140,7 +144,8 @@ __all__ = ["ARRAY_REQUESTS", "CTW_NAMES", "CTW_ZERO_NAMES", "Ctw", "DERIVED_BITS
            "default_fault_positions", "describe_control_word", "describe_n2", "describe_pkw",
            "describe_status_word", "encode_area", "encode_pke", "fault_memory_requests",
            "format_value", "make_drive", "matches", "n2_from_hz", "n2_from_percent", "n2_to_hz",
-           "n2_to_percent", "next_control_word", "param_for", "param_index", "ppo_layout",
+           "n2_to_percent", "next_control_word", "param_for", "param_index", "pkw_drive_param",
+           "ppo_drive_object", "ppo_layout",
            "pzd_map_pnu", "pzd_map_read", "pzd_map_write", "read_request", "resolve_code",
            "save_requests", "state_from_status", "stw_names", "target_reached", "to_signed16",
            "words_to_bytes", "write_request"]

@@ -2,6 +2,8 @@
 
 Turns captured PPO areas into named fields with one-line texts, using the profile's parameters and
 alarms and the card config; a family module may supply `param_value(profile, param, raw)`. No bus.
+And such a decoded area in the common words of `sniff --station` (ppo_drive_object: command, state,
+Hz, the PKW channel), what ProfidriveDrive.normalise_area answers for the families on the core.
 """
 
 from __future__ import annotations
@@ -247,3 +249,80 @@ def decode_area(profile: Profile, layout: str, direction: str, data: bytes, *,
     text.append("summary: " + out["summary"])
     out["text"] = text
     return out
+
+
+# -- a decoded area in the common words of `sniff --station` (Drive.normalise_area) -------------------
+
+#: the common `drive` object of `pdrive sniff --station` (docs/json.md): command / control, state /
+#: status, reference_hz / actual_hz, param
+DriveObject = dict[str, Any]
+
+
+def _round(x: float | None) -> float | None:
+    return None if x is None else round(float(x), 3)
+
+
+def ppo_drive_object(direction: str, area: Decoded, *,
+                     state_without_status_word: Callable[[Decoded, DriveObject], None] | None = None
+                     ) -> DriveObject:
+    """The common fields of a decoded PPO-style area (this package's decode_area, and a family's on
+    the core): CTW/STW words (or a `run_command` word), N2 or the family's speed words as Hz, the
+    PKW channel as `param` (pkw_drive_param). A response without a status word: the family's
+    `state_without_status_word(area, d)` fills state / status / status_word from the area's other
+    words (nothing when None)."""
+    d: DriveObject = {}
+    if direction == "request":
+        cw = area.get("control_word") or area.get("run_command")
+        if cw:
+            d["command"] = cw.get("command")
+            d["control"] = list(cw.get("set", []))
+            d["control_word"] = cw.get("hex") or f"0x{cw.get('word', cw.get('raw', 0)):04X}"
+        ref = area.get("reference")
+        if ref:
+            d["reference_hz"] = _round(ref.get("hz"))
+            d["reference_percent"] = _round(ref.get("percent"))
+    else:
+        sw = area.get("status_word")
+        if sw:
+            d["state"] = sw.get("state")
+            d["status"] = list(sw.get("set", []))
+            d["status_word"] = sw.get("hex") or f"0x{sw.get('word', sw.get('raw', 0)):04X}"
+        elif state_without_status_word is not None:
+            state_without_status_word(area, d)
+        act = area.get("actual")
+        if act:
+            d["actual_hz"] = _round(act.get("hz"))
+            d["actual_percent"] = _round(act.get("percent"))
+    pk = area.get("pkw")
+    if pk and pk.get("ak"):
+        d["param"] = pkw_drive_param(direction, pk)
+    return d
+
+
+def pkw_drive_param(direction: str, pk: Decoded) -> dict[str, Any]:
+    """A decoded PKW request or answer (describe_pkw's fields) as the `param` of the drive object:
+    request (read / write / other) or error, the native code, and one line ("read F07", "F07 = 5.0 s")."""
+    code = pk.get("code") or f"PNU{pk.get('pnu')}"
+    if code.upper().startswith("PNU") and pk.get("subindex") and "[" not in code:
+        code += f"[{pk['subindex']}]"              # an array element (Fuji's subindex is the code)
+    p: dict[str, Any] = {"ak": pk["ak"], "code": code, "ak_text": pk.get("ak_text")}
+    vt = pk.get("value_text")
+    if "value" in pk:
+        p["value"] = pk["value"]
+        p["unit"] = pk.get("unit", "")
+    if direction == "request":
+        if vt is not None:
+            p["request"], p["text"] = "write", f"write {code} = {vt}"
+        elif "read" in (pk.get("ak_text") or "").lower() or "request" in (pk.get("ak_text") or "").lower():
+            p["request"], p["text"] = "read", f"read {code}"
+        else:
+            p["request"], p["text"] = "other", f"{pk.get('ak_text')} {code}"
+    else:
+        if "error" in pk and pk.get("error") is not None and pk.get("error") is not False:
+            p["error"] = pk["error"]
+            p["text"] = f"{code}: error {pk['error']} ({pk.get('error_text', '')})"
+        elif vt is not None:
+            p["text"] = f"{code} = {vt}"
+        else:
+            p["text"] = f"{code}: {pk.get('ak_text')}"
+    return p

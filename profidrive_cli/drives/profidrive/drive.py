@@ -14,6 +14,7 @@ from profidrive_cli.drives.base import (CyclicChannel, Drive, DriveError, DriveS
                                         ParamInfo, ParamValue)
 from profidrive_cli.drives.values import raw_value_problem, value_problem
 from profidrive_cli.drives.profidrive.config import ProfidriveConfig, config
+from profidrive_cli.drives.profidrive.describe import ppo_drive_object
 from profidrive_cli.drives.profidrive.params import ParamRef, resolve_code
 from profidrive_cli.drives.profidrive.pkw import (REQUEST_TEXT, PkwChannel, PkwFrame, PkwResult,
                                                   read_request, write_request)
@@ -439,6 +440,11 @@ class ProfidriveDrive(Drive):
         """The status word's named bits (profidrive stw names), then the family's extras."""
         names = config(profile).stw_names
         return [names[b] for b in sorted(names)] + cls.extra_flag_names(profile, layout)
+
+    @classmethod
+    def normalise_area(cls, profile: Any, direction: str, area: dict[str, Any]) -> dict[str, Any]:
+        """CTW/STW, N2 reference / actual in Hz and the PKW channel (describe.ppo_drive_object)."""
+        return ppo_drive_object(direction, area)
 
     @classmethod
     def extra_flag_names(cls, profile: Any, layout: str) -> list[str]:

@@ -1,6 +1,6 @@
 """Toyo PBUS66-Z describers for pdrive decode: decode_area (any layout, either direction) with its
 per-word and PKW text, and the Slave_Diag device block (decode_diag). JSON-serialisable dicts with a
-"text" list.
+"text" list. And mode 1's status flag as the state of `sniff --station` (mode1_state).
 
 May touch: drives/profidrive (word helpers), config, codec, params (value scaling, param_at).
 """
@@ -245,3 +245,22 @@ def decode_area(profile: Profile, layout: str, direction: str, data: bytes, *,
     text.append("summary: " + out["summary"])
     out["text"] = text
     return out
+
+
+def mode1_state(area: dict[str, Any], d: dict[str, Any]) -> None:
+    """Toyo mode 1 has no status word: the status flag (toyo-vf66-pbus66z.md Table 3.9, bit 1
+    "running normally", bit 2 "jog running") and the fault flags of a decoded response `area`
+    (decode_area's `fields`) say what the drive does: state / status / status_word into the `drive`
+    object `d` of sniff --station (ToyoDrive.normalise_area); nothing without a status flag."""
+    fields: list[dict[str, Any]] = area.get("fields") or []
+    by = {f.get("field"): f for f in fields}
+    sf = by.get("status_flag")
+    if sf is None:
+        return
+    names = list(sf.get("set", []))
+    faults = [n for k in ("fault_flag1", "fault_flag2") for n in by.get(k, {}).get("set", [])]
+    d["state"] = ("fault: " + ", ".join(faults) if faults else
+                  "jog running" if "jog running" in names else
+                  "running" if "running" in names else "stopped")
+    d["status"] = names
+    d["status_word"] = sf.get("hex")

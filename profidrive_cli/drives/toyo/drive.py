@@ -3,7 +3,7 @@ state machine; mode 1 (toyo, toyo_plch) the run-command word. Parameters go thro
 channel with this package's frames and scaling; faults from the history PNU; traceback reads.
 
 May touch: drives/profidrive, drives/base, drives/values, drives/torque, and this package's config, codec,
-params.
+params, describe (mode1_state).
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from profidrive_cli.drives.base import (CyclicChannel, DriveError, DriveStatus, 
 from profidrive_cli.drives.toyo.codec import (bit_names, decode_history_word, speed_percent, speed_word,
                                               traceback_ind)
 from profidrive_cli.drives.toyo.config import toyo_config
+from profidrive_cli.drives.toyo.describe import mode1_state
 from profidrive_cli.drives.toyo.params import (_toyo_frame, effective_scale, frame_for, param_at,
                                                resolve_param, value_from_wire, wire_from_value)
 from profidrive_cli.drives.torque import torque_counts
@@ -385,6 +386,12 @@ class ToyoDrive(pd.ProfidriveDrive):
         tc = toyo_config(profile)
         plch = tc.plch or tc.layouts[layout].plch
         return cls._no_jog_words(profile) if plch else None
+
+    @classmethod
+    def normalise_area(cls, profile: Any, direction: str, area: dict[str, Any]) -> dict[str, Any]:
+        """The core's PPO reading; a mode 1 response (no status word) says its state by the status
+        and fault flags (describe.mode1_state)."""
+        return pd.ppo_drive_object(direction, area, state_without_status_word=mode1_state)
 
     @classmethod
     def status_flag_names(cls, profile: Any, layout: str) -> list[str]:

@@ -1,6 +1,8 @@
 """Yaskawa decode_area: a captured output or input area -> named fields and text (pdrive decode).
 
-JSON-serialisable dict with a "text" list. May touch: codec, paramaccess (area parsing), config.
+JSON-serialisable dict with a "text" list; and such an area in the common words of `sniff --station`
+(drive_object, what YaskawaDrive.normalise_area answers). May touch: codec, paramaccess (area
+parsing), config, drives/base (value_text).
 """
 
 from __future__ import annotations
@@ -8,6 +10,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from profidrive_cli import UsageError
+from profidrive_cli.drives.base import value_text
 from profidrive_cli.drives.yaskawa.codec import (COMMAND_TEXT, FORMATS, MFO_BITS, STATUS_TEXT, AreaFormat,
                                                  FrequencyScale, _s16, decode_bits, decode_command,
                                                  decode_status, unpack_words)
@@ -17,7 +20,7 @@ from profidrive_cli.drives.yaskawa.paramaccess import (ERROR_CODES, FC_NONE, FC_
                                                        decode_hs, error_text)
 
 if TYPE_CHECKING:
-    from profidrive_cli.drives.profile import Profile
+    from profidrive_cli.drives.profile import ParamDef, Profile
 
 # ---------------------------------------------------------------------------------------------------
 # decode_area: captured areas -> named fields (pdrive decode)
@@ -173,3 +176,92 @@ def _decode_param(profile: Profile, fmt: AreaFormat, direction: str, area: bytes
     else:
         text.append(f"parameter access: function code 0x{fn:02X} is not a valid reply")
     return d, text
+
+
+# ---------------------------------------------------------------------------------------------------
+# the common `drive` object of sniff --station (YaskawaDrive.normalise_area)
+# ---------------------------------------------------------------------------------------------------
+
+
+def _round(x: float | None) -> float | None:
+    return None if x is None else round(float(x), 3)
+
+
+def drive_object(profile: Profile, direction: str, area: dict[str, Any]) -> dict[str, Any]:
+    """A decoded area (decode_area) in the common words of `pdrive sniff --station`: the run
+    command and status flags in the manual's words (codec COMMAND_TEXT / STATUS_TEXT), reference
+    and output frequency in Hz, the MEMOBUS parameter area as `param` (memobus_param)."""
+    d: dict[str, Any] = {}
+    if direction == "request":
+        cmd = area.get("command")
+        if cmd:
+            fl = cmd["flags"]
+            d["command"] = ("forward and reverse (the drive stops with an alarm)"
+                            if fl.get("forward_run") and fl.get("reverse_run") else
+                            "forward run" if fl.get("forward_run") else
+                            "reverse run" if fl.get("reverse_run") else "stop")
+            d["control"] = [COMMAND_TEXT.get(k, k) for k, v in fl.items() if v]
+            d["control_word"] = f"0x{cmd['raw']:04X}"
+        ref = area.get("frequency_reference")
+        if ref:
+            d["reference_hz"] = _round(ref.get("hz"))
+    else:
+        stw = area.get("status")
+        if stw:
+            fl = stw["flags"]
+            d["state"] = ("fault" if fl.get("fault") else "alarm" if fl.get("alarm") else
+                          ("running reverse" if fl.get("reverse") else "running")
+                          if fl.get("running") else "ready" if fl.get("ready") else "not ready")
+            d["status"] = [STATUS_TEXT.get(k, k) for k, v in fl.items() if v]
+            d["status_word"] = f"0x{stw['raw']:04X}"
+        act = area.get("output_frequency") or area.get("speed_feedback")
+        if act:
+            d["actual_hz"] = _round(act.get("hz"))
+    pa = area.get("parameter_access")
+    if pa and pa.get("function"):
+        p = memobus_param(profile, direction, pa)
+        if p is not None:
+            d["param"] = p
+    return d
+
+
+def memobus_param(profile: Profile, direction: str, pa: dict[str, Any]) -> dict[str, Any] | None:
+    """The parameter-access area (decode_area's `parameter_access`) as the `param` of the drive
+    object: request (read / write / other) or error, the profile's code of the register, one line
+    ("read C1-01", "C1-01 = 10.0 s"); None for an answer whose handshake is still running."""
+    reg = pa.get("start_register", 0)
+    prm = next((p for p in profile.parameters.values() if p.register == reg), None)
+    code = prm.code if prm is not None else f"register 0x{reg:04X}"
+    fn = pa["function"]
+    p: dict[str, Any] = {"function": fn, "code": code}
+    if direction == "request":
+        if fn == FC_READ:
+            p["request"], p["text"] = "read", f"read {code}"
+        elif fn == FC_WRITE:
+            vals = pa.get("data") or [0]
+            p["request"] = "write"
+            p["text"] = f"write {code} = {_reg_value(prm, vals[0])}"
+        else:
+            p["request"], p["text"] = "other", f"function 0x{fn:02X} {code}"
+        return p
+    hs = pa.get("handshake") or {}
+    if not hs.get("complete"):
+        return None            # the handshake is still running: the area holds no answer yet
+    if pa.get("error"):
+        p["error"] = pa.get("error_code")
+        p["text"] = f"{code}: error {pa.get('error_name')} ({pa.get('error_meaning')})"
+    elif fn == FC_READ and pa.get("values"):
+        raw = pa["values"][0]
+        if prm is not None:
+            p["value"] = prm.from_raw(raw)
+            p["unit"] = prm.unit or ""
+        p["text"] = f"{code} = {_reg_value(prm, raw)}"
+    else:
+        p["text"] = f"{code}: {pa.get('function_name')} accepted"
+    return p
+
+
+def _reg_value(prm: ParamDef | None, raw: int) -> str:
+    if prm is None:
+        return f"0x{raw:04X}"
+    return value_text(prm.from_raw(raw), prm.unit or "")

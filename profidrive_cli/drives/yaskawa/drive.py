@@ -2,7 +2,8 @@
 
 Couples the sans-IO codec and ParamAccess machine with the channel: builds the output image each
 cycle, decodes the status, runs parameter requests through the handshake. May touch: drives/base,
-drives/values, drives/torque, and this package's codec, paramaccess and config.
+drives/values, drives/torque, and this package's codec, paramaccess, config and describe
+(drive_object).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from profidrive_cli.drives.values import raw_value_problem, value_problem
 from profidrive_cli.drives.yaskawa.codec import (COMMAND_BITS, FORMATS, STATUS_BITS, FrequencyScale, _s16,
                                                  decode_status, mfi_bit, pack_words, unpack_words)
 from profidrive_cli.drives.yaskawa.config import family_config, parse_register_code, register_name
+from profidrive_cli.drives.yaskawa.describe import drive_object
 from profidrive_cli.drives.yaskawa.paramaccess import (ParamAccess, ParamRequest, ParamResult, error_text,
                                                        refusal_words)
 
@@ -61,6 +63,11 @@ class YaskawaDrive(Drive):
     @classmethod
     def jog_refusal_for(cls, profile: Any, layout: str) -> str | None:
         return cls._no_jog_words(profile)
+
+    @classmethod
+    def normalise_area(cls, profile: Any, direction: str, area: dict[str, Any]) -> dict[str, Any]:
+        """Run command / status flags, Hz and the MEMOBUS parameter area (describe.drive_object)."""
+        return drive_object(profile, direction, area)
 
     @classmethod
     def status_flag_names(cls, profile: Any, layout: str) -> list[str]:

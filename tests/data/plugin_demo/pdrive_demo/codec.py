@@ -5,7 +5,16 @@ from profidrive_cli.drives.profidrive.drive import ProfidriveDrive
 
 
 class DemoDrive(ProfidriveDrive):
-    pass
+    """The core's drive. A family answers its own questions through the Drive's hooks; the one shown
+    here: how `pdrive sniff --station` reads a captured area (normalise_area, a class method, no bus),
+    the core's reading with the card named in the state."""
+
+    @classmethod
+    def normalise_area(cls, profile, direction, area):
+        d = super().normalise_area(profile, direction, area)
+        if "state" in d:
+            d["state"] = f"demo card: {d['state']}"
+        return d
 
 
 def make_drive(channel, profile, layout=None):
