@@ -142,6 +142,11 @@ class Drive(ABC):
     """Common operations. Every blocking call keeps exchanging cyclic data while it waits."""
 
     family: str = ""
+    #: what __init__ keeps for the codec: the station's cyclic channel, the drive profile (a
+    #: drives.profile.Profile) and the layout in use (one of the profile's layouts)
+    channel: CyclicChannel
+    profile: Any
+    layout: str
 
     def __init__(self, channel: CyclicChannel, profile: Any, layout: str | None = None):
         self.channel = channel

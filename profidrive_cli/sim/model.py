@@ -41,12 +41,17 @@ class SlaveModel:
     """
 
     #: short family name ("fuji-g1", "plain", ...) shown by the sim
-    family = "plain"
+    family: str = "plain"
     #: Sync / Freeze offered (sim/plant.py sets them where the profile's GSD file claims them)
     sync_supported = False
     freeze_supported = False
     #: the drive profile the model was built from (drive models set it); None: a plain DP-V0 slave
     profile: Profile | None = None
+    #: the layout chosen by the last accepted Chk_Cfg (None until configured), and its input and
+    #: output lengths in octets (data_exchange answers exactly input_len octets)
+    layout: str | None
+    input_len: int
+    output_len: int
 
     def __init__(self, ident: int, cfgs: dict[str, bytes] | None = None, name: str = "DP-V0 slave",
                  user_prm_len: int | None = None, max_diag_len: int = 6):
