@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from typing import Any, Callable, ClassVar, Protocol
+from typing import Any, Callable, ClassVar, Protocol, final
 
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.drives.torque import no_torque_reason
@@ -276,9 +276,30 @@ class Drive(ABC):
     @abstractmethod
     def read_param(self, code: str) -> ParamValue: ...
 
-    @abstractmethod
+    @final
     def write_param(self, code: str, value: float | int) -> ParamValue:
-        """Range-checked write, then read back; returns the value read back."""
+        """The drive's own checked write (no plan; no families' override -- they implement
+        write_resolved): `code` resolved by param_info, refused when the parameter is read-only or
+        the value fails value_problem (the exact-value check), each refusal raised as the family
+        words it (write_refusal); then write_resolved, the one write hook. Returns the value read
+        back. A write above drives/ goes through session/parameters.py (Parameters.plan, execute),
+        which makes the same checks and reaches the same hook."""
+        info = self.param_info(code)
+        p = info.param
+        if not info.writable or (p is not None and not p.writable):
+            label = f"{info.code} ({info.name})" if info.name else info.code
+            raise self.write_refusal(info, "read_only", f"{label} is read-only")
+        msg = self.value_problem(info, value)
+        if msg:
+            raise self.write_refusal(info, "out_of_range", msg)
+        return self.write_resolved(info, value)
+
+    def write_refusal(self, info: ParamInfo, kind: str, message: str) -> Exception:
+        """The error write_param raises for a write it refuses before sending: `kind` is
+        "read_only" or "out_of_range"; `message` the one line. Here DriveError for a read-only
+        parameter, UsageError for a value the parameter cannot hold; a codec whose card numbers
+        these errors answers with its own (PROFIdrive: ParamError with the card's error number)."""
+        return DriveError(message) if kind == "read_only" else UsageError(message)
 
     def save(self) -> None:
         """Store parameters in non-volatile memory where the card supports it."""
@@ -323,12 +344,14 @@ class Drive(ABC):
         """Read the parameter `info` (from param_info) without resolving its code again."""
         return self.read_param(info.code)
 
+    @abstractmethod
     def write_resolved(self, info: ParamInfo, value: float | int) -> ParamValue:
-        """Write `value`, already checked by the session (session/parameters.py Parameters.plan:
-        writable, not dangerous unless allowed, value_problem), to the parameter `info` (from
-        param_info) without resolving or checking it again; returns the value read back. The
-        base writes through write_param (which checks again); the codecs write `info.ref`."""
-        return self.write_param(info.code, value)
+        """THE family hook for writing a parameter; every write reaches it (Parameters.execute
+        after Parameters.plan, and write_param). Write `value`, already checked (plan or
+        write_param: writable, value_problem; plan also: not dangerous unless allowed), to the
+        parameter `info` (from param_info) without resolving or checking it again (the codecs
+        write `info.ref`), then read it back; returns the value read back. What only the family
+        knows -- a frame its card cannot write, its refusal in words -- is checked here."""
 
     # -- family hooks for session/backup.py (dump, compare, restore) --------------------------
     def dumpable(self, p: Any) -> bool:

@@ -281,15 +281,10 @@ class ProfidriveDrive(Drive):
         unit = ref.param.unit if ref.param is not None else ""
         return ParamValue(ref.code, ref.name, raw, value, unit)
 
-    def write_param(self, code: str, value: float | int) -> ParamValue:
-        ref = self.resolve_param(code)
-        p = ref.param
-        if p is not None and not p.writable:
-            raise ParamError(f"{ref.label} is read-only", self.cfg.error_numbers.get("read_only"))
-        msg = self.check_value(ref, value)
-        if msg:
-            raise ParamError(msg, self.cfg.error_numbers.get("out_of_range"))
-        return self._write(ref, value)
+    def write_refusal(self, info: ParamInfo, kind: str, message: str) -> Exception:
+        """A write refused before sending, numbered as the card numbers it (pkw.error_numbers:
+        read_only, out_of_range)."""
+        return ParamError(message, self.cfg.error_numbers.get(kind))
 
     def write_resolved(self, info: ParamInfo, value: float | int) -> ParamValue:
         return self._write(self._ref(info), value)

@@ -12,8 +12,8 @@ from datetime import datetime
 from typing import TYPE_CHECKING, Any
 
 from profidrive_cli.drives import profidrive as pd
-from profidrive_cli.drives.base import (CyclicChannel, DriveError, DriveStatus, FaultRecord, ParamError, ParamValue,
-                                        Reaction)
+from profidrive_cli.drives.base import (CyclicChannel, DriveError, DriveStatus, FaultRecord, ParamError, ParamInfo,
+                                        ParamValue, Reaction)
 from profidrive_cli.drives.toyo.codec import (bit_names, decode_history_word, speed_percent, speed_word,
                                               traceback_ind)
 from profidrive_cli.drives.toyo.config import toyo_config
@@ -137,15 +137,11 @@ class ToyoDrive(pd.ProfidriveDrive):
             raise ParamError(f"{ref.label}: the card refused the read: {res.describe_error()}", res.error)
         return self._param_value(ref, res.value)
 
-    def write_param(self, code: str, value: float | int) -> ParamValue:
-        ref = self.resolve_param(code)
-        p = ref.param
-        if ref.array or (p is not None and not p.writable):
-            raise ParamError(f"{ref.label} is read-only", 1)
-        msg = self.check_value(ref, value)
-        if msg:
-            raise ParamError(msg, 2)
-        return self._write(ref, value)
+    def param_info(self, code: str) -> ParamInfo:
+        info = super().param_info(code)
+        if isinstance(info.ref, pd.ParamRef) and info.ref.array:
+            info.access = "ro"                       # traceback / fault history frames: read only
+        return info
 
     def _write(self, ref: pd.ParamRef, value: float | int) -> ParamValue:
         p = ref.param

@@ -14,7 +14,6 @@ from profidrive_cli import UsageError
 from profidrive_cli.drives.base import (CyclicChannel, Drive, DriveError, DriveStatus, FaultRecord, ParamError,
                                         ParamInfo, ParamValue, Reaction)
 from profidrive_cli.drives.torque import capability_refusal, torque_counts
-from profidrive_cli.drives.values import raw_value_problem, value_problem
 from profidrive_cli.drives.yaskawa.codec import (COMMAND_BITS, FORMATS, STATUS_BITS, FrequencyScale, _s16,
                                                  decode_status, mfi_bit, pack_words, unpack_words)
 from profidrive_cli.drives.yaskawa.config import family_config, parse_register_code, register_name
@@ -499,19 +498,9 @@ class YaskawaDrive(Drive):
                               raw=raw, value=raw)
         return ParamValue(code=p.code, name=p.name, raw=raw, value=p.from_raw(raw), unit=p.unit)
 
-    def write_param(self, code: str, value: float | int) -> ParamValue:
+    def write_resolved(self, info: ParamInfo, value: float | int) -> ParamValue:
         if self.params is None:
             raise self._no_channel()
-        info = self.param_info(code)
-        p = info.param
-        msg = self.check_value(p, value) if p is not None else raw_value_problem(code, value, 16)
-        if msg:
-            raise UsageError(msg)
-        if p is not None and not p.writable:
-            raise DriveError(f"{p.code} ({p.name}) is read-only")
-        return self.write_resolved(info, value)
-
-    def write_resolved(self, info: ParamInfo, value: float | int) -> ParamValue:
         reg, p = (info.ref, info.param) if isinstance(info.ref, int) else self._resolve(info.code)
         code = info.code
         if p is not None:
@@ -524,9 +513,9 @@ class YaskawaDrive(Drive):
             raw = int(value)
         if not 0 <= raw <= 0xFFFF:
             raise UsageError(f"{code}: {value!r} does not fit a 16-bit register")
-        # The profile's limits were checked above (exact value, listed codes, min..max); the drive's own
-        # limits (they differ between F7, G7, P7 and depend on other settings) may be narrower: its
-        # refusal (0x21 / 0x22) is explained below.
+        # The profile's limits were checked before (Drive.value_problem: exact value, listed codes,
+        # min..max, 16 bits); the drive's own limits (they differ between F7, G7, P7 and depend on
+        # other settings) may be narrower: its refusal (0x21 / 0x22) is explained below.
         try:
             self.write_registers(reg, [raw])
         except ParamError as e:
@@ -536,12 +525,6 @@ class YaskawaDrive(Drive):
             self._fmax = None
             self._o1_03 = None
         return self.read_resolved(info)
-
-    def check_value(self, p: ParamDef, value: float | int) -> str | None:
-        """The exact-value check (drives/values.py) against the profile's entry: resolution, the
-        listed codes, min..max, the 16-bit register. The drive may still refuse a value its own
-        limits (which differ between F7, G7 and P7) do not allow."""
-        return value_problem(p, value)
 
     def _unit_registers(self) -> set[int]:
         regs = set()
