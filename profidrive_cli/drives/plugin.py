@@ -39,6 +39,7 @@ OWNERS: Final[dict[str, str]] = {
     "Drive": "profidrive_cli.drives.base:Drive",
     "CyclicChannel": "profidrive_cli.drives.base:CyclicChannel",
     "DriveStatus": "profidrive_cli.drives.base:DriveStatus",
+    "ParamInfo": "profidrive_cli.drives.base:ParamInfo",
     "ParamValue": "profidrive_cli.drives.base:ParamValue",
     "FaultRecord": "profidrive_cli.drives.base:FaultRecord",
     "DriveError": "profidrive_cli.drives.base:DriveError",
@@ -73,7 +74,8 @@ PLUGIN_INTERFACE: Final[tuple[Promise, ...]] = (
     Promise("Drive.reset_fault", "(self, timeout: float = 5.0) -> DriveStatus", "must"),
     Promise("Drive.status", "(self) -> DriveStatus", "must"),
     Promise("Drive.read_param", "(self, code: str) -> ParamValue", "must"),
-    Promise("Drive.write_param", "(self, code: str, value: float | int) -> ParamValue", "must"),
+    Promise("Drive.write_resolved", "(self, info: ParamInfo, value: float | int) -> ParamValue",
+            "must"),
     Promise("Drive.fault_history", "(self) -> list[FaultRecord]", "must"),
     # -- Drive: what a family may override ---------------------------------------------------------
     Promise("Drive.family", ": str = ''", "may"),
@@ -88,11 +90,13 @@ PLUGIN_INTERFACE: Final[tuple[Promise, ...]] = (
     Promise("Drive.jog_reference", "(self) -> str | None", "may"),
     Promise("Drive.status_flag_names", "(cls, profile: Any, layout: str) -> list[str]", "may"),
     Promise("Drive.param_label_for", "(cls, profile: Any, code: str) -> tuple[str, Any]", "may"),
+    Promise("Drive.param_info", "(self, code: str) -> ParamInfo", "may"),
     Promise("Drive.normalise_area",
             "(cls, profile: Any, direction: str, area: dict[str, Any]) -> dict[str, Any]", "may"),
     # -- Drive: what pdrive provides ---------------------------------------------------------------
     Promise("Drive.__init__", "(self, channel: CyclicChannel, profile: Any, layout: str | None = None)",
             "pdrive"),
+    Promise("Drive.write_param", "(self, code: str, value: float | int) -> ParamValue", "pdrive"),
     Promise("Drive.channel", ": CyclicChannel", "pdrive"),
     Promise("Drive.profile", ": Any", "pdrive"),
     Promise("Drive.layout", ": str", "pdrive"),
@@ -108,6 +112,8 @@ PLUGIN_INTERFACE: Final[tuple[Promise, ...]] = (
                            "torque_percent: float | None = None)", "pdrive"),
     Promise("ParamValue", "(code: str, name: str, raw: int, value: float | int, unit: str = '', "
                           "text: str | None = None)", "pdrive"),
+    Promise("ParamInfo", "(code: str, name: str, unit: str, param: Any, access: str, ref: Any = None)",
+            "pdrive"),
     Promise("FaultRecord", "(position: str, raw: int, codes: list[str], meanings: list[str])", "pdrive"),
     Promise("DriveError", "class DriveError(BusError)", "pdrive"),
     Promise("ParamError", "class ParamError(DriveError)", "pdrive"),
@@ -128,9 +134,8 @@ PLUGIN_INTERFACE: Final[tuple[Promise, ...]] = (
     Promise("SlaveModel.ext_diag", "(self) -> bytes", "may"),
 )
 
-#: promised names whose code arrives with another branch (issue 36: the passive decoder asks the
-#: family's Drive class, bustools/passive.py); the contract test checks each once it exists
-PENDING: Final[frozenset[str]] = frozenset({"Drive.normalise_area"})
+#: promised names whose code has not arrived yet; the contract test checks each once it exists
+PENDING: Final[frozenset[str]] = frozenset()
 
 #: what pdrive ships for a plug-in to build on instead of writing its own (the PROFIdrive core), by
 #: import path ("module:attribute"), with the promised name each one fills
