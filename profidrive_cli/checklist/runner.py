@@ -204,8 +204,8 @@ class RunResult:
 @dataclass
 class StationHandle:
     """What open_station yields: the Drive, the identity the bus reported for the station, and the
-    session behind them (api.Bus.session: a session.DriveStation), whose checked write_param, save,
-    safe stop, counters and master the steps use. closed(): after the station is left, what the safe
+    station behind them (api.Bus.station: a DriveStation), whose .params (the one write path, save),
+    .motion (the safe stop), counters and master the steps use. closed(): after the station is left, what the safe
     stop on the way out did (dict for the report)."""
     drive: Drive
     identity: dict[str, Any]  # address, ident (int), profile (name), gsd (file name or None), layout, ...
