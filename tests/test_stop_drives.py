@@ -212,7 +212,17 @@ def test_a_drive_error_in_the_normal_wait_coasts_in_the_coast_wait_fails():
     r = a.motion.stop_report
     assert (r.how, r.stopped) == ("failed", False)
     assert r.message == "normal stop failed: bad reply 2; coast stop not possible: bad reply 4"
-    assert r.seconds == pytest.approx(4 * DT)
+    assert r.seconds == pytest.approx(4 * DT) and r.status is RUNNING
+
+
+def test_a_drive_error_of_one_member_does_not_hold_up_the_other_in_its_round():
+    clock = Clock()
+    rounds = Rounds()
+    a, ma = member(clock, 3, drive=FailingCycle(clock, {1}, coast_after=0))
+    b, mb = member(clock, 4, normal_after=1)
+    ss.stop_drives([ma, mb], now=clock.now, end_round=rounds)
+    assert b.drive.cycles == 2 and rounds.n == 1 + 2
+    assert a.motion.stop_report.message == "stopped; normal stop failed: bad reply 1; coasted"
 
 
 def test_a_station_out_of_data_exchange_is_waited_out():
@@ -223,6 +233,8 @@ def test_a_station_out_of_data_exchange_is_waited_out():
     a, ma = member(clock, 3, normal_after=5)
     ss.stop_drives([mb, ma], now=clock.now, end_round=rounds, out=lambda addr: None)
     assert d.commands == [("normal", "out")]        # the command is kept for when it is back
+    # the other is cycled in every round the first is out: it stops in the 6th round
+    assert rounds.n == 1 + 6 and a.drive.cycles == 6
     assert b.motion.stop_report.how == "normal" and b.motion.stop_report.stopped
     assert a.motion.stop_report.how == "normal"
 
@@ -309,3 +321,64 @@ def test_the_single_stop_keeps_a_raising_on_sample_and_goes_on():
     assert r.how == "normal" and r.stopped and calls == [RUNNING]
     assert isinstance(s.motion.callback_error, RuntimeError)
     assert s.final_status is STOPPED
+
+
+def test_a_third_signal_during_the_single_stop_s_coast_ends_its_wait():
+    clock = Clock()
+
+    class Signalled(Drive):
+        def cycle(self):
+            st = super().cycle()
+            if self.commands[-1][0] == "coast":
+                s.signals.hurry = True          # a third signal, during the coast wait
+            return st
+    d = Signalled(clock, coast_after=30)
+    s = Session(d, clock, decel_s=10.0)
+    s.signals.hurry = True
+    r = s.motion.stop(None, None)
+    assert (r.how, r.stopped) == ("failed", False)
+    assert r.message == ("stop hurried by a second signal; the drive does not report stopped after "
+                         "a coast stop either")
+    assert d.cycles == 2 and s.signals.hurry is True and s.motion.may_run is True
+
+
+def test_nothing_is_known_before_the_first_start():
+    s = Session(None, Clock())
+    fresh = ss.SafeStop(s)
+    assert fresh.decel_s is None and fresh.comm_loss_text is None and fresh.stop_report is None
+
+
+# -- wait_stopped: the wait without a command (not the stop) ---------------------------------------
+
+def test_wait_stopped_reads_the_fault_code_once_in_fault():
+    clock = Clock()
+    tripped = status("fault", running=False, speed=0.0, fault=True)
+    coded = status("fault", running=False, speed=0.0, fault=True, fault_code="OC2")
+    d = Drive(clock, normal_after=1, rest=tripped, fault_status=coded)
+    d.stop("normal", wait=False)
+    s = Session(d, clock)
+    assert s.motion.wait_stopped(5.0, None) is coded
+    d2 = Drive(clock, normal_after=0, rest=tripped)              # not readable: the fault stays
+    d2.stop("normal", wait=False)
+    assert Session(d2, clock).motion.wait_stopped(5.0, None) is tripped
+    with_code = status("fault", running=False, speed=0.0, fault=True, fault_code="E70")
+    d3 = Drive(clock, normal_after=0, rest=with_code, fault_status=coded)
+    d3.stop("normal", wait=False)
+    assert Session(d3, clock).motion.wait_stopped(5.0, None) is with_code
+    d4 = Drive(clock, normal_after=0, rest=STOPPED, fault_status=coded)
+    d4.stop("normal", wait=False)
+    assert Session(d4, clock).motion.wait_stopped(5.0, None) is STOPPED
+
+
+def test_wait_stopped_keeps_a_raising_on_sample_and_goes_on():
+    clock = Clock()
+    d = Drive(clock, normal_after=2)
+    d.stop("normal", wait=False)
+    s = Session(d, clock)
+    calls = []
+
+    def boom(smp):
+        calls.append(smp.status)
+        raise RuntimeError("closed stdout")
+    assert s.motion.wait_stopped(5.0, boom) is STOPPED
+    assert calls == [RUNNING] and str(s.motion.callback_error) == "closed stdout"
