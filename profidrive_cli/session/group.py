@@ -16,8 +16,9 @@ Its rules, each written here once:
 - the pace: one round is one Data_Exchange per station, so its wire time is the sum of the stations'
   (Group.rate); the watchdog every member needs outlasts three such rounds (min_watchdog_ms,
   Group.watchdog_for), raised before the stations are parameterised.
-- the stop of all in one round (Group.stop_all): the normal stop command of every drive in one round,
-  a bounded wait for all together, a coast stop for each one not stopped in its time.
+- the stop of all in one round (Group.stop_all): safestop.stop_drives, the one stop path, on the
+  group's rounds: the normal stop command of every drive in one round, a bounded wait for all
+  together, a coast stop for each one not stopped in its time.
 
 Talks to the bus through dp.poller.Master only; no click and no rich.
 """
@@ -31,14 +32,12 @@ from typing import TYPE_CHECKING, Callable, Iterable, Sequence
 from profidrive_cli import BusError
 from profidrive_cli.dp import services as S
 from profidrive_cli.dp.station import RELEASED, StationMachine
-from profidrive_cli.drives.base import DriveError
 from profidrive_cli.link.base import LinkLost
-from profidrive_cli.session.cycle import Sample, default_cycle_hz, make_sample
-from profidrive_cli.session.safestop import COAST_TIMEOUT_S, StopReport
+from profidrive_cli.session.cycle import Sample, default_cycle_hz
+from profidrive_cli.session.safestop import StationOut, StopMember, stop_drives
 
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.dp.poller import Master
-    from profidrive_cli.drives.base import Drive
     from profidrive_cli.session.station import DriveStation
 
 #: (address, session, the speed in % it may be running at, None: unknown) of a drive to stop
@@ -81,15 +80,6 @@ def min_watchdog_ms(round_s: float) -> float:
 def wire_round_s(wire_hz: Iterable[float]) -> float:
     """The wire time of one round: one Data_Exchange per station, each at its own wire limit."""
     return sum(1.0 / hz for hz in wire_hz)
-
-
-class StationOut(BusError):
-    """A station of the group is not in data exchange (dropped out, or not back yet)."""
-
-    def __init__(self, address: int, why: str):
-        super().__init__(f"station {address} is out of data exchange ({why})")
-        self.address = address
-        self.why = why
 
 
 class GroupCycle:
@@ -362,85 +352,23 @@ class Group:
     # -- the stop of all in one round --------------------------------------------------------------
     def stop_all(self, items: Sequence[StopItem], hurry: Callable[[], bool] = lambda: False,
                  on_sample: Callable[[int, Sample], None] | None = None) -> None:
-        """The stop of several drives at once. items: (address, DriveStation, percent) of the drives
-        that may be running, all on the group. The normal stop command of every drive goes in one
-        round; then rounds until each reports stopped (or in fault); a drive not stopped within its
-        own stop time (safestop.stop_timeout), or every one when hurry() says so (a second signal),
-        gets a coast stop; one still not stopped after that is reported failed. A station out of data
-        exchange keeps its stop command for when it is back. Each session's stop_report (and
-        final_status) is set and may_run cleared for each drive confirmed stopped. on_sample(address,
-        Sample) sees every cycle."""
-        link = self.master.link
-        t0 = link.now()
-        pending: dict[int, tuple[str, float, float, str]] = {}     # address -> mode, deadline, limit, why
-        by_addr = {a: s for a, s, _ in items}
-        for a, s, pct in items:
-            limit = s.motion.stop_timeout(pct)
-            pending[a] = ("normal", t0 + limit, limit, "")
-            try:
-                _drive(s).stop("normal", wait=False)
-            except StationOut:
-                pass                        # the command is set; it goes when the station is back
-            except DriveError as e:
-                pending[a] = ("normal", t0, limit, f"normal stop failed: {e}")
-        self.end_round()
-        while pending:
-            for a in list(pending):
-                s = by_addr[a]
-                try:
-                    st = _drive(s).cycle()
-                except StationOut:
-                    continue
-                if on_sample is not None:
-                    on_sample(a, make_sample(s, st))
-                if not (st.fault or st.stopped):
-                    continue
-                if st.fault and st.fault_code is None:
-                    try:
-                        st = _drive(s).status()
-                    except (DriveError, StationOut):
-                        pass
-                mode, _, _, why = pending.pop(a)
-                msg = (f"the drive is in fault{f' ({st.fault_code})' if st.fault_code else ''}: its "
-                       f"output is off" if st.fault else "stopped")
-                s.motion.confirm_stopped()
-                s.motion.final_status = st
-                s.motion.stop_report = StopReport(mode, True, link.now() - t0,
-                                           msg + (f"; {why}; coasted" if mode == "coast" else ""), st)
-            self.end_round()
-            now = link.now()
-            hurried = hurry() if pending else False
-            for a in list(pending):
-                mode, deadline, limit, why = pending[a]
-                s = by_addr[a]
-                if mode == "normal" and (hurried or now > deadline):
-                    why = why or ("stop hurried by a second signal" if hurried else
-                                  f"not stopped after {limit:g} s")
-                    s.warn(f"station {a}: {why}: coasting")
-                    pending[a] = ("coast", now + COAST_TIMEOUT_S, COAST_TIMEOUT_S, why)
-                    try:
-                        _drive(s).stop("coast", wait=False)
-                    except StationOut:
-                        pass
-                    except DriveError as e:
-                        pending.pop(a)
-                        s.motion.stop_report = StopReport("failed", False, now - t0,
-                                                   f"{why}; coast stop not possible: {e}", s.motion.final_status)
-                elif mode == "coast" and now > deadline:
-                    pending.pop(a)
-                    out = self.out.get(a)
-                    if out is not None:
-                        text = (f"station {a} out of data exchange ({out}): pdrive could not send the "
-                                f"stop; its DP watchdog ({s.watchdog_ms:g} ms) ends data exchange and "
-                                f"the drive stops by {s.motion.comm_loss_text or 'its communication-loss setting'}")
-                    else:
-                        text = f"{why}; the drive does not report stopped after a coast stop either"
-                    s.motion.stop_report = StopReport("failed", False, now - t0, text, s.motion.final_status)
+        """The stop of several drives at once: safestop.stop_drives on the group's rounds. items:
+        (address, DriveStation, percent) of the drives that may be running, all on the group. The
+        normal stop command of every drive goes in one round; then rounds until each reports stopped
+        (or in fault); a drive not stopped within its own stop time (safestop.stop_timeout), or every
+        one when hurry() says so (a second signal), gets a coast stop; one still not stopped after
+        that is reported failed. A station out of data exchange keeps its stop command for when it
+        is back. Each session's Motion records its own stop_report (and final_status, may_run).
+        on_sample(address, Sample) sees every cycle."""
+        members = [StopMember(s.motion, pct, prefix=f"station {a}: ",
+                              on_sample=None if on_sample is None else _for(on_sample, a))
+                   for a, s, pct in items]
+        stop_drives(members, now=self.master.link.now, end_round=self.end_round, hurry=hurry,
+                    out=self.out.get)
 
 
-def _drive(s: "DriveStation") -> "Drive":
-    assert s.drive is not None                      # a member of a group is connected
-    return s.drive
+def _for(on_sample: Callable[[int, Sample], None], address: int) -> Callable[[Sample], None]:
+    return lambda smp: on_sample(address, smp)
 
 
 __all__ = ["Group", "GroupChannel", "GroupCycle", "KeepMiss", "StationOut", "StopItem", "min_watchdog_ms",

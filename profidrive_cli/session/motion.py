@@ -8,8 +8,8 @@ what MotionStation names.
 
 may_run turns True when Motion starts or jogs the drive, and when anything else tells the Drive to
 turn the motor (Drive.on_motion: the checklist's steps command the session's Drive directly); it
-turns False only when a stop confirms the drive stopped (stop(), or a group's stop of several drives
-in one round: confirm_stopped()).
+turns False only when a stop confirms the drive stopped (safestop.stop_drives, the one stop path, for
+stop() and for a group's stop of several drives in one round, reports it to _finished()).
 """
 
 from __future__ import annotations
@@ -76,9 +76,15 @@ class Motion(SafeStop):
             self._may_run = False
         return r
 
+    def _finished(self, report: StopReport) -> None:
+        """The stop (safestop.stop_drives: stop(), a group's stop of several drives in one round)
+        reports this drive's: kept, and may_run cleared when it is confirmed stopped."""
+        super()._finished(report)
+        if report.stopped:
+            self._may_run = False
+
     def confirm_stopped(self) -> None:
-        """A stop run elsewhere saw this drive stopped (multirun.stop_together: the stop of several
-        drives in one bus round)."""
+        """A stop run elsewhere saw this drive stopped."""
         self._may_run = False
 
     # -- speed -----------------------------------------------------------------------------------

@@ -5,6 +5,11 @@ release the station; with the link lost, say what the station's watchdog and the
 Sends only stop commands (drives.base.Drive.stop) and the release; reads parameters only to size the
 wait and to name the comm-loss behaviour.
 
+stop_drives is the one stop path: the stop of one drive (SafeStop.stop: a group of one, its own
+cycle() the exchange) and of several in rounds of one bus cycle (session/group.py Group.stop_all,
+which hands in its end_round and the stations out of data exchange: StationOut is defined here).
+Each member's SafeStop records its own report (_finished); Motion clears may_run on a stopped one.
+
 SafeStop keeps what the stop knows and reports (deceleration time, comm-loss words, stop report, the
 last status, the after_stop hooks); session/motion.py's Motion is one and says whether the drive may
 be turning (may_run). It reads of its station only what StopStation names.
@@ -18,10 +23,10 @@ wrong (the command then ends with its one line).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
-from typing import Any, Callable, Protocol
+from dataclasses import dataclass, field
+from typing import Any, Callable, Protocol, Sequence
 
-from profidrive_cli import PdriveError, UsageError
+from profidrive_cli import BusError, PdriveError, UsageError
 from profidrive_cli.drives.base import Drive, DriveError, DriveStatus
 from profidrive_cli.session.cycle import Sample
 from profidrive_cli.session.signals import Guard
@@ -134,44 +139,46 @@ class SafeStop:
 
     def stop(self, on_sample: OnSample | None = None, timeout: float | None = None) -> StopReport:
         """The family's normal stop; wait (bounded) until the drive reports stopped; coast if it does
-        not (or a signal hurries it). The report is also kept in .stop_report."""
-        self.stop_report = self._stop(on_sample or self.station.on_sample, timeout)
-        return self.stop_report
-
-    def _stop(self, on_sample: OnSample | None, timeout: float | None) -> StopReport:
+        not (or a signal hurries it). The report is also kept in .stop_report. stop_drives with
+        this one drive: its own cycle() is the exchange; an on_sample that raises is kept in
+        callback_error and the stop goes on without it."""
         sta = self.station
         d = sta.need_drive()
-        t_start = self._now()
         last = d.last_seen()
-        pct = last.speed_percent if last is not None else None
-        limit = timeout if timeout is not None else self.stop_timeout(pct)
-        try:
-            d.stop("normal", wait=False)
-            st, on_sample = self._wait(limit, on_sample)
-            if st is not None:
-                msg = (f"the drive is in fault{f' ({st.fault_code})' if st.fault_code else ''}: "
-                       f"its output is off" if st.fault else "stopped")
-                return StopReport("normal", True, self._now() - t_start, msg, st)
-            why = ("stop hurried by a second signal" if sta.signals.hurry else
-                   f"not stopped after {limit:g} s")
-        except DriveError as e:
-            why = f"normal stop failed: {e}"
-        # escalate: coast (OFF2 / base block / run bit off)
-        self._tell(sta.warn, f"{why}: coasting")
-        try:
-            d.stop("coast", wait=False)
-            sta.signals.hurry = False
-            st, on_sample = self._wait(COAST_TIMEOUT_S, on_sample)
-        except DriveError as e:
-            return StopReport("failed", False, self._now() - t_start,
-                              f"{why}; coast stop not possible: {e}", self.final_status)
-        if st is None:
-            return StopReport("failed", False, self._now() - t_start,
-                              f"{why}; the drive does not report stopped after a coast stop either",
-                              self.final_status)
-        return StopReport("coast", True, self._now() - t_start, f"{why}; coasted", st)
+        cb = on_sample or sta.on_sample
+
+        def guarded(smp: Sample) -> None:
+            nonlocal cb
+            if cb is None:
+                return
+            try:
+                cb(smp)
+            except Exception as e:              # noqa: BLE001  (the stop goes on without it)
+                self.callback_failed(e)
+                cb = None
+
+        def hurried() -> bool:
+            h = bool(sta.signals.hurry)
+            if h and member.mode == "normal":
+                sta.signals.hurry = False       # the coast wait is not hurried away by the same one
+            return h
+        member = StopMember(self, last.speed_percent if last is not None else None, timeout,
+                            on_sample=guarded if cb is not None else None)
+        stop_drives([member], now=self._now, hurry=hurried, hurry_ends_coast=True,
+                    state_in_coast_report=False)
+        assert self.stop_report is not None     # stop_drives reports every member it returns for
+        return self.stop_report
+
+    def _finished(self, report: StopReport) -> None:
+        """The stop engine (stop_drives) reports this drive's stop: kept as .stop_report (with its
+        status as final_status when it stopped); Motion clears may_run on a stopped report."""
+        if report.stopped:
+            self.final_status = report.status
+        self.stop_report = report
 
     def wait_stopped(self, timeout: float, on_sample: OnSample | None) -> DriveStatus | None:
+        """Cycle (no command) until the drive reports stopped or in fault (its status), None after
+        `timeout` s or a second signal. Not the stop: that is stop() / stop_drives."""
         return self._wait(timeout, on_sample)[0]
 
     def _wait(self, timeout: float, on_sample: OnSample | None
@@ -290,3 +297,144 @@ class SafeStop:
                 hook(link_ok)
             except Exception as e:          # noqa: BLE001  (the stop is done; say what was left)
                 self._tell(self.station.say, f"after the stop: {e}")
+
+
+# -- the one stop path: one drive (SafeStop.stop) or several in rounds (group.Group.stop_all) ------
+
+class StationOut(BusError):
+    """A station of a group is not in data exchange (dropped out, or not back yet): raised by a
+    group's channel (session/group.py), waited out by stop_drives when it is told which stations
+    are out (`out`)."""
+
+    def __init__(self, address: int, why: str):
+        super().__init__(f"station {address} is out of data exchange ({why})")
+        self.address = address
+        self.why = why
+
+
+@dataclass(eq=False)
+class StopMember:
+    """One drive for stop_drives: its Motion (a SafeStop, which records the report), the speed in %
+    it may be running at (None: unknown) for its stop time, the user's stop time if given, the
+    prefix of its warning ("station 3: " in a group) and what sees each of its cycles' Sample."""
+
+    stopper: SafeStop
+    percent: float | None = None
+    timeout: float | None = None
+    prefix: str = ""
+    on_sample: OnSample | None = None
+    #: the engine's state: "normal" or "coast", when that one is given up, its time, why coasting
+    mode: str = field(default="normal", init=False)
+    deadline: float = field(default=0.0, init=False)
+    limit: float = field(default=0.0, init=False)
+    why: str = field(default="", init=False)
+
+
+def stop_drives(members: Sequence[StopMember], *, now: Callable[[], float],
+                end_round: Callable[[], None] = lambda: None,
+                hurry: Callable[[], bool] = lambda: False,
+                out: Callable[[int], str | None] | None = None,
+                hurry_ends_coast: bool = False, state_in_coast_report: bool = True) -> None:
+    """The stop of one drive or of several at once: the one stop path (SafeStop.stop, a group's
+    Group.stop_all). The normal stop command of every member goes in one round (a command the
+    drive refuses -- DriveError -- is followed at once by the coast stop); then rounds (each member's
+    cycle(), then end_round(): a no-op for one drive, whose own cycle() is the exchange) until
+    each reports stopped (or in fault, its fault code read where the cycle's words had none). A
+    member not stopped within its time (its timeout, else stop_timeout(percent), from the start of
+    the stop), or every one still under its normal stop when hurry() says so (a second signal),
+    gets a coast stop (its warning `{prefix}{why}: coasting`); one still not stopped
+    COAST_TIMEOUT_S after that, or whose coast stop is refused, is "failed". Each member's
+    SafeStop records its own report (_finished; Motion clears may_run on a stopped one).
+
+    out: in a group, the stations out of data exchange now (address -> why, None: in): a
+    StationOut is then waited out (the command is kept for when the station is back) and a member
+    still out at the end is reported so; without it a StationOut is raised like any BusError.
+    hurry_ends_coast: a hurry during the coast wait ends it ("failed"; the single stop's third
+    signal). state_in_coast_report: a coasted member's report starts with its state ("stopped; ...";
+    the group's words) rather than only `{why}; coasted` (the single stop's). An on_sample that
+    raises, a LinkLost, a BusError: raised (the single stop guards its on_sample itself)."""
+    waited: tuple[type[BaseException], ...] = (StationOut,) if out is not None else ()
+    unreadable: tuple[type[BaseException], ...] = (DriveError, *waited)
+    t0 = now()
+    pending = list(members)
+
+    def finish(m: StopMember, report: StopReport) -> None:
+        pending.remove(m)
+        m.stopper._finished(report)
+
+    def coast(m: StopMember, t: float) -> None:
+        ss = m.stopper
+        ss._tell(ss.station.warn, f"{m.prefix}{m.why}: coasting")
+        m.mode, m.deadline, m.limit = "coast", t + COAST_TIMEOUT_S, COAST_TIMEOUT_S
+        try:
+            ss.station.need_drive().stop("coast", wait=False)
+        except waited:
+            pass                            # the command is set; it goes when the station is back
+        except DriveError as e:
+            finish(m, StopReport("failed", False, now() - t0,
+                                 f"{m.why}; coast stop not possible: {e}", ss.final_status))
+
+    for m in members:
+        m.limit = m.timeout if m.timeout is not None else m.stopper.stop_timeout(m.percent)
+        m.mode, m.deadline, m.why = "normal", t0 + m.limit, ""
+        try:
+            m.stopper.station.need_drive().stop("normal", wait=False)
+        except waited:
+            pass                            # the command is set; it goes when the station is back
+        except DriveError as e:
+            m.why = f"normal stop failed: {e}"
+            coast(m, now())
+    end_round()
+    while pending:
+        for m in list(pending):
+            ss = m.stopper
+            d = ss.station.need_drive()
+            try:
+                st = d.cycle()
+            except waited:
+                continue
+            except DriveError as e:
+                if m.mode == "normal":
+                    m.why = f"normal stop failed: {e}"
+                    coast(m, now())
+                else:
+                    finish(m, StopReport("failed", False, now() - t0,
+                                         f"{m.why}; coast stop not possible: {e}", ss.final_status))
+                continue
+            if m.on_sample is not None:
+                m.on_sample(ss.sample(st))
+            else:
+                ss.final_status = st
+            if not (st.fault or st.stopped):
+                continue
+            if st.fault and st.fault_code is None:
+                try:
+                    st = d.status()
+                except unreadable:
+                    pass
+            msg = (f"the drive is in fault{f' ({st.fault_code})' if st.fault_code else ''}: its "
+                   f"output is off" if st.fault else "stopped")
+            if m.mode == "coast":
+                msg = f"{msg}; {m.why}; coasted" if state_in_coast_report else f"{m.why}; coasted"
+            finish(m, StopReport(m.mode, True, now() - t0, msg, st))
+        end_round()
+        if not pending:
+            break
+        t = now()
+        hurried = hurry()
+        for m in list(pending):
+            if m.mode == "normal" and (hurried or t > m.deadline):
+                m.why = m.why or ("stop hurried by a second signal" if hurried else
+                                  f"not stopped after {m.limit:g} s")
+                coast(m, t)
+            elif m.mode == "coast" and (t > m.deadline or (hurried and hurry_ends_coast)):
+                ss = m.stopper
+                why_out = out(ss.station.address or 0) if out is not None else None
+                if why_out is not None:
+                    text = (f"station {ss.station.address} out of data exchange ({why_out}): pdrive "
+                            f"could not send the stop; its DP watchdog ({ss.station.watchdog_ms:g} ms) "
+                            f"ends data exchange and the drive stops by "
+                            f"{ss.comm_loss_text or 'its communication-loss setting'}")
+                else:
+                    text = f"{m.why}; the drive does not report stopped after a coast stop either"
+                finish(m, StopReport("failed", False, t - t0, text, ss.final_status))
