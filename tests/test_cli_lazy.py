@@ -40,3 +40,16 @@ def test_unknown_command_is_a_usage_error():
     r = CliRunner().invoke(cli, ["scna"])
     assert r.exit_code == 2
     assert "No such command" in r.output
+
+
+def test_a_drive_command_loads_only_the_station_level_it_names():
+    # the one door (profidrive_cli.api.station) loads a name's module on first use: the options every
+    # drive command shares (drive_opts: SessionTerminated) do not bring in the run loop, the group,
+    # the multi-drive run, the monitors or the comm-loss test
+    code = ("import sys; import profidrive_cli.cli.drive_opts\n"
+            "heavy = [m for m in ('profidrive_cli.session.live', 'profidrive_cli.session.group',"
+            " 'profidrive_cli.session.multirun', 'profidrive_cli.session.monitors',"
+            " 'profidrive_cli.session.commloss') if m in sys.modules]\n"
+            "print('HEAVY', heavy)\n")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert "HEAVY []" in p.stdout, p.stdout + p.stderr

@@ -22,23 +22,62 @@ The station level is typed (mypy --strict) but not a versioned contract (docs/ve
 changes when the tools need it, and CHANGELOG.md says so where a user would notice.
 """
 
-from profidrive_cli.session.backup import CARD_MANUAL, default_source, nothing_compared
-from profidrive_cli.session.commloss import CommLossResult, run_commloss
-from profidrive_cli.session.commloss import check_args as check_commloss_args
-from profidrive_cli.session.cycle import Sample, wire_limit_hz
-from profidrive_cli.session.discovery import Candidate
-from profidrive_cli.session.dumpfile import load_dump, not_dumped_words, write_dump
-from profidrive_cli.session.group import Group
-from profidrive_cli.session.live import NOT_REACHED, Live, Reach, end_status, fault_name
-from profidrive_cli.session.monitors import Monitors, TripRecords, setup_monitors
-from profidrive_cli.session.motion import Motion
-from profidrive_cli.session.multirun import MultiRun
-from profidrive_cli.session.parameters import Parameters
-from profidrive_cli.session.paramtypes import ParamInfo, ParamRow, WritePlan, suggest_codes
-from profidrive_cli.session.restore import RestoreInterrupted, RestoreRefused, scope_problem
-from profidrive_cli.session.safestop import StopReport
-from profidrive_cli.session.signals import SessionTerminated
-from profidrive_cli.session.station import DEFAULT_WATCHDOG_MS, DriveStation
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.session.backup import CARD_MANUAL, default_source, nothing_compared
+    from profidrive_cli.session.commloss import CommLossResult, run_commloss
+    from profidrive_cli.session.commloss import check_args as check_commloss_args
+    from profidrive_cli.session.cycle import Sample, wire_limit_hz
+    from profidrive_cli.session.discovery import Candidate
+    from profidrive_cli.session.dumpfile import load_dump, not_dumped_words, write_dump
+    from profidrive_cli.session.group import Group
+    from profidrive_cli.session.live import NOT_REACHED, Live, Reach, end_status, fault_name
+    from profidrive_cli.session.monitors import Monitors, TripRecords, setup_monitors
+    from profidrive_cli.session.motion import Motion
+    from profidrive_cli.session.multirun import MultiRun
+    from profidrive_cli.session.parameters import Parameters
+    from profidrive_cli.session.paramtypes import ParamInfo, ParamRow, WritePlan, suggest_codes
+    from profidrive_cli.session.restore import RestoreInterrupted, RestoreRefused, scope_problem
+    from profidrive_cli.session.safestop import StopReport
+    from profidrive_cli.session.signals import SessionTerminated
+    from profidrive_cli.session.station import DEFAULT_WATCHDOG_MS, DriveStation
+
+#: name -> (module, attribute): loaded on first use (PEP 562), so that a command importing one name
+#: (drive_opts: SessionTerminated) loads that module only, not the whole station level
+_HOME: dict[str, tuple[str, str]] = {
+    **{n: ("profidrive_cli.session.backup", n) for n in ("CARD_MANUAL", "default_source", "nothing_compared")},
+    **{n: ("profidrive_cli.session.commloss", n) for n in ("CommLossResult", "run_commloss")},
+    "check_commloss_args": ("profidrive_cli.session.commloss", "check_args"),
+    **{n: ("profidrive_cli.session.cycle", n) for n in ("Sample", "wire_limit_hz")},
+    "Candidate": ("profidrive_cli.session.discovery", "Candidate"),
+    **{n: ("profidrive_cli.session.dumpfile", n) for n in ("load_dump", "not_dumped_words", "write_dump")},
+    "Group": ("profidrive_cli.session.group", "Group"),
+    **{n: ("profidrive_cli.session.live", n)
+       for n in ("NOT_REACHED", "Live", "Reach", "end_status", "fault_name")},
+    **{n: ("profidrive_cli.session.monitors", n) for n in ("Monitors", "TripRecords", "setup_monitors")},
+    "Motion": ("profidrive_cli.session.motion", "Motion"),
+    "MultiRun": ("profidrive_cli.session.multirun", "MultiRun"),
+    "Parameters": ("profidrive_cli.session.parameters", "Parameters"),
+    **{n: ("profidrive_cli.session.paramtypes", n)
+       for n in ("ParamInfo", "ParamRow", "WritePlan", "suggest_codes")},
+    **{n: ("profidrive_cli.session.restore", n)
+       for n in ("RestoreInterrupted", "RestoreRefused", "scope_problem")},
+    "StopReport": ("profidrive_cli.session.safestop", "StopReport"),
+    "SessionTerminated": ("profidrive_cli.session.signals", "SessionTerminated"),
+    **{n: ("profidrive_cli.session.station", n) for n in ("DEFAULT_WATCHDOG_MS", "DriveStation")},
+}
+
+
+def __getattr__(name: str) -> object:
+    home = _HOME.get(name)
+    if home is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    import importlib
+    value = getattr(importlib.import_module(home[0]), home[1])
+    globals()[name] = value
+    return value
+
 
 __all__ = [
     "CARD_MANUAL", "Candidate", "CommLossResult", "DEFAULT_WATCHDOG_MS", "DriveStation", "Group", "Live",
