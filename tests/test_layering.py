@@ -7,7 +7,7 @@ on directly. A layer may import its own modules, the top-level modules (profidri
 datafile, outfile, data, config, plot) and every layer below it, following PLAN down:
 
     link -> fdl -> dp -> gsd -> drives -> session -> api -> checklist, cli
-                                  |-> bustools   (beside session)
+                                  |-> bustools   (beside session) -> monitor
                                   '-> sim        (beside the master stack)
 
     link       nothing of pdrive: bytes in and out of a port (the sim:// handler is named, not imported)
@@ -20,6 +20,8 @@ datafile, outfile, data, config, plot) and every layer below it, following PLAN 
     session    drives and below: one drive station (profidrive_cli/session/)
     bustools   drives and below, beside session: the bus-level tools without a drive session (listen,
                passive decoding, the live lists, Wireshark); never session, api, checklist, cli, sim
+    monitor    bustools and below: `pdrive monitor` (profidrive_cli/monitor/), the listener left on a line
+               with its history, web page and exporters; never session, api, checklist, cli, sim
     sim        drives and below, beside the master stack: the slave side (the drive models reuse the
                codecs; sim:// is registered from here) and the built-in PLC of `sim --plc`; never
                session, api, checklist, cli, bustools
@@ -58,9 +60,10 @@ PLAN: dict[str, tuple[str, ...]] = {
     "session": ("drives",),
     "bustools": ("drives",),            # beside session
     "sim": ("drives",),                 # beside the master stack
+    "monitor": ("bustools",),           # the line monitored (issue 37), beside session and api
     "api": ("session", "bustools"),
     "checklist": ("api", "sim"),
-    "cli": ("checklist",),
+    "cli": ("checklist", "monitor"),
     "aio": ("api",),                    # the asyncio face of the API, beside the CLI (issue 29)
 }
 TOP = "top"
