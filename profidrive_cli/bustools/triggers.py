@@ -262,6 +262,13 @@ class TriggerSet:
                     break
         return out
 
+    def drive_state(self, station: int) -> tuple[str | None, bool | None]:
+        """A decoded drive's last state in words and whether it is in fault (None, None: not decoded
+        yet, or not a drive this set decodes)."""
+        if station not in self._fault:
+            return None, None
+        return self._state.get(station) or None, self._fault[station]
+
     def _drive(self, c: Captured) -> list[Note]:
         assert self.decoder is not None
         d = self.decoder.decode(c)

@@ -32,7 +32,8 @@ def _json_mode(argv: Sequence[str] | None) -> tuple[bool, bool]:
     if "--" in args:
         args = args[:args.index("--")]
     stream = bool(args) and (args[0] in STREAM_COMMANDS
-                             or bool(STREAM_WITH.get(args[0], frozenset()) & set(args[1:])))
+                             or bool(STREAM_WITH.get(args[0], frozenset()) & set(args[1:]))
+                             or (args[0] == "monitor" and "report" not in args[1:]))
     return "--json" in args, stream
 
 
@@ -137,6 +138,8 @@ COMMANDS = {
            "Bring any DP slave to Data_Exchange and show its inputs."),
     "jog": ("profidrive_cli.cli.jog_cmd", "jog_cmd",
             "Jog a drive with the card's own jog function; a safe stop on every exit."),
+    "monitor": ("profidrive_cli.cli.monitor_cmd", "monitor_group",
+                "A permanent bus monitor: history, web page, metrics, alarms (listens only)."),
     "param": ("profidrive_cli.cli.drive_cmds", "param_group",
               "Read and write drive parameters by their native codes."),
     "run": ("profidrive_cli.cli.run_cmd", "run_cmd",
