@@ -175,7 +175,7 @@ class History:
         self._run: _Run | None = None
         self._closed = False
         #: the hysteresis: a removal frees this much beyond what the write needs
-        self._headroom = max(16 << 10, max_bytes // 32)
+        self._headroom = max(32 << 10, max_bytes // 16)
         self._wal_limit = max(64 << 10, min(8 << 20, max_bytes // 32))
         self.resumed = self.path.exists()
         if self.captures.exists() and not self.captures.is_dir():
@@ -334,7 +334,7 @@ class History:
 
     def _estimate(self, n_rows: int) -> int:
         """The most a write of n rows adds to the files (its WAL frames): the pages it touches."""
-        pages = 12 + 2 * math.ceil(n_rows * 160 / self._page)
+        pages = 6 + 2 * math.ceil(n_rows * 160 / self._page)
         return pages * (self._page + 24)
 
     def _write_items(self, items: list[_Item]) -> list[StoreNote]:
