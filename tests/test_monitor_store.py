@@ -403,3 +403,45 @@ def test_trend_buckets(tmp_path: Path) -> None:
             r.close()
     finally:
         h.close()
+
+
+def test_readers_in_threads_while_the_monitor_writes(tmp_path: Path) -> None:
+    import threading
+    bound = MIN_MAX_BYTES
+    h = History(tmp_path, max_bytes=bound)
+    r = h.reader()
+    stop = threading.Event()
+    errors: list[BaseException] = []
+    reads = [0]
+
+    def read() -> None:
+        try:
+            while not stop.is_set():
+                r.events(limit=50)
+                r.trend(5, T0, T0 + 400, 50)
+                r.totals(T0, T0 + 400)
+                reads[0] += 1
+                stop.wait(0.002)
+        except BaseException as e:                # noqa: BLE001 -- reported by the test
+            errors.append(e)
+
+    threads = [threading.Thread(target=read) for _ in range(2)]
+    for th in threads:
+        th.start()
+    try:
+        for i in range(600):
+            notes = h.write(samples=samples(T0 + i, (3, 4, 5)),
+                            events=[MonEvent(T0 + i, "rr", 5, str(i))])
+            assert not [n for n in notes if n.kind in ("failed", "full")], notes
+    finally:
+        stop.set()
+        for th in threads:
+            th.join(timeout=60)
+    try:
+        assert not errors and reads[0] > 0
+        h.write(samples=samples(T0 + 600))          # no reader now: the bound made good
+        assert h.size_bytes() <= bound and h.removed_rows > 0
+        assert r.events(limit=1)[0]["text"] == "599"
+    finally:
+        r.close()
+        h.close()
