@@ -52,6 +52,10 @@ SCHEMA_VERSION = 1
 MIN_MAX_BYTES = 256 << 10
 #: what an empty store takes beside its rows: the database's schema pages, the -shm, one write's WAL
 _BASE_BYTES = 160 << 10
+#: the most the writer waits for a reader (a TRUNCATE checkpoint waits for the readers to leave the
+#: WAL; past this it checkpoints what it can and tries again later): the monitor's loop never waits
+#: long for the web page
+BUSY_S = 0.1
 #: the pcap link type of the captures (LINKTYPE_PROFIBUS_DL)
 LINKTYPE = 147
 #: the most buckets a trend has (the page's plots are a few hundred pixels wide)
@@ -198,7 +202,7 @@ class History:
         if self.path.exists() and not self.path.is_file():
             raise UsageError(f"--db {self.path}: not a regular file")
         try:
-            con = sqlite3.connect(str(self.path), isolation_level=None, timeout=1.0)
+            con = sqlite3.connect(str(self.path), isolation_level=None, timeout=BUSY_S)
         except sqlite3.Error as e:
             raise UsageError(f"--db {self.path}: cannot open ({e})") from None
         try:
