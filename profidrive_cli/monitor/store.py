@@ -25,7 +25,6 @@ What it promises, for a monitor left on a line for weeks:
 
 from __future__ import annotations
 
-import errno
 import json
 import math
 import os
