@@ -427,3 +427,29 @@ def test_the_page_in_a_browser(reader) -> None:
     assert "station 5&#39;s cable or power" in dom or "station 5's cable or power" in dom
     assert r.links == [f"captures/{CAPTURE}?token={s.token}"]
     assert r.plots > 0                      # the trends drawn from /api/trend
+
+
+def test_idle_and_slow_clients_hold_no_worker(server) -> None:
+    """Clients that connect and send half a request (or nothing) hold no worker thread: a request
+    beside them is answered (waitress reads requests asynchronously; web.THREADS workers)."""
+    import socket
+    held = []
+    try:
+        for i in range(web.THREADS * 2):
+            c = socket.create_connection(("127.0.0.1", server.port), timeout=60)
+            if i % 2:
+                c.sendall(b"GET /api/live HTTP/1.1\r\nHost: 127.0.0.1\r\n")    # never finished
+            held.append(c)
+        assert get(server.port, "/api/live")[0] == 200
+    finally:
+        for c in held:
+            c.close()
+
+
+def test_too_many_query_fields() -> None:
+    app = web.make_app(live_view, None, None, {"127.0.0.1"}, log=lambda line: None)
+    got: list[str] = []
+    body = b"".join(app({"REQUEST_METHOD": "GET", "PATH_INFO": "/api/live",
+                         "QUERY_STRING": "&".join(f"a{i}=1" for i in range(40)),
+                         "HTTP_HOST": "127.0.0.1"}, lambda status, headers: got.append(status)))
+    assert got == ["400 Bad Request"] and json.loads(body)["error"].startswith("query:")

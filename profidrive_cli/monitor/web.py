@@ -348,8 +348,11 @@ class App:
         why = foreign(environ, self.names)
         if why is not None:
             return self._json(403, {"error": f"refused: {why}"})
-        query = parse_qs(str(environ.get("QUERY_STRING", "")), keep_blank_values=True,
-                         max_num_fields=32)
+        try:
+            query = parse_qs(str(environ.get("QUERY_STRING", "")), keep_blank_values=True,
+                             max_num_fields=32)
+        except ValueError:
+            return self._json(400, {"error": "query: more than 32 fields"})
         if not token_ok(self.token, environ, query):
             return self._json(401, {"error": "this monitor needs its token (Authorization: Bearer "
                                              "TOKEN, or ?token=TOKEN in the page's address)"})
