@@ -98,6 +98,7 @@ def run_monitor(opts: BusOptions, db_dir: str | None, stations: tuple[str, ...],
     history = History(directory, max_bytes, None if keep_days is None else keep_days * 86400.0)
     sinks: list[Sink] = []
     server: Any = None
+    reader: Any = None
     try:
         if mqtt:
             from profidrive_cli.monitor.mqtt import MqttAlarms
@@ -111,16 +112,20 @@ def run_monitor(opts: BusOptions, db_dir: str | None, stations: tuple[str, ...],
         box = LiveBox()
         if web_at is not None:
             from profidrive_cli.monitor.web import serve
-            server = serve(box.get, history.reader(), host=web_at[0], port=web_at[1], log=_log_line)
+            reader = history.reader()
+            server = serve(box.get, reader, host=web_at[0], port=web_at[1], log=_log_line)
         if not opts.json:
             err.print(f"monitoring {port} (listening only), history {directory}"
                       + (" (resumed)" if history.resumed else "")
                       + f", at most {max_disk} with its captures"
-                      + (f"; page {server.url}" if server is not None else "")
-                      + (f" (token {server.token})" if server is not None and server.token else ""),
+                      + (f"; page {server.page_url}" if server is not None else "")
+                      + (" (on every address of this machine)"
+                         if server is not None and web_at is not None and web_at[0] in ("", "0.0.0.0", "::")
+                         else ""),
                       markup=False, soft_wrap=True)
         elif server is not None:
-            emit_json({"event": "web", "url": server.url, "token": server.token})
+            emit_json({"event": "web", "url": server.page_url, "port": server.port,
+                       "token": server.token})
         old = signal.getsignal(signal.SIGTERM)
 
         def on_term(*_a: object) -> None:
@@ -134,6 +139,8 @@ def run_monitor(opts: BusOptions, db_dir: str | None, stations: tuple[str, ...],
     finally:
         if server is not None:
             server.close()
+        if reader is not None:
+            reader.close()
         for s in sinks:
             s.close()
         history.close()
@@ -185,7 +192,7 @@ def report_cmd(db_dir: str, since: str, until: str | None, station: int | None,
     """What the monitor's history holds for a time window: runs, stations with their counters,
     every event with its likely cause and capture."""
     from profidrive_cli.monitor.report import parse_since, report, report_html, report_text
-    from profidrive_cli.monitor.store import open_reader
+    from profidrive_cli.monitor.store import Reader
     from profidrive_cli.outfile import check_output_path, write_text_atomic
 
     now = time.time()
@@ -193,7 +200,7 @@ def report_cmd(db_dir: str, since: str, until: str | None, station: int | None,
     t_until = None if until is None else parse_since(until, now, "--until")
     if html_file:
         check_output_path(html_file)
-    reader = open_reader(db_dir)
+    reader = Reader(db_dir)
     try:
         doc = report(reader, t_since, t_until, station)
     finally:
