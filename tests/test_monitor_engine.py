@@ -94,6 +94,26 @@ def test_a_silent_station_is_an_event_with_its_cause_and_capture():
     assert done.packets[0][1] == req_dx(3, False)
 
 
+def test_the_cause_is_the_one_standing_when_the_event_fired():
+    """Station 5 silent and back inside one capture (after_s 30 s): the lost event keeps the
+    silent-station cause it had when it fired, though 5 answers again when the capture closes; the
+    back event, fired when 5 answered again (no rounds unanswered then), has none."""
+    m = Monitor(baud=187_500, wall0=0.0, interval_s=1000.0, ring_s=5.0, after_s=30.0)
+    timed, t, fcb = [], 0.0, False
+    for silent in [()] * 5 + [(5,)] * (LOST_AFTER + 2) + [()] * 5:
+        timed += cycle(t, fcb, silent=silent)
+        t += 0.1
+        fcb = not fcb
+    outs = feed_all(m, timed)
+    assert not any(o.captures for o in outs)
+    done = m.tick(t + 31.0).captures
+    assert len(done) == 1
+    evs = {e.kind: e for e in m.events_of(done[0], "c.pcap") if e.station == 5}
+    assert set(evs) >= {"lost", "back"}
+    assert evs["lost"].cause is not None and "5" in evs["lost"].cause
+    assert evs["back"].cause is None
+
+
 def test_counters_are_sampled_as_increments_per_interval():
     m = Monitor(baud=187_500, wall0=0.0, interval_s=1.0, ring_s=1.0, after_s=0.0)
     timed = []

@@ -180,14 +180,14 @@ def _sayer(as_json: bool) -> Any:
 
 @monitor_group.command("report")
 @click.option("--db", "db_dir", required=True, metavar="DIR", help="The monitor's history directory.")
-@click.option("--since", default="24h", show_default=True, metavar="WHEN",
-              help="From: an age (90s, 30m, 12h, 7d) or a date and time (2026-12-04, "
-                   "'2026-12-04 22:00').")
+@click.option("--since", default=None, metavar="WHEN",
+              help="From (default: the beginning): an age (90s, 30m, 12h, 7d) or a date and time "
+                   "(2026-12-04, '2026-12-04 22:00').")
 @click.option("--until", default=None, metavar="WHEN", help="Up to (default: now); the same forms.")
 @click.option("--station", type=click.IntRange(0, 126), default=None, help="Only this station.")
 @click.option("--html", "html_file", default=None, metavar="FILE", help="Also write one HTML page.")
 @click.option("--json", "as_json", is_flag=True, help="The report as one JSON document.")
-def report_cmd(db_dir: str, since: str, until: str | None, station: int | None,
+def report_cmd(db_dir: str, since: str | None, until: str | None, station: int | None,
                html_file: str | None, as_json: bool) -> None:
     """What the monitor's history holds for a time window: runs, stations with their counters,
     every event with its likely cause and capture."""
@@ -196,7 +196,7 @@ def report_cmd(db_dir: str, since: str, until: str | None, station: int | None,
     from profidrive_cli.outfile import check_output_path, write_text_atomic
 
     now = time.time()
-    t_since = parse_since(since, now, "--since")
+    t_since = None if since is None else parse_since(since, now, "--since")
     t_until = None if until is None else parse_since(until, now, "--until")
     if html_file:
         check_output_path(html_file)

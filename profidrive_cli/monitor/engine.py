@@ -33,7 +33,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from profidrive_cli.bustools.causes import likely_causes
+from profidrive_cli.bustools.causes import Cause, likely_causes
 from profidrive_cli.bustools.passive import PassiveDecoder, Watched
 from profidrive_cli.bustools.passive_live import BITS_PER_OCTET, StationLive
 from profidrive_cli.bustools.recorder import MAX_RING, Done, Recorder
@@ -109,6 +109,10 @@ class Monitor:
         self._marks: dict[int, _Mark] = {}
         self._bus_mark = (0, 0, 0, 0, 0, 0.0)      # frames, tokens, errors, octets, rotation n, total
         self._infos: dict[int, tuple[int | None, str | None, str]] = {}
+        #: the likely cause standing when an event of the open capture fired (by Event.n; None: no
+        #: cause then): a lost station is blamed while it is silent, and may be back before its
+        #: capture closes; a cause that comes later is not an earlier event's
+        self._causes_seen: dict[int, tuple[str, tuple[str, ...]] | None] = {}
         self.recent: deque[MonEvent] = deque(maxlen=LIVE_EVENTS)
         self.events_total = 0
         self.by_kind: dict[str, int] = {}
@@ -127,7 +131,10 @@ class Monitor:
         """Octets heard at link time t."""
         self.t = max(self.t, t)
         out = Output()
+        fired = self.recorder.events
         out.captures += self.recorder.feed(merge_errors(self.capture.feed(data, t)))
+        if self.recorder.events != fired:
+            self._see_causes()
         return out
 
     def tick(self, t: float) -> Output:
@@ -172,13 +179,26 @@ class Monitor:
         out = []
         for e in done.events:
             f = e.fired
-            mine = [c for c in causes if not c.stations or f.station is None or f.station in c.stations]
-            best = mine[0] if mine else None
+            seen = (self._causes_seen.pop(e.n) if e.n in self._causes_seen
+                    else _best(causes, f.station))
             out.append(MonEvent(t=self.wall(f.t), kind=f.trigger.kind, station=f.station, text=f.text,
-                                cause=None if best is None else best.title,
-                                evidence=() if best is None else tuple(best.evidence),
+                                cause=None if seen is None else seen[0],
+                                evidence=() if seen is None else seen[1],
                                 repeats=e.repeats, capture=capture))
+        if self.recorder.open is None:
+            self._causes_seen.clear()          # (bounded: only the open capture's are kept)
         return out
+
+    def _see_causes(self) -> None:
+        """The events that just fired (in the open capture) get the cause ranked first now."""
+        op = self.recorder.open
+        if op is None:
+            return
+        todo = [e for e in op.events if e.n not in self._causes_seen]
+        if todo:
+            causes = likely_causes(self.live_list)
+            for e in todo:
+                self._causes_seen[e.n] = _best(causes, e.fired.station)
 
     def note(self, ev: MonEvent) -> None:
         """An event that was recorded (or could not be): the live view shows it and counts it."""
@@ -308,3 +328,12 @@ def _counts(st: StationLive) -> dict[str, int]:
     return {"exchanges": st.exchanges, "retries": c.get("retries", 0),
             "no_answer": c.get("no_answer", 0), "illegal": c.get("illegal", 0),
             "reparams": c.get("reparams", 0)}
+
+
+def _best(causes: list[Cause], station: int | None) -> tuple[str, tuple[str, ...]] | None:
+    """The cause ranked first for a station (a cause of no station: the whole line; an event of no
+    station: any cause): its title and evidence."""
+    for c in causes:
+        if not c.stations or station is None or station in c.stations:
+            return c.title, tuple(c.evidence)
+    return None
