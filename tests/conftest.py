@@ -3,6 +3,7 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 import time
 
 import pytest
@@ -321,3 +322,27 @@ def pytest_collection_modifyitems(config, items):
                 seen[path] = False
         if seen[path]:
             item.add_marker(skip)
+
+
+#: Debian's headless browser (CI installs it): the monitor's page is checked as a browser renders it
+CHROMIUM = shutil.which("chromium") or ("/usr/bin/chromium" if os.path.exists("/usr/bin/chromium")
+                                        else None)
+
+
+def chromium(url: str, *extra: str) -> str:
+    """What headless Chromium prints for `url` (e.g. with --dump-dom: the DOM after the scripts ran,
+    10 s of the page's virtual time); killed after 120 s."""
+    with tempfile.TemporaryDirectory() as profile:
+        p = subprocess.Popen(
+            [CHROMIUM or "chromium", "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+             "--no-first-run", "--disable-background-networking", "--disable-component-update",
+             "--disable-sync", f"--user-data-dir={profile}", "--virtual-time-budget=10000",
+             *extra, url],
+            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        try:
+            out, _ = p.communicate(timeout=120)
+        finally:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+        return out

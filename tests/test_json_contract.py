@@ -207,7 +207,10 @@ def test_every_documented_table_is_used():
             "sniff event=disk", "config show", "config path",
             "wireshark install", "checklist measured bus_health", "sim-ctl state", "audit",
             "scan save", "scan compare", "checklist measured baseline", "param fleet dump",
-            "param fleet diff"}
+            "param fleet diff",
+            # tests/test_monitor_e2e.py (web, monitor, end, report), test_monitor_soak.py (removed)
+            "monitor event=web", "monitor event=monitor", "monitor event=end", "monitor report",
+            "monitor event=removed"}
     assert set(CONTRACTS) == used
 
 

@@ -16,14 +16,13 @@ import http.client
 import json
 import os
 import pathlib
-import shutil
 import subprocess
 import sys
-import tempfile
 from typing import Any
 
 import pytest
 
+from conftest import CHROMIUM, chromium
 from profidrive_cli.monitor import web
 from profidrive_cli.monitor.model import SAMPLE_COUNTERS, MonEvent, state_colour
 
@@ -353,27 +352,6 @@ def test_without_the_extra_a_usage_error(monkeypatch) -> None:
 def test_clients_for_limit() -> None:
     assert web.clients_for_limit(64) == 12 and web.clients_for_limit(1024) == 32
     assert web.clients_for_limit(10) == 2 and web.clients_for_limit(None) == web.MAX_CLIENTS
-
-
-CHROMIUM = shutil.which("chromium") or ("/usr/bin/chromium" if os.path.exists("/usr/bin/chromium")
-                                        else None)
-
-
-def chromium(url: str, *extra: str) -> str:
-    with tempfile.TemporaryDirectory() as profile:
-        p = subprocess.Popen(
-            [CHROMIUM or "chromium", "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
-             "--no-first-run", "--disable-background-networking", "--disable-component-update",
-             "--disable-sync", f"--user-data-dir={profile}", "--virtual-time-budget=10000",
-             *extra, url],
-            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-        try:
-            out, _ = p.communicate(timeout=120)
-        finally:
-            if p.poll() is None:
-                p.kill()
-                p.wait()
-        return out
 
 
 def test_the_page_in_a_browser(reader) -> None:

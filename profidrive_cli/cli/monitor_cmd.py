@@ -119,9 +119,8 @@ def run_monitor(opts: BusOptions, db_dir: str | None, stations: tuple[str, ...],
                       + (" (resumed)" if history.resumed else "")
                       + f", at most {max_disk} with its captures"
                       + (f"; page {server.page_url}" if server is not None else "")
-                      + (" (on every address of this machine)"
-                         if server is not None and web_at is not None and web_at[0] in ("", "0.0.0.0", "::")
-                         else ""),
+                      + (" (on every address of this machine)" if server is not None
+                         and web_at is not None and web_at[0] in ("0.0.0.0", "::") else ""),
                       markup=False, soft_wrap=True)
         elif server is not None:
             emit_json({"event": "web", "url": server.page_url, "port": server.port,
