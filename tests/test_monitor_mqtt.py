@@ -90,6 +90,111 @@ def broker(tmp_path):
         b.stop()
 
 
+class Gate:
+    """A TCP relay 127.0.0.1:port -> the broker that the test opens and shuts: shut, the port refuses
+    connections and the relayed ones are cut -- the broker gone for the alarms, while the test's
+    subscriber (connected to the broker itself) stays subscribed and misses nothing."""
+
+    def __init__(self, target_port: int) -> None:
+        self.target = target_port
+        self.port = _free_port()
+        self._listener: socket.socket | None = None
+        self._acceptor: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+        self._socks: list[socket.socket] = []
+        self._pumps: list[threading.Thread] = []
+
+    def open(self) -> None:
+        ls = socket.socket()
+        ls.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        end = time.monotonic() + DEADLINE_S
+        while True:
+            try:
+                ls.bind(("127.0.0.1", self.port))
+                break
+            except OSError:
+                if time.monotonic() > end:
+                    ls.close()
+                    raise
+                time.sleep(0.1)
+        ls.listen(8)
+        ls.settimeout(0.1)
+        self._listener = ls
+        self._stop = threading.Event()
+        self._acceptor = threading.Thread(target=self._accept, args=(ls, self._stop), daemon=True)
+        self._acceptor.start()
+
+    def _accept(self, ls: socket.socket, stop: threading.Event) -> None:
+        while not stop.is_set():
+            try:
+                c, _ = ls.accept()
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            try:
+                b = socket.create_connection(("127.0.0.1", self.target), timeout=DEADLINE_S)
+            except OSError:
+                c.close()
+                continue
+            c.settimeout(None)
+            b.settimeout(None)
+            with self._lock:
+                self._socks += [c, b]
+                for src, dst in ((c, b), (b, c)):
+                    t = threading.Thread(target=self._pump, args=(src, dst), daemon=True)
+                    self._pumps.append(t)
+                    t.start()
+
+    @staticmethod
+    def _pump(src: socket.socket, dst: socket.socket) -> None:
+        try:
+            while data := src.recv(65536):
+                dst.sendall(data)
+        except OSError:
+            pass
+        for s in (src, dst):
+            try:
+                s.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+
+    def shut(self) -> None:
+        self._stop.set()
+        if self._acceptor is not None:
+            self._acceptor.join(DEADLINE_S)
+            self._acceptor = None
+        if self._listener is not None:
+            self._listener.close()
+            self._listener = None
+        with self._lock:
+            socks, self._socks = self._socks, []
+            pumps, self._pumps = self._pumps, []
+        for s in socks:
+            try:
+                s.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+        for t in pumps:
+            t.join(DEADLINE_S)
+        for s in socks:
+            s.close()
+
+
+@pytest.fixture
+def gate_factory():
+    made: list[Gate] = []
+
+    def make(target_port: int) -> Gate:
+        g = Gate(target_port)
+        made.append(g)
+        return g
+    yield make
+    for g in made:
+        g.shut()
+
+
 class Subscriber:
     """The test's own paho client, subscribed to PREFIX/#; messages as (topic, payload str, retain)."""
 
@@ -213,6 +318,16 @@ def test_missing_extra_is_usage_error() -> None:
     assert out.stdout.strip() == "USAGE --mqtt needs the mqtt extra: pip install 'profidrive-cli[mqtt]'"
 
 
+def test_old_paho_is_usage_error() -> None:
+    # paho-mqtt before 2.2 has no drop_out_messages: the constructor says to upgrade
+    code = ("import paho.mqtt.client as c; del c.Client.drop_out_messages\n"
+            "from profidrive_cli import UsageError\n"
+            "from profidrive_cli.monitor.mqtt import MqttAlarms\n"
+            "try:\n    MqttAlarms('mqtt://h')\nexcept UsageError as e:\n    print('USAGE', e)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "USAGE --mqtt needs paho-mqtt 2.2 or newer: pip install -U 'profidrive-cli[mqtt]'"
+
+
 # -- against the broker -----------------------------------------------------------------------------
 
 def test_status_and_event(broker, sub_factory, alarms_factory) -> None:
@@ -273,51 +388,141 @@ def test_station_state_retained_on_change(broker, sub_factory, alarms_factory) -
     assert retained and json.loads(payload)["drive_state"] == "fault"
 
 
-def test_broker_away_and_back(broker, sub_factory, alarms_factory) -> None:
-    a, lines = alarms_factory(f"mqtt://127.0.0.1:{broker.port}")
+def _seen(sub: Subscriber, topics: set[str]) -> list[tuple[str, str]]:
+    """What the subscriber got on `topics`, in the order it came: (topic, payload)."""
+    with sub.lock:
+        return [(t, p) for t, p, _ in sub.messages if t in topics]
+
+
+def test_broker_away_and_back(broker, gate_factory, sub_factory, alarms_factory) -> None:
+    # the alarms reach the broker through the gate; the subscriber is on the broker itself throughout
+    gate = gate_factory(broker.port)
+    gate.open()
+    sub = sub_factory(broker.port)
+    a, lines = alarms_factory(f"mqtt://127.0.0.1:{gate.port}")
     a.start()
     wait_for(lambda: a.connected, "connected")
-    broker.stop()
+    a.station_state(7, "data exchange", "operation", False, t=100.0)
+    wait_for(lambda: a.published == 1, "the first state acknowledged")
+
+    gate.shut()
     wait_for(lambda: not a.connected, "the loss noticed")
-    for i in range(5):
-        a.event(MonEvent(t=1000.0 + i, kind="lost", station=10 + i, text=f"station {10 + i} lost"))
-    # several reconnect attempts fail meanwhile (back-off from 1 s): wait until a few have passed
+    # the broker sends the monitor's last will for the cut connection
+    wait_for(lambda: sub.on("pdrive/status")[-1:] == [("offline", False)], "the will: offline")
+    a.event(MonEvent(t=1000.0, kind="lost", station=10, text="station 10 lost"))
+    a.event(MonEvent(t=1001.0, kind="lost", station=11, text="station 11 lost"))
+    a.station_state(7, "data exchange", "fault", True, t=1001.5)
+    for i in (12, 13, 14):
+        a.event(MonEvent(t=1000.0 + i - 10, kind="lost", station=i, text=f"station {i} lost"))
+    # several reconnect attempts fail meanwhile (back-off from 1 s): let a few pass
     time.sleep(3.0)
-    assert not a.connected and a.published == 0
-    lost = [line for line in lines if "lost" in line]
-    assert len(lost) == 1, lines
+    assert not a.connected and a.published == 1
+    assert len([line for line in lines if "lost" in line]) == 1, lines
     assert "Traceback" not in "".join(lines)
 
-    broker.start()
-    sub = sub_factory(broker.port)
+    gate.open()
     wait_for(lambda: a.connected, "reconnected", deadline_s=60.0)
-    wait_for(lambda: all(sub.on(f"pdrive/event/lost/{10 + i}") for i in range(5)), "queued events")
-    wait_for(lambda: ("online", True) in sub.on("pdrive/status")
-             or ("online", False) in sub.on("pdrive/status"), "online again")
-    assert a.published == 5 and a.dropped == 0
-    back = [line for line in lines if "back" in line]
-    assert len(back) == 1, lines
+    # five events and one state change queued while away: all acknowledged, none dropped
+    wait_for(lambda: a.published == 1 + 6, "the queued messages acknowledged")
+    assert a.dropped == 0
+    state = "pdrive/station/7/state"
+    topics = {state} | {f"pdrive/event/lost/{i}" for i in range(10, 15)}
+    wait_for(lambda: len(_seen(sub, topics)) == 7, "all seven on the subscriber")
+    # in the order they were given (the first state from before the loss, then the queue's order)
+    assert [t for t, _ in _seen(sub, topics)] == [
+        state, "pdrive/event/lost/10", "pdrive/event/lost/11", state,
+        "pdrive/event/lost/12", "pdrive/event/lost/13", "pdrive/event/lost/14"]
+    assert json.loads(_seen(sub, {state})[-1][1]) == {
+        "state": "data exchange", "drive_state": "fault", "fault": True, "t": 1001.5}
+    wait_for(lambda: sub.on("pdrive/status")[-1:] == [("online", False)], "online again")
+    assert len([line for line in lines if "back" in line]) == 1, lines
     assert len([line for line in lines if "lost" in line]) == 1, lines
 
 
-def test_not_there_at_start(tmp_path, sub_factory, alarms_factory) -> None:
-    if not os.path.exists(MOSQUITTO):
-        if os.environ.get("CI") == "true":
-            pytest.fail(f"{MOSQUITTO} is missing under CI")
-        pytest.skip("mosquitto not installed")
-    b = Broker(tmp_path, _free_port())
-    a, lines = alarms_factory(f"mqtt://127.0.0.1:{b.port}")
+def test_queue_bounded_while_away(broker, gate_factory, sub_factory, alarms_factory) -> None:
+    gate = gate_factory(broker.port)
+    gate.open()
+    sub = sub_factory(broker.port)
+    a, lines = alarms_factory(f"mqtt://127.0.0.1:{gate.port}", max_queue=3)
+    a.start()
+    wait_for(lambda: a.connected, "connected")
+    gate.shut()
+    wait_for(lambda: not a.connected, "the loss noticed")
+    for i in range(5):
+        a.event(MonEvent(t=float(i), kind="rr", station=i, text=f"e{i}"))
+    # 5 into a queue of 3: the two oldest dropped, counted, said once
+    assert a.dropped == 2
+    assert len([line for line in lines if "queue full" in line]) == 1, lines
+    gate.open()
+    wait_for(lambda: a.published == 3, "the three kept acknowledged", deadline_s=60.0)
+    topics = {f"pdrive/event/rr/{i}" for i in range(5)}
+    wait_for(lambda: len(_seen(sub, topics)) == 3, "three on the subscriber")
+    assert [t for t, _ in _seen(sub, topics)] == [f"pdrive/event/rr/{i}" for i in (2, 3, 4)]
+
+
+def test_state_dropped_from_queue_is_said_again(broker, gate_factory, sub_factory,
+                                                alarms_factory) -> None:
+    # a station's latest state pushed out of the full queue: its retained topic must still end at it
+    gate = gate_factory(broker.port)
+    gate.open()
+    sub = sub_factory(broker.port)
+    a, _ = alarms_factory(f"mqtt://127.0.0.1:{gate.port}", max_queue=2)
+    a.start()
+    wait_for(lambda: a.connected, "connected")
+    gate.shut()
+    wait_for(lambda: not a.connected, "the loss noticed")
+    a.station_state(7, "data exchange", "fault", True, t=50.0)
+    for i in range(3):
+        a.event(MonEvent(t=60.0 + i, kind="rr", station=i, text=f"e{i}"))
+    assert a.dropped == 2          # the state and event 0
+    gate.open()
+    state = "pdrive/station/7/state"
+    wait_for(lambda: _seen(sub, {state}), "the state said again", deadline_s=60.0)
+    assert json.loads(_seen(sub, {state})[-1][1]) == {
+        "state": "data exchange", "drive_state": "fault", "fault": True, "t": 50.0}
+    wait_for(lambda: a.published == 3, "the state and the two events kept acknowledged")
+    late = sub_factory(broker.port)
+    wait_for(lambda: late.on(state), "the retained state for a late subscriber")
+    assert json.loads(late.on(state)[0][0])["drive_state"] == "fault" and late.on(state)[0][1]
+
+
+def test_states_said_again_after_broker_restart(broker, sub_factory, alarms_factory) -> None:
+    # a broker without persistence forgets the retained states when it restarts: said again
+    a, _ = alarms_factory(f"mqtt://127.0.0.1:{broker.port}")
+    a.start()
+    wait_for(lambda: a.connected, "connected")
+    a.station_state(3, "data exchange", "operation", False, t=10.0)
+    a.station_state(9, "no answer", None, None, t=11.0)
+    wait_for(lambda: a.published == 2, "both states acknowledged")
+    broker.stop()
+    wait_for(lambda: not a.connected, "the loss noticed")
+    broker.start()
+    wait_for(lambda: a.connected, "reconnected", deadline_s=60.0)
+    # retained: the subscriber gets them whenever it comes
+    sub = sub_factory(broker.port)
+    wait_for(lambda: sub.on("pdrive/station/3/state") and sub.on("pdrive/station/9/state"),
+             "both states again")
+    assert json.loads(sub.on("pdrive/station/3/state")[-1][0]) == {
+        "state": "data exchange", "drive_state": "operation", "fault": False, "t": 10.0}
+    assert json.loads(sub.on("pdrive/station/9/state")[-1][0]) == {
+        "state": "no answer", "drive_state": None, "fault": None, "t": 11.0}
+    wait_for(lambda: ("online", True) in sub.on("pdrive/status")
+             or ("online", False) in sub.on("pdrive/status"), "online again")
+
+
+def test_not_there_at_start(broker, gate_factory, sub_factory, alarms_factory) -> None:
+    gate = gate_factory(broker.port)   # not open yet: nothing listens on its port
+    sub = sub_factory(broker.port)
+    a, lines = alarms_factory(f"mqtt://127.0.0.1:{gate.port}")
     a.start()   # no broker: not an error
     a.event(EV)
     wait_for(lambda: any("not reachable" in line for line in lines), "not reachable said")
-    time.sleep(2.5)
+    time.sleep(2.5)   # a few retries pass: still one line
     assert len([line for line in lines if "not reachable" in line]) == 1, lines
-    try:
-        b.start()
-        sub = sub_factory(b.port)
-        wait_for(lambda: sub.on("pdrive/event/nr/5"), "the queued event", deadline_s=60.0)
-    finally:
-        b.stop()
+    gate.open()
+    wait_for(lambda: sub.on("pdrive/event/nr/5"), "the queued event", deadline_s=60.0)
+    wait_for(lambda: a.published == 1, "acknowledged")
+    assert any("back" in line for line in lines), lines
 
 
 def test_queue_overflow_drops_oldest(broker, sub_factory, alarms_factory) -> None:
