@@ -476,6 +476,6 @@ class MqttAlarms:
             msg = self._inflight.pop(mid, None)
             if msg is not None:
                 self._acked(msg)
-            elif not self._closing:
+            else:   # before the sender noted its mid (or close()'s "offline": one stray mid)
                 self._early.add(mid)
             self._lock.notify_all()
