@@ -131,6 +131,20 @@ def test_reply_octets_arrive_one_by_one_at_wire_time():
     link.close()
 
 
+def test_a_reply_is_complete_at_its_end_days_into_a_virtual_clock():
+    """The spin the monitor's virtual plant met 6 h 15 min into a run: a one-octet reply (an SC at
+    19.2 kbit/s: 11 bits = 572.9 us) whose end, start + char time, lost more than 1e-9 of an octet to
+    rounding; at its end it is complete, at any clock, and not one octet earlier."""
+    from profidrive_cli.sim.bus import Reply
+    char_s = 11 / 19200
+    for start in (0.0, 22510.069374999995, 604800.123456789, 3.15e7 + 0.7):
+        r = Reply(start, b"\xe5", char_s)
+        assert r.due(r.end) == 1, start
+        assert r.due(start + 0.999 * char_s) == 0, start
+        two = Reply(start, b"\x00\x01", char_s)
+        assert two.due(two.end) == 2 and two.due(start + char_s * 1.999) == 1, start
+
+
 def test_bus_flags_tsyn_violation_and_collision():
     bus = build_bus("sim://?stations=3:fuji-g1&baud=19200&timing=wire")
     p = bus.params
