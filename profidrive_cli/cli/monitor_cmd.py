@@ -107,7 +107,8 @@ def run_monitor(opts: BusOptions, db_dir: str | None, stations: tuple[str, ...],
             sinks.append(alarms)
         link, opener = _open(opts, port)
         baud = listen_baud(opts) if not port.startswith("sim://") else getattr(link, "baud", None)
-        engine = Monitor(baud=baud, watched=watched, wall0=time.time(), interval_s=interval,
+        engine = Monitor(baud=baud, watched=watched, wall0=_wall0(port, history.newest_t),
+                         interval_s=interval,
                          ring_s=ring_s, after_s=after_s, port=port)
         box = LiveBox()
         if web_at is not None:
@@ -162,6 +163,15 @@ def _open(opts: BusOptions, port: str) -> tuple[Link, Any]:
         from profidrive_cli.sim.virtual_line import open_line
         return open_line(port), lambda: open_line(port)
     return opts.open_link(), opts.open_link
+
+
+def _wall0(port: str, newest: float | None) -> float:
+    """The wall-clock time of the line's time 0: now; on a virtual plant (whose clock runs ahead of
+    the wall's) after the newest time of a resumed history, so that its runs follow each other."""
+    now = time.time()
+    if newest is not None and port.startswith("sim://") and "timing=virtual" in port:
+        return max(now, newest + 1.0)
+    return now
 
 
 def _log_line(text: str) -> None:

@@ -287,6 +287,11 @@ class History:
                 pass
         return n
 
+    @property
+    def newest_t(self) -> float | None:
+        """The newest time the history holds (None: empty)."""
+        return self._newest
+
     def size_bytes(self) -> int:
         """The database, its -wal and -shm files and every own capture file, in bytes."""
         return self._file_bytes() + self._capture_bytes
