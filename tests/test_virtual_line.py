@@ -398,3 +398,13 @@ def _run(line, seconds):
                     break
                 except LinkLost:
                     pass
+
+
+def test_a_reply_is_read_whole_days_into_the_line():
+    """After 2**16 s of line time the bus's octet count by division rounds a reply's last octet
+    away at its exact end; the line must still hand the reply over (it once hung there)."""
+    line = open_line(f"{V}&stations=3:fuji-g1&cycle=10")
+    listen(line, 60)                          # in data exchange
+    line.sleep(65536 - 60 - line.now())
+    fs = frames(listen(line, 600))
+    assert len(replies_from(fs, 3)) >= 50
