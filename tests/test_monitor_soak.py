@@ -4,10 +4,10 @@ seven virtual days of a faulty line, in a separate process, with a 2 MiB disk bo
 The plant (URL below): five stations (the default plant), the master's cycle CYCLE_S, replies dropped
 now and then (drop=), drives tripping now and then (drivetrip=, reset by the operator 60 s later),
 and every 6 h (repeat=21600): station 5 unplugged from 600 s to 900 s, a second master (address 1)
-in the token ring from 3000 s to 3200 s, the listener's adapter pulled from 5000 s to 5030 s.
+in the token ring from 3000 s to 3400 s, the listener's adapter pulled from 5000 s to 5030 s.
 
 By hand: windows at 600 + k * 21600 < 604800 s, k = 0..27: 28 unplugs, 28 pulls (56 adapter events,
-adapter_losses 28). Each unplug is 300 s of silence, at least 4 rounds of CYCLE_S (60 s) -- one
+adapter_losses 28). Each unplug is 600 s of silence, at least 4 rounds of CYCLE_S (120 s) -- one
 lost(5) and one back(5) each; a drop is one reply, never 4 rounds in a row.
 
 What must hold: exit 0 after --duration; every event on the stream keeps docs/json.md; the history
@@ -16,8 +16,9 @@ the newest events with captures on disk; the peak RSS of the week no more than R
 of one day of the same plant (memory flat in the length of the run); a restart on the same history
 resumes it (a second run, capture numbers going on).
 
-CYCLE_S is 60 s so that the week costs about a minute of CPU (the line's master and stations are
-simulated octet by octet); PDRIVE_SOAK_CYCLE=10 runs the same soak at a 10 s cycle (tools, README).
+CYCLE_S is 120 s (the virtual line's longest) so that the week costs about a minute of CPU (the
+line's master and stations are simulated telegram by telegram: about 3 ms a cycle); PDRIVE_SOAK_CYCLE=10
+runs the same soak at a 10 s cycle (about 6 minutes).
 """
 
 from __future__ import annotations
@@ -34,13 +35,13 @@ DAY_S = 86_400
 WEEK_S = 7 * DAY_S
 REPEAT_S = 21_600
 MAX_DISK = 2 * 1024 * 1024
-CYCLE_S = float(os.environ.get("PDRIVE_SOAK_CYCLE", "60"))
+CYCLE_S = float(os.environ.get("PDRIVE_SOAK_CYCLE", "120"))
 #: the week may hold more than one day in the pages of SQLite's cache, the captures' ring (30 s of a
-#: slow line: a few hundred telegrams) and Python's allocator: 16 MiB is generous; a leak per
-#: telegram or per sample would be ~7 times what one day grows by
+#: slow line: a few dozen telegrams) and Python's allocator: 16 MiB is generous; a leak per
+#: telegram or per sample would grow 7 times as much in the week as in the day
 RSS_SLACK_MB = 16
 PLANT = ("sim://?timing=virtual&cycle={cycle:g}&seed=7&drop=0.001&drivetrip=0.0002&ack=60"
-         "&unplug=5@600-900&master2=1@3000-3200&adapter=5000-5030&repeat=21600")
+         "&unplug=5@600-1200&master2=1@3000-3400&adapter=5000-5030&repeat=21600")
 WINDOWS = len(range(600, WEEK_S, REPEAT_S))          # 28
 
 
@@ -113,8 +114,8 @@ def test_a_virtual_week_of_a_faulty_line(tmp_path):
     # the oldest went for the bound: fewer events kept than heard, the newest kept with captures
     heard = sum(1 for d in lines if d["event"] == "monitor")
     assert 0 < doc["events_total"] < heard
-    newest = doc["events"][0]
-    assert newest["capture"] and newest["capture_present"]
+    newest = [e for e in doc["events"] if e["capture"]][0]   # (adapter, disk: no capture)
+    assert newest["capture_present"]
     assert (week / "captures" / newest["capture"]).is_file()
     assert any(e["kind"] == "lost" and e["station"] == 5 and e["cause"] for e in doc["events"])
 
@@ -122,7 +123,7 @@ def test_a_virtual_week_of_a_faulty_line(tmp_path):
 def test_a_restart_resumes_the_history(tmp_path):
     db = tmp_path / "line"
     db.mkdir()
-    rc, first, err, _ = _monitor(db, 4 * 3600)               # 600-900 s: station 5 unplugged
+    rc, first, err, _ = _monitor(db, 4 * 3600)               # 600-1200 s: station 5 unplugged
     assert rc == 0, err[-2000:]
     rc, second, err, _ = _monitor(db, 4 * 3600)
     assert rc == 0, err[-2000:]

@@ -19,15 +19,16 @@ POLL_S = 0.2
 
 def listen(link: Link, duration: float | None, on_data: Callable[[bytes, float], None],
            clock: Callable[[], float] = time.monotonic,
-           on_tick: Callable[[float], None] | None = None) -> None:
+           on_tick: Callable[[float], None] | None = None, poll_s: float = POLL_S) -> None:
     """Read `link` for `duration` seconds (None: until an exception, e.g. KeyboardInterrupt or a
     closed pcap pipe, ends it); on_data(octets, seconds since the start) for every chunk read, and
-    on_tick(seconds since the start) after every read, data or not (a live view refreshes there)."""
+    on_tick(seconds since the start) after every read, data or not (a live view refreshes there);
+    a read returns at least every `poll_s` seconds of the clock."""
     start = clock()
     end = None if duration is None else start + duration
     while end is None or clock() < end:
         now = clock()
-        data = link.read(now + POLL_S if end is None else min(end, now + POLL_S))
+        data = link.read(now + poll_s if end is None else min(end, now + poll_s))
         if data:
             on_data(data, clock() - start)
         if on_tick is not None:

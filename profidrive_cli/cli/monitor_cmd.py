@@ -82,6 +82,7 @@ def _checked(db_dir: str | None, interval: float, ring_s: float, after_s: float,
 def run_monitor(opts: BusOptions, db_dir: str | None, stations: tuple[str, ...], interval: float,
                 ring_s: float, after_s: float, max_disk: str, keep_days: float | None,
                 web: str | None, mqtt: str | None, duration: float | None) -> None:
+    from profidrive_cli.bustools.listen import POLL_S
     from profidrive_cli.bustools.passive import watch_list
     from profidrive_cli.bustools.ringstore import parse_size
     from profidrive_cli.cli.sim_cmd import _host_port
@@ -133,7 +134,8 @@ def run_monitor(opts: BusOptions, db_dir: str | None, stations: tuple[str, ...],
         signal.signal(signal.SIGTERM, on_term)
         try:
             summary = run(link, engine, history, say=_sayer(opts.json), opener=opener,
-                          duration=duration, sinks=sinks, box=box, port=port)
+                          duration=duration, sinks=sinks, box=box, port=port,
+                          poll_s=VIRTUAL_POLL_S if _virtual(port) else POLL_S)
         finally:
             signal.signal(signal.SIGTERM, old)
     finally:
@@ -165,11 +167,20 @@ def _open(opts: BusOptions, port: str) -> tuple[Link, Any]:
     return opts.open_link(), opts.open_link
 
 
+#: how often a read on a virtual plant returns when nothing is heard (line seconds): its idle reads
+#: are CPU only, and a second is finer than anything the monitor times (samples, --after)
+VIRTUAL_POLL_S = 1.0
+
+
+def _virtual(port: str) -> bool:
+    return port.startswith("sim://") and "timing=virtual" in port
+
+
 def _wall0(port: str, newest: float | None) -> float:
     """The wall-clock time of the line's time 0: now; on a virtual plant (whose clock runs ahead of
     the wall's) after the newest time of a resumed history, so that its runs follow each other."""
     now = time.time()
-    if newest is not None and port.startswith("sim://") and "timing=virtual" in port:
+    if newest is not None and _virtual(port):
         return max(now, newest + 1.0)
     return now
 

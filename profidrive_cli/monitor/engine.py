@@ -105,6 +105,7 @@ class Monitor:
         self._masters_known: set[int] = set()
         self._next_sample = interval_s
         self._next_look = 0.0
+        self._heard = False                          # telegrams fed since the last look
         self._last_sample_t = 0.0
         self._marks: dict[int, _Mark] = {}
         self._bus_mark = (0, 0, 0, 0, 0, 0.0)      # frames, tokens, errors, octets, rotation n, total
@@ -131,6 +132,7 @@ class Monitor:
         """Octets heard at link time t."""
         self.t = max(self.t, t)
         out = Output()
+        self._heard = True
         fired = self.recorder.events
         out.captures += self.recorder.feed(merge_errors(self.capture.feed(data, t)))
         if self.recorder.events != fired:
@@ -143,8 +145,9 @@ class Monitor:
         self.t = max(self.t, t)
         out = Output()
         out.captures += self.recorder.tick(t)
-        if t >= self._next_look:
+        if t >= self._next_look and self._heard:      # (a silent line changes none of it)
             self._next_look = t + LOOK_EVERY_S
+            self._heard = False
             if self.learn:
                 self._learn_drives()
             out.events += self._masters(t)

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
 from profidrive_cli import BusError
-from profidrive_cli.bustools.listen import listen
+from profidrive_cli.bustools.listen import POLL_S, listen
 from profidrive_cli.link.base import LinkLost
 from profidrive_cli.monitor.engine import Monitor, Output
 from profidrive_cli.monitor.model import MonEvent, StoreNote
@@ -173,9 +173,10 @@ class _Run:
 def run(link: Link, engine: Monitor, history: History | None, *, say: Say,
         opener: Callable[[], Link] | None = None, duration: float | None = None,
         sinks: Sequence[Sink] = (), box: LiveBox | None = None, retry_s: float = RETRY_S,
-        port: str = "") -> Summary:
+        port: str = "", poll_s: float = POLL_S) -> Summary:
     """Listen until `duration` link seconds have passed (None: until KeyboardInterrupt or
-    Stopped). The link is closed on the way out; the history is not (the caller owns it)."""
+    Stopped). The link is closed on the way out; the history is not (the caller owns it). A read
+    returns at least every `poll_s` link seconds (a virtual plant's idle reads cost CPU only)."""
     clock = link.now
     t0 = clock()
     r = _Run(engine, history, say, sinks, box, clock)
@@ -202,7 +203,7 @@ def run(link: Link, engine: Monitor, history: History | None, *, say: Say,
             if left is not None and left <= 0:
                 break
             try:
-                listen(link, left, on_data, clock=clock, on_tick=on_tick)
+                listen(link, left, on_data, clock=clock, on_tick=on_tick, poll_s=poll_s)
                 break                                   # the duration is over
             except LinkLost as e:
                 try:
