@@ -68,7 +68,7 @@ PLAN: dict[str, tuple[str, ...]] = {
 }
 TOP = "top"
 TOP_MODULES = {"profidrive_cli", "profidrive_cli.datafile", "profidrive_cli.outfile", "profidrive_cli.data",
-               "profidrive_cli.config", "profidrive_cli.plot"}
+               "profidrive_cli.config", "profidrive_cli.plot", "profidrive_cli.httprules"}
 
 
 def _below(layer: str) -> set[str]:

@@ -15,7 +15,7 @@ Routes (GET and HEAD only, anything else 405; unknown 404; JSON answers carry Ca
     /captures/NAME   a capture of the history (pcap), streamed in chunks; a name with a path in it 404
     /metrics         the Prometheus text exposition of the live view (metrics.py)
 
-The rules of profidrive_cli/sim/control_http.py, written again here (monitor/ never imports sim/):
+The rules of every HTTP endpoint of pdrive (profidrive_cli/httprules.py, shared with sim --control):
 
 - loopback by default; on any other address (needs_token) a token is printed at start and every
   request carries it (`Authorization: Bearer TOKEN` or `?token=TOKEN`; the page keeps the one of its
@@ -32,21 +32,19 @@ from __future__ import annotations
 
 import hmac
 import html
-import ipaddress
 import json
 import logging
 import math
 import pathlib
 import re
 import secrets
-import socket
 import threading
 import time
 from importlib import resources
 from typing import Any, Callable, Iterable, Iterator, Protocol
-from urllib.parse import parse_qs, urlsplit
+from urllib.parse import parse_qs
 
-from profidrive_cli import UsageError
+from profidrive_cli import UsageError, httprules
 
 #: the port `--web` binds when none is given
 DEFAULT_PORT = 8470
@@ -112,95 +110,23 @@ class HistoryReader(Protocol):
         ...
 
 
-# -- the rules of an HTTP endpoint (as sim/control_http.py) --------------------------------------
+# -- the rules of an HTTP endpoint (httprules.py) ---------------------------------------------
 
 def clients_for_limit(nofile: int | None) -> int:
-    """How many connections the page can afford under a descriptor limit `nofile`: a quarter of what
-    is left after the monitor's own (the port, the database, the captures, Python's), between 2 and
-    MAX_CLIENTS -- 12 at a limit of 64, 32 at 1,024."""
-    if nofile is None or nofile <= 0:
-        return MAX_CLIENTS
-    return max(2, min(MAX_CLIENTS, (nofile - 16) // 4))
+    """How many connections the page can afford under a descriptor limit `nofile` (httprules.py):
+    12 at a limit of 64, MAX_CLIENTS at 1,024."""
+    return httprules.clients_for_limit(nofile, MAX_CLIENTS)
 
 
-def _nofile() -> int | None:
-    try:
-        import resource
-    except ImportError:                     # (Windows: no such limit)
-        return None
-    soft = resource.getrlimit(resource.RLIMIT_NOFILE)[0]
-    return None if soft == resource.RLIM_INFINITY else int(soft)
-
-
-def is_loopback(host: str) -> bool:
-    if host in ("localhost", ""):
-        return host == "localhost"
-    try:
-        return ipaddress.ip_address(host.strip("[]")).is_loopback
-    except ValueError:
-        return False
-
-
-def needs_token(host: str) -> bool:
-    """A page bound to `host` asks every request for its token: any address but loopback (an empty
-    host, 0.0.0.0 and ::, binds every interface)."""
-    return not is_loopback(host)
-
-
-def host_name(hostport: str) -> str:
-    """'HOST:PORT', '[V6]:PORT' or 'HOST' -> the host, lower case, without a trailing dot."""
-    h = hostport.strip()
-    if h.startswith("["):
-        h = h[1:].partition("]")[0]
-    elif h.count(":") == 1:
-        h = h.partition(":")[0]
-    return h.lower().rstrip(".")
-
-
-def names_for(host: str) -> set[str]:
-    """The names a Host header may carry for a server bound to `host`: the address itself,
-    localhost, 127.0.0.1 and ::1, this machine's name (any IP literal is accepted too: own_host)."""
-    names = {host.lower().strip("[]"), "localhost", "127.0.0.1", "::1"}
-    try:
-        names.add(socket.gethostname().lower())
-    except OSError:
-        pass
-    return names
-
-
-def own_host(host: str, names: set[str]) -> bool:
-    """A Host (or an Origin's host) that names this server: one of `names`, a *.localhost name, an IP
-    address. A DNS-rebinding page's Host is its own domain name, never an address."""
-    name = host_name(host)
-    if name in names or name.endswith(".localhost"):
-        return True
-    try:
-        ipaddress.ip_address(name)
-    except ValueError:
-        return False
-    return True
+_nofile = httprules.nofile
+is_loopback, needs_token = httprules.is_loopback, httprules.needs_token
+host_name, names_for, own_host = httprules.host_name, httprules.names_for, httprules.own_host
 
 
 def foreign(environ: dict[str, Any], names: set[str]) -> str | None:
     """Why a request comes from somewhere else (403), or None."""
-    host = environ.get("HTTP_HOST")
-    if host is not None and not own_host(host, names):
-        return f"Host {host[:80]!r} is not this monitor"
-    site = environ.get("HTTP_SEC_FETCH_SITE")
-    if site is not None and site not in ("same-origin", "none"):
-        return f"a {site[:20]} request (Sec-Fetch-Site)"
-    origin = environ.get("HTTP_ORIGIN")
-    if origin is None:
-        return None
-    try:
-        o = urlsplit(origin)
-        o.port
-    except ValueError:
-        return f"Origin {origin[:80]!r} is not this monitor"
-    if o.scheme != "http" or host is None or o.netloc.lower() != host.strip().lower() \
-            or not own_host(o.netloc, names):
-        return f"Origin {origin[:80]!r} is not this monitor"
-    return None
+    return httprules.foreign(environ.get("HTTP_HOST"), environ.get("HTTP_SEC_FETCH_SITE"),
+                             environ.get("HTTP_ORIGIN"), names, "monitor")
 
 
 def token_ok(token: str | None, environ: dict[str, Any], query: dict[str, list[str]]) -> bool:

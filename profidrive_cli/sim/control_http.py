@@ -23,7 +23,6 @@ GET serves `/state` only (a GET must not steer the plant); every command is a PO
 from __future__ import annotations
 
 import hmac
-import ipaddress
 import json
 import secrets
 import socket
@@ -32,8 +31,8 @@ import threading
 import time
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any, Callable
-from urllib.parse import urlsplit
 
+from profidrive_cli import httprules
 from profidrive_cli.sim.control import ControlBusy, ControlError, Controller
 from profidrive_cli.sim.server import AcceptGuard, Reports, refuse_now, stderr_line
 
@@ -51,36 +50,19 @@ MAX_CLIENTS = 32
 
 
 def clients_for_limit(nofile: int | None) -> int:
-    """How many control connections the process can afford under a descriptor limit `nofile`: a
-    quarter of what is left after the simulator's own (the bus port, its client, the pty, Python's),
-    between 2 and MAX_CLIENTS -- 12 at a limit of 64, 32 at 1,024."""
-    if nofile is None or nofile <= 0:
-        return MAX_CLIENTS
-    return max(2, min(MAX_CLIENTS, (nofile - 16) // 4))
+    """How many control connections the process can afford under a descriptor limit `nofile`
+    (httprules.py): 12 at a limit of 64, MAX_CLIENTS at 1,024."""
+    return httprules.clients_for_limit(nofile, MAX_CLIENTS)
 
 
-def _nofile() -> int | None:
-    try:
-        import resource
-    except ImportError:                     # (Windows: no such limit)
-        return None
-    soft = resource.getrlimit(resource.RLIMIT_NOFILE)[0]
-    return None if soft == resource.RLIM_INFINITY else int(soft)
-
-
-def is_loopback(host: str) -> bool:
-    if host in ("localhost", ""):
-        return host == "localhost"
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
+_nofile = httprules.nofile
+is_loopback = httprules.is_loopback
 
 
 def needs_token(host: str) -> bool:
     """A control bound to `host` asks every request for its token: any address but loopback (an empty
-    host, 0.0.0.0 and ::, binds every interface)."""
-    return not is_loopback(host)
+    host, 0.0.0.0 and ::, binds every interface). (A name of its own: tests replace it.)"""
+    return httprules.needs_token(host)
 
 
 def json_too_deep(raw: bytes, limit: int = MAX_DEPTH) -> bool:
@@ -108,14 +90,7 @@ def json_too_deep(raw: bytes, limit: int = MAX_DEPTH) -> bool:
     return False
 
 
-def _host_name(hostport: str) -> str:
-    """'HOST:PORT', '[V6]:PORT' or 'HOST' -> the host, lower case, without a trailing dot."""
-    h = hostport.strip()
-    if h.startswith("["):
-        h = h[1:].partition("]")[0]
-    elif h.count(":") == 1:
-        h = h.partition(":")[0]
-    return h.lower().rstrip(".")
+_host_name = httprules.host_name
 
 
 def _busy_answer(why: str) -> bytes:
@@ -221,11 +196,7 @@ class ControlServer:
         self.report_busy, self.report_error = Reports(log), Reports(log)
         self.httpd = _Httpd(self, (host, port), _handler(self))
         self.host, self.port = host, int(self.httpd.server_address[1])
-        self._names = {"localhost", host.lower().strip("[]")}
-        try:
-            self._names.add(socket.gethostname().lower())
-        except OSError:
-            pass
+        self._names = httprules.names_for(host)
         self._thread = threading.Thread(target=self._serve, name="pdrive-sim-control", daemon=True)
 
     @property
@@ -250,38 +221,14 @@ class ControlServer:
         self.guard.close()
 
     def own_host(self, host: str) -> bool:
-        """A Host (or an Origin's host) that names this server: an address, localhost, the name it
-        was bound to, this machine's name. A DNS-rebinding page's Host is its own domain."""
-        name = _host_name(host)
-        if name in self._names or name.endswith(".localhost"):
-            return True
-        try:
-            ipaddress.ip_address(name)
-        except ValueError:
-            return False
-        return True
+        """A Host (or an Origin's host) that names this server (httprules.own_host)."""
+        return httprules.own_host(host, self._names)
 
     def foreign(self, headers: Any) -> str | None:
-        """Why a request comes from somewhere else (403), or None."""
-        host = headers.get("Host")
-        if host is not None and not self.own_host(host):
-            return f"Host {host[:80]!r} is not this simulator"
-        site = headers.get("Sec-Fetch-Site")
-        if site is not None and site not in ("same-origin", "none"):
-            return f"a {site[:20]} request (Sec-Fetch-Site)"
-        origin = headers.get("Origin")
-        if origin is None:
-            return None
-        try:
-            o = urlsplit(origin)
-            port = o.port
-        except ValueError:
-            o, port = None, None
-        target = host if host is not None else f"{self.host}:{self.port}"
-        if o is None or o.scheme != "http" or o.netloc.lower() != target.strip().lower() \
-                or not self.own_host(o.netloc) or (host is None and port != self.port):
-            return f"Origin {origin[:80]!r} is not this simulator"
-        return None
+        """Why a request comes from somewhere else (403), or None (httprules.foreign)."""
+        return httprules.foreign(headers.get("Host"), headers.get("Sec-Fetch-Site"),
+                                 headers.get("Origin"), self._names, "simulator",
+                                 (self.host, self.port))
 
     def token_ok(self, authorization: str) -> bool:
         if self.token is None:
