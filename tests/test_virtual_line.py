@@ -408,3 +408,11 @@ def test_a_reply_is_read_whole_days_into_the_line():
     line.sleep(65536 - 60 - line.now())
     fs = frames(listen(line, 600))
     assert len(replies_from(fs, 3)) >= 50
+
+
+def test_the_line_says_its_baud_rate():
+    """The monitor's bus load needs the line's baud rate: the plant's (19200 bit/s by default,
+    sim/plant.py; baud= sets it)."""
+    from profidrive_cli.sim.virtual_line import open_line
+    assert open_line("sim://?timing=virtual").baud == 19200
+    assert open_line("sim://?timing=virtual&baud=187500").baud == 187_500

@@ -224,6 +224,8 @@ class VirtualLine(Link):
         self._tap: deque[Heard] = deque()
         self.wire = _Wire(bus, self._tap)
         # as `sim --plc` builds its master (sim/plc.py Plc): one retry, no link latency
+        #: the line's baud rate (the monitor's bus load)
+        self.baud = int(bus.params.baud)
         self.master = Master(self.wire, BusParams.for_baud(bus.params.baud, retries=1,
                                                            link_latency=0.0),
                              address=MASTER_ADDRESS)
