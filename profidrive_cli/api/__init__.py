@@ -8,6 +8,7 @@
         drive.status()                               # -> Status
         drive.run(hz=30, wait=True, timeout=20)      # -> Status
         drive.param("F07")                           # -> Param
+        bus.read_params([3, 4, 5], ["F07", "F08"])   # several drives at once -> {station: {code: Param}}
         drive.set_param("F07", 5.0)                  # exact value or UsageError; -> Param read back
         drive.faults()                               # -> Faults
         drive.stop()                                 # -> StopResult
@@ -25,7 +26,7 @@ from typing import TYPE_CHECKING
 
 from profidrive_cli import BusError, PdriveError, UsageError
 from profidrive_cli.api.bus import Bus, make_master, open_bus
-from profidrive_cli.api.results import Fault, Faults, Param, Station, Status, StopResult
+from profidrive_cli.api.results import Fault, Faults, Param, ParamsError, Station, Status, StopResult
 from profidrive_cli.fdl.master import format_counters
 
 if TYPE_CHECKING:                                   # pragma: no cover
@@ -47,6 +48,6 @@ def __getattr__(name: str) -> object:
         return value
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
-__all__ = ["Bus", "BusError", "Drive", "DriveError", "Fault", "Faults", "Param", "PdriveError",
+__all__ = ["Bus", "BusError", "Drive", "DriveError", "Fault", "Faults", "Param", "ParamsError", "PdriveError",
            "SessionTerminated", "Station", "Status", "StopResult", "UsageError", "format_counters",
            "make_master", "open_bus"]

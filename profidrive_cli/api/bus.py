@@ -25,12 +25,12 @@ import warnings
 import weakref
 from pathlib import Path
 from types import TracebackType
-from typing import TYPE_CHECKING, Any, Callable, Iterator, Literal, Mapping
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator, Literal, Mapping, TypeVar
 
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.api import keepalive
 from profidrive_cli.api.keepalive import API_WATCHDOG_MS, KEEP_S
-from profidrive_cli.api.results import Station
+from profidrive_cli.api.results import Param, ParamsError, Station
 
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.api.results import AuditResult
@@ -43,6 +43,9 @@ if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.session.group import Group
     from profidrive_cli.session.safestop import StopReport
     from profidrive_cli.session.signals import SignalGuard
+    from profidrive_cli.session.together import Outcome
+
+T = TypeVar("T")
 
 #: every bus not yet closed (weakly: a closed or dropped bus is not kept alive by this)
 _open_buses: "weakref.WeakSet[Bus]" = weakref.WeakSet()
@@ -185,6 +188,9 @@ class Bus:
         #: the stations the keep-alive did not hold (each raised by its drive's next call)
         self._missed = keepalive.Missed()
         self._thread: threading.Thread | None = None
+        #: a together() run is under way: its rounds hold every station (its jobs' threads must
+        #: never reach the master through the channels' hooks)
+        self._together = False
         _open_buses.add(self)
         _masters[id(self)] = master
 
@@ -466,6 +472,89 @@ class Bus:
                     d.close()
         return out
 
+    def read_params(self, stations: "Mapping[int, Iterable[str]] | Iterable[int]",
+                    codes: "Iterable[str] | None" = None) -> dict[int, dict[str, Param]]:
+        """Read parameters of several drives at once: one bus cycle carries a request to each of
+        them (session/together.py), so a line reads at the pace of the wire and of its slowest
+        drive, not of the sum of them. stations: {station: [codes]}, or stations with `codes` for
+        every one (read_params([3, 4, 5], ["F07", "F08"])). A drive not yet opened is opened
+        (profile and layout as drive() chooses them) and closed again as soon as it is read.
+        Every code of every drive is checked before the first parameter request (UsageError:
+        nothing read). Returns {station: {code:
+        Param}}; when a drive could not be read, ParamsError (a BusError) after every other was:
+        its .errors {station: why} and .partial (what was read)."""
+        if isinstance(stations, Mapping):
+            if codes is not None:
+                raise UsageError("read_params: give the codes either per station or as codes=, "
+                                 "not both")
+            given = dict(stations)
+        else:
+            if codes is None:
+                raise UsageError("read_params: which codes? read_params([3, 4], ['F07'])")
+            given = {st: codes for st in stations}
+        wanted: dict[int, list[str]] = {}
+        for st, cs in given.items():
+            if isinstance(cs, str) or not all(isinstance(c, str) for c in cs):
+                raise UsageError(f"read_params: station {st}: the codes must be a list of strings")
+            wanted[st] = list(cs)
+        opened = [st for st in wanted if st not in self._drives]
+        try:
+            drives = {st: self.drive(st) for st in sorted(wanted)}
+            with self._call():
+                for st in drives:
+                    self._check_open(st)
+                infos = {st: [drives[st]._station.params.info(c) for c in wanted[st]]
+                         for st in drives}
+
+                def job(st: int) -> Callable[[], dict[str, Param]]:
+                    params = drives[st]._station.params
+                    return lambda: {c: Param.of(params.read_info(i))
+                                    for c, i in zip(wanted[st], infos[st])}
+                def done(st: int, _: object) -> None:
+                    if st in opened:             # opened for this call: released at once
+                        drives[st].close()
+                out = self.together({st: d._station for st, d in drives.items()},
+                                    {st: job(st) for st in drives}, on_done=done)
+        finally:
+            for st in opened:
+                d = self._drives.get(st)
+                if d is not None:
+                    d.close()
+        errors = {st: str(o.error) for st, o in out.items() if o.error is not None}
+        values = {st: o.value for st, o in out.items() if o.value is not None}
+        if errors:
+            raise ParamsError(errors, values)
+        return values
+
+    def together(self, sessions: "Mapping[int, DriveStation]", jobs: "Mapping[int, Callable[[], T]]",
+                 on_done: "Callable[[int, Outcome[T]], None] | None" = None
+                 ) -> "dict[int, Outcome[T]]":
+        """The station level: jobs[address]() of every station at once, each talking to its own
+        connected session (sessions[address]), one bus cycle carrying a request to each
+        (session/together.py: the rounds in this thread, unpaced; every other opened drive of this
+        bus held by the keep rule). on_done(address, outcome): in this thread as soon as a job ends
+        (write its result, close its session: the rounds stop keeping it). Returns {address:
+        Outcome} (.value or .error, per station); raises LinkLost and what this thread gets
+        meanwhile (Ctrl-C, SessionTerminated) after every job has ended."""
+        from profidrive_cli.session.together import run_together
+        with self._call():
+            self._check_open()
+            channels = {}
+            for a in jobs:
+                ch = sessions[a].channel
+                if ch is None:
+                    raise UsageError(f"station {a}: not connected")
+                channels[a] = ch
+            self._together = True
+            try:
+                return run_together(self.master, channels, jobs, keep=list(self._drives),
+                                    on_done=on_done)
+            finally:
+                self._together = False
+                now = self.master.link.now()
+                for a in self._drives:
+                    self._last[a] = now
+
     def station(self, station: int | None = None, *, profile: str | None = None,
                 layout: str | None = None, ppo: int | None = None, fmt: str | None = None,
                 watchdog_ms: float = 500, cycle_hz: float | None = None,
@@ -538,8 +627,8 @@ class Bus:
     def _exchanged(self, address: int, t: float) -> None:
         """After a Data_Exchange with `address`: the other opened stations that are due get one."""
         self._last[address] = t
-        if self._group is not None and self._group.cycling:
-            return                          # the stop's bus cycle exchanges every station
+        if self._together or (self._group is not None and self._group.cycling):
+            return                          # the rounds exchange every station (in this thread)
         self._keep_others(address)
 
     def _keep_others(self, busy: int | None) -> None:

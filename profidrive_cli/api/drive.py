@@ -279,4 +279,4 @@ class Drive:
 
 
 def _param(pv: "ParamValue") -> Param:
-    return Param(pv.code, pv.name, pv.value, pv.unit or "", int(pv.raw), getattr(pv, "text", None))
+    return Param.of(pv)

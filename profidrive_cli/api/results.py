@@ -7,6 +7,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from typing import Any, Mapping
 
+from profidrive_cli import BusError
+
 
 def _hex(ident: int | None) -> str | None:
     return None if ident is None else "0x%04X" % ident
@@ -67,6 +69,21 @@ class Param:
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
+
+    @classmethod
+    def of(cls, pv: Any) -> "Param":
+        """From a drives.base.ParamValue (with its text, where the card's tables give one)."""
+        return cls(pv.code, pv.name, pv.value, pv.unit or "", int(pv.raw), getattr(pv, "text", None))
+
+
+class ParamsError(BusError):
+    """Bus.read_params: some drives could not be read (after every other was). errors: {station:
+    why}; partial: {station: {code: Param}} of the drives that were."""
+
+    def __init__(self, errors: Mapping[int, str], partial: Mapping[int, Mapping[str, Param]]) -> None:
+        self.errors = dict(errors)
+        self.partial = {st: dict(v) for st, v in partial.items()}
+        super().__init__("; ".join(f"station {st}: {why}" for st, why in sorted(self.errors.items())))
 
 
 @dataclass(frozen=True)

@@ -11,6 +11,7 @@ through the names here -- no tool imports session/ (tests/test_layering.py: the 
     Live, Reach     the loop of run and jog; the one "reached" rule (NOT_REACHED, end_status,
                     fault_name: the words of a run's end)
     MultiRun, Group several drives in one run; several stations on one bus cycle
+    Outcome, Stopped  what Bus.together() gives per station (its jobs at once: fleet dump / diff)
     Monitors, TripRecords, setup_monitors   run --monitor and the card's trip records
     run_commloss, check_commloss_args, CommLossResult   the comm-loss acceptance test
     dump files      load_dump, write_dump, not_dumped_words; restore's RestoreRefused /
@@ -42,6 +43,7 @@ if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.session.safestop import StopReport
     from profidrive_cli.session.signals import SessionTerminated
     from profidrive_cli.session.station import DEFAULT_WATCHDOG_MS, DriveStation
+    from profidrive_cli.session.together import Outcome, Stopped
 
 #: name -> (module, attribute): loaded on first use (PEP 562), so that a command importing one name
 #: (drive_opts: SessionTerminated) loads that module only, not the whole station level
@@ -66,6 +68,7 @@ _HOME: dict[str, tuple[str, str]] = {
     "StopReport": ("profidrive_cli.session.safestop", "StopReport"),
     "SessionTerminated": ("profidrive_cli.session.signals", "SessionTerminated"),
     **{n: ("profidrive_cli.session.station", n) for n in ("DEFAULT_WATCHDOG_MS", "DriveStation")},
+    **{n: ("profidrive_cli.session.together", n) for n in ("Outcome", "Stopped")},
 }
 
 
@@ -81,8 +84,8 @@ def __getattr__(name: str) -> object:
 
 __all__ = [
     "CARD_MANUAL", "Candidate", "CommLossResult", "DEFAULT_WATCHDOG_MS", "DriveStation", "Group", "Live",
-    "Monitors", "Motion", "MultiRun", "NOT_REACHED", "ParamInfo", "ParamRow", "Parameters", "Reach",
-    "RestoreInterrupted", "RestoreRefused", "Sample", "SessionTerminated", "StopReport", "TripRecords",
+    "Monitors", "Motion", "MultiRun", "NOT_REACHED", "Outcome", "ParamInfo", "ParamRow", "Parameters", "Reach",
+    "RestoreInterrupted", "RestoreRefused", "Sample", "SessionTerminated", "StopReport", "Stopped", "TripRecords",
     "WritePlan", "check_commloss_args", "default_source", "end_status", "fault_name", "load_dump",
     "not_dumped_words", "nothing_compared", "run_commloss", "scope_problem", "setup_monitors",
     "suggest_codes", "wire_limit_hz", "write_dump",

@@ -7,9 +7,11 @@ The HTML page uses the checklist report's style (checklist/report_html.CSS).
 
 from __future__ import annotations
 
+import contextlib
+import functools
 from html import escape as html_escape
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any, Callable, TypeVar, cast
 
 import click
 from rich.markup import escape
@@ -24,7 +26,9 @@ from profidrive_cli.api import fleet
 from profidrive_cli.api.station import write_dump
 
 if TYPE_CHECKING:
-    from profidrive_cli.api.station import DriveStation
+    from profidrive_cli.api.station import DriveStation, Outcome
+
+T = TypeVar("T")
 
 #: --html writes a page: the file name says so (as checklist run --report, run --plot)
 HTML_SUFFIXES = {".html": "html", ".htm": "html"}
@@ -38,25 +42,51 @@ def fleet_group() -> None:
 
 def _read_stations(opts: BusOptions, addresses: list[int], profile_name: str | None, ppo: int | None,
                    fmt: str | None, watchdog_ms: int,
-                   each: Callable[[int, DriveStation], None]) -> dict[int, str]:
-    """Open each station in turn on one bus (api.Bus.session) and call each(address, session);
-    a station that cannot be read is reported and skipped: {address: why}."""
+                   job: Callable[[DriveStation], T], each: Callable[[int, DriveStation, T], None]
+                   ) -> dict[int, str]:
+    """Open every station on one bus (api.Bus.station), then job(session) of all of them at once
+    (Bus.together: one bus cycle carries a request to each); as each job ends, each(address,
+    session, result) here and the station released. A station that cannot be opened or read is
+    reported and skipped: {address: why}. The sessions' exits stop and release every station on
+    every way out."""
     failed: dict[int, str] = {}
-    with opts.open_bus(None) as bus:
+
+    def fail(a: int, e: BaseException) -> None:
+        failed[a] = str(e)
+        if not opts.json:
+            err.print(escape(f"station {a}: {e}"))
+    with opts.open_bus(None) as bus, contextlib.ExitStack() as stack:
+        sessions: dict[int, DriveStation] = {}
         for a in addresses:
             defaults = opts.station_defaults(a)
             try:
                 # the config file's profile and layout for this station, below the options
                 layout = defaults.get("layout") if ppo is None and fmt is None else None
-                with bus.station(a, profile=profile_name or defaults.get("profile"), layout=layout,
-                                 ppo=ppo, fmt=fmt, watchdog_ms=watchdog_ms, handle_signals=True,
-                                 on_message=lambda t: err.print(escape(t))) as s:
-                    each(a, s)
+                sessions[a] = stack.enter_context(bus.station(
+                    a, profile=profile_name or defaults.get("profile"), layout=layout, ppo=ppo,
+                    fmt=fmt, watchdog_ms=watchdog_ms, handle_signals=True,
+                    on_message=lambda t: err.print(escape(t))))
             except (BusError, DriveError) as e:
-                failed[a] = str(e)
-                if not opts.json:
-                    err.print(escape(f"station {a}: {e}"))
+                fail(a, e)
+        def done(a: int, o: Outcome[T]) -> None:
+            # as soon as its job ended: the result, then the station released (its session's exit)
+            s = sessions[a]
+            try:
+                if o.error is None:
+                    each(a, s, cast(T, o.value))
+                elif isinstance(o.error, (BusError, DriveError)):
+                    fail(a, o.error)
+                else:
+                    raise o.error
+            finally:
+                s.close()
+        bus.together(sessions, {a: functools.partial(job, s) for a, s in sessions.items()},
+                     on_done=done)
     return failed
+
+
+def _dump(s: DriveStation) -> dict[str, Any]:
+    return s.params.dump()
 
 
 @fleet_group.command("dump")
@@ -76,19 +106,18 @@ def fleet_dump(opts: BusOptions, stations: str, directory: str, profile_name: st
         check_output_path(p, "-o")              # before the bus is opened
     written: dict[int, dict[str, Any]] = {}
 
-    def each(a: int, s: DriveStation) -> None:
-        doc = s.params.dump()
+    def each(a: int, s: DriveStation, doc: dict[str, Any]) -> None:
         assert s.profile is not None            # an open session has its profile
         write_dump(doc, paths[a])
         written[a] = {"station": a, "profile": s.profile.name, "file": str(paths[a]),
                       "settings": len(doc["parameters"])}
 
-    failed = _read_stations(opts, addresses, profile_name, ppo, fmt, watchdog_ms, each)
+    failed = _read_stations(opts, addresses, profile_name, ppo, fmt, watchdog_ms, _dump, each)
     if opts.json:
-        emit_json({"directory": str(directory), "written": list(written.values()),
+        emit_json({"directory": str(directory), "written": [written[a] for a in sorted(written)],
                    "failed": {str(a): why for a, why in failed.items()}})
     else:
-        for w in written.values():
+        for w in (written[a] for a in sorted(written)):
             out.print(escape(f"station {w['station']} ({w['profile']}): {w['settings']} settings "
                              f"written to {w['file']}"))
         out.print(escape(f"{len(written)} of {len(addresses)} station(s) dumped into {directory}"))
@@ -126,11 +155,11 @@ def fleet_diff(opts: BusOptions, source: str, golden: str | None, html_path: str
             raise UsageError(f"{source}: neither a directory nor station addresses (e.g. 3-7)") from None
         sets = []
 
-        def each(a: int, s: DriveStation) -> None:
-            sets.append(fleet.from_dump(s.params.dump()))
+        def each(a: int, s: DriveStation, doc: dict[str, Any]) -> None:
+            sets.append(fleet.from_dump(doc))
 
-        failed = _read_stations(opts, addresses, profile_name, ppo, fmt, watchdog_ms, each)
-    result = fleet.compare(sets, gold)
+        failed = _read_stations(opts, addresses, profile_name, ppo, fmt, watchdog_ms, _dump, each)
+    result = fleet.compare(sorted(sets, key=lambda x: x.station), gold)
     if html_path:
         write_text_atomic(html_path, to_html(result), "--html")
     if opts.json:

@@ -1,0 +1,279 @@
+"""Together: the same blocking work on several stations at once, one bus cycle carrying a request to
+each -- fleet dump / diff, the API's Bus.read_params. Without it a line of drives is read one station
+after another, each PKW (or MEMOBUS) transaction waiting for its own cycles: a line of 50 drives a
+minute where the wire allows seconds.
+
+How: every station's job (a function that talks to its drive through the drive's CyclicChannel, as
+the families' parameter paths do: `s.params.dump`) runs in a thread of its own, and the station's
+MeteredChannel sends its exchanges to this coordinator instead of the bus (LockstepChannel). The
+caller's thread alone talks to the bus: a round opens when every job still running has posted its
+next outputs (or has ended), then each posted station gets one Data_Exchange, in address order, and
+its inputs go back to its job. So the rounds are the same whatever the threads' timing: each job sees
+exactly the exchanges it asked for, in order, as on its own channel.
+
+Rules, each written here once:
+- unpaced while the jobs run: a round goes as soon as it is full (the wire, the slaves' answers and
+  the CPU are the pace); the jobs' own cycle rates do not apply.
+- the keep rule holds (dp.poller.keep_within: a quarter of the DP watchdog): a station whose job has
+  ended or has not posted yet (its thread did not get the CPU) gets a Data_Exchange with its last
+  outputs once its last request is that old; a round waits for a late job only until then, then
+  goes without it. `keep` names more stations to hold (the API's other open drives).
+- a station that drops out is brought up again by its next exchange (Master.exchange), as on its own
+  channel; a BusError of its exchange is raised in its job only.
+- a lost link ends every job (LinkLost in each) and is raised here; so is anything the caller's
+  thread gets while it waits (Ctrl-C, session.SessionTerminated): every job is ended (Stopped at its
+  next exchange), its thread joined, then the exception goes on -- the sessions' own exits make the
+  safe stop and release the stations, as for one station.
+
+Threads, not a rewrite of every family's parameter path as a state machine: the families' request
+loops stay the one code path of `param get` and of the dump. No click and no rich.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Iterable, Mapping
+from typing import TYPE_CHECKING, Generic, TypeVar
+
+from profidrive_cli import BusError
+from profidrive_cli.dp.poller import keep_within
+from profidrive_cli.link.base import LinkLost
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.dp.poller import Master
+    from profidrive_cli.session.cycle import MeteredChannel
+
+T = TypeVar("T")
+
+#: the shortest and longest single wait for a late job, real seconds (it is waited for until a held
+#: station's keep-alive is due on the link's clock; the wait is cut in pieces of at most MAX_WAIT_S)
+MIN_WAIT_S = 0.001
+MAX_WAIT_S = 0.25
+#: how long the end of a stopped run waits for each job's thread (it ends at its next exchange)
+JOIN_S = 5.0
+
+
+class Stopped(BusError):
+    """Raised in a job's exchange when the run it belongs to was ended (a lost link, Ctrl-C, a
+    signal in the caller's thread)."""
+
+
+class Outcome(Generic[T]):
+    """What one station's job gave: its value, or the exception it raised (BusError, DriveError,
+    UsageError... the caller reports it per station)."""
+
+    __slots__ = ("value", "error")
+
+    def __init__(self, value: T | None = None, error: BaseException | None = None) -> None:
+        self.value = value
+        self.error = error
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+
+class LockstepChannel:
+    """The inner channel of a station's MeteredChannel during a run: exchange() posts the outputs to
+    the coordinator and waits for the round that carries them."""
+
+    def __init__(self, run: "_Run", address: int) -> None:
+        self.run = run
+        self.address = address
+        self.cycles = 0
+
+    def now(self) -> float:
+        return self.run.master.link.now()
+
+    def exchange(self, outputs: bytes) -> bytes:
+        self.cycles += 1
+        return self.run.post(self.address, bytes(outputs))
+
+
+class _Run:
+    """One run's shared state: the posted outputs, the answers, the jobs still running."""
+
+    def __init__(self, master: "Master") -> None:
+        self.master = master
+        self.cond = threading.Condition()
+        self.posted: dict[int, bytes] = {}
+        self.answers: dict[int, bytes | BaseException] = {}
+        self.running: set[int] = set()
+        #: jobs ended since the coordinator last looked (for on_done)
+        self.ended: list[int] = []
+        self.stopped: BaseException | None = None
+
+    def post(self, address: int, outputs: bytes) -> bytes:
+        with self.cond:
+            if self.stopped is not None:
+                raise self._stopped()
+            self.posted[address] = outputs
+            self.cond.notify_all()
+            while address not in self.answers:
+                if self.stopped is not None:
+                    self.posted.pop(address, None)
+                    raise self._stopped()
+                self.cond.wait()
+            got = self.answers.pop(address)
+        if isinstance(got, BaseException):
+            raise got
+        return got
+
+    def _stopped(self) -> BaseException:
+        why = self.stopped
+        if isinstance(why, LinkLost):
+            return why
+        return Stopped(f"stopped ({type(why).__name__}{': ' + str(why) if str(why) else ''})")
+
+
+def run_together(master: "Master", channels: Mapping[int, "MeteredChannel"],
+                 jobs: Mapping[int, Callable[[], T]], keep: Iterable[int] = (),
+                 on_done: Callable[[int, Outcome[T]], None] | None = None
+                 ) -> dict[int, Outcome[T]]:
+    """Run jobs[address]() for every station at once, each on its own channel (channels[address],
+    the station's MeteredChannel: its inner channel is the coordinator's while the jobs run, then
+    its own again), the bus rounds in this thread (see the module doc). keep: more stations to hold
+    in data exchange meanwhile. on_done(address, outcome): called here, between two rounds, as
+    soon as a station's job has ended (the CLI writes its file and releases the station, so the
+    rounds no longer keep it). Returns {address: Outcome} in the jobs' order; raises LinkLost, and
+    whatever this thread gets while it waits (KeyboardInterrupt, SessionTerminated) or on_done
+    raises, after every job has ended."""
+    if not jobs:
+        return {}
+    missing = [a for a in jobs if a not in channels]
+    if missing:
+        raise ValueError(f"run_together: no channel for station(s) {missing}")
+    run = _Run(master)
+    outcomes: dict[int, Outcome[T]] = {}
+    held = sorted(set(jobs) | set(keep))
+    within = {a: _within(master, a) for a in held}
+    old_inner = {a: channels[a].inner for a in jobs}
+    threads: list[threading.Thread] = []
+
+    def work(address: int, job: Callable[[], T]) -> None:
+        try:
+            outcomes[address] = Outcome(value=job())
+        except BaseException as e:          # noqa: BLE001  (the caller reports it per station)
+            outcomes[address] = Outcome(error=e)
+        finally:
+            with run.cond:
+                run.running.discard(address)
+                run.ended.append(address)
+                run.cond.notify_all()
+
+    def ended(addresses: list[int]) -> None:
+        if on_done is not None:
+            for a in addresses:
+                on_done(a, outcomes.get(a, Outcome(error=Stopped("the job did not end"))))
+
+    for a in jobs:
+        channels[a].inner = LockstepChannel(run, a)
+    try:
+        with run.cond:
+            run.running = set(jobs)
+        for a, job in jobs.items():
+            t = threading.Thread(target=work, args=(a, job), name=f"pdrive-station-{a}", daemon=True)
+            threads.append(t)
+            t.start()
+        _rounds(run, held, within, ended)
+    except BaseException as e:
+        with run.cond:
+            run.stopped = e
+            run.cond.notify_all()
+        for t in threads:
+            t.join(JOIN_S)
+        raise
+    finally:
+        for a, inner in old_inner.items():
+            channels[a].inner = inner
+    for t in threads:
+        t.join()
+    return {a: outcomes.get(a, Outcome(error=Stopped("the job did not end"))) for a in jobs}
+
+
+def _within(master: "Master", address: int) -> float | None:
+    """How old the station's last request may get: its watchdog's keep rule (not its own cycle
+    period: while the jobs run, a station waiting for its turn needs only to stay in data
+    exchange), None: no watchdog."""
+    st = master.stations.get(address)
+    return keep_within(st.config.wd_ms if st is not None else None)
+
+
+def _rounds(run: _Run, held: list[int], within: dict[int, float | None],
+            ended: Callable[[list[int]], None]) -> None:
+    """The caller's loop: wait until every running job has posted, then one round; until all
+    ended. ended(addresses) for the jobs that ended, before the next round. A job late to post (its
+    thread did not get the CPU) is waited for until a held station's keep-alive is due on the
+    link's clock: then the round goes without it (on a virtual clock that never happens: the
+    slaves' watchdogs do not run while the master waits either)."""
+    cond = run.cond
+    master = run.master
+    while True:
+        with cond:
+            while not run.running <= run.posted.keys():
+                due = _next_due(master, held, within)
+                now = master.link.now()
+                if due is not None and now >= due:
+                    break                   # a late job: the round goes without it
+                cond.wait(MAX_WAIT_S if due is None else
+                          min(MAX_WAIT_S, max(MIN_WAIT_S, due - now)))
+            done, run.ended = run.ended, []
+            last = not run.running and not run.posted
+            posted = dict(sorted(run.posted.items()))
+            run.posted.clear()
+        if done:
+            ended(done)
+        if last:
+            return
+        answers = _round(master, posted, held, within)
+        with cond:
+            run.answers.update(answers)
+            cond.notify_all()
+
+
+def _next_due(master: "Master", held: list[int], within: dict[int, float | None]) -> float | None:
+    """The link time at which the first held station in data exchange needs its keep-alive."""
+    due: float | None = None
+    for a in held:
+        w = within.get(a)
+        st = master.stations.get(a)
+        if not w or st is None or not st.in_data_exchange:
+            continue
+        last = master.last_request(a)
+        t = (last if last is not None else master.link.now()) + w
+        due = t if due is None else min(due, t)
+    return due
+
+
+def _round(master: "Master", posted: dict[int, bytes], held: list[int],
+           within: dict[int, float | None]) -> dict[int, bytes | BaseException]:
+    """One Data_Exchange for every posted station (address order), then a keep-alive for every held
+    station not posted whose last request is its keep_within() old. LinkLost is raised (the caller
+    ends every job); any other BusError goes to its own job."""
+    answers: dict[int, bytes | BaseException] = {}
+    for a, outputs in posted.items():
+        try:
+            answers[a] = master.exchange(a, outputs)
+        except LinkLost:
+            raise
+        except BusError as e:
+            answers[a] = e
+    now = master.link.now()
+    for a in held:
+        w = within.get(a)
+        if a in posted or not w:
+            continue
+        st = master.stations.get(a)
+        last = master.last_request(a)
+        if st is None or not st.in_data_exchange or (last is not None and now - last < w):
+            continue
+        try:
+            master.exchange(a, None)
+        except LinkLost:
+            raise
+        except BusError:
+            pass                            # seen by its own next exchange
+    return answers
+
+
+__all__ = ["LockstepChannel", "Outcome", "Stopped", "run_together"]

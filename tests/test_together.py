@@ -1,0 +1,266 @@
+"""Issue 38, a line of drives at the wire's pace: session/together.py (several stations' blocking
+jobs at once, one bus round carrying a request to each) on a scripted master, then on the simulated
+bus through the API (Bus.read_params) and the CLI (fleet dump).
+
+The scripted master's clock moves only with its exchanges (10 ms each), so the rounds and the
+keep-alives are the same whatever the threads' timing; expected sequences are written out by hand
+from the module's rules: a round opens when every running job has posted, carries the posted
+stations in address order, then a keep-alive (outputs None) for each held station not posted whose
+last request is a quarter of its DP watchdog old (dp.poller.keep_within).
+"""
+
+from __future__ import annotations
+
+import threading
+from types import SimpleNamespace
+
+import pytest
+
+from profidrive_cli import BusError, UsageError
+from profidrive_cli.link.base import LinkLost
+from profidrive_cli.session.cycle import MeteredChannel
+from profidrive_cli.session.together import Stopped, run_together
+
+
+class Clock:
+    def __init__(self, tick: float = 0.0) -> None:
+        self.t = 0.0
+        self.tick = tick
+
+    def now(self) -> float:
+        self.t += self.tick
+        return self.t
+
+
+class Script:
+    """The part of dp.poller.Master a run uses: exchange, last_request, stations, link.now."""
+
+    def __init__(self, addresses, wd_ms=None, step=0.01, tick=0.0):
+        self.link = Clock(tick)
+        self.stations = {a: SimpleNamespace(config=SimpleNamespace(wd_ms=wd_ms), in_data_exchange=True)
+                         for a in addresses}
+        self.log: list[tuple[int, bytes | None]] = []
+        self.last: dict[int, float] = {}
+        self.fail: dict[int, BaseException] = {}
+        self.step = step
+        self.threads: set[str] = set()
+
+    def exchange(self, a, outputs=None):
+        self.threads.add(threading.current_thread().name)
+        self.link.t += self.step
+        self.log.append((a, outputs))
+        self.last[a] = self.link.t
+        if a in self.fail:
+            raise self.fail[a]
+        return bytes([a]) + (outputs or b"")
+
+    def last_request(self, a):
+        return self.last.get(a)
+
+
+class Own:
+    """A station's own inner channel (what the run replaces, then puts back)."""
+
+    def now(self):
+        return 0.0
+
+    def exchange(self, outputs):
+        raise AssertionError("the station's own channel was used during the run")
+
+
+def channels(addresses):
+    return {a: MeteredChannel(Own()) for a in addresses}
+
+
+def counting(ch, n, tag):
+    """A job: n exchanges with outputs tag+i; returns the inputs it got."""
+    return lambda: [ch.exchange(bytes([tag, i])) for i in range(n)]
+
+
+def test_rounds_carry_every_running_station_once_in_address_order():
+    m = Script([3, 4, 5])
+    chs = channels([3, 4, 5])
+    own = {a: c.inner for a, c in chs.items()}
+    out = run_together(m, chs, {5: counting(chs[5], 2, 50), 3: counting(chs[3], 3, 30),
+                                4: counting(chs[4], 1, 40)})
+    # by hand: round 1 = 3, 4, 5; round 2 = 3, 5 (4 has ended); round 3 = 3
+    assert m.log == [(3, bytes([30, 0])), (4, bytes([40, 0])), (5, bytes([50, 0])),
+                     (3, bytes([30, 1])), (5, bytes([50, 1])),
+                     (3, bytes([30, 2]))]
+    assert list(out) == [5, 3, 4]                           # the jobs' order
+    assert out[3].value == [bytes([3, 30, i]) for i in range(3)]
+    assert out[5].value == [bytes([5, 50, 0]), bytes([5, 50, 1])]
+    assert all(o.ok for o in out.values())
+    assert {a: c.inner for a, c in chs.items()} == own      # each station's own channel again
+    assert {a: c.cycles for a, c in chs.items()} == {3: 3, 4: 1, 5: 2}
+    assert m.threads == {threading.current_thread().name}  # only the caller's thread on the bus
+
+
+def test_a_station_waiting_for_its_turn_is_kept_by_its_watchdog_rule():
+    # watchdog 100 ms: kept once its last request is 25 ms old; each exchange takes 10 ms
+    m = Script([3, 4], wd_ms=100)
+    chs = channels([3, 4])
+    out = run_together(m, chs, {3: counting(chs[3], 6, 30), 4: counting(chs[4], 1, 40)})
+    assert out[3].ok and out[4].ok
+    # by hand: r1 3@10 4@20; r2 3@30 (4 last 20: 10 old); r3 3@40 (20 old); r4 3@50, 30 old ->
+    # 4 kept @60; r5 3@70; r6 3@80 (4: 20 old); end of 3's job
+    assert m.log == [(3, bytes([30, 0])), (4, bytes([40, 0])), (3, bytes([30, 1])),
+                     (3, bytes([30, 2])), (3, bytes([30, 3])), (4, None),
+                     (3, bytes([30, 4])), (3, bytes([30, 5]))]
+
+
+def test_a_late_job_is_waited_for_until_a_keep_alive_is_due():
+    # station 4's job posts only after 3 has made 5 exchanges; both have watchdogs of 100 ms (kept
+    # when 25 ms old); the clock runs on while the master waits (1 ms each time it is read), as a
+    # real line's does
+    m = Script([3, 4], wd_ms=100, tick=0.001)
+    m.last = {3: 0.0, 4: 0.0}                # both in data exchange since t = 0
+    chs = channels([3, 4])
+    go = threading.Event()
+
+    def three():
+        got = [chs[3].exchange(bytes([30, i])) for i in range(5)]
+        go.set()
+        return got
+
+    def four():
+        go.wait(60)
+        return chs[4].exchange(bytes([40]))
+    out = run_together(m, chs, {3: three, 4: four})
+    assert out[3].ok and out[4].value == bytes([4, 40])
+    # 4 never posted before 3's fifth exchange: it was kept with its last outputs meanwhile
+    fours = [o for a, o in m.log if a == 4]
+    assert fours[-1] == bytes([40]) and fours[:-1] and all(o is None for o in fours[:-1])
+    # 3's own five in order; after its job ended it is kept the same way while 4 is late
+    threes = [o for a, o in m.log if a == 3]
+    assert threes[:5] == [bytes([30, i]) for i in range(5)] and all(o is None for o in threes[5:])
+
+
+def test_a_bus_error_goes_to_its_own_job_only():
+    m = Script([3, 4, 5])
+    m.fail[4] = BusError("station 4: no answer")
+    chs = channels([3, 4, 5])
+    out = run_together(m, chs, {a: counting(chs[a], 2, a) for a in (3, 4, 5)})
+    assert isinstance(out[4].error, BusError) and "no answer" in str(out[4].error)
+    assert out[3].value == [bytes([3, 3, 0]), bytes([3, 3, 1])]
+    assert out[5].ok
+
+
+def test_a_lost_link_ends_every_job_and_is_raised():
+    m = Script([3, 4, 5])
+    chs = channels([3, 4, 5])
+    own = {a: c.inner for a, c in chs.items()}
+    m.fail[5] = LinkLost("gone", "sim://")
+    seen = {}
+
+    def job(a):
+        def run():
+            try:
+                return [chs[a].exchange(b"x") for _ in range(100)]
+            except BaseException as e:
+                seen[a] = e
+                raise
+        return run
+    with pytest.raises(LinkLost):
+        run_together(m, chs, {a: job(a) for a in (3, 4, 5)})
+    # every job ended by the lost link: none ran on; the channels are the stations' own again
+    assert set(seen) == {3, 4, 5} and all(isinstance(e, LinkLost) for e in seen.values())
+    assert len(m.log) == 3
+    assert {a: c.inner for a, c in chs.items()} == own
+    assert not [t for t in threading.enumerate() if t.name.startswith("pdrive-station-")]
+
+
+def test_an_interrupt_in_the_callers_thread_stops_every_job():
+    m = Script([3, 4])
+    chs = channels([3, 4])
+    seen = {}
+
+    def job(a):
+        def run():
+            try:
+                return [chs[a].exchange(b"x") for _ in range(100)]
+            except BaseException as e:
+                seen[a] = e
+                raise
+        return run
+
+    def done(a, outcome):
+        raise KeyboardInterrupt
+
+    def short():
+        return chs[3].exchange(b"y")
+    with pytest.raises(KeyboardInterrupt):
+        run_together(m, chs, {3: short, 4: job(4)}, on_done=done)
+    assert isinstance(seen[4], Stopped)
+    assert not [t for t in threading.enumerate() if t.name.startswith("pdrive-station-")]
+
+
+def test_on_done_comes_between_rounds_as_each_job_ends():
+    m = Script([3, 4])
+    chs = channels([3, 4])
+    order = []
+
+    def done(a, outcome):
+        order.append((a, len(m.log), outcome.value))
+    run_together(m, chs, {3: counting(chs[3], 3, 30), 4: counting(chs[4], 1, 40)}, on_done=done)
+    # 4 ends after round 1 (2 exchanges so far), 3 after round 3 (2 + 1 + 1)
+    assert order == [(4, 2, [bytes([4, 40, 0])]), (3, 4, [bytes([3, 30, i]) for i in range(3)])]
+
+
+def test_no_jobs_and_a_missing_channel():
+    assert run_together(Script([]), {}, {}) == {}
+    with pytest.raises(ValueError, match="no channel for station"):
+        run_together(Script([3]), {}, {3: lambda: None})
+
+
+# -- on the simulated bus -------------------------------------------------------------------------
+
+LINE = "sim://?stations=3:fuji-g1,4:fuji-g1,5:fuji-g1&set=4:F07=5"
+
+
+def test_read_params_reads_each_drive_as_param_does():
+    import profidrive_cli as pdrive
+    with pdrive.open_bus(LINE) as bus:
+        got = bus.read_params([3, 4, 5], ["F07", "F08"])
+        assert sorted(got) == [3, 4, 5] and all(sorted(v) == ["F07", "F08"] for v in got.values())
+        # the plant's values: F07 6.0 s (the Fuji factory value) but station 4 set to 5 s
+        assert [got[a]["F07"].value for a in (3, 4, 5)] == [6.0, 5.0, 6.0]
+        # drives read_params opened are closed again; the same reads one by one agree
+        assert bus.drives == []
+        for a in (3, 4, 5):
+            d = bus.drive(a)
+            assert d.param("F07") == got[a]["F07"] and d.param("F08") == got[a]["F08"]
+
+
+def test_read_params_per_station_codes_keeps_an_opened_drive_open():
+    import profidrive_cli as pdrive
+    with pdrive.open_bus(LINE) as bus:
+        d4 = bus.drive(4)
+        got = bus.read_params({3: ["F07"], 4: ["F08", "F07"]})
+        assert list(got[4]) == ["F08", "F07"] and got[4]["F07"].value == 5.0
+        assert bus.drives == [d4] and d4.status().station == 4
+
+
+def test_read_params_bad_input_reads_nothing():
+    import profidrive_cli as pdrive
+    with pdrive.open_bus(LINE) as bus:
+        for args, words in ((([3], None), "which codes"), (({3: ["F07"]}, ["F07"]), "not both"),
+                            (({3: "F07"},), "list of strings"), (([3], [7]), "list of strings")):
+            with pytest.raises(UsageError, match=words):
+                bus.read_params(*args)
+        with pytest.raises(UsageError, match="NOPE99"):
+            bus.read_params([3, 4], ["F07", "NOPE99"])
+        assert bus.drives == []
+
+
+def test_read_params_a_station_that_cannot_be_read_is_named_the_others_are_kept():
+    import profidrive_cli as pdrive
+    from profidrive_cli.api import ParamsError
+    with pdrive.open_bus(LINE) as bus:
+        d = bus.drive(5)
+        bus.simulator.unplug(5)
+        with pytest.raises(ParamsError) as e:
+            bus.read_params({3: ["F07"], 5: ["F07"]})
+        assert set(e.value.errors) == {5} and "station 5" in str(e.value)
+        assert e.value.partial[3]["F07"].value == 6.0
+        del d
