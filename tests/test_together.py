@@ -11,7 +11,12 @@ last request is a quarter of its DP watchdog old (dp.poller.keep_within).
 
 from __future__ import annotations
 
+import json
+import os
+import signal
+import subprocess
 import threading
+import time
 from types import SimpleNamespace
 
 import pytest
@@ -264,3 +269,74 @@ def test_read_params_a_station_that_cannot_be_read_is_named_the_others_are_kept(
         assert set(e.value.errors) == {5} and "station 5" in str(e.value)
         assert e.value.partial[3]["F07"].value == 6.0
         del d
+
+
+# -- the asyncio twin -------------------------------------------------------------------------------
+
+def test_aio_read_params_and_its_cancellation():
+    import asyncio
+
+    from profidrive_cli import aio
+
+    async def main():
+        async with aio.open_bus(LINE + "&baud=9600&timing=wire", baud=9600) as bus:
+            got = await bus.read_params([3, 4], ["F07"])
+            assert [got[a]["F07"].value for a in (3, 4)] == [6.0, 5.0]
+            # a long read (every setting of three drives, 9.6 kbit/s on the wire's time) cancelled
+            # at once: CancelledError; the drives it opened are closed, the bus goes on
+            codes = ["F07", "F08", "F03"] * 20
+            t = asyncio.ensure_future(bus.read_params({3: codes, 4: codes, 5: codes}))
+            await asyncio.sleep(0.2)
+            t.cancel()
+            with pytest.raises(asyncio.CancelledError):
+                await t
+            assert bus.sync.drives == []
+            assert (await (await bus.drive(4)).param("F07")).value == 5.0
+    asyncio.run(main())
+
+
+# -- the CLI: SIGTERM while a line is read ------------------------------------------------------------
+
+@pytest.mark.skipif(os.name != "posix", reason="SIGTERM to a child process over a pty")
+def test_sigterm_during_fleet_dump_releases_every_station_and_leaves_whole_files(tmp_path):
+    from conftest import pdrive_cmd, pty_sim_process
+    from profidrive_cli.session.dumpfile import load_dump
+    out_dir = tmp_path / "dumps"
+    out_dir.mkdir()
+    # 19.2 kbit/s on the wire's time: the Moeller drive's 231 settings take at least 330 exchanges
+    # of 26.6 ms (bench_fleet.py's hand figure), about 9 s; the Toyo drive (no settings a dump can
+    # hold) is written first, so its file says the jobs are running
+    with pty_sim_process("--plant", "sim://?timing=wire&baud=19200") as port:
+        p = subprocess.Popen(pdrive_cmd() + ["param", "fleet", "dump", "3,4,5,6,7", "-o", str(out_dir),
+                                             "--port", port, "--baud", "19200", "--json"],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL,
+                             text=True)
+        try:
+            end = time.monotonic() + 120
+            while not list(out_dir.glob("station-*.yaml")) and p.poll() is None and \
+                    time.monotonic() < end:
+                time.sleep(0.05)
+            assert p.poll() is None, p.stderr.read()
+            p.send_signal(signal.SIGTERM)
+            out, err = p.communicate(timeout=120)
+        finally:
+            if p.poll() is None:
+                p.kill()
+                p.communicate()
+        assert p.returncode == 143, err
+        assert "Traceback" not in err
+        # the station 6 dump was cut: no file, no partial one; every file there is whole
+        files = sorted(out_dir.iterdir())
+        assert "station-006.yaml" not in [f.name for f in files]
+        assert all(f.name.startswith("station-") and f.suffix == ".yaml" for f in files), files
+        for f in files:
+            load_dump(str(f))
+        # every station was released on the way out: none is left in data exchange
+        r = subprocess.run(pdrive_cmd() + ["scan", "--from", "3", "--to", "7", "--port", port,
+                                            "--baud", "19200", "--json"],
+                           capture_output=True, text=True, timeout=300, stdin=subprocess.DEVNULL)
+        assert r.returncode == 0, r.stderr
+        rows = [json.loads(line) for line in r.stdout.splitlines() if line.strip()]
+        found = rows[-1]["stations"] if rows and "stations" in rows[-1] else rows
+        states = {s["station"]: s.get("state") for s in found if s.get("station") in (3, 4, 5, 6, 7)}
+        assert len(states) == 5 and not any("data exchange" in str(v) for v in states.values()), states

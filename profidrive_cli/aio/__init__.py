@@ -35,7 +35,7 @@ import threading
 import weakref
 from concurrent.futures import ThreadPoolExecutor
 from types import FrameType, TracebackType
-from typing import TYPE_CHECKING, Any, Callable, Coroutine, Mapping, TypeVar
+from typing import TYPE_CHECKING, Any, Callable, Coroutine, Iterable, Mapping, TypeVar
 
 from profidrive_cli.api import open_bus as _open_bus
 from profidrive_cli.api.bus import stop_words
@@ -267,6 +267,29 @@ class AsyncBus:
         if have is None or have.sync is not d:
             have = self._drives[d.station] = AsyncDrive(self, d, fmax)
         return have
+
+
+    async def read_params(self, stations: "Mapping[int, Iterable[str]] | Iterable[int]",
+                          codes: "Iterable[str] | None" = None) -> "dict[int, dict[str, Param]]":
+        """Bus.read_params: several drives' parameters at once, one bus cycle carrying a request to
+        each. Cancelled meanwhile: the reads end before the next bus round (the request of each
+        round is not torn in half), the drives it opened are closed, then CancelledError."""
+        bus = self.sync
+        cancel = threading.Event()
+        fut = asyncio.get_running_loop().run_in_executor(
+            self._pool, functools.partial(bus.read_params, stations, codes, cancel=cancel))
+        cancelled = False
+        while not fut.done():
+            try:
+                await asyncio.shield(fut)
+            except asyncio.CancelledError:
+                cancel.set()
+                cancelled = True
+            except BaseException:           # noqa: BLE001  (fut.result() below raises it)
+                break
+        if cancelled:
+            raise asyncio.CancelledError()
+        return fut.result()
 
 
 class AsyncDrive:

@@ -473,14 +473,16 @@ class Bus:
         return out
 
     def read_params(self, stations: "Mapping[int, Iterable[str]] | Iterable[int]",
-                    codes: "Iterable[str] | None" = None) -> dict[int, dict[str, Param]]:
+                    codes: "Iterable[str] | None" = None, *, cancel: threading.Event | None = None
+                    ) -> dict[int, dict[str, Param]]:
         """Read parameters of several drives at once: one bus cycle carries a request to each of
         them (session/together.py), so a line reads at the pace of the wire and of its slowest
         drive, not of the sum of them. stations: {station: [codes]}, or stations with `codes` for
         every one (read_params([3, 4, 5], ["F07", "F08"])). A drive not yet opened is opened
         (profile and layout as drive() chooses them) and closed again as soon as it is read.
         Every code of every drive is checked before the first parameter request (UsageError:
-        nothing read). Returns {station: {code:
+        nothing read). cancel: a threading.Event another thread may set: the reads end before the
+        next bus round (session.together.Stopped, a BusError). Returns {station: {code:
         Param}}; when a drive could not be read, ParamsError (a BusError) after every other was:
         its .errors {station: why} and .partial (what was read)."""
         if isinstance(stations, Mapping):
@@ -514,7 +516,7 @@ class Bus:
                     if st in opened:             # opened for this call: released at once
                         drives[st].close()
                 out = self.together({st: d._station for st, d in drives.items()},
-                                    {st: job(st) for st in drives}, on_done=done)
+                                    {st: job(st) for st in drives}, on_done=done, cancel=cancel)
         finally:
             for st in opened:
                 d = self._drives.get(st)
@@ -527,8 +529,8 @@ class Bus:
         return values
 
     def together(self, sessions: "Mapping[int, DriveStation]", jobs: "Mapping[int, Callable[[], T]]",
-                 on_done: "Callable[[int, Outcome[T]], None] | None" = None
-                 ) -> "dict[int, Outcome[T]]":
+                 on_done: "Callable[[int, Outcome[T]], None] | None" = None,
+                 cancel: threading.Event | None = None) -> "dict[int, Outcome[T]]":
         """The station level: jobs[address]() of every station at once, each talking to its own
         connected session (sessions[address]), one bus cycle carrying a request to each
         (session/together.py: the rounds in this thread, unpaced; every other opened drive of this
@@ -548,7 +550,7 @@ class Bus:
             self._together = True
             try:
                 return run_together(self.master, channels, jobs, keep=list(self._drives),
-                                    on_done=on_done)
+                                    on_done=on_done, cancel=cancel)
             finally:
                 self._together = False
                 now = self.master.link.now()

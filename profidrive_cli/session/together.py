@@ -128,16 +128,17 @@ class _Run:
 
 def run_together(master: "Master", channels: Mapping[int, "MeteredChannel"],
                  jobs: Mapping[int, Callable[[], T]], keep: Iterable[int] = (),
-                 on_done: Callable[[int, Outcome[T]], None] | None = None
-                 ) -> dict[int, Outcome[T]]:
+                 on_done: Callable[[int, Outcome[T]], None] | None = None,
+                 cancel: threading.Event | None = None) -> dict[int, Outcome[T]]:
     """Run jobs[address]() for every station at once, each on its own channel (channels[address],
     the station's MeteredChannel: its inner channel is the coordinator's while the jobs run, then
     its own again), the bus rounds in this thread (see the module doc). keep: more stations to hold
     in data exchange meanwhile. on_done(address, outcome): called here, between two rounds, as
     soon as a station's job has ended (the CLI writes its file and releases the station, so the
-    rounds no longer keep it). Returns {address: Outcome} in the jobs' order; raises LinkLost, and
-    whatever this thread gets while it waits (KeyboardInterrupt, SessionTerminated) or on_done
-    raises, after every job has ended."""
+    rounds no longer keep it). cancel: once set, the run ends before its next round (Stopped; the
+    asyncio face's cancellation). Returns {address: Outcome} in the jobs' order; raises LinkLost,
+    Stopped when cancelled, and whatever this thread gets while it waits (KeyboardInterrupt,
+    SessionTerminated) or on_done raises, after every job has ended."""
     if not jobs:
         return {}
     missing = [a for a in jobs if a not in channels]
@@ -175,7 +176,7 @@ def run_together(master: "Master", channels: Mapping[int, "MeteredChannel"],
             t = threading.Thread(target=work, args=(a, job), name=f"pdrive-station-{a}", daemon=True)
             threads.append(t)
             t.start()
-        _rounds(run, held, within, ended)
+        _rounds(run, held, within, ended, cancel)
     except BaseException as e:
         with run.cond:
             run.stopped = e
@@ -200,7 +201,7 @@ def _within(master: "Master", address: int) -> float | None:
 
 
 def _rounds(run: _Run, held: list[int], within: dict[int, float | None],
-            ended: Callable[[list[int]], None]) -> None:
+            ended: Callable[[list[int]], None], cancel: threading.Event | None = None) -> None:
     """The caller's loop: wait until every running job has posted, then one round; until all
     ended. ended(addresses) for the jobs that ended, before the next round. A job late to post (its
     thread did not get the CPU) is waited for until a held station's keep-alive is due on the
@@ -211,6 +212,8 @@ def _rounds(run: _Run, held: list[int], within: dict[int, float | None],
     while True:
         with cond:
             while not run.running <= run.posted.keys():
+                if cancel is not None and cancel.is_set():
+                    break
                 due = _next_due(master, held, within)
                 now = master.link.now()
                 if due is not None and now >= due:
@@ -225,6 +228,8 @@ def _rounds(run: _Run, held: list[int], within: dict[int, float | None],
             ended(done)
         if last:
             return
+        if cancel is not None and cancel.is_set():
+            raise Stopped("cancelled")
         answers = _round(master, posted, held, within)
         with cond:
             run.answers.update(answers)
