@@ -22,6 +22,8 @@ rich: cli/drive_cmds.py and the checklist runner build on it.
     backup.py        dump and compare;  dumpfile.py: the dump file format and loading
     restore.py       restore: plan every row first, then write and read back
     group.py         Group: several stations on one bus cycle (run 3,4,5, the checklist's together, api)
+    together.py      run_together: several stations' parameter jobs at once, one round carrying a
+                     request of each (fleet dump / diff, api Bus.read_params)
     multirun.py      MultiRun: several drives in one run on a Group
     live.py          Live: the loop of run and jog (keys, rendering: the CLI); Reach, the "reached" rule
     monitors.py      run --monitor and the trip records of `faults`
