@@ -340,3 +340,29 @@ def test_sigterm_during_fleet_dump_releases_every_station_and_leaves_whole_files
         found = rows[-1]["stations"] if rows and "stations" in rows[-1] else rows
         states = {s["station"]: s.get("state") for s in found if s.get("station") in (3, 4, 5, 6, 7)}
         assert len(states) == 5 and not any("data exchange" in str(v) for v in states.values()), states
+
+
+def test_the_dump_text_is_the_same_by_either_yaml_emitter(tmp_path, capsys, monkeypatch):
+    # fleet dump writes with libyaml's emitter where PyYAML has it: the text of every family's
+    # dump must be the one PyYAML's own emitter writes
+    import yaml
+
+    from conftest import run_main
+    from profidrive_cli.session import dumpfile
+    if not hasattr(yaml, "CSafeDumper"):
+        pytest.skip("PyYAML without libyaml")
+    docs = {}
+    real = dumpfile.dump_text
+
+    def keep(doc, output):
+        docs[str(output)] = doc
+        return real(doc, output)
+    monkeypatch.setattr(dumpfile, "dump_text", keep)
+    r = run_main(capsys, monkeypatch, "param", "fleet", "dump", "3,4,5,6,7", "-o", tmp_path,
+                 "--port", "sim://")
+    assert r.exit_code == 0, r.stderr
+    assert len(docs) == 5
+    written = {path: open(path, encoding="utf-8").read() for path in docs}
+    monkeypatch.delattr(yaml, "CSafeDumper")
+    for path, doc in docs.items():
+        assert written[path] == real(doc, path)
