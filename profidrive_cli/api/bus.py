@@ -19,13 +19,14 @@ from __future__ import annotations
 
 import atexit
 import contextlib
+import functools
 import threading
 import os
 import warnings
 import weakref
 from pathlib import Path
 from types import TracebackType
-from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator, Literal, Mapping, TypeVar
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator, Literal, Mapping, TypeVar, cast
 
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.api import keepalive
@@ -453,24 +454,43 @@ class Bus:
               cycle_s: float | None = None, max_reaction_s: float | None = None
               ) -> list["AuditResult"]:
         """Drive.audit() of each station (None: every station the scan finds with a known drive
-        profile), one after the other, lowest first; a drive this call opened is closed again
-        (a drive opened before stays open). BusError when there is no drive station to audit."""
+        profile), all at once (one bus cycle carrying a request of each: together()), the results
+        lowest station first; a drive this call opened is closed again as soon as its audit is
+        done (a drive opened before stays open). BusError when there is no drive station to audit;
+        a station's error is raised (the lowest station's) once every audit has ended."""
+        from profidrive_cli.api.drive import audit_result
+        from profidrive_cli.session.audit import audit_session
         if stations is None:
             found = [s.station for s in self.scan(0, 125) if s.kind == "slave" and s.profile]
             if not found:
                 raise BusError(f"audit: no drive station found on {self.port}")
         else:
             found = sorted(set(stations))
-        out = []
-        for st in found:
-            opened = st in self._drives
-            d = self.drive(st, profile=profile, layout=layout, ppo=ppo, watchdog_ms=watchdog_ms)
-            try:
-                out.append(d.audit(max_reaction_s=max_reaction_s, cycle_s=cycle_s))
-            finally:
-                if not opened:
+        opened = [st for st in found if st not in self._drives]
+        try:
+            drives = {st: self.drive(st, profile=profile, layout=layout, ppo=ppo,
+                                     watchdog_ms=watchdog_ms) for st in found}
+            with self._call():
+                for st in drives:
+                    self._check_open(st)
+
+                def done(st: int, _: object) -> None:
+                    if st in opened:
+                        drives[st].close()
+                out = self.together(
+                    {st: d._station for st, d in drives.items()},
+                    {st: functools.partial(audit_session, d._station, cycle_s=cycle_s,
+                                           max_reaction_s=max_reaction_s)
+                     for st, d in drives.items()}, on_done=done)
+        finally:
+            for st in opened:
+                d = self._drives.get(st)
+                if d is not None:
                     d.close()
-        return out
+        for st in found:
+            if out[st].error is not None:
+                raise cast(BaseException, out[st].error)
+        return [audit_result(out[st].value) for st in found]
 
     def read_params(self, stations: "Mapping[int, Iterable[str]] | Iterable[int]",
                     codes: "Iterable[str] | None" = None, *, cancel: threading.Event | None = None

@@ -232,14 +232,7 @@ class Drive:
             self._check()
             rep = audit_session(self._station, watchdog_s=watchdog_s, cycle_s=cycle_s,
                                 max_reaction_s=max_reaction_s)
-            return AuditResult(
-                rep.station, rep.profile, rep.layout, rep.ident, rep.watchdog_s, rep.cycle_s,
-                rep.max_reaction_s,
-                tuple(AuditFinding(f.severity, f.rule, f.code, f.value, f.why, f.fix, f.manual,
-                                   None if f.check is None else dict(f.check)) for f in rep.findings),
-                tuple(AuditSkip(k.rule, k.topic, k.reason, k.manual) for k in rep.not_applicable),
-                tuple(AuditSkip(k.rule, k.topic, k.reason, k.manual) for k in rep.not_checked),
-                tuple(rep.checked))
+            return audit_result(rep)
 
     @property
     def last_stop(self) -> StopResult | None:
@@ -276,6 +269,18 @@ class Drive:
             return
         self._closed = True
         self._station.close(exc)
+
+
+def audit_result(rep: Any) -> AuditResult:
+    """The API's AuditResult of a session.audit.AuditReport."""
+    return AuditResult(
+        rep.station, rep.profile, rep.layout, rep.ident, rep.watchdog_s, rep.cycle_s,
+        rep.max_reaction_s,
+        tuple(AuditFinding(f.severity, f.rule, f.code, f.value, f.why, f.fix, f.manual,
+                           None if f.check is None else dict(f.check)) for f in rep.findings),
+        tuple(AuditSkip(k.rule, k.topic, k.reason, k.manual) for k in rep.not_applicable),
+        tuple(AuditSkip(k.rule, k.topic, k.reason, k.manual) for k in rep.not_checked),
+        tuple(rep.checked))
 
 
 def _param(pv: "ParamValue") -> Param:
