@@ -319,7 +319,10 @@ def test_a_failing_handler_is_one_line_and_it_goes_on(reader) -> None:
             st, _, body = get(s.port, "/api/live")
             assert st == 500 and "RuntimeError" in json.loads(body)["error"]
             assert b"Traceback" not in body
-        assert len(logged) == 1 and "the engine is confused" in logged[0]   # rate-limited
+        # rate-limited: one line for the three (waitress may add its own "Task queue depth"
+        # warning when a loaded machine leaves a request waiting: not this handler's)
+        mine = [m for m in logged if "Task queue depth" not in m]
+        assert len(mine) == 1 and "the engine is confused" in mine[0]
         assert get(s.port, "/api/live")[0] == 200
     finally:
         s.close()

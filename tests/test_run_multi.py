@@ -274,7 +274,9 @@ def test_signal_leaves_every_drive_stopped(pty_sim, sig):
 
 
 def test_five_drives_over_a_pty_reach_20_hz_and_end_stopped(pty_sim):
-    r = pdrive("run", "3,4,5,6,7", "--hz", "20", "--duration", "2", "--yes", "--json", "--port", pty_sim)
+    # the slowest ramp is the Toyo drive's (station 5: no short ramp, sim/toyo.py accel_s 5 s for
+    # 60 Hz): 20 Hz after 5 x 20 / 60 = 1.67 s; three times that leaves room for a loaded machine
+    r = pdrive("run", "3,4,5,6,7", "--hz", "20", "--duration", "5", "--yes", "--json", "--port", pty_sim)
     assert r.returncode == 0, r.stderr
     for a in ALL:
         st = _status(pty_sim, a)
