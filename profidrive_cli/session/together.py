@@ -5,11 +5,14 @@ minute where the wire allows seconds.
 
 How: every station's job (a function that talks to its drive through the drive's CyclicChannel, as
 the families' parameter paths do: `s.params.dump`) runs in a thread of its own, and the station's
-MeteredChannel sends its exchanges to this coordinator instead of the bus (LockstepChannel). The
-caller's thread alone talks to the bus: a round opens when every job still running has posted its
-next outputs (or has ended), then each posted station gets one Data_Exchange, in address order, and
-its inputs go back to its job. So the rounds are the same whatever the threads' timing: each job sees
-exactly the exchanges it asked for, in order, as on its own channel.
+MeteredChannel sends its exchanges into the run instead of to the bus (LockstepChannel). A round
+goes when every job still running has posted its next outputs (or has ended): each posted station
+gets one Data_Exchange, in address order, and its inputs go back to its job. The job whose post
+completes the round runs it itself, so a line where one drive is left reads with no hand-over
+between threads; one round at a time, so never two threads on the bus. The rounds are therefore
+the same whatever the threads' timing: each job sees exactly the exchanges it asked for, in order,
+as on its own channel. The caller's thread runs on_done as each job ends, and the rounds that no
+job starts (a late job, below).
 
 Rules, each written here once:
 - unpaced while the jobs run: a round goes as soon as it is full (the wire, the slaves' answers and
@@ -20,10 +23,11 @@ Rules, each written here once:
   goes without it. `keep` names more stations to hold (the API's other open drives).
 - a station that drops out is brought up again by its next exchange (Master.exchange), as on its own
   channel; a BusError of its exchange is raised in its job only.
-- a lost link ends every job (LinkLost in each) and is raised here; so is anything the caller's
-  thread gets while it waits (Ctrl-C, session.SessionTerminated): every job is ended (Stopped at its
-  next exchange), its thread joined, then the exception goes on -- the sessions' own exits make the
-  safe stop and release the stations, as for one station.
+- a lost link ends every job (LinkLost in each) and is raised in the caller's thread; so is
+  anything that thread gets while it waits (Ctrl-C, session.SessionTerminated): every job is ended
+  (Stopped at its next exchange; a round under way ends first), its thread joined, then the
+  exception goes on -- the sessions' own exits make the safe stop and release the stations, as for
+  one station.
 
 Threads, not a rewrite of every family's parameter path as a state machine: the families' request
 loops stay the one code path of `param get` and of the dump. No click and no rich.
@@ -49,8 +53,9 @@ T = TypeVar("T")
 #: station's keep-alive is due on the link's clock; the wait is cut in pieces of at most MAX_WAIT_S)
 MIN_WAIT_S = 0.001
 MAX_WAIT_S = 0.25
-#: how long the end of a stopped run waits for each job's thread (it ends at its next exchange)
-JOIN_S = 5.0
+#: how long the end of a stopped run waits for each job's thread (it ends at its next exchange;
+#: a round under way first: each posted station's exchange, a station's bring-up at most)
+JOIN_S = 30.0
 
 
 class Stopped(BusError):
@@ -91,28 +96,64 @@ class LockstepChannel:
 
 
 class _Run:
-    """One run's shared state: the posted outputs, the answers, the jobs still running."""
+    """One run's shared state: the posted outputs, the answers, the jobs still running, and who is
+    on the bus (`busy`: one round, or the caller's on_done, at a time)."""
 
-    def __init__(self, master: "Master") -> None:
+    def __init__(self, master: "Master", held: list[int], within: dict[int, float | None]) -> None:
         self.master = master
+        self.held = held
+        self.within = within
         self.cond = threading.Condition()
         self.posted: dict[int, bytes] = {}
         self.answers: dict[int, bytes | BaseException] = {}
         self.running: set[int] = set()
-        #: jobs ended since the coordinator last looked (for on_done)
+        #: jobs ended since the caller last looked (for on_done)
         self.ended: list[int] = []
         self.stopped: BaseException | None = None
+        self.busy = False
+        self.rounds = 0
 
+    # -- with self.cond held -------------------------------------------------------------------
+    def full(self) -> bool:
+        """Every running job has posted (and one has): the round may go."""
+        return bool(self.posted) and self.running <= self.posted.keys()
+
+    def round(self) -> None:
+        """One round of what is posted, on the bus with the lock let go meanwhile (the jobs still
+        computing post into the next one). A lost link (or anything else) stops the run."""
+        batch = dict(sorted(self.posted.items()))
+        self.posted.clear()
+        self.busy = True
+        self.cond.release()
+        try:
+            got = _round(self.master, batch, self.held, self.within)
+        except BaseException as e:          # noqa: BLE001  (every job and the caller see it)
+            self.cond.acquire()
+            self.stopped = self.stopped or e
+            got = {}
+        else:
+            self.cond.acquire()
+        self.busy = False
+        self.rounds += 1
+        self.answers.update(got)
+        self.cond.notify_all()
+
+    # -- a job's thread --------------------------------------------------------------------------
     def post(self, address: int, outputs: bytes) -> bytes:
+        """A job's exchange: its outputs into the round; the last job to post runs the round itself
+        (no hand-over to another thread on the way: a line where one drive is left reads at the
+        pace of one station's own channel)."""
         with self.cond:
             if self.stopped is not None:
                 raise self._stopped()
             self.posted[address] = outputs
-            self.cond.notify_all()
             while address not in self.answers:
                 if self.stopped is not None:
                     self.posted.pop(address, None)
                     raise self._stopped()
+                if not self.busy and not self.ended and self.full():
+                    self.round()            # (a job that ended goes to on_done first)
+                    continue
                 self.cond.wait()
             got = self.answers.pop(address)
         if isinstance(got, BaseException):
@@ -121,7 +162,7 @@ class _Run:
 
     def _stopped(self) -> BaseException:
         why = self.stopped
-        if isinstance(why, LinkLost):
+        if isinstance(why, (LinkLost, Stopped)):
             return why
         return Stopped(f"stopped ({type(why).__name__}{': ' + str(why) if str(why) else ''})")
 
@@ -131,23 +172,22 @@ def run_together(master: "Master", channels: Mapping[int, "MeteredChannel"],
                  on_done: Callable[[int, Outcome[T]], None] | None = None,
                  cancel: threading.Event | None = None) -> dict[int, Outcome[T]]:
     """Run jobs[address]() for every station at once, each on its own channel (channels[address],
-    the station's MeteredChannel: its inner channel is the coordinator's while the jobs run, then
-    its own again), the bus rounds in this thread (see the module doc). keep: more stations to hold
-    in data exchange meanwhile. on_done(address, outcome): called here, between two rounds, as
-    soon as a station's job has ended (the CLI writes its file and releases the station, so the
-    rounds no longer keep it). cancel: once set, the run ends before its next round (Stopped; the
-    asyncio face's cancellation). Returns {address: Outcome} in the jobs' order; raises LinkLost,
-    Stopped when cancelled, and whatever this thread gets while it waits (KeyboardInterrupt,
-    SessionTerminated) or on_done raises, after every job has ended."""
+    the station's MeteredChannel: its inner channel is the run's while the jobs run, then its own
+    again), one bus round carrying the next request of each (see the module doc). keep: more
+    stations to hold in data exchange meanwhile. on_done(address, outcome): called in this thread,
+    between two rounds, as soon as a station's job has ended (the CLI writes its file and releases
+    the station, so the rounds no longer keep it). cancel: once set, the run ends before its next
+    round (Stopped; the asyncio face's cancellation). Returns {address: Outcome} in the jobs'
+    order; raises LinkLost, Stopped when cancelled, and whatever this thread gets while it waits
+    (KeyboardInterrupt, SessionTerminated) or on_done raises, after every job has ended."""
     if not jobs:
         return {}
     missing = [a for a in jobs if a not in channels]
     if missing:
         raise ValueError(f"run_together: no channel for station(s) {missing}")
-    run = _Run(master)
     outcomes: dict[int, Outcome[T]] = {}
     held = sorted(set(jobs) | set(keep))
-    within = {a: _within(master, a) for a in held}
+    run = _Run(master, held, {a: _within(master, a) for a in held})
     old_inner = {a: channels[a].inner for a in jobs}
     threads: list[threading.Thread] = []
 
@@ -162,7 +202,7 @@ def run_together(master: "Master", channels: Mapping[int, "MeteredChannel"],
                 run.ended.append(address)
                 run.cond.notify_all()
 
-    def ended(addresses: list[int]) -> None:
+    def done(addresses: list[int]) -> None:
         if on_done is not None:
             for a in addresses:
                 on_done(a, outcomes.get(a, Outcome(error=Stopped("the job did not end"))))
@@ -176,12 +216,14 @@ def run_together(master: "Master", channels: Mapping[int, "MeteredChannel"],
             t = threading.Thread(target=work, args=(a, job), name=f"pdrive-station-{a}", daemon=True)
             threads.append(t)
             t.start()
-        _rounds(run, held, within, ended, cancel)
+        _watch(run, done, cancel)
     except BaseException as e:
         with run.cond:
-            run.stopped = e
+            run.stopped = run.stopped or e
             run.cond.notify_all()
         for t in threads:
+            # a job's round in progress ends first (bounded: each posted station's exchange, a
+            # station's bring-up at most): never two threads on the bus
             t.join(JOIN_S)
         raise
     finally:
@@ -200,40 +242,45 @@ def _within(master: "Master", address: int) -> float | None:
     return keep_within(st.config.wd_ms if st is not None else None)
 
 
-def _rounds(run: _Run, held: list[int], within: dict[int, float | None],
-            ended: Callable[[list[int]], None], cancel: threading.Event | None = None) -> None:
-    """The caller's loop: wait until every running job has posted, then one round; until all
-    ended. ended(addresses) for the jobs that ended, before the next round. A job late to post (its
-    thread did not get the CPU) is waited for until a held station's keep-alive is due on the
-    link's clock: then the round goes without it (on a virtual clock that never happens: the
-    slaves' watchdogs do not run while the master waits either)."""
+def _watch(run: _Run, done: Callable[[list[int]], None], cancel: threading.Event | None) -> None:
+    """The caller's part, until every job has ended: on_done for the jobs that ended (between two
+    rounds); a round when the jobs' last post did not start one (a job ended instead); a round
+    without a late job (its thread did not get the CPU) when a held station's keep-alive is due on
+    the link's clock (on a virtual clock that never happens: the slaves' watchdogs do not run
+    while the master waits either); the run's end on a lost link or a cancel."""
     cond = run.cond
     master = run.master
-    while True:
-        with cond:
-            while not run.running <= run.posted.keys():
-                if cancel is not None and cancel.is_set():
-                    break
-                due = _next_due(master, held, within)
-                now = master.link.now()
-                if due is not None and now >= due:
-                    break                   # a late job: the round goes without it
-                cond.wait(MAX_WAIT_S if due is None else
-                          min(MAX_WAIT_S, max(MIN_WAIT_S, due - now)))
-            done, run.ended = run.ended, []
-            last = not run.running and not run.posted
-            posted = dict(sorted(run.posted.items()))
-            run.posted.clear()
-        if done:
-            ended(done)
-        if last:
-            return
-        if cancel is not None and cancel.is_set():
-            raise Stopped("cancelled")
-        answers = _round(master, posted, held, within)
-        with cond:
-            run.answers.update(answers)
-            cond.notify_all()
+    with cond:
+        while True:
+            if run.stopped is not None:
+                raise run.stopped
+            if cancel is not None and cancel.is_set():
+                raise Stopped("cancelled")
+            if run.busy:
+                cond.wait(MAX_WAIT_S)
+                continue
+            if run.ended:
+                ended, run.ended = run.ended, []
+                run.busy = True
+                cond.release()
+                try:
+                    done(ended)
+                finally:
+                    cond.acquire()
+                    run.busy = False
+                    cond.notify_all()
+                continue
+            if not run.running:
+                return
+            if run.full():
+                run.round()
+                continue
+            due = _next_due(master, run.held, run.within)
+            now = master.link.now()
+            if due is not None and now >= due:
+                run.round()                 # a late job: the round goes without it
+                continue
+            cond.wait(MAX_WAIT_S if due is None else min(MAX_WAIT_S, max(MIN_WAIT_S, due - now)))
 
 
 def _next_due(master: "Master", held: list[int], within: dict[int, float | None]) -> float | None:
