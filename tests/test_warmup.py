@@ -118,7 +118,7 @@ def test_a_broadcast_is_heard_and_not_answered():
     gc = F.encode(F.make(F.BROADCAST, 2, F.request_fc(F.SDN_HIGH), b"\x00\x00", 58, 62))
     assert bus.receive(gc, 0.0) == []
     assert bus.slave(3).warmup == 2                      # (the setting is kept)
-    req = F.encode(F.make(3, 2, F.FDL_STATUS))
+    req = F.encode(F.make(3, 2, F.request_fc(F.FDL_STATUS)))
     assert [len(bus.receive(req, 1.0 + i)) for i in range(2)] == [0, 1]
     assert bus.slave(3).stats["ignored_warmup"] == 1
 
