@@ -133,7 +133,9 @@ class SimSlave:
         it addresses the station, is executed and answered (a real ET200S left four FDL status
         requests unanswered and answered the 5th, with no other traffic on the line:
         ../shared/testdata/external/pyprofibus26-et200s-startup.txt: telegrams=4). Time alone
-        fixes nothing: a silent line keeps a station searching, as on the ASIC. Armed once by the
+        fixes nothing: a silent line keeps a station searching, as on the ASIC (which would move
+        on to the next rate after its monitoring time there; the model stays at the line's rate
+        once its search reached it). Armed once by the
         plant: a power cycle of the fault injection does not re-arm it, and the fall-back of
         Baud_Control to Baud_Search (no telegram to the station within WD_Baud_Control_Val) is
         not modelled."""
