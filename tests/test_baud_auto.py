@@ -180,13 +180,14 @@ def test_scan_on_sim_one_request_per_empty_address():
     for a in (0, 1, 4, 10):
         assert c[a].requests == 1 and c[a].retries == 0, (a, c[a])
     m.link.close()
-    # the full scan: the warm-up pass adds WARMUP_PROBES - 1 single attempts per silent address
-    # (a slave in Baud_Search; the ET200S of pyprofibus #26 answered the 5th request)
+    # the full scan: the second pass adds one single attempt per silent address (a slave in
+    # Baud_Search); it begins after the quick pass's 10 requests (0, 1, 3..10): WAKE_TELEGRAMS
+    # (10) went by, no extra pass
     m = Master(open_link("sim://?stations=3:fuji-g1"), BusParams.for_baud(19200, retries=2))
     assert [e.address for e in scan_mod.scan(m, 0, 10)] == [3]
     c = m.fdl.counters
     for a in (0, 1, 4, 10):
-        assert c[a].requests == 5 and c[a].retries == 0, (a, c[a])
+        assert c[a].requests == 2 and c[a].retries == 0, (a, c[a])
     m.link.close()
 
 

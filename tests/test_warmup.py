@@ -5,9 +5,12 @@ unanswered at 19.2 kbit/s and answered the 5th (GitHub mbuesch/pyprofibus issue 
 in ../shared/testdata/external/pyprofibus26-et200s-startup.txt, read from there, never copied). The
 five GSD files in gsd/ declare Auto_Baud_supp = 1 (the slave searches the rate: Baud_Search, IEC 61158).
 
-`sim://?warmup=3:4` makes station 3 ignore its first 4 telegrams (sim/slave.py SimSlave.warmup);
-`scan`, `diag`, `io`, the drive commands' start-up and `--baud auto` for a named station send up to
-dp/scan.py's WARMUP_PROBES (5: the pyprofibus #26 figure) FDL status requests to wake it.
+`sim://?warmup=3:4` makes station 3 miss the first 4 valid telegrams on its line, to any station
+(sim/slave.py SimSlave.baud_search: Baud_Search takes the rate from any telegram on the line);
+`diag`, `io`, the drive commands' start-up and `--baud auto` for a named station send up to
+dp/scan.py's WARMUP_PROBES (5: the pyprofibus #26 figure) FDL status requests to wake it, and a
+scan's second pass asks every silent address again after the quick pass's traffic
+(tests/test_scan_warmup.py has the scan's counts).
 """
 
 import json
@@ -107,26 +110,36 @@ def test_bad_warmup_on_the_command_line_is_one_line_exit_2():
     assert len(lines) == 1 and "warmup=3:x" in lines[0] and "Traceback" not in err
 
 
-def test_a_broadcast_is_not_counted_and_not_answered():
+def test_a_broadcast_is_heard_and_not_answered():
+    """Baud_Search takes the rate from any valid telegram on the line: a Global_Control broadcast
+    (SD2) counts as one of the 2 telegrams station 3 misses; the next request to it is the 2nd
+    (missed, no answer), the one after it the 3rd (answered)."""
     bus = build_bus("sim://?stations=3:fuji-g1&warmup=3:2")
     gc = F.encode(F.make(F.BROADCAST, 2, F.request_fc(F.SDN_HIGH), b"\x00\x00", 58, 62))
-    bus.receive(gc, 0.0)
-    assert bus.slave(3).warmup == 2
+    assert bus.receive(gc, 0.0) == []
+    assert bus.slave(3).warmup == 2                      # (the setting is kept)
+    req = F.encode(F.make(3, 2, F.request_fc(F.FDL_STATUS)))
+    assert [len(bus.receive(req, 1.0 + i)) for i in range(2)] == [0, 1]
+    assert bus.slave(3).stats["ignored_warmup"] == 1
 
 
 # -- scan ------------------------------------------------------------------------------------------
 
 def test_scan_wakes_a_station_in_baud_search_and_says_how_late():
+    """Station 3 misses 4 telegrams: at its quick-pass probe the line has carried 2 (the probes to
+    0 and 1; the master is 2), so that one is the 3rd, missed; by the second pass the line has
+    carried far more than 4: it answers its second request, after 1 unanswered."""
     m = _master("sim://?warmup=3:4")
     found = scan_mod.scan(m, 0, 126)
     assert [e.address for e in found] == [3, 4, 5, 6, 7]
     late = {e.address: e.unanswered for e in found}
-    assert late == {3: 4, 4: 0, 5: 0, 6: 0, 7: 0}            # the URL's 4
+    assert late == {3: 1, 4: 0, 5: 0, 6: 0, 7: 0}
     assert found[0].ident == 0xFD01 and found[0].diag is not None   # FUJIFD01.GSD Ident_Number
     m.link.close()
 
 
 def test_quick_scan_misses_it_one_request_per_address():
+    """Its quick-pass probe is the 3rd telegram on the line (after the probes to 0 and 1)."""
     m = _master("sim://?warmup=3:4")
     found = scan_mod.scan(m, 0, 126, quick=True)
     assert [e.address for e in found] == [4, 5, 6, 7]
@@ -134,18 +147,26 @@ def test_quick_scan_misses_it_one_request_per_address():
 
 
 def test_the_warmup_is_bounded():
-    """A slave that ignores WARMUP_PROBES requests (it would answer the 6th) is not waited for."""
-    m = _master(f"sim://?warmup=3:{scan_mod.WARMUP_PROBES}")
-    found = scan_mod.scan(m, 0, 10)
-    assert 3 not in [e.address for e in found]
-    assert m.fdl.counters[3].requests == scan_mod.WARMUP_PROBES
+    """A scan of address 3 alone: the requests to 3 are the only telegrams on the line. It is asked
+    until it has been asked once after WAKE_TELEGRAMS (10) telegrams: the requests 1..11, the 11th
+    after 10. A slave that misses 11 telegrams (it would answer the 12th) is not waited for; one
+    that misses 10 answers the 11th."""
+    m = _master(f"sim://?warmup=3:{scan_mod.WAKE_TELEGRAMS + 1}")
+    found = scan_mod.scan(m, 3, 3)
+    assert found == []
+    assert m.fdl.counters[3].requests == scan_mod.WAKE_TELEGRAMS + 1 == 11
+    m.link.close()
+    m = _master(f"sim://?warmup=3:{scan_mod.WAKE_TELEGRAMS}")
+    found = scan_mod.scan(m, 3, 3)
+    assert [(e.address, e.unanswered) for e in found] == [(3, 10)]
     m.link.close()
 
 
 def test_requests_per_empty_address_quick_and_full():
     """Hand count on an empty bus (no stations, master 2, addresses 0..126): the quick pass one FDL
-    status to each of the 126 others, the full scan WARMUP_PROBES to each."""
-    for quick, per in ((True, 1), (False, scan_mod.WARMUP_PROBES)):
+    status to each of the 126 others, the full scan two (the second pass; it begins after 126
+    telegrams, more than WAKE_TELEGRAMS: no extra)."""
+    for quick, per in ((True, 1), (False, 2)):
         m = _master("sim://?stations=")
         assert scan_mod.scan(m, 0, 126, quick=quick) == []
         assert m.link.ser.bus.stats.requests == 126 * per
@@ -155,13 +176,13 @@ def test_requests_per_empty_address_quick_and_full():
 def test_scan_text_and_json_say_the_station_answered_late():
     code, out, err = _run("scan", "--port", "sim://?warmup=3:4")
     assert code == 0, err
-    assert "station 3 answered after 4 unanswered requests (baud-rate search)" in out
+    assert "station 3 answered after 1 unanswered request (baud-rate search)" in out
     assert "station 4 answered" not in out
     code, out, err = _run("scan", "--port", "sim://?warmup=3:4", "--json")
     assert code == 0, err
     doc = json.loads(out)
     assert {s["station"]: s["unanswered_before"] for s in doc["stations"]} == \
-        {3: 4, 4: 0, 5: 0, 6: 0, 7: 0}
+        {3: 1, 4: 0, 5: 0, 6: 0, 7: 0}              # (see test_scan_wakes_...: the quick pass's one)
 
 
 # -- first contact of the other commands ------------------------------------------------------------

@@ -1,10 +1,11 @@
 """scan --watch says when a station answered only after unanswered requests (issue 26: warm-up,
 Baud_Search), in its table and its JSON Lines (`unanswered_before`, as `scan --json` has it).
 
-Expected values: the URL's count. `sim://?warmup=3:4` makes station 3 ignore its first 4 telegrams
-(sim/plant.py), so the first scan's warm-up pass finds it after exactly 4 unanswered FDL status
-requests (the quick pass's one, then 3 of the warm-up pass; dp/scan.py); every other station answers
-the first (0)."""
+Expected values by hand: `sim://?warmup=3:4` makes station 3 miss the first 4 valid telegrams on the
+line, to any station (sim/slave.py baud_search). The first scan's quick pass asks 0 and 1 (the master
+is 2), then 3: the 3rd telegram, missed; its second pass asks 3 again long after 4 telegrams: the
+answer, after exactly 1 unanswered FDL status request (dp/scan.py); every other station answers the
+first (0)."""
 
 from __future__ import annotations
 
@@ -30,7 +31,7 @@ def test_the_watched_list_keeps_how_late_each_station_answered_its_first_scan():
         w.start()
         for _ in range(3):
             w.step()
-        assert {s.address: s.unanswered_before for s in w.view().stations} == {3: 4, 6: 0}
+        assert {s.address: s.unanswered_before for s in w.view().stations} == {3: 1, 6: 0}
     finally:
         m.link.close()
 
@@ -42,7 +43,7 @@ def test_watch_json_lines_carry_unanswered_before():
     lines = [json.loads(x) for x in r.output.splitlines()]
     assert assert_stream(lines, "scan watch")[-1] == "end"          # docs/json.md, the new key in it
     for line in lines:
-        assert {s["station"]: s["unanswered_before"] for s in line["stations"]} == {3: 4, 6: 0}
+        assert {s["station"]: s["unanswered_before"] for s in line["stations"]} == {3: 1, 6: 0}
 
 
 def test_watch_table_says_the_station_answered_late():
@@ -60,5 +61,5 @@ def test_watch_table_says_the_station_answered_late():
     finally:
         m.link.close()
     rows = {line.split("│")[1].strip(): line for line in text.splitlines() if line.count("│") > 3}
-    assert "answered after 4 unanswered requests (baud-rate search)" in rows["3"]
+    assert "answered after 1 unanswered request (baud-rate search)" in rows["3"]
     assert "unanswered" not in rows["6"]

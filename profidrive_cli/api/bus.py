@@ -121,11 +121,11 @@ def make_master(link: "Link", baud: int, address: int, *, slot_time: int | None 
     from profidrive_cli.fdl.timing import BusParams
     try:
         # over real ports, widen the reply timeout for USB/OS latency (reference §4.3); the
-        # instant simulator needs none
+        # instant simulator needs none, a real port measured its own (link/margin.py)
         params = BusParams.for_baud(
             baud, slot_time=slot_time,
             retries=retries if retries is not None else (1 if link.is_simulator else 2),
-            link_latency=0.0 if link.instant else 0.02)
+            link_latency=0.0 if link.instant else getattr(link, "margin", 0.02))
         return Master(link, params, address)
     except ValueError as e:
         link.close()

@@ -81,8 +81,9 @@ def _cfg_json(cfg: bytes | None) -> list[dict[str, Any]] | None:
               help="--watch: stop after watching this many seconds, counted after the first scan "
                    "(default: until Ctrl-C).")
 @click.option("--quick", is_flag=True,
-              help="One FDL status per address, no warm-up pass: faster on an empty bus, but a slave "
-                   "still searching the baud rate is missed.")
+              help="One FDL status per address, no second pass over the silent ones: half the "
+                   "requests on an empty bus, but a slave still searching the baud rate is found "
+                   "only when the traffic before its request woke it.")
 @click.option("--save", "save_path", default=None, metavar="FILE",
               help="Record the accepted network (stations, idents, Get_Cfg, counters, reply times) "
                    "to FILE (.yaml/.yml: YAML, else JSON).")

@@ -37,6 +37,7 @@ import serial.rs485
 
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.link.base import Link, LinkLost, plain_sleep, precise_sleep
+from profidrive_cli.link.margin import measure as measure_margin
 from profidrive_cli.link.parity import ParityMarkingSerial
 
 try:
@@ -366,6 +367,9 @@ class SerialLink(Link):
         self.instant = self.bus is not None and not self.bus.wire
         # the simulator adds no latency of its own; a real port's is unknown
         self.latency = 0.0 if self.bus is not None else None
+        #: seconds a master adds to every reply timeout for this port's OS and adapter delays,
+        #: measured at open (link/margin.py); none on the simulator
+        self.margin = 0.0 if self.bus is not None else measure_margin(self.ser, self.name)
         # only the simulator keeps µs timing: ptys, USB adapters and TCP converters add a
         # millisecond or more of their own, so waits there sleep instead of spinning
         self.us_timing = self.bus is not None

@@ -16,6 +16,11 @@ With wire timing the bus also checks the master: a request that starts less than
 the end of the last telegram counts in stats.tsyn_violations, one that starts while a reply is still
 due (before its last octet) in stats.collisions.
 
+Every station on the line hears every valid telegram on it (Baud_Search, sim/slave.py
+SimSlave.baud_search: a station still searching the rate takes it from any telegram, not only one
+addressed to it): the bus counts them in one Line (requests, broadcasts, the stations' replies;
+SD1/SD2/SD3 only) and a searching station reads the count when a telegram addresses it.
+
 Fault injection (a FaultPlan, sim/faults.py) corrupts, drops, delays or misaddresses replies,
 power-cycles or trips stations, and puts a lone noise octet 0xE5 (phantom) where no station answers;
 every injection is counted in the plan.
@@ -40,13 +45,14 @@ from typing import TYPE_CHECKING, Any, Callable, ContextManager, Iterator
 
 from profidrive_cli.fdl import frames as F
 from profidrive_cli.fdl.timing import TSYN_BITS, BusParams
-from profidrive_cli.sim.slave import DATA_EXCH, SimSlave, TickLog
+from profidrive_cli.sim.slave import DATA_EXCH, Line, SimSlave, TickLog
 
 if TYPE_CHECKING:
     from profidrive_cli.sim.control import Controller
     from profidrive_cli.sim.faults import FaultPlan
 
 TIMINGS = ("instant", "wire", "virtual")
+_SC = F.SC
 #: seconds of bus time after which every station's next due time is asked again (a safety net for a
 #: station changed from outside the bus, e.g. a watchdog armed by hand)
 RESYNC_S = 1.0
@@ -98,6 +104,8 @@ class SimBus:
             raise ValueError(f"timing must be one of {', '.join(TIMINGS)}, got {timing!r}")
         #: the bus's clock ticks (what a station not run at some of them makes up for)
         self.ticks = TickLog()
+        #: the valid telegrams that went by on this line (what a station in Baud_Search hears)
+        self.line = Line()
         self._queue: list[tuple[float, int, SimSlave]] = []     # (due, order, station)
         self._order = count()
         self._members: list[SimSlave] = []
@@ -199,6 +207,7 @@ class SimBus:
             if not s.plugged:
                 s.plugged = True
                 s.ticks = self.ticks
+                s.join(self.line)
                 s.ticked_at = max(s.ticked_at, last)
                 s.queued = None               # (an entry from before it left is not its own now)
             self.schedule(s)
@@ -315,8 +324,13 @@ class SimBus:
                 out.append(reply)
 
     def _dispatch(self, req: F.Frame, t: float) -> Reply | None:
+        line = self.line
         if req.sd in (F.SC, F.SD4) or not req.is_request:
-            return None          # tokens, replies of other stations: nothing for a slave to do
+            # tokens, replies of other stations: nothing for a slave to do; a reply is still a
+            # valid telegram on the line (Baud_Search: sim/slave.py Line)
+            if req.sd != F.SC and req.sd != F.SD4:
+                line.telegrams += 1
+            return None
         self.stats.requests += 1
         if self.faults is not None and self.faults.unplugs:
             touched = [s for a in self.faults.unplugs if (s := self._slaves.get(a)) is not None]
@@ -348,19 +362,26 @@ class SimBus:
             self.schedule(s)
             if req.da != F.BROADCAST:
                 reply, answering = r, s
+        # every station on the line heard it (counted after they handled it: a station in
+        # Baud_Search compares the telegrams before this one)
+        line.telegrams += 1
         if reply is None:
             return None
         assert answering is not None        # the station that gave the reply
         start = t + (answering.reply_delay_bits / self.params.baud if self.wire else 0.0)
         late = False
+        heard = reply[0] != _SC
         if self.faults is not None:
             res = self.faults.on_reply(self, req, reply, t)
             if res is None:
                 return None
+            heard = heard and res[0] == reply          # (a corrupted reply is no valid telegram)
             reply, extra = res
             if extra:
                 start += extra
                 late = True
+        if heard:
+            line.telegrams += 1           # the reply, an SD1 or SD2 telegram on the line
         self.stats.replies += 1
         if self.log is not None:
             self.log.append((start, "S", reply))

@@ -20,8 +20,13 @@
                                              set=7:d5-01=1: the simulated SI-P1 in torque control
     sim://?faults=6:E01,E05                  station 6's fault history pre-filled (repeat the key per station)
     sim://?warmup=3:4,5:2                    station 3 still searches the baud rate (Baud_Search): it
-                                             ignores its first 4 telegrams and answers from the 5th
-                                             (station 5: from the 3rd); sim/slave.py SimSlave.warmup
+                                             misses the first 4 valid telegrams on the line (to any
+                                             station, its own included) and takes the rate from the
+                                             5th, which it answers when it is addressed (station 5:
+                                             from the 3rd); sim/slave.py SimSlave.baud_search
+    sim://?warmup=3:0.5s                     station 3's search reaches the line's rate 0.5 s after
+                                             power-on (the bus's clock): it takes the rate from the
+                                             first valid telegram after that
     sim://?firstcontact=3,5                  stations 3 and 5 keep the first-contact rule of a Siemens
                                              CBP2 drive board (kolod/profibus): from a master they
                                              keep no frame count for (after power-on), an SRD/SDA is
@@ -67,8 +72,10 @@ if TYPE_CHECKING:
 DEFAULT_PLANT = ((3, "fuji-g1"), (4, "fuji-pdp3"), (5, "toyo"), (6, "moeller"), (7, "yaskawa"))
 KNOWN_KEYS = {"stations", "baud", "timing", "trip", "faults", "tsdr", "seed", "set", "warmup",
               "firstcontact", "learn"}
-#: the most telegrams a station of warmup= may ignore (a bound for the URL, not a device figure)
+#: the most telegrams a station of warmup= may miss, and the longest search in seconds (bounds for
+#: the URL, not device figures)
 MAX_WARMUP = 1000
+MAX_WARMUP_S = 3600.0
 TIMINGS = ("instant", "wire", "virtual")
 
 
@@ -154,20 +161,31 @@ def _per_station(values: list[str], key: str) -> dict[int, list[str]]:
     return out
 
 
-def _warmups(values: list[str]) -> dict[int, int]:
-    """warmup=ADDR:COUNT[,ADDR:COUNT...] (the key may repeat) -> {address: telegrams ignored}."""
-    out: dict[int, int] = {}
+def _warmups(values: list[str]) -> dict[int, tuple[int, float]]:
+    """warmup=ADDR:COUNT or ADDR:SECONDSs [,...] (the key may repeat) -> {address: (telegrams
+    missed, seconds of search)}."""
+    out: dict[int, tuple[int, float]] = {}
     for v in values:
         for item in filter(None, (t.strip() for t in v.split(","))):
-            addr, colon, count = item.partition(":")
+            addr, colon, what = item.partition(":")
+            what = what.strip()
+            a, n, sec = -1, -1, -1.0
             try:
-                a, n = int(addr), int(count)
+                a = int(addr)
+                if what.lower().endswith("s"):
+                    n, sec = 0, float(what[:-1])
+                else:
+                    n, sec = int(what), 0.0
             except ValueError:
-                a, n = -1, -1
-            if not colon or not 0 <= a <= 125 or not 0 <= n <= MAX_WARMUP:
-                raise UsageError(f"sim URL: warmup={v} must be ADDRESS:COUNT[,ADDRESS:COUNT...] with "
-                                 f"address 0..125 and count 0..{MAX_WARMUP}, e.g. warmup=3:4")
-            out[a] = n
+                pass
+            if (not colon or not 0 <= a <= 125 or not 0 <= n <= MAX_WARMUP
+                    or not 0.0 <= sec <= MAX_WARMUP_S):        # (NaN fails too)
+                raise UsageError(f"sim URL: warmup={v} must be ADDRESS:COUNT or ADDRESS:SECONDSs"
+                                 f"[,...] with address 0..125, count 0..{MAX_WARMUP} (valid "
+                                 f"telegrams on the line the station misses) or seconds "
+                                 f"0..{MAX_WARMUP_S:g} (its search time), e.g. warmup=3:4 or "
+                                 f"warmup=3:0.5s")
+            out[a] = (n, sec)
     return out
 
 
@@ -312,10 +330,11 @@ def build_bus(url: str, now: float = 0.0, default_baud: int = 19200) -> SimBus:
     for a in set(trips) | set(seeded):
         if a not in addrs:
             raise UsageError(f"sim URL: no station {a} to trip or seed faults")
-    for a, n in warmups.items():
+    for a, (n, sec) in warmups.items():
         if a not in addrs:
-            raise UsageError(f"sim URL: warmup={a}:{n}: no station {a} on the bus")
-        addrs[a].warmup = n
+            what = f"{sec:g}s" if sec else str(n)
+            raise UsageError(f"sim URL: warmup={a}:{what}: no station {a} on the bus")
+        addrs[a].baud_search(n, sec, now)
     for a in sorted(first_contacts):
         if a not in addrs:
             raise UsageError(f"sim URL: firstcontact={a}: no station {a} on the bus")

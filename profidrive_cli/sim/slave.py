@@ -55,6 +55,22 @@ class TickLog:
         return times[max(lo, hi - self.KEEP):hi]
 
 
+class Line:
+    """What every station on one simulated line hears: how many valid telegrams went by -- SD1, SD2
+    or SD3, complete and error-free, from any station to any station (requests, the stations'
+    replies, broadcasts); not an SD4 token nor the one-octet SC, which a station in Baud_Search
+    does not take a rate from (see SimSlave.baud_search).
+
+    The bus counts (sim/bus.py); a station still searching the rate reads the count when a telegram
+    addresses it. So every station is told of every telegram for one addition per telegram on the
+    bus, whatever the number of stations."""
+
+    __slots__ = ("telegrams",)
+
+    def __init__(self) -> None:
+        self.telegrams = 0
+
+
 class SimSlave:
     def __init__(self, address: int, model: SlaveModel | LazyModel, set_slave_add_supported: bool = False,
                  response_bits: int | None = None):
@@ -70,12 +86,19 @@ class SimSlave:
         self.stats = {"requests": 0, "repeats": 0, "prm_rejected": 0, "cfg_rejected": 0,
                       "watchdog_expired": 0, "data_exchange": 0, "power_cycles": 0, "trips": 0,
                       "ignored_warmup": 0, "ignored_first_contact": 0}
-        #: Baud_Search (IEC 61158; Auto_Baud_supp = 1 in the GSD files of gsd/): the station still
-        #: searches the baud rate and ignores this many more valid telegrams addressed to it at its
-        #: rate (no answer at all), then answers (sim://?warmup=3:4; a real ET200S answered the 5th
-        #: FDL status request, ../shared/testdata/external/pyprofibus26-et200s-startup.txt). Set by
-        #: the plant once, at start: a power cycle of the fault injection does not re-arm it.
+        #: Baud_Search (see baud_search()): the valid telegrams on the line this station misses while
+        #: it searches the rate, and the seconds its search takes to reach the line's rate (0: no
+        #: such condition); both set by the plant (sim://?warmup=3:4, warmup=3:0.5s)
         self.warmup = 0
+        self.warmup_s = 0.0
+        #: still searching the rate: nothing is executed or answered
+        self.searching = False
+        self._search_t0 = 0.0           # when the search began (the station's power-on)
+        #: the line this station sits on (set by sim/bus.py; None: a station on its own, which
+        #: hears only the telegrams handed to handle())
+        self.line: Line | None = None
+        self.joined_at_telegram = 0     # line.telegrams when the station joined the line
+        self._heard_alone = 0           # telegrams handed to handle() while on no line
         #: the first-contact rule of a Siemens CBP2 drive board (sim://?firstcontact=3; kolod/profibus,
         #: profibus_debug/diagnostics.py): an SRD/SDA from a master the station keeps no frame count
         #: for (after power-on, or another master) is executed only when it starts a sequence, FCV=0
@@ -90,6 +113,59 @@ class SimSlave:
         self.queued: float | None = None
         self.plugged = False
         self.power_on(0.0)
+
+    # -- Baud_Search ----------------------------------------------------------------------------
+    def baud_search(self, telegrams: int = 0, seconds: float = 0.0, now: float = 0.0) -> None:
+        """The station starts (at `now`, its power-on) still searching the baud rate.
+
+        Baud_Search / Baud_Control as the DP slave ASICs implement them (the SPC3 described in the
+        ProSoft MVI46-PDPS manual, "Automatic Baud Rate Identification"; the state names in Lenze's
+        8400 motec PROFIBUS manual, code C13861; the profibus-dp-reference has only the GSD key
+        Auto_Baud_supp, which the GSD files of gsd/ set to 1): after power-on the station listens
+        at one rate after the other, highest first, each for a monitoring time; the first SD1, SD2
+        or SD3 telegram it receives complete and error-free at a rate fixes that rate -- a
+        telegram from any station to any station, not only one addressed to it -- and it goes to
+        Baud_Control. Telegrams that go by while it listens at other rates are lost to it.
+
+        Modelled as: the station misses the first `telegrams` valid telegrams on its line (they
+        went by while it listened at other rates) and its search reaches the line's rate `seconds`
+        after power-on; with both conditions met, the next valid telegram fixes the rate and, when
+        it addresses the station, is executed and answered (a real ET200S left four FDL status
+        requests unanswered and answered the 5th, with no other traffic on the line:
+        ../shared/testdata/external/pyprofibus26-et200s-startup.txt: telegrams=4). Time alone
+        fixes nothing: a silent line keeps a station searching, as on the ASIC (which would move
+        on to the next rate after its monitoring time there; the model stays at the line's rate
+        once its search reached it). Armed once by the
+        plant: a power cycle of the fault injection does not re-arm it, and the fall-back of
+        Baud_Control to Baud_Search (no telegram to the station within WD_Baud_Control_Val) is
+        not modelled."""
+        self.warmup = max(0, telegrams)
+        self.warmup_s = max(0.0, seconds)
+        self.searching = self.warmup > 0 or self.warmup_s > 0.0
+        self._search_t0 = now
+        self._heard_alone = 0
+        self.joined_at_telegram = self.line.telegrams if self.line is not None else 0
+
+    def join(self, line: Line) -> None:
+        """The station is put on `line` (sim/bus.py): its count of telegrams heard starts here."""
+        if self.line is not line:
+            self.line = line
+            self.joined_at_telegram = line.telegrams
+
+    def telegrams_heard(self) -> int:
+        """Valid telegrams on the line since the station joined it (on its own: those handed to
+        handle() while it searched)."""
+        line = self.line
+        return line.telegrams - self.joined_at_telegram if line is not None else self._heard_alone
+
+    def _rate_found(self, now: float) -> bool:
+        """Baud_Search, at a valid telegram (not counted yet): True when this one fixes the rate."""
+        if self.telegrams_heard() >= self.warmup and now - self._search_t0 >= self.warmup_s:
+            self.searching = False
+            return True
+        if self.line is None:
+            self._heard_alone += 1
+        return False
 
     @property
     def reply_delay_bits(self) -> int:
@@ -251,11 +327,9 @@ class SimSlave:
     def handle(self, req: F.Frame, now: float) -> bytes | None:
         if not self.powered:
             return None
-        if self.warmup > 0:
-            # still searching the rate: nothing is executed or answered (a broadcast is not counted:
-            # the count is of telegrams addressed to this station)
+        if self.searching and not self._rate_found(now):
+            # still searching the rate: nothing is executed or answered
             if req.da == self.address:
-                self.warmup -= 1
                 self.stats["ignored_warmup"] += 1
             return None
         self.tick(now)
