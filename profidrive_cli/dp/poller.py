@@ -27,8 +27,8 @@ from typing import Callable, Literal, overload
 from profidrive_cli import BusError
 from profidrive_cli.dp import services as S
 from profidrive_cli.dp.dx_fast import exchange_fast
-from profidrive_cli.dp.station import (CFG_FAULT, LOCKED, PRM_FAULT, RELEASED, STATE_WORDS, DpRequest,
-                                       Event, SlaveConfig, StationMachine)
+from profidrive_cli.dp.station import (CFG_FAULT, DATA_EXCH, LOCKED, PRM_FAULT, RELEASED, STATE_WORDS,
+                                       DpRequest, Event, SlaveConfig, StationMachine)
 from profidrive_cli.fdl import frames as F
 from profidrive_cli.fdl.master import MORE, REPLY, FdlMaster, Outcome, format_counters
 from profidrive_cli.fdl.timing import BusParams
@@ -145,21 +145,35 @@ class Master:
     def _await(self, da: int, dx: Literal[False] = False) -> Outcome: ...
 
     @overload
-    def _await(self, da: int, dx: bool) -> Outcome | bytes: ...
+    def _await(self, da: int, dx: bool,
+               first: tuple[bytes, float, bytes | Literal["more"] | None] | None = None
+               ) -> Outcome | bytes: ...
 
-    def _await(self, da: int, dx: bool = False) -> Outcome | bytes:
+    def _await(self, da: int, dx: bool = False,
+               first: tuple[bytes, float, bytes | Literal["more"] | None] | None = None
+               ) -> Outcome | bytes:
         """Wait for the reply to the request just sent (retrying it) until it has an outcome.
         dx: a request from FdlMaster.dx_request; its expected reply is taken by the fast check
-        (then the input octets are returned), anything else by the general engine."""
+        (then the input octets are returned), anything else by the general engine. first: the
+        first read already made and given to the fast check (dx_fast.py: chunk, its time, what
+        dx_feed said), carried on from there."""
         waited_for = 0       # length of the telegram whose rest was already waited for
         fdl = self.fdl
         reads = 0
         while True:
-            chunk = self.link.read(fdl.deadline)
-            now = self.link.now()
+            res: Outcome | bytes | Literal["more"] | None
+            if first is not None:
+                chunk, now, res = first
+                first = None
+                fed = True
+            else:
+                chunk = self.link.read(fdl.deadline)
+                now = self.link.now()
+                fed = False
             reads += 1
             if chunk:
-                res: Outcome | bytes | Literal["more"] | None = fdl.dx_feed(chunk, now) if dx else None
+                if not fed:
+                    res = fdl.dx_feed(chunk, now) if dx else None
                 if res is None:
                     res = fdl.feed(chunk, now)
                 elif res is MORE:
@@ -378,7 +392,24 @@ class Master:
         """One Data_Exchange with a station in data exchange; restarts it if it dropped out."""
         st = self.stations[address]
         if outputs is not None:
-            st.set_outputs(outputs)
+            if type(outputs) is bytes and len(outputs) == st.output_len:
+                st.outputs = outputs
+            else:
+                st.set_outputs(outputs)
+        if self.fast_dx and st.state == DATA_EXCH and (not self.kept or address in self.kept):
+            # the cycle of a station in data exchange, as step() decides it (a kept station's own
+            # cycle lets no keep-alive go first): the fast path when its Data_Exchange is due
+            now = self.link.now()
+            if not st._diag_due and now >= st.wait_until:
+                st.fresh_inputs = False
+                self._last_req[address] = now
+                exchange_fast(self, st)
+                if st.fresh_inputs and st.state == DATA_EXCH:
+                    return st.inputs
+                if st.state == "absent" or not (st.in_data_exchange or st.fresh_inputs):
+                    self.bring_up(address)
+                    self.step(st)
+                return st.inputs
         if not st.in_data_exchange:
             self.bring_up(address)
         st.fresh_inputs = False

@@ -40,6 +40,12 @@ MORE: Final = "more"       # dx_feed(): the beginning of the expected reply, wai
 
 #: FCS + ED for every FCS value (the fast path's request tail)
 _TAILS = tuple(bytes((i, F.ED)) for i in range(256))
+#: the Data_Exchange request's FC by MasterFcb state (MasterFcb.fc, as dx_request reads it inline):
+#: the first after a (re)start, then FCB set / clear, FCV set
+_DX_FC_FIRST: Final = F.request_fc(F.SRD_HIGH, fcb=True, fcv=False)
+_DX_FC_FCB: Final = F.request_fc(F.SRD_HIGH, fcb=True, fcv=True)
+_DX_FC_NO_FCB: Final = F.request_fc(F.SRD_HIGH, fcb=False, fcv=True)
+_ED: Final = F.ED
 
 
 @dataclass
@@ -194,7 +200,8 @@ class FdlMaster:
         fcb = self._fcb.get(da)
         if fcb is None:
             fcb = self._fcb[da] = MasterFcb()
-        fc = fcb.fc(F.SRD_HIGH)
+        # fcb.fc(F.SRD_HIGH), inline (the per-cycle path)
+        fc = (_DX_FC_FCB if fcb._fcb else _DX_FC_NO_FCB) if fcb._started else _DX_FC_FIRST
         p = self.params
         if self._dx_params is not p:
             self._dx_cache.clear()
@@ -252,7 +259,7 @@ class FdlMaster:
                 return MORE
             return None
         end = t.reply_data_end
-        if not got.startswith(head) or got[end + 1] != F.ED:
+        if not got.startswith(head) or got[end + 1] != _ED:
             return None
         inputs = got[len(head):end]
         if (t.reply_fcs + sum(inputs)) & 0xFF != got[end]:
@@ -260,7 +267,9 @@ class FdlMaster:
         if buf:
             buf.clear()
         da = self._da
-        self._fcb[da].confirm()
+        fcb = self._fcb[da]                 # fcb.confirm(), inline (the per-cycle path)
+        fcb._started = True
+        fcb._fcb = not fcb._fcb
         if self._retries or self._illegal:
             c = self.counters[da]
             c.retries += self._retries
