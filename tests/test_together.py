@@ -40,9 +40,11 @@ class Clock:
 class Script:
     """The part of dp.poller.Master a run uses: exchange, last_request, stations, link.now."""
 
-    def __init__(self, addresses, wd_ms=None, step=0.01, tick=0.0):
+    def __init__(self, addresses, wd_ms=None, step=0.01, tick=0.0, baud=1500000):
         self.link = Clock(tick)
-        self.stations = {a: SimpleNamespace(config=SimpleNamespace(wd_ms=wd_ms), in_data_exchange=True)
+        self.params = SimpleNamespace(baud=baud)
+        self.stations = {a: SimpleNamespace(config=SimpleNamespace(wd_ms=wd_ms), in_data_exchange=True,
+                                            output_len=12, input_len=12)
                          for a in addresses}
         self.log: list[tuple[int, bytes | None]] = []
         self.last: dict[int, float] = {}
@@ -214,6 +216,46 @@ def test_on_done_comes_between_rounds_as_each_job_ends():
     run_together(m, chs, {3: counting(chs[3], 3, 30), 4: counting(chs[4], 1, 40)}, on_done=done)
     # 4 ends after round 1 (2 exchanges so far), 3 after round 3 (2 + 1 + 1)
     assert order == [(4, 2, [bytes([4, 40, 0])]), (3, 4, [bytes([3, 30, i]) for i in range(3)])]
+
+
+def test_the_window_is_what_a_quarter_second_round_carries():
+    from profidrive_cli.session.together import MAX_JOBS, window
+    # by hand (reference §1, §4.1: 11 bit a character, min TSDR 11, TID1 37): a PPO1 Data_Exchange
+    # is 2 x 21 x 11 + 11 + 37 = 510 bit: 26.6 ms at 19.2k (9 in 0.25 s), 53.1 ms at 9.6k (4),
+    # 0.34 ms at 1.5M (all, up to MAX_JOBS)
+    twelve = list(range(3, 15))
+    assert window(Script(twelve, baud=19200), twelve) == 9
+    assert window(Script(twelve, baud=9600), twelve) == 4
+    assert window(Script(twelve, baud=1500000), twelve) == 12
+    many = list(range(0, 100))
+    assert window(Script(many, baud=1500000), many) == MAX_JOBS
+    assert window(Script([3], baud=9600), [3]) == 1
+
+
+def test_no_more_jobs_run_at_once_than_the_window():
+    twelve = list(range(3, 15))
+    m = Script(twelve, baud=9600)                         # a window of 4 (above)
+    chs = channels(twelve)
+    at_once = {"now": 0, "most": 0}
+    lock = threading.Lock()
+
+    def job(a):
+        def run():
+            with lock:
+                at_once["now"] += 1
+                at_once["most"] = max(at_once["most"], at_once["now"])
+            try:
+                return [chs[a].exchange(bytes([a, i])) for i in range(3)]
+            finally:
+                with lock:
+                    at_once["now"] -= 1
+        return run
+    out = run_together(m, chs, {a: job(a) for a in twelve})
+    assert all(o.ok for o in out.values()) and at_once["most"] == 4
+    # each station's three exchanges, in order; the first round carries the first four stations
+    for a in twelve:
+        assert [o for x, o in m.log if x == a] == [bytes([a, i]) for i in range(3)]
+    assert [a for a, _ in m.log[:4]] == [3, 4, 5, 6]
 
 
 def test_no_jobs_and_a_missing_channel():

@@ -17,6 +17,10 @@ job starts (a late job, below).
 Rules, each written here once:
 - unpaced while the jobs run: a round goes as soon as it is full (the wire, the slaves' answers and
   the CPU are the pace); the jobs' own cycle rates do not apply.
+- a window: at most as many jobs at once as one round of ROUND_S (0.25 s) on the wire carries, and
+  never more than MAX_JOBS threads; the others start, in address order, as jobs end. A longer round
+  would stretch each job's transactions past their own timeouts (a line of 30 drives at 9.6 kbit/s
+  would take 1.6 s a round).
 - the keep rule holds (dp.poller.keep_within: a quarter of the DP watchdog): a station whose job has
   ended or has not posted yet (its thread did not get the CPU) gets a Data_Exchange with its last
   outputs once its last request is that old; a round waits for a late job only until then, then
@@ -41,6 +45,7 @@ from typing import TYPE_CHECKING, Generic, TypeVar
 
 from profidrive_cli import BusError
 from profidrive_cli.dp.poller import keep_within
+from profidrive_cli.fdl.timing import wire_time_data_exchange
 from profidrive_cli.link.base import LinkLost
 
 if TYPE_CHECKING:                                   # pragma: no cover
@@ -49,6 +54,12 @@ if TYPE_CHECKING:                                   # pragma: no cover
 
 T = TypeVar("T")
 
+#: the longest round the run lets grow on the wire (the window of jobs at once), seconds: an eighth
+#: of the 2 s a PKW request waits for its answer (drives/profidrive/pkw.py), which comes a round
+#: or two after the request; at 19.2 kbit/s 9 PPO1 stations, at 1.5 Mbit/s the whole line
+ROUND_S = 0.25
+#: and the most jobs (threads) at once, whatever the rate
+MAX_JOBS = 32
 #: the shortest and longest single wait for a late job, real seconds (it is waited for until a held
 #: station's keep-alive is due on the link's clock; the wait is cut in pieces of at most MAX_WAIT_S)
 MIN_WAIT_S = 0.001
@@ -207,16 +218,24 @@ def run_together(master: "Master", channels: Mapping[int, "MeteredChannel"],
             for a in addresses:
                 on_done(a, outcomes.get(a, Outcome(error=Stopped("the job did not end"))))
 
+    waiting = list(jobs.items())
+    width = window(master, list(jobs))
+
+    def start() -> None:
+        """Start jobs (address order) while fewer than `width` run (with run.cond held)."""
+        while waiting and len(run.running) < width:
+            a, job = waiting.pop(0)
+            run.running.add(a)
+            t = threading.Thread(target=work, args=(a, job), name=f"pdrive-station-{a}", daemon=True)
+            threads.append(t)
+            t.start()
+
     for a in jobs:
         channels[a].inner = LockstepChannel(run, a)
     try:
         with run.cond:
-            run.running = set(jobs)
-        for a, job in jobs.items():
-            t = threading.Thread(target=work, args=(a, job), name=f"pdrive-station-{a}", daemon=True)
-            threads.append(t)
-            t.start()
-        _watch(run, done, cancel)
+            start()
+        _watch(run, done, cancel, start)
     except BaseException as e:
         with run.cond:
             run.stopped = run.stopped or e
@@ -234,6 +253,28 @@ def run_together(master: "Master", channels: Mapping[int, "MeteredChannel"],
     return {a: outcomes.get(a, Outcome(error=Stopped("the job did not end"))) for a in jobs}
 
 
+def window(master: "Master", addresses: list[int]) -> int:
+    """How many jobs run at once: as many stations as one round of at most ROUND_S on the wire
+    carries (their Data_Exchanges at the bus rate), at least one, at most MAX_JOBS. A longer round
+    would stretch each job's own transactions past their timeouts (a PKW request waits 2 s for its
+    answer, which comes a round or two later) and hold more threads than a line needs: the others
+    wait for a job to end, their stations held in data exchange by the keep rule."""
+    baud = master.params.baud
+    width = 0
+    total = 0.0
+    for a in sorted(addresses):
+        st = master.stations.get(a)
+        if st is None:
+            t = 0.0
+        else:
+            t = wire_time_data_exchange(baud, st.output_len, st.input_len)
+        if width and total + t > ROUND_S:
+            break
+        total += t
+        width += 1
+    return max(1, min(MAX_JOBS, width))
+
+
 def _within(master: "Master", address: int) -> float | None:
     """How old the station's last request may get: its watchdog's keep rule (not its own cycle
     period: while the jobs run, a station waiting for its turn needs only to stay in data
@@ -242,7 +283,8 @@ def _within(master: "Master", address: int) -> float | None:
     return keep_within(st.config.wd_ms if st is not None else None)
 
 
-def _watch(run: _Run, done: Callable[[list[int]], None], cancel: threading.Event | None) -> None:
+def _watch(run: _Run, done: Callable[[list[int]], None], cancel: threading.Event | None,
+           start: Callable[[], None] = lambda: None) -> None:
     """The caller's part, until every job has ended: on_done for the jobs that ended (between two
     rounds); a round when the jobs' last post did not start one (a job ended instead); a round
     without a late job (its thread did not get the CPU) when a held station's keep-alive is due on
@@ -269,6 +311,7 @@ def _watch(run: _Run, done: Callable[[list[int]], None], cancel: threading.Event
                     cond.acquire()
                     run.busy = False
                     cond.notify_all()
+                start()                     # the next jobs in their place
                 continue
             if not run.running:
                 return
@@ -328,4 +371,4 @@ def _round(master: "Master", posted: dict[int, bytes], held: list[int],
     return answers
 
 
-__all__ = ["LockstepChannel", "Outcome", "Stopped", "run_together"]
+__all__ = ["LockstepChannel", "MAX_JOBS", "Outcome", "ROUND_S", "Stopped", "run_together", "window"]
