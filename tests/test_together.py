@@ -157,13 +157,8 @@ def test_a_bus_error_goes_to_its_own_job_only():
     assert out[5].ok
 
 
-def test_a_lost_link_ends_every_job_and_is_raised():
-    m = Script([3, 4, 5])
-    chs = channels([3, 4, 5])
-    own = {a: c.inner for a, c in chs.items()}
-    m.fail[5] = LinkLost("gone", "sim://")
-    seen = {}
-
+def endless(chs, seen):
+    """Jobs of 100 exchanges each that note what ended them in seen[address]."""
     def job(a):
         def run():
             try:
@@ -172,6 +167,16 @@ def test_a_lost_link_ends_every_job_and_is_raised():
                 seen[a] = e
                 raise
         return run
+    return job
+
+
+def test_a_lost_link_ends_every_job_and_is_raised():
+    m = Script([3, 4, 5])
+    chs = channels([3, 4, 5])
+    own = {a: c.inner for a, c in chs.items()}
+    m.fail[5] = LinkLost("gone", "sim://")
+    seen = {}
+    job = endless(chs, seen)
     with pytest.raises(LinkLost):
         run_together(m, chs, {a: job(a) for a in (3, 4, 5)})
     # every job ended by the lost link: none ran on; the channels are the stations' own again
@@ -185,15 +190,7 @@ def test_an_interrupt_in_the_callers_thread_stops_every_job():
     m = Script([3, 4])
     chs = channels([3, 4])
     seen = {}
-
-    def job(a):
-        def run():
-            try:
-                return [chs[a].exchange(b"x") for _ in range(100)]
-            except BaseException as e:
-                seen[a] = e
-                raise
-        return run
+    job = endless(chs, seen)
 
     def done(a, outcome):
         raise KeyboardInterrupt
