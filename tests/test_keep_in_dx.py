@@ -306,3 +306,25 @@ def test_checklist_together_raises_the_watchdog_to_three_rounds_of_its_group(sim
         assert any(f"watchdog raised from {WATCHDOG_MS} ms to {expect_ms:g} ms" in w
                    for w in st["identity"].get("warnings", [])), st["identity"]
     assert all(s.stats["watchdog_expired"] == 0 for s in bus.slaves.values())
+
+
+def test_the_cycle_of_a_station_not_kept_lets_the_kept_ones_have_their_keep_alive():
+    """Master.exchange of a station in data exchange that is not kept (issue 38: exchange() takes
+    the fast path itself, as step() decides): a kept station that is due gets its keep-alive
+    first, so over 2 s (four watchdogs) of cycles of station 4 alone, station 3 never goes a
+    watchdog without a Data_Exchange."""
+    m = _master()
+    bus = m.link.bus
+    bus.log = []
+    cfgs = _configs(m)
+    for a in (3, 4):
+        m.add_station(a, cfgs[a])
+        m.bring_up(a)
+    m.keep(3)
+    end = m.link.now() + 4 * WATCHDOG_MS / 1000.0
+    while m.link.now() < end:
+        m.exchange(4)
+    m.exchange(3)
+    spans = no_dx_spans(bus.log, 9600)
+    assert spans[3] < WATCHDOG_MS / 1000.0, spans
+    assert m.stations[3].counters.reparams == 0 and m.stations[3].in_data_exchange
