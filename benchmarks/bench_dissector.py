@@ -77,11 +77,12 @@ VALUES = ("changing", "realistic")
 # the yaskawa's status: running, ready, remote (0x0421), + frequency agree (bit 4)
 ZSW_CHANGING = (0x0237, 0x0337, 0x02B7, 0x0737)
 YASKAWA_STATUS = (0x0421, 0x0431)
+LITTLE_ENDIAN = ("toyo",)               # the toyo's PPO words are little endian (its profile)
 
 
-def _area(n: int, word0: int, word1: int, pkw: bytes) -> bytes:
+def _area(n: int, word0: int, word1: int, pkw: bytes, order: str = ">") -> bytes:
     if n == 12:                                     # PPO1: PKW 8, STW/ZSW, HSW/HIW
-        return pkw + struct.pack(">HH", word0, word1)
+        return pkw + struct.pack(order + "HH", word0, word1)
     body = struct.pack(">HH", word0, word1) + bytes(n - 4)    # yaskawa extended1: command + reference
     return body
 
@@ -109,14 +110,17 @@ def telegrams(seconds: float, values: str = "realistic"):
         else:
             setpoint = actual = ((cycle // 3) % 4096) * 4   # changes every third cycle
             zsw = 0x0237
-        for addr, _, n in PLANT:
+        for addr, name, n in PLANT:
+            # the changing capture writes each drive's words in its own order (toyo: little endian)
+            order = "<" if changing and name in LITTLE_ENDIAN else ">"
             pkw_req = pkw_res = bytes(8)
             if n == 12 and cycle % 50 == 0 and addr == 3 + (cycle // 50) % 4:
-                pkw_req = struct.pack(">HHHH", 0x1000 | 3, 0, 0, 0)           # AK 1: read PNU 3
-                pkw_res = struct.pack(">HHHH", 0x1000 | 3, 0, 0, 5000)        # AK 1: value 5000
+                pkw_req = struct.pack(order + "HHHH", 0x1000 | 3, 0, 0, 0)      # AK 1: read PNU 3
+                pkw_res = struct.pack(order + "HHHH", 0x1000 | 3, 0, 0, 5000)   # AK 1: value 5000
             fcb = 0x20 if cycle % 2 else 0
             if n == 12:
-                out, inp = _area(n, 0x047F, setpoint, pkw_req), _area(n, zsw, actual, pkw_res)
+                out = _area(n, 0x047F, setpoint, pkw_req, order)
+                inp = _area(n, zsw, actual, pkw_res, order)
             elif changing:
                 out = _area(n, 0x0001, setpoint, pkw_req)                     # forward run
                 inp = _yaskawa_response(YASKAWA_STATUS[(cycle // 5) % 2], actual, setpoint,
