@@ -252,9 +252,17 @@ local function station_table()
   return TABLE
 end
 
+-- the preferences, read once (each read is a call into Wireshark) and again when they change
+local PREFS = nil
+local function prefs()
+  if PREFS == nil then PREFS = { stations = p_pd.prefs.stations or "", generic = p_pd.prefs.generic } end
+  return PREFS
+end
+function p_pd.prefs_changed() PREFS = nil end
+
 local pref_cache_text, pref_cache = nil, {}
 local function pref_stations()
-  local text = p_pd.prefs.stations or ""
+  local text = prefs().stations
   if text == pref_cache_text then return pref_cache end
   pref_cache_text, pref_cache = text, {}
   local t = station_table()
@@ -330,9 +338,9 @@ if band == nil then
   end
 end
 
+-- v with 4 decimals, trailing zeros and point dropped ("%.4f" always has the point)
 local function fmt_num(v)
-  local s = string.format("%.4f", v):gsub("0+$", ""):gsub("%.$", "")
-  return s
+  return (string.match(string.format("%.4f", v), "^(.-)%.?0*$"))
 end
 
 local function bit_list(word, names, width)
@@ -344,8 +352,8 @@ local function bit_list(word, names, width)
 end
 
 local function state_from_status(w)
-  if math.floor(w / 8) % 2 == 1 then return "fault" end
-  if math.floor(w / 64) % 2 == 1 then return "S1 switching on inhibited" end
+  if w % 16 >= 8 then return "fault" end                          -- bit 3
+  if w % 128 >= 64 then return "S1 switching on inhibited" end    -- bit 6
   local low = w % 8
   if low == 7 then return "S4 operation" end
   if low == 3 then return "S3 switched on" end
@@ -571,27 +579,6 @@ local function dissect_area(tvb, pinfo, tree, station, direction)
   local summary = table.concat(notes, "; ")
   t:set_text("PROFIdrive " .. name .. ", station " .. station .. ": " .. summary)
   return summary, cacheable
-end
-
--- Without a protocol tree (tshark's summary lines, Wireshark's packet list) an area only gives the
--- Info column's summary. Per station and direction the last area's summary is kept: a cyclic area
--- that repeats the station's previous one (most of them on a running line) costs one string
--- comparison. The entry holds the layout and the preference it was decoded with.
-local area_cache = {}
-
-local function area_summary(tvb, pinfo, tree, off, len, raw, station, direction)
-  local slot = direction == "request" and station or station + 128
-  local lay = station_layout(station)
-  local generic = p_pd.prefs.generic
-  local c = area_cache[slot]
-  if c and c.raw == raw and c.lay == lay and c.generic == generic then return c.summary end
-  local summary, cacheable = dissect_area(tvb(off, len):tvb(), pinfo, tree, station, direction)
-  if cacheable then
-    area_cache[slot] = { raw = raw, lay = lay, generic = generic, summary = summary }
-  else
-    area_cache[slot] = nil
-  end
-  return summary
 end
 
 -- ------------------------------------------------------------------------------------------------
@@ -857,86 +844,499 @@ local function fc_words_cached(fc)
   return w
 end
 
--- Is a protocol tree being built? tshark's summary lines and Wireshark's packet list dissect without
--- one (the root TreeItem has no text then); -V, -T fields, display filters and the packet details
--- build one. Where TreeItem.text is unknown (old Wireshark) the answer is always yes.
-local tree_text_known = nil
-local function builds_tree(tree)
-  if tree_text_known == nil then tree_text_known = pcall(function() return tree.text end) end
-  if not tree_text_known then return true end
-  return tree.text ~= nil
+-- ------------------------------------------------------------------------------------------------
+-- The hot path: the telegrams of a running line (token, short acknowledge, FDL status and
+-- Data_Exchange with a good FCS and end delimiter, no SAPs), in every mode. Each call into Wireshark
+-- (a TvbRange, a tree item, a method or attribute looked up on a userdata) costs some 2,000 to 4,000
+-- instructions with its garbage collection (callgrind, Wireshark 4.0), more than the Lua around it,
+-- so this path makes as few as the output needs, and the same output as the full path below:
+--   - values are read from one raw string (string.byte), never from a TvbRange per octet or word;
+--   - one TvbRange per span, shared by every item on it; an item's label is given when it is added
+--     (no set_text / append_text afterwards); the methods are looked up once;
+--   - per layout and direction, a plan made once (labels, fields, texts), not per telegram;
+--   - without a protocol tree (tshark's summary lines, Wireshark's packet list) only the columns;
+--     with a tree that is not shown (a display filter or a field column on the packet list, tshark
+--     -Y without -V) only the fields they refer to (TreeItem.visible, TreeItem:referenced); with a
+--     shown tree (-V, -T fields / pdml / json, the packet details) every item.
+-- Anything else (SAP services, bad FCS, a length that does not match the layout) takes the full
+-- path, which decodes and checks everything.
+
+local M_add, M_add_le, M_gen, M_set_text, M_referenced  -- TreeItem methods, looked up once
+-- TreeItem.visible and TreeItem:referenced (Wireshark 2.4 and later); without them every tree is
+-- built in full
+local tree_visible_known = nil
+local NUM = {}
+for i = 0, 255 do NUM[i] = tostring(i) end
+local HEXU = {}
+for i = 0, 255 do HEXU[i] = string.format("%02X", i) end
+
+-- Which fields does this pass refer to (tree not shown)? Asked once per field and pass; a new pass
+-- (the frame number goes back: a new file, a refilter, a click in the packet list) asks again.
+local REF, REF_last = {}, -1
+local function ref_reset(pinfo)
+  local n = pinfo.number
+  if n <= REF_last then REF = {} end
+  REF_last = n
+end
+local function refd(tree, field)
+  local r = REF[field]
+  if r == nil then r = M_referenced(tree, field) and true or false REF[field] = r end
+  return r
 end
 
--- The telegrams of a running line without a tree: token, short acknowledge, FDL status and
--- Data_Exchange with a good FCS and end delimiter. The columns are the full path's, read from one raw
--- string (no TvbRange per octet); the area's summary comes from area_summary. Anything else returns
--- nil and takes the full path below.
-local function dissect_columns(tvb, pinfo, tree, len)
+-- the bits of a bit word, per names table and value: "a, b" (the bits set) and the lines
+-- "bit  8 jog 1: 0" (at most 4096 words per names table are kept)
+local BITS = setmetatable({}, { __mode = "k" })
+local function bits_of(w, names)
+  local by_w = BITS[names]
+  if by_w == nil then by_w = { n = 0 } BITS[names] = by_w end
+  local e = by_w[w]
+  if e == nil then
+    local set = bit_list(w, names, 16)
+    e = { set = table.concat(set, ", "), text = #set > 0 and table.concat(set, ", ") or "no bits set",
+          lines = bit_lines(w, names) }
+    if by_w.n >= 4096 then by_w = { n = 0 } BITS[names] = by_w end
+    by_w[w] = e
+    by_w.n = by_w.n + 1
+  end
+  return e
+end
+
+local format, concat, floor = string.format, table.concat, math.floor
+
+-- octets i..j (1-based) of s as "0a 1b ..": one string.byte for all of them
+local function hex_of(s, i, j)
+  local o = { byte(s, i, j) }
+  for k = 1, #o do o[k] = HEX[o[k]] end
+  return concat(o, " ")
+end
+
+-- the plan of an area (one layout's request or response): made once per area table
+local PLANS = setmetatable({}, { __mode = "k" })
+local function plan_of(area, lay, direction, name)
+  local plan = PLANS[area]
+  if plan then return plan end
+  local order = (lay and lay.word_order) or area.word_order or "big"
+  plan = { name = name, little = order == "little", lay = lay, direction = direction, fields = {},
+           ak_texts = direction == "request" and (lay and lay.ak_request or AK_REQUEST)
+                      or (lay and lay.ak_response or AK_RESPONSE) }
+  for _, f in ipairs(area.fields) do
+    local p = { kind = f.kind, off = f.offset, size = f.size, name = f.name, role = f.role,
+                label = f.name .. (f.what and (" (" .. f.what .. ")") or "") }
+    if f.kind == "bits" then
+      p.names = f.bits or {}
+      p.field = f.role == "control" and P.control or f.role == "status" and P.status or P.word
+      p.state = f.role == "status" and f.state ~= false
+      p.set_field = f.role == "control" and P.control_set or f.role == "status" and P.status_set or nil
+    elseif f.kind == "n2" or f.kind == "scaled" then
+      p.signed = f.signed ~= false
+      p.field = f.role == "reference" and P.reference or f.role == "actual" and P.actual or P.word
+      p.pct_field = f.role and (f.role == "reference" and P.reference_pct or P.actual_pct) or nil
+      p.hz_field = f.role and (f.role == "reference" and P.reference_hz or P.actual_hz) or nil
+      if f.kind == "n2" then
+        p.max_hz = f.max_hz
+        if f.max_hz then p.hz_tail = " (100 % = " .. fmt_num(f.max_hz) .. " Hz)" end
+      else
+        p.scale = f.scale or 1
+        p.hz = f.unit == "Hz"
+        p.unit_tail = f.unit and f.unit ~= "" and (" " .. f.unit) or ""
+      end
+    end
+    plan.fields[#plan.fields + 1] = p
+  end
+  PLANS[area] = plan
+  return plan
+end
+
+-- the PKW channel at 1-based index i of s: its values and its note (dissect_pkw's rules)
+local function pkw_values(s, i, little, plan)
+  local a1, a2, b1, b2, c1, c2, d1, d2 = byte(s, i, i + 7)
+  local pke, ind, pwe
+  if little then pke, ind, pwe = a2 * 256 + a1, b2 * 256 + b1, (c2 * 256 + c1) * 65536 + d2 * 256 + d1
+  else pke, ind, pwe = a1 * 256 + a2, b1 * 256 + b2, (c1 * 256 + c2) * 65536 + d1 * 256 + d2 end
+  local ak = floor(pke / 4096)
+  local pnu = pke % 2048
+  local sub = floor(ind / 256)
+  local ak_text = plan.ak_texts[ak] or "reserved"
+  local label = param_label(plan.lay, pnu, sub)
+  local note
+  if ak == 0 then
+    note = "PKW " .. ak_text
+  else
+    local where = "PNU " .. pnu .. (sub ~= 0 and ("[" .. sub .. "]") or "")
+    note = "PKW AK " .. ak .. " " .. ak_text .. ", " .. where .. (label and (" = " .. label) or "")
+    if (plan.direction == "response" and (ak == 7 or ak == 8)) then
+      note = note .. ": error " .. (pwe % 65536)
+    elseif not (plan.direction == "request" and (ak == 1 or ak == 4 or ak == 6 or ak == 9)) then
+      note = note .. ", PWE " .. pwe
+    end
+  end
+  return note, ak, ak_text, sub, pwe, label
+end
+
+-- the area's summary (the Info column's and the PROFIdrive item's text) from the raw telegram s,
+-- the area at 1-based index base with len octets
+local function plan_summary(plan, s, base, len)
+  local notes = {}
+  local little = plan.little
+  local fields = plan.fields
+  for k = 1, #fields do
+    local p = fields[k]
+    if p.off + p.size <= len then
+      local kind = p.kind
+      local i = base + p.off
+      if kind == "pkw" then
+        notes[#notes + 1] = (pkw_values(s, i, little, plan))
+      elseif kind ~= "bytes" and kind ~= "word" then
+        local h, l = byte(s, i, i + 1)
+        if little then h, l = l, h end
+        local w = h * 256 + l
+        if kind == "bits" then
+          local note = p.name .. " 0x" .. HEXU[h] .. HEXU[l]
+          if p.state then note = note .. " " .. state_from_status(w) end
+          notes[#notes + 1] = note
+        else
+          local v = p.signed and s16(w) or w
+          local hz
+          if kind == "n2" then
+            if p.max_hz then hz = v * 100.0 / 16384 * p.max_hz / 100.0 end
+          elseif p.hz then
+            hz = v * p.scale
+          end
+          notes[#notes + 1] = hz and format("%s %.2f Hz", p.name, hz) or (p.name .. " 0x" .. HEXU[h] .. HEXU[l])
+        end
+      end
+    end
+  end
+  return concat(notes, "; ")
+end
+
+-- the area's items under pd: every item when the tree is shown (V), else only the referred ones.
+-- tvb: the telegram; s its raw octets; the area at 0-based offset off. Returns the area's summary
+-- (plan_summary's) when V.
+local function plan_items(plan, tvb, tree, pd, s, off, len, V)
+  local little = plan.little
+  local notes = {}
+  local fields = plan.fields
+  for k = 1, #fields do
+    local p = fields[k]
+    if p.off + p.size <= len then
+      local kind = p.kind
+      local o = off + p.off
+      local i = o + 1
+      if kind == "pkw" then
+        local note, ak, ak_text, sub, pwe, label = pkw_values(s, i, little, plan)
+        notes[#notes + 1] = note
+        local add_w = little and M_add_le or M_add
+        local t = pd
+        if V or refd(tree, P.pkw) then
+          t = M_add(pd, P.pkw, tvb(o, 8), s:sub(i, i + 7),
+                    "PKW (parameter channel): " .. hex_of(s, i, i + 7) .. " -> " .. note)
+        end
+        local r = tvb(o, 2)
+        if V or refd(tree, P.pke) then add_w(t, P.pke, r) end
+        if V or refd(tree, P.ak) then add_w(t, P.ak, r) end
+        if V or refd(tree, P.spm) then add_w(t, P.spm, r) end
+        if V or refd(tree, P.pnu) then add_w(t, P.pnu, r) end
+        if V or refd(tree, P.ak_text) then M_add(t, P.ak_text, r, ak_text) end
+        if V or refd(tree, P.ind) or refd(tree, P.subindex) then
+          r = tvb(o + 2, 2)
+          if V or refd(tree, P.ind) then add_w(t, P.ind, r) end
+          if V or refd(tree, P.subindex) then M_add(t, P.subindex, r, sub) end
+        end
+        if V or refd(tree, P.pwe) then M_add(t, P.pwe, tvb(o + 4, 4), pwe) end
+        if label and ak ~= 0 and (V or refd(tree, P.param)) then M_add(t, P.param, tvb(o, 4), label) end
+      elseif kind == "bytes" then
+        if V or refd(tree, P.bytes) then
+          M_add(pd, P.bytes, tvb(o, p.size), s:sub(i, i + p.size - 1), p.name .. ": " .. hex_of(s, i, i + p.size - 1))
+        end
+      else
+        local h, l = byte(s, i, i + 1)
+        if little then h, l = l, h end
+        local w = h * 256 + l
+        local field = p.field
+        local r = tvb(o, 2)
+        local hex = "0x" .. HEXU[h] .. HEXU[l]
+        if kind == "bits" then
+          local b = bits_of(w, p.names)
+          local st = p.state and state_from_status(w)
+          local t
+          if V then
+            t = M_add(pd, field, r, w, p.label .. " " .. hex .. ": " .. b.text .. (st and (" -> " .. st) or ""))
+            notes[#notes + 1] = p.name .. " " .. hex .. (st and (" " .. st) or "")
+          elseif refd(tree, field) then
+            M_add(pd, field, r, w)
+          end
+          if st and (V or refd(tree, P.state)) then M_add(pd, P.state, r, st) end
+          if p.set_field then
+            if V or refd(tree, p.set_field) then M_add(pd, p.set_field, r, b.set) end
+          elseif V or refd(tree, P.field) then
+            M_add(pd, P.field, r, p.name)
+          end
+          if V then
+            local lines = b.lines
+            for k = 1, #lines do M_add(t, r, lines[k]) end
+          end
+        elseif kind == "n2" or kind == "scaled" then
+          local v = p.signed and s16(w) or w
+          local text, hz, hzs, val
+          local t
+          if kind == "n2" then
+            local pct = v * 100.0 / 16384
+            if V then
+              text = p.label .. " " .. hex .. ": " .. fmt_num(pct) .. " %"
+            end
+            if p.max_hz then
+              hz = pct * p.max_hz / 100.0
+              hzs = format("%.2f", hz)
+              if V then text = text .. " = " .. hzs .. " Hz" .. p.hz_tail end
+            end
+            if V then t = M_add(pd, field, r, w, text) elseif refd(tree, field) then M_add(pd, field, r, w) end
+            if p.pct_field and (V or refd(tree, p.pct_field)) then M_add(pd, p.pct_field, r, pct) end
+          else
+            val = v * p.scale
+            if p.hz then hz = val hzs = format("%.2f", hz) end
+            if V then t = M_add(pd, field, r, w, p.label .. " " .. hex .. " = " .. fmt_num(val) .. p.unit_tail)
+            elseif refd(tree, field) then M_add(pd, field, r, w) end
+            if field == P.word and (V or refd(tree, P.value)) then M_add(pd, P.value, r, val) end
+          end
+          if hz and p.hz_field and (V or refd(tree, p.hz_field)) then M_add(pd, p.hz_field, r, hz) end
+          if field == P.word and (V or refd(tree, P.field)) then M_add(pd, P.field, r, p.name) end
+          notes[#notes + 1] = hz and (p.name .. " " .. hzs .. " Hz") or (p.name .. " " .. hex)
+        else
+          if V then M_add(pd, P.word, r, w, p.label .. " " .. hex .. " = " .. w)
+          elseif refd(tree, P.word) then M_add(pd, P.word, r, w) end
+          if V or refd(tree, P.field) then M_add(pd, P.field, r, p.name) end
+        end
+      end
+    end
+  end
+  return concat(notes, "; ")
+end
+
+-- the layout of a station's area: (plan or nil, name or nil); nil, nil and false when the length
+-- does not match the station's layout (the full path reports that)
+local function area_plan(station, direction, len)
+  local lay = station_layout(station)
+  if lay and lay[direction] and lay[direction].length ~= len then return nil, nil, false end
+  local area, name
+  if lay then
+    area = lay[direction]
+    name = lay.profile .. " " .. lay.layout
+  elseif prefs().generic then
+    area = generic_layout_cached(len, direction)
+    name = area and ("generic PROFIdrive " .. area.name)
+  end
+  if area == nil then return nil, nil, true end
+  return plan_of(area, lay, direction, name), lay, true
+end
+
+-- Per station and direction the last area's summary: an area that repeats the station's previous
+-- one (most of them on a running line) costs one string comparison. The entry holds the layout and
+-- the preference it was decoded with.
+local area_cache = {}
+
+-- the summary of the area at 0-based offset off (len octets) of the telegram (raw s) and its plan
+-- (both nil without a layout), and false when the full path must decode it
+local function area_summary(tvb, s, off, len, station, direction)
+  local slot = direction == "request" and station or station + 128
+  local lay = station_layout(station)
+  local generic = prefs().generic
+  local c = area_cache[slot]
+  local raw = s:sub(off + 1, off + len)
+  if c and c.raw == raw and c.lay == lay and c.generic == generic then return c.summary, c.plan, true end
+  local plan, _, ok = area_plan(station, direction, len)
+  if not ok then area_cache[slot] = nil return nil, nil, false end
+  -- a station's first area is read through a TvbRange (the bounds checked by Wireshark), every later
+  -- one from the telegram's raw string
+  if c == nil then raw = tvb(off, len):raw() end
+  local summary = plan and plan_summary(plan, raw, 1, len)
+  area_cache[slot] = { raw = raw, lay = lay, generic = generic, summary = summary, plan = plan }
+  return summary, plan, true
+end
+
+-- the FC item's label as Wireshark writes it ("FC: 0x5d") and the FC in words
+local FC_LABEL = {}
+local function fc_label(fc)
+  FC_LABEL[fc] = "FC: 0x" .. HEX[fc] .. ": " .. fc_words_cached(fc)
+  return FC_LABEL[fc]
+end
+
+local DIR_TEXT = { request = "request (master -> drive outputs)", response = "response (drive -> master inputs)" }
+
+-- returns the telegram's length when done, nil for the full path
+local function dissect_fast(tvb, pinfo, tree, len)
   local s = tvb:raw()
-  local sd = byte(s, 1)
-  if sd == SC then
-    pinfo.cols.protocol:set("PROFIBUS")
-    pinfo.cols.info:set("SC  short acknowledge")
-    return len
-  end
-  if sd == SD4 then
-    if len < 3 then return nil end
-    local da, sa = band(byte(s, 2), 0x7F), band(byte(s, 3), 0x7F)
-    pinfo.cols.protocol:set("PROFIBUS")
-    pinfo.cols.src:set(tostring(sa))
-    pinfo.cols.dst:set(tostring(da))
-    pinfo.cols.info:set(string.format("SD4  token %d -> %d", sa, da))
-    return len
-  end
+  local sd, o2, o3, o4 = byte(s, 1, 4)
   local body_off, body_len
   if sd == SD1 then body_off, body_len = 1, 3
   elseif sd == SD3 then body_off, body_len = 1, 11
   elseif sd == SD2 and len >= 4 then
-    body_off, body_len = 4, byte(s, 2)
-    if byte(s, 3) ~= body_len or byte(s, 4) ~= SD2 or body_len < 3 then return nil end
-  else
+    body_off, body_len = 4, o2
+    if o3 ~= body_len or o4 ~= SD2 or body_len < 3 then return nil end
+  elseif sd ~= SC and sd ~= SD4 then
     return nil
   end
-  local fcs_at = body_off + body_len                       -- 0-based, as in the tvb
-  if len < fcs_at + 2 or byte(s, fcs_at + 2) ~= ED then return nil end
-  if byte(s, fcs_at + 1) ~= octet_sum(s, body_off + 1, fcs_at) then return nil end
-  local da_raw, sa_raw, fc = byte(s, body_off + 1, body_off + 3)
-  if band(da_raw, 0x80) ~= 0 or band(sa_raw, 0x80) ~= 0 then return nil end     -- SAPs: DP services
-  local da, sa = da_raw, sa_raw
-  local is_request = band(fc, 0x40) ~= 0
+  local fcs_at, fcs, da, sa, fc
+  if body_off then
+    fcs_at = body_off + body_len                          -- 0-based, as in the tvb
+    if len < fcs_at + 2 then return nil end
+    local ed
+    fcs, ed = byte(s, fcs_at + 1, fcs_at + 2)
+    if ed ~= ED or fcs ~= octet_sum(s, body_off + 1, fcs_at) then return nil end
+    da, sa, fc = byte(s, body_off + 1, body_off + 3)
+    if da >= 0x80 or sa >= 0x80 then return nil end      -- SAPs: DP services
+  elseif sd == SD4 and len < 3 then
+    return nil
+  end
+  if M_add == nil then
+    M_add, M_add_le, M_gen, M_set_text = tree.add, tree.add_le, tree.set_generated, tree.set_text
+    tree_visible_known = pcall(function() return tree.visible end) and pcall(function() return tree.referenced end)
+    if tree_visible_known then M_referenced = tree.referenced end
+  end
+  -- the tree: shown (V), built but not shown (only the referred fields), or none
+  local V, T = false, false
+  if tree_visible_known then
+    V = tree.visible
+    T = V or tree.text ~= nil
+  else
+    V, T = true, true
+  end
+  if T and not V then ref_reset(pinfo) end
+  local cols = pinfo.cols
+  cols.protocol = "PROFIBUS"
+  if sd == SC then
+    cols.info = "SC  short acknowledge"
+    if T then
+      local t = M_add(tree, p_fdl, tvb(), "PROFIBUS SC: short acknowledge")
+      if V or refd(tree, F.sd) then M_add(t, F.sd, tvb(0, 1)) end
+      if V or refd(tree, F.service) then M_gen(M_add(t, F.service, "short acknowledge")) end
+    end
+    return len
+  end
+  if sd == SD4 then
+    da, sa = o2 % 128, o3 % 128
+    cols.src = NUM[sa]
+    cols.dst = NUM[da]
+    cols.info = "SD4  token " .. sa .. " -> " .. da
+    if T then
+      local t = M_add(tree, p_fdl, tvb(), "PROFIBUS SD4: token " .. sa .. " -> " .. da)
+      if V or refd(tree, F.sd) then M_add(t, F.sd, tvb(0, 1)) end
+      if V or refd(tree, F.da) then M_add(t, F.da, tvb(1, 1)) end
+      if V or refd(tree, F.sa) then M_add(t, F.sa, tvb(2, 1)) end
+      if V or refd(tree, F.service) then M_gen(M_add(t, F.service, "token")) end
+    end
+    return len
+  end
+  local is_request = fc % 128 >= 64                  -- bit 6
   local du_off, du_len = body_off + 3, body_len - 3
-  local service, summary
-  if is_request and band(fc, 0x0F) == 9 then
+  local service, station, direction
+  if is_request and fc % 16 == 9 then
     service = "FDL status"
-  elseif not is_request and band(fc, 0x0F) == 0 and du_len == 0 then
+  elseif not is_request and fc % 16 == 0 and du_len == 0 then
     service = "FDL status reply"
   elseif is_request then
     service = "Data_Exchange"
-    if du_len > 0 then
-      summary = area_summary(tvb, pinfo, tree, du_off, du_len, s:sub(du_off + 1, fcs_at), da, "request")
-    end
+    if du_len > 0 then station, direction = da, "request" end
   else
     service = "Data_Exchange reply"
-    if du_len > 0 then
-      summary = area_summary(tvb, pinfo, tree, du_off, du_len, s:sub(du_off + 1, fcs_at), sa, "response")
+    if du_len > 0 then station, direction = sa, "response" end
+  end
+  -- the area's layout and (without a shown tree) its summary; with a shown tree the summary comes
+  -- with the items
+  local summary, plan
+  if station then
+    local ok, _
+    if V then
+      plan, _, ok = area_plan(station, direction, du_len)
+    else
+      summary, plan, ok = area_summary(tvb, s, du_off, du_len, station, direction)
+    end
+    if not ok then return nil end              -- the length does not match the layout: the full path warns
+  end
+  local fcw = fc_words_cached(fc)
+  cols.src = NUM[sa]
+  cols.dst = NUM[da]
+  local info = SD_NAMES[sd] .. "  " .. sa .. " -> " .. da .. "  " .. service .. "  " .. fcw
+  if not V then
+    if summary and summary ~= "" then info = info .. "  " .. summary end
+    cols.info = info
+    if not T then return len end
+  end
+
+  local t = M_add(tree, p_fdl, tvb(), "PROFIBUS " .. SD_NAMES[sd] .. " " .. sa .. " -> " .. da .. ": " .. service)
+  if V or refd(tree, F.sd) then M_add(t, F.sd, tvb(0, 1)) end
+  if sd == SD2 then
+    if V or refd(tree, F.le) then M_add(t, F.le, tvb(1, 1)) end
+    if V or refd(tree, F.ler) then M_add(t, F.ler, tvb(2, 1)) end
+  end
+  local r = tvb(body_off, 1)
+  if V then
+    M_add(M_add(t, F.da, r), F.da_ext, r)
+    r = tvb(body_off + 1, 1)
+    M_add(M_add(t, F.sa, r), F.sa_ext, r)
+    r = tvb(body_off + 2, 1)
+    local fct = M_add(t, F.fc, r, fc, FC_LABEL[fc] or fc_label(fc))
+    M_add(fct, F.fc_req, r)
+    if is_request then
+      M_add(fct, F.fc_fcb, r)
+      M_add(fct, F.fc_fcv, r)
+      M_add(fct, F.fc_fn, r)
+    else
+      M_add(fct, F.fc_type, r)
+      M_add(fct, F.fc_st, r)
+    end
+    M_add(t, F.fc_text, r, fcw)
+  else
+    if refd(tree, F.da) then M_add(t, F.da, r) end
+    if refd(tree, F.da_ext) then M_add(t, F.da_ext, r) end
+    r = tvb(body_off + 1, 1)
+    if refd(tree, F.sa) then M_add(t, F.sa, r) end
+    if refd(tree, F.sa_ext) then M_add(t, F.sa_ext, r) end
+    r = tvb(body_off + 2, 1)
+    if refd(tree, F.fc) then M_add(t, F.fc, r) end
+    if refd(tree, F.fc_req) then M_add(t, F.fc_req, r) end
+    if is_request then
+      if refd(tree, F.fc_fcb) then M_add(t, F.fc_fcb, r) end
+      if refd(tree, F.fc_fcv) then M_add(t, F.fc_fcv, r) end
+      if refd(tree, F.fc_fn) then M_add(t, F.fc_fn, r) end
+    else
+      if refd(tree, F.fc_type) then M_add(t, F.fc_type, r) end
+      if refd(tree, F.fc_st) then M_add(t, F.fc_st, r) end
+    end
+    if refd(tree, F.fc_text) then M_add(t, F.fc_text, r, fcw) end
+  end
+  local rdu = du_len > 0 and tvb(du_off, du_len)
+  if rdu and (V or refd(tree, F.du)) then M_add(t, F.du, rdu) end
+  r = tvb(fcs_at, 1)
+  if V or refd(tree, F.fcs) then M_add(t, F.fcs, r, fcs, "FCS: 0x" .. HEX[fcs] .. " [correct]") end
+  if V or refd(tree, F.fcs_status) then M_gen(M_add(t, F.fcs_status, r, "good")) end
+  if V or refd(tree, F.ed) then M_add(t, F.ed, tvb(fcs_at + 1, 1)) end
+  if V or refd(tree, F.service) then M_gen(M_add(t, F.service, service)) end
+  if station then
+    local field = direction == "request" and F.outputs or F.inputs
+    if V or refd(tree, field) then M_add(t, field, rdu) end
+    local pd = M_add(tree, p_pd, rdu)
+    if V or refd(tree, P.station) then M_gen(M_add(pd, P.station, station)) end
+    if V or refd(tree, P.direction) then M_gen(M_add(pd, P.direction, DIR_TEXT[direction])) end
+    if plan then
+      if V or refd(tree, P.layout) then M_gen(M_add(pd, P.layout, plan.name)) end
+      local notes = plan_items(plan, tvb, tree, pd, s, du_off, du_len, V)
+      if V then summary = notes end
+      M_set_text(pd, "PROFIdrive " .. plan.name .. ", station " .. station .. ": " .. summary)
+    else
+      M_set_text(pd, "PROFIdrive: no layout for station " .. station .. " (" .. du_len .. " octets)")
     end
   end
-  pinfo.cols.protocol:set("PROFIBUS")
-  pinfo.cols.src:set(tostring(sa))
-  pinfo.cols.dst:set(tostring(da))
-  local info = string.format("%s  %d -> %d  %s  %s", SD_NAMES[sd], sa, da, service, fc_words_cached(fc))
-  if summary and summary ~= "" then info = info .. "  " .. summary end
-  pinfo.cols.info:set(info)
+  if V then
+    if summary and summary ~= "" then info = info .. "  " .. summary end
+    cols.info = info
+  end
   return len
 end
 
-function p_fdl.dissector(tvb, pinfo, tree)
-  local len = tvb:len()
-  if len < 1 then return 0 end
-  if not builds_tree(tree) then
-    local done = dissect_columns(tvb, pinfo, tree, len)
-    if done then return done end
-  end
+-- the full path: every telegram, every check
+local function dissect_full(tvb, pinfo, tree, len)
   pinfo.cols.protocol:set("PROFIBUS")
   local sd = tvb(0, 1):uint()
   local t = tree:add(p_fdl, tvb())
@@ -1075,6 +1475,12 @@ function p_fdl.dissector(tvb, pinfo, tree)
   pinfo.cols.info:set(info)
   t:set_text(string.format("PROFIBUS %s %d -> %d: %s", SD_NAMES[sd], sa, da, service))
   return len
+end
+
+function p_fdl.dissector(tvb, pinfo, tree)
+  local len = tvb:len()
+  if len < 1 then return 0 end
+  return dissect_fast(tvb, pinfo, tree, len) or dissect_full(tvb, pinfo, tree, len)
 end
 
 -- DLT_USER0 (link type 147), as pdrive writes pcap files (wtap_encaps in Wireshark >= 3.x; wtap before)
