@@ -42,6 +42,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 HERE = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, HERE)
@@ -54,12 +55,26 @@ MIN_TSDR_BITS = 11
 CHAR_BITS = 11
 
 STATIONS = ["3=fuji-g1", "4=fuji-pdp3", "5=toyo", "6=moeller", "7=yaskawa"]
+_STATION_ARGS = [a for s in STATIONS for a in ("--station", s)]
+#: --ring's pcaps go to this directory (made per run); its triggers are the docs' systemd unit's
+#: (docs/commands.md), with every drive watched: a station lost, a drive's fault bit
+RING_OUT = "{ring_out}"
 MODES = {
     "text": [],
     "json": ["--json"],
-    "station": [a for s in STATIONS for a in ("--station", s)],
+    "station": _STATION_ARGS,
     "live": ["--live"],
+    "ring": ["--ring", "30", "--trigger", "lost(*),fault(*)", *_STATION_ARGS, "--out", RING_OUT],
 }
+
+#: where the reference word (request) and the actual-frequency word (response) of each drive of the
+#: default plant sit in its Data_Exchange area: (request offset, response offset, byte order).
+#: PPO1 (fuji-g1, fuji-pdp3, moeller): PKW 0..7, STW/ZSW 8..9, HSW/HIW 10..11, big-endian
+#: (PROFIdrive); Toyo PBUS66-Z PPO1: the same places, little-endian; Yaskawa SI-P1 extended1
+#: (../shared/spec/yaskawa-profibus-dp.md §2): out word 1 the reference, in word 5 the output
+#: frequency, big-endian
+SPEED_WORD = {3: (10, 10, "big"), 4: (10, 10, "big"), 5: (10, 10, "little"), 6: (10, 10, "big"),
+              7: (2, 10, "big")}
 
 
 def record(seconds: float) -> bytes:
@@ -72,6 +87,48 @@ def record(seconds: float) -> bytes:
     end = time.monotonic() + seconds
     plc.run(lambda: time.monotonic() > end)
     return b"".join(chunks)
+
+
+def changing(raw: bytes) -> bytes:
+    """The capture with values that change every cycle: in each Data_Exchange request to a drive of
+    SPEED_WORD its reference word, in each reply its actual word, plus the number of that station's
+    Data_Exchange telegrams so far in that direction (mod 2^16), the FCS made anew; every other
+    octet (control and status words, PKW / parameter areas, the other telegrams) as it was. So
+    every area differs from the station's previous one and none repeats within 65,536 cycles."""
+    from profidrive_cli.bustools.passive import is_data_exchange
+    from profidrive_cli.dp.capture import Capture
+    from profidrive_cli.fdl import frames as F
+    out: list[bytes] = []
+    count: dict[tuple[int, bool], int] = {}
+    cap = Capture()
+    for i in range(0, len(raw), 1 << 16):
+        for c in cap.feed(raw[i:i + (1 << 16)], 0.0, hold=3):
+            out.append(_changed(c, count, is_data_exchange, F))
+    for c in cap.feed(b"", 0.0):
+        out.append(_changed(c, count, is_data_exchange, F))
+    if len(cap.rx):
+        out.append(bytes(cap.rx.buf))
+    return b"".join(out)
+
+
+def _changed(c: Any, count: dict[tuple[int, bool], int], is_dx: Any, F: Any) -> bytes:
+    f = c.frame
+    if f is None or not is_dx(f) or c.raw[0] != F.SD2:
+        return bytes(c.raw)
+    station = f.da if f.is_request else f.sa
+    where = SPEED_WORD.get(station)
+    if where is None:
+        return bytes(c.raw)
+    off = where[0] if f.is_request else where[1]
+    order = where[2]
+    key = (station, f.is_request)
+    n = count[key] = count.get(key, 0) + 1
+    raw = bytearray(c.raw)
+    at = 7 + off                             # SD2 LE LEr SD2 DA SA FC, then the area (no SAPs)
+    word = (int.from_bytes(raw[at:at + 2], order) + n) & 0xFFFF
+    raw[at:at + 2] = word.to_bytes(2, order)
+    raw[-2] = F.fcs(raw[4:-2])
+    return bytes(raw)
 
 
 def line_figures(raw: bytes) -> tuple[int, float, dict[str, int]]:

@@ -28,6 +28,7 @@ from profidrive_cli.fdl import frames as F
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.dp.capture import Captured
     from profidrive_cli.drives.profile import Profile
+    from profidrive_cli.drives.wirefields import SpeedWord
 
 #: a family codec's decoded area (drives/<family>/codec.py decode_area): its shape is the family's,
 #: its values JSON's; and the common `drive` object made from it (docs/json.md), whose `param` and
@@ -109,6 +110,9 @@ def is_data_exchange(f: F.Frame) -> bool:
     return bool(f.data)
 
 
+#: the Data_Exchange request functions (is_data_exchange)
+_DX_FUNCTIONS = (F.SRD_LOW, F.SRD_HIGH)
+
 #: decoded areas kept per decoder: a station's area mostly repeats its previous one (the same
 #: command, reference and parameter request cycle after cycle); cleared when this many are kept
 AREA_CACHE_MAX = 1024
@@ -119,24 +123,40 @@ class PassiveDecoder:
     same object for the same station, direction, octets, layout and max frequency: do not change
     it)."""
 
-    def __init__(self, watched: dict[int, Watched]):
+    def __init__(self, watched: dict[int, Watched], fast: bool = True):
         self.watched = watched
         self._areas: dict[tuple[int, str, bytes, str | None, float | None], DriveObject] = {}
+        #: the fast path (_fast): off, every area is decoded the slow way (tests compare the two)
+        self.fast = fast
+        self._plans: dict[tuple[int, str, str, float | None], _Plan | None] = {}
+        self._rests: dict[tuple[tuple[int, str, str, float | None], bytes], DriveObject] = {}
 
     def decode(self, c: Captured) -> DriveObject | None:
         f = c.frame
-        if f is None or f.sd in (F.SC, F.SD4):
+        if f is None:
             return None
-        if f.is_request and f.da in self.watched and f.dsap == S.SAP_CHK_CFG:
+        sd = f.sd
+        if sd == F.SC or sd == F.SD4:
+            return None
+        fc = f.fc
+        if f.dsap is None and f.ssap is None:        # a Data_Exchange request or its data reply
+            if fc & F.FC_REQ:
+                if fc & 0x0F not in _DX_FUNCTIONS:
+                    return None
+                st = self.watched.get(f.da)
+                direction = "request"
+            else:
+                if not f.data:
+                    return None
+                st = self.watched.get(f.sa)
+                direction = "response"
+            if st is None:
+                return None
+            data = f.data
+            return self._decode_area(st, direction, data if type(data) is bytes else bytes(data))
+        if fc & F.FC_REQ and f.da in self.watched and f.dsap == S.SAP_CHK_CFG:
             self.watched[f.da].seen_cfg = bytes(f.data)
-            return None
-        if not is_data_exchange(f):
-            return None
-        direction = "request" if f.is_request else "response"
-        st = self.watched.get(f.da if f.is_request else f.sa)
-        if st is None:
-            return None
-        return self._decode_area(st, direction, bytes(f.data))
+        return None
 
     def _decode_area(self, st: Watched, direction: str, data: bytes) -> DriveObject:
         layout = st.layout_for(direction, len(data))
@@ -145,10 +165,99 @@ class PassiveDecoder:
         if d is None:
             if len(self._areas) >= AREA_CACHE_MAX:
                 self._areas.clear()
-            d = self._areas[key] = _decode_new(st, direction, data, layout)
+            d = self._fast(st, direction, data, layout) if self.fast else None
+            if d is None:
+                d = _decode_new(st, direction, data, layout)
+            self._areas[key] = d
         if d.get("param") and direction == "response":
             _learn_fmax(st, d["param"])
         return d
+
+    def _fast(self, st: Watched, direction: str, data: bytes, layout: str | None) -> DriveObject | None:
+        """The area's drive object from its rest's -- the area with its speed word put to the word's
+        class and the octets the drive object does not read to zero, decoded the slow way once per
+        the rest's octets -- and the word's own fields (the family's speed_plan); None where the
+        family has no plan for the area (the slow way then)."""
+        if layout is None:
+            return None
+        pkey = (st.address, direction, layout, st.fmax)
+        plan = self._plans.get(pkey, _UNKNOWN)
+        if plan is _UNKNOWN:
+            plan = self._plans[pkey] = _plan(st, direction, layout)
+        if plan is None or len(data) != plan.size:
+            return None
+        at = plan.offset
+        word = int.from_bytes(data[at:at + 2], plan.order)    # type: ignore[arg-type]
+        parts = [data[a:b] if fill is None else fill for a, b, fill in plan.segments]
+        parts[plan.slot] = plan.classes[0 if not word else 2 if word & 0x8000 else 1]
+        rest_key = (pkey, b"".join(parts))
+        rest = self._rests.get(rest_key)
+        if rest is None:
+            if len(self._rests) >= AREA_CACHE_MAX:
+                self._rests.clear()
+            rest = self._rests[rest_key] = _decode_new(st, direction, rest_key[1], layout)
+        if "error" in rest:
+            return None
+        d = dict(rest)
+        for k, v in plan.word.fields(word).items():
+            if k in d:
+                d[k] = v
+        d["text"] = drive_text(d)
+        return d
+
+
+class _Plan:
+    """A family's SpeedWord for one station, direction and layout, cut for _fast: the area as
+    `segments` in order, each (start, end, None) for octets read from the area or (start, end,
+    zeros) for an ignored range, and which segment is the speed word (`slot`)."""
+    __slots__ = ("word", "offset", "order", "size", "segments", "slot", "classes")
+
+    def __init__(self, word: SpeedWord, size: int):
+        self.word, self.offset, self.order, self.size = word, word.offset, word.order, size
+        fixed = {word.offset: 2}
+        for a, n in word.ignore:
+            if n > 0 and not any(a < b + m and b < a + n for b, m in fixed.items()):
+                fixed[a] = n                              # (a range over the speed word: not)
+        segments: list[tuple[int, int, bytes | None]] = []
+        self.slot = 0
+        pos = 0
+        for a in sorted(fixed):
+            if a > pos:
+                segments.append((pos, a, None))
+            if a == word.offset:
+                self.slot = len(segments)
+            segments.append((a, a + fixed[a], bytes(fixed[a])))
+            pos = a + fixed[a]
+        if pos < size:
+            segments.append((pos, size, None))
+        self.segments = segments
+        #: the speed word's class: 0, 1, -1 as two octets in the plan's byte order
+        self.classes = (b"\x00\x00", (1).to_bytes(2, word.order), b"\xff\xff")  # type: ignore[arg-type]
+
+
+#: not looked up yet (None: the family has no plan for the area)
+_UNKNOWN: Any = object()
+
+
+def _plan(st: Watched, direction: str, layout: str) -> _Plan | None:
+    """The family codec's speed_plan for this station's areas (drives/wirefields.py SpeedWord), with
+    the max frequency its decode_area is given (_decode); None when the codec has none, or for a
+    word outside the layout's area."""
+    from profidrive_cli.drives import codec_module
+    fn = getattr(codec_module(st.profile), "speed_plan", None)
+    if fn is None:
+        return None
+    if st.decoder is None:
+        st.decoder = _decoder(st.profile)
+    max_hz = st.fmax if st.fmax is not None and st.decoder[1] else None
+    word: SpeedWord | None = fn(st.profile, layout, direction, max_hz)
+    lay = st.profile.layouts.get(layout)
+    if word is None or lay is None:
+        return None
+    size = lay.output_len if direction == "request" else lay.input_len
+    if not 0 <= word.offset <= size - 2 or word.order not in ("big", "little"):
+        return None
+    return _Plan(word, size)
 
 
 def _decode_new(st: Watched, direction: str, data: bytes, layout: str | None) -> DriveObject:
