@@ -13,9 +13,10 @@ from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any
 
 from profidrive_cli.bustools.passive import frame_suffix
+from profidrive_cli.bustools.slaveview import ByModule
 from profidrive_cli.cli.common import emit_json, out
-from profidrive_cli.dp.capture import format_line, frame_fields
-from profidrive_cli.dp.du_decode import decode_du
+from profidrive_cli.dp.capture import format_line, frame_json_head, frame_service
+from profidrive_cli.dp.du_decode import DECODED_SERVICES, decode_du
 
 if TYPE_CHECKING:                                   # pragma: no cover
     from rich.live import Live
@@ -67,19 +68,25 @@ class SniffView:
                                             if k not in ("station", "profile", "direction")}
             return
         f = c.frame
-        fields = frame_fields(c) if f is not None else None
-        dec = (decode_du(fields["service"], f.data)
-               if f is not None and fields is not None and "du" in fields else None)
-        if self.slaves is not None and f is not None:
-            dec = self.slaves.decode(f, dec)
         write = self._lines.append
+        if f is None:                                   # a framing error: its line / bad_frame
+            write(json.dumps(frame_json(c.describe())) + "\n" if self.as_json
+                  else format_line(c) + "\n")
+            return
+        service, has_du = frame_service(c)
+        dec = decode_du(service, f.data) if has_du and service in DECODED_SERVICES else None
+        if self.slaves is not None:
+            dec = self.slaves.decode(f, dec)
         if self.as_json:
-            obj = frame_json(c.describe())
+            # json.dumps of {frame_json(c.describe()), decoded, drive}: the frame's text from its
+            # head's pieces (dp/capture.py), a Data_Exchange's `decoded` from its station's
+            written = frame_json_head(c)
             if dec is not None:
-                obj["decoded"] = dec
+                written += ', "decoded": ' + (dec.json_text() if type(dec) is ByModule
+                                              else json.dumps(dec))
             if d is not None:
-                obj["drive"] = drive_json(d)
-            write(json.dumps(obj) + "\n")           # emit_json's text, written by flush()
+                written += ', "drive": ' + json.dumps(drive_json(d))
+            write(written + "}\n")                     # emit_json's text, written by flush()
         else:
             # a plain write, not rich's print (8x dearer per line): the same text, no markup
             line = format_line(c)

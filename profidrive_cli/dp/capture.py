@@ -12,6 +12,7 @@ telegrams, so `pdrive sniff` formats most of them once (benchmarks/bench_sniff.p
 
 from __future__ import annotations
 
+import json
 import math
 import struct
 from dataclasses import dataclass
@@ -77,6 +78,41 @@ class Captured:
         return d
 
 
+class _Head:
+    """What a frame's fields, line and JSON take from its header alone -- SD, addresses, FC, SAPs and
+    whether it carries data -- made once per header (a bus has a few hundred): the fields before
+    `raw` and between `raw` and `du` (`mid`), the service, the line's text before the DU and the
+    JSON pieces. A frame then costs its octets' hex only (values that change every cycle)."""
+    __slots__ = ("sd", "mid", "service", "prefix", "json_mid", "json_end", "has_du")
+
+    def __init__(self, f: F.Frame):
+        d = _fields(b"", f)
+        self.sd = d["sd"]
+        self.has_du = "du" in d
+        self.mid = {k: v for k, v in d.items() if k not in ("sd", "raw", "du", "service")}
+        self.service = d["service"]
+        # the line's text: this prefix, then the DU's hex (_body of the fields with an empty DU)
+        self.prefix = _body({**d, "du": ""}) if self.has_du else _body(d)
+        # json.dumps(frame_json(describe())) after "raw": the keys between raw and du, du, service
+        mid = json.dumps(self.mid)[1:-1]
+        self.json_mid = (", " + mid if mid else "") + (', "du": "' if self.has_du else "")
+        self.json_end = ('", ' if self.has_du else ", ") + json.dumps({"service": self.service})[1:-1]
+
+
+#: the heads seen (_Head), by (sd, da, sa, fc, dsap, ssap, carries data); bounded like the caches
+_HEADS: dict[tuple[int, int, int, int, int | None, int | None, bool], _Head] = {}
+
+
+def _head(f: F.Frame) -> _Head:
+    key = (f.sd, f.da, f.sa, f.fc, f.dsap, f.ssap, bool(f.data))
+    h = _HEADS.get(key)
+    if h is None:
+        if len(_HEADS) >= _CACHE_MAX:
+            _HEADS.clear()
+        h = _HEADS[key] = _Head(f)
+    return h
+
+
 def frame_fields(c: Captured) -> FrameFields:
     """describe() of a frame without its time: sd, raw, service, da/sa, SAPs, fc, fc_text, du (kept
     per octets: do not change the dict)."""
@@ -87,8 +123,37 @@ def frame_fields(c: Captured) -> FrameFields:
             raise ValueError(f"not a frame: {c.error}")
         if len(_FIELDS) >= _CACHE_MAX:
             _FIELDS.clear()
-        d = _FIELDS[c.raw] = _fields(c.raw, f)
+        h = _head(f)
+        d = {"sd": h.sd, "raw": c.raw.hex(" ")}              # type: ignore[assignment]
+        d.update(h.mid)                                       # type: ignore[typeddict-item]
+        if h.has_du:
+            d["du"] = f.data.hex(" ")
+        d["service"] = h.service
+        _FIELDS[c.raw] = d
     return d
+
+
+def frame_service(c: Captured) -> tuple[str, bool]:
+    """(the frame's service as frame_fields names it, whether its fields carry a `du`)."""
+    f = c.frame
+    if f is None:
+        raise ValueError(f"not a frame: {c.error}")
+    h = _head(f)
+    return h.service, h.has_du
+
+
+def frame_json_head(c: Captured) -> str:
+    """json.dumps of the frame event of docs/json.md ({"event": "frame", "t_s", then frame_fields})
+    without its closing brace: the text json.dumps gives, made from the head's pieces and the
+    octets' hex (the caller adds keys and the brace). Frames only (an error: ValueError)."""
+    f = c.frame
+    if f is None:
+        raise ValueError(f"not a frame: {c.error}")
+    h = _head(f)
+    t = round(c.t, 6)
+    ts = float.__repr__(t) if type(t) is float and math.isfinite(t) else json.dumps(t)
+    return ('{"event": "frame", "t_s": ' + ts + ', "sd": "' + h.sd + '", "raw": "' + c.raw.hex(" ")
+            + '"' + h.json_mid + (f.data.hex(" ") if h.has_du else "") + h.json_end)
 
 
 def _fields(raw: bytes, f: F.Frame) -> FrameFields:
@@ -115,14 +180,24 @@ def format_line(c: Captured, arrow: str = "") -> str:
     """One line per frame, as `pdrive sniff` and the -vv trace print it: time, SD, SA -> DA, SAPs,
     FC in words, service, DU."""
     a = f"{arrow} " if arrow else ""
+    t = c.t
+    global _T, _T_TEXT
+    if t != _T or type(t) is not float or not t and math.copysign(1.0, t) != math.copysign(1.0, _T):
+        _T, _T_TEXT = t, f"{round(t, 6):>12.6f}  "
     if c.frame is None:
-        return f"{round(c.t, 6):>12.6f}  {a}!! {c.error}: {c.raw.hex(' ')}"
+        return f"{_T_TEXT}{a}!! {c.error}: {c.raw.hex(' ')}"
     body = _BODIES.get(c.raw)
     if body is None:
         if len(_BODIES) >= _CACHE_MAX:
             _BODIES.clear()
-        body = _BODIES[c.raw] = _body(frame_fields(c))
-    return f"{round(c.t, 6):>12.6f}  {a}{body}"
+        h = _head(c.frame)
+        body = _BODIES[c.raw] = h.prefix + c.frame.data.hex(" ") if h.has_du else h.prefix
+    return f"{_T_TEXT}{a}{body}"
+
+
+#: the last time format_line wrote and its text (a capture's telegrams often share one)
+_T: float = math.nan
+_T_TEXT = ""
 
 
 def _body(d: FrameFields) -> str:
@@ -294,4 +369,5 @@ def read_pcap(data: bytes) -> tuple[int, list[tuple[float, bytes]]]:
 
 
 __all__ = ["Capture", "Captured", "ErrorMerger", "HOLD", "PcapWriter", "read_pcap", "merge_errors", "frame_fields",
+           "frame_service", "frame_json_head",
            "LINKTYPE_USER0", "LINKTYPE_PROFIBUS_DL", "LINKTYPES", "TimeRangeError", "check_time", "T_MAX"]
