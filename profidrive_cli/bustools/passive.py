@@ -131,7 +131,11 @@ class PassiveDecoder:
         self._plans: dict[tuple[int, str, str, float | None], _Plan | None] = {}
         self._rests: dict[tuple[tuple[int, str, str, float | None], bytes], DriveObject] = {}
 
-    def decode(self, c: Captured) -> DriveObject | None:
+    def decode(self, c: Captured, speed: bool = True) -> DriveObject | None:
+        """The drive object of a watched station's Data_Exchange telegram (None for any other).
+        speed=False: its reference / actual fields and text may be those of an area like it with
+        another speed word (the recorder's triggers read the command, state, flags and parameter
+        channel only): the fast path's rest as it is, no Hz computed, no text written."""
         f = c.frame
         if f is None:
             return None
@@ -153,15 +157,24 @@ class PassiveDecoder:
             if st is None:
                 return None
             data = f.data
-            return self._decode_area(st, direction, data if type(data) is bytes else bytes(data))
+            return self._decode_area(st, direction, data if type(data) is bytes else bytes(data),
+                                     speed)
         if fc & F.FC_REQ and f.da in self.watched and f.dsap == S.SAP_CHK_CFG:
             self.watched[f.da].seen_cfg = bytes(f.data)
         return None
 
-    def _decode_area(self, st: Watched, direction: str, data: bytes) -> DriveObject:
+    def _decode_area(self, st: Watched, direction: str, data: bytes, speed: bool = True
+                     ) -> DriveObject:
         layout = st.layout_for(direction, len(data))
         key = (st.address, direction, data, layout, st.fmax)
         d = self._areas.get(key)
+        if d is None and not speed and self.fast:
+            found = self._rest(st, direction, data, layout)
+            if found is not None:
+                d = found[2]
+                if d.get("param") and direction == "response":
+                    _learn_fmax(st, d["param"])
+                return d
         if d is None:
             if len(self._areas) >= AREA_CACHE_MAX:
                 self._areas.clear()
@@ -178,6 +191,21 @@ class PassiveDecoder:
         class and the octets the drive object does not read to zero, decoded the slow way once per
         the rest's octets -- and the word's own fields (the family's speed_plan); None where the
         family has no plan for the area (the slow way then)."""
+        found = self._rest(st, direction, data, layout)
+        if found is None:
+            return None
+        plan, word, rest = found
+        d = dict(rest)
+        for k, v in plan.word.fields(word).items():
+            if k in d:
+                d[k] = v
+        d["text"] = drive_text(d)
+        return d
+
+    def _rest(self, st: Watched, direction: str, data: bytes, layout: str | None
+              ) -> tuple[_Plan, int, DriveObject] | None:
+        """(the plan, the speed word, the rest's drive object) for _fast; None without a plan or
+        when the rest does not decode."""
         if layout is None:
             return None
         pkey = (st.address, direction, layout, st.fmax)
@@ -198,12 +226,7 @@ class PassiveDecoder:
             rest = self._rests[rest_key] = _decode_new(st, direction, rest_key[1], layout)
         if "error" in rest:
             return None
-        d = dict(rest)
-        for k, v in plan.word.fields(word).items():
-            if k in d:
-                d[k] = v
-        d["text"] = drive_text(d)
-        return d
+        return plan, word, rest
 
 
 class _Plan:
