@@ -5,7 +5,8 @@
   and direction, areas of seeded random octets plus the speed word's edge values (0, 1, 0x7FFF,
   0x8000, 0xFFFF) give the same drive object -- the same keys in the same order, the same values --
   as PassiveDecoder(fast=False), which decodes every area through the family's decode_area; also
-  with a learnt max frequency. The recorder's triggers (speed=False) fire the same.
+  with a learnt max frequency; the text line's words (PassiveDecoder.suffix) are frame_suffix's of
+  that object. The recorder's triggers (speed=False) fire the same.
 - the frame path: a frame's line, its JSON and a Data_Exchange's decoded-by-module JSON, made from
   pieces, equal the line of _body(_fields(...)) and json.dumps of the dicts (docs/json.md), on a
   capture whose values change every telegram, with framing errors, tokens, short acknowledges,
@@ -25,7 +26,7 @@ from pathlib import Path
 import pytest
 
 from conftest import run_main
-from profidrive_cli.bustools.passive import PassiveDecoder, Watched
+from profidrive_cli.bustools.passive import PassiveDecoder, Watched, frame_suffix
 from profidrive_cli.dp.capture import (Capture, Captured, _body, _fields, format_line, frame_fields,
                                        frame_json_head)
 from profidrive_cli.drives.profile import all_profiles, load_profile
@@ -69,6 +70,7 @@ def test_the_station_fast_path_gives_the_slow_paths_drive_object(profile, fmax):
             size = lay.output_len if direction == "request" else lay.input_len
             fast = PassiveDecoder({5: Watched(5, profile, layout, fmax=fmax)})
             slow = PassiveDecoder({5: Watched(5, profile, layout, fmax=fmax)}, fast=False)
+            lines = PassiveDecoder({5: Watched(5, profile, layout, fmax=fmax)})
             plan = codec_module(profile).speed_plan(profile, layout, direction, None)
             planned += plan is not None
             for data in _areas(size, plan.offset if plan else None, plan.order if plan else "big",
@@ -76,6 +78,7 @@ def test_the_station_fast_path_gives_the_slow_paths_drive_object(profile, fmax):
                 c = _frame(direction, 5, data)
                 a, b = fast.decode(c), slow.decode(c)
                 assert a == b and list(a) == list(b), (layout, direction, data.hex(" "))
+                assert lines.suffix(c) == frame_suffix(b)         # the text line's words
                 assert json.dumps(a) == json.dumps(b)
                 # speed=False: everything but the Hz and the text as the slow way's
                 r = fast.decode(c, speed=False)
@@ -297,3 +300,75 @@ def test_ring_from_a_file_refuses_a_pcap_to_write(tmp_path, capsys, monkeypatch)
                  "--trigger", "lost(*)", "--pcap", str(tmp_path / "o.pcap"), "--out", str(tmp_path))
     assert r.exit_code == 2 and "not with --pcap" in r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["x.raw"]
+
+
+def _reference_feed(cap_buf: bytearray, t_first: float, t: float, hold: int) -> tuple[list[Captured], int]:
+    """Capture.feed's loop before its SD2 fast path: F.parse at every position."""
+    out, pos, stop = [], 0, len(cap_buf) - hold
+    tt = t_first
+    while pos < stop:
+        r = F.parse(cap_buf, pos)
+        if r is None:
+            break
+        if isinstance(r, F.FrameError):
+            used = r.used
+            if r.kind == F.FrameError.GARBAGE:
+                end = pos + used
+                while end < len(cap_buf) and cap_buf[end] not in F.START_DELIMITERS:
+                    end += 1
+                used = end - pos
+                out.append(Captured(tt, bytes(cap_buf[pos:end]), None, "garbage"))
+            else:
+                out.append(Captured(tt, bytes(cap_buf[pos:pos + used]), None, f"{r.kind}: {r.detail}"))
+        else:
+            out.append(Captured(tt, bytes(cap_buf[pos:pos + r[1]]), r[0]))
+            used = r[1]
+        pos += used
+        tt = t
+    return out, pos
+
+
+def _odd_sd2(rng: random.Random) -> bytes:
+    """An SD2 telegram as the fast path sees it, or one of its near misses: LE 250..255 with a
+    right FCS and ED, a SAP bit, a wrong FCS / ED / LEr / second SD, cut short."""
+    le = rng.choice((4, 5, 15, 35, 249, 250, 255, 3))
+    body = bytes([rng.choice((3, 0x83, 2)), rng.choice((2, 0x82)), 0x7D]) + bytes(
+        rng.getrandbits(8) for _ in range(max(0, le - 3)))
+    t = bytearray([0x68, le, le, 0x68]) + body[:le] + bytes([sum(body[:le]) & 0xFF, 0x16])
+    k = rng.randrange(8)
+    if k == 0:
+        t[-2] ^= 1
+    elif k == 1:
+        t[-1] = 0x17
+    elif k == 2:
+        t[2] ^= 1
+    elif k == 3:
+        t[3] = 0x69
+    elif k == 4:
+        t = t[:rng.randrange(1, len(t))]
+    return bytes(t)
+
+
+def test_the_capture_fast_path_parses_as_parse_does():
+    from profidrive_cli.dp.capture import HOLD
+    rng = random.Random(5)
+    for _ in range(300):
+        stream = b"".join(rng.choice((_odd_sd2(rng), b"\xE5", b"\xdc\x02\x03", b"\x10\x03\x02\x49\x4e\x16",
+                                      bytes([rng.getrandbits(8)]))) for _ in range(20))
+        cap = Capture()
+        ref_buf = bytearray()
+        ref_t = 0.0
+        cuts = sorted(rng.sample(range(1, len(stream)), 6)) + [len(stream), len(stream)]
+        for i, (j, k) in enumerate(zip([0] + cuts, cuts)):     # (the last chunk empty)
+            chunk, t = stream[j:k], float(i)
+            hold = rng.choice((0, HOLD)) if k < len(stream) else 0
+            got = cap.feed(chunk, t, hold=hold)
+            if not ref_buf:
+                ref_t = t
+            ref_buf += chunk
+            want, used = _reference_feed(ref_buf, ref_t, t, hold)
+            if want:
+                ref_t = t
+            del ref_buf[:used]
+            assert got == want
+        assert bytes(cap.rx.buf) == bytes(ref_buf)

@@ -136,6 +136,44 @@ class PassiveDecoder:
         speed=False: its reference / actual fields and text may be those of an area like it with
         another speed word (the recorder's triggers read the command, state, flags and parameter
         channel only): the fast path's rest as it is, no Hz computed, no text written."""
+        hit = self._locate(c)
+        if hit is None:
+            return None
+        return self._decode_area(hit[0], hit[1], hit[2], speed)
+
+    def suffix(self, c: Captured) -> str | None:
+        """frame_suffix(decode(c)) (None where decode gives None), made without the drive object
+        on the fast path: the rest's text around the Hz the speed word gives."""
+        hit = self._locate(c)
+        if hit is None:
+            return None
+        st, direction, data = hit
+        layout = st.layout_for(direction, len(data))
+        d = self._areas.get((st.address, direction, data, layout, st.fmax))
+        if d is None and self.fast:
+            found = self._rest(st, direction, data, layout)
+            if found is not None:
+                plan, word, rest = found
+                if rest.get("param") and direction == "response":
+                    _learn_fmax(st, rest["param"])
+                pieces = plan.pieces.get(id(rest))
+                if pieces is None or pieces[0] is not rest:
+                    if len(plan.pieces) >= AREA_CACHE_MAX:
+                        plan.pieces.clear()
+                    pieces = plan.pieces[id(rest)] = (rest, _pieces(rest, plan.hz_key))
+                before, label, after, without = pieces[1]
+                w = plan.word
+                hz = w.hz(word) if w.hz is not None else w.fields(word).get(plan.hz_key)
+                if hz is None:
+                    return without
+                return before + f"{label}{hz:.2f} Hz" + after
+        if d is None:
+            d = self._decode_area(st, direction, data)
+        return frame_suffix(d)
+
+    def _locate(self, c: Captured) -> tuple[Watched, str, bytes] | None:
+        """(the watched station, "request" / "response", the area) of a Data_Exchange telegram;
+        None for any other (a Chk_Cfg to a watched station noted: it names the layout)."""
         f = c.frame
         if f is None:
             return None
@@ -157,8 +195,7 @@ class PassiveDecoder:
             if st is None:
                 return None
             data = f.data
-            return self._decode_area(st, direction, data if type(data) is bytes else bytes(data),
-                                     speed)
+            return st, direction, data if type(data) is bytes else bytes(data)
         if fc & F.FC_REQ and f.da in self.watched and f.dsap == S.SAP_CHK_CFG:
             self.watched[f.da].seen_cfg = bytes(f.data)
         return None
@@ -215,7 +252,7 @@ class PassiveDecoder:
         if plan is None or len(data) != plan.size:
             return None
         at = plan.offset
-        word = int.from_bytes(data[at:at + 2], plan.order)    # type: ignore[arg-type]
+        word = int.from_bytes(data[at:at + 2], plan.order)
         parts = [data[a:b] if fill is None else fill for a, b, fill in plan.segments]
         parts[plan.slot] = plan.classes[0 if not word else 2 if word & 0x8000 else 1]
         rest_key = (pkey, b"".join(parts))
@@ -233,10 +270,14 @@ class _Plan:
     """A family's SpeedWord for one station, direction and layout, cut for _fast: the area as
     `segments` in order, each (start, end, None) for octets read from the area or (start, end,
     zeros) for an ignored range, and which segment is the speed word (`slot`)."""
-    __slots__ = ("word", "offset", "order", "size", "segments", "slot", "classes")
+    __slots__ = ("word", "offset", "order", "size", "segments", "slot", "classes", "hz_key",
+                 "pieces")
 
-    def __init__(self, word: SpeedWord, size: int):
+    def __init__(self, word: SpeedWord, size: int, direction: str):
         self.word, self.offset, self.order, self.size = word, word.offset, word.order, size
+        #: the Hz field drive_text reads, and each rest's line around it (suffix: _pieces)
+        self.hz_key = "reference_hz" if direction == "request" else "actual_hz"
+        self.pieces: dict[int, tuple[DriveObject, tuple[str, str, str, str]]] = {}
         fixed = {word.offset: 2}
         for a, n in word.ignore:
             if n > 0 and not any(a < b + m and b < a + n for b, m in fixed.items()):
@@ -280,7 +321,40 @@ def _plan(st: Watched, direction: str, layout: str) -> _Plan | None:
     size = lay.output_len if direction == "request" else lay.input_len
     if not 0 <= word.offset <= size - 2 or word.order not in ("big", "little"):
         return None
-    return _Plan(word, size)
+    return _Plan(word, size, direction)
+
+
+def _pieces(rest: DriveObject, hz_key: str) -> tuple[str, str, str, str]:
+    """frame_suffix of a drive object like the rest's with another Hz (drive_text's parts in its
+    order): (before, label, after, without) -- the line is before + label + f"{hz:.2f} Hz" +
+    after, or `without` when the Hz is None."""
+    arrow = "->" if rest["direction"] == "request" else "<-"
+    who = f"drive {rest['station']} ({rest['profile']}"
+    who += f" {rest['layout']})" if rest.get("layout") else ")"
+    head = f"  | {arrow} {who}: "
+    pre: list[str] = []
+    post: list[str] = []
+    parts = pre
+    if "command" in rest:
+        parts.append(str(rest["command"]))
+    if hz_key == "reference_hz":
+        parts = post
+    elif rest.get("reference_hz") is not None:
+        parts.append(f"reference {rest['reference_hz']:.2f} Hz")
+    if "state" in rest:
+        parts.append(str(rest["state"]))
+    if hz_key == "actual_hz":
+        parts = post
+    elif rest.get("actual_hz") is not None:
+        parts.append(f"actual {rest['actual_hz']:.2f} Hz")
+    param = rest["param"]["text"] if rest.get("param") else None
+    label = "reference " if hz_key == "reference_hz" else "actual "
+    before = head + "".join(p + ", " for p in pre)
+    after = "".join(", " + p for p in post) + ("" if param is None else "; " + param)
+    text = ", ".join(pre + post)
+    if param is not None:
+        text += ("; " if text else "") + param
+    return before, label, after, head + text
 
 
 def _decode_new(st: Watched, direction: str, data: bytes, layout: str | None) -> DriveObject:

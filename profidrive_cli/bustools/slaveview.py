@@ -17,7 +17,7 @@ from __future__ import annotations
 import json
 import os
 from dataclasses import dataclass
-from typing import Any, Iterable
+from typing import Any, Iterable, Sequence
 
 from profidrive_cli import UsageError
 from profidrive_cli.dp import services as S
@@ -62,6 +62,9 @@ class ByModule(dict[str, Any]):
     """SlaveView's `decoded` object of a Data_Exchange (docs/json.md: gsd, modules, text), which
     also gives its json.dumps text from pieces made once per station (json_text)."""
     __slots__ = ("_cuts", "_octets", "_which")
+    _cuts: _Cuts
+    _octets: list[str]
+    _which: Sequence[int]
 
     def json_text(self) -> str:
         """json.dumps(self) (while it is unchanged)."""

@@ -58,6 +58,8 @@ class SniffView:
 
     # -- one frame -------------------------------------------------------------------------------
     def frame(self, c: Captured) -> None:
+        if self.live is None and not self.as_json:
+            return self._line(c)
         d = self.decoder.decode(c) if self.decoder is not None else None
         if self.live is not None:
             self.live.feed(c)
@@ -96,6 +98,24 @@ class SniffView:
             if dec is not None:
                 for text in dec.get("text", []):
                     write(DECODED_INDENT + text + "\n")
+
+    def _line(self, c: Captured) -> None:
+        """frame() in text mode: the frame's line with the drive's words (PassiveDecoder.suffix:
+        the line without the drive object), the decoded lines under it."""
+        f = c.frame
+        write = self._lines.append
+        if f is None:
+            write(format_line(c) + "\n")
+            return
+        suffix = self.decoder.suffix(c) if self.decoder is not None else None
+        service, has_du = frame_service(c)
+        dec = decode_du(service, f.data) if has_du and service in DECODED_SERVICES else None
+        if self.slaves is not None:
+            dec = self.slaves.decode(f, dec)
+        write(format_line(c) + suffix + "\n" if suffix is not None else format_line(c) + "\n")
+        if dec is not None:
+            for text in dec.get("text", []):
+                write(DECODED_INDENT + text + "\n")
 
     def flush(self) -> None:
         """The frames shown so far out to the reader: once per chunk of the capture, not per line."""

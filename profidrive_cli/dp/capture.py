@@ -124,7 +124,7 @@ def frame_fields(c: Captured) -> FrameFields:
         if len(_FIELDS) >= _CACHE_MAX:
             _FIELDS.clear()
         h = _head(f)
-        d = {"sd": h.sd, "raw": c.raw.hex(" ")}              # type: ignore[assignment]
+        d = {"sd": h.sd, "raw": c.raw.hex(" ")}
         d.update(h.mid)                                       # type: ignore[typeddict-item]
         if h.has_du:
             d["du"] = f.data.hex(" ")
@@ -230,10 +230,28 @@ class Capture:
             self._t = t
         self.rx.feed(data)
         buf = self.rx.buf
-        out = []
+        out: list[Captured] = []
+        append = out.append
         pos = 0
-        stop = len(buf) - hold
+        n = len(buf)
+        stop = n - hold
+        tt = self._t                    # the first entry's time: when its first octets came
+        frame = F._frame
         while pos < stop:
+            # the common telegram, an SD2 without SAPs, whole and sound: what F.parse gives for it
+            # (SD LE LEr SD, 4 <= LE <= 249, FCS, ED; DA and SA without the extension bit)
+            if buf[pos] == 0x68 and pos + 7 <= n:
+                le = buf[pos + 1]
+                end = pos + le + 6
+                if (end <= n and buf[pos + 2] == le and buf[pos + 3] == 0x68 and 4 <= le <= 249
+                        and buf[end - 1] == 0x16 and not (buf[pos + 4] | buf[pos + 5]) & 0x80
+                        and sum(buf[pos + 4:end - 2]) & 0xFF == buf[end - 2]):
+                    raw = bytes(buf[pos:end])
+                    append(Captured(tt, raw, frame(0x68, raw[4], raw[5], raw[6], raw[7:-2],
+                                                   None, None)))
+                    pos = end
+                    tt = t
+                    continue
             r = F.parse(buf, pos)
             if r is None:
                 break
@@ -242,18 +260,18 @@ class Capture:
                 if r.kind == F.FrameError.GARBAGE:
                     # a run of octets that cannot start a telegram is one entry
                     end = pos + used
-                    n = len(buf)
                     while end < n and buf[end] not in _STARTS:
                         end += 1
                     used = end - pos
-                    out.append(Captured(self._t, bytes(buf[pos:end]), None, "garbage"))
+                    append(Captured(tt, bytes(buf[pos:end]), None, "garbage"))
                 else:
-                    out.append(Captured(self._t, bytes(buf[pos:pos + used]), None,
-                                        f"{r.kind}: {r.detail}"))
+                    append(Captured(tt, bytes(buf[pos:pos + used]), None, f"{r.kind}: {r.detail}"))
             else:
-                frame, used = r
-                out.append(Captured(self._t, bytes(buf[pos:pos + used]), frame))
+                f, used = r
+                append(Captured(tt, bytes(buf[pos:pos + used]), f))
             pos += used
+            tt = t
+        if out:
             self._t = t
         if pos:
             del buf[:pos]

@@ -44,6 +44,9 @@ class SpeedWord(NamedTuple):
     order: str                                      # "big" / "little"
     fields: Callable[[int], dict[str, Any]]
     ignore: tuple[tuple[int, int], ...] = ()
+    #: the Hz field alone (reference_hz / actual_hz, what a sniff line shows), when it is cheaper
+    #: than fields (None: taken from fields)
+    hz: Callable[[int], float | None] | None = None
 
 
 def _field(kind: str, name: str, offset: int, size: int = 2, **extra: object) -> WireField:

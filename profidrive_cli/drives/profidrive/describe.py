@@ -351,7 +351,10 @@ def speed_plan(profile: Profile, layout: str, direction: str, max_hz: float | No
         # describe_n2: percent round(pct, 6), hz round(pct * max / 100, 6) when max; then _round
         return {hz_key: round(float(round(pct * mhz / 100.0, 6)), 3) if mhz else None,
                 pct_key: round(float(round(pct, 6)), 3)}
+
+    def hz(word: int) -> float | None:
+        return round(float(round(n2_to_percent(word) * mhz / 100.0, 6)), 3) if mhz else None
     pzd = (2 * PKW_WORDS if ppo.pkw else 0)
     # PZD3.. (raw words, ppo_drive_object reads none of them)
     rest = ppo.length(direction) - (pzd + 4)
-    return SpeedWord(pzd + 2, ppo.word_order, fields, ((pzd + 4, rest),) if rest > 0 else ())
+    return SpeedWord(pzd + 2, ppo.word_order, fields, ((pzd + 4, rest),) if rest > 0 else (), hz)

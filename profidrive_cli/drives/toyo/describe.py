@@ -304,4 +304,7 @@ def speed_plan(profile: Profile, layout: str, direction: str, max_hz: float | No
         pct = pd.to_signed16(word) * 100.0 / fs          # codec.speed_percent
         return {hz_key: round(float(round(pct * fmax / 100.0, 6)), 3),
                 pct_key: round(float(round(pct, 6)), 3)}
-    return SpeedWord(offset, tc.word_order, fields, ignore)
+
+    def hz(word: int) -> float | None:
+        return round(float(round(pd.to_signed16(word) * 100.0 / fs * fmax / 100.0, 6)), 3)
+    return SpeedWord(offset, tc.word_order, fields, ignore, hz)

@@ -291,8 +291,11 @@ def speed_plan(profile: Profile, layout: str, direction: str, max_hz: float | No
 
     def fields(word: int) -> dict[str, Any]:
         return {key: _round(raw_to_hz(word, which))}
+
+    def hz(word: int) -> float | None:
+        return _round(raw_to_hz(word, which))
     # drive_object reads the command / status word, this word and the parameter area: the other
     # fast words (torque, current, analog, PG count, MF outputs, the drive's own reference) not
     read = {"command", "status", want[0]}
     ignore = tuple((2 * i, 2) for i, n in enumerate(names) if n not in read)
-    return SpeedWord(2 * names.index(want[0]), profile.word_order, fields, ignore)
+    return SpeedWord(2 * names.index(want[0]), profile.word_order, fields, ignore, hz)
