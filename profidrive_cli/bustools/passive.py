@@ -11,6 +11,14 @@ The layout comes from `--station ADDR=PROFILE:LAYOUT`, else from the Chk_Cfg the
 the capture saw it), else the profile's default layout (or the one layout whose lengths fit).
 The max frequency that turns N2 words into Hz is the profile's default until an answer to a read of
 the profile's max-frequency parameter goes by on the wire; from then on that value.
+
+Fast path (issue 38): a drive's area changes every cycle in its speed word, rarely elsewhere. A
+family codec's speed_plan (drives/wirefields.py SpeedWord) says where that word sits, which words
+the drive object does not read, and the Hz fields the word gives; the rest of the area (the word put
+to its class, those words to zero) is decoded the slow way once per its octets and kept (bounded),
+the word's fields computed each time -- the same drive object as the slow way
+(tests/test_sniff_fast.py), at a fraction of the cost. PassiveDecoder.suffix makes sniff's line
+without the drive object. A family without a plan is decoded the slow way.
 """
 
 from __future__ import annotations

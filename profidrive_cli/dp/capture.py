@@ -7,7 +7,10 @@ it touches fdl.frames and dp.services only and is sans-IO (octets and times in, 
 Streaming: Capture.feed gives the records a chunk completed and keeps only an unfinished telegram;
 ErrorMerger joins a garbage run across chunks; with feed(hold=HOLD) a file read in chunks decodes as
 in one piece. A frame's fields and line are kept per octets (bounded caches): a bus repeats its
-telegrams, so `pdrive sniff` formats most of them once (benchmarks/bench_sniff.py).
+telegrams, so `pdrive sniff` formats most of them once (benchmarks/bench_sniff.py). Values that
+change every cycle defeat those caches: what a frame's fields, line and JSON take from its header
+(SD, addresses, FC, SAPs) is made once per header (_Head), the octets' hex each time; and
+Capture.feed parses a sound SD2 telegram without SAPs in place (what fdl.frames.parse gives).
 """
 
 from __future__ import annotations
