@@ -58,17 +58,30 @@ class _Cuts:
         self.json_text_pieces = tuple(json.dumps(t)[1:-1] for t in self.text_pieces)
 
 
-class ByModule(dict[str, Any]):
-    """SlaveView's `decoded` object of a Data_Exchange (docs/json.md: gsd, modules, text), which
-    also gives its json.dumps text from pieces made once per station (json_text)."""
-    __slots__ = ("_cuts", "_octets", "_which")
-    _cuts: _Cuts
-    _octets: list[str]
-    _which: Sequence[int]
+class DxView:
+    """A Data_Exchange of a station whose modules are known, cut by module: its `decoded` object
+    (docs/json.md: gsd, modules, text) as a dict (as_dict), as the text line (text) or as the text
+    json.dumps gives for that dict (json_text), each made from pieces built once per station and
+    the modules' octets in hex."""
+    __slots__ = ("cuts", "which", "octets")
+
+    def __init__(self, cuts: _Cuts, which: Sequence[int], octets: list[str]):
+        self.cuts, self.which, self.octets = cuts, which, octets
+
+    def text(self) -> str:
+        pieces = self.cuts.text_pieces
+        return self.cuts.head + "; ".join(pieces[i] + o for i, o in zip(self.which, self.octets))
+
+    def as_dict(self) -> dict[str, Any]:
+        parts = self.cuts.parts
+        return {"gsd": self.cuts.file,
+                "modules": [{"slot": parts[i][0], "name": parts[i][1], "offset": parts[i][2],
+                             "octets": o} for i, o in zip(self.which, self.octets)],
+                "text": [self.text()]}
 
     def json_text(self) -> str:
-        """json.dumps(self) (while it is unchanged)."""
-        cuts, octets, which = self._cuts, self._octets, self._which
+        """json.dumps(self.as_dict())."""
+        cuts, octets, which = self.cuts, self.octets, self.which
         mods = ", ".join(cuts.json_mods[i] + o + '"}' for i, o in zip(which, octets))
         text = "; ".join(cuts.json_text_pieces[i] + o for i, o in zip(which, octets))
         return cuts.json_head + mods + cuts.json_text_head + text + '"]}'
@@ -86,34 +99,33 @@ class SlaveView:
         self._layouts: dict[tuple[int, bytes, bytes | None], SlaveLayout | None] = {}
 
     # -- per frame ------------------------------------------------------------------------------
+    def dx_view(self, f: F.Frame) -> DxView | None:
+        """A frame without SAPs: its area by module when it is a Data_Exchange of a station whose
+        modules are known, else None."""
+        if f.sd == F.SC or f.sd == F.SD4:
+            return None
+        if f.fc & F.FC_REQ:                                   # (f.is_request)
+            if f.fc & 0x0F not in (F.SRD_LOW, F.SRD_HIGH):
+                return None
+            cuts = self._cuts.get((f.da, OUT))
+        else:
+            if not f.data:
+                return None
+            cuts = self._cuts.get((f.sa, IN))
+        if cuts is None:
+            return None
+        data = f.data
+        parts = cuts.parts
+        which = range(len(parts)) if len(data) > cuts.reach else \
+            [i for i, p in enumerate(parts) if p[2] < len(data)]
+        return DxView(cuts, which, [data[parts[i][2]:parts[i][3]].hex(" ") for i in which])
+
     def decode(self, f: F.Frame, dec: dict[str, Any] | None) -> dict[str, Any] | None:
         """The frame's `decoded` object: `dec` (dp/du_decode.py's) with the GSD's view added, or a
-        new one for a Data_Exchange of a station whose modules are known."""
+        new one for a Data_Exchange of a station whose modules are known (dx_view)."""
         if f.dsap is None and f.ssap is None:
-            if f.sd == F.SC or f.sd == F.SD4:
-                return dec
-            if f.fc & F.FC_REQ:                               # (f.is_request)
-                if f.fc & 0x0F not in (F.SRD_LOW, F.SRD_HIGH):
-                    return dec
-                cuts = self._cuts.get((f.da, OUT))
-            else:
-                if not f.data:
-                    return dec
-                cuts = self._cuts.get((f.sa, IN))
-            if cuts is None:
-                return dec
-            data = f.data
-            parts = cuts.parts
-            which = range(len(parts)) if len(data) > cuts.reach else \
-                [i for i, p in enumerate(parts) if p[2] < len(data)]
-            octets = [data[parts[i][2]:parts[i][3]].hex(" ") for i in which]
-            pieces = cuts.text_pieces
-            out = ByModule(gsd=cuts.file, modules=[
-                {"slot": parts[i][0], "name": parts[i][1], "offset": parts[i][2], "octets": o}
-                for i, o in zip(which, octets)],
-                text=[cuts.head + "; ".join(pieces[i] + o for i, o in zip(which, octets))])
-            out._cuts, out._octets, out._which = cuts, octets, which
-            return out
+            v = self.dx_view(f)
+            return dec if v is None else v.as_dict()
         if (f.is_request and f.dsap == S.SAP_SET_PRM and len(f.data) >= 7 and f.da not in self.skip
                 and f.data[0] & 0xC0 != 0x40):             # not a release (Unlock_Req alone)
             st = self._seen.setdefault(f.da, _Seen())
@@ -189,5 +201,5 @@ class SlaveView:
         return self._layouts[key]
 
 
-__all__ = ["ByModule", "SlaveView"]
+__all__ = ["DxView", "SlaveView"]
 
