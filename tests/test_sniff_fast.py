@@ -1,6 +1,6 @@
 """sniff's fast paths give what the plain paths give (issue 38, "sniff with headroom").
 
-- `--station`: each family's speed_plan (drives/wirefields.py SpeedWord) lets bustools/passive.py
+- `--station`: each family's speed_plan (drives/speedplan.py SpeedWord) lets bustools/passive.py
   decode the rest of an area once and the speed word each time. For every shipped profile, layout
   and direction, areas of seeded random octets plus the speed word's edge values (0, 1, 0x7FFF,
   0x8000, 0xFFFF) give the same drive object -- the same keys in the same order, the same values --

@@ -13,7 +13,7 @@ The max frequency that turns N2 words into Hz is the profile's default until an 
 the profile's max-frequency parameter goes by on the wire; from then on that value.
 
 Fast path (issue 38): a drive's area changes every cycle in its speed word, rarely elsewhere. A
-family codec's speed_plan (drives/wirefields.py SpeedWord) says where that word sits, which words
+family codec's speed_plan (drives/speedplan.py SpeedWord) says where that word sits, which words
 the drive object does not read, and the Hz fields the word gives; the rest of the area (the word put
 to its class, those words to zero) is decoded the slow way once per its octets and kept (bounded),
 the word's fields computed each time -- the same drive object as the slow way
@@ -36,7 +36,7 @@ from profidrive_cli.fdl import frames as F
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.dp.capture import Captured
     from profidrive_cli.drives.profile import Profile
-    from profidrive_cli.drives.wirefields import SpeedWord
+    from profidrive_cli.drives.speedplan import SpeedWord
 
 #: a family codec's decoded area (drives/<family>/codec.py decode_area): its shape is the family's,
 #: its values JSON's; and the common `drive` object made from it (docs/json.md), whose `param` and
@@ -311,13 +311,25 @@ class _Plan:
 _UNKNOWN: Any = object()
 
 
+def _reads_as_planned(cls: Any, codec: ModuleType) -> bool:
+    """The plan is the codec's, written for its decode_area read by pdrive's families' or the
+    codec's own package's normalise_area: a Drive class that reads areas its own way (a plug-in's
+    on a shipped codec) gets the slow way."""
+    owner = next((k for k in getattr(cls, "__mro__", ()) if "normalise_area" in vars(k)), None)
+    if owner is None:
+        return False
+    package = codec.__name__ if hasattr(codec, "__path__") else codec.__name__.rpartition(".")[0]
+    return bool(owner.__module__.startswith(("profidrive_cli.drives.", package + ".")))
+
+
 def _plan(st: Watched, direction: str, layout: str) -> _Plan | None:
-    """The family codec's speed_plan for this station's areas (drives/wirefields.py SpeedWord), with
+    """The family codec's speed_plan for this station's areas (drives/speedplan.py SpeedWord), with
     the max frequency its decode_area is given (_decode); None when the codec has none, or for a
     word outside the layout's area."""
-    from profidrive_cli.drives import codec_module
-    fn = getattr(codec_module(st.profile), "speed_plan", None)
-    if fn is None:
+    from profidrive_cli.drives import codec_module, drive_class
+    mod = codec_module(st.profile)
+    fn = getattr(mod, "speed_plan", None)
+    if fn is None or not _reads_as_planned(drive_class(st.profile), mod):
         return None
     if st.decoder is None:
         st.decoder = _decoder(st.profile)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Generator, Iterator
 from typing import IO, TYPE_CHECKING
 
 import click
@@ -87,7 +87,8 @@ def sniff_cmd(opts: BusOptions, duration: float, pcap_file: str | None, linktype
         from profidrive_cli.cli.sniff_ring import run_ring
         return run_ring(opts, ring, triggers, after_s, out_dir, stations, duration, linktype,
                         others={"--pcap": pcap_file, "--raw": raw_out, "--live": live},
-                        max_disk=max_disk, keep_days=keep_days, raw_file=raw_file)
+                        max_disk=max_disk, keep_days=keep_days,
+                        from_file=_ring_source(raw_file) if raw_file else None)
     if raw_out is not None and raw_file:
         raise UsageError("--raw writes what is received from a port; with --from-file there is nothing "
                          "to receive")
@@ -211,6 +212,32 @@ def _packet_file(path: str) -> CaptureReader | None:
     from profidrive_cli.dp.capfile import capture_format, open_capture
     fmt = capture_format(path, "raw")
     return None if fmt == "raw" else open_capture(path, fmt)
+
+
+class RingSource:
+    """--ring --from-file: the file (its path, its modification time: the wall clock of its start
+    when it carries no times) and its entries (file_entries), opened when they are first read --
+    after the recorder's options were checked -- and closed when done."""
+
+    def __init__(self, path: str):
+        self.path = path
+        self.mtime = _mtime(path)
+
+    def entries(self, cap: Capture, started: Callable[[float], None]
+                ) -> Generator[tuple[list[Captured], bool], None, None]:
+        packets = _packet_file(self.path)
+        src = open_input_file(self.path, "raw capture", MAX_CAPTURE_BYTES) if packets is None else None
+        try:
+            yield from file_entries(self.path, cap, packets, src, started)
+        finally:
+            if src is not None:
+                src.close()
+            if packets is not None:
+                packets.close()
+
+
+def _ring_source(path: str) -> RingSource:
+    return RingSource(path)
 
 
 def _chunks(fh: IO[bytes], path: str) -> Iterator[bytes]:

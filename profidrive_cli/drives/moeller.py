@@ -34,7 +34,7 @@ from profidrive_cli.drives.sections import key, key_line, section
 if TYPE_CHECKING:
     from profidrive_cli.drives.formats import Formatter
     from profidrive_cli.drives.profile import ParamDef, Profile
-    from profidrive_cli.drives.wirefields import SpeedWord
+    from profidrive_cli.drives.speedplan import SpeedWord
 
 FAMILY_PARAM_KEYS = {"bytes", "format", "ranges", "df6", "df6_max", "note", "array"}
 FORMATS = ("code", "hex", "bits", "baud", "alarm947")
@@ -480,7 +480,7 @@ def decode_area(profile: Profile, layout: str, direction: str, data: bytes, *,
 
 def speed_plan(profile: Profile, layout: str, direction: str, max_hz: float | None = None
                ) -> SpeedWord | None:
-    """sniff --station's fast path (drives/wirefields.py SpeedWord): HSW / HIW as the core's N2
+    """sniff --station's fast path (drives/speedplan.py SpeedWord): HSW / HIW as the core's N2
     word (the request's direction text reads HSW's sign: not in the drive object)."""
     return pd.speed_plan(profile, layout, direction, max_hz)
 

@@ -16,7 +16,7 @@ hand. Field kinds:
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Callable, NamedTuple
+from typing import TYPE_CHECKING, Any
 
 from profidrive_cli import UsageError
 
@@ -28,25 +28,6 @@ DIRECTIONS = ("request", "response")
 #: one field of an area, as the station table's JSON has it (kind, name, offset, size, and the
 #: kind's own keys: role, bits, scale, unit, ...)
 WireField = dict[str, Any]
-
-
-class SpeedWord(NamedTuple):
-    """Where an area's reference (request) / actual (response) word sits and the drive-object
-    fields it gives, computed as the family's decode_area + normalise_area compute them (the same
-    arithmetic in the same order: equal floats). A family codec's optional `speed_plan(profile,
-    layout, direction, max_hz)` answers it; `sniff --station` then decodes the rest of an area once
-    per the rest's octets and this word each time (bustools/passive.py): nothing else in the drive
-    object may depend on the word beyond its class (zero, positive, negative as a signed 16-bit
-    number), nor on the octets of `ignore` ((offset, size) ranges: words the drive object does not
-    read, e.g. a measured current; decoded as zeros). tests/test_sniff_fast.py holds every family's
-    to its slow path."""
-    offset: int
-    order: str                                      # "big" / "little"
-    fields: Callable[[int], dict[str, Any]]
-    ignore: tuple[tuple[int, int], ...] = ()
-    #: the Hz field alone (reference_hz / actual_hz, what a sniff line shows), when it is cheaper
-    #: than fields (None: taken from fields)
-    hz: Callable[[int], float | None] | None = None
 
 
 def _field(kind: str, name: str, offset: int, size: int = 2, **extra: object) -> WireField:

@@ -91,7 +91,7 @@ Drive
     ppo_drive_object(direction, area, *, state_without_status_word=None) -> dict
         a decoded area in the common words of `sniff --station` (ProfidriveDrive.normalise_area);
         pkw_drive_param(direction, pkw) -> dict: its PKW channel as the `param` there
-    speed_plan(profile, layout, direction, max_hz=None) -> wirefields.SpeedWord | None
+    speed_plan(profile, layout, direction, max_hz=None) -> speedplan.SpeedWord | None
         where the N2 reference / actual word sits and its drive-object fields (sniff --station's
         fast path: the rest of an area is decoded once per its octets, this word each time)
     make_drive(channel, profile, layout=None) -> ProfidriveDrive  (so `family: profidrive` works)

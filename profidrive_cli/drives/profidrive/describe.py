@@ -20,7 +20,7 @@ from profidrive_cli.drives.profidrive.pnu import (PNU_BAUD, PNU_CONTROL_WORD, PN
                                                   PNU_STATUS_WORD, decode_baud, decode_device_id)
 from profidrive_cli.drives.profidrive.ppo import PKW_WORDS, decode_area_bytes, ppo_layout
 from profidrive_cli.drives.profidrive.scaling import n2_to_percent, to_signed16
-from profidrive_cli.drives.wirefields import SpeedWord
+from profidrive_cli.drives.speedplan import SpeedWord
 from profidrive_cli.drives.profidrive.words import (CTW_ZERO_NAMES, Ctw, State, bit_list,
                                                     command_from_control_word,
                                                     state_from_status)
@@ -333,7 +333,7 @@ def pkw_drive_param(direction: str, pk: Decoded) -> dict[str, Any]:
 
 def speed_plan(profile: Profile, layout: str, direction: str, max_hz: float | None = None
                ) -> SpeedWord | None:
-    """sniff --station's fast path (drives/wirefields.py SpeedWord): the N2 reference / actual
+    """sniff --station's fast path (drives/speedplan.py SpeedWord): the N2 reference / actual
     word of a PPO area (the word after CTW / STW) and its fields:
     reference_hz and reference_percent, or actual_hz and actual_percent (ppo_drive_object over
     describe_n2). None when the layout is not a PPO layout."""

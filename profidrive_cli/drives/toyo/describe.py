@@ -15,7 +15,7 @@ from profidrive_cli.drives.toyo.codec import (RECORDING_TEXT, bit_names, ctw_com
                                               decode_traceback_ind, run_cmd_fields, speed_percent)
 from profidrive_cli.drives.toyo.config import toyo_config
 from profidrive_cli.drives.toyo.params import param_at, value_from_wire
-from profidrive_cli.drives.wirefields import SpeedWord
+from profidrive_cli.drives.speedplan import SpeedWord
 
 if TYPE_CHECKING:
     from profidrive_cli.drives.profile import Profile
@@ -269,7 +269,7 @@ def mode1_state(area: dict[str, Any], d: dict[str, Any]) -> None:
 
 def speed_plan(profile: Profile, layout: str, direction: str, max_hz: float | None = None
                ) -> SpeedWord | None:
-    """sniff --station's fast path (drives/wirefields.py SpeedWord): the speed word
+    """sniff --station's fast path (drives/speedplan.py SpeedWord): the speed word
     decode_area takes as the reference (request: the last `speed_ref`) or the actual value
     (response: the last `motor_speed`), and its reference_hz / reference_percent or actual_hz /
     actual_percent as describe_word and ppo_drive_object compute them. None when the layout has

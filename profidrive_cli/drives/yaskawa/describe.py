@@ -15,7 +15,7 @@ from profidrive_cli.drives.yaskawa.codec import (COMMAND_TEXT, FORMATS, MFO_BITS
                                                  FrequencyScale, _s16, decode_bits, decode_command,
                                                  decode_status, unpack_words)
 from profidrive_cli.drives.yaskawa.config import family_config, register_name
-from profidrive_cli.drives.wirefields import SpeedWord
+from profidrive_cli.drives.speedplan import SpeedWord
 from profidrive_cli.drives.yaskawa.paramaccess import (ERROR_CODES, FC_NONE, FC_READ, FC_WRITE,
                                                        FUNCTION_NAMES, HS_STATUS_NAMES, ParamArea,
                                                        decode_hs, error_text)
@@ -270,7 +270,7 @@ def _reg_value(prm: ParamDef | None, raw: int) -> str:
 
 def speed_plan(profile: Profile, layout: str, direction: str, max_hz: float | None = None
                ) -> SpeedWord | None:
-    """sniff --station's fast path (drives/wirefields.py SpeedWord): the word drive_object
+    """sniff --station's fast path (drives/speedplan.py SpeedWord): the word drive_object
     reads the Hz from -- the reference (request), the output frequency or else the speed feedback
     (response) -- and its reference_hz / actual_hz as decode_area and drive_object compute them
     (the profile's max frequency: decode_area takes no other); the other fast words ignored. None
