@@ -170,11 +170,16 @@ class PassiveDecoder:
                         plan.pieces.clear()
                     pieces = plan.pieces[id(rest)] = (rest, _pieces(rest, plan.hz_key))
                 before, label, after, without = pieces[1]
-                w = plan.word
-                hz = w.hz(word) if w.hz is not None else w.fields(word).get(plan.hz_key)
-                if hz is None:
+                hz_text = plan.hz_texts.get(word)
+                if hz_text is None:
+                    w = plan.word
+                    hz = w.hz(word) if w.hz is not None else w.fields(word).get(plan.hz_key)
+                    if len(plan.hz_texts) >= AREA_CACHE_MAX:
+                        plan.hz_texts.clear()
+                    hz_text = plan.hz_texts[word] = "" if hz is None else f"{hz:.2f} Hz"
+                if not hz_text:
                     return without
-                return before + f"{label}{hz:.2f} Hz" + after
+                return before + label + hz_text + after
         if d is None:
             d = self._decode_area(st, direction, data)
         return frame_suffix(d)
@@ -279,13 +284,15 @@ class _Plan:
     `segments` in order, each (start, end, None) for octets read from the area or (start, end,
     zeros) for an ignored range, and which segment is the speed word (`slot`)."""
     __slots__ = ("word", "offset", "order", "size", "segments", "slot", "classes", "hz_key",
-                 "pieces")
+                 "pieces", "hz_texts")
 
     def __init__(self, word: SpeedWord, size: int, direction: str):
         self.word, self.offset, self.order, self.size = word, word.offset, word.order, size
         #: the Hz field drive_text reads, and each rest's line around it (suffix: _pieces)
         self.hz_key = "reference_hz" if direction == "request" else "actual_hz"
         self.pieces: dict[int, tuple[DriveObject, tuple[str, str, str, str]]] = {}
+        #: the word's Hz as the line shows it ("30.00 Hz"; "": none), by word (bounded)
+        self.hz_texts: dict[int, str] = {}
         fixed = {word.offset: 2}
         for a, n in word.ignore:
             if n > 0 and not any(a < b + m and b < a + n for b, m in fixed.items()):

@@ -19,7 +19,7 @@ from profidrive_cli.drives.profidrive.pkw import (ERROR_RESPONSES, REQUEST_TEXT,
 from profidrive_cli.drives.profidrive.pnu import (PNU_BAUD, PNU_CONTROL_WORD, PNU_DEVICE_ID,
                                                   PNU_STATUS_WORD, decode_baud, decode_device_id)
 from profidrive_cli.drives.profidrive.ppo import PKW_WORDS, decode_area_bytes, ppo_layout
-from profidrive_cli.drives.profidrive.scaling import n2_to_percent, to_signed16
+from profidrive_cli.drives.profidrive.scaling import N2_FULL, n2_to_percent, to_signed16
 from profidrive_cli.drives.speedplan import SpeedWord
 from profidrive_cli.drives.profidrive.words import (CTW_ZERO_NAMES, Ctw, State, bit_list,
                                                     command_from_control_word,
@@ -353,7 +353,11 @@ def speed_plan(profile: Profile, layout: str, direction: str, max_hz: float | No
                 pct_key: round(float(round(pct, 6)), 3)}
 
     def hz(word: int) -> float | None:
-        return round(float(round(n2_to_percent(word) * mhz / 100.0, 6)), 3) if mhz else None
+        # n2_to_percent inline (to_signed16 of a 16-bit word, * 100.0 / N2_FULL): the same floats
+        if not mhz:
+            return None
+        return round(round((word - 0x10000 if word & 0x8000 else word) * 100.0 / N2_FULL * mhz
+                           / 100.0, 6), 3)
     pzd = (2 * PKW_WORDS if ppo.pkw else 0)
     # PZD3.. (raw words, ppo_drive_object reads none of them)
     rest = ppo.length(direction) - (pzd + 4)
