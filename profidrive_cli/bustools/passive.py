@@ -11,6 +11,14 @@ The layout comes from `--station ADDR=PROFILE:LAYOUT`, else from the Chk_Cfg the
 the capture saw it), else the profile's default layout (or the one layout whose lengths fit).
 The max frequency that turns N2 words into Hz is the profile's default until an answer to a read of
 the profile's max-frequency parameter goes by on the wire; from then on that value.
+
+Fast path (issue 38): a drive's area changes every cycle in its speed word, rarely elsewhere. A
+family codec's speed_plan (drives/speedplan.py SpeedWord) says where that word sits, which words
+the drive object does not read, and the Hz fields the word gives; the rest of the area (the word put
+to its class, those words to zero) is decoded the slow way once per its octets and kept (bounded),
+the word's fields computed each time -- the same drive object as the slow way
+(tests/test_sniff_fast.py), at a fraction of the cost. PassiveDecoder.suffix makes sniff's line
+without the drive object. A family without a plan is decoded the slow way.
 """
 
 from __future__ import annotations
@@ -28,6 +36,7 @@ from profidrive_cli.fdl import frames as F
 if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.dp.capture import Captured
     from profidrive_cli.drives.profile import Profile
+    from profidrive_cli.drives.speedplan import SpeedWord
 
 #: a family codec's decoded area (drives/<family>/codec.py decode_area): its shape is the family's,
 #: its values JSON's; and the common `drive` object made from it (docs/json.md), whose `param` and
@@ -109,6 +118,9 @@ def is_data_exchange(f: F.Frame) -> bool:
     return bool(f.data)
 
 
+#: the Data_Exchange request functions (is_data_exchange)
+_DX_FUNCTIONS = (F.SRD_LOW, F.SRD_HIGH)
+
 #: decoded areas kept per decoder: a station's area mostly repeats its previous one (the same
 #: command, reference and parameter request cycle after cycle); cleared when this many are kept
 AREA_CACHE_MAX = 1024
@@ -119,36 +131,257 @@ class PassiveDecoder:
     same object for the same station, direction, octets, layout and max frequency: do not change
     it)."""
 
-    def __init__(self, watched: dict[int, Watched]):
+    def __init__(self, watched: dict[int, Watched], fast: bool = True):
         self.watched = watched
         self._areas: dict[tuple[int, str, bytes, str | None, float | None], DriveObject] = {}
+        #: the fast path (_fast): off, every area is decoded the slow way (tests compare the two)
+        self.fast = fast
+        self._plans: dict[tuple[int, str, str, float | None], _Plan | None] = {}
+        self._rests: dict[tuple[tuple[int, str, str, float | None], bytes], DriveObject] = {}
 
-    def decode(self, c: Captured) -> DriveObject | None:
+    def decode(self, c: Captured, speed: bool = True) -> DriveObject | None:
+        """The drive object of a watched station's Data_Exchange telegram (None for any other).
+        speed=False: its reference / actual fields and text may be those of an area like it with
+        another speed word (the recorder's triggers read the command, state, flags and parameter
+        channel only): the fast path's rest as it is, no Hz computed, no text written."""
+        hit = self._locate(c)
+        if hit is None:
+            return None
+        return self._decode_area(hit[0], hit[1], hit[2], speed)
+
+    def suffix(self, c: Captured) -> str | None:
+        """frame_suffix(decode(c)) (None where decode gives None), made without the drive object
+        on the fast path: the rest's text around the Hz the speed word gives."""
+        hit = self._locate(c)
+        if hit is None:
+            return None
+        st, direction, data = hit
+        layout = st.layout_for(direction, len(data))
+        d = self._areas.get((st.address, direction, data, layout, st.fmax))
+        if d is None and self.fast:
+            found = self._rest(st, direction, data, layout)
+            if found is not None:
+                plan, word, rest = found
+                if rest.get("param") and direction == "response":
+                    _learn_fmax(st, rest["param"])
+                pieces = plan.pieces.get(id(rest))
+                if pieces is None or pieces[0] is not rest:
+                    if len(plan.pieces) >= AREA_CACHE_MAX:
+                        plan.pieces.clear()
+                    pieces = plan.pieces[id(rest)] = (rest, _pieces(rest, plan.hz_key))
+                before, label, after, without = pieces[1]
+                hz_text = plan.hz_texts.get(word)
+                if hz_text is None:
+                    w = plan.word
+                    hz = w.hz(word) if w.hz is not None else w.fields(word).get(plan.hz_key)
+                    if len(plan.hz_texts) >= AREA_CACHE_MAX:
+                        plan.hz_texts.clear()
+                    hz_text = plan.hz_texts[word] = "" if hz is None else f"{hz:.2f} Hz"
+                if not hz_text:
+                    return without
+                return before + label + hz_text + after
+        if d is None:
+            d = self._decode_area(st, direction, data)
+        return frame_suffix(d)
+
+    def _locate(self, c: Captured) -> tuple[Watched, str, bytes] | None:
+        """(the watched station, "request" / "response", the area) of a Data_Exchange telegram;
+        None for any other (a Chk_Cfg to a watched station noted: it names the layout)."""
         f = c.frame
-        if f is None or f.sd in (F.SC, F.SD4):
+        if f is None:
             return None
-        if f.is_request and f.da in self.watched and f.dsap == S.SAP_CHK_CFG:
+        sd = f.sd
+        if sd == F.SC or sd == F.SD4:
+            return None
+        fc = f.fc
+        if f.dsap is None and f.ssap is None:        # a Data_Exchange request or its data reply
+            if fc & F.FC_REQ:
+                if fc & 0x0F not in _DX_FUNCTIONS:
+                    return None
+                st = self.watched.get(f.da)
+                direction = "request"
+            else:
+                if not f.data:
+                    return None
+                st = self.watched.get(f.sa)
+                direction = "response"
+            if st is None:
+                return None
+            data = f.data
+            return st, direction, data if type(data) is bytes else bytes(data)
+        if fc & F.FC_REQ and f.da in self.watched and f.dsap == S.SAP_CHK_CFG:
             self.watched[f.da].seen_cfg = bytes(f.data)
-            return None
-        if not is_data_exchange(f):
-            return None
-        direction = "request" if f.is_request else "response"
-        st = self.watched.get(f.da if f.is_request else f.sa)
-        if st is None:
-            return None
-        return self._decode_area(st, direction, bytes(f.data))
+        return None
 
-    def _decode_area(self, st: Watched, direction: str, data: bytes) -> DriveObject:
+    def _decode_area(self, st: Watched, direction: str, data: bytes, speed: bool = True
+                     ) -> DriveObject:
         layout = st.layout_for(direction, len(data))
         key = (st.address, direction, data, layout, st.fmax)
         d = self._areas.get(key)
+        if d is None and not speed and self.fast:
+            found = self._rest(st, direction, data, layout)
+            if found is not None:
+                d = found[2]
+                if d.get("param") and direction == "response":
+                    _learn_fmax(st, d["param"])
+                return d
         if d is None:
             if len(self._areas) >= AREA_CACHE_MAX:
                 self._areas.clear()
-            d = self._areas[key] = _decode_new(st, direction, data, layout)
+            d = self._fast(st, direction, data, layout) if self.fast else None
+            if d is None:
+                d = _decode_new(st, direction, data, layout)
+            self._areas[key] = d
         if d.get("param") and direction == "response":
             _learn_fmax(st, d["param"])
         return d
+
+    def _fast(self, st: Watched, direction: str, data: bytes, layout: str | None) -> DriveObject | None:
+        """The area's drive object from its rest's -- the area with its speed word put to the word's
+        class and the octets the drive object does not read to zero, decoded the slow way once per
+        the rest's octets -- and the word's own fields (the family's speed_plan); None where the
+        family has no plan for the area (the slow way then)."""
+        found = self._rest(st, direction, data, layout)
+        if found is None:
+            return None
+        plan, word, rest = found
+        d = dict(rest)
+        for k, v in plan.word.fields(word).items():
+            if k in d:
+                d[k] = v
+        d["text"] = drive_text(d)
+        return d
+
+    def _rest(self, st: Watched, direction: str, data: bytes, layout: str | None
+              ) -> tuple[_Plan, int, DriveObject] | None:
+        """(the plan, the speed word, the rest's drive object) for _fast; None without a plan or
+        when the rest does not decode."""
+        if layout is None:
+            return None
+        pkey = (st.address, direction, layout, st.fmax)
+        plan = self._plans.get(pkey, _UNKNOWN)
+        if plan is _UNKNOWN:
+            plan = self._plans[pkey] = _plan(st, direction, layout)
+        if plan is None or len(data) != plan.size:
+            return None
+        at = plan.offset
+        word = int.from_bytes(data[at:at + 2], plan.order)
+        parts = [data[a:b] if fill is None else fill for a, b, fill in plan.segments]
+        parts[plan.slot] = plan.classes[0 if not word else 2 if word & 0x8000 else 1]
+        rest_key = (pkey, b"".join(parts))
+        rest = self._rests.get(rest_key)
+        if rest is None:
+            if len(self._rests) >= AREA_CACHE_MAX:
+                self._rests.clear()
+            rest = self._rests[rest_key] = _decode_new(st, direction, rest_key[1], layout)
+        if "error" in rest:
+            return None
+        return plan, word, rest
+
+
+class _Plan:
+    """A family's SpeedWord for one station, direction and layout, cut for _fast: the area as
+    `segments` in order, each (start, end, None) for octets read from the area or (start, end,
+    zeros) for an ignored range, and which segment is the speed word (`slot`)."""
+    __slots__ = ("word", "offset", "order", "size", "segments", "slot", "classes", "hz_key",
+                 "pieces", "hz_texts")
+
+    def __init__(self, word: SpeedWord, size: int, direction: str):
+        self.word, self.offset, self.order, self.size = word, word.offset, word.order, size
+        #: the Hz field drive_text reads, and each rest's line around it (suffix: _pieces)
+        self.hz_key = "reference_hz" if direction == "request" else "actual_hz"
+        self.pieces: dict[int, tuple[DriveObject, tuple[str, str, str, str]]] = {}
+        #: the word's Hz as the line shows it ("30.00 Hz"; "": none), by word (bounded)
+        self.hz_texts: dict[int, str] = {}
+        fixed = {word.offset: 2}
+        for a, n in word.ignore:
+            if n > 0 and not any(a < b + m and b < a + n for b, m in fixed.items()):
+                fixed[a] = n                              # (a range over the speed word: not)
+        segments: list[tuple[int, int, bytes | None]] = []
+        self.slot = 0
+        pos = 0
+        for a in sorted(fixed):
+            if a > pos:
+                segments.append((pos, a, None))
+            if a == word.offset:
+                self.slot = len(segments)
+            segments.append((a, a + fixed[a], bytes(fixed[a])))
+            pos = a + fixed[a]
+        if pos < size:
+            segments.append((pos, size, None))
+        self.segments = segments
+        #: the speed word's class: 0, 1, -1 as two octets in the plan's byte order
+        self.classes = (b"\x00\x00", (1).to_bytes(2, word.order), b"\xff\xff")  # type: ignore[arg-type]
+
+
+#: not looked up yet (None: the family has no plan for the area)
+_UNKNOWN: Any = object()
+
+
+def _reads_as_planned(cls: Any, codec: ModuleType) -> bool:
+    """The plan is the codec's, written for its decode_area read by pdrive's families' or the
+    codec's own package's normalise_area: a Drive class that reads areas its own way (a plug-in's
+    on a shipped codec) gets the slow way."""
+    owner = next((k for k in getattr(cls, "__mro__", ()) if "normalise_area" in vars(k)), None)
+    if owner is None:
+        return False
+    package = codec.__name__ if hasattr(codec, "__path__") else codec.__name__.rpartition(".")[0]
+    return bool(owner.__module__.startswith(("profidrive_cli.drives.", package + ".")))
+
+
+def _plan(st: Watched, direction: str, layout: str) -> _Plan | None:
+    """The family codec's speed_plan for this station's areas (drives/speedplan.py SpeedWord), with
+    the max frequency its decode_area is given (_decode); None when the codec has none, or for a
+    word outside the layout's area."""
+    from profidrive_cli.drives import codec_module, drive_class
+    mod = codec_module(st.profile)
+    fn = getattr(mod, "speed_plan", None)
+    if fn is None or not _reads_as_planned(drive_class(st.profile), mod):
+        return None
+    if st.decoder is None:
+        st.decoder = _decoder(st.profile)
+    max_hz = st.fmax if st.fmax is not None and st.decoder[1] else None
+    word: SpeedWord | None = fn(st.profile, layout, direction, max_hz)
+    lay = st.profile.layouts.get(layout)
+    if word is None or lay is None:
+        return None
+    size = lay.output_len if direction == "request" else lay.input_len
+    if not 0 <= word.offset <= size - 2 or word.order not in ("big", "little"):
+        return None
+    return _Plan(word, size, direction)
+
+
+def _pieces(rest: DriveObject, hz_key: str) -> tuple[str, str, str, str]:
+    """frame_suffix of a drive object like the rest's with another Hz (drive_text's parts in its
+    order): (before, label, after, without) -- the line is before + label + f"{hz:.2f} Hz" +
+    after, or `without` when the Hz is None."""
+    arrow = "->" if rest["direction"] == "request" else "<-"
+    who = f"drive {rest['station']} ({rest['profile']}"
+    who += f" {rest['layout']})" if rest.get("layout") else ")"
+    head = f"  | {arrow} {who}: "
+    pre: list[str] = []
+    post: list[str] = []
+    parts = pre
+    if "command" in rest:
+        parts.append(str(rest["command"]))
+    if hz_key == "reference_hz":
+        parts = post
+    elif rest.get("reference_hz") is not None:
+        parts.append(f"reference {rest['reference_hz']:.2f} Hz")
+    if "state" in rest:
+        parts.append(str(rest["state"]))
+    if hz_key == "actual_hz":
+        parts = post
+    elif rest.get("actual_hz") is not None:
+        parts.append(f"actual {rest['actual_hz']:.2f} Hz")
+    param = rest["param"]["text"] if rest.get("param") else None
+    label = "reference " if hz_key == "reference_hz" else "actual "
+    before = head + "".join(p + ", " for p in pre)
+    after = "".join(", " + p for p in post) + ("" if param is None else "; " + param)
+    text = ", ".join(pre + post)
+    if param is not None:
+        text += ("; " if text else "") + param
+    return before, label, after, head + text
 
 
 def _decode_new(st: Watched, direction: str, data: bytes, layout: str | None) -> DriveObject:

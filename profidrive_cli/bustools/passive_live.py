@@ -228,7 +228,7 @@ class LiveList:
         if f.sd == F.SC:
             self._answered(c, high=False)
             return
-        if f.is_request:
+        if f.fc & F.FC_REQ:                                  # (f.is_request: not SC, not SD4)
             self._request(c, f)
         elif self._pending is not None and self._pending.station.address == f.sa:
             status = f.fc & 0x0F
@@ -317,14 +317,16 @@ class LiveList:
         st = self.station(f.da)
         st.master = f.sa
         st.prev_req_t, st.last_req_t = st.last_req_t, c.t
-        fn = f.function
+        fc = f.fc
+        fn = fc & 0x0F                                      # (f.function, f.fcv, f.fcb)
         if fn in _SRD_SDA:
-            if f.fcv and st.last_fcb is not None and f.fcb == st.last_fcb:
+            fcb = bool(fc & F.FC_FCB)
+            if fc & F.FC_FCV and st.last_fcb is not None and fcb == st.last_fcb:
                 st.counters["retries"] += 1
                 retry = True
             else:
                 retry = False
-            st.last_fcb = f.fcb
+            st.last_fcb = fcb
         else:
             retry = False
         dx = f.dsap is None and f.ssap is None and fn in (F.SRD_LOW, F.SRD_HIGH)

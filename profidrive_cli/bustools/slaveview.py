@@ -14,9 +14,10 @@ Sans-IO apart from reading GSD files: fdl frames in, the `decoded` object of doc
 
 from __future__ import annotations
 
+import json
 import os
 from dataclasses import dataclass
-from typing import Any, Iterable
+from typing import Any, Iterable, Sequence
 
 from profidrive_cli import UsageError
 from profidrive_cli.dp import services as S
@@ -36,8 +37,54 @@ class _Seen:
     cfg_is_chk: bool = False          # from a Chk_Cfg (else from a Get_Cfg reply)
 
 
-#: one direction of a station, built once: (gsd file name, ((slot, name, start, end), ...), text head)
-_Cuts = tuple[str, tuple[tuple[int, str, int, int], ...], str]
+class _Cuts:
+    """One direction of a station, built once: the GSD file's name, its modules' (slot, name, start,
+    end), the text's head -- and the pieces of the decoded object's text and JSON around each
+    module's octets (ByModule), so that a Data_Exchange costs the octets' hex only."""
+    __slots__ = ("file", "parts", "head", "reach", "text_pieces", "json_head", "json_mods",
+                 "json_text_head", "json_text_pieces")
+
+    def __init__(self, file: str, parts: tuple[tuple[int, str, int, int], ...], head: str):
+        self.file, self.parts, self.head = file, parts, head
+        #: an area longer than this holds every module (shorter: the modules that start in it)
+        self.reach = max(a for _, _, a, _ in parts)
+        self.text_pieces = tuple(f"{n} {name}: " for n, name, _, _ in parts)
+        # json.dumps of {"gsd", "modules": [{"slot", "name", "offset", "octets"}], "text": [..]}:
+        # JSON escapes character by character, so a text's escape is its pieces' escapes joined
+        self.json_head = '{"gsd": ' + json.dumps(file) + ', "modules": ['
+        self.json_mods = tuple(json.dumps({"slot": n, "name": name, "offset": a})[:-1] + ', "octets": "'
+                               for n, name, a, _ in parts)
+        self.json_text_head = '], "text": ["' + json.dumps(head)[1:-1]
+        self.json_text_pieces = tuple(json.dumps(t)[1:-1] for t in self.text_pieces)
+
+
+class DxView:
+    """A Data_Exchange of a station whose modules are known, cut by module: its `decoded` object
+    (docs/json.md: gsd, modules, text) as a dict (as_dict), as the text line (text) or as the text
+    json.dumps gives for that dict (json_text), each made from pieces built once per station and
+    the modules' octets in hex."""
+    __slots__ = ("cuts", "which", "octets")
+
+    def __init__(self, cuts: _Cuts, which: Sequence[int], octets: list[str]):
+        self.cuts, self.which, self.octets = cuts, which, octets
+
+    def text(self) -> str:
+        pieces = self.cuts.text_pieces
+        return self.cuts.head + "; ".join(pieces[i] + o for i, o in zip(self.which, self.octets))
+
+    def as_dict(self) -> dict[str, Any]:
+        parts = self.cuts.parts
+        return {"gsd": self.cuts.file,
+                "modules": [{"slot": parts[i][0], "name": parts[i][1], "offset": parts[i][2],
+                             "octets": o} for i, o in zip(self.which, self.octets)],
+                "text": [self.text()]}
+
+    def json_text(self) -> str:
+        """json.dumps(self.as_dict())."""
+        cuts, octets, which = self.cuts, self.octets, self.which
+        mods = ", ".join(cuts.json_mods[i] + o + '"}' for i, o in zip(which, octets))
+        text = "; ".join(cuts.json_text_pieces[i] + o for i, o in zip(which, octets))
+        return cuts.json_head + mods + cuts.json_text_head + text + '"]}'
 
 
 class SlaveView:
@@ -52,28 +99,33 @@ class SlaveView:
         self._layouts: dict[tuple[int, bytes, bytes | None], SlaveLayout | None] = {}
 
     # -- per frame ------------------------------------------------------------------------------
+    def dx_view(self, f: F.Frame) -> DxView | None:
+        """A frame without SAPs: its area by module when it is a Data_Exchange of a station whose
+        modules are known, else None."""
+        if f.sd == F.SC or f.sd == F.SD4:
+            return None
+        if f.fc & F.FC_REQ:                                   # (f.is_request)
+            if f.fc & 0x0F not in (F.SRD_LOW, F.SRD_HIGH):
+                return None
+            cuts = self._cuts.get((f.da, OUT))
+        else:
+            if not f.data:
+                return None
+            cuts = self._cuts.get((f.sa, IN))
+        if cuts is None:
+            return None
+        data = f.data
+        parts = cuts.parts
+        which = range(len(parts)) if len(data) > cuts.reach else \
+            [i for i, p in enumerate(parts) if p[2] < len(data)]
+        return DxView(cuts, which, [data[parts[i][2]:parts[i][3]].hex(" ") for i in which])
+
     def decode(self, f: F.Frame, dec: dict[str, Any] | None) -> dict[str, Any] | None:
         """The frame's `decoded` object: `dec` (dp/du_decode.py's) with the GSD's view added, or a
-        new one for a Data_Exchange of a station whose modules are known."""
+        new one for a Data_Exchange of a station whose modules are known (dx_view)."""
         if f.dsap is None and f.ssap is None:
-            if f.sd in (F.SC, F.SD4):
-                return dec
-            if f.is_request:
-                if f.function not in (F.SRD_LOW, F.SRD_HIGH):
-                    return dec
-                cuts = self._cuts.get((f.da, OUT))
-            else:
-                if not f.data:
-                    return dec
-                cuts = self._cuts.get((f.sa, IN))
-            if cuts is None:
-                return dec
-            data = f.data
-            file, parts, head = cuts
-            mods = [{"slot": n, "name": name, "offset": a, "octets": data[a:b].hex(" ")}
-                    for n, name, a, b in parts if a < len(data)]
-            return {"gsd": file, "modules": mods,
-                    "text": [head + "; ".join(f"{m['slot']} {m['name']}: {m['octets']}" for m in mods)]}
+            v = self.dx_view(f)
+            return dec if v is None else v.as_dict()
         if (f.is_request and f.dsap == S.SAP_SET_PRM and len(f.data) >= 7 and f.da not in self.skip
                 and f.data[0] & 0xC0 != 0x40):             # not a release (Unlock_Req alone)
             st = self._seen.setdefault(f.da, _Seen())
@@ -111,7 +163,7 @@ class SlaveView:
                            (m.out_offset + m.out_len) if d == OUT else (m.in_offset + m.in_len))
                           for m in lay.modules if (m.out_len if d == OUT else m.in_len))
             if parts:
-                self._cuts[(address, d)] = (name, parts, f"{label} by module ({name}): ")
+                self._cuts[(address, d)] = _Cuts(name, parts, f"{label} by module ({name}): ")
         if not show:
             return dec
         out = dict(dec or {"text": []})
@@ -149,5 +201,5 @@ class SlaveView:
         return self._layouts[key]
 
 
-__all__ = ["SlaveView"]
+__all__ = ["DxView", "SlaveView"]
 

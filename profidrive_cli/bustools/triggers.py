@@ -271,7 +271,12 @@ class TriggerSet:
 
     def _drive(self, c: Captured) -> list[Note]:
         assert self.decoder is not None
-        d = self.decoder.decode(c)
+        f = c.frame
+        if f is not None and f.fc & 0x40 and f.dsap is None:
+            return []               # a Data_Exchange request: the triggers read the drives' answers
+        # (a Chk_Cfg still goes to the decoder: it names the layout); state, flags and parameter
+        # channel only, not the Hz (speed=False)
+        d = self.decoder.decode(c, speed=False)
         if d is None or "error" in d or d.get("direction") != "response":
             return []
         a = d["station"]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Generator, Iterator
 from typing import IO, TYPE_CHECKING
 
 import click
@@ -86,8 +86,9 @@ def sniff_cmd(opts: BusOptions, duration: float, pcap_file: str | None, linktype
             or max_disk is not None or keep_days is not None):
         from profidrive_cli.cli.sniff_ring import run_ring
         return run_ring(opts, ring, triggers, after_s, out_dir, stations, duration, linktype,
-                        others={"--pcap": pcap_file, "--raw": raw_out, "--from-file": raw_file,
-                                "--live": live}, max_disk=max_disk, keep_days=keep_days)
+                        others={"--pcap": pcap_file, "--raw": raw_out, "--live": live},
+                        max_disk=max_disk, keep_days=keep_days,
+                        from_file=_ring_source(raw_file) if raw_file else None)
     if raw_out is not None and raw_file:
         raise UsageError("--raw writes what is received from a port; with --from-file there is nothing "
                          "to receive")
@@ -128,28 +129,12 @@ def sniff_cmd(opts: BusOptions, duration: float, pcap_file: str | None, linktype
                 view.frame(c)
             view.flush()
 
-        if packets is not None:
-            t0 = None
-            batch: list[Captured] = []
-            for p in packets:
-                if t0 is None:
-                    t0 = p.t                         # the file's own clock: its first telegram
-                    if writer is not None:
-                        writer.start = t0
-                batch += cap.feed(p.raw, p.t - t0)
-                if len(batch) >= PACKETS_PER_SHOW:
-                    show(batch, end_of_chunk=False)
-                    batch = []
-            rest = cap.feed(b"", cap._t)
-            show(batch + rest + [_truncated(cap)] if len(cap.rx) else batch + rest)
-            view.finish(cap._t)
-        elif src is not None and raw_file:             # (src: only from a --from-file)
-            # shown as if decoded in one piece: a telegram that starts in the chunk's last octets
-            # waits for the next (HOLD), a garbage run that goes on in it stays one entry
-            for chunk in _chunks(src, raw_file):
-                show(cap.feed(chunk, 0.0, hold=HOLD), end_of_chunk=False)
-            rest = cap.feed(b"", 0.0)
-            show(rest + [_truncated(cap)] if len(cap.rx) else rest)
+        if raw_file:
+            def started(t0: float) -> None:
+                if writer is not None:
+                    writer.start = t0                # the file's own clock: its first telegram
+            for items, last in file_entries(raw_file, cap, packets, src, started):
+                show(items, end_of_chunk=last)
             view.finish(cap._t)
         else:
             link = opts.open_link()
@@ -192,12 +177,67 @@ def sniff_cmd(opts: BusOptions, duration: float, pcap_file: str | None, linktype
 PACKETS_PER_SHOW = 1024
 
 
+def file_entries(path: str, cap: Capture, packets: CaptureReader | None, src: IO[bytes] | None,
+                 started: Callable[[float], None]) -> Iterator[tuple[list[Captured], bool]]:
+    """A capture file's entries in batches, (entries, last), as decoded in one piece: a packet
+    file's (`packets`) timed from its first packet (`started(its time)` is called then), a raw
+    file's (`src`, read in CHUNK_BYTES) all at 0; the last batch ends with the truncated telegram
+    the file ended in, if any. Errors of a run of garbage over two batches are for an ErrorMerger
+    to join (end_of_chunk at the last)."""
+    if packets is not None:
+        t0 = None
+        batch: list[Captured] = []
+        for p in packets:
+            if t0 is None:
+                t0 = p.t
+                started(t0)
+            batch += cap.feed(p.raw, p.t - t0)
+            if len(batch) >= PACKETS_PER_SHOW:
+                yield batch, False
+                batch = []
+        rest = cap.feed(b"", cap._t)
+        yield (batch + rest + [_truncated(cap)] if len(cap.rx) else batch + rest), True
+    elif src is not None:
+        # shown as if decoded in one piece: a telegram that starts in the chunk's last octets
+        # waits for the next (HOLD), a garbage run that goes on in it stays one entry
+        for chunk in _chunks(src, path):
+            yield cap.feed(chunk, 0.0, hold=HOLD), False
+        rest = cap.feed(b"", 0.0)
+        yield (rest + [_truncated(cap)] if len(cap.rx) else rest), True
+
+
 def _packet_file(path: str) -> CaptureReader | None:
     """The open packet reader of a pcap, pcapng or ProfiTrace .ptd file (by extension; its header
     checked now, before anything is written); None for a raw octet file (any other extension)."""
     from profidrive_cli.dp.capfile import capture_format, open_capture
     fmt = capture_format(path, "raw")
     return None if fmt == "raw" else open_capture(path, fmt)
+
+
+class RingSource:
+    """--ring --from-file: the file (its path, its modification time: the wall clock of its start
+    when it carries no times) and its entries (file_entries), opened when they are first read --
+    after the recorder's options were checked -- and closed when done."""
+
+    def __init__(self, path: str):
+        self.path = path
+        self.mtime = _mtime(path)
+
+    def entries(self, cap: Capture, started: Callable[[float], None]
+                ) -> Generator[tuple[list[Captured], bool], None, None]:
+        packets = _packet_file(self.path)
+        src = open_input_file(self.path, "raw capture", MAX_CAPTURE_BYTES) if packets is None else None
+        try:
+            yield from file_entries(self.path, cap, packets, src, started)
+        finally:
+            if src is not None:
+                src.close()
+            if packets is not None:
+                packets.close()
+
+
+def _ring_source(path: str) -> RingSource:
+    return RingSource(path)
 
 
 def _chunks(fh: IO[bytes], path: str) -> Iterator[bytes]:

@@ -10,7 +10,8 @@ from __future__ import annotations
 import signal
 import time
 from datetime import datetime
-from typing import Any
+from collections.abc import Callable, Generator
+from typing import TYPE_CHECKING, Any, Protocol
 
 from profidrive_cli import UsageError
 from profidrive_cli.bustools.causes import likely_causes
@@ -24,6 +25,19 @@ from profidrive_cli.bustools.triggers import TriggerSet, parse_all
 from profidrive_cli.cli.common import emit_json, err, out
 from profidrive_cli.dp.capture import LINKTYPES, Capture, PcapWriter, merge_errors
 from profidrive_cli.outfile import OutputWriteError
+
+if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.dp.capture import Captured
+
+
+class RingSource(Protocol):
+    """--ring --from-file's file (sniff_cmd.RingSource): its path, its modification time and its
+    entries in batches, (entries, last), opened when first read and closed when done."""
+    path: str
+    mtime: float
+
+    def entries(self, cap: Capture, started: Callable[[float], None]
+                ) -> Generator[tuple[list[Captured], bool], None, None]: ...
 
 
 class _Stop(Exception):
@@ -39,10 +53,12 @@ def listen_baud(opts: Any) -> int | None:
 def run_ring(opts: Any, ring_s: float | None, trigger_exprs: tuple[str, ...], after_s: float | None,
              out_opt: str | None, stations: tuple[str, ...], duration: float,
              linktype: str, others: dict[str, Any] | None = None, max_disk: str | None = None,
-             keep_days: float | None = None) -> None:
+             keep_days: float | None = None, from_file: RingSource | None = None) -> None:
     """Listen until --duration (given: else until Ctrl-C or SIGTERM), writing a capture per event.
     A capture that cannot be written is an error event and the listening goes on; the command
-    ends with exit 1 (OutputWriteError) when any was not written."""
+    ends with exit 1 (OutputWriteError) when any was not written. With `from_file` (--from-file)
+    the file's telegrams instead of the port's, on the file's clock (a pcap's packet times, from
+    its first; a raw file's all at 0, its captures' wall clock the file's modification time)."""
     import click
 
     from profidrive_cli.bustools.passive import PassiveDecoder, watch_list
@@ -51,8 +67,7 @@ def run_ring(opts: Any, ring_s: float | None, trigger_exprs: tuple[str, ...], af
                          "give --ring SECONDS")
     given = [k for k, v in (others or {}).items() if v]
     if given:
-        raise UsageError(f"--ring writes its own captures and listens to a port: not with "
-                         f"{', '.join(given)}")
+        raise UsageError(f"--ring writes its own captures: not with {', '.join(given)}")
     if ring_s <= 0:
         raise UsageError("--ring must be positive (seconds before an event to keep)")
     ctx = click.get_current_context(silent=True)
@@ -70,12 +85,19 @@ def run_ring(opts: Any, ring_s: float | None, trigger_exprs: tuple[str, ...], af
     watched = watch_list(stations) if stations else {}
     triggers = parse_all(list(trigger_exprs), set(watched))
     pattern = out_pattern(out_opt)
-    tset = TriggerSet(triggers, PassiveDecoder(watched) if watched else None, baud=listen_baud(opts))
+    # a file's line rate only from --baud / PDRIVE_BAUD (as sniff --from-file --live: the default
+    # and a port's configured rate say nothing about the line the file was captured on)
+    baud = listen_baud(opts) if from_file is None or opts.source_of("baud").startswith(("option", "env")) \
+        else None
+    tset = TriggerSet(triggers, PassiveDecoder(watched) if watched else None, baud=baud)
     store = Store(pattern, max_bytes, None if keep_days is None else keep_days * 86400.0)
     # numbered on after an earlier run's captures: a restart never writes over one of them
     rec = Recorder(tset, ring_s, after, first_n=store.last_number() + 1)
     writer = _Writer(pattern, LINKTYPES[linktype], opts.json, tset, store)
     cap = Capture()
+    if from_file is not None:
+        return _from_file(from_file, opts.json, ring_s, after, triggers, pattern, max_bytes,
+                          keep_days, rec, writer, store)
     link = opts.open_link()
     if link.is_simulator:
         err.print("sim:// is silent unless a master talks: start `pdrive sim --plc --pty` and "
@@ -106,15 +128,51 @@ def run_ring(opts: Any, ring_s: float | None, trigger_exprs: tuple[str, ...], af
         signal.signal(signal.SIGTERM, old)
         link.close()
     writer.write_all(rec.close())
-    if not opts.json:
+    _summary(opts.json, rec, store)
+
+
+def _summary(as_json: bool, rec: Recorder, store: Store, heard: str = "heard") -> None:
+    """The closing line (text mode); OutputWriteError (exit 1) when a capture was not written."""
+    if not as_json:
         err.print(f"{rec.events} event(s), {store.written} capture(s)"
                   + (f", {store.failed} not written" if store.failed else "")
                   + (f", {store.removed} removed (disk bound)" if store.removed else "")
-                  + f", {rec.telegrams} telegrams heard")
+                  + f", {rec.telegrams} telegrams {heard}")
     first = store.first_failure
     if first is not None:
         raise OutputWriteError(f"{store.failed} capture(s) could not be written (the first: capture "
                                f"{first.n}, {first.path}: {first.reason})")
+
+
+def _from_file(source: RingSource, as_json: bool, ring_s: float, after: float, triggers: list[Any],
+               pattern: Pattern, max_bytes: int, keep_days: float | None, rec: Recorder,
+               writer: _Writer, store: Store) -> None:
+    """--ring --from-file: the file's telegrams through the recorder, in the order and with the
+    times `sniff --from-file` shows them (sniff_cmd.file_entries), a capture per event."""
+    from profidrive_cli.dp.capture import ErrorMerger
+    writer.start = source.mtime
+    if not as_json:
+        keep = "" if keep_days is None else f", none older than {keep_days:g} days (--keep)"
+        err.print(f"from {source.path}: ring {ring_s:g} s, {after:g} s after each event, triggers "
+                  f"{', '.join(t.label for t in triggers)}; captures {pattern.text}, at most "
+                  f"{size_text(max_bytes)} of them (--max-disk){keep}", markup=False)
+
+    def started(t0: float) -> None:
+        writer.start = t0                          # a packet file's clock: its first packet
+    merger = ErrorMerger()
+    entries = source.entries(Capture(), started)
+    try:
+        for items, last in entries:
+            merged = merger.feed(items)
+            if last:
+                merged += merger.flush()
+            writer.write_all(rec.feed(merged))
+    except KeyboardInterrupt:
+        pass
+    finally:
+        entries.close()
+    writer.write_all(rec.close())
+    _summary(as_json, rec, store, "read")
 
 
 def pcap_size(packets: list[tuple[float, bytes]]) -> int:

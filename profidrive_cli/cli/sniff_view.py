@@ -14,8 +14,8 @@ from typing import TYPE_CHECKING, Any
 
 from profidrive_cli.bustools.passive import frame_suffix
 from profidrive_cli.cli.common import emit_json, out
-from profidrive_cli.dp.capture import format_line, frame_fields
-from profidrive_cli.dp.du_decode import decode_du
+from profidrive_cli.dp.capture import format_line, frame_json_head, frame_service
+from profidrive_cli.dp.du_decode import DECODED_SERVICES, decode_du
 
 if TYPE_CHECKING:                                   # pragma: no cover
     from rich.live import Live
@@ -23,8 +23,9 @@ if TYPE_CHECKING:                                   # pragma: no cover
 
     from profidrive_cli.bustools.passive import PassiveDecoder
     from profidrive_cli.bustools.passive_live import LiveList
-    from profidrive_cli.bustools.slaveview import SlaveView
+    from profidrive_cli.bustools.slaveview import DxView, SlaveView
     from profidrive_cli.dp.capture import Captured
+    from profidrive_cli.fdl.frames import Frame
 
 REFRESH_S = 0.5
 #: the decoded data unit's lines sit under the frame line, past its time column
@@ -57,6 +58,8 @@ class SniffView:
 
     # -- one frame -------------------------------------------------------------------------------
     def frame(self, c: Captured) -> None:
+        if self.live is None and not self.as_json:
+            return self._line(c)
         d = self.decoder.decode(c) if self.decoder is not None else None
         if self.live is not None:
             self.live.feed(c)
@@ -67,28 +70,61 @@ class SniffView:
                                             if k not in ("station", "profile", "direction")}
             return
         f = c.frame
-        fields = frame_fields(c) if f is not None else None
-        dec = (decode_du(fields["service"], f.data)
-               if f is not None and fields is not None and "du" in fields else None)
-        if self.slaves is not None and f is not None:
-            dec = self.slaves.decode(f, dec)
         write = self._lines.append
+        if f is None:                                   # a framing error: its line / bad_frame
+            write(json.dumps(frame_json(c.describe())) + "\n" if self.as_json
+                  else format_line(c) + "\n")
+            return
+        dec, view = self._decoded(c, f)
         if self.as_json:
-            obj = frame_json(c.describe())
-            if dec is not None:
-                obj["decoded"] = dec
+            # json.dumps of {frame_json(c.describe()), decoded, drive}: the frame's text from its
+            # head's pieces (dp/capture.py), a Data_Exchange's `decoded` from its station's
+            written = frame_json_head(c)
+            if view is not None:
+                written += ', "decoded": ' + view.json_text()
+            elif dec is not None:
+                written += ', "decoded": ' + json.dumps(dec)
             if d is not None:
-                obj["drive"] = drive_json(d)
-            write(json.dumps(obj) + "\n")           # emit_json's text, written by flush()
+                written += ', "drive": ' + json.dumps(drive_json(d))
+            write(written + "}\n")                     # emit_json's text, written by flush()
         else:
             # a plain write, not rich's print (8x dearer per line): the same text, no markup
             line = format_line(c)
             if d is not None:
                 line += frame_suffix(d)
             write(line + "\n")
-            if dec is not None:
-                for text in dec.get("text", []):
-                    write(DECODED_INDENT + text + "\n")
+            self._decoded_lines(dec, view)
+
+    def _decoded(self, c: Captured, f: Frame) -> tuple[dict[str, Any] | None, DxView | None]:
+        """The frame's `decoded` object: a Data_Exchange's by module (a DxView, made into text or
+        JSON as needed), any other frame's as a dict (du_decode, with the GSD's view)."""
+        if f.dsap is None and f.ssap is None and self.slaves is not None:
+            return None, self.slaves.dx_view(f)      # (du_decode has nothing for these)
+        service, has_du = frame_service(c)
+        dec = decode_du(service, f.data) if has_du and service in DECODED_SERVICES else None
+        if self.slaves is not None:
+            dec = self.slaves.decode(f, dec)
+        return dec, None
+
+    def _decoded_lines(self, dec: dict[str, Any] | None, view: DxView | None) -> None:
+        if view is not None:
+            self._lines.append(DECODED_INDENT + view.text() + "\n")
+        elif dec is not None:
+            for text in dec.get("text", []):
+                self._lines.append(DECODED_INDENT + text + "\n")
+
+    def _line(self, c: Captured) -> None:
+        """frame() in text mode: the frame's line with the drive's words (PassiveDecoder.suffix:
+        the line without the drive object), the decoded lines under it."""
+        f = c.frame
+        write = self._lines.append
+        if f is None:
+            write(format_line(c) + "\n")
+            return
+        suffix = self.decoder.suffix(c) if self.decoder is not None else None
+        dec, view = self._decoded(c, f)
+        write(format_line(c) + suffix + "\n" if suffix is not None else format_line(c) + "\n")
+        self._decoded_lines(dec, view)
 
     def flush(self) -> None:
         """The frames shown so far out to the reader: once per chunk of the capture, not per line."""

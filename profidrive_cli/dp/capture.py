@@ -7,11 +7,15 @@ it touches fdl.frames and dp.services only and is sans-IO (octets and times in, 
 Streaming: Capture.feed gives the records a chunk completed and keeps only an unfinished telegram;
 ErrorMerger joins a garbage run across chunks; with feed(hold=HOLD) a file read in chunks decodes as
 in one piece. A frame's fields and line are kept per octets (bounded caches): a bus repeats its
-telegrams, so `pdrive sniff` formats most of them once (benchmarks/bench_sniff.py).
+telegrams, so `pdrive sniff` formats most of them once (benchmarks/bench_sniff.py). Values that
+change every cycle defeat those caches: what a frame's fields, line and JSON take from its header
+(SD, addresses, FC, SAPs) is made once per header (_Head), the octets' hex each time; and
+Capture.feed parses a sound SD2 telegram without SAPs in place (what fdl.frames.parse gives).
 """
 
 from __future__ import annotations
 
+import json
 import math
 import struct
 from dataclasses import dataclass
@@ -77,6 +81,41 @@ class Captured:
         return d
 
 
+class _Head:
+    """What a frame's fields, line and JSON take from its header alone -- SD, addresses, FC, SAPs and
+    whether it carries data -- made once per header (a bus has a few hundred): the fields before
+    `raw` and between `raw` and `du` (`mid`), the service, the line's text before the DU and the
+    JSON pieces. A frame then costs its octets' hex only (values that change every cycle)."""
+    __slots__ = ("sd", "mid", "service", "prefix", "json_mid", "json_end", "has_du")
+
+    def __init__(self, f: F.Frame):
+        d = _fields(b"", f)
+        self.sd = d["sd"]
+        self.has_du = "du" in d
+        self.mid = {k: v for k, v in d.items() if k not in ("sd", "raw", "du", "service")}
+        self.service = d["service"]
+        # the line's text: this prefix, then the DU's hex (_body of the fields with an empty DU)
+        self.prefix = _body({**d, "du": ""}) if self.has_du else _body(d)
+        # json.dumps(frame_json(describe())) after "raw": the keys between raw and du, du, service
+        mid = json.dumps(self.mid)[1:-1]
+        self.json_mid = (", " + mid if mid else "") + (', "du": "' if self.has_du else "")
+        self.json_end = ('", ' if self.has_du else ", ") + json.dumps({"service": self.service})[1:-1]
+
+
+#: the heads seen (_Head), by (sd, da, sa, fc, dsap, ssap, carries data); bounded like the caches
+_HEADS: dict[tuple[int, int, int, int, int | None, int | None, bool], _Head] = {}
+
+
+def _head(f: F.Frame) -> _Head:
+    key = (f.sd, f.da, f.sa, f.fc, f.dsap, f.ssap, bool(f.data))
+    h = _HEADS.get(key)
+    if h is None:
+        if len(_HEADS) >= _CACHE_MAX:
+            _HEADS.clear()
+        h = _HEADS[key] = _Head(f)
+    return h
+
+
 def frame_fields(c: Captured) -> FrameFields:
     """describe() of a frame without its time: sd, raw, service, da/sa, SAPs, fc, fc_text, du (kept
     per octets: do not change the dict)."""
@@ -87,8 +126,37 @@ def frame_fields(c: Captured) -> FrameFields:
             raise ValueError(f"not a frame: {c.error}")
         if len(_FIELDS) >= _CACHE_MAX:
             _FIELDS.clear()
-        d = _FIELDS[c.raw] = _fields(c.raw, f)
+        h = _head(f)
+        d = {"sd": h.sd, "raw": c.raw.hex(" ")}
+        d.update(h.mid)                                       # type: ignore[typeddict-item]
+        if h.has_du:
+            d["du"] = f.data.hex(" ")
+        d["service"] = h.service
+        _FIELDS[c.raw] = d
     return d
+
+
+def frame_service(c: Captured) -> tuple[str, bool]:
+    """(the frame's service as frame_fields names it, whether its fields carry a `du`)."""
+    f = c.frame
+    if f is None:
+        raise ValueError(f"not a frame: {c.error}")
+    h = _head(f)
+    return h.service, h.has_du
+
+
+def frame_json_head(c: Captured) -> str:
+    """json.dumps of the frame event of docs/json.md ({"event": "frame", "t_s", then frame_fields})
+    without its closing brace: the text json.dumps gives, made from the head's pieces and the
+    octets' hex (the caller adds keys and the brace). Frames only (an error: ValueError)."""
+    f = c.frame
+    if f is None:
+        raise ValueError(f"not a frame: {c.error}")
+    h = _head(f)
+    t = round(c.t, 6)
+    ts = float.__repr__(t) if type(t) is float and math.isfinite(t) else json.dumps(t)
+    return ('{"event": "frame", "t_s": ' + ts + ', "sd": "' + h.sd + '", "raw": "' + c.raw.hex(" ")
+            + '"' + h.json_mid + (f.data.hex(" ") if h.has_du else "") + h.json_end)
 
 
 def _fields(raw: bytes, f: F.Frame) -> FrameFields:
@@ -115,14 +183,24 @@ def format_line(c: Captured, arrow: str = "") -> str:
     """One line per frame, as `pdrive sniff` and the -vv trace print it: time, SD, SA -> DA, SAPs,
     FC in words, service, DU."""
     a = f"{arrow} " if arrow else ""
+    t = c.t
+    global _T, _T_TEXT
+    if t != _T or type(t) is not float or not t and math.copysign(1.0, t) != math.copysign(1.0, _T):
+        _T, _T_TEXT = t, f"{round(t, 6):>12.6f}  "
     if c.frame is None:
-        return f"{round(c.t, 6):>12.6f}  {a}!! {c.error}: {c.raw.hex(' ')}"
+        return f"{_T_TEXT}{a}!! {c.error}: {c.raw.hex(' ')}"
     body = _BODIES.get(c.raw)
     if body is None:
         if len(_BODIES) >= _CACHE_MAX:
             _BODIES.clear()
-        body = _BODIES[c.raw] = _body(frame_fields(c))
-    return f"{round(c.t, 6):>12.6f}  {a}{body}"
+        h = _head(c.frame)
+        body = _BODIES[c.raw] = h.prefix + c.frame.data.hex(" ") if h.has_du else h.prefix
+    return f"{_T_TEXT}{a}{body}"
+
+
+#: the last time format_line wrote and its text (a capture's telegrams often share one)
+_T: float = math.nan
+_T_TEXT = ""
 
 
 def _body(d: FrameFields) -> str:
@@ -155,10 +233,28 @@ class Capture:
             self._t = t
         self.rx.feed(data)
         buf = self.rx.buf
-        out = []
+        out: list[Captured] = []
+        append = out.append
         pos = 0
-        stop = len(buf) - hold
+        n = len(buf)
+        stop = n - hold
+        tt = self._t                    # the first entry's time: when its first octets came
+        frame = F._frame
         while pos < stop:
+            # the common telegram, an SD2 without SAPs, whole and sound: what F.parse gives for it
+            # (SD LE LEr SD, 4 <= LE <= 249, FCS, ED; DA and SA without the extension bit)
+            if buf[pos] == 0x68 and pos + 7 <= n:
+                le = buf[pos + 1]
+                end = pos + le + 6
+                if (end <= n and buf[pos + 2] == le and buf[pos + 3] == 0x68 and 4 <= le <= 249
+                        and buf[end - 1] == 0x16 and not (buf[pos + 4] | buf[pos + 5]) & 0x80
+                        and sum(buf[pos + 4:end - 2]) & 0xFF == buf[end - 2]):
+                    raw = bytes(buf[pos:end])
+                    append(Captured(tt, raw, frame(0x68, raw[4], raw[5], raw[6], raw[7:-2],
+                                                   None, None)))
+                    pos = end
+                    tt = t
+                    continue
             r = F.parse(buf, pos)
             if r is None:
                 break
@@ -167,18 +263,18 @@ class Capture:
                 if r.kind == F.FrameError.GARBAGE:
                     # a run of octets that cannot start a telegram is one entry
                     end = pos + used
-                    n = len(buf)
                     while end < n and buf[end] not in _STARTS:
                         end += 1
                     used = end - pos
-                    out.append(Captured(self._t, bytes(buf[pos:end]), None, "garbage"))
+                    append(Captured(tt, bytes(buf[pos:end]), None, "garbage"))
                 else:
-                    out.append(Captured(self._t, bytes(buf[pos:pos + used]), None,
-                                        f"{r.kind}: {r.detail}"))
+                    append(Captured(tt, bytes(buf[pos:pos + used]), None, f"{r.kind}: {r.detail}"))
             else:
-                frame, used = r
-                out.append(Captured(self._t, bytes(buf[pos:pos + used]), frame))
+                f, used = r
+                append(Captured(tt, bytes(buf[pos:pos + used]), f))
             pos += used
+            tt = t
+        if out:
             self._t = t
         if pos:
             del buf[:pos]
@@ -294,4 +390,5 @@ def read_pcap(data: bytes) -> tuple[int, list[tuple[float, bytes]]]:
 
 
 __all__ = ["Capture", "Captured", "ErrorMerger", "HOLD", "PcapWriter", "read_pcap", "merge_errors", "frame_fields",
+           "frame_service", "frame_json_head",
            "LINKTYPE_USER0", "LINKTYPE_PROFIBUS_DL", "LINKTYPES", "TimeRangeError", "check_time", "T_MAX"]

@@ -87,6 +87,11 @@ def _cfg(name: str, du: bytes) -> dict[str, Any]:
     return {"cfg": mods, "text": [f"{name}: " + ("; ".join(mods) or "no identifier")]}
 
 
+#: the services decode_du has a decoder for (any other: None, without a call)
+DECODED_SERVICES = frozenset(("Set_Prm", "Slave_Diag reply", "Chk_Cfg", "Get_Cfg reply",
+                              "Global_Control", "Set_Slave_Add"))
+
+
 def decode_du(service: str, du: bytes) -> dict[str, Any] | None:
     """The DU of a telegram of `service` (as dp.capture names it) in words: a JSON-ready dict with
     a `text` list (the lines sniff prints), or None for a service without a decoder here or a DU
@@ -109,4 +114,4 @@ def decode_du(service: str, du: bytes) -> dict[str, Any] | None:
     return None
 
 
-__all__ = ["decode_du", "ext_block"]
+__all__ = ["DECODED_SERVICES", "decode_du", "ext_block"]

@@ -11,6 +11,7 @@ Dialect (profile profiles/moeller-de6-net-dp.yaml, sections `profidrive:` and `m
   * DF6 limits: rows marked df6: false are not on a DF6; df6_max lowers the maximum
 
 Module API: make_drive(channel, profile, layout=None), decode_area(profile, layout, direction, data),
+speed_plan(profile, layout, direction, max_hz),
 param_value(profile, param, raw), moeller_config(profile), source_selection(ctw),
 device_name(word), baud_text(code, profile), fault_text(profile, number),
 address_from_switches(right, left), value_from_wire(param, raw), wire_from_value(param, value).
@@ -33,6 +34,7 @@ from profidrive_cli.drives.sections import key, key_line, section
 if TYPE_CHECKING:
     from profidrive_cli.drives.formats import Formatter
     from profidrive_cli.drives.profile import ParamDef, Profile
+    from profidrive_cli.drives.speedplan import SpeedWord
 
 FAMILY_PARAM_KEYS = {"bytes", "format", "ranges", "df6", "df6_max", "note", "array"}
 FORMATS = ("code", "hex", "bits", "baud", "alarm947")
@@ -476,7 +478,14 @@ def decode_area(profile: Profile, layout: str, direction: str, data: bytes, *,
     return out
 
 
-__all__ = ["MoellerConfig", "MoellerDrive", "make_drive", "decode_area", "param_value",
+def speed_plan(profile: Profile, layout: str, direction: str, max_hz: float | None = None
+               ) -> SpeedWord | None:
+    """sniff --station's fast path (drives/speedplan.py SpeedWord): HSW / HIW as the core's N2
+    word (the request's direction text reads HSW's sign: not in the drive object)."""
+    return pd.speed_plan(profile, layout, direction, max_hz)
+
+
+__all__ = ["MoellerConfig", "MoellerDrive", "make_drive", "decode_area", "speed_plan", "param_value",
            "moeller_config", "source_selection", "device_name", "baud_text", "fault_text",
            "address_from_switches", "value_from_wire", "wire_from_value", "in_ranges",
            "direction_text", "DriveError"]

@@ -114,6 +114,25 @@ class Frame:
 
 SC_FRAME = Frame(SC)
 
+#: Frame(...) for the receiver's hot path: the frozen dataclass's __init__ sets each field through
+#: object.__setattr__; its slots' own setters do the same at about half the cost (the same object)
+_new = object.__new__
+(_set_sd, _set_da, _set_sa, _set_fc, _set_data, _set_dsap, _set_ssap) = (
+    Frame.__dict__[n].__set__ for n in ("sd", "da", "sa", "fc", "data", "dsap", "ssap"))
+
+
+def _frame(sd: int, da: int, sa: int, fc: int, data: bytes, dsap: int | None,
+           ssap: int | None) -> Frame:
+    f: Frame = _new(Frame)
+    _set_sd(f, sd)
+    _set_da(f, da)
+    _set_sa(f, sa)
+    _set_fc(f, fc)
+    _set_data(f, data)
+    _set_dsap(f, dsap)
+    _set_ssap(f, ssap)
+    return f
+
 
 def make(da: int, sa: int, fc: int, data: bytes = b"", dsap: int | None = None,
          ssap: int | None = None) -> Frame:
@@ -220,7 +239,7 @@ def parse(buf: bytes | bytearray, pos: int = 0) -> tuple[Frame, int] | FrameErro
     elif sd == SD4:
         if n < 3:
             return NEED_MORE
-        return Frame(SD4, buf[pos + 1] & ADDR_MASK, buf[pos + 2] & ADDR_MASK), 3
+        return _frame(SD4, buf[pos + 1] & ADDR_MASK, buf[pos + 2] & ADDR_MASK, 0, b"", None, None), 3
     else:
         return FrameError(FrameError.GARBAGE, f"0x{sd:02X} is no start delimiter", 1)
     if (sum(buf[body_start:body_end]) & 0xFF) != buf[body_end]:
@@ -240,7 +259,7 @@ def parse(buf: bytes | bytearray, pos: int = 0) -> tuple[Frame, int] | FrameErro
             return FrameError(FrameError.SAP, "SSAP announced but missing", 1)
         ssap = buf[i] & 0x3F
         i += 1
-    return Frame(sd, da & ADDR_MASK, sa & ADDR_MASK, fc, bytes(buf[i:body_end]), dsap, ssap), total
+    return _frame(sd, da & ADDR_MASK, sa & ADDR_MASK, fc, bytes(buf[i:body_end]), dsap, ssap), total
 
 
 def missing(buf: bytes | bytearray, pos: int = 0) -> int:

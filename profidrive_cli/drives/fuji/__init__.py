@@ -16,6 +16,7 @@ ppo_select, parameter_channel, storage, comm_loss, zero_data, fault_history, bau
     code) and M16-M19 (the exact alarm code): the history lists every candidate, narrowed by M16-M19
 
 Package API (re-exported here; import the package, not its modules): make_drive, decode_area,
+speed_plan,
 param_value, profidrive_config, fuji_config, parse_function_code, function_code_name,
 pcd_assignment, pcd_assignment_code, alarm_candidates, alarm_by_mcode, alarm_text, mcode_of,
 ppo_for_o30, o30_for_layout, comm_loss_action, comm_loss_text, FujiDrive, FujiConfig, CommLossAction,
@@ -35,11 +36,11 @@ from profidrive_cli.drives.fuji.config import (FAMILY_PARAM_KEYS, FORMATS, FUJI_
                                                FUJI_STW_BITS, STOP_ACTIONS, CommLossAction,
                                                FujiConfig, fuji_config, parse_int_set,
                                                profidrive_config)
-from profidrive_cli.drives.fuji.describe import decode_area
+from profidrive_cli.drives.fuji.describe import decode_area, speed_plan
 from profidrive_cli.drives.fuji.formats import FORMATTERS, PARSERS
 from profidrive_cli.drives.fuji.drive import FujiDrive, make_drive
 
-__all__ = ["FujiConfig", "FujiDrive", "make_drive", "decode_area", "param_value", "fuji_config",
+__all__ = ["FujiConfig", "FujiDrive", "make_drive", "decode_area", "speed_plan", "param_value", "fuji_config",
            "profidrive_config", "parse_function_code", "function_code_name", "pcd_assignment",
            "pcd_assignment_code", "alarm_candidates", "alarm_by_mcode", "alarm_text", "ppo_for_o30",
            "o30_for_layout", "comm_loss_action", "comm_loss_text", "mcode_of", "CommLossAction",

@@ -16,6 +16,7 @@ from profidrive_cli.drives.fuji.config import fuji_config
 
 if TYPE_CHECKING:
     from profidrive_cli.drives.profile import Profile
+    from profidrive_cli.drives.speedplan import SpeedWord
 
 
 def _hex_word(w: int) -> str:
@@ -133,3 +134,11 @@ def decode_area(profile: Profile, layout: str, direction: str, data: bytes, *,
                                                   for e in out["pzd"])
                            + f" (function codes assigned by {which}; raw)")
     return out
+
+
+def speed_plan(profile: Profile, layout: str, direction: str, max_hz: float | None = None
+               ) -> SpeedWord | None:
+    """sniff --station's fast path (drives/speedplan.py SpeedWord): MRV / MAV as the core's N2
+    word. The dialect reads MRV's sign (direction, not in the drive object) and MAV != 0 (S3 or
+    S5): both within the word's class."""
+    return pd.speed_plan(profile, layout, direction, max_hz)

@@ -91,6 +91,9 @@ Drive
     ppo_drive_object(direction, area, *, state_without_status_word=None) -> dict
         a decoded area in the common words of `sniff --station` (ProfidriveDrive.normalise_area);
         pkw_drive_param(direction, pkw) -> dict: its PKW channel as the `param` there
+    speed_plan(profile, layout, direction, max_hz=None) -> speedplan.SpeedWord | None
+        where the N2 reference / actual word sits and its drive-object fields (sniff --station's
+        fast path: the rest of an area is decoded once per its octets, this word each time)
     make_drive(channel, profile, layout=None) -> ProfidriveDrive  (so `family: profidrive` works)
 """
 
@@ -101,7 +104,8 @@ from profidrive_cli.drives.profidrive.config import (ERROR_ROLES, ProfidriveConf
 from profidrive_cli.drives.profidrive.describe import (check_direction, decode_area,
                                                        describe_control_word, describe_n2,
                                                        describe_pkw, describe_status_word,
-                                                       pkw_drive_param, ppo_drive_object)
+                                                       pkw_drive_param, ppo_drive_object,
+                                                       speed_plan)
 from profidrive_cli.drives.profidrive.drive import ProfidriveDrive, make_drive
 from profidrive_cli.drives.profidrive.params import (ParamRef, decimals_for, format_value,
                                                      param_for, param_index, resolve_code)
@@ -145,7 +149,7 @@ __all__ = ["ARRAY_REQUESTS", "CTW_NAMES", "CTW_ZERO_NAMES", "Ctw", "DERIVED_BITS
            "describe_status_word", "encode_area", "encode_pke", "fault_memory_requests",
            "format_value", "make_drive", "matches", "n2_from_hz", "n2_from_percent", "n2_to_hz",
            "n2_to_percent", "next_control_word", "param_for", "param_index", "pkw_drive_param",
-           "ppo_drive_object", "ppo_layout",
+           "ppo_drive_object", "ppo_layout", "speed_plan",
            "pzd_map_pnu", "pzd_map_read", "pzd_map_write", "read_request", "resolve_code",
            "save_requests", "state_from_status", "stw_names", "target_reached", "to_signed16",
            "words_to_bytes", "write_request"]

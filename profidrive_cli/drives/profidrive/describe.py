@@ -18,8 +18,9 @@ from profidrive_cli.drives.profidrive.pkw import (ERROR_RESPONSES, REQUEST_TEXT,
                                                   WRITE_REQUESTS, PkwFrame)
 from profidrive_cli.drives.profidrive.pnu import (PNU_BAUD, PNU_CONTROL_WORD, PNU_DEVICE_ID,
                                                   PNU_STATUS_WORD, decode_baud, decode_device_id)
-from profidrive_cli.drives.profidrive.ppo import decode_area_bytes, ppo_layout
-from profidrive_cli.drives.profidrive.scaling import n2_to_percent, to_signed16
+from profidrive_cli.drives.profidrive.ppo import PKW_WORDS, decode_area_bytes, ppo_layout
+from profidrive_cli.drives.profidrive.scaling import N2_FULL, n2_to_percent, to_signed16
+from profidrive_cli.drives.speedplan import SpeedWord
 from profidrive_cli.drives.profidrive.words import (CTW_ZERO_NAMES, Ctw, State, bit_list,
                                                     command_from_control_word,
                                                     state_from_status)
@@ -326,3 +327,38 @@ def pkw_drive_param(direction: str, pk: Decoded) -> dict[str, Any]:
         else:
             p["text"] = f"{code}: {pk.get('ak_text')}"
     return p
+
+
+# -- the speed word of sniff --station's fast path (bustools/passive.py) -------------------------------
+
+def speed_plan(profile: Profile, layout: str, direction: str, max_hz: float | None = None
+               ) -> SpeedWord | None:
+    """sniff --station's fast path (drives/speedplan.py SpeedWord): the N2 reference / actual
+    word of a PPO area (the word after CTW / STW) and its fields:
+    reference_hz and reference_percent, or actual_hz and actual_percent (ppo_drive_object over
+    describe_n2). None when the layout is not a PPO layout."""
+    check_direction(direction)
+    try:
+        ppo = ppo_layout(profile, layout)
+    except UsageError:
+        return None
+    mhz = float(profile.max_frequency_default) if max_hz is None else float(max_hz)
+    hz_key, pct_key = (("reference_hz", "reference_percent") if direction == "request"
+                       else ("actual_hz", "actual_percent"))
+
+    def fields(word: int) -> DriveObject:
+        pct = n2_to_percent(word)
+        # describe_n2: percent round(pct, 6), hz round(pct * max / 100, 6) when max; then _round
+        return {hz_key: round(float(round(pct * mhz / 100.0, 6)), 3) if mhz else None,
+                pct_key: round(float(round(pct, 6)), 3)}
+
+    def hz(word: int) -> float | None:
+        # n2_to_percent inline (to_signed16 of a 16-bit word, * 100.0 / N2_FULL): the same floats
+        if not mhz:
+            return None
+        return round(round((word - 0x10000 if word & 0x8000 else word) * 100.0 / N2_FULL * mhz
+                           / 100.0, 6), 3)
+    pzd = (2 * PKW_WORDS if ppo.pkw else 0)
+    # PZD3.. (raw words, ppo_drive_object reads none of them)
+    rest = ppo.length(direction) - (pzd + 4)
+    return SpeedWord(pzd + 2, ppo.word_order, fields, ((pzd + 4, rest),) if rest > 0 else (), hz)

@@ -32,7 +32,8 @@ from profidrive_cli.drives.toyo.codec import (RECORDING_TEXT, bit_names, ctw_com
                                               decode_traceback_ind, history_word, protection, run_cmd_fields,
                                               speed_percent, speed_word, traceback_ind)
 from profidrive_cli.drives.toyo.config import ToyoConfig, ToyoLayout, input_words, profidrive_config, toyo_config
-from profidrive_cli.drives.toyo.describe import decode_area, decode_diag, describe_pkw, describe_word
+from profidrive_cli.drives.toyo.describe import (decode_area, decode_diag, describe_pkw, describe_word,
+                                                 speed_plan)
 from profidrive_cli.drives.toyo.drive import ToyoDrive, make_drive
 from profidrive_cli.drives.toyo.formats import FORMATTERS
 from profidrive_cli.drives.toyo.params import (_TB_RE, _toyo_frame, effective_scale, param_at, param_value,
@@ -44,7 +45,7 @@ from profidrive_cli.drives.toyo.params import (_TB_RE, _toyo_frame, effective_sc
 #: with it): the traceback points TBcc[r,p]
 ADDRESS_FORMS = _TB_RE
 
-__all__ = ["ToyoConfig", "ToyoDrive", "make_drive", "decode_area", "param_value", "profidrive_config",
+__all__ = ["ToyoConfig", "ToyoDrive", "make_drive", "decode_area", "speed_plan", "param_value", "profidrive_config",
            "toyo_config", "speed_word", "speed_percent", "history_word", "decode_history_word",
            "traceback_ind", "decode_traceback_ind", "decode_diag", "protection", "describe_pkw",
            "ctw_command", "run_cmd_fields", "value_from_wire", "wire_from_value", "ToyoLayout",

@@ -15,6 +15,7 @@ from profidrive_cli.drives.toyo.codec import (RECORDING_TEXT, bit_names, ctw_com
                                               decode_traceback_ind, run_cmd_fields, speed_percent)
 from profidrive_cli.drives.toyo.config import toyo_config
 from profidrive_cli.drives.toyo.params import param_at, value_from_wire
+from profidrive_cli.drives.speedplan import SpeedWord
 
 if TYPE_CHECKING:
     from profidrive_cli.drives.profile import Profile
@@ -264,3 +265,46 @@ def mode1_state(area: dict[str, Any], d: dict[str, Any]) -> None:
                   "running" if "running" in names else "stopped")
     d["status"] = names
     d["status_word"] = sf.get("hex")
+
+
+def speed_plan(profile: Profile, layout: str, direction: str, max_hz: float | None = None
+               ) -> SpeedWord | None:
+    """sniff --station's fast path (drives/speedplan.py SpeedWord): the speed word
+    decode_area takes as the reference (request: the last `speed_ref`) or the actual value
+    (response: the last `motor_speed`), and its reference_hz / reference_percent or actual_hz /
+    actual_percent as describe_word and ppo_drive_object compute them. None when the layout has
+    no such speed word. The words the drive object does not read are ignored."""
+    pd.check_direction(direction)
+    tc = toyo_config(profile)
+    tl = tc.layouts.get(layout)
+    if tl is None:
+        return None
+    want = "speed_ref" if direction == "request" else "motor_speed"
+    names = tl.words(direction, tc.plch or tl.plch)
+    at = [i for i, n in enumerate(names) if n == want]
+    f = tc.fields.get(want)
+    if not at or f is None or f.get("kind") != "speed":
+        return None
+    offset = (8 if tl.pkw else 0) + 2 * at[-1]
+    lay = profile.layouts[layout]
+    if offset + 2 > (lay.output_len if direction == "request" else lay.input_len):
+        return None
+    fmax = max_hz if max_hz is not None else float(profile.max_frequency_default)
+    hz_key, pct_key = (("reference_hz", "reference_percent") if direction == "request"
+                       else ("actual_hz", "actual_percent"))
+
+    fs = tc.speed_full_scale
+    # ppo_drive_object and mode1_state read the control / status / run-command word, the status and
+    # fault flags and this word: the others (currents, voltages, registers, dates) not
+    read = {"ctw", "zsw", "run_cmd", "status_flag", "fault_flag1", "fault_flag2", want}
+    base = 8 if tl.pkw else 0
+    ignore = tuple((base + 2 * i, 2) for i, n in enumerate(names) if n not in read)
+
+    def fields(word: int) -> dict[str, Any]:
+        pct = pd.to_signed16(word) * 100.0 / fs          # codec.speed_percent
+        return {hz_key: round(float(round(pct * fmax / 100.0, 6)), 3),
+                pct_key: round(float(round(pct, 6)), 3)}
+
+    def hz(word: int) -> float | None:
+        return round(float(round(pd.to_signed16(word) * 100.0 / fs * fmax / 100.0, 6)), 3)
+    return SpeedWord(offset, tc.word_order, fields, ignore, hz)

@@ -39,7 +39,7 @@ from profidrive_cli.drives.yaskawa.codec import (COMMAND_BITS, FORMATS, MFO_BITS
                                                  unpack_words)
 from profidrive_cli.drives.yaskawa.config import (YaskawaConfig, family_config, led_diagnosis,
                                                   parse_register_code, register_name)
-from profidrive_cli.drives.yaskawa.describe import decode_area
+from profidrive_cli.drives.yaskawa.describe import decode_area, speed_plan
 from profidrive_cli.drives.yaskawa.drive import FAMILY, YaskawaDrive, make_drive
 from profidrive_cli.drives.yaskawa.paramaccess import (ERROR_CODES, FC_NONE, FC_READ, FC_WRITE,
                                                        FUNCTION_NAMES, ParamAccess, ParamArea, ParamRequest,
@@ -48,6 +48,6 @@ from profidrive_cli.drives.yaskawa.paramaccess import (ERROR_CODES, FC_NONE, FC_
 __all__ = ["COMMAND_BITS", "ERROR_CODES", "FAMILY", "FC_NONE", "FC_READ", "FC_WRITE", "FORMATS",
            "FUNCTION_NAMES", "MFO_BITS", "SIGNED_WORDS", "STATUS_BITS", "AreaFormat", "FrequencyScale",
            "ParamAccess", "ParamArea", "ParamRequest", "ParamResult", "YaskawaConfig", "YaskawaDrive",
-           "decode_area", "decode_bits", "decode_command", "decode_hs", "decode_status", "encode_command",
+           "decode_area", "speed_plan", "decode_bits", "decode_command", "decode_hs", "decode_status", "encode_command",
            "encode_param_area", "error_text", "family_config", "led_diagnosis", "make_drive", "mfi_bit",
            "pack_words", "parse_register_code", "register_name", "unpack_words"]

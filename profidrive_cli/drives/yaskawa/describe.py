@@ -15,6 +15,7 @@ from profidrive_cli.drives.yaskawa.codec import (COMMAND_TEXT, FORMATS, MFO_BITS
                                                  FrequencyScale, _s16, decode_bits, decode_command,
                                                  decode_status, unpack_words)
 from profidrive_cli.drives.yaskawa.config import family_config, register_name
+from profidrive_cli.drives.speedplan import SpeedWord
 from profidrive_cli.drives.yaskawa.paramaccess import (ERROR_CODES, FC_NONE, FC_READ, FC_WRITE,
                                                        FUNCTION_NAMES, HS_STATUS_NAMES, ParamArea,
                                                        decode_hs, error_text)
@@ -265,3 +266,36 @@ def _reg_value(prm: ParamDef | None, raw: int) -> str:
     if prm is None:
         return f"0x{raw:04X}"
     return value_text(prm.from_raw(raw), prm.unit or "")
+
+
+def speed_plan(profile: Profile, layout: str, direction: str, max_hz: float | None = None
+               ) -> SpeedWord | None:
+    """sniff --station's fast path (drives/speedplan.py SpeedWord): the word drive_object
+    reads the Hz from -- the reference (request), the output frequency or else the speed feedback
+    (response) -- and its reference_hz / actual_hz as decode_area and drive_object compute them
+    (the profile's max frequency: decode_area takes no other); the other fast words ignored. None
+    for an unknown layout."""
+    if layout not in FORMATS or layout not in profile.layouts:
+        return None
+    fmt = FORMATS[layout]
+    names = fmt.out_words if direction == "request" else fmt.in_words
+    want = (("reference",) if direction == "request" else
+            ("output_frequency",) if "output_frequency" in names else ("speed_feedback",))
+    if want[0] not in names:
+        return None
+    cfg = family_config(profile)
+    scale = FrequencyScale(cfg.o1_03, float(profile.max_frequency_default), cfg.reference_unit_hz,
+                           cfg.feedback_unit_hz)
+    which, key = ("reference", "reference_hz") if direction == "request" else ("feedback", "actual_hz")
+    raw_to_hz = scale.raw_to_hz
+
+    def fields(word: int) -> dict[str, Any]:
+        return {key: _round(raw_to_hz(word, which))}
+
+    def hz(word: int) -> float | None:
+        return _round(raw_to_hz(word, which))
+    # drive_object reads the command / status word, this word and the parameter area: the other
+    # fast words (torque, current, analog, PG count, MF outputs, the drive's own reference) not
+    read = {"command", "status", want[0]}
+    ignore = tuple((2 * i, 2) for i, n in enumerate(names) if n not in read)
+    return SpeedWord(2 * names.index(want[0]), profile.word_order, fields, ignore, hz)
