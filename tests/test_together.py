@@ -227,6 +227,9 @@ def test_the_window_is_what_a_quarter_second_round_carries():
     many = list(range(0, 100))
     assert window(Script(many, baud=1500000), many) == MAX_JOBS
     assert window(Script([3], baud=9600), [3]) == 1
+    # with a 500 ms watchdog the round stays within its keep rule, a quarter of it (125 ms): at
+    # 19.2k 4 PPO1 stations (106 ms; a fifth would make 133 ms), so none is due before its turn
+    assert window(Script(twelve, baud=19200, wd_ms=500), twelve) == 4
 
 
 def test_no_more_jobs_run_at_once_than_the_window():

@@ -62,9 +62,12 @@ def _read_stations(opts: BusOptions, addresses: list[int], profile_name: str | N
             try:
                 # the config file's profile and layout for this station, below the options
                 layout = defaults.get("layout") if ppo is None and fmt is None else None
+                # cycle_hz 0: no pace of its own -- while the others are brought up it is kept by
+                # its watchdog's rule alone (a quarter of it), not once per cycle period (at 19.2k
+                # that was a keep-alive every 27 ms per station), and together() sets the pace
                 sessions[a] = stack.enter_context(bus.station(
                     a, profile=profile_name or defaults.get("profile"), layout=layout, ppo=ppo,
-                    fmt=fmt, watchdog_ms=watchdog_ms, handle_signals=True,
+                    fmt=fmt, watchdog_ms=watchdog_ms, cycle_hz=0, handle_signals=True,
                     on_message=lambda t: err.print(escape(t))))
             except (BusError, DriveError) as e:
                 fail(a, e)

@@ -40,6 +40,7 @@ loops stay the one code path of `param get` and of the dump. No click and no ric
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable, Iterable, Mapping
 from typing import TYPE_CHECKING, Generic, TypeVar
 
@@ -60,6 +61,9 @@ T = TypeVar("T")
 ROUND_S = 0.25
 #: and the most jobs (threads) at once, whatever the rate
 MAX_JOBS = 32
+#: how long (real seconds) a job may be late to post before the stations of running jobs count
+#: for the keep rule too (its thread did not get the CPU; on a virtual clock the rule never fires)
+LATE_S = 0.05
 #: the shortest and longest single wait for a late job, real seconds (it is waited for until a held
 #: station's keep-alive is due on the link's clock; the wait is cut in pieces of at most MAX_WAIT_S)
 MIN_WAIT_S = 0.001
@@ -123,6 +127,8 @@ class _Run:
         self.stopped: BaseException | None = None
         self.busy = False
         self.rounds = 0
+        #: when the last round ended (real time: how late a job is to post)
+        self.last_round = time.monotonic()
 
     # -- with self.cond held -------------------------------------------------------------------
     def full(self) -> bool:
@@ -146,6 +152,7 @@ class _Run:
             self.cond.acquire()
         self.busy = False
         self.rounds += 1
+        self.last_round = time.monotonic()
         self.answers.update(got)
         self.cond.notify_all()
 
@@ -254,12 +261,16 @@ def run_together(master: "Master", channels: Mapping[int, "MeteredChannel"],
 
 
 def window(master: "Master", addresses: list[int]) -> int:
-    """How many jobs run at once: as many stations as one round of at most ROUND_S on the wire
-    carries (their Data_Exchanges at the bus rate), at least one, at most MAX_JOBS. A longer round
-    would stretch each job's own transactions past their timeouts (a PKW request waits 2 s for its
-    answer, which comes a round or two later) and hold more threads than a line needs: the others
-    wait for a job to end, their stations held in data exchange by the keep rule."""
+    """How many jobs run at once: as many stations as one round on the wire carries (their
+    Data_Exchanges at the bus rate) within ROUND_S and within the keep rule of each of them (a
+    quarter of its watchdog: a station exchanged first in a round must not be due before the
+    round is over), at least one, at most MAX_JOBS. A longer round would stretch each job's own
+    transactions past their timeouts (a PKW request waits 2 s for its answer, which comes a round
+    or two later) and hold more threads than a line needs: the others wait for a job to end, their
+    stations held in data exchange by the keep rule."""
     baud = master.params.baud
+    rules = [w for w in (_within(master, a) for a in addresses) if w]
+    budget = min([ROUND_S, *rules])
     width = 0
     total = 0.0
     for a in sorted(addresses):
@@ -268,7 +279,7 @@ def window(master: "Master", addresses: list[int]) -> int:
             t = 0.0
         else:
             t = wire_time_data_exchange(baud, st.output_len, st.input_len)
-        if width and total + t > ROUND_S:
+        if width and total + t > budget:
             break
         total += t
         width += 1
@@ -318,12 +329,18 @@ def _watch(run: _Run, done: Callable[[list[int]], None], cancel: threading.Event
             if run.full():
                 run.round()
                 continue
-            due = _next_due(master, run.held, run.within)
+            # the stations whose jobs are about to post are exchanged by the next round anyway:
+            # only those that are not (done, waiting for their turn, kept for the caller) count,
+            # and the running ones too once their jobs are LATE_S late (a thread without the CPU)
+            late = time.monotonic() - run.last_round > LATE_S
+            due = _next_due(master, run.held if late else
+                            [a for a in run.held if a not in run.running], run.within)
             now = master.link.now()
             if due is not None and now >= due:
                 run.round()                 # a late job: the round goes without it
                 continue
-            cond.wait(MAX_WAIT_S if due is None else min(MAX_WAIT_S, max(MIN_WAIT_S, due - now)))
+            wait = MAX_WAIT_S if due is None else min(MAX_WAIT_S, max(MIN_WAIT_S, due - now))
+            cond.wait(wait if late else min(wait, LATE_S))
 
 
 def _next_due(master: "Master", held: list[int], within: dict[int, float | None]) -> float | None:
