@@ -27,6 +27,7 @@ from profidrive_cli.link import open_link
 from profidrive_cli.sim.plant import build_bus
 
 from conftest import SHARED
+from test_warmup import _capture_lines
 
 ET200S = os.path.join(SHARED, "testdata", "external", "pyprofibus26-et200s-startup.txt")
 needs_capture = pytest.mark.skipif(not os.path.isfile(ET200S), reason=f"{ET200S} not present")
@@ -98,14 +99,8 @@ def test_bad_seconds_are_a_usage_error(bad):
 # -- the ET200S of pyprofibus #26, reproduced ------------------------------------------------------
 
 def _capture():
-    out = []
-    with open(ET200S, encoding="utf-8") as f:
-        for line in f:
-            if line.startswith("#") or not line.strip():
-                continue
-            direction, octets, _ = line.rstrip("\n").split("\t", 2)
-            out.append((direction, bytes.fromhex(octets)))
-    return out
+    """(direction, octets) of each telegram line of the #26 capture (test_warmup.py reads it)."""
+    return _capture_lines()
 
 
 @needs_capture
