@@ -514,5 +514,16 @@ def _head_data(cls: type[_PureLoader] | type[_CLoader], text: str, want: set[str
         loader.dispose()
 
 
-def load_yaml(path: str | Path, what: str = "data file") -> Any:
-    return load_yaml_text(read_text(path, what), Path(path))
+def load_yaml(path: str | Path, what: str = "data file", *, cached: bool = False) -> Any:
+    """load_yaml_text of a file. cached=True: the parse is kept in (and read back from) the cache of
+    parsed data files (datacache.py: keyed by the text itself; the profiles use it)."""
+    text = read_text(path, what)
+    if not cached:
+        return load_yaml_text(text, Path(path))
+    from profidrive_cli import datacache
+    loader = _loader_class(None, text).__name__
+    data = datacache.get(text, loader)
+    if data is datacache.MISS:
+        data = load_yaml_text(text, Path(path))
+        datacache.put(text, loader, data)
+    return data

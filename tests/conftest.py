@@ -10,6 +10,11 @@ import pytest
 
 SHARED = os.path.join(os.path.dirname(__file__), "..", "..", "shared")
 
+# The cache of parsed profiles (profidrive_cli/datacache.py) is off for the tests and every process
+# they start: nothing is written to the developer's ~/.cache, and no test reads what another left
+# there (tests/test_datacache.py turns it on in a folder of its own).
+os.environ["PDRIVE_CACHE_DIR"] = "off"
+
 
 def pdrive_cmd() -> list[str]:
     """How to start pdrive as a separate process (the installed console script if there is one)."""

@@ -67,7 +67,8 @@ PLAN: dict[str, tuple[str, ...]] = {
     "aio": ("api",),                    # the asyncio face of the API, beside the CLI (issue 29)
 }
 TOP = "top"
-TOP_MODULES = {"profidrive_cli", "profidrive_cli.datafile", "profidrive_cli.outfile", "profidrive_cli.data",
+TOP_MODULES = {"profidrive_cli", "profidrive_cli.datafile", "profidrive_cli.datacache", "profidrive_cli.outfile",
+               "profidrive_cli.data",
                "profidrive_cli.config", "profidrive_cli.plot", "profidrive_cli.httprules"}
 
 

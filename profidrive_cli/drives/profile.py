@@ -259,7 +259,7 @@ def load_profile_file(path: str | Path, *, check_sections: bool = True) -> Profi
     and trip records to be read when they are used (a test of one section reader's own messages);
     every command loads with the check (_check_sections)."""
     path = Path(path)
-    doc = load_yaml(path)
+    doc = load_yaml(path, cached=True)
     if not isinstance(doc, LineDict):
         raise DataFileError(path, 1, "a profile must be a YAML mapping")
     ident_node = _get(path, doc, "identity", LineDict)
@@ -398,6 +398,7 @@ def _bus_settings(path: str | Path, doc: LineDict, params: dict[str, ParamDef]) 
 
 
 _GROUP_NAME = re.compile(r"[a-z][a-z0-9_-]*\Z")
+_WILD = re.compile(r"[*?\[]")
 
 
 def _groups(path: str | Path, doc: LineDict, params: dict[str, ParamDef]) -> dict[str, tuple[str, ...]]:
@@ -415,6 +416,8 @@ def _groups(path: str | Path, doc: LineDict, params: dict[str, ParamDef]) -> dic
         if not isinstance(pats, list) or not all(isinstance(x, str) and x.strip() for x in pats):
             raise _err(path, node, name, f"groups.{name} must be a list of parameter codes or patterns")
         for pat in pats:
+            if pat in params and not _WILD.search(pat):
+                continue                        # a plain code (most of them): no pattern to match
             if not any(fnmatch.fnmatchcase(c, pat) for c in params):
                 raise _err(path, node, name, f"groups.{name}: {pat!r} matches no parameter of this profile")
         out[name] = tuple(pats)
