@@ -436,3 +436,70 @@ def test_profile_marks_register_sources(prof):
     assert prof.param("E1-04").access == "stop" and prof.max_frequency_param == "E1-04"
     assert {a.code for a in prof.alarms} >= {"BUS", "EF0", "OPE05", "OPE06", "CPF20", "CPF23"}
     assert len(prof.raw["decisions"]) >= 10
+
+
+# --- several parameters at once (read_many: fleet dump, factory diff) ------------------------------
+
+def _transactions(d, monkeypatch):
+    """The MEMOBUS transactions the drive starts: (start register, count) each."""
+    seen = []
+    real = d._transact
+
+    def counted(req):
+        seen.append((req.start, req.count))
+        return real(req)
+    monkeypatch.setattr(d, "_transact", counted)
+    return seen
+
+
+def test_read_many_reads_runs_of_consecutive_registers_together(prof, monkeypatch):
+    model, ch, d = rig(prof)
+    codes = ["A1-02", "b1-01", "b1-02", "b1-03", "C1-01", "C1-02", "C1-09", "C1-10", "d1-01",
+             "U3-01", "U3-02", "U3-03", "U3-04"]
+    singles = {c: d.read_param(c) for c in codes}
+    seen = _transactions(d, monkeypatch)
+    got = list(d.read_many(codes))
+    assert [c for c, _ in got] == codes
+    assert {c: (v.code, v.raw, v.value, v.unit) for c, v in got} == \
+        {c: (v.code, v.raw, v.value, v.unit) for c, v in singles.items()}
+    # the profile's registers: A1-02 0x102; b1-01..03 0x180..0x182; C1-01/02 0x200/0x201;
+    # C1-09/10 0x208/0x209; d1-01 0x280; U3-01..04 0x90..0x93 (4: the format's most, Table 3.5)
+    assert seen == [(0x102, 1), (0x180, 3), (0x200, 2), (0x208, 2), (0x280, 1), (0x90, 4)]
+    # a run longer than a request carries is cut at the format's limit (here made 2)
+    monkeypatch.setattr(d, "fmt", replace(d.fmt, max_registers=2))
+    seen.clear()
+    got = dict(d.read_many(["b1-01", "b1-02", "b1-03", "U3-01", "U3-02", "U3-03", "U3-04"]))
+    assert seen == [(0x180, 2), (0x182, 1), (0x90, 2), (0x92, 2)]
+    assert got["U3-04"].raw == singles["U3-04"].raw
+
+
+def test_read_many_gives_each_refusal_to_its_own_code(prof, monkeypatch):
+    model, ch, d = rig(prof)
+    seen = _transactions(d, monkeypatch)
+    got = dict(d.read_many(["b1-03", "REG0x0183", "nonsense-code", "C1-01"]))
+    # 0x182 and 0x183 run together; the simulated drive has no 0x183 (error 02, unknown register):
+    # the run is read again one register at a time
+    assert seen == [(0x182, 2), (0x182, 1), (0x183, 1), (0x200, 1)]
+    assert got["b1-03"].raw == model.regs[0x0182]
+    assert isinstance(got["REG0x0183"], ParamError) and got["REG0x0183"].number == 0x02
+    assert isinstance(got["nonsense-code"], UsageError)
+    assert got["C1-01"].value == pytest.approx(10.0)
+
+
+def test_read_many_without_an_answer_is_that_error_for_the_whole_run(prof, monkeypatch):
+    model, ch, d = rig(prof)
+
+    def silent(req):
+        raise DriveError("yaskawa: no answer to the parameter request")
+    monkeypatch.setattr(d, "_transact", silent)
+    got = list(d.read_many(["C1-01", "C1-02", "d1-01"]))
+    assert [c for c, _ in got] == ["C1-01", "C1-02", "d1-01"]
+    assert all(isinstance(e, DriveError) and "no answer" in str(e) for _, e in got)
+
+
+def test_read_many_on_the_six_word_format_reads_one_at_a_time(prof, monkeypatch):
+    model, ch, d = rig(prof, "extended2")
+    seen = _transactions(d, monkeypatch)
+    got = dict(d.read_many(["C1-01", "C1-02"]))
+    assert seen == [(0x200, 1), (0x201, 1)]                     # Table 3.5: 1 register only
+    assert got["C1-02"].value == pytest.approx(10.0)

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from typing import Any, Callable, ClassVar, Protocol, final
+from typing import Any, Callable, ClassVar, Iterator, Protocol, Sequence, final
 
 from profidrive_cli import BusError, UsageError
 from profidrive_cli.drives.torque import no_torque_reason
@@ -275,6 +275,17 @@ class Drive(ABC):
 
     @abstractmethod
     def read_param(self, code: str) -> ParamValue: ...
+
+    def read_many(self, codes: Sequence[str]) -> Iterator[tuple[str, ParamValue | DriveError | UsageError]]:
+        """Several parameters in order, each as it is read: (code, its value, or the DriveError or
+        UsageError that refused it). Here one read_param each; a family whose channel carries
+        several parameters in one transaction reads them together (Yaskawa's 16-word format: up to
+        4 consecutive MEMOBUS registers), with the same values and the same refusals per code."""
+        for code in codes:
+            try:
+                yield code, self.read_param(code)
+            except (DriveError, UsageError) as e:
+                yield code, e
 
     @final
     def write_param(self, code: str, value: float | int) -> ParamValue:

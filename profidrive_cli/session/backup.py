@@ -120,16 +120,16 @@ def factory_diff(params: ParamView, progress: Callable[[int, int, str], None] | 
         raise DriveError(no_channel_words(params))
     plan = [(c, p) for c, p, kind in dump_plan(params) if kind != "readonly"]
     rows: list[ParamRow] = []
+    reads = d.read_many([code for code, _ in plan])
     for i, (code, p) in enumerate(plan):
         if progress:
             progress(i, len(plan), code)
         want = factory_default(p)
-        try:
-            pv = d.read_param(code)
-        except (DriveError, UsageError) as e:
-            if isinstance(e, BusError) and not isinstance(e, DriveError):
-                raise
-            rows.append(ParamRow(code, p.name, p.unit, want, None, "missing", str(e)))
+        pv = next(reads)[1]
+        if isinstance(pv, (DriveError, UsageError)):
+            if isinstance(pv, BusError) and not isinstance(pv, DriveError):
+                raise pv
+            rows.append(ParamRow(code, p.name, p.unit, want, None, "missing", str(pv)))
             continue
         name, unit = pv.name or p.name, pv.unit or p.unit
         if want is None:
@@ -161,15 +161,15 @@ def dump(params: ParamView, progress: Callable[[int, int, str], None] | None = N
     readonly: dict[str, Any] = {}
     failed: dict[str, str] = {}
     unknown: list[str] = []
+    reads = d.read_many([code for code, _, kind in plan if not (changed and kind == "readonly")])
     for i, (code, p, kind) in enumerate(plan):
         if progress:
             progress(i, len(plan), code)
         if changed and kind == "readonly":
             continue                   # a monitor has no factory setting
-        try:
-            pv = d.read_param(code)
-        except (DriveError, UsageError) as e:
-            failed[code] = str(e)
+        pv = next(reads)[1]
+        if isinstance(pv, (DriveError, UsageError)):
+            failed[code] = str(pv)
             continue
         if changed:
             want = factory_default(p)

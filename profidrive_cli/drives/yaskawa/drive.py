@@ -8,7 +8,7 @@ drives/values, drives/torque, and this package's codec, paramaccess, config and 
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Iterable
+from typing import TYPE_CHECKING, Any, Iterable, Iterator, Sequence
 
 from profidrive_cli import UsageError
 from profidrive_cli.drives.base import (CyclicChannel, Drive, DriveError, DriveStatus, FaultRecord, ParamError,
@@ -491,7 +491,55 @@ class YaskawaDrive(Drive):
 
     def read_resolved(self, info: ParamInfo) -> ParamValue:       # (read_registers: the channel)
         reg, p = (info.ref, info.param) if isinstance(info.ref, int) else self._resolve(info.code)
-        raw = self.read_registers(reg, 1)[0]
+        return self._value(reg, p, self.read_registers(reg, 1)[0])
+
+    def read_many(self, codes: Sequence[str]) -> Iterator[tuple[str, ParamValue | DriveError | UsageError]]:
+        """Runs of codes whose registers follow each other (b1-01, b1-02, b1-03) in one transaction
+        of up to fmt.max_registers (16-word format: 4; manual Table 3.5, "1-4 consecutive
+        registers"); a run the drive refuses is read again one code at a time, so each refusal is
+        the code's own (a run that gets no answer at all is that error for each of its codes)."""
+        if self.params is None or self.fmt.max_registers < 2:
+            yield from super().read_many(codes)
+            return
+        items: list[tuple[str, int, ParamDef | None]] = []
+        for code in codes:
+            try:
+                reg, p = self._resolve(code)
+            except (DriveError, UsageError) as e:
+                yield from self._read_run(items)
+                items = []
+                yield code, e
+                continue
+            if items and (reg != items[-1][1] + 1 or len(items) >= self.fmt.max_registers):
+                yield from self._read_run(items)
+                items = []
+            items.append((code, reg, p))
+        yield from self._read_run(items)
+
+    def _read_run(self, run: list[tuple[str, int, ParamDef | None]]
+                  ) -> Iterator[tuple[str, ParamValue | DriveError | UsageError]]:
+        if not run:
+            return
+        if len(run) > 1:
+            try:
+                raws = self.read_registers(run[0][1], len(run))
+            except ParamError:
+                pass                                # each on its own below: whose refusal it is
+            except (DriveError, UsageError) as e:   # no answer: none of them was read
+                for code, _, _ in run:
+                    yield code, e
+                return
+            else:
+                for (code, reg, p), raw in zip(run, raws):
+                    yield code, self._value(reg, p, raw)
+                return
+        for code, reg, p in run:
+            try:
+                yield code, self._value(reg, p, self.read_registers(reg, 1)[0])
+            except (DriveError, UsageError) as e:
+                yield code, e
+
+    def _value(self, reg: int, p: ParamDef | None, raw: int) -> ParamValue:
         if p is None:
             n = register_name(self.profile, reg)
             return ParamValue(code=f"REG0x{reg:04X}", name=f"MEMOBUS register{' (' + n + ')' if n else ''}",
