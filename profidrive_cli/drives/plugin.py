@@ -91,6 +91,9 @@ PLUGIN_INTERFACE: Final[tuple[Promise, ...]] = (
     Promise("Drive.status_flag_names", "(cls, profile: Any, layout: str) -> list[str]", "may"),
     Promise("Drive.param_label_for", "(cls, profile: Any, code: str) -> tuple[str, Any]", "may"),
     Promise("Drive.param_info", "(self, code: str) -> ParamInfo", "may"),
+    Promise("Drive.read_many",
+            "(self, codes: Sequence[str]) -> Iterator[tuple[str, ParamValue | DriveError | UsageError]]",
+            "may"),
     Promise("Drive.normalise_area",
             "(cls, profile: Any, direction: str, area: dict[str, Any]) -> dict[str, Any]", "may"),
     # -- Drive: what pdrive provides ---------------------------------------------------------------
