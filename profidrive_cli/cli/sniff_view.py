@@ -121,9 +121,15 @@ class SniffView:
         if f is None:
             write(format_line(c) + "\n")
             return
-        suffix = self.decoder.suffix(c) if self.decoder is not None else None
+        if self.decoder is not None:
+            suffix = self.decoder.suffix(c)
+            if suffix is not None:
+                # a watched station's Data_Exchange: nothing by module under it (SlaveView skips
+                # the watched stations)
+                write(format_line(c) + suffix + "\n")
+                return
         dec, view = self._decoded(c, f)
-        write(format_line(c) + suffix + "\n" if suffix is not None else format_line(c) + "\n")
+        write(format_line(c) + "\n")
         self._decoded_lines(dec, view)
 
     def flush(self) -> None:
