@@ -30,7 +30,7 @@ import inspect
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from types import ModuleType
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any
 
 from profidrive_cli import UsageError
 from profidrive_cli.dp import services as S
@@ -123,6 +123,7 @@ def is_data_exchange(f: F.Frame) -> bool:
 
 #: the Data_Exchange request functions (is_data_exchange)
 _DX_FUNCTIONS = (F.SRD_LOW, F.SRD_HIGH)
+_SC, _SD4, _FC_REQ = F.SC, F.SD4, F.FC_REQ
 
 #: decoded areas kept per decoder: a station's area mostly repeats its previous one (the same
 #: command, reference and parameter request cycle after cycle); cleared when this many are kept
@@ -164,14 +165,14 @@ class PassiveDecoder:
         if f is None:
             return None
         sd = f.sd
-        if sd == F.SC or sd == F.SD4:
+        if sd == _SC or sd == _SD4:
             return None
         if f.dsap is not None or f.ssap is not None:
             self._locate(c)                          # (a Chk_Cfg to a watched station: noted)
             return None
         fc = f.fc
         data = f.data
-        if fc & F.FC_REQ:
+        if fc & _FC_REQ:
             if fc & 0x0F not in _DX_FUNCTIONS:
                 return None
             lane = self._req_lanes.get(f.da)
@@ -189,8 +190,7 @@ class PassiveDecoder:
             lane = self._lane(st, lane.direction, data if type(data) is bytes else bytes(data))
         if lane.mask < 0:
             return self._suffix_slow(st, lane.direction, data if type(data) is bytes else bytes(data))
-        at = lane.at
-        word = int.from_bytes(data[at:at + 2], lane.order)
+        word = data[lane.hi] << 8 | data[lane.lo]
         key = int.from_bytes(data, "big") & lane.mask | lane.classes[
             0 if not word else 2 if word & 0x8000 else 1]
         e = lane.lines.get(key)
@@ -400,11 +400,11 @@ _Line = tuple[str, str, str, "float | None"]
 class _Lane:
     """suffix()'s way for one watched station's areas in one direction, made for the layout, max
     frequency and Chk_Cfg the station had and the area's length (made anew when one changes):
-    the plan's speed word (`at`, `order`), the rest of an area as one int (the area's octets as a
-    big-endian number, the speed word and the ignored words masked out (`mask`), the word's class
-    in its place (`classes`)) and each rest's line pieces by that int (`lines`, bounded). Without a
-    plan mask is -1: the slow way."""
-    __slots__ = ("st", "direction", "size", "layout", "cfg", "fmax", "plan", "at", "order", "mask",
+    the plan's speed word (its octets `hi`, `lo`), the rest of an area as one int (the area's
+    octets as a big-endian number, the speed word and the ignored words masked out (`mask`), the
+    word's class in its place (`classes`)) and each rest's line pieces by that int (`lines`,
+    bounded). Without a plan mask is -1: the slow way."""
+    __slots__ = ("st", "direction", "size", "layout", "cfg", "fmax", "plan", "hi", "lo", "mask",
                  "classes", "lines", "hz_texts", "hz_text")
 
     def __init__(self, st: Watched, direction: str, size: int, layout: str | None,
@@ -415,13 +415,12 @@ class _Lane:
         self.lines: dict[int, _Line] = {}
         self.hz_texts: dict[int, str] = {}
         self.hz_text: Callable[[int], str] = str
-        self.at, self.mask = 0, -1
-        self.order: Literal["little", "big"] = "big"
+        self.hi, self.lo, self.mask = 0, 0, -1        # the speed word's high and low octet
         self.classes: tuple[int, ...] = (0, 0, 0)
         if plan is None:
             return
-        self.at = plan.offset
-        self.order = "little" if plan.order == "little" else "big"
+        at = plan.offset
+        self.hi, self.lo = (at + 1, at) if plan.order == "little" else (at, at + 1)
         mask = (1 << (8 * size)) - 1
         for a, b, fill in plan.segments:
             if fill is not None:
