@@ -194,16 +194,22 @@ def _reference_view_lines(items: list[Captured], as_json: bool, stations: list[s
     return lines
 
 
+@pytest.mark.parametrize("batched", [False, True])
 @pytest.mark.parametrize("as_json", [False, True])
 @pytest.mark.parametrize("stations", [[], ["3=fuji-g1", "4=fuji-pdp3", "5=toyo", "6=moeller",
                                            "7=yaskawa"]])
-def test_the_view_writes_what_the_plain_path_writes(capsys, as_json, stations):
+def test_the_view_writes_what_the_plain_path_writes(capsys, as_json, stations, batched):
     from profidrive_cli.cli.sniff_view import SniffView
     items = _entries(_changing_capture(random.Random(11), 30))
     view = SniffView(stations, as_json=as_json)
     capsys.readouterr()
-    for c in items:
-        view.frame(c)
+    if batched:                         # sniff's way: a chunk's frames at once (SniffView.frames)
+        for i in range(0, len(items), 97):
+            view.frames(items[i:i + 97])
+            view.flush()
+    else:
+        for c in items:
+            view.frame(c)
     view.finish(0.0)
     got = capsys.readouterr().out
     assert got == "".join(_reference_view_lines(items, as_json, stations))

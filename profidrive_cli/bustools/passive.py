@@ -18,7 +18,10 @@ the drive object does not read, and the Hz fields the word gives; the rest of th
 to its class, those words to zero) is decoded the slow way once per its octets and kept (bounded),
 the word's fields computed each time -- the same drive object as the slow way
 (tests/test_sniff_fast.py), at a fraction of the cost. PassiveDecoder.suffix makes sniff's line
-without the drive object. A family without a plan is decoded the slow way.
+without the drive object: per station and direction a _Lane keeps each rest's line around the Hz
+(found by the area as an int with the speed word masked), so a telegram whose speed word changes
+costs a lookup, the word's Hz text and a concatenation. A family without a plan is decoded the slow
+way.
 """
 
 from __future__ import annotations
@@ -120,6 +123,7 @@ def is_data_exchange(f: F.Frame) -> bool:
 
 #: the Data_Exchange request functions (is_data_exchange)
 _DX_FUNCTIONS = (F.SRD_LOW, F.SRD_HIGH)
+_SC, _SD4, _FC_REQ = F.SC, F.SD4, F.FC_REQ
 
 #: decoded areas kept per decoder: a station's area mostly repeats its previous one (the same
 #: command, reference and parameter request cycle after cycle); cleared when this many are kept
@@ -138,6 +142,9 @@ class PassiveDecoder:
         self.fast = fast
         self._plans: dict[tuple[int, str, str, float | None], _Plan | None] = {}
         self._rests: dict[tuple[tuple[int, str, str, float | None], bytes], DriveObject] = {}
+        #: suffix()'s lanes by station, of requests and of responses
+        self._req_lanes: dict[int, _Lane] = {}
+        self._rsp_lanes: dict[int, _Lane] = {}
 
     def decode(self, c: Captured, speed: bool = True) -> DriveObject | None:
         """The drive object of a watched station's Data_Exchange telegram (None for any other).
@@ -151,38 +158,100 @@ class PassiveDecoder:
 
     def suffix(self, c: Captured) -> str | None:
         """frame_suffix(decode(c)) (None where decode gives None), made without the drive object
-        on the fast path: the rest's text around the Hz the speed word gives."""
-        hit = self._locate(c)
-        if hit is None:
+        on the fast path: per station and direction a _Lane keeps each rest's line around the Hz
+        (the words but the speed word), so a telegram costs a lookup of its rest, the Hz of its
+        speed word and a concatenation."""
+        f = c.frame
+        if f is None:
             return None
-        st, direction, data = hit
+        sd = f.sd
+        if sd == _SC or sd == _SD4:
+            return None
+        if f.dsap is not None or f.ssap is not None:
+            self._locate(c)                          # (a Chk_Cfg to a watched station: noted)
+            return None
+        fc = f.fc
+        data = f.data
+        if fc & _FC_REQ:
+            if fc & 0x0F not in _DX_FUNCTIONS:
+                return None
+            lane = self._req_lanes.get(f.da)
+        else:
+            if not data:
+                return None
+            lane = self._rsp_lanes.get(f.sa)
+        if lane is None:
+            hit = self._locate(c)
+            if hit is None:
+                return None                          # not a watched station
+            lane = self._lane(*hit)
+        st = lane.st
+        if lane.cfg is not st.seen_cfg or lane.fmax != st.fmax or len(data) != lane.size:
+            lane = self._lane(st, lane.direction, data if type(data) is bytes else bytes(data))
+        if lane.mask < 0:
+            return self._suffix_slow(st, lane.direction, data if type(data) is bytes else bytes(data))
+        word = data[lane.hi] << 8 | data[lane.lo]
+        key = int.from_bytes(data, "big") & lane.mask | lane.classes[
+            0 if not word else 2 if word & 0x8000 else 1]
+        e = lane.lines.get(key)
+        if e is None:
+            e = self._lane_line(lane, key, data if type(data) is bytes else bytes(data))
+            if e is None:
+                return self._suffix_slow(st, lane.direction,
+                                         data if type(data) is bytes else bytes(data))
+        hz = lane.hz_texts.get(word)
+        if hz is None:
+            hz = lane.hz_text(word)
+        if e[3] is not None and e[3] != st.fmax:    # an answer of the max-frequency parameter
+            st.fmax = e[3]
+        return e[0] + hz + e[1] if hz else e[2]
+
+    def _lane(self, st: Watched, direction: str, data: bytes) -> _Lane:
+        """The station's lane for areas like `data` (its layout, max frequency and Chk_Cfg as they
+        are now), kept until one of them changes; a lane without a plan (mask -1) sends its areas
+        the slow way."""
         layout = st.layout_for(direction, len(data))
-        d = self._areas.get((st.address, direction, data, layout, st.fmax))
-        if d is None and self.fast:
+        plan = None
+        if self.fast and layout is not None:
+            pkey = (st.address, direction, layout, st.fmax)
+            plan = self._plans.get(pkey, _UNKNOWN)
+            if plan is _UNKNOWN:
+                plan = self._plans[pkey] = _plan(st, direction, layout)
+            if plan is not None and plan.size != len(data):
+                plan = None
+        lane = _Lane(st, direction, len(data), layout, plan)
+        (self._req_lanes if direction == "request" else self._rsp_lanes)[st.address] = lane
+        return lane
+
+    def _lane_line(self, lane: _Lane, key: int, data: bytes) -> _Line | None:
+        """The lane's line pieces for the rest of `data` (kept under `key`); None when the rest
+        does not decode (the slow way)."""
+        st = lane.st
+        found = self._rest(st, lane.direction, data, lane.layout)
+        if found is None:
+            return None
+        plan, _, rest = found
+        before, label, after, without = _pieces(rest, plan.hz_key)
+        teach = (_taught_fmax(st.profile, rest["param"])
+                 if rest.get("param") and lane.direction == "response" else None)
+        if len(lane.lines) >= AREA_CACHE_MAX:
+            lane.lines.clear()
+        e = lane.lines[key] = (before + label, after, without, teach)
+        return e
+
+    def _suffix_slow(self, st: Watched, direction: str, data: bytes) -> str:
+        """suffix() the way that makes the drive object (decode's)."""
+        layout = st.layout_for(direction, len(data))
+        if self.fast and (st.address, direction, data, layout, st.fmax) not in self._areas:
             found = self._rest(st, direction, data, layout)
             if found is not None:
                 plan, word, rest = found
                 if rest.get("param") and direction == "response":
                     _learn_fmax(st, rest["param"])
-                pieces = plan.pieces.get(id(rest))
-                if pieces is None or pieces[0] is not rest:
-                    if len(plan.pieces) >= AREA_CACHE_MAX:
-                        plan.pieces.clear()
-                    pieces = plan.pieces[id(rest)] = (rest, _pieces(rest, plan.hz_key))
-                before, label, after, without = pieces[1]
-                hz_text = plan.hz_texts.get(word)
-                if hz_text is None:
-                    w = plan.word
-                    hz = w.hz(word) if w.hz is not None else w.fields(word).get(plan.hz_key)
-                    if len(plan.hz_texts) >= AREA_CACHE_MAX:
-                        plan.hz_texts.clear()
-                    hz_text = plan.hz_texts[word] = "" if hz is None else f"{hz:.2f} Hz"
-                if not hz_text:
-                    return without
-                return before + label + hz_text + after
-        if d is None:
-            d = self._decode_area(st, direction, data)
-        return frame_suffix(d)
+                before, label, after, without = _pieces(rest, plan.hz_key)
+                hz_text = plan.hz_text(word)
+                return before + label + hz_text + after if hz_text else without
+        return frame_suffix(self._decode_area(st, direction, data))
 
     def _locate(self, c: Captured) -> tuple[Watched, str, bytes] | None:
         """(the watched station, "request" / "response", the area) of a Data_Exchange telegram;
@@ -284,13 +353,12 @@ class _Plan:
     `segments` in order, each (start, end, None) for octets read from the area or (start, end,
     zeros) for an ignored range, and which segment is the speed word (`slot`)."""
     __slots__ = ("word", "offset", "order", "size", "segments", "slot", "classes", "hz_key",
-                 "pieces", "hz_texts")
+                 "hz_texts")
 
     def __init__(self, word: SpeedWord, size: int, direction: str):
         self.word, self.offset, self.order, self.size = word, word.offset, word.order, size
-        #: the Hz field drive_text reads, and each rest's line around it (suffix: _pieces)
+        #: the Hz field drive_text reads (a rest's line around it: _pieces)
         self.hz_key = "reference_hz" if direction == "request" else "actual_hz"
-        self.pieces: dict[int, tuple[DriveObject, tuple[str, str, str, str]]] = {}
         #: the word's Hz as the line shows it ("30.00 Hz"; "": none), by word (bounded)
         self.hz_texts: dict[int, str] = {}
         fixed = {word.offset: 2}
@@ -312,6 +380,56 @@ class _Plan:
         self.segments = segments
         #: the speed word's class: 0, 1, -1 as two octets in the plan's byte order
         self.classes = (b"\x00\x00", (1).to_bytes(2, word.order), b"\xff\xff")  # type: ignore[arg-type]
+
+    def hz_text(self, word: int) -> str:
+        """The Hz the speed word gives as the line shows it ("30.00 Hz"; "": none), kept by word
+        (bounded)."""
+        w = self.word
+        hz = w.hz(word) if w.hz is not None else w.fields(word).get(self.hz_key)
+        if len(self.hz_texts) >= AREA_CACHE_MAX:
+            self.hz_texts.clear()
+        text = self.hz_texts[word] = "" if hz is None else f"{hz:.2f} Hz"
+        return text
+
+
+#: a rest's text line (suffix): (the line up to the Hz, after it, the line without an Hz, the max
+#: frequency the rest teaches or None)
+_Line = tuple[str, str, str, "float | None"]
+
+
+class _Lane:
+    """suffix()'s way for one watched station's areas in one direction, made for the layout, max
+    frequency and Chk_Cfg the station had and the area's length (made anew when one changes):
+    the plan's speed word (its octets `hi`, `lo`), the rest of an area as one int (the area's
+    octets as a big-endian number, the speed word and the ignored words masked out (`mask`), the
+    word's class in its place (`classes`)) and each rest's line pieces by that int (`lines`,
+    bounded). Without a plan mask is -1: the slow way."""
+    __slots__ = ("st", "direction", "size", "layout", "cfg", "fmax", "plan", "hi", "lo", "mask",
+                 "classes", "lines", "hz_texts", "hz_text")
+
+    def __init__(self, st: Watched, direction: str, size: int, layout: str | None,
+                 plan: _Plan | None):
+        self.st, self.direction, self.size, self.layout = st, direction, size, layout
+        self.cfg, self.fmax = st.seen_cfg, st.fmax
+        self.plan = plan
+        self.lines: dict[int, _Line] = {}
+        self.hz_texts: dict[int, str] = {}
+        self.hz_text: Callable[[int], str] = str
+        self.hi, self.lo, self.mask = 0, 0, -1        # the speed word's high and low octet
+        self.classes: tuple[int, ...] = (0, 0, 0)
+        if plan is None:
+            return
+        at = plan.offset
+        self.hi, self.lo = (at + 1, at) if plan.order == "little" else (at, at + 1)
+        mask = (1 << (8 * size)) - 1
+        for a, b, fill in plan.segments:
+            if fill is not None:
+                mask &= ~(((1 << (8 * (b - a))) - 1) << (8 * (size - b)))
+        self.mask = mask
+        shift = 8 * (size - plan.offset - 2)
+        self.classes = tuple(int.from_bytes(x, "big") << shift for x in plan.classes)
+        self.hz_texts = plan.hz_texts
+        self.hz_text = plan.hz_text
 
 
 #: not looked up yet (None: the family has no plan for the area)
@@ -424,10 +542,19 @@ def _decode(st: Watched, layout: str, direction: str, data: bytes) -> Area:
     return fn(st.profile, layout, direction, data)
 
 
-def _learn_fmax(st: Watched, param: dict[str, Any]) -> None:
-    if param.get("code") and param.get("code") == st.profile.max_frequency_param \
+def _taught_fmax(profile: Profile, param: dict[str, Any]) -> float | None:
+    """The max frequency an answer's parameter channel gives (an answer of the profile's
+    max-frequency parameter with a positive value), else None."""
+    if param.get("code") and param.get("code") == profile.max_frequency_param \
             and isinstance(param.get("value"), (int, float)) and param["value"] > 0:
-        st.fmax = float(param["value"])
+        return float(param["value"])
+    return None
+
+
+def _learn_fmax(st: Watched, param: dict[str, Any]) -> None:
+    fmax = _taught_fmax(st.profile, param)
+    if fmax is not None:
+        st.fmax = fmax
 
 
 # -- one family's decoded area -> the common `drive` object -------------------------------------

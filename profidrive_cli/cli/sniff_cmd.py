@@ -122,11 +122,12 @@ def sniff_cmd(opts: BusOptions, duration: float, pcap_file: str | None, linktype
             merged = merger.feed(items)
             if end_of_chunk:
                 merged += merger.flush()
-            for c in merged:
-                count += 1
-                if writer and c.frame is not None:
-                    writer.write(c.t, c.raw)
-                view.frame(c)
+            count += len(merged)
+            if writer is not None:
+                for c in merged:
+                    if c.frame is not None:
+                        writer.write(c.t, c.raw)
+            view.frames(merged)
             view.flush()
 
         if raw_file:

@@ -56,7 +56,26 @@ class SniffView:
         #: frame lines not yet written (flush())
         self._lines: list[str] = []
 
-    # -- one frame -------------------------------------------------------------------------------
+    # -- frames ----------------------------------------------------------------------------------
+    def frames(self, items: Iterable[Captured]) -> None:
+        """frame() of each item in turn; in text mode with --station a watched station's
+        Data_Exchange line made here (the most telegrams of a line), without a call per frame."""
+        if self.live is not None or self.as_json or self.decoder is None:
+            for c in items:
+                self.frame(c)
+            return
+        suffix = self.decoder.suffix
+        write = self._lines.append
+        plain = self._plain_line
+        for c in items:
+            s = suffix(c)
+            if s is None:
+                plain(c)
+            else:
+                # a watched station's Data_Exchange: nothing by module under it (SlaveView skips
+                # the watched stations)
+                write(format_line(c) + s + "\n")
+
     def frame(self, c: Captured) -> None:
         if self.live is None and not self.as_json:
             return self._line(c)
@@ -116,14 +135,21 @@ class SniffView:
     def _line(self, c: Captured) -> None:
         """frame() in text mode: the frame's line with the drive's words (PassiveDecoder.suffix:
         the line without the drive object), the decoded lines under it."""
+        if self.decoder is not None:
+            suffix = self.decoder.suffix(c)
+            if suffix is not None:
+                self._lines.append(format_line(c) + suffix + "\n")      # (as in frames())
+                return
+        self._plain_line(c)
+
+    def _plain_line(self, c: Captured) -> None:
+        """The line of a frame that carries no drive's words, the decoded lines under it."""
         f = c.frame
-        write = self._lines.append
         if f is None:
-            write(format_line(c) + "\n")
+            self._lines.append(format_line(c) + "\n")
             return
-        suffix = self.decoder.suffix(c) if self.decoder is not None else None
         dec, view = self._decoded(c, f)
-        write(format_line(c) + suffix + "\n" if suffix is not None else format_line(c) + "\n")
+        self._lines.append(format_line(c) + "\n")
         self._decoded_lines(dec, view)
 
     def flush(self) -> None:
