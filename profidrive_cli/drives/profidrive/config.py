@@ -59,6 +59,8 @@ class ProfidriveConfig:
     device_ids: dict[int, str] = field(default_factory=dict)
     ramps: dict[str, str] = field(default_factory=dict)
     jog_reference: str | None = None
+    #: parameters over DP-V1 DS47 (the profile's `dpv1:`); None: PKW words only
+    dpv1: Dpv1Config | None = None
 
     def error_text(self, number: int) -> str:
         return self.error_texts.get(number, f"error {number}")
@@ -101,6 +103,9 @@ class ProfidriveConfig:
                                     "fault_memory.positions must be one text per subindex")
             cfg.fault_positions = list(fm.positions)
         cfg.save_pnu = sec.save.pnu
+        if sec.dpv1 is not None:
+            d = sec.dpv1
+            cfg.dpv1 = Dpv1Config(d.slot, d.axis, d.c1_timeout_ms / 1000.0, d.timeout_s)
         cfg.baud_codes.update(_texts(path, sec.baud_codes, "baud_codes: keys are numbers, values texts"))
         cfg.device_ids.update(_texts(path, sec.device_ids, "device_ids: keys are numbers, values texts"))
         cfg.ramps = _ramps(path, profile, sec.ramps)
@@ -184,6 +189,26 @@ class FaultMemoryKeys:
 
 
 @dataclass(frozen=True)
+class Dpv1Keys:
+    """`dpv1:`: the card's parameters go over DP-V1 (class-1 Read/Write of data record 47, the
+    PROFIdrive base mode parameter access) instead of PKW words."""
+    slot: int = key("int", 0, lo=0, hi=254, type_msg=_INT, range_msg="dpv1.slot must be 0..254")
+    axis: int = key("int", 1, lo=0, hi=255, type_msg=_INT, range_msg="dpv1.axis must be 0..255")
+    #: the GSD's C1_Response_Timeout (there in 10 ms) in ms: the longest a Read/Write may take
+    c1_timeout_ms: float = key("number", 1000.0, gt=0, type_msg="dpv1.c1_timeout_ms must be a number > 0")
+    #: how long a parameter request may keep answering "state conflict" (busy), in s
+    timeout_s: float = key("number", 2.0, gt=0, type_msg="dpv1.timeout_s must be a number > 0")
+
+
+@dataclass(frozen=True)
+class Dpv1Config:
+    slot: int = 0
+    axis: int = 1
+    c1_timeout_s: float = 1.0
+    timeout_s: float = 2.0
+
+
+@dataclass(frozen=True)
 class SaveKeys:
     pnu: int | None = key("int", None, type_msg=_INT)      # `save: {}` or none: the card has no save PNU
 
@@ -200,6 +225,7 @@ class ProfidriveKeys:
     pkw: PkwKeys = _sub(PkwKeys)
     fault_memory: FaultMemoryKeys = _sub(FaultMemoryKeys)
     save: SaveKeys = _sub(SaveKeys)
+    dpv1: Dpv1Keys | None = _sub(Dpv1Keys, nullable=True)
     baud_codes: dict[Any, Any] = key("mapping", {}, type_msg=_MAPPING)
     device_ids: dict[Any, Any] = key("mapping", {}, type_msg=_MAPPING)
     ramps: dict[Any, Any] = key("mapping", {}, type_msg=_MAPPING)
