@@ -153,7 +153,7 @@ parameters:
   - {code: ACC, name: Acceleration time, pnu: 11, unit: s, scale: 0.1, min: 0.1, max: 3600, default: 2.0}
 """
 
-_KNOWN = ("array_pnus, baud_codes, ctw_bits, device_ids, fault_memory, held_ctw_bits, jog_reference, "
+_KNOWN = ("array_pnus, baud_codes, ctw_bits, device_ids, dpv1, fault_memory, held_ctw_bits, jog_reference, "
           "labels, pkw, pzd_map, ramps, save, stw_bits")
 _PKW = ("error_numbers, errors, max_zero_cycles, requests, responses, timeout_s, unsupported_text, "
         "zero_after_error, zero_between_identical")
@@ -192,6 +192,9 @@ PROFIDRIVE = [
     ("  fault_memory: {x: 1}", 10, "profidrive.fault_memory: unknown key 'x' (known: pnu, positions, subindexes)"),
     ("  save: {pnu: x}", 10, "'pnu' must be an integer, got 'x'"),
     ("  save: {at: 1}", 10, "profidrive.save: unknown key 'at' (known: pnu)"),
+    ("  dpv1: {slott: 0}", 10, "profidrive.dpv1: unknown key 'slott' (known: axis, c1_timeout_ms, slot, timeout_s)"),
+    ("  dpv1: {slot: 255}", 10, "dpv1.slot must be 0..254"),
+    ("  dpv1: {c1_timeout_ms: 0}", 10, "dpv1.c1_timeout_ms must be a number > 0"),
     ("  baud_codes: {x: y}", 10, "baud_codes: keys are numbers, values texts"),
     ("  device_ids: {1: 2}", 10, "device_ids: keys are numbers, values texts"),
     ("  ramps: {up: ACC}", 10, "ramps: keys accel, decel, quick_decel; values parameter codes"),
