@@ -25,7 +25,9 @@ import time
 from typing import Callable, Literal, overload
 
 from profidrive_cli import BusError
+from profidrive_cli.dp import msac1 as M1
 from profidrive_cli.dp import services as S
+from profidrive_cli.dp.acyclic import C1Call, C1Timeout
 from profidrive_cli.dp.dx_fast import exchange_fast
 from profidrive_cli.dp.station import (CFG_FAULT, DATA_EXCH, LOCKED, PRM_FAULT, RELEASED, STATE_WORDS,
                                        DpRequest, Event, SlaveConfig, StationMachine)
@@ -481,6 +483,37 @@ class Master:
         if failed:
             raise BusError("after reconnecting: " + "; ".join(failed))
 
+    # -- DP-V1 class-1 acyclic calls (dp/acyclic.py) -----------------------------------------------
+    def c1_call(self, address: int, pdu: bytes, timeout_s: float) -> M1.Msac1Pdu:
+        """One MSAC_C1 Read or Write with a station in data exchange: the request, then polls until
+        its answer, within timeout_s (the GSD's C1_Response_Timeout). Between the polls the kept
+        stations' cycles go on (this one's too), so no watchdog runs out. A timeout restarts the
+        station's start-up (a DP-V1 slave leaves data exchange with it) and raises C1Timeout; a
+        negative answer raises C1Error."""
+        st = self.stations.get(address)
+        if st is None or not st.in_data_exchange:
+            raise BusError(f"station {address}: DP-V1 read/write needs the station in data exchange")
+        call = C1Call(address, pdu, self.link.now(), timeout_s)
+        while True:
+            self.keep_alive()
+            res = self.transact(address, F.SRD_HIGH, call.request(), M1.SAP_C1, M1.SAP_C1)
+            try:
+                out = call.feed(res.frame if res.kind == REPLY else None, self.link.now())
+            except C1Timeout:
+                ev: list[Event] = []
+                st.restart(ev, "DP-V1 class-1 timeout", self.link.now())
+                self._emit(address, ev)
+                raise
+            if out is not None:
+                return out
+
+    def c1_read(self, address: int, slot: int, index: int, length: int, timeout_s: float) -> bytes:
+        """The data of a Read of (slot, index), at most `length` octets."""
+        return self.c1_call(address, M1.read_request(slot, index, length), timeout_s).data
+
+    def c1_write(self, address: int, slot: int, index: int, data: bytes, timeout_s: float) -> None:
+        self.c1_call(address, M1.write_request(slot, index, data), timeout_s)
+
     def channel(self, address: int, period: float = 0.0) -> "StationChannel":
         return StationChannel(self, address, period)
 
@@ -497,6 +530,13 @@ class StationChannel:
 
     def now(self) -> float:
         return self.master.link.now()
+
+    def c1_read(self, slot: int, index: int, length: int, timeout_s: float) -> bytes:
+        """drives.base.AcyclicChannel: a DP-V1 class-1 Read of this station."""
+        return self.master.c1_read(self.address, slot, index, length, timeout_s)
+
+    def c1_write(self, slot: int, index: int, data: bytes, timeout_s: float) -> None:
+        self.master.c1_write(self.address, slot, index, data, timeout_s)
 
     def exchange(self, outputs: bytes) -> bytes:
         if self.period:

@@ -31,6 +31,15 @@ class CyclicChannel(Protocol):
         """Monotonic time in seconds (the clock the bus runs on)."""
 
 
+class AcyclicChannel(Protocol):
+    """A station's DP-V1 class-1 Read/Write (dp.poller.StationChannel; the session's MeteredChannel
+    passes it on). A channel without these methods has no acyclic services."""
+
+    def c1_read(self, slot: int, index: int, length: int, timeout_s: float) -> bytes: ...
+
+    def c1_write(self, slot: int, index: int, data: bytes, timeout_s: float) -> None: ...
+
+
 class DriveError(BusError):
     """The drive refused or did not answer (parameter error, timeout, not allowed in this state)."""
 
@@ -192,6 +201,12 @@ class Drive(ABC):
     def jog_refusal(self) -> str:
         """Why this card cannot jog over the bus (one line; only asked when supports_jog is False)."""
         return f"{self.family}: jog is not supported by this card"
+
+    @classmethod
+    def set_prm_user_data(cls, profile: Any, user_prm: bytes) -> bytes:
+        """The User_Prm_Data of the station's Set_Prm, from the GSD's defaults (`user_prm`): a
+        family changes what its card needs (the PROFIdrive core: DPV1_Enable for a DS47 card)."""
+        return user_prm
 
     @classmethod
     def jog_refusal_for(cls, profile: Any, layout: str) -> str | None:

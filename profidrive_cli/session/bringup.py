@@ -20,8 +20,10 @@ def bring_up(master: Any, address: int, ident: int, profile: Profile, layout: st
     the layout, Data_Exchange at `cycle_hz` (0: unpaced); the station kept in data exchange while
     the master talks to others. Returns its MeteredChannel."""
     from profidrive_cli.dp.station import SlaveConfig
+    from profidrive_cli.drives import drive_class
     lay = profile.layouts[layout]
-    sc = SlaveConfig(ident=ident, cfg=lay.cfg, user_prm=user_prm(ident),
+    prm = drive_class(profile).set_prm_user_data(profile, user_prm(ident))
+    sc = SlaveConfig(ident=ident, cfg=lay.cfg, user_prm=prm,
                      wd_ms=watchdog_ms, sync=sync, freeze=freeze)
     master.add_station(address, sc)
     try:

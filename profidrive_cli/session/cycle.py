@@ -46,6 +46,15 @@ class MeteredChannel:
     def now(self) -> float:
         return self.inner.now()
 
+    def c1_read(self, slot: int, index: int, length: int, timeout_s: float) -> bytes:
+        """drives.base.AcyclicChannel, when the inner channel has it (AttributeError otherwise)."""
+        read: Callable[[int, int, int, float], bytes] = getattr(self.inner, "c1_read")
+        return read(slot, index, length, timeout_s)
+
+    def c1_write(self, slot: int, index: int, data: bytes, timeout_s: float) -> None:
+        write: Callable[[int, int, bytes, float], None] = getattr(self.inner, "c1_write")
+        write(slot, index, data, timeout_s)
+
     def exchange(self, outputs: bytes) -> bytes:
         inner = self.inner
         inputs = inner.exchange(outputs)

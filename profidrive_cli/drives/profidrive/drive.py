@@ -13,7 +13,7 @@ from profidrive_cli import UsageError
 from profidrive_cli.drives.base import (CyclicChannel, Drive, DriveError, DriveStatus, FaultRecord, ParamError,
                                         ParamInfo, ParamValue)
 from profidrive_cli.drives.values import raw_value_problem, value_problem
-from profidrive_cli.drives.profidrive.config import ProfidriveConfig, config
+from profidrive_cli.drives.profidrive.config import Dpv1Config, ProfidriveConfig, config
 from profidrive_cli.drives.profidrive.describe import ppo_drive_object
 from profidrive_cli.drives.profidrive.params import ParamRef, resolve_code
 from profidrive_cli.drives.profidrive.pkw import (REQUEST_TEXT, PkwChannel, PkwFrame, PkwResult,
@@ -73,11 +73,23 @@ class ProfidriveDrive(Drive):
         self.last_status: DriveStatus | None = None
         self._pkw_result: PkwResult | None = None
         self._fmax: float | None = None
+        #: parameters over DP-V1 DS47 (the profile's `dpv1:`, a channel with class-1 services, a
+        #: layout without PKW words or use_dpv1()); None: PKW
+        self.ds47: Dpv1Config | None = None
+        if self.cfg.dpv1 is not None and self.pkw is None and hasattr(channel, "c1_read"):
+            self.ds47 = self.cfg.dpv1
+        self._ds47_ref = 0
 
     # -- hooks -------------------------------------------------------------------------------
     @property
     def has_param_channel(self) -> bool:
-        return self.pkw is not None
+        return self.pkw is not None or self.ds47 is not None
+
+    def use_dpv1(self, settings: Dpv1Config | None = None) -> None:
+        """Parameters over DP-V1 DS47 from now on (`--dpv1`), with the profile's settings or these."""
+        if not hasattr(self.channel, "c1_read"):
+            raise DriveError(f"{self.profile.name}: this connection has no DP-V1 class-1 services")
+        self.ds47 = settings or self.cfg.dpv1 or Dpv1Config()
 
     def control_extra_bits(self) -> int:
         return self.extra_bits
@@ -94,6 +106,18 @@ class ProfidriveDrive(Drive):
     def _ref(self, info: ParamInfo) -> ParamRef:
         """The address param_info resolved (resolved again only for a ParamInfo made elsewhere)."""
         return info.ref if isinstance(info.ref, ParamRef) else self.resolve_param(info.code)
+
+    @classmethod
+    def set_prm_user_data(cls, profile: Any, user_prm: bytes) -> bytes:
+        """A card with `dpv1:` gets DPV1_Enable (DPV1_Status_1 bit 7) in the first of the three
+        DPV1_Status octets that open a DP-V1 slave's user parameters (dp/dpv1.py); without a GSD
+        that gives them, the three octets 80 00 00."""
+        from profidrive_cli.dp.dpv1 import dpv1_status
+        if config(profile).dpv1 is None:
+            return user_prm
+        if dpv1_status(user_prm) is None:
+            return bytes((0x80, 0, 0)) + bytes(user_prm)
+        return bytes((user_prm[0] | 0x80,)) + bytes(user_prm[1:])
 
     @classmethod
     def param_label_for(cls, profile: Any, code: str) -> tuple[str, Any]:
@@ -225,7 +249,10 @@ class ProfidriveDrive(Drive):
 
     # -- PKW ---------------------------------------------------------------------------------
     def request(self, frame: PkwFrame, timeout: float | None = None) -> PkwResult:
-        """Run one PKW request to completion (keeps cyclic data going)."""
+        """Run one PKW request to completion (keeps cyclic data going); on a DP-V1 drive the same
+        request as a PROFIdrive parameter request over DS47 (ds47_request)."""
+        if self.ds47 is not None:
+            return self.ds47_request(frame, timeout)
         if self.pkw is None:
             raise DriveError(f"{self.profile.name}: layout {self.layout} has no parameter channel "
                              f"(use a PPO with PKW: {', '.join(n for n, l in self.profile.layouts.items() if l.pkw) or 'none'})")
@@ -242,6 +269,82 @@ class ProfidriveDrive(Drive):
                 raise DriveError(f"no answer to the parameter request for PNU {frame.pnu}")
         res, self._pkw_result = self._pkw_result, None
         return res
+
+    def ds47_request(self, frame: PkwFrame, timeout: float | None = None) -> PkwResult:
+        """A PKW request run as a PROFIdrive parameter request over DP-V1: Write DS47 with the
+        request, then Read DS47 until the response comes (a "state conflict" or "resource busy"
+        answer means not ready yet, up to the profile's dpv1.timeout_s); the answer as the
+        PkwResult the PKW path would give (AK 7 and the error number for a negative one)."""
+        from profidrive_cli.dp.acyclic import C1Error, C1Timeout
+        from profidrive_cli.drives.profidrive import ds47 as D
+        d = self.ds47
+        assert d is not None
+        chan: Any = self.channel
+        ak = frame.ak
+        self._ds47_ref = self._ds47_ref % 255 + 1
+        addr = D.ParamAddress(frame.pnu, frame.subindex)
+        long = ak in (3, 8, 11, 13)
+        if ak in (1, 6):
+            req = D.read_request(self._ds47_ref, d.axis, [addr])
+        elif ak in (2, 3, 7, 8, 11, 12, 13, 14):
+            value = frame.value & (0xFFFFFFFF if long else 0xFFFF)
+            signed = self._ds47_signed(frame.pnu)
+            if signed and value >> (31 if long else 15):
+                value -= 1 << (32 if long else 16)
+            fmt = (0x04 if signed else 0x07) if long else (0x03 if signed else 0x06)
+            req = D.change_request(self._ds47_ref, d.axis, [(addr, D.ParamValues(fmt, (value,)))])
+        else:
+            raise DriveError(f"{self.profile.name}: request AK {ak} ({REQUEST_TEXT.get(ak, '?')}) "
+                             "has no DS47 counterpart here")
+        what = f"PNU {frame.pnu}" + (f"[{frame.subindex}]" if frame.subindex else "")
+        limit = timeout if timeout is not None else d.timeout_s
+        try:
+            chan.c1_write(d.slot, D.INDEX, req.encode(), d.c1_timeout_s)
+            end = self.channel.now() + limit
+            while True:
+                try:
+                    data = chan.c1_read(d.slot, D.INDEX, 240, d.c1_timeout_s)
+                    break
+                except C1Error as e:
+                    if not e.busy or self.channel.now() > end:
+                        raise
+                    self.cycle()
+        except C1Timeout as e:
+            raise DriveError(f"{what}: {e}; a DP-V1 slave leaves data exchange on a class-1 "
+                             "timeout: the station is parameterised again (its outputs at their "
+                             "safe state until then)") from None
+        except C1Error as e:
+            raise DriveError(f"{what}: {e}") from None
+        try:
+            res = D.ParamResponse.decode(data)
+        except D.Ds47Error as e:
+            raise DriveError(f"{what}: the drive's DS47 response is malformed: {e}") from None
+        if res.reference != req.reference:
+            raise DriveError(f"{what}: DS47 response to request {res.reference}, not "
+                             f"{req.reference}")
+        item = res.items[0] if res.items else None
+        if isinstance(item, D.ParamFault):
+            return PkwResult(frame, PkwFrame(7, frame.pnu, frame.subindex, item.number),
+                             error=item.number, error_text=D.error_text(item.number))
+        if not res.ok:
+            return PkwResult(frame, PkwFrame(7, frame.pnu, frame.subindex), error=-1,
+                             error_text=f"negative DS47 response 0x{res.response_id:02X}")
+        if ak in (1, 6):
+            if not isinstance(item, D.ParamValues) or isinstance(item.values, bytes) \
+                    or not item.values:
+                raise DriveError(f"{what}: DS47 read answered without a numeric value")
+            v = int(item.values[0])
+            is_long = item.format in (0x04, 0x07, 0x08, 0x43)
+            return PkwResult(frame, PkwFrame(2 if is_long else 1, frame.pnu, frame.subindex,
+                                             v & (0xFFFFFFFF if is_long else 0xFFFF)))
+        return PkwResult(frame, PkwFrame(2 if long else 1, frame.pnu, frame.subindex, frame.value))
+
+    def _ds47_signed(self, pnu: int) -> bool:
+        """A change request's format: signed when the profile's parameter at this PNU can be < 0."""
+        for p in self.profile.parameters.values():
+            if p.pnu == pnu and p.min is not None and p.min < 0:
+                return True
+        return False
 
     def read_raw(self, pnu: int, subindex: int = 0, array: bool | None = None) -> int:
         if array is None:

@@ -1,0 +1,90 @@
+"""One DP-V1 class-1 acyclic call (MSAC_C1 Read or Write) as the master runs it, sans-IO.
+
+The master sends the request PDU in an SRD to DSAP 51 from SSAP 51 (high priority with the frame count
+bit, as its other DP services), then polls with the same SAPs and an empty DU until the slave answers
+with data; the short acknowledgement SC (or a reply without data) means "not ready yet". The whole call
+is bounded by the slave's C1_Response_Timeout (GSD, in 10 ms units): past it the call fails with
+C1Timeout. A DP-V1 slave leaves data exchange when its class-1 connection times out (IEC 61158-6's
+MSAC1S machine stops with the cyclic one), so the poller restarts the station's start-up then.
+
+C1Call holds the state; dp/poller.py's Master.c1_call does the waiting and keeps the other stations'
+cycles (and this station's) going between the polls.
+"""
+
+from __future__ import annotations
+
+from profidrive_cli import BusError
+from profidrive_cli.dp import msac1 as M
+from profidrive_cli.fdl import frames as F
+
+
+class C1Error(BusError):
+    """A negative MSAC_C1 answer: .function, .decode, .code1, .code2 (msac1.error_text says them)."""
+
+    def __init__(self, message: str, pdu: M.Msac1Pdu):
+        super().__init__(message)
+        self.pdu = pdu
+        self.function = pdu.function
+        self.decode, self.code1, self.code2 = pdu.error or (0, 0, 0)
+
+    @property
+    def busy(self) -> bool:
+        """'state conflict' or 'resource busy': the slave asks to be asked again."""
+        return self.decode == 0x80 and self.code1 in (M.STATE_CONFLICT, M.RESOURCE_BUSY)
+
+
+class C1Timeout(BusError):
+    """No MSAC_C1 answer within C1_Response_Timeout."""
+
+
+class C1Call:
+    """One Read or Write: request() is the DU of the next SRD (the PDU first, then empty polls),
+    feed() takes what came back and says whether the call is over."""
+
+    def __init__(self, address: int, pdu: bytes, now: float, timeout_s: float):
+        self.address = address
+        self.pdu = bytes(pdu)
+        self.request_pdu = M.decode_pdu(self.pdu, is_request=True)
+        self.deadline = now + timeout_s
+        self.timeout_s = timeout_s
+        self.sent = False
+        self.polls = 0
+
+    def request(self) -> bytes:
+        if self.sent:
+            self.polls += 1
+            return b""
+        return self.pdu
+
+    def feed(self, frame: F.Frame | None, now: float) -> M.Msac1Pdu | None:
+        """The answer PDU (a negative one raises C1Error), or None: poll again. A request that got
+        no reply at all is sent again (the FDL retries are spent by then); the deadline holds."""
+        what = f"station {self.address}: DP-V1 {self.request_pdu.describe()}"
+        if frame is not None and frame.sd != F.SC:
+            status = frame.fc & 0x0F
+            if status == F.RS:
+                raise BusError(f"{what}: SAP 51 not enabled (RS): the slave is not DP-V1, or its "
+                               "Set_Prm did not set DPV1_Enable, or it is not in data exchange")
+            if status in F.NEGATIVE:
+                raise BusError(f"{what}: answered {F.describe_fc(frame.fc)}")
+        if frame is not None:
+            self.sent = True
+            if frame.sd != F.SC and frame.data:
+                if frame.dsap != M.SAP_C1 and frame.ssap != M.SAP_C1:
+                    raise BusError(f"{what}: the answer came from SAP {frame.ssap}, not 51")
+                try:
+                    pdu = M.decode_pdu(frame.data, is_request=False)
+                except M.Msac1Error as e:
+                    raise BusError(f"{what}: bad answer: {e}") from None
+                if pdu.function != self.request_pdu.function:
+                    raise BusError(f"{what}: answered with {pdu.name}")
+                if pdu.error is not None:
+                    raise C1Error(f"{what}: {M.error_text(*pdu.error)}", pdu)
+                return pdu
+        if now >= self.deadline:
+            raise C1Timeout(f"{what}: no answer within {self.timeout_s * 1000:g} ms "
+                            "(C1_Response_Timeout)")
+        return None
+
+
+__all__ = ["C1Call", "C1Error", "C1Timeout"]
