@@ -96,6 +96,7 @@ PLUGIN_INTERFACE: Final[tuple[Promise, ...]] = (
             "may"),
     Promise("Drive.normalise_area",
             "(cls, profile: Any, direction: str, area: dict[str, Any]) -> dict[str, Any]", "may"),
+    Promise("Drive.set_prm_user_data", "(cls, profile: Any, user_prm: bytes) -> bytes", "may"),
     # -- Drive: what pdrive provides ---------------------------------------------------------------
     Promise("Drive.__init__", "(self, channel: CyclicChannel, profile: Any, layout: str | None = None)",
             "pdrive"),

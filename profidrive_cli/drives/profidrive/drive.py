@@ -437,7 +437,7 @@ class ProfidriveDrive(Drive):
 
     def max_frequency(self) -> float:
         if self._fmax is None:
-            if self.pkw is not None and self.profile.max_frequency_param:
+            if self.has_param_channel and self.profile.max_frequency_param:
                 self._fmax = float(self.read_param(self.profile.max_frequency_param).value)
             else:
                 self._fmax = float(self.profile.max_frequency_default)

@@ -87,8 +87,10 @@ def resolve_code(profile: Profile, code: str, cfg: ProfidriveConfig | None = Non
                          f"(use a code such as {next(iter(profile.parameters), 'F03')} or PNU<n>[<ind>])")
     pnu = int(m.group(1), 0)
     sub = int(m.group(2), 0) if m.group(2) is not None else 0
-    if not 0 < pnu <= 0x7FF or not 0 <= sub <= 255:
-        raise UsageError(f"{code}: PNU must be 1..2047 and subindex 0..255")
+    # PKW's PKE holds 11 bits of PNU; DS47 (a `dpv1:` card) a whole word
+    top = 0xFFFF if cfg.dpv1 is not None else 0x7FF
+    if not 0 < pnu <= top or not 0 <= sub <= 255:
+        raise UsageError(f"{code}: PNU must be 1..{top} and subindex 0..255")
     p = param_for(profile, pnu, sub)
     array = pnu in cfg.array_pnus or bool(p is not None and p.extra.get("array"))
     if p is not None:
