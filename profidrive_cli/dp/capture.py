@@ -11,6 +11,10 @@ telegrams, so `pdrive sniff` formats most of them once (benchmarks/bench_sniff.p
 change every cycle defeat those caches: what a frame's fields, line and JSON take from its header
 (SD, addresses, FC, SAPs) is made once per header (_Head), the octets' hex each time; and
 Capture.feed parses a sound SD2 telegram without SAPs in place (what fdl.frames.parse gives).
+
+DP-V1's acyclic telegrams (SAP 51, 50, 49: dp/msac1.py) are named by their PDU's function as well
+("MSAC_C1 Read request", "MSAC_C1 poll", "MSAC_C1 Read error response"): their heads are made each
+time, never kept, so every other telegram's head lookup stays what it was.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ from dataclasses import dataclass
 from typing import Protocol, TypedDict
 
 from profidrive_cli import UsageError
+from profidrive_cli.dp import msac1 as M
 from profidrive_cli.dp.services import service_name
 from profidrive_cli.fdl import frames as F
 
@@ -110,10 +115,43 @@ def _head(f: F.Frame) -> _Head:
     key = (f.sd, f.da, f.sa, f.fc, f.dsap, f.ssap, bool(f.data))
     h = _HEADS.get(key)
     if h is None:
+        h = _Head(f)
+        if acyclic_sap(f) is not None:
+            return h        # named by its PDU's first octet too: made each time (rare), never kept
         if len(_HEADS) >= _CACHE_MAX:
             _HEADS.clear()
-        h = _HEADS[key] = _Head(f)
+        _HEADS[key] = h
     return h
+
+
+#: the DP-V1 acyclic SAPs of a slave (dp/msac1.py) and the name of their telegrams
+ACYCLIC_SAPS = {M.SAP_C1: "MSAC_C1", M.SAP_C1_ALARM: "MSAC_C1 alarm", M.SAP_C2: "MSAC_C2"}
+
+
+def acyclic_sap(f: F.Frame) -> int | None:
+    """The slave's DP-V1 acyclic SAP a telegram is for (a request's DSAP) or from (a reply's SSAP):
+    51 (MSAC_C1), 50 (its alarm SAP) or 49 (MSAC_C2); None for any other telegram."""
+    if f.dsap is None:
+        return None
+    sap = f.dsap if f.fc & F.FC_REQ else f.ssap
+    return sap if sap in ACYCLIC_SAPS else None
+
+
+def acyclic_service(sap: int, is_request: bool, du: bytes) -> str:
+    """A DP-V1 acyclic telegram's service by its PDU's first octet: "MSAC_C1 Read request",
+    "MSAC_C1 Write response", "MSAC_C1 Read error response" (the error bit), "MSAC_C1 poll" (a
+    request without data: the master fetching the answer), "MSAC_C1 reply" (a reply without data: not
+    ready yet), "MSAC_C1 Alarm_Ack request" on SAP 50, "MSAC_C2 Initiate request" on SAP 49."""
+    prefix = ACYCLIC_SAPS[sap]
+    if not du:
+        return prefix + (" poll" if is_request else " reply")
+    fn = du[0] & 0x7F
+    if fn == M.ALARM_ACK and sap == M.SAP_C1_ALARM:
+        prefix = "MSAC_C1"
+    name = M.FUNCTIONS.get(fn, f"function 0x{fn:02X}")
+    if is_request:
+        return f"{prefix} {name} request"
+    return f"{prefix} {name} {'error response' if du[0] & M.ERROR_BIT else 'response'}"
 
 
 def frame_fields(c: Captured) -> FrameFields:
@@ -174,6 +212,8 @@ def _fields(raw: bytes, f: F.Frame) -> FrameFields:
         d["service"] = "FDL status"
     elif not f.is_request and f.dsap is None and f.ssap is None and f.fc & 0x0F == F.OK and not f.data:
         d["service"] = "FDL status reply"
+    elif (sap := acyclic_sap(f)) is not None:
+        d["service"] = acyclic_service(sap, f.is_request, f.data)
     else:
         d["service"] = service_name(f.dsap, f.ssap, f.is_request) + ("" if f.is_request else " reply")
     return d
@@ -390,5 +430,5 @@ def read_pcap(data: bytes) -> tuple[int, list[tuple[float, bytes]]]:
 
 
 __all__ = ["Capture", "Captured", "ErrorMerger", "HOLD", "PcapWriter", "read_pcap", "merge_errors", "frame_fields",
-           "frame_service", "frame_json_head",
+           "frame_service", "frame_json_head", "ACYCLIC_SAPS", "acyclic_sap", "acyclic_service",
            "LINKTYPE_USER0", "LINKTYPE_PROFIBUS_DL", "LINKTYPES", "TimeRangeError", "check_time", "T_MAX"]

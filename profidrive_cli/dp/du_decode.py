@@ -5,13 +5,21 @@ Set_Prm (reference §3.1: the 7 standard octets, the DP-V1 status octets, the re
 parameters), Slave_Diag replies (§3.3 status octets, §3.4 every extended-diagnosis block with the
 DP-V1 alarm/status headers of dp/dpv1.py), Chk_Cfg requests and Get_Cfg replies (§3.2 identifiers),
 Global_Control and Set_Slave_Add. Other telegrams: None.
+
+DP-V1's acyclic telegrams (SAP 51 MSAC_C1, 50 its alarm SAP, 49 MSAC_C2) have their own decoder,
+decode_acyclic(): the MSAC_C1 PDU in words (dp/msac1.py: Read / Write / Alarm_Ack, a negative answer
+with its error class and code); a poll (a request without data) and a reply without data named as
+such; a class-2 telegram by its function only. What a data record holds (DS47: a PROFIdrive parameter
+request or response) is read above dp/, where the drives' codecs are (bustools/dpv1view.py).
 """
 
 from __future__ import annotations
 
 from typing import Any
 
+from profidrive_cli.dp import msac1 as M
 from profidrive_cli.dp import services as S
+from profidrive_cli.dp.capture import ACYCLIC_SAPS, acyclic_service
 from profidrive_cli.dp.cfg import CfgError, decode_cfg
 from profidrive_cli.dp.dpv1 import dpv1_block, dpv1_status
 
@@ -114,4 +122,40 @@ def decode_du(service: str, du: bytes) -> dict[str, Any] | None:
     return None
 
 
-__all__ = ["DECODED_SERVICES", "decode_du", "ext_block"]
+def decode_acyclic(sap: int, is_request: bool, du: bytes) -> tuple[dict[str, Any], M.Msac1Pdu | None]:
+    """A DP-V1 acyclic telegram (capture.acyclic_sap() gave `sap`) in words: (its `decoded` object,
+    the PDU when it is an MSAC_C1 one that decodes). The object: `msac` {service, sap, kind, then
+    msac1's Msac1Pdu.to_dict(): function, slot, index, length, data | error, error_text | slot,
+    alarm_type, specifier; `problem` when the PDU is malformed} and `text` [one line]. kind: request,
+    poll (a request without data), response, ack (a reply without data: not ready yet)."""
+    service = ACYCLIC_SAPS[sap].split()[0]
+    kind = ("request" if du else "poll") if is_request else ("response" if du else "ack")
+    m: dict[str, Any] = {"service": service, "sap": sap, "kind": kind}
+    d: dict[str, Any] = {"msac": m}
+    if not du:
+        d["text"] = [f"{service} poll: the master asks for the answer" if is_request
+                     else f"{service} reply without data: no answer yet"]
+        return d, None
+    fn = du[0] & 0x7F
+    if sap == M.SAP_C2 or fn not in (M.READ, M.WRITE, M.ALARM_ACK):
+        # class 2 (Initiate, Abort, ...), or a function class 1 does not define: named, not decoded
+        m["function"] = M.FUNCTIONS.get(fn, f"function 0x{fn:02X}")
+        m["data"] = du[1:].hex(" ")
+        d["text"] = [f"{acyclic_service(sap, is_request, du)}: {du.hex(' ')}"]
+        return d, None
+    try:
+        pdu = M.decode_pdu(du, is_request)
+    except M.Msac1Error as e:
+        m["function"] = M.FUNCTIONS[fn]
+        m["problem"] = str(e)
+        d["text"] = [f"{acyclic_service(sap, is_request, du)}: malformed PDU: {e}: {du.hex(' ')}"]
+        return d, None
+    m.update(pdu.to_dict())
+    # (the data's octets are on the frame's line: not again here)
+    words = pdu.describe() if pdu.error is not None or pdu.alarm is not None else \
+        f"{pdu.name} slot {pdu.slot} index {pdu.index} length {pdu.length}"
+    d["text"] = [f"{service} {'request' if is_request else 'response'}: {words}"]
+    return d, pdu
+
+
+__all__ = ["DECODED_SERVICES", "decode_du", "decode_acyclic", "ext_block"]
