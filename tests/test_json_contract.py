@@ -672,6 +672,21 @@ def test_sniff_decoded_objects(tmp_path):
         assert len(assert_stream(lines_of(pdrive("sniff", "--from-file", str(ext), "--json")), "sniff")) == 15
 
 
+def test_sniff_dpv1_decoded_objects(tmp_path):
+    """Issue 39: the `decoded.msac` and `decoded.ds47` objects of DP-V1 acyclic telegrams (a DS47
+    read as a master runs it, a negative answer, a change request, an Alarm_Ack, a class-2 Initiate,
+    a negative parameter response, a malformed PDU and record: tests/test_sniff_dpv1.py's octets)
+    against the contract."""
+    from test_sniff_dpv1 import BAD_LENGTH, CAPTURE, READ_RES_NEGATIVE, SHORT_RECORD, WRITE_964
+    extra = [WRITE_964, READ_RES_NEGATIVE, BAD_LENGTH, SHORT_RECORD]
+    raw = tmp_path / "dpv1.raw"
+    raw.write_bytes(b"".join(CAPTURE + extra))
+    lines = lines_of(pdrive("sniff", "--from-file", str(raw), "--json"))
+    assert assert_stream(lines, "sniff") == ["frame"] * (len(CAPTURE) + len(extra))
+    assert all("msac" in d["decoded"] for d in lines)
+    assert sum("ds47" in d["decoded"] for d in lines) == 6
+
+
 # ---------------------------------------------------------------------------------------------
 # the commands merged with their own JSON: scan --watch, commloss-test, run 3,4,5, sniff --station /
 # --live, sim --plc, config show / path, wireshark install, the bus_health and comm_loss steps

@@ -16,6 +16,8 @@ no rich: cli/sniff_cmd.py, sniff_view.py, scan_watch.py and wireshark_cmd.py ren
                      the position in errors, evaluated on captured telegrams, sans-IO
     recorder.py      the black-box recorder (`sniff --ring`): the ring of telegrams, one capture per
                      event with the seconds before and after, bounded in seconds and telegrams, sans-IO
+    dpv1view.py      sniff's DP-V1 acyclic telegrams in words (the PDU, the DS47 parameter request and
+                     response, a call's request, SC, polls and answer tied together), sans-IO
     causes.py        likely causes from the live list's counters and timing, each with its evidence
     buswatch.py      `scan --watch` and the checklist step bus_health: the live list polled pass after
                      pass (Slave_Diag / FDL status through dp.poller.Master), state categories, counter

@@ -14,18 +14,25 @@ from typing import TYPE_CHECKING, Any
 
 from profidrive_cli.bustools.passive import frame_suffix
 from profidrive_cli.cli.common import emit_json, out
-from profidrive_cli.dp.capture import format_line, frame_json_head, frame_service
+from profidrive_cli.dp.capture import acyclic_sap, format_line, frame_json_head, frame_service
 from profidrive_cli.dp.du_decode import DECODED_SERVICES, decode_du
+from profidrive_cli.fdl.frames import SC
 
 if TYPE_CHECKING:                                   # pragma: no cover
+    from collections.abc import Callable
+
     from rich.live import Live
     from rich.table import Table
 
+    from profidrive_cli.bustools.dpv1view import AcyclicView
     from profidrive_cli.bustools.passive import PassiveDecoder
     from profidrive_cli.bustools.passive_live import LiveList
     from profidrive_cli.bustools.slaveview import DxView, SlaveView
     from profidrive_cli.dp.capture import Captured
     from profidrive_cli.fdl.frames import Frame
+
+#: a frame's `decoded` object: a dict, or a Data_Exchange by module (DxView)
+Decoded = tuple["dict[str, Any] | None", "DxView | None"]
 
 REFRESH_S = 0.5
 #: the decoded data unit's lines sit under the frame line, past its time column
@@ -55,6 +62,11 @@ class SniffView:
             self.slaves = SlaveView(gsd_dir, set(self.decoder.watched) if self.decoder else ())
         #: frame lines not yet written (flush())
         self._lines: list[str] = []
+        #: DP-V1 acyclic telegrams in words (made at the first one: they are rare)
+        self.acyclic: AcyclicView | None = None
+        #: a frame's `decoded` object: _decoded_plain, or for the one telegram after a DP-V1
+        #: request or poll _decoded_after_request (no test per frame on the Data_Exchange path)
+        self._decoded: Callable[[Captured, Frame], Decoded] = self._decoded_plain
 
     # -- frames ----------------------------------------------------------------------------------
     def frames(self, items: Iterable[Captured]) -> None:
@@ -114,16 +126,43 @@ class SniffView:
             write(line + "\n")
             self._decoded_lines(dec, view)
 
-    def _decoded(self, c: Captured, f: Frame) -> tuple[dict[str, Any] | None, DxView | None]:
+    def _decoded_plain(self, c: Captured, f: Frame) -> Decoded:
         """The frame's `decoded` object: a Data_Exchange's by module (a DxView, made into text or
-        JSON as needed), any other frame's as a dict (du_decode, with the GSD's view)."""
+        JSON as needed), any other frame's as a dict (du_decode, with the GSD's view; a DP-V1
+        acyclic telegram's from bustools/dpv1view.py)."""
         if f.dsap is None and f.ssap is None and self.slaves is not None:
             return None, self.slaves.dx_view(f)      # (du_decode has nothing for these)
+        sap = acyclic_sap(f)
+        if sap is not None:
+            return self._acyclic_frame(f, sap), None
         service, has_du = frame_service(c)
         dec = decode_du(service, f.data) if has_du and service in DECODED_SERVICES else None
         if self.slaves is not None:
             dec = self.slaves.decode(f, dec)
         return dec, None
+
+    def _acyclic_frame(self, f: Frame, sap: int) -> dict[str, Any]:
+        """A DP-V1 acyclic telegram's `decoded`; after a request or a poll the next telegram's
+        decoding looks for the slave's short acknowledgement."""
+        if self.acyclic is None:
+            from profidrive_cli.bustools.dpv1view import AcyclicView
+            self.acyclic = AcyclicView()
+        dec = self.acyclic.frame(f, sap)
+        if f.is_request:
+            self._decoded = self._decoded_after_request
+        return dec
+
+    def _decoded_after_request(self, c: Captured, f: Frame) -> Decoded:
+        """_decoded of the telegram after a DP-V1 request or poll (then _decoded_plain again): an
+        SC is the slave's acknowledgement, named by the request it answers. (With --station in
+        text mode a watched station's Data_Exchange goes by without this call: only an unanswered
+        request followed by such a telegram and then an SC would name that SC wrongly.)"""
+        self._decoded = self._decoded_plain
+        assert self.acyclic is not None
+        if f.sd == SC:
+            return self.acyclic.short_ack(), None
+        self.acyclic.next_frame()
+        return self._decoded_plain(c, f)
 
     def _decoded_lines(self, dec: dict[str, Any] | None, view: DxView | None) -> None:
         if view is not None:
