@@ -629,3 +629,118 @@ def test_extcap_refuses_another_interface_and_a_capture_without_fifo():
     p = _extcap("--capture", "--extcap-interface", "pdrive", "--port", "sim://")
     assert p.returncode == 2 and "--fifo" in p.stderr
     assert "Traceback" not in p.stderr
+
+
+def test_tshark_names_the_dpv1_telegrams_and_decodes_ds47_like_sniff(tshark, tmp_path):
+    """Issue 39: the dissector names the DP-V1 acyclic telegrams as `pdrive sniff` does (a DS47 read
+    as a master runs it: request, SC, poll, SC, answer; a negative answer; the Toshiba change
+    request; an Alarm_Ack; a class-2 Initiate; a negative parameter response), its Info column ends
+    in sniff's decoded lines, and the PDU and DS47 fields carry the values of the octets
+    (tests/test_sniff_dpv1.py: the telegrams and their hand-written words)."""
+    from test_sniff_dpv1 import CAPTURE, READ_RES_NEGATIVE, WRITE_964
+    frames = CAPTURE + [WRITE_964, READ_RES_NEGATIVE]
+    pcap = _pcap(tmp_path / "dpv1.pcap", frames)
+    names = ["profibus.service", "_ws.col.Info", "profibus.msac.kind", "profibus.msac.function",
+             "profibus.msac.negative", "profibus.msac.slot", "profibus.msac.index", "profibus.msac.length",
+             "profibus.msac.error_decode", "profibus.msac.error_class", "profibus.msac.error_code",
+             "profibus.msac.error_text", "profibus.msac.request", "profibus.msac.note",
+             "profibus.msac.alarm_type", "profidrive.ds47.kind", "profidrive.ds47.reference",
+             "profidrive.ds47.request_id", "profidrive.ds47.response_id", "profidrive.ds47.axis",
+             "profidrive.ds47.count", "profidrive.ds47.attribute", "profidrive.ds47.elements",
+             "profidrive.ds47.pnu", "profidrive.ds47.subindex", "profidrive.ds47.format",
+             "profidrive.ds47.value", "profidrive.ds47.error", "profidrive.ds47.error_text"]
+    rows = _fields(tshark, pcap, names)
+    raw = tmp_path / "dpv1.raw"
+    raw.write_bytes(b"".join(frames))
+    sniffed = [json.loads(x) for x in run("sniff", "--from-file", raw, "--json").output.splitlines()]
+    assert len(rows) == len(sniffed) == len(frames)
+    for r, d in zip(rows, sniffed):
+        assert r["profibus.service"] == d["service"]
+        assert r["_ws.col.Info"].endswith("  " + "; ".join(d["decoded"]["text"])), r["_ws.col.Info"]
+    # by hand from the octets
+    write, ack, poll, ack2, wres, read, _, _, rres, _, _, _, err, change, _, alarm, init, _, neg = rows
+    assert [r["profibus.msac.kind"] for r in (write, ack, poll, ack2, wres, rres, alarm, init)] == \
+        ["request", "ack", "poll", "ack", "response", "response", "request", "request"]
+    assert (write["profibus.msac.function"], write["profibus.msac.slot"], write["profibus.msac.index"],
+            write["profibus.msac.length"]) == ("0x5f", "0", "47", "10")
+    assert (read["profibus.msac.function"], read["profibus.msac.length"]) == ("0x5e", "240")
+    assert poll["profibus.msac.request"] == "Write slot 0 index 47 length 10"
+    assert ack["profibus.msac.note"] == ("MSAC_C1: station 5 took the request (Write slot 0 index 47 "
+                                         "length 10); the master polls for the answer")
+    assert ack2["profibus.msac.note"].startswith("MSAC_C1: station 5 has no answer yet")
+    # DE 80 B5 00: Read (0x5E) with the error bit, Error_Decode 0x80 DPV1, class 0xB access, code 5
+    assert (err["profibus.msac.function"], err["profibus.msac.negative"], err["profibus.msac.error_decode"],
+            err["profibus.msac.error_class"], err["profibus.msac.error_code"]) == ("0x5e", "1", "0x80",
+                                                                                  "0x0b", "5")
+    assert err["profibus.msac.error_text"] == "DPV1 access: state conflict (80 B5 00)"
+    assert err["profibus.msac.request"] == "Read slot 0 index 47 length 240"
+    assert alarm["profibus.service"] == "MSAC_C1 Alarm_Ack request" and alarm["profibus.msac.alarm_type"] == "1"
+    assert init["profibus.service"] == "MSAC_C2 Initiate request"
+    # DS47: 01 01 01 01 10 01 03 C4 00 00 / 01 01 01 01 42 01 00 2A / the change of PNU 927 to 0
+    assert [write[f"profidrive.ds47.{k}"] for k in ("kind", "reference", "request_id", "axis", "count",
+                                                    "attribute", "elements", "pnu", "subindex")] == \
+        ["request", "1", "0x01", "1", "1", "0x10", "1", "964", "0"]
+    assert [rres[f"profidrive.ds47.{k}"] for k in ("kind", "reference", "response_id", "axis", "count",
+                                                   "format", "value")] == \
+        ["response", "1", "0x01", "1", "1", "0x42", "42"]
+    assert [change[f"profidrive.ds47.{k}"] for k in ("request_id", "pnu", "subindex", "format", "value")] == \
+        ["0x02", "927", "0", "0x06", "0"]
+    assert (neg["profidrive.ds47.response_id"], neg["profidrive.ds47.format"], neg["profidrive.ds47.error"],
+            neg["profidrive.ds47.error_text"]) == ("0x81", "0x44", "0x0014", "0x14 value impermissible")
+    assert ack["profidrive.ds47.kind"] == "" and wres["profidrive.ds47.kind"] == ""
+
+
+def test_tshark_dpv1_tree_and_a_capture_without_dpv1_keeps_its_sc_plain(tshark, tmp_path):
+    """The DS47 subtree's items in words (-V); an SC in a capture without DP-V1 telegrams is the plain
+    short acknowledge, and an SC that follows anything but a request or poll too."""
+    from test_sniff_dpv1 import READ_RES, WRITE_927
+    out = _tshark(tshark, _pcap(tmp_path / "a.pcap", [WRITE_927, SC, READ_RES, SC]), "-V")
+    assert "PROFIdrive parameter request (DS47): ref 1 change axis 1: PNU927[0] (1 element) = Unsigned16 0" in out
+    assert "Parameter 1: PNU927[0] (1 element) = Unsigned16 0" in out
+    assert "PROFIdrive parameter response (DS47): ref 1 read ok axis 1: Word 0x002A" in out
+    rows = _fields(tshark, _pcap(tmp_path / "b.pcap", [WRITE_927, SC, READ_RES, SC, DX_REQ, SC]),
+                   ["_ws.col.Info", "profibus.msac.kind"])
+    assert rows[1]["profibus.msac.kind"] == "ack"
+    assert [r["_ws.col.Info"] for r in rows[3::2]] == ["SC  short acknowledge"] * 2
+
+
+def _lua_table(name: str) -> str:
+    """The text of `local NAME = { ... }` in the dissector (braces counted)."""
+    text = LUA.read_text(encoding="utf-8")
+    start = text.index(f"local {name} = {{") + len(f"local {name} = ")
+    depth = 0
+    for i in range(start, len(text)):
+        depth += {"{": 1, "}": -1}.get(text[i], 0)
+        if depth == 0:
+            return text[start:i + 1]
+    raise AssertionError(f"{name}: no end")
+
+
+def _lua_names(table_text: str) -> dict[int, str]:
+    import re
+    return {int(k, 0): v for k, v in re.findall(r'\[(0x[0-9A-Fa-f]+|\d+)\]\s*=\s*"([^"]*)"', table_text)}
+
+
+def test_the_dissectors_dpv1_tables_are_the_codecs():
+    """The dissector repeats dp/msac1.py's and drives/profidrive/ds47.py's tables (Lua cannot ask
+    Python): the same functions, error classes and codes, DS47 names, formats, value sizes and error
+    numbers, so Wireshark and sniff say the same words."""
+    import re
+
+    from profidrive_cli.dp import msac1 as M
+    from profidrive_cli.drives.profidrive import ds47 as D
+    assert _lua_names(_lua_table("MSAC_FUNCTIONS")) == M.FUNCTIONS
+    assert _lua_names(_lua_table("MSAC_ERROR_DECODE")) == M.ERROR_DECODE
+    assert _lua_names(_lua_table("MSAC_ERROR_CLASSES")) == M.ERROR_CLASSES
+    codes = _lua_table("MSAC_ERROR_CODES")
+    blocks = dict(re.findall(r"\[(0x[0-9A-F]+)\]\s*=\s*(\{[^}]*\})", codes))
+    assert {int(k, 16): _lua_names(v) for k, v in blocks.items()} == M.ERROR_CODES
+    assert _lua_names(_lua_table("DS47_REQUEST")) == D.REQUEST_NAMES
+    assert _lua_names(_lua_table("DS47_RESPONSE")) == D.RESPONSE_NAMES
+    assert _lua_names(_lua_table("DS47_ATTRIBUTES")) == D.ATTRIBUTES
+    assert _lua_names(_lua_table("DS47_FORMATS")) == D.FORMATS
+    assert _lua_names(_lua_table("DS47_ERRORS")) == D.ERRORS
+    coding = {int(k, 16): (int(n), kind) for k, n, kind in
+              re.findall(r'\[(0x[0-9A-F]+)\]\s*=\s*\{\s*(\d+),\s*"(\w)"\s*\}', _lua_table("DS47_CODING"))}
+    assert coding == D._CODING
+    assert {int(k, 16) for k in re.findall(r"\[(0x[0-9A-F]+)\]", _lua_table("DS47_HEX"))} == D._HEX_FORMATS

@@ -5,7 +5,9 @@
 -- Packets: one FDL telegram each (SD .. ED), link type DLT_USER0 (147) as `pdrive sniff --pcap` and
 -- `--trace FILE.pcap` write them. Names are those of pdrive (dp/capture.py, dp/services.py):
 -- services Set_Prm, Chk_Cfg, Slave_Diag, Get_Cfg, Global_Control, Data_Exchange, Rd_Inp, Rd_Outp,
--- Set_Slave_Add; replies "<service> reply"; "FDL status", "token", "short acknowledge".
+-- Set_Slave_Add; replies "<service> reply"; "FDL status", "token", "short acknowledge"; DP-V1 acyclic
+-- telegrams by their PDU ("MSAC_C1 Read request", "MSAC_C1 poll", "MSAC_C1 Read error response", ...),
+-- the PDU in profibus.msac.*, data record 47 (the PROFIdrive parameter channel) in profidrive.ds47.*.
 --
 -- Data_Exchange areas are decoded as PROFIdrive PPO (PKW + STW/ZSW + HSW/HIW) by their length, or by
 -- a station's layout when the station table `pdrive_stations.lua` (written by
@@ -66,6 +68,58 @@ local ALARM_SPEC = { [0] = "no further differentiation", "error appears (slot di
   "error disappears (slot okay)", "error disappears, slot still disturbed" }
 local STATUS_SPEC = { [0] = "no further differentiation", "status appears", "status disappears", "reserved" }
 local MODULE_STATUS = { "data invalid (module fault)", "data invalid (wrong module)", "data invalid (no module)" }
+-- DP-V1 acyclic services (dp/msac1.py, dp/capture.py acyclic_service): the slave's SAPs 51 (MSAC_C1
+-- Read / Write), 50 (its alarm SAP: Alarm_Ack) and 49 (MSAC_C2, named only); the PDU's first octet is
+-- the function (bit 7: a negative answer with Error_Decode, Error_Code_1 = class << 4 | code,
+-- Error_Code_2)
+local ACYCLIC = { [51] = "MSAC_C1", [50] = "MSAC_C1 alarm", [49] = "MSAC_C2" }
+local MSAC_READ, MSAC_WRITE, MSAC_ALARM_ACK = 0x5E, 0x5F, 0x5C
+local MSAC_FUNCTIONS = { [0x5E] = "Read", [0x5F] = "Write", [0x5C] = "Alarm_Ack", [0x57] = "Initiate",
+  [0x58] = "Abort", [0x48] = "Idle", [0x51] = "Data_Transport", [0x56] = "RM" }
+local MSAC_ERROR_DECODE = { [0x80] = "DPV1", [0xFE] = "FMS", [0xFF] = "HART" }
+local MSAC_ERROR_CLASSES = { [0xA] = "application", [0xB] = "access", [0xC] = "resource" }
+local MSAC_ERROR_CODES = {
+  [0xA] = { [0] = "read error", [1] = "write error", [2] = "module failure", [8] = "version conflict",
+            [9] = "feature not supported" },
+  [0xB] = { [0] = "invalid index", [1] = "write length error", [2] = "invalid slot", [3] = "type conflict",
+            [4] = "invalid area", [5] = "state conflict", [6] = "access denied", [7] = "invalid range",
+            [8] = "invalid parameter", [9] = "invalid type" },
+  [0xC] = { [0] = "read constraint conflict", [1] = "write constraint conflict", [2] = "resource busy",
+            [3] = "resource unavailable" } }
+-- PROFIdrive parameter channel in data record 47 (drives/profidrive/ds47.py: its names, sizes and words)
+local DS47_INDEX = 47
+local DS47_REQUEST = { [0x01] = "read", [0x02] = "change" }
+local DS47_RESPONSE = { [0x01] = "read ok", [0x02] = "change ok", [0x81] = "read negative",
+  [0x82] = "change negative" }
+local DS47_ATTRIBUTES = { [0x10] = "value", [0x20] = "description", [0x30] = "text" }
+local DS47_FORMATS = { [0x01] = "Boolean", [0x02] = "Integer8", [0x03] = "Integer16", [0x04] = "Integer32",
+  [0x05] = "Unsigned8", [0x06] = "Unsigned16", [0x07] = "Unsigned32", [0x08] = "FloatingPoint",
+  [0x09] = "VisibleString", [0x0A] = "OctetString", [0x0C] = "TimeOfDay with date indication",
+  [0x0D] = "TimeDifference", [0x21] = "N2", [0x22] = "N4", [0x23] = "V2", [0x24] = "L2", [0x25] = "R2",
+  [0x26] = "T2", [0x27] = "T4", [0x28] = "D2", [0x29] = "E2", [0x2A] = "C4", [0x2B] = "X2", [0x2C] = "X4",
+  [0x32] = "Date", [0x34] = "TimeOfDay without date indication",
+  [0x35] = "TimeDifference with date indication", [0x36] = "TimeDifference without date indication",
+  [0x40] = "Zero", [0x41] = "Byte", [0x42] = "Word", [0x43] = "Double word", [0x44] = "Error" }
+-- a format's values: octets each and kind ("s" signed, "u" unsigned, "f" IEEE 754 single, "o" octets);
+-- TimeDifference (0x0D) has none (4 or 6 octets a value: the block does not say which)
+local DS47_CODING = { [0x01] = { 1, "u" }, [0x02] = { 1, "s" }, [0x03] = { 2, "s" }, [0x04] = { 4, "s" },
+  [0x05] = { 1, "u" }, [0x06] = { 2, "u" }, [0x07] = { 4, "u" }, [0x08] = { 4, "f" }, [0x09] = { 1, "o" },
+  [0x0A] = { 1, "o" }, [0x0C] = { 6, "u" }, [0x21] = { 2, "u" }, [0x22] = { 4, "u" }, [0x23] = { 2, "u" },
+  [0x24] = { 2, "u" }, [0x25] = { 2, "u" }, [0x26] = { 2, "u" }, [0x27] = { 4, "u" }, [0x28] = { 2, "u" },
+  [0x29] = { 2, "u" }, [0x2A] = { 4, "u" }, [0x2B] = { 2, "u" }, [0x2C] = { 4, "u" }, [0x32] = { 7, "u" },
+  [0x34] = { 4, "u" }, [0x35] = { 6, "u" }, [0x36] = { 4, "u" }, [0x41] = { 1, "u" }, [0x42] = { 2, "u" },
+  [0x43] = { 4, "u" } }
+-- formats whose values read best in hex (bit sequences)
+local DS47_HEX = { [0x23] = true, [0x41] = true, [0x42] = true, [0x43] = true }
+local DS47_ERRORS = { [0x00] = "impermissible parameter number", [0x01] = "parameter value cannot be changed",
+  [0x02] = "low or high limit exceeded", [0x03] = "faulty subindex", [0x04] = "no array",
+  [0x05] = "incorrect data type", [0x06] = "setting not permitted (may only be reset)",
+  [0x07] = "description element cannot be changed", [0x09] = "no description data available",
+  [0x0B] = "no operation priority (no parameter change rights)", [0x0F] = "no text array available",
+  [0x11] = "request cannot be executed because of operating state", [0x14] = "value impermissible",
+  [0x15] = "response too long", [0x16] = "parameter address impermissible", [0x17] = "illegal format",
+  [0x18] = "number of values inconsistent", [0x19] = "axis/DO nonexistent",
+  [0x20] = "parameter text element cannot be changed", [0x21] = "service not supported" }
 
 -- PROFIdrive (drives/profidrive/words.py, pkw.py)
 local CTW_NAMES = { [0] = "ON", [1] = "no OFF2", [2] = "no OFF3", [3] = "enable operation",
@@ -158,6 +212,27 @@ local F = {
   ssa_extra = ProtoField.bytes("profibus.ssa.rem_slave_data", "Rem_Slave_Data", base.SPACE),
   outputs = ProtoField.bytes("profibus.outputs", "Outputs", base.SPACE),
   inputs = ProtoField.bytes("profibus.inputs", "Inputs", base.SPACE),
+  -- DP-V1 acyclic (MSAC_C1 / MSAC_C2)
+  msac = ProtoField.bytes("profibus.msac", "DP-V1 acyclic PDU", base.SPACE),
+  msac_service = ProtoField.string("profibus.msac.service", "Acyclic service"),
+  msac_kind = ProtoField.string("profibus.msac.kind", "Kind"),
+  msac_function = ProtoField.uint8("profibus.msac.function", "Function", base.HEX, vs(MSAC_FUNCTIONS), 0x7F),
+  msac_error_bit = ProtoField.bool("profibus.msac.negative", "Negative answer", 8, nil, 0x80),
+  msac_slot = ProtoField.uint8("profibus.msac.slot", "Slot"),
+  msac_index = ProtoField.uint8("profibus.msac.index", "Index"),
+  msac_length = ProtoField.uint8("profibus.msac.length", "Length"),
+  msac_data = ProtoField.bytes("profibus.msac.data", "Data", base.SPACE),
+  msac_decode = ProtoField.uint8("profibus.msac.error_decode", "Error_Decode", base.HEX, vs(MSAC_ERROR_DECODE)),
+  msac_code1 = ProtoField.uint8("profibus.msac.error_code_1", "Error_Code_1", base.HEX),
+  msac_class = ProtoField.uint8("profibus.msac.error_class", "Error class", base.HEX, nil, 0xF0),
+  msac_code = ProtoField.uint8("profibus.msac.error_code", "Error code", base.DEC, nil, 0x0F),
+  msac_code2 = ProtoField.uint8("profibus.msac.error_code_2", "Error_Code_2", base.HEX),
+  msac_error = ProtoField.string("profibus.msac.error_text", "Error"),
+  msac_alarm_type = ProtoField.uint8("profibus.msac.alarm_type", "Alarm type"),
+  msac_specifier = ProtoField.uint8("profibus.msac.specifier", "Specifier", base.HEX),
+  msac_station = ProtoField.uint8("profibus.msac.station", "Slave"),
+  msac_request = ProtoField.string("profibus.msac.request", "Request answered"),
+  msac_note = ProtoField.string("profibus.msac.note", "In words"),
 }
 local bits_fields = {}
 for i, n in ipairs(ST1_BITS) do
@@ -217,6 +292,25 @@ local P = {
   field = ProtoField.string("profidrive.field", "Field"),
   value = ProtoField.double("profidrive.value", "Value"),
   bytes = ProtoField.bytes("profidrive.bytes", "Octets", base.SPACE),
+  -- the DP-V1 parameter channel (data record 47)
+  ds47_kind = ProtoField.string("profidrive.ds47.kind", "Parameter request or response"),
+  ds47_reference = ProtoField.uint8("profidrive.ds47.reference", "Request reference"),
+  ds47_request_id = ProtoField.uint8("profidrive.ds47.request_id", "Request ID", base.HEX, vs(DS47_REQUEST)),
+  ds47_response_id = ProtoField.uint8("profidrive.ds47.response_id", "Response ID", base.HEX, vs(DS47_RESPONSE)),
+  ds47_axis = ProtoField.uint8("profidrive.ds47.axis", "Axis"),
+  ds47_count = ProtoField.uint8("profidrive.ds47.count", "Number of parameters"),
+  ds47_param = ProtoField.string("profidrive.ds47.parameter", "Parameter"),
+  ds47_attribute = ProtoField.uint8("profidrive.ds47.attribute", "Attribute", base.HEX, vs(DS47_ATTRIBUTES)),
+  ds47_elements = ProtoField.uint8("profidrive.ds47.elements", "Number of elements"),
+  ds47_pnu = ProtoField.uint16("profidrive.ds47.pnu", "PNU"),
+  ds47_subindex = ProtoField.uint16("profidrive.ds47.subindex", "Subindex"),
+  ds47_format = ProtoField.uint8("profidrive.ds47.format", "Format", base.HEX, vs(DS47_FORMATS)),
+  ds47_values = ProtoField.uint8("profidrive.ds47.values", "Number of values"),
+  ds47_value = ProtoField.double("profidrive.ds47.value", "Value"),
+  ds47_octets = ProtoField.bytes("profidrive.ds47.octets", "Octets", base.SPACE),
+  ds47_error = ProtoField.uint16("profidrive.ds47.error", "Error number", base.HEX),
+  ds47_error_text = ProtoField.string("profidrive.ds47.error_text", "Error"),
+  ds47_extra = ProtoField.uint16("profidrive.ds47.error_extra", "Additional information", base.HEX),
 }
 local pl = {}
 for _, v in pairs(P) do pl[#pl + 1] = v end
@@ -824,6 +918,316 @@ local function dissect_ssa(tvb, tree, off, len)
 end
 
 -- ------------------------------------------------------------------------------------------------
+-- DP-V1 acyclic services (dp/du_decode.py decode_acyclic, bustools/dpv1view.py, drives/records.py)
+
+-- ds47.py error_text: "0x14 value impermissible"
+local function ds47_error_text(n)
+  local t = DS47_ERRORS[n]
+  if t then return string.format("0x%02X %s", n, t) end
+  if n >= 0x65 and n <= 0xFF then return string.format("0x%02X manufacturer-specific error", n) end
+  return string.format("0x%02X unknown error number", n)
+end
+
+local function ds47_format_name(fmt)
+  return DS47_FORMATS[fmt] or string.format("format 0x%02X", fmt)
+end
+
+-- ds47.py ParamAddress.describe: "PNU964[0] (1 element)"
+local function ds47_address(pnu, sub, el, attr)
+  local a = ""
+  if attr ~= 0x10 then a = " " .. (DS47_ATTRIBUTES[attr] or string.format("attribute 0x%02X", attr)) end
+  return string.format("PNU%d[%d]%s (%d element%s)", pnu, sub, a, el, el == 1 and "" or "s")
+end
+
+-- one block at off (format, number of values, the values, a zero octet when they take an odd number):
+-- its items under tree; returns its words (ds47.py ParamValues / ParamFault describe) and the offset
+-- after it, or nil and what is wrong
+local function ds47_block(tvb, tree, off, stop)
+  if off + 2 > stop then return nil, "the block (format, number of values) runs past the end" end
+  local fmt, n = tvb(off, 1):uint(), tvb(off + 1, 1):uint()
+  if fmt == 0x44 then
+    if n ~= 1 and n ~= 2 then return nil, "an error block carries 1 or 2 values, not " .. n end
+    if off + 2 + 2 * n > stop then return nil, "the error block runs past the end" end
+    tree:add(P.ds47_format, tvb(off, 1))
+    tree:add(P.ds47_values, tvb(off + 1, 1))
+    local num = tvb(off + 2, 2):uint()
+    tree:add(P.ds47_error, tvb(off + 2, 2))
+    tree:add(P.ds47_error_text, tvb(off + 2, 2), ds47_error_text(num))
+    local text = "error " .. ds47_error_text(num)
+    if n == 2 then
+      tree:add(P.ds47_extra, tvb(off + 4, 2))
+      text = text .. string.format(" (additional information %d)", tvb(off + 4, 2):uint())
+    end
+    return text, off + 2 + 2 * n
+  end
+  if fmt == 0x40 then
+    if n ~= 0 then return nil, "a Zero block carries no values, not " .. n end
+    tree:add(P.ds47_format, tvb(off, 1))
+    tree:add(P.ds47_values, tvb(off + 1, 1))
+    return "Zero", off + 2
+  end
+  local coding = DS47_CODING[fmt]
+  if coding == nil then return nil, string.format("format 0x%02X: the size of its values is not known", fmt) end
+  local size, kind = coding[1], coding[2]
+  local len = n * size
+  if off + 2 + len > stop then
+    return nil, string.format("%d %s value(s) need %d octets, %d left", n, DS47_FORMATS[fmt], len, stop - off - 2)
+  end
+  tree:add(P.ds47_format, tvb(off, 1))
+  tree:add(P.ds47_values, tvb(off + 1, 1))
+  local name, text = DS47_FORMATS[fmt], nil
+  if kind == "o" then
+    if len > 0 then tree:add(P.ds47_octets, tvb(off + 2, len)) end
+    if fmt == 0x09 then text = name .. " '" .. (len > 0 and tvb(off + 2, len):string() or "") .. "'"
+    else text = name .. " " .. (len > 0 and hexs(tvb(off + 2, len)) or "(none)") end
+  else
+    local shown = {}
+    for i = 0, n - 1 do
+      local r = tvb(off + 2 + i * size, size)
+      local v
+      if kind == "f" then v = r:float()
+      elseif kind == "s" then v = r:int()
+      elseif size > 4 then v = r:uint64():tonumber()
+      else v = r:uint() end
+      tree:add(P.ds47_value, r, v)
+      if i < 8 then
+        if kind == "f" then shown[#shown + 1] = string.format("%g", v)
+        elseif DS47_HEX[fmt] then shown[#shown + 1] = string.format("0x%0" .. (2 * size) .. "X", v)
+        else shown[#shown + 1] = string.format("%d", v) end
+      end
+    end
+    text = name .. " " .. (#shown > 0 and table.concat(shown, ", ") or "(none)") ..
+           (n > 8 and string.format(" ... (%d values)", n) or "")
+  end
+  local nxt = off + 2 + len
+  if len % 2 == 1 and nxt < stop then nxt = nxt + 1 end     -- the pad (may be missing after the last)
+  return text, nxt
+end
+
+-- a PROFIdrive parameter request (in a Write of index 47) or response (in a Read answer of index 47)
+-- at off: a PROFIdrive subtree; returns its line (sniff's: "DS47 parameter request: " and ds47.py's
+-- describe)
+local function dissect_ds47(tvb, root, off, len, is_request)
+  local stop = off + len
+  local what = is_request and "request" or "response"
+  local pd = root:add(p_pd, tvb(off, len))
+  pd:add(P.ds47_kind, what):set_generated()
+  local function malformed(why)
+    pd:add_proto_expert_info(E.malformed, "DS47 parameter " .. what .. ": " .. why)
+    pd:set_text("PROFIdrive parameter " .. what .. " (DS47), malformed: " .. why)
+    return "DS47 parameter " .. what .. ", malformed: " .. why
+  end
+  if len < 4 then return malformed("a header of 4 octets, " .. len .. " here") end
+  local ref, id, axis, n = tvb(off, 1):uint(), tvb(off + 1, 1):uint(), tvb(off + 2, 1):uint(), tvb(off + 3, 1):uint()
+  pd:add(P.ds47_reference, tvb(off, 1))
+  pd:add(is_request and P.ds47_request_id or P.ds47_response_id, tvb(off + 1, 1))
+  pd:add(P.ds47_axis, tvb(off + 2, 1))
+  pd:add(P.ds47_count, tvb(off + 3, 1))
+  local ids = is_request and DS47_REQUEST or DS47_RESPONSE
+  if ids[id] == nil then return malformed(string.format("%s id 0x%02X", what, id)) end
+  local head = string.format("ref %d %s axis %d: ", ref, ids[id], axis)
+  local parts = {}
+  local pos = off + 4
+  if is_request then
+    local items = {}
+    for i = 1, n do
+      if pos + 6 > stop then return malformed("the address of parameter " .. i .. " of " .. n .. " is missing") end
+      local attr, el = tvb(pos, 1):uint(), tvb(pos + 1, 1):uint()
+      local pnu, sub = tvb(pos + 2, 2):uint(), tvb(pos + 4, 2):uint()
+      local addr = ds47_address(pnu, sub, el, attr)
+      local pt = pd:add(P.ds47_param, tvb(pos, 6), addr)
+      pt:set_text(string.format("Parameter %d: %s", i, addr))
+      pt:add(P.ds47_attribute, tvb(pos, 1))
+      pt:add(P.ds47_elements, tvb(pos + 1, 1))
+      pt:add(P.ds47_pnu, tvb(pos + 2, 2))
+      pt:add(P.ds47_subindex, tvb(pos + 4, 2))
+      items[i] = pt
+      parts[i] = addr
+      pos = pos + 6
+    end
+    if id == 0x02 then
+      for i = 1, n do
+        local text, nxt = ds47_block(tvb, items[i], pos, stop)
+        if text == nil then return malformed("parameter " .. i .. " of " .. n .. ": " .. nxt) end
+        items[i]:append_text(" = " .. text)
+        parts[i] = parts[i] .. " = " .. text
+        pos = nxt
+      end
+    end
+  elseif id ~= 0x02 then                   -- a positive change response is the header alone
+    for i = 1, n do
+      if pos + 2 > stop then return malformed("the block of parameter " .. i .. " of " .. n .. " is missing") end
+      local pt = pd:add(P.ds47_param, tvb(pos, 2), "parameter " .. i)
+      local text, nxt = ds47_block(tvb, pt, pos, stop)
+      if text == nil then return malformed("parameter " .. i .. " of " .. n .. ": " .. nxt) end
+      pt:set_len(nxt - pos)
+      pt:set_text(string.format("Parameter %d: %s", i, text))
+      parts[i] = text
+      pos = nxt
+    end
+  end
+  if pos ~= stop then return malformed(string.format("%d octet(s) after the last parameter", stop - pos)) end
+  local desc = head .. (#parts > 0 and table.concat(parts, (is_request and id ~= 0x02) and ", " or "; ")
+                        or string.format("%d parameter%s", n, n == 1 and "" or "s"))
+  pd:set_text("PROFIdrive parameter " .. what .. " (DS47): " .. desc)
+  return "DS47 parameter " .. what .. ": " .. desc
+end
+
+-- dp/msac1.py error_text
+local function msac_error_text(decode, c1, c2)
+  local octets = string.format("(%02X %02X %02X)", decode, c1, c2)
+  if decode ~= 0x80 then return (MSAC_ERROR_DECODE[decode] or "reserved error decode") .. " error " .. octets end
+  local cls, code = shr(c1, 4), band(c1, 0x0F)
+  if cls >= 0xD then return "DPV1 user-specific error " .. octets end
+  if MSAC_ERROR_CLASSES[cls] == nil then return "DPV1 reserved error class " .. cls .. " " .. octets end
+  local name = MSAC_ERROR_CODES[cls][code]
+  if name == nil then name = code >= (cls == 0xC and 8 or 10) and "user-specific" or "reserved" end
+  return "DPV1 " .. MSAC_ERROR_CLASSES[cls] .. ": " .. name .. " " .. octets
+end
+
+-- dp/capture.py acyclic_service: a telegram's service by its SAP and its PDU's first octet
+local function acyclic_service(sap, is_request, first)
+  local prefix = ACYCLIC[sap]
+  if first == nil then return prefix .. (is_request and " poll" or " reply") end
+  local fn = band(first, 0x7F)
+  if fn == MSAC_ALARM_ACK and sap == 50 then prefix = "MSAC_C1" end
+  local name = MSAC_FUNCTIONS[fn] or string.format("function 0x%02X", fn)
+  if is_request then return prefix .. " " .. name .. " request" end
+  return prefix .. " " .. name .. (band(first, 0x80) ~= 0 and " error response" or " response")
+end
+
+-- A call's telegrams tied together (bustools/dpv1view.py): the request open per (master, slave) and
+-- the SC right after a request or poll. Wireshark dissects a file in order first: what a telegram
+-- learnt from the ones before it is kept by its frame number (C1_CTX, C1_SC) for every later look;
+-- init() starts afresh with each file. A capture without DP-V1 telegrams never looks (C1_SEEN).
+local C1_SEEN, C1_OPEN, C1_CTX, C1_SC = false, {}, {}, {}
+local C1_AT, C1_NOTE = -2, nil
+function p_fdl.init()
+  C1_SEEN, C1_OPEN, C1_CTX, C1_SC, C1_AT, C1_NOTE = false, {}, {}, {}, -2, nil
+end
+
+-- the note of the SC frame n: the acknowledgement of the request or poll just before it, or nil
+local function c1_sc_note(n)
+  local note = C1_SC[n]
+  if note == nil then
+    note = (n == C1_AT + 1) and C1_NOTE or false
+    C1_SC[n] = note
+  end
+  return note or nil
+end
+
+local function msac_what(fn, slot, index, length)
+  return string.format("%s slot %d index %d length %d", MSAC_FUNCTIONS[fn] or string.format("function 0x%02X", fn),
+    slot, index, length)
+end
+
+-- the MSAC PDU of a telegram to or from an acyclic SAP (the DU at off, len octets after the SAPs):
+-- its items under t (the DS47 record as a PROFIdrive subtree of root); returns the summary
+local function dissect_msac(tvb, pinfo, root, t, off, len, sap, is_request, da, sa)
+  C1_SEEN = true
+  local n = pinfo.number
+  local service = ACYCLIC[sap]:match("^%S+")
+  local pair = is_request and (sa * 128 + da) or (da * 128 + sa)
+  local slave = is_request and da or sa
+  -- what the request open between these two stations asked, as it stood when this frame came
+  local ctx = C1_CTX[n]
+  if ctx == nil then ctx = C1_OPEN[pair] or false C1_CTX[n] = ctx end
+  local mt = t:add(F.msac, len > 0 and tvb(off, len) or tvb(off - 2, 2))
+  mt:add(F.msac_service, service):set_generated()
+  local function arm(kind, what)
+    C1_AT = n
+    C1_NOTE = kind == "request" and
+      string.format("%s: station %d took the request%s; the master polls for the answer", service, slave,
+        what and (" (" .. what .. ")") or "") or
+      string.format("%s: station %d has no answer yet%s; the master polls again", service, slave,
+        what and (" (" .. what .. ")") or "")
+  end
+  local summary
+  if len == 0 then
+    mt:add(F.msac_kind, is_request and "poll" or "ack"):set_generated()
+    mt:add(F.msac_station, slave):set_generated()
+    if ctx then mt:add(F.msac_request, ctx):set_generated() end
+    if is_request then
+      summary = string.format("%s poll: the master asks station %d for the answer%s", service, da,
+        ctx and (" to " .. ctx) or "")
+      arm("poll", ctx or nil)
+    else
+      summary = service .. " reply without data: no answer yet" .. (ctx and (" (to " .. ctx .. ")") or "")
+    end
+    mt:set_text("DP-V1 " .. summary)
+    return summary
+  end
+  local first = tvb(off, 1):uint()
+  local fn = band(first, 0x7F)
+  mt:add(F.msac_kind, is_request and "request" or "response"):set_generated()
+  mt:add(F.msac_function, tvb(off, 1))
+  mt:add(F.msac_error_bit, tvb(off, 1))
+  local bad = nil
+  if sap == 49 or (fn ~= MSAC_READ and fn ~= MSAC_WRITE and fn ~= MSAC_ALARM_ACK) then
+    if len > 1 then mt:add(F.msac_data, tvb(off + 1, len - 1)) end
+    summary = acyclic_service(sap, is_request, first) .. ": " .. hexs(tvb(off, len))
+    if is_request then arm("request", nil)
+    elseif ctx then summary = summary .. " (to " .. ctx .. ")" end
+  elseif band(first, 0x80) ~= 0 then
+    if is_request then bad = string.format("octet 0: 0x%02X has the error bit set in a request", first)
+    elseif len ~= 4 then bad = string.format("error response of %d octets (4 expected)", len)
+    else
+      local d, c1, c2 = tvb(off + 1, 1):uint(), tvb(off + 2, 1):uint(), tvb(off + 3, 1):uint()
+      mt:add(F.msac_decode, tvb(off + 1, 1))
+      local ct = mt:add(F.msac_code1, tvb(off + 2, 1))
+      ct:add(F.msac_class, tvb(off + 2, 1)):append_text(MSAC_ERROR_CLASSES[shr(c1, 4)] and
+        (" (" .. MSAC_ERROR_CLASSES[shr(c1, 4)] .. ")") or "")
+      ct:add(F.msac_code, tvb(off + 2, 1))
+      mt:add(F.msac_code2, tvb(off + 3, 1))
+      local text = msac_error_text(d, c1, c2)
+      mt:add(F.msac_error, tvb(off + 1, 3), text)
+      summary = string.format("%s response: %s error: %s", service, MSAC_FUNCTIONS[fn], text)
+      if ctx then
+        mt:add(F.msac_request, ctx):set_generated()
+        summary = summary .. " (to " .. ctx .. ")"
+      end
+    end
+  elseif len < 4 then
+    bad = string.format("%s PDU of %d octets (header of 4 expected)", MSAC_FUNCTIONS[fn], len)
+  elseif fn == MSAC_ALARM_ACK then
+    mt:add(F.msac_slot, tvb(off + 1, 1))
+    mt:add(F.msac_alarm_type, tvb(off + 2, 1))
+    mt:add(F.msac_specifier, tvb(off + 3, 1))
+    summary = string.format("%s %s: Alarm_Ack slot %d alarm type %d specifier 0x%02X", service,
+      is_request and "request" or "response", tvb(off + 1, 1):uint(), tvb(off + 2, 1):uint(), tvb(off + 3, 1):uint())
+    if is_request then C1_OPEN[pair] = "Alarm_Ack slot " .. tvb(off + 1, 1):uint() arm("request", C1_OPEN[pair]) end
+  else
+    local slot, index, length = tvb(off + 1, 1):uint(), tvb(off + 2, 1):uint(), tvb(off + 3, 1):uint()
+    mt:add(F.msac_slot, tvb(off + 1, 1))
+    mt:add(F.msac_index, tvb(off + 2, 1))
+    mt:add(F.msac_length, tvb(off + 3, 1))
+    local dlen = len - 4
+    if dlen > 0 then mt:add(F.msac_data, tvb(off + 4, dlen)) end
+    local carries = (fn == MSAC_WRITE) == is_request
+    if carries and dlen ~= length then bad = string.format("octet 3: length %d but %d data octets follow", length, dlen)
+    elseif not carries and dlen > 0 then
+      bad = string.format("octet 4: %d octets after a %s %s header", dlen, MSAC_FUNCTIONS[fn],
+        is_request and "request" or "response")
+    elseif length > 240 then bad = string.format("octet 3: length %d over 240", length) end
+    local what = msac_what(fn, slot, index, length)
+    summary = string.format("%s %s: %s", service, is_request and "request" or "response", what)
+    if is_request then C1_OPEN[pair] = what arm("request", what) end
+    if bad == nil and index == DS47_INDEX and carries and dlen > 0 then
+      summary = summary .. "; " .. dissect_ds47(tvb, root, off + 4, dlen, is_request)
+    end
+  end
+  if bad then
+    mt:add_proto_expert_info(E.malformed, service .. " PDU: " .. bad)
+    summary = acyclic_service(sap, is_request, first) .. ": malformed PDU: " .. bad .. ": " .. hexs(tvb(off, len))
+    if is_request then arm("request", nil)
+    elseif ctx then summary = summary .. " (to " .. ctx .. ")" end
+  end
+  if not is_request then C1_OPEN[pair] = nil end       -- answered (a reply with data: len > 0 here)
+  mt:set_text("DP-V1 " .. summary)
+  return summary
+end
+
+-- ------------------------------------------------------------------------------------------------
 -- FDL telegram
 
 local function fc_words(fc)
@@ -1206,11 +1610,17 @@ local function dissect_fast(tvb, pinfo, tree, len)
   local cols = pinfo.cols
   cols.protocol = "PROFIBUS"
   if sd == SC then
-    cols.info = "SC  short acknowledge"
+    -- (a DP-V1 call's acknowledgement: only in a capture with DP-V1 telegrams, C1_SEEN)
+    local note = C1_SEEN and c1_sc_note(pinfo.number)
+    cols.info = note and ("SC  short acknowledge  " .. note) or "SC  short acknowledge"
     if T then
       local t = M_add(tree, p_fdl, tvb(), "PROFIBUS SC: short acknowledge")
       if V or refd(tree, F.sd) then M_add(t, F.sd, tvb(0, 1)) end
       if V or refd(tree, F.service) then M_gen(M_add(t, F.service, "short acknowledge")) end
+      if note then
+        if V or refd(tree, F.msac_kind) then M_gen(M_add(t, F.msac_kind, "ack")) end
+        if V or refd(tree, F.msac_note) then M_gen(M_add(t, F.msac_note, note)) end
+      end
     end
     return len
   end
@@ -1343,7 +1753,12 @@ local function dissect_full(tvb, pinfo, tree, len)
   t:add(F.sd, tvb(0, 1))
   if sd == SC then
     t:add(F.service, "short acknowledge"):set_generated()
-    pinfo.cols.info:set("SC  short acknowledge")
+    local note = C1_SEEN and c1_sc_note(pinfo.number)
+    if note then
+      t:add(F.msac_kind, "ack"):set_generated()
+      t:add(F.msac_note, note):set_generated()
+    end
+    pinfo.cols.info:set("SC  short acknowledge" .. (note and ("  " .. note) or ""))
     t:set_text("PROFIBUS SC: short acknowledge")
     return len
   end
@@ -1440,6 +1855,9 @@ local function dissect_full(tvb, pinfo, tree, len)
     elseif sap == nil then name = "Data_Exchange"
     else name = SERVICE_NAMES[sap] or ("SAP " .. sap) end
     service = name .. (is_request and "" or " reply")
+    if dsap ~= nil and ACYCLIC[sap] then
+      service = acyclic_service(sap, is_request, du_len > 0 and tvb(du_off, 1):uint() or nil)
+    end
   end
   t:add(F.service, service):set_generated()
 
@@ -1455,6 +1873,8 @@ local function dissect_full(tvb, pinfo, tree, len)
     elseif not is_request and ssap == SAP.SLAVE_DIAG then summary = dissect_diag(tvb, t, du_off, du_len)
     elseif is_request and dsap == SAP.GLOBAL_CONTROL then summary = dissect_gc(tvb, t, du_off, du_len)
     elseif is_request and dsap == SAP.SET_SLAVE_ADD then summary = dissect_ssa(tvb, t, du_off, du_len)
+    elseif dsap ~= nil and ACYCLIC[sap] then
+      summary = dissect_msac(tvb, pinfo, tree, t, du_off, du_len, sap, is_request, da, sa)
     elseif not is_request and ssap == SAP.RD_INP and du_len > 0 then
       t:add(F.inputs, tvb(du_off, du_len))
       summary = dissect_area(tvb(du_off, du_len):tvb(), pinfo, tree, sa, "response")

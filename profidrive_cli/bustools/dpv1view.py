@@ -69,6 +69,8 @@ class AcyclicView:
         if is_request:
             if pdu is not None:
                 opened = self._open[pair] = _Open(m["service"], sap, _what(pdu))
+            elif f.data:
+                opened = None           # named by its function only, or malformed: no request named
             self._last = (pair, opened or _Open(m["service"], sap, ""), m["kind"])
             if not f.data:
                 m["station"] = f.da
