@@ -6,6 +6,8 @@ master asks more of a station than an untouched drive can answer, LazyModel answ
 
   * `ident` (from the profile index, pdrive's cheap read of each profile's first keys),
   * `ext_diag()` = b"" (an untouched drive has no trip to report) and `max_diag_len`,
+  * `c1_server` = None (an unbuilt station has no DP-V1 request pending; sim/slave.py serves SAP 51
+    only in data exchange, which the Set_Prm that builds the model comes before),
   * `tick(now)` and `catch_up(times)` (sim/bus.py: the ticks of the bus an unaddressed station
     makes up for): remembered; the model, once built, catches up with the last REPLAY_TICKS of them
     in order, so what it records at standstill (the Toyo card's traceback samples) is what an
@@ -24,7 +26,7 @@ from typing import Any, Protocol
 
 from profidrive_cli import PdriveError
 from profidrive_cli.drives.registry import sim_diag_len
-from profidrive_cli.sim.model import SlaveModel, ticks_always
+from profidrive_cli.sim.model import C1Server, SlaveModel, ticks_always
 
 
 
@@ -102,6 +104,11 @@ class LazyModel:
     def ext_diag(self) -> bytes:
         real = self._real
         return b"" if real is None else real.ext_diag()
+
+    @property
+    def c1_server(self) -> C1Server | None:
+        real = self._real
+        return None if real is None else real.c1_server
 
     def tick(self, now: float) -> None:
         real = self._real

@@ -10,10 +10,28 @@ be run on a simulated clock.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 if TYPE_CHECKING:                                   # pragma: no cover
+    from profidrive_cli.dp.msac1 import Msac1Pdu
     from profidrive_cli.drives.profile import Profile
+
+
+class C1Server(Protocol):
+    """A DP-V1 slave's class-1 acyclic server (MSAC_C1 Read/Write of data records), sans-IO.
+
+    sim/slave.py owns the wire side: SAP 51, the short acknowledgement, the answer in the reply to a
+    poll once it is ready, the one request pending (a new one replaces it), what drops it. The server
+    owns the records: it answers each request and says from when the answer may be given."""
+
+    def c1_request(self, pdu: Msac1Pdu, now: float) -> tuple[bytes, float] | None:
+        """The answer to a Read or Write request that arrived at `now` (decoded; its function READ
+        or WRITE): the answer PDU (msac1.read_response / write_response / error_response octets)
+        and the time from which it is ready; None: the request is never answered."""
+
+    def c1_drop(self, now: float) -> None:
+        """The class-1 connection ended (a Set_Prm, the watchdog, the station left data exchange):
+        forget what is in progress (e.g. a parameter response not yet read)."""
 
 
 _TICKS_ALWAYS: dict[type, bool] = {}
@@ -47,6 +65,9 @@ class SlaveModel:
     freeze_supported = False
     #: the drive profile the model was built from (drive models set it); None: a plain DP-V0 slave
     profile: Profile | None = None
+    #: the DP-V1 class-1 server of a DP-V1 slave (sim/dpv1_axis.py); None: no MSAC_C1 (SAP 51
+    #: answered RS, as a DP-V0 slave does)
+    c1_server: C1Server | None = None
     #: the layout chosen by the last accepted Chk_Cfg (None until configured), and its input and
     #: output lengths in octets (data_exchange answers exactly input_len octets)
     layout: str | None

@@ -4,6 +4,28 @@ handle(frame, now) takes one request Frame addressed to this station and returns
 (or None when no reply is due, e.g. SDN). It answers in each state what a real slave answers,
 refusals included: RS for services not enabled in the current state, Prm_Fault / Cfg_Fault in the
 next diagnosis for rejected Set_Prm / Chk_Cfg, the cached reply for an FCB repetition.
+
+DP-V1 class-1 acyclic services (MSAC_C1, dp/msac1.py) on SAP 51, for a station whose model has a C1
+server (sim/model.py SlaveModel.c1_server), whose last accepted Set_Prm set DPV1_Enable
+(DPV1_Status_1 bit 7, the first user-parameter octet: dp/dpv1.py) and which is in data exchange with
+the master that parameterised it; otherwise SAP 51 is answered RS (SAP not enabled), as a DP-V0
+slave answers it. On the wire (the same as dp/acyclic.py, the master side):
+
+  * the master sends the request PDU (Read 5E / Write 5F) in an SRD to DSAP 51 from SSAP 51 (high
+    priority, the frame count bit as in its other DP services); the station answers at once with
+    the short acknowledgement SC (E5) and hands the PDU to its C1 server;
+  * the master then polls with an SRD on the same SAPs and an empty DU; the station answers SC while
+    the answer is not ready (or nothing is pending), then the answer PDU (the response or an error
+    response DE/DF 80 code1 code2) in a reply with data (DL), the SAPs swapped as every SAP reply;
+  * a request PDU that does not decode (msac1.Msac1Error) is answered, on the next poll, with an
+    error PDU: access "invalid parameter" (80 B8 00) for a Read or Write function, application
+    "feature not supported" (80 A9 00) for any other function (Alarm_Ack belongs on SAP 50; the
+    class-2 functions on SAP 49); so is a well-formed PDU of another function;
+  * a new request while one is pending replaces it (the old one is forgotten, never answered);
+  * a Set_Prm (accepted or not), the watchdog's expiry, leaving data exchange for any reason and a
+    power cycle drop what is pending (the C1 server's c1_drop).
+A poll whose reply was lost is repeated with the same frame count bit and gets the cached reply (the
+FDL repetition), so an answer is not lost with its telegram.
 """
 
 from __future__ import annotations
@@ -11,7 +33,9 @@ from __future__ import annotations
 from bisect import bisect_left, bisect_right
 from typing import TYPE_CHECKING
 
+from profidrive_cli.dp import msac1 as M1
 from profidrive_cli.dp import services as S
+from profidrive_cli.dp.dpv1 import dpv1_status
 from profidrive_cli.fdl import frames as F
 from profidrive_cli.fdl.fcb import SlaveFcb
 from profidrive_cli.sim.model import SlaveModel, ticks_always
@@ -85,7 +109,8 @@ class SimSlave:
         #: counters a test can look at
         self.stats = {"requests": 0, "repeats": 0, "prm_rejected": 0, "cfg_rejected": 0,
                       "watchdog_expired": 0, "data_exchange": 0, "power_cycles": 0, "trips": 0,
-                      "ignored_warmup": 0, "ignored_first_contact": 0}
+                      "ignored_warmup": 0, "ignored_first_contact": 0, "c1_requests": 0,
+                      "c1_answers": 0}
         #: Baud_Search (see baud_search()): the valid telegrams on the line this station misses while
         #: it searches the rate, and the seconds its search takes to reach the line's rate (0: no
         #: such condition); both set by the plant (sim://?warmup=3:4, warmup=3:0.5s)
@@ -189,6 +214,9 @@ class SimSlave:
         self.inputs = b""
         self.min_tsdr = DEFAULT_MIN_TSDR
         self.fcb.reset()
+        #: DPV1_Enable in the last accepted Set_Prm: MSAC_C1 on SAP 51 enabled (with a C1 server)
+        self.dpv1_enabled = False
+        self._c1_drop(now)
 
     def power_cycle(self, now: float) -> None:
         """Power off and on: back to Wait_Prm, needs a new Set_Prm (fault injection)."""
@@ -211,6 +239,18 @@ class SimSlave:
             self.model.on_leave_data_exchange(now, reason)
         self.state = to
         self._sync_mode_off()
+        self._c1_drop(now)
+
+    def _c1_drop(self, now: float) -> None:
+        """Nothing pending on SAP 51 any more (a Set_Prm, the watchdog, leaving data exchange,
+        power on): the answer not yet given is forgotten, and the C1 server told (c1_drop)."""
+        #: the answer PDU of the pending MSAC_C1 request (None: none, or one never answered) and
+        #: the time from which a poll gets it
+        self._c1_answer: bytes | None = None
+        self._c1_ready = 0.0
+        server = self.model.c1_server
+        if server is not None:
+            server.c1_drop(now)
 
     def _sync_mode_off(self) -> None:
         """No Sync / Freeze command in force (power on, leaving data exchange)."""
@@ -424,6 +464,8 @@ class SimSlave:
             return self._reply(req, F.DL, self.inputs)
         if sap == S.SAP_RD_OUTP and self.state == DATA_EXCH:
             return self._reply(req, F.DL, self.outputs)
+        if sap == M1.SAP_C1:
+            return self._msac_c1(req, now)
         if sap == S.SAP_SET_SLAVE_ADD and self.set_slave_add_supported and self.state == WAIT_PRM:
             try:
                 ssa = S.SetSlaveAdd.decode(req.data)
@@ -474,6 +516,8 @@ class SimSlave:
         self.master = req.sa
         self.wd_s = prm.wd_ms / 1000.0 if prm.wd_ms is not None else None
         self.sync, self.freeze, self.group = prm.sync, prm.freeze, prm.group
+        status = dpv1_status(prm.user_prm)
+        self.dpv1_enabled = status is not None and bool(status.octets[0] & 0x80)
         if prm.min_tsdr:                    # 0 = keep the value in use
             self.min_tsdr = prm.min_tsdr
         self.last_seen = now
@@ -516,3 +560,34 @@ class SimSlave:
         if not self.inputs and status == F.DL:
             return F.encode(F.Frame(F.SC))
         return self._reply(req, status, self.inputs, saps=False)
+
+    # -- DP-V1 class-1 acyclic services (SAP 51) ----------------------------------------------
+    def _msac_c1(self, req: F.Frame, now: float) -> bytes:
+        """An SRD to SAP 51: a request PDU (answered SC, handed to the C1 server) or a poll (empty
+        DU: SC while the answer is not ready, then the answer PDU with DL). See the module doc."""
+        server = self.model.c1_server if self.state == DATA_EXCH else None
+        if (server is None or not self.dpv1_enabled or req.ssap != M1.SAP_C1
+                or not self._from_own_master(req)):
+            return self._reply(req, F.RS)
+        du = bytes(req.data)
+        if du:
+            # a request: it replaces the pending one (whose answer is never given)
+            self.stats["c1_requests"] += 1
+            fn = du[0] & 0x7F
+            try:
+                pdu: M1.Msac1Pdu | None = M1.decode_pdu(du, is_request=True)
+            except M1.Msac1Error:
+                pdu = None
+            if pdu is None or pdu.function not in (M1.READ, M1.WRITE):
+                code = 0xB8 if pdu is None and fn in (M1.READ, M1.WRITE) else 0xA9
+                self._c1_answer, self._c1_ready = M1.error_response(fn, code), now
+            else:
+                got = server.c1_request(pdu, now)
+                self._c1_answer, self._c1_ready = got if got is not None else (None, now)
+            return F.encode(F.SC_FRAME)
+        answer = self._c1_answer
+        if answer is None or now < self._c1_ready:
+            return F.encode(F.SC_FRAME)           # a poll: not ready yet, or nothing pending
+        self._c1_answer = None
+        self.stats["c1_answers"] += 1
+        return self._reply(req, F.DL, answer)
