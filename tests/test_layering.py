@@ -496,8 +496,8 @@ def test_the_family_packages_are_the_registrys():
     assert family_of_module("profidrive_cli.drives.profile") is None
     assert family_of_module("profidrive_cli.drives") is None
     assert set(SIM_MODELS) == {"profidrive_cli.sim.fuji", "profidrive_cli.sim.moeller", "profidrive_cli.sim.toyo",
-                               "profidrive_cli.sim.yaskawa", "profidrive_cli.sim.profidrive_model",
-                               "profidrive_cli.sim.pkw_server"}
+                               "profidrive_cli.sim.yaskawa", "profidrive_cli.sim.dpv1_axis",
+                               "profidrive_cli.sim.profidrive_model", "profidrive_cli.sim.pkw_server"}
     assert all(m in MODULES for m in SIM_MODELS)
 
 

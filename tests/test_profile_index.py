@@ -20,6 +20,7 @@ TABLE = [
     ("fuji-opc-g1-pdp", ("fuji-g1",), "fuji", 0xFD01),
     ("fuji-opc-pdp3", ("fuji-pdp3",), "fuji", 0xFD02),
     ("moeller-de6-net-dp", ("moeller",), "moeller", 0xFD06),
+    ("profidrive-dpv1", ("dpv1-axis",), "profidrive", 0x8158),
     ("toyo-pbus66z", ("toyo",), "toyo", 0x0BE7),
     ("yaskawa-si-p1", ("yaskawa",), "yaskawa", 0x00CA),
 ]
@@ -76,7 +77,7 @@ def test_an_unknown_ident_loads_nothing(loads):
 
 def test_an_unknown_name_lists_the_known_ones_without_loading(loads):
     with pytest.raises(UsageError, match=r"unknown profile 'nosuch' \(known: fuji-opc-g1-pdp, fuji-opc-pdp3, "
-                       r"moeller-de6-net-dp, toyo-pbus66z, yaskawa-si-p1\)"):
+                       r"moeller-de6-net-dp, profidrive-dpv1, toyo-pbus66z, yaskawa-si-p1\)"):
         profmod.load_profile("nosuch")
     assert loads == []
 
