@@ -924,8 +924,10 @@ def test_resolve_param_unknown_words():
     assert str(e.value) == "unknown parameter 'C1-0' for yaskawa-si-p1; closest yaskawa codes: C1-10, C1-09, C1-02"
     with pytest.raises(UsageError) as e:
         resolve_param(YASK, "PNU918")
-    assert str(e.value).startswith("unknown parameter 'PNU918' for yaskawa-si-p1 (PNU918 is a fuji/moeller "
-                                   "code; this station is family yaskawa)")
+    # PNU918 is a code of every family with a PNU channel: Fuji and Moeller (PKW) and the DP-V1
+    # PROFIdrive axis (DS47, profiles/profidrive-dpv1.yaml)
+    assert str(e.value).startswith("unknown parameter 'PNU918' for yaskawa-si-p1 (PNU918 is a "
+                                   "fuji/moeller/profidrive code; this station is family yaskawa)")
 
 
 def test_read_of_a_raw_register_has_no_unit():
