@@ -55,6 +55,7 @@ class FakeDrive:
 
     family = "fuji"
     comm_loss_words = "family words: the card's own comm-loss behaviour"
+    fmax_unread = None          # Drive.fmax_unread: the max frequency was read (or never tried)
 
     def __init__(self, channel=True, max_hz=50.0, decel=6.5, comm=None, cycles=None, status_reply=None,
                  start_reply=RUNNING, supports_jog=True, jog_ref="A038", torque_why=None,
@@ -270,6 +271,19 @@ def test_fmax_read_from_the_drive():
     assert src == "read from the drive (F03)"       # docs/commands.md L62
     assert s.drive.names() == ["max_frequency"] and s.warnings == []
     assert s.motion.fmax_hz == 50.0 and type(s.motion.fmax_hz) is float
+
+
+def test_fmax_the_drive_could_not_give_is_the_profile_default_said_so():
+    # the codec fell back (Drive.fmax_unread: a DS47 read that timed out): never "read from the drive"
+    s = station(max_hz=50)
+    s.drive.fmax_unread = "PNU 3: no answer"
+    hz, src = s.motion.fmax()
+    assert hz == 60.0                                   # fuji-opc-pdp3.yaml: default_hz 60.0
+    assert src.startswith("the profile default (F03 could not be read: PNU 3: no answer")
+    assert "read from the drive" not in src and "max_frequency" not in s.drive.names()
+    s = station(max_hz=50)
+    s.drive.fmax_unread = "PNU 3: no answer"
+    assert s.motion.fmax(40.0) == (40.0, "from --fmax")     # the user's value then holds
 
 
 def test_fmax_read_over_a_register_only_parameter():

@@ -100,15 +100,46 @@ def test_a_negative_answer_is_a_c1_error_and_state_conflict_is_busy():
 
 def test_no_answer_within_the_c1_response_timeout_is_a_timeout():
     call = C1Call(9, M.write_request(0, 47, TOSHIBA_DS47), 0.0, 0.01)   # C1_Response_Timeout = 1
-    call.request()
+    call.request(0.0)
+    assert call.feed(F.SC_FRAME, 0.0) is None          # acknowledged at 0: the 10 ms start here
+    call.request(0.005)
     assert call.feed(F.SC_FRAME, 0.005) is None
-    call.request()
+    call.request(0.0101)                               # a poll sent after 0 + 10 ms, still nothing
     with pytest.raises(C1Timeout, match="within 10 ms"):
         call.feed(F.SC_FRAME, 0.0101)
     call = C1Call(9, M.write_request(0, 47, TOSHIBA_DS47), 0.0, 0.01)
-    call.request()
+    call.request(0.0)
     assert call.feed(None, 0.009) is None          # silence: sent again (request() still the PDU)
-    assert call.request() == M.write_request(0, 47, TOSHIBA_DS47)
+    assert call.request(0.009) == M.write_request(0, 47, TOSHIBA_DS47)
+    with pytest.raises(C1Timeout):                 # never acknowledged: 10 ms from the first try
+        call.feed(None, 0.0101)
+
+
+def test_the_timeout_counts_from_the_acknowledgement_not_from_the_decision_to_ask():
+    """At 19.2k the request telegram (DU 4 + 12 octets, 9 more of frame, 11 bits each) takes
+    25 * 11 / 19200 = 14.3 ms, longer than a 10 ms C1_Response_Timeout: the slave's clock starts at
+    its acknowledgement, and so does the master's."""
+    call = C1Call(9, M.write_request(0, 47, TOSHIBA_DS47), 0.0, 0.01)
+    call.request(0.0)
+    assert call.feed(F.SC_FRAME, 0.0143) is None       # the ack, 14.3 ms after the decision
+    call.request(0.020)                                # a poll within 10 ms of the ack
+    assert call.feed(F.SC_FRAME, 0.0235) is None       # not ready: no timeout yet (< 24.3 ms sent)
+    call.request(0.024)
+    pdu = call.feed(_reply(bytes.fromhex("5F 00 2F 0C")), 0.0275)
+    assert pdu is not None and pdu.name.startswith("Write")
+
+
+def test_a_master_stalled_past_the_deadline_asks_once_more_before_it_gives_up():
+    """A loaded machine may sleep through the deadline: the poll sent after it takes the answer the
+    slave readied in time; only a poll sent at or after the deadline that finds nothing is a timeout."""
+    call = C1Call(9, M.read_request(0, 47, 240), 0.0, 0.01)
+    call.request(0.0)
+    assert call.feed(F.SC_FRAME, 0.001) is None
+    call.request(0.005)                                # sent before 11 ms ...
+    assert call.feed(F.SC_FRAME, 5.0) is None          # ... its SC read 5 s later: not late yet
+    call.request(5.0)
+    pdu = call.feed(_reply(bytes.fromhex("5E 00 2F 02 12 34")), 5.001)
+    assert pdu is not None and pdu.data == b"\x12\x34"
 
 
 def test_a_slave_without_dpv1_answers_rs_and_the_call_says_why():

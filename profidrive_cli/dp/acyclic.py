@@ -2,9 +2,12 @@
 
 The master sends the request PDU in an SRD to DSAP 51 from SSAP 51 (high priority with the frame count
 bit, as its other DP services), then polls with the same SAPs and an empty DU until the slave answers
-with data; the short acknowledgement SC (or a reply without data) means "not ready yet". The whole call
-is bounded by the slave's C1_Response_Timeout (GSD, in 10 ms units): past it the call fails with
-C1Timeout. A DP-V1 slave leaves data exchange when its class-1 connection times out (IEC 61158-6's
+with data; the short acknowledgement SC (or a reply without data) means "not ready yet". The call is
+bounded by the slave's C1_Response_Timeout (GSD, in 10 ms units), counted as the slave counts it: from
+the acknowledgement of the request, not from the moment the master decided to ask (at 19.2k the
+request telegram alone takes longer than a 10 ms timeout). It fails with C1Timeout only when a poll
+sent at or after that deadline still finds no answer: a master stalled past the deadline (a loaded
+machine) asks once more before it gives up, so a slave that answered in time is never called late. A DP-V1 slave leaves data exchange when its class-1 connection times out (IEC 61158-6's
 MSAC1S machine stops with the cyclic one), so the poller restarts the station's start-up then.
 
 C1Call holds the state; dp/poller.py's Master.c1_call does the waiting and keeps the other stations'
@@ -45,12 +48,16 @@ class C1Call:
         self.address = address
         self.pdu = bytes(pdu)
         self.request_pdu = M.decode_pdu(self.pdu, is_request=True)
-        self.deadline = now + timeout_s
+        self.deadline = now + timeout_s        # until the request is acknowledged: its own bound
         self.timeout_s = timeout_s
         self.sent = False
         self.polls = 0
+        self.asked_at = now
 
-    def request(self) -> bytes:
+    def request(self, now: float | None = None) -> bytes:
+        """The DU of the next telegram, sent at `now` (the master's clock; None: the call's last)."""
+        if now is not None:
+            self.asked_at = now
         if self.sent:
             self.polls += 1
             return b""
@@ -68,7 +75,9 @@ class C1Call:
             if status in F.NEGATIVE:
                 raise BusError(f"{what}: answered {F.describe_fc(frame.fc)}")
         if frame is not None:
-            self.sent = True
+            if not self.sent:
+                self.sent = True
+                self.deadline = now + self.timeout_s       # the slave's clock starts at its ack
             if frame.sd != F.SC and frame.data:
                 if frame.dsap != M.SAP_C1 and frame.ssap != M.SAP_C1:
                     raise BusError(f"{what}: the answer came from SAP {frame.ssap}, not 51")
@@ -81,7 +90,8 @@ class C1Call:
                 if pdu.error is not None:
                     raise C1Error(f"{what}: {M.error_text(*pdu.error)}", pdu)
                 return pdu
-        if now >= self.deadline:
+        late = self.asked_at >= self.deadline if self.sent else now >= self.deadline
+        if late:
             raise C1Timeout(f"{what}: no answer within {self.timeout_s * 1000:g} ms "
                             "(C1_Response_Timeout)")
         return None

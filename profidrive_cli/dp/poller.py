@@ -491,12 +491,15 @@ class Master:
         station's start-up (a DP-V1 slave leaves data exchange with it) and raises C1Timeout; a
         negative answer raises C1Error."""
         st = self.stations.get(address)
-        if st is None or not st.in_data_exchange:
+        if st is None or st.state == RELEASED:
             raise BusError(f"station {address}: DP-V1 read/write needs the station in data exchange")
+        if not st.in_data_exchange:
+            # on its way back (a class-1 timeout or a lost station restarted it): its start-up first
+            self.bring_up(address, timeout=5.0, fail_fast=True)
         call = C1Call(address, pdu, self.link.now(), timeout_s)
         while True:
             self.keep_alive()
-            res = self.transact(address, F.SRD_HIGH, call.request(), M1.SAP_C1, M1.SAP_C1)
+            res = self.transact(address, F.SRD_HIGH, call.request(self.link.now()), M1.SAP_C1, M1.SAP_C1)
             try:
                 out = call.feed(res.frame if res.kind == REPLY else None, self.link.now())
             except C1Timeout:

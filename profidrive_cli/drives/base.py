@@ -518,6 +518,9 @@ class Drive(ABC):
 
     #: the max frequency (Hz = 100 %) the codec scales speed words with; None = not known yet
     _fmax: float | None = None
+    #: why the drive's own max frequency could not be read, when the codec fell back to the
+    #: profile default (None: read, or never tried); session/motion.py says it instead of "read"
+    fmax_unread: str | None = None
 
     def use_max_frequency(self, hz: float) -> None:
         """Scale speed words with `hz` as 100 % (the --fmax / config / profile value the session

@@ -116,7 +116,7 @@ class Motion(SafeStop):
         source = source_of(override)
         given = f"fmax {override:g} Hz from {source}" if source is not None else \
             f"--fmax {override:g}" if override is not None else ""
-        if self.fmax_readable:
+        if self.fmax_readable and d.fmax_unread is None:
             hz = float(d.max_frequency())
             src = f"read from the drive ({code})"
             if override is not None and not math.isclose(override, hz, rel_tol=1e-3):
@@ -132,7 +132,9 @@ class Motion(SafeStop):
             d.use_max_frequency(hz)
         else:
             hz = float(prof.max_frequency_default)
-            if not d.has_param_channel:
+            if d.fmax_unread is not None:
+                why = f"{code} could not be read: {d.fmax_unread}"
+            elif not d.has_param_channel:
                 why = f"layout {self.station.layout} has no parameter channel"
             elif code:
                 why = f"{code} has no published parameter number"

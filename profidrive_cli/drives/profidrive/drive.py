@@ -275,11 +275,9 @@ class ProfidriveDrive(Drive):
         request, then Read DS47 until the response comes (a "state conflict" or "resource busy"
         answer means not ready yet, up to the profile's dpv1.timeout_s); the answer as the
         PkwResult the PKW path would give (AK 7 and the error number for a negative one)."""
-        from profidrive_cli.dp.acyclic import C1Error, C1Timeout
         from profidrive_cli.drives.profidrive import ds47 as D
         d = self.ds47
         assert d is not None
-        chan: Any = self.channel
         ak = frame.ak
         self._ds47_ref = self._ds47_ref % 255 + 1
         addr = D.ParamAddress(frame.pnu, frame.subindex)
@@ -297,6 +295,32 @@ class ProfidriveDrive(Drive):
             raise DriveError(f"{self.profile.name}: request AK {ak} ({REQUEST_TEXT.get(ak, '?')}) "
                              "has no DS47 counterpart here")
         what = f"PNU {frame.pnu}" + (f"[{frame.subindex}]" if frame.subindex else "")
+        res = self._ds47_exchange(req, what, timeout)
+        item = res.items[0] if res.items else None
+        if isinstance(item, D.ParamFault):
+            return PkwResult(frame, PkwFrame(7, frame.pnu, frame.subindex, item.number),
+                             error=item.number, error_text=D.error_text(item.number))
+        if not res.ok:
+            return PkwResult(frame, PkwFrame(7, frame.pnu, frame.subindex), error=-1,
+                             error_text=f"negative DS47 response 0x{res.response_id:02X}")
+        if ak in (1, 6):
+            if not isinstance(item, D.ParamValues) or isinstance(item.values, bytes) \
+                    or not item.values:
+                raise DriveError(f"{what}: DS47 read answered without a numeric value")
+            v = int(item.values[0])
+            is_long = item.format in (0x04, 0x07, 0x08, 0x43)
+            return PkwResult(frame, PkwFrame(2 if is_long else 1, frame.pnu, frame.subindex,
+                                             v & (0xFFFFFFFF if is_long else 0xFFFF)))
+        return PkwResult(frame, PkwFrame(2 if long else 1, frame.pnu, frame.subindex, frame.value))
+
+    def _ds47_exchange(self, req: Any, what: str, timeout: float | None = None) -> Any:
+        """Write DS47 with `req` (a ds47.ParamRequest), then Read DS47 until its response (busy
+        answers polled up to the profile's dpv1.timeout_s); the decoded ds47.ParamResponse."""
+        from profidrive_cli.dp.acyclic import C1Error, C1Timeout
+        from profidrive_cli.drives.profidrive import ds47 as D
+        d = self.ds47
+        assert d is not None
+        chan: Any = self.channel
         limit = timeout if timeout is not None else d.timeout_s
         try:
             chan.c1_write(d.slot, D.INDEX, req.encode(), d.c1_timeout_s)
@@ -322,22 +346,26 @@ class ProfidriveDrive(Drive):
         if res.reference != req.reference:
             raise DriveError(f"{what}: DS47 response to request {res.reference}, not "
                              f"{req.reference}")
+        return res
+
+    def ds47_read_array(self, pnu: int, count: int, subindex: int = 0) -> list[int]:
+        """`count` elements of an array parameter from `subindex` on, in one DS47 request (a
+        `dpv1:` card only); ParamError with the drive's error number when it refuses."""
+        from profidrive_cli.drives.profidrive import ds47 as D
+        d = self.ds47
+        if d is None:
+            raise DriveError(f"{self.profile.name}: PNU {pnu} as a whole array needs DS47 (dpv1:)")
+        self._ds47_ref = self._ds47_ref % 255 + 1
+        req = D.read_request(self._ds47_ref, d.axis, [D.ParamAddress(pnu, subindex, count)])
+        res = self._ds47_exchange(req, f"PNU {pnu}[{subindex}..{subindex + count - 1}]")
         item = res.items[0] if res.items else None
         if isinstance(item, D.ParamFault):
-            return PkwResult(frame, PkwFrame(7, frame.pnu, frame.subindex, item.number),
-                             error=item.number, error_text=D.error_text(item.number))
-        if not res.ok:
-            return PkwResult(frame, PkwFrame(7, frame.pnu, frame.subindex), error=-1,
-                             error_text=f"negative DS47 response 0x{res.response_id:02X}")
-        if ak in (1, 6):
-            if not isinstance(item, D.ParamValues) or isinstance(item.values, bytes) \
-                    or not item.values:
-                raise DriveError(f"{what}: DS47 read answered without a numeric value")
-            v = int(item.values[0])
-            is_long = item.format in (0x04, 0x07, 0x08, 0x43)
-            return PkwResult(frame, PkwFrame(2 if is_long else 1, frame.pnu, frame.subindex,
-                                             v & (0xFFFFFFFF if is_long else 0xFFFF)))
-        return PkwResult(frame, PkwFrame(2 if long else 1, frame.pnu, frame.subindex, frame.value))
+            raise ParamError(f"PNU {pnu}: the drive refused the read: "
+                             f"{D.error_text(item.number)}", item.number)
+        if not isinstance(item, D.ParamValues) or isinstance(item.values, bytes) \
+                or not res.ok:
+            raise DriveError(f"PNU {pnu}: DS47 read answered without numeric values")
+        return [int(v) for v in item.values]
 
     def _ds47_signed(self, pnu: int) -> bool:
         """A change request's format: signed when the profile's parameter at this PNU can be < 0."""
@@ -372,11 +400,33 @@ class ProfidriveDrive(Drive):
         return self._read(self._ref(info))
 
     def _read(self, ref: ParamRef) -> ParamValue:
+        if self.ds47 is not None and ref.pnu == PNU_DEVICE_ID and ref.subindex == 0:
+            return self._device_identification(ref)
         res = self.request(read_request(ref.pnu, ref.subindex, ref.array))
         if not res.ok:
             raise ParamError(f"{ref.label}: the drive refused the read: {res.describe_error()}",
                              res.error)
         return self._param_value(ref, res.value)
+
+    def _device_identification(self, ref: ParamRef) -> ParamValue:
+        """PNU 964 over DS47 read as the whole array (one request, subindex 0 on): the value is
+        subindex 0 (the manufacturer id), the text the identification in words."""
+        from profidrive_cli.drives.profidrive import ds47 as D
+        count = int(ref.param.extra.get("array", 6)) if ref.param is not None else 6
+        values = self.ds47_read_array(ref.pnu, max(5, min(count, 6)))
+        try:
+            ident = D.device_identification(values)
+        except D.Ds47Error as e:
+            raise DriveError(f"{ref.label}: {e}") from None
+        date = ident["firmware_date"] or f"{ident['firmware_year']} {values[4]:04d}"
+        text = (f"manufacturer {values[0]}, drive unit type 0x{values[1]:04X}, firmware "
+                f"{ident['firmware_version']} of {date}")
+        if ident["drive_objects"] is not None:
+            n = ident["drive_objects"]
+            text += f", {n} drive object" + ("" if n == 1 else "s")
+        pv = self._param_value(ref, values[0])
+        pv.text = text
+        return pv
 
     def _param_value(self, ref: ParamRef, wire: int) -> ParamValue:
         raw = wire & 0xFFFF if ref.size == 16 else wire & 0xFFFFFFFF
@@ -494,12 +544,14 @@ class ProfidriveDrive(Drive):
 
     # -- motion ------------------------------------------------------------------------------
     def _ensure_fmax(self) -> None:
-        """Learn the drive's max frequency once (PKW), else fall back to the profile default."""
-        if self.pkw is not None and self._fmax is None:
+        """Learn the drive's max frequency once (PKW or DS47), else fall back to the profile
+        default (a card that refuses or does not answer the read)."""
+        if self.has_param_channel and self._fmax is None:
             try:
                 self.max_frequency()
-            except DriveError:
+            except DriveError as e:
                 self._fmax = float(self.profile.max_frequency_default)
+                self.fmax_unread = str(e)
 
     def status(self) -> DriveStatus:
         self._ensure_fmax()
