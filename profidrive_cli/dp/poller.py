@@ -490,25 +490,33 @@ class Master:
         stations' cycles go on (this one's too), so no watchdog runs out. A timeout restarts the
         station's start-up (a DP-V1 slave leaves data exchange with it) and raises C1Timeout; a
         negative answer raises C1Error."""
+        call = C1Call(address, pdu, self.link.now(), timeout_s)
+        while True:
+            self.keep_alive()
+            out = self.c1_step(call)
+            if out is not None:
+                return out
+
+    def c1_step(self, call: C1Call) -> M1.Msac1Pdu | None:
+        """One telegram of a class-1 call (its request, or a poll): the answer PDU when it came,
+        None to poll again. The station must be in data exchange (one on its way back is brought
+        up first); a timeout restarts its start-up and raises C1Timeout. c1_call loops on it, and a
+        run of several stations at once (session/together.py) gives each call one step a round."""
+        address = call.address
         st = self.stations.get(address)
         if st is None or st.state == RELEASED:
             raise BusError(f"station {address}: DP-V1 read/write needs the station in data exchange")
         if not st.in_data_exchange:
             # on its way back (a class-1 timeout or a lost station restarted it): its start-up first
             self.bring_up(address, timeout=5.0, fail_fast=True)
-        call = C1Call(address, pdu, self.link.now(), timeout_s)
-        while True:
-            self.keep_alive()
-            res = self.transact(address, F.SRD_HIGH, call.request(self.link.now()), M1.SAP_C1, M1.SAP_C1)
-            try:
-                out = call.feed(res.frame if res.kind == REPLY else None, self.link.now())
-            except C1Timeout:
-                ev: list[Event] = []
-                st.restart(ev, "DP-V1 class-1 timeout", self.link.now())
-                self._emit(address, ev)
-                raise
-            if out is not None:
-                return out
+        res = self.transact(address, F.SRD_HIGH, call.request(self.link.now()), M1.SAP_C1, M1.SAP_C1)
+        try:
+            return call.feed(res.frame if res.kind == REPLY else None, self.link.now())
+        except C1Timeout:
+            ev: list[Event] = []
+            st.restart(ev, "DP-V1 class-1 timeout", self.link.now())
+            self._emit(address, ev)
+            raise
 
     def c1_read(self, address: int, slot: int, index: int, length: int, timeout_s: float) -> bytes:
         """The data of a Read of (slot, index), at most `length` octets."""

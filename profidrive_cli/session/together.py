@@ -14,6 +14,11 @@ the same whatever the threads' timing: each job sees exactly the exchanges it as
 as on its own channel. The caller's thread runs on_done as each job ends, and the rounds that no
 job starts (a late job, below).
 
+A DP-V1 drive's parameter path (DS47 over class-1 Read/Write) posts each telegram of its call -- the
+request, then each poll -- into the rounds the same way (LockstepChannel.c1_read / c1_write: one
+SRD to SAP 51 in place of its Data_Exchange, Master.c1_step), so a DS47 drive is read beside PKW
+drives, one telegram of each in flight per round.
+
 Rules, each written here once:
 - unpaced while the jobs run: a round goes as soon as it is full (the wire, the slaves' answers and
   the CPU are the pace); the jobs' own cycle rates do not apply.
@@ -42,9 +47,11 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable, Iterable, Mapping
-from typing import TYPE_CHECKING, Generic, TypeVar
+from typing import TYPE_CHECKING, Generic, TypeVar, overload
 
 from profidrive_cli import BusError
+from profidrive_cli.dp import msac1 as M1
+from profidrive_cli.dp.acyclic import C1Call
 from profidrive_cli.dp.poller import keep_within
 from profidrive_cli.fdl.timing import wire_time_data_exchange
 from profidrive_cli.link.base import LinkLost
@@ -54,6 +61,9 @@ if TYPE_CHECKING:                                   # pragma: no cover
     from profidrive_cli.session.cycle import MeteredChannel
 
 T = TypeVar("T")
+#: what a round gives a station's job: its inputs, a DP-V1 call's answer (None: not yet), or the
+#: exception its telegram raised
+_Answer = bytes | M1.Msac1Pdu | None | BaseException
 
 #: the longest round the run lets grow on the wire (the window of jobs at once), seconds: an eighth
 #: of the 2 s a PKW request waits for its answer (drives/profidrive/pkw.py), which comes a round
@@ -109,6 +119,21 @@ class LockstepChannel:
         self.cycles += 1
         return self.run.post(self.address, bytes(outputs))
 
+    # DP-V1 class-1 calls (drives/base.AcyclicChannel): each telegram of the call (the request,
+    # then its polls) is this station's part of one round, as an exchange would be
+    def c1_read(self, slot: int, index: int, length: int, timeout_s: float) -> bytes:
+        return self._c1(M1.read_request(slot, index, length), timeout_s).data
+
+    def c1_write(self, slot: int, index: int, data: bytes, timeout_s: float) -> None:
+        self._c1(M1.write_request(slot, index, data), timeout_s)
+
+    def _c1(self, pdu: bytes, timeout_s: float) -> M1.Msac1Pdu:
+        call = C1Call(self.address, pdu, self.now(), timeout_s)
+        while True:
+            got = self.run.post(self.address, call)
+            if isinstance(got, M1.Msac1Pdu):
+                return got
+
 
 class _Run:
     """One run's shared state: the posted outputs, the answers, the jobs still running, and who is
@@ -119,8 +144,9 @@ class _Run:
         self.held = held
         self.within = within
         self.cond = threading.Condition()
-        self.posted: dict[int, bytes] = {}
-        self.answers: dict[int, bytes | BaseException] = {}
+        #: a station's outputs for its Data_Exchange, or the class-1 call it takes the next step of
+        self.posted: dict[int, bytes | C1Call] = {}
+        self.answers: dict[int, _Answer] = {}
         self.running: set[int] = set()
         #: jobs ended since the caller last looked (for on_done)
         self.ended: list[int] = []
@@ -157,7 +183,12 @@ class _Run:
         self.cond.notify_all()
 
     # -- a job's thread --------------------------------------------------------------------------
-    def post(self, address: int, outputs: bytes) -> bytes:
+    @overload
+    def post(self, address: int, outputs: bytes) -> bytes: ...
+    @overload
+    def post(self, address: int, outputs: C1Call) -> M1.Msac1Pdu | None: ...
+
+    def post(self, address: int, outputs: bytes | C1Call) -> bytes | M1.Msac1Pdu | None:
         """A job's exchange: its outputs into the round; the last job to post runs the round itself
         (no hand-over to another thread on the way: a line where one drive is left reads at the
         pace of one station's own channel)."""
@@ -357,15 +388,18 @@ def _next_due(master: "Master", held: list[int], within: dict[int, float | None]
     return due
 
 
-def _round(master: "Master", posted: dict[int, bytes], held: list[int],
-           within: dict[int, float | None]) -> dict[int, bytes | BaseException]:
+def _round(master: "Master", posted: dict[int, bytes | C1Call], held: list[int],
+           within: dict[int, float | None]) -> dict[int, _Answer]:
     """One Data_Exchange for every posted station (address order), then a keep-alive for every held
     station not posted whose last request is its keep_within() old. LinkLost is raised (the caller
     ends every job); any other BusError goes to its own job."""
-    answers: dict[int, bytes | BaseException] = {}
+    answers: dict[int, _Answer] = {}
     for a, outputs in posted.items():
         try:
-            answers[a] = master.exchange(a, outputs)
+            if isinstance(outputs, C1Call):
+                answers[a] = master.c1_step(outputs)        # one telegram of a DP-V1 call
+            else:
+                answers[a] = master.exchange(a, outputs)
         except LinkLost:
             raise
         except BusError as e:
