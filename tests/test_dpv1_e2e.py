@@ -15,7 +15,7 @@ import json
 import pytest
 import yaml
 
-from conftest import pty_sim_process, run_main, run_pdrive
+from conftest import TcpSim, pty_sim_process, run_main, run_pdrive
 
 ADDR = 9
 PLANT = f"sim://?stations={ADDR}:profidrive-dpv1"
@@ -92,9 +92,8 @@ def test_run_refuses_to_start_without_its_max_frequency_and_nothing_turns(capsys
     assert "S4" not in r.stdout and "operation" not in r.stdout
 
 
-def test_the_dpv1_axis_over_a_pty_and_over_socket(tmp_path):
-    """The same commands over `pdrive sim --pty` (a real byte path, its own process), then over
-    `pdrive sim --listen` + socket://."""
+def test_the_dpv1_axis_over_a_pty():
+    """The same commands over `pdrive sim --pty` (a real byte path, its own process)."""
     with pty_sim_process("--plant", PLANT) as pty:
         r = run_pdrive("param", "get", ADDR, "PNU964", "--json", "--port", pty)
         assert r.returncode == 0, r.stderr
@@ -127,3 +126,16 @@ def test_the_api_reads_a_ds47_drive_through_the_one_door():
         got = bus.read_params({ADDR: ["P104", "PNU964"]})
         assert got[ADDR]["P104"].value == pytest.approx(_profile_param("P104")["default"])
         assert got[ADDR]["PNU964"].text == IDENT_TEXT
+
+
+def test_the_dpv1_axis_over_socket():
+    """`pdrive sim --listen`'s byte path (replies in TCP segments) in its own thread: the SC after a
+    request and the polls come as a converter delivers them."""
+    with TcpSim(PLANT) as srv:
+        r = run_pdrive("param", "get", ADDR, "PNU964", "--json", "--port", srv.url)
+        assert r.returncode == 0, r.stderr
+        assert json.loads(r.stdout)["parameters"][0]["text"] == IDENT_TEXT
+        r = run_pdrive("param", "set", ADDR, "P104", 2.5, "--yes", "--port", srv.url)
+        assert r.returncode == 0, r.stderr
+        r = run_pdrive("param", "get", ADDR, "P104", "--json", "--port", srv.url)
+        assert json.loads(r.stdout)["parameters"][0]["value"] == pytest.approx(2.5)

@@ -62,6 +62,9 @@ class Master:
         self.address = address
         self.stations: dict[int, StationMachine] = {}
         self._line_free_at = 0.0     # earliest start of the next request (TSYN / TID1 / TID2 kept)
+        #: a request was repeated: the late reply to the attempt before it may still come after
+        #: the one taken (a slave that answered both): dropped before the next request is sent
+        self._flush_next = False
         self.on_event: Callable[[int, Event], object] | None = None    # for live views / logs
         #: stations in data exchange take the fast path (dp/dx_fast.py); False: the general
         #: engine for every request (same octets, counters and FCB states, only slower)
@@ -104,6 +107,12 @@ class Master:
         while now < self._line_free_at:
             self.link.sleep(self._line_free_at - now)
             now = self.link.now()
+        if self._flush_next:
+            # what came after the reply to a repeated request is a late reply to its first attempt
+            # (seen over a pty: a slave late with its first answer then answered the retry too, and
+            # every later request took the reply to the one before it)
+            self._flush_next = False
+            self.link.flush_input()
 
     def _link_lost(self, e: LinkLost) -> LinkLost:
         """The port went away: forget the request in progress, say so with the counters."""
@@ -217,6 +226,7 @@ class Master:
             out, deadline = nxt
             self.link.write(out)
             self._sent(out)
+            self._flush_next = True
 
     def send_sdn(self, da: int, dsap: int, data: bytes) -> None:
         try:

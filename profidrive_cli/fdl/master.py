@@ -110,6 +110,7 @@ class FdlMaster:
         self._fcb: dict[int, MasterFcb] = {}
         self.counters: dict[int, StationCounters] = {}
         self._pending: bytes | None = None
+        self._saps: tuple[int | None, int] | None = None
         self._da = 0
         self._uses_fcb = False
         self._retries_left = 0
@@ -172,6 +173,9 @@ class FdlMaster:
             fc = F.request_fc(function)
         frame = F.Frame(F.SD2, da, self.address, fc, bytes(data), dsap, ssap)
         self._pending = F.encode(frame)
+        #: a reply with SAPs must carry ours swapped (IEC 61158-4: its DSAP our SSAP, its SSAP our
+        #: DSAP); one that does not is a late reply to an earlier request
+        self._saps = (ssap, dsap) if dsap is not None else None
         self._dx = None
         self._da = da
         self._uses_fcb = uses_fcb
@@ -215,6 +219,7 @@ class FdlMaster:
             t.cap = self.attempt_cap(n, n_in + 9)
         self._pending = out = t.head + outputs + _TAILS[(t.head_fcs + sum(outputs)) & 0xFF]
         self._dx = t
+        self._saps = None
         self._da = da
         self._uses_fcb = True
         self._retries_left = p.retries
@@ -352,6 +357,9 @@ class FdlMaster:
                 return self._done(r)
             if r.sd == F.SD4 or r.is_request or r.da != self.address or r.sa != self._da:
                 self._illegal += 1          # token, another master's request, a foreign reply
+                continue
+            if r.dsap is not None and self._saps is not None and (r.dsap, r.ssap) != self._saps:
+                self._illegal += 1          # a late reply to another service of this station
                 continue
             return self._done(r)
 
