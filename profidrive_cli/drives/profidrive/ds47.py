@@ -90,7 +90,7 @@ from __future__ import annotations
 import datetime
 import struct
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Mapping, Sequence
 
 from profidrive_cli.drives.profidrive.pnu import PNU_DEVICE_ID, PNU_FAULT_NUMBER
 
@@ -435,6 +435,22 @@ def _check_length(n: int, what: str) -> None:
 
 # -- request -------------------------------------------------------------------------------------
 
+def _header(data: bytes, kind: str, ids: Mapping[int, str], not_one: str) -> tuple[int, int, int, int]:
+    """The 4-octet header of a parameter request or response (`kind`): reference, request or
+    response id (one of `ids`, else "... `not_one`"), axis, number of parameters, checked."""
+    _check_length(len(data), kind)
+    if len(data) < 4:
+        raise Ds47Error(f"octet {len(data)}: short header: {len(data)} octet(s), a parameter "
+                        f"{kind} starts with 4 (reference, {kind} id, axis, number of "
+                        "parameters)")
+    reference, ident, axis, count = data[0], data[1], data[2], data[3]
+    _check(reference, 1, 255, "request reference", 0)
+    if ident not in ids:
+        raise Ds47Error(f"octet 1: {kind} id 0x{ident:02X} {not_one}")
+    _check(count, 1, MAX_PARAMETERS, "number of parameters", 3)
+    return reference, ident, axis, count
+
+
 @dataclass(frozen=True)
 class ParamRequest:
     """A parameter request: read (REQUEST_READ) the addressed parameters, or change
@@ -484,17 +500,8 @@ class ParamRequest:
         """A request from its octets (a Write DS47's data); Ds47Error names what is malformed
         and the octet."""
         data = bytes(data)
-        _check_length(len(data), "request")
-        if len(data) < 4:
-            raise Ds47Error(f"octet {len(data)}: short header: {len(data)} octet(s), a parameter "
-                            "request starts with 4 (reference, request id, axis, number of "
-                            "parameters)")
-        reference, request_id, axis, count = data[0], data[1], data[2], data[3]
-        _check(reference, 1, 255, "request reference", 0)
-        if request_id not in REQUEST_NAMES:
-            raise Ds47Error(f"octet 1: request id 0x{request_id:02X} is neither 0x01 (read) nor "
-                            "0x02 (change)")
-        _check(count, 1, MAX_PARAMETERS, "number of parameters", 3)
+        reference, request_id, axis, count = _header(
+            data, "request", REQUEST_NAMES, "is neither 0x01 (read) nor 0x02 (change)")
         pos = 4
         addresses = []
         for k in range(1, count + 1):
@@ -598,17 +605,8 @@ class ParamResponse:
         the octet. Lenient where the structure allows: blocks are read as they come (a Zero
         block in a read response is kept, a missing pad after the last block accepted)."""
         data = bytes(data)
-        _check_length(len(data), "response")
-        if len(data) < 4:
-            raise Ds47Error(f"octet {len(data)}: short header: {len(data)} octet(s), a parameter "
-                            "response starts with 4 (reference, response id, axis, number of "
-                            "parameters)")
-        reference, response_id, axis, count = data[0], data[1], data[2], data[3]
-        _check(reference, 1, 255, "request reference", 0)
-        if response_id not in RESPONSE_NAMES:
-            raise Ds47Error(f"octet 1: response id 0x{response_id:02X} is not one of 0x01, 0x02, "
-                            "0x81, 0x82")
-        _check(count, 1, MAX_PARAMETERS, "number of parameters", 3)
+        reference, response_id, axis, count = _header(
+            data, "response", RESPONSE_NAMES, "is not one of 0x01, 0x02, 0x81, 0x82")
         pos = 4
         items: list[ParamValues | ParamFault] = []
         if response_id == RESPONSE_CHANGE:
