@@ -177,12 +177,22 @@ def test_sim_ctl_bad_input_is_one_line(served) -> None:
             # a --control that is no HOST:PORT is bad input, as for `pdrive sim --control` (issue 34)
             (("--control", "nonsense", "state"), 2, "--control needs HOST:PORT"),
             (("--control", "127.0.0.1:0", "state"), 2, "PORT 1..65535"),
-            (("--control", "127.0.0.1:99999", "state"), 2, "--control needs HOST:PORT")):
+            (("--control", "127.0.0.1:99999", "state"), 2, "--control needs HOST:PORT"),
+            # no HOST urllib can put in a URL (it raised ValueError: a traceback)
+            (("--control", "ftp://x:1", "state"), 2, "not HOST:PORT")):
         p = _pdrive("sim-ctl", *args)
         assert p.returncode == code, (args, p.stderr)
         assert p.stderr.count("\n") == 1 and words in p.stderr and "Traceback" not in p.stderr, p.stderr
     bad = _pdrive("sim", "--pty", "--control", "nowhere")
     assert bad.returncode == 2 and "--control needs HOST:PORT" in bad.stderr
+
+
+@pytest.mark.skipif(os.name != "posix", reason="pdrive sim --pty")
+def test_sim_ctl_takes_the_control_url_the_simulator_printed(served) -> None:
+    # `pdrive sim --control` prints http://HOST:PORT; pasting it was a traceback (Invalid IPv6 URL)
+    p = _pdrive("sim-ctl", "--control", served["control"], "state", "--json")
+    assert p.returncode == 0, p.stderr
+    assert 3 in {r["station"] for r in json.loads(p.stdout)["stations"]}
 
 
 @pytest.mark.skipif(os.name != "posix", reason="pdrive sim --pty")

@@ -36,14 +36,19 @@ def simctl_cmd(control: str | None, token: str | None, as_json: bool, command: s
     if not control:
         raise UsageError("sim-ctl: no --control HOST:PORT (the address `pdrive sim --control` printed)")
     from profidrive_cli.cli.sim_cmd import _host_port
-    host, port = _host_port(control, "--control", lowest=1)
+    # the simulator prints its control as a URL (http://HOST:PORT): take that as well as HOST:PORT
+    where = control[len("http://"):].rstrip("/") if control.lower().startswith("http://") else control
+    host, port = _host_port(where, "--control", lowest=1)
     token = token or os.environ.get("PDRIVE_SIM_TOKEN")
     body = _arguments(command, args)
     url = f"http://{f'[{host}]' if ':' in host else host}:{port}/{command}"
-    req = urllib.request.Request(url, data=None if command == "state" else json.dumps(body).encode(),
-                                 method="GET" if command == "state" else "POST",
-                                 headers={"Content-Type": "application/json",
-                                          **({"Authorization": f"Bearer {token}"} if token else {})})
+    try:
+        req = urllib.request.Request(url, data=None if command == "state" else json.dumps(body).encode(),
+                                     method="GET" if command == "state" else "POST",
+                                     headers={"Content-Type": "application/json",
+                                              **({"Authorization": f"Bearer {token}"} if token else {})})
+    except ValueError as e:                 # a HOST urllib cannot put in a URL
+        raise UsageError(f"--control {control[:80]!r}: not HOST:PORT ({e})") from None
     try:
         with urllib.request.urlopen(req, timeout=15) as r:
             answer = json.loads(r.read() or b"{}")
