@@ -139,3 +139,12 @@ def test_the_dpv1_axis_over_socket():
         assert r.returncode == 0, r.stderr
         r = run_pdrive("param", "get", ADDR, "P104", "--json", "--port", srv.url)
         assert json.loads(r.stdout)["parameters"][0]["value"] == pytest.approx(2.5)
+
+
+def test_a_tripped_axis_names_its_fault_over_ds47(capsys, monkeypatch):
+    """trip=9:OV: status reads the fault number from PNU 947 subindex 0 (profile fault_memory) over
+    DS47 and names it with the profile's alarm table (number 2 = OV, DC-link overvoltage)."""
+    r = run_main(capsys, monkeypatch, "status", ADDR, "--json", "--port", PLANT + f"&trip={ADDR}:OV")
+    assert r.exit_code == 0, r.output
+    st = json.loads(r.stdout)
+    assert st["fault"] is True and st["fault_code"] == "OV"

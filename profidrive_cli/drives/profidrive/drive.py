@@ -556,7 +556,7 @@ class ProfidriveDrive(Drive):
     def status(self) -> DriveStatus:
         self._ensure_fmax()
         st = self.cycle()
-        if st.fault and self.pkw is not None:
+        if st.fault and self.has_param_channel:
             try:
                 rec = self.alarm_record("current", self.read_raw(
                     self.cfg.fault_memory_pnu, self.cfg.fault_subindexes[0], array=True) & 0xFFFF)
@@ -640,7 +640,7 @@ class ProfidriveDrive(Drive):
         st = self.cycle()
         if st.fault:
             raise DriveError("the drive is in fault: acknowledge it first (reset)")
-        if self.pkw is not None and self._fmax is None:
+        if self.has_param_channel and self._fmax is None:
             self.max_frequency()
         return self._go(Target.OPERATE, timeout, "operation", hint=True)
 
