@@ -148,3 +148,28 @@ def test_a_tripped_axis_names_its_fault_over_ds47(capsys, monkeypatch):
     assert r.exit_code == 0, r.output
     st = json.loads(r.stdout)
     assert st["fault"] is True and st["fault_code"] == "OV"
+
+
+def test_a_users_own_profile_turns_dpv1_on_for_another_drive(capsys, monkeypatch, tmp_path):
+    """"By profile": a user's profile in $PDRIVE_PROFILE_PATH with a `profidrive.dpv1:` entry (here
+    a small one of their own: two parameters, telegram 1) reads the axis over DS47 -- no switch
+    needed and nothing of pdrive's own changed."""
+    (tmp_path / "my-axis.yaml").write_text(
+        "profile: my-axis\nfamily: profidrive\ntitle: my own DP-V1 axis\n"
+        "identity: {ident: 0x8158}\nword_order: big\n"
+        "layouts:\n  tel1: {cfg: \"E1 D1\", pkw: false}\ndefault_layout: tel1\n"
+        "max_frequency: {param: FMAX, default_hz: 50.0}\n"
+        "profidrive:\n  labels: {control: STW1, status: ZSW1, reference: NSOLL_A, actual: NIST_A}\n"
+        "  dpv1: {slot: 0, axis: 1, c1_timeout_ms: 10}\n"
+        "parameters:\n"
+        "  - {code: FMAX, name: Maximum frequency, pnu: 100, unit: Hz, scale: 0.01, min: 10, max: 400, access: stop}\n"
+        "  - {code: RAMP_UP, name: Ramp-up time, pnu: 102, unit: s, scale: 0.01, min: 0.1, max: 600, access: rw}\n"
+        "  - {code: ADDR, name: Station address, pnu: 918, index: 0, access: ro}\n")
+    monkeypatch.setenv("PDRIVE_PROFILE_PATH", str(tmp_path))
+    r = run_main(capsys, monkeypatch, "param", "get", ADDR, "RAMP_UP", "ADDR", "FMAX", "--profile", "my-axis",
+                 "--json", "--port", PLANT)
+    assert r.exit_code == 0, r.output
+    got = {p["code"]: p for p in json.loads(r.stdout)["parameters"]}
+    assert got["RAMP_UP"]["value"] == pytest.approx(_profile_param("P102")["default"])
+    assert got["ADDR"]["raw"] == ADDR
+    assert got["FMAX"]["value"] == pytest.approx(_profile_param("P100")["default"])
