@@ -110,7 +110,7 @@ class FdlMaster:
         self._fcb: dict[int, MasterFcb] = {}
         self.counters: dict[int, StationCounters] = {}
         self._pending: bytes | None = None
-        self._saps: tuple[int | None, int] | None = None
+        self._saps: tuple[int, int] | None = None
         self._da = 0
         self._uses_fcb = False
         self._retries_left = 0
@@ -175,7 +175,7 @@ class FdlMaster:
         self._pending = F.encode(frame)
         #: a reply with SAPs must carry ours swapped (IEC 61158-4: its DSAP our SSAP, its SSAP our
         #: DSAP); one that does not is a late reply to an earlier request
-        self._saps = (ssap, dsap) if dsap is not None else None
+        self._saps = (ssap, dsap) if dsap is not None and ssap is not None else None
         self._dx = None
         self._da = da
         self._uses_fcb = uses_fcb
