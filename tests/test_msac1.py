@@ -154,3 +154,27 @@ def test_an_answer_to_another_function_is_refused():
     call.request()
     with pytest.raises(BusError, match="answered with Write"):
         call.feed(_reply(bytes.fromhex("5F 00 2F 02")), 0.1)
+
+
+def test_a_poll_lost_on_the_line_is_asked_again_even_past_the_deadline():
+    """A poll whose telegrams were all lost (noise, its FDL retries spent) says nothing of the
+    slave's answer: it is asked again, past the deadline too; SILENT_POLLS (3) in a row end the call."""
+    from profidrive_cli.dp.acyclic import SILENT_POLLS
+    call = C1Call(9, M.read_request(0, 47, 240), 0.0, 0.01)
+    call.request(0.0)
+    assert call.feed(F.SC_FRAME, 0.001) is None             # acknowledged: deadline 11 ms
+    call.request(0.020)                                      # past it ...
+    assert call.feed(None, 0.021) is None                    # ... lost: asked again
+    call.request(0.022)
+    pdu = call.feed(_reply(bytes.fromhex("5E 00 2F 02 12 34")), 0.023)
+    assert pdu is not None and pdu.data == b"\x12\x34"
+    call = C1Call(9, M.read_request(0, 47, 240), 0.0, 1.0)
+    call.request(0.0)
+    assert call.feed(F.SC_FRAME, 0.001) is None
+    for k in range(SILENT_POLLS - 1):
+        call.request(0.002 + k * 0.001)
+        assert call.feed(None, 0.0025 + k * 0.001) is None
+    call.request(0.01)
+    with pytest.raises(C1Timeout, match="no reply to 3 polls in a row"):
+        call.feed(None, 0.011)
+    assert SILENT_POLLS == 3

@@ -21,6 +21,11 @@ from profidrive_cli.dp import msac1 as M
 from profidrive_cli.fdl import frames as F
 
 
+#: polls in a row without any reply (each after its FDL retries) that end a call: the slave is gone
+#: or the line is broken, not late with its answer
+SILENT_POLLS = 3
+
+
 class C1Error(BusError):
     """A negative MSAC_C1 answer: .function, .decode, .code1, .code2 (msac1.error_text says them)."""
 
@@ -53,6 +58,7 @@ class C1Call:
         self.sent = False
         self.polls = 0
         self.asked_at = now
+        self.silent = 0                        # polls in a row that got no reply at all
 
     def request(self, now: float | None = None) -> bytes:
         """The DU of the next telegram, sent at `now` (the master's clock; None: the call's last)."""
@@ -90,6 +96,14 @@ class C1Call:
                 if pdu.error is not None:
                     raise C1Error(f"{what}: {M.error_text(*pdu.error)}", pdu)
                 return pdu
+        if frame is None and self.sent:
+            # a poll lost on the line (its FDL retries spent) says nothing of the slave's answer:
+            # asked again, whatever the deadline, up to SILENT_POLLS in a row
+            self.silent += 1
+            if self.silent >= SILENT_POLLS:
+                raise C1Timeout(f"{what}: no reply to {self.silent} polls in a row")
+            return None
+        self.silent = 0
         late = self.asked_at >= self.deadline if self.sent else now >= self.deadline
         if late:
             raise C1Timeout(f"{what}: no answer within {self.timeout_s * 1000:g} ms "
@@ -97,4 +111,4 @@ class C1Call:
         return None
 
 
-__all__ = ["C1Call", "C1Error", "C1Timeout"]
+__all__ = ["SILENT_POLLS", "C1Call", "C1Error", "C1Timeout"]

@@ -33,6 +33,11 @@ from profidrive_cli.drives.profidrive.words import (Ctw, State, Stw, Target, nex
 if TYPE_CHECKING:
     from profidrive_cli.drives.profile import Profile
 
+#: a DS47 request that ended in a class-1 timeout is sent once more (the answer may have been lost on
+#: the line after the slave handed it out)
+DS47_REPEATS = 1
+
+
 class ProfidriveDrive(Drive):
     """The Drive interface over a PPO layout (drives/base.py), generic PROFIdrive V2.
 
@@ -322,23 +327,30 @@ class ProfidriveDrive(Drive):
         assert d is not None
         chan: Any = self.channel
         limit = timeout if timeout is not None else d.timeout_s
-        try:
-            chan.c1_write(d.slot, D.INDEX, req.encode(), d.c1_timeout_s)
-            end = self.channel.now() + limit
-            while True:
-                try:
-                    data = chan.c1_read(d.slot, D.INDEX, 240, d.c1_timeout_s)
-                    break
-                except C1Error as e:
-                    if not e.busy or self.channel.now() > end:
-                        raise
-                    self.cycle()
-        except C1Timeout as e:
-            raise DriveError(f"{what}: {e}; a DP-V1 slave leaves data exchange on a class-1 "
-                             "timeout: the station is parameterised again (its outputs at their "
-                             "safe state until then)") from None
-        except C1Error as e:
-            raise DriveError(f"{what}: {e}") from None
+        for attempt in range(1 + DS47_REPEATS):
+            try:
+                chan.c1_write(d.slot, D.INDEX, req.encode(), d.c1_timeout_s)
+                end = self.channel.now() + limit
+                while True:
+                    try:
+                        data = chan.c1_read(d.slot, D.INDEX, 240, d.c1_timeout_s)
+                        break
+                    except C1Error as e:
+                        if not e.busy or self.channel.now() > end:
+                            raise
+                        self.cycle()
+                break
+            except C1Timeout as e:
+                # an answer lost on the line (its telegram and the FDL retry both spoilt) is gone
+                # for good: the slave has handed it out. The whole request once more (a read, or
+                # the same change again: both come to the same); a slave that stays silent fails
+                if attempt < DS47_REPEATS:
+                    continue
+                raise DriveError(f"{what}: {e}; a DP-V1 slave leaves data exchange on a class-1 "
+                                 "timeout: the station is parameterised again (its outputs at "
+                                 "their safe state until then)") from None
+            except C1Error as e:
+                raise DriveError(f"{what}: {e}") from None
         try:
             res = D.ParamResponse.decode(data)
         except D.Ds47Error as e:
