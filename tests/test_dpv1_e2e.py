@@ -191,3 +191,31 @@ def test_a_dump_over_a_noisy_line_equals_the_clean_one(capsys, monkeypatch, tmp_
     a, b = (yaml.safe_load(p.read_text()) for p in (clean, noisy))
     assert "unreadable" not in b
     assert a["parameters"] == b["parameters"] and a.get("values") == b.get("values")
+
+
+def test_a_max_frequency_read_again_after_a_failure_is_no_longer_said_unread(monkeypatch):
+    """Drive.fmax_unread says why the codec uses the profile default; once the drive's own value is
+    read (after P100 was written, say), it is cleared: motion must not keep calling it unread."""
+    from conftest import drive_on_bus
+    from profidrive_cli.dp.poller import Master
+    from profidrive_cli.drives.base import DriveError
+    from profidrive_cli.drives.profile import load_profile
+    from profidrive_cli.fdl.timing import BusParams
+    from profidrive_cli.link import open_link
+    m = Master(open_link("sim://?stations=3:fuji-g1"), BusParams.for_baud(19200))
+    try:
+        d = drive_on_bus(m, 3, load_profile("fuji-g1"), "ppo1", wd_ms=5000)
+        real = type(d).max_frequency
+
+        def fails(self):
+            raise DriveError("F03: no answer")
+        monkeypatch.setattr(type(d), "max_frequency", fails)
+        d._ensure_fmax()
+        assert d.fmax_unread == "F03: no answer"
+        assert d._fmax == load_profile("fuji-g1").max_frequency_default
+        monkeypatch.setattr(type(d), "max_frequency", real)
+        d._fmax = None                                  # as a write of F03 forgets it
+        d._ensure_fmax()
+        assert d.fmax_unread is None
+    finally:
+        m.link.close()

@@ -7,8 +7,9 @@ bounded by the slave's C1_Response_Timeout (GSD, in 10 ms units), counted as the
 the acknowledgement of the request, not from the moment the master decided to ask (at 19.2k the
 request telegram alone takes longer than a 10 ms timeout). It fails with C1Timeout only when a poll
 sent at or after that deadline still finds no answer: a master stalled past the deadline (a loaded
-machine) asks once more before it gives up, so a slave that answered in time is never called late. A DP-V1 slave leaves data exchange when its class-1 connection times out (IEC 61158-6's
-MSAC1S machine stops with the cyclic one), so the poller restarts the station's start-up then.
+machine) asks once more before it gives up, so a slave that answered in time is never called late.
+A DP-V1 slave leaves data exchange when its class-1 connection times out (IEC 61158-6's MSAC1S machine
+stops with the cyclic one), so the poller restarts the station's start-up then.
 
 C1Call holds the state; dp/poller.py's Master.c1_call does the waiting and keeps the other stations'
 cycles (and this station's) going between the polls.

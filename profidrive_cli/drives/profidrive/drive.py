@@ -31,6 +31,7 @@ from profidrive_cli.drives.profidrive.words import (Ctw, State, Stw, Target, nex
                                                     state_from_status, target_reached)
 
 if TYPE_CHECKING:
+    from profidrive_cli.drives.profidrive.ds47 import ParamRequest, ParamResponse
     from profidrive_cli.drives.profile import Profile
 
 #: a DS47 request that ended in a class-1 timeout is sent once more (the answer may have been lost on
@@ -318,7 +319,8 @@ class ProfidriveDrive(Drive):
                                              v & (0xFFFFFFFF if is_long else 0xFFFF)))
         return PkwResult(frame, PkwFrame(2 if long else 1, frame.pnu, frame.subindex, frame.value))
 
-    def _ds47_exchange(self, req: Any, what: str, timeout: float | None = None) -> Any:
+    def _ds47_exchange(self, req: ParamRequest, what: str,
+                       timeout: float | None = None) -> ParamResponse:
         """Write DS47 with `req` (a ds47.ParamRequest), then Read DS47 until its response (busy
         answers polled up to the profile's dpv1.timeout_s); the decoded ds47.ParamResponse."""
         from profidrive_cli.dp.acyclic import C1Error, C1Timeout
@@ -564,6 +566,8 @@ class ProfidriveDrive(Drive):
             except DriveError as e:
                 self._fmax = float(self.profile.max_frequency_default)
                 self.fmax_unread = str(e)
+            else:
+                self.fmax_unread = None          # read now (again, after a write of it)
 
     def status(self) -> DriveStatus:
         self._ensure_fmax()
